@@ -1,0 +1,36 @@
+# flexlink_ros: the two set-up commands are `make demo` and `make test`.
+PYTHON ?= python3
+VENV ?= .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.requirements-installed
+
+.PHONY: venv install demo test bench report clean
+
+venv: $(STAMP)
+
+# The venv is (re)built whenever the pinned requirements change.
+$(STAMP): requirements.txt requirements-test.txt
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -r requirements-test.txt
+	touch $(STAMP)
+
+# Non-editable install: console scripts in $(VENV)/bin and config files in
+# $(VENV)/share/flexlink_ros, where ament_index finds them (AMENT_PREFIX_PATH=$(VENV)).
+install: venv
+	$(PY) -m pip install -q --no-deps --force-reinstall .
+
+demo: install
+	$(VENV)/bin/flexlink demo
+
+test: install
+	$(PY) -m pytest -q test
+
+bench: install
+	$(VENV)/bin/flexlink bench
+
+report: install
+	$(VENV)/bin/flexlink report --out out/report
+
+clean:
+	rm -rf build install log out demo_out *.egg-info

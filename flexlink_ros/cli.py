@@ -1,0 +1,88 @@
+"""
+The `flexlink` command-line tool: one script, one small module per group of subcommands.
+
+Every subcommand prints human-readable text, or one JSON object on stdout with ``--json``,
+and exits non-zero with a one-line reason on bad input. ``main(argv=None)`` only parses.
+"""
+
+import argparse
+import importlib
+import json
+import math
+import sys
+
+from .core.errors import FlexlinkError
+
+# Modules that each define register(subparsers); a subcommand's function returns an exit code.
+COMMAND_MODULES = (
+)
+
+
+def emit(result, text, as_json):
+    """Print a result as one JSON object or as text; returns exit code 0."""
+    if as_json:
+        print(json.dumps(_jsonable(result)))
+    else:
+        print(text)
+    return 0
+
+
+def _jsonable(value):
+    """Convert numpy scalars/arrays and non-finite floats to JSON-safe values."""
+    if hasattr(value, 'tolist'):
+        value = value.tolist()
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def degree_range(text):
+    """Parse 'START:STOP:STEP' (degrees, STOP excluded) or a comma list into a list of floats."""
+    try:
+        if ':' in text:
+            start, stop, step = (float(part) for part in text.split(':'))
+            if step <= 0:
+                raise ValueError
+            count = int(math.floor((stop - start) / step + 1e-9))
+            values = [start + k * step for k in range(max(count, 0))]
+            if not values:
+                raise ValueError
+            return values
+        return [float(part) for part in text.split(',')]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f'expected START:STOP:STEP in degrees or a comma list, got {text!r}') from None
+
+
+def build_parser():
+    """The argument parser with every registered subcommand."""
+    parser = argparse.ArgumentParser(
+        prog='flexlink',
+        description='Flexible four-bar linkage: kinematics, joint criteria, beam and FE '
+                    'models, streaming estimator, ROS 2 node and MCAP tools.')
+    subparsers = parser.add_subparsers(dest='command', metavar='COMMAND')
+    subparsers.required = True
+    for name in COMMAND_MODULES:
+        importlib.import_module(name).register(subparsers)
+    return parser
+
+
+def main(argv=None):
+    """Entry point of the `flexlink` script."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except (FlexlinkError, ValueError) as exc:
+        print(f'flexlink {args.command}: error: {exc}', file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == '__main__':
+    sys.exit(main())

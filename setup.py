@@ -1,0 +1,30 @@
+"""ament_python packaging of flexlink_ros (also installable with `pip install .`)."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = 'flexlink_ros'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/config', glob('config/*.yaml')),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='flexlink_ros developers',
+    maintainer_email='flexlink@example.com',
+    description='Elastic deflection and joint-contact estimates of a flexible four-bar linkage',
+    license='Apache-2.0',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [
+            'flexlink = flexlink_ros.cli:main',
+        ],
+    },
+)
