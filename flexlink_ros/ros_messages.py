@@ -1,0 +1,198 @@
+"""
+Translation between ROS 2 messages and the core's arrays (standard message types only).
+
+Input: the crank's angle and speed from a ``sensor_msgs/JointState``. Output topics (all
+stamped with the input's stamp, frame = the ground frame, SI units):
+
+- deflections: ``geometry_msgs/Vector3Stamped``, x and y = elastic deflection [m], z = 0;
+- joint criteria: ``sensor_msgs/JointState`` with name = [O2, A, B, O4] and, per joint,
+  position = |dgamma/dt| / R [rad/(s N)] (the Earles-Wu criterion), velocity = dgamma/dt
+  [rad/s], effort = R [N] (reaction force magnitude);
+- the deformed linkage: ``visualization_msgs/MarkerArray``;
+- health and per-joint levels: ``diagnostic_msgs/DiagnosticArray``.
+"""
+
+import math
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Point, Vector3Stamped
+from sensor_msgs.msg import JointState
+from std_msgs.msg import ColorRGBA, Header
+from visualization_msgs.msg import Marker, MarkerArray
+
+JOINT_NAMES = ('O2', 'A', 'B', 'O4')
+LINK_NAMES = ('crank', 'coupler', 'lever')
+
+OK, WARN, ERROR, STALE = (DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR,
+                          DiagnosticStatus.STALE)
+LEVEL_NAMES = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR', STALE: 'STALE'}
+LEVEL_COLOURS = {OK: (0.2, 0.7, 0.3), WARN: (1.0, 0.7, 0.0), ERROR: (0.9, 0.1, 0.1),
+                 STALE: (0.5, 0.5, 0.5)}
+LINK_COLOURS = ((0.25, 0.45, 0.85), (0.85, 0.4, 0.1), (0.2, 0.6, 0.4))
+
+
+class InputRejected(ValueError):
+    """Raised if a JointState cannot be used; the message says why (counted and skipped)."""
+
+
+def stamp_to_ns(stamp):
+    """Integer nanoseconds of a builtin_interfaces/Time."""
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def ns_to_stamp(stamp_ns):
+    """builtin_interfaces/Time of integer nanoseconds."""
+    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
+    return Time(sec=sec, nanosec=nanosec)
+
+
+def crank_from_joint_state(msg, joint_name):
+    """
+    Crank angle and speed from a JointState.
+
+    Parameters
+    ----------
+    msg : sensor_msgs.msg.JointState
+    joint_name : str
+        Name of the crank joint.
+
+    Returns
+    -------
+    stamp_ns : int
+    angle : float
+        Crank angle [rad] (any real; the estimator wraps it).
+    speed : float or None
+        Crank speed [rad/s], None if the message has no usable velocity for the joint.
+
+    Raises
+    ------
+    InputRejected
+        Empty arrays, the joint missing, a position array too short, or a non-finite angle.
+
+    """
+    if not msg.name:
+        raise InputRejected('empty JointState (no joint names)')
+    try:
+        index = list(msg.name).index(joint_name)
+    except ValueError:
+        raise InputRejected(f'joint {joint_name!r} not in JointState names '
+                            f'{list(msg.name)[:8]}') from None
+    if len(msg.position) <= index:
+        raise InputRejected(f'JointState has {len(msg.position)} positions for '
+                            f'{len(msg.name)} names: no position for {joint_name!r}')
+    angle = float(msg.position[index])
+    if not math.isfinite(angle):
+        raise InputRejected(f'non-finite position {angle} for {joint_name!r}')
+    speed = None
+    if len(msg.velocity) > index:
+        value = float(msg.velocity[index])
+        if not math.isfinite(value):
+            raise InputRejected(f'non-finite velocity {value} for {joint_name!r}')
+        speed = value
+    return stamp_to_ns(msg.header.stamp), angle, speed
+
+
+def deflection_message(stamp, frame_id, dx, dy):
+    """Vector3Stamped of an elastic deflection [m] in the ground frame."""
+    msg = Vector3Stamped()
+    msg.header = Header(stamp=stamp, frame_id=frame_id)
+    msg.vector.x, msg.vector.y, msg.vector.z = float(dx), float(dy), 0.0
+    return msg
+
+
+def criteria_message(stamp, frame_id, ratio, gamma_dot, force):
+    """
+    JointState carrying the Earles-Wu criterion per joint (see the module docstring).
+
+    Parameters
+    ----------
+    ratio, gamma_dot, force : sequence of float, length 4
+        |dgamma/dt|/R [rad/(s N)], dgamma/dt [rad/s], R [N] for O2, A, B, O4.
+
+    """
+    msg = JointState()
+    msg.header = Header(stamp=stamp, frame_id=frame_id)
+    msg.name = list(JOINT_NAMES)
+    msg.position = [float(v) for v in ratio]
+    msg.velocity = [float(v) for v in gamma_dot]
+    msg.effort = [float(v) for v in force]
+    return msg
+
+
+def _colour(rgb, alpha=1.0):
+    return ColorRGBA(r=float(rgb[0]), g=float(rgb[1]), b=float(rgb[2]), a=float(alpha))
+
+
+def linkage_markers(stamp, frame_id, link_points, link_deflections, exaggeration,
+                    joint_positions, joint_levels, namespace='flexlink'):
+    """
+    The rigid and the deformed linkage as markers for RViz and Foxglove.
+
+    Parameters
+    ----------
+    link_points : sequence of ndarray, shape (n_k, 2)
+        Rigid-body positions [m] of points along each link (crank, coupler, lever).
+    link_deflections : sequence of ndarray, shape (n_k, 2)
+        Elastic deflections [m] at those points, ground frame.
+    exaggeration : float
+        Factor applied to the deflections in the drawing.
+    joint_positions : ndarray, shape (4, 2)
+        O2, A, B, O4 [m].
+    joint_levels : sequence of int, length 4
+        Diagnostic level per joint (colours the joint spheres).
+
+    Returns
+    -------
+    visualization_msgs.msg.MarkerArray
+
+    """
+    header = Header(stamp=stamp, frame_id=frame_id)
+    markers = []
+    for k, (points, deflection) in enumerate(zip(link_points, link_deflections)):
+        for kind, offset, rgb, alpha, width in (
+                ('rigid', 0.0, (0.6, 0.6, 0.6), 0.5, 0.002),
+                ('deformed', exaggeration, LINK_COLOURS[k], 1.0, 0.004)):
+            marker = Marker(header=header, ns=f'{namespace}/{kind}', id=k,
+                            type=Marker.LINE_STRIP, action=Marker.ADD)
+            marker.pose.orientation.w = 1.0
+            marker.scale.x = width
+            marker.color = _colour(rgb, alpha)
+            shown = np.asarray(points) + offset * np.asarray(deflection)
+            marker.points = [Point(x=float(x), y=float(y), z=0.0) for x, y in shown]
+            markers.append(marker)
+    for j, (position, level) in enumerate(zip(joint_positions, joint_levels)):
+        marker = Marker(header=header, ns=f'{namespace}/joints', id=j, type=Marker.SPHERE,
+                        action=Marker.ADD)
+        marker.pose.position = Point(x=float(position[0]), y=float(position[1]), z=0.0)
+        marker.pose.orientation.w = 1.0
+        marker.scale.x = marker.scale.y = marker.scale.z = 0.012
+        marker.color = _colour(LEVEL_COLOURS[level])
+        markers.append(marker)
+    return MarkerArray(markers=markers)
+
+
+def joint_level(ratio, flagged, warn, error):
+    """Diagnostic level of one joint from its criterion value and near-zero-force flag."""
+    if flagged or not math.isfinite(ratio) or ratio > error:
+        return ERROR
+    if ratio > warn:
+        return WARN
+    return OK
+
+
+def status(name, level, message, values, hardware_id='flexlink'):
+    """A DiagnosticStatus with key-value pairs (values formatted as strings)."""
+    return DiagnosticStatus(
+        level=level, name=name, message=message, hardware_id=hardware_id,
+        values=[KeyValue(key=str(k), value=(f'{v:.6g}' if isinstance(v, float) else str(v)))
+                for k, v in values.items()])
+
+
+def diagnostics_message(stamp, statuses):
+    """DiagnosticArray of statuses."""
+    msg = DiagnosticArray()
+    msg.header = Header(stamp=stamp)
+    msg.status = list(statuses)
+    return msg

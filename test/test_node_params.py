@@ -1,0 +1,44 @@
+"""Node parameter table: defaults valid, bad values rejected with a reason."""
+
+import pytest
+
+from flexlink_ros import node_params
+
+
+def test_defaults_are_valid():
+    values = node_params.defaults()
+    assert node_params.validate_all(values) is values
+
+
+@pytest.mark.parametrize('name, value, fragment', [
+    ('markers.exaggeration', 0.5, '>= 1'),
+    ('damping_ratio', -0.1, '>= 0'),
+    ('damping_ratio', float('nan'), 'finite'),
+    ('qos.reliability', 'sometimes', 'one of'),
+    ('model.bearings', 'magnetic', 'one of'),
+    ('qos.depth', 2.5, 'type int'),
+    ('qos.depth', True, 'type int'),
+    ('frame_id', 3, 'type str'),
+    ('no.such.parameter', 1, 'unknown'),
+])
+def test_bad_values_give_reasons(name, value, fragment):
+    reason = node_params.validate_parameter(name, value, node_params.defaults())
+    assert reason is not None and fragment in reason
+
+
+def test_integer_accepted_for_float():
+    assert node_params.validate_parameter('damping_ratio', 0) is None
+
+
+def test_warn_threshold_cannot_exceed_error():
+    current = node_params.defaults()
+    reason = node_params.validate_parameter('diagnostics.criterion_warn', 5000.0, current)
+    assert 'must not exceed' in reason
+    with pytest.raises(ValueError, match='criterion_warn'):
+        node_params.validate_all(dict(current, **{'diagnostics.criterion_error': 1.0}))
+
+
+def test_markdown_table_lists_every_parameter():
+    table = node_params.markdown_table()
+    for spec in node_params.PARAMETERS:
+        assert f'`{spec.name}`' in table
