@@ -15,6 +15,7 @@ from .core.errors import FlexlinkError
 
 # Modules that each define register(subparsers); a subcommand's function returns an exit code.
 COMMAND_MODULES = (
+    'flexlink_ros.cli_report',
 )
 
 
