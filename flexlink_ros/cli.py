@@ -9,14 +9,20 @@ import argparse
 import importlib
 import json
 import math
+import pathlib
 import sys
 
 from .core.errors import FlexlinkError
 
-# Modules that each define register(subparsers); a subcommand's function returns an exit code.
-COMMAND_MODULES = (
-    'flexlink_ros.cli_report',
-)
+def _command_modules():
+    """Every ``flexlink_ros/cli_<group>.py`` module; each defines register(subparsers)."""
+    package = pathlib.Path(__file__).resolve().parent
+    return tuple(f'flexlink_ros.{path.stem}' for path in sorted(package.glob('cli_*.py')))
+
+
+# Discovered, so adding a command group means adding one cli_<group>.py file and nothing else.
+# A subcommand's function takes the parsed args and returns an exit code.
+COMMAND_MODULES = _command_modules()
 
 
 def emit(result, text, as_json):

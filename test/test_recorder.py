@@ -1,0 +1,327 @@
+"""MCAP recorder: rosbag2 layout read back by two independent readers, crash and full-disk paths."""
+
+import json
+import os
+import pathlib
+import shutil
+import struct
+import subprocess
+import time
+
+import pytest
+import yaml
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Point, PointStamped, Vector3Stamped
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from rclpy.serialization import serialize_message
+from rosbags.highlevel import AnyReader
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Header
+from visualization_msgs.msg import Marker, MarkerArray
+
+from flexlink_ros import cli
+from flexlink_ros.cli_mcap import mcap_info, recover_mcap, scan_mcap
+from flexlink_ros.core.errors import RecorderError
+from flexlink_ros.recorder import McapRecorder, RecorderState
+from flexlink_ros.rosbag_schema import (message_definition, serialize_exact, share_directory,
+                                        type_hash)
+
+T0_NS = 1_700_000_000_000_000_000
+STEP_NS = 1_000_000  # 1 kHz
+
+
+def stamp(ns):
+    return Header(stamp=Time(sec=ns // 10**9, nanosec=ns % 10**9), frame_id='ground')
+
+
+def sample_messages(k):
+    """The four output types (and an empty-array JointState) at sample k."""
+    t = T0_NS + k * STEP_NS
+    joint = JointState(header=stamp(t), name=['crank'], position=[0.001 * k],
+                       velocity=[] if k % 3 == 0 else [2.0 + k])
+    diag = DiagnosticArray(header=stamp(t), status=[DiagnosticStatus(
+        level=DiagnosticStatus.WARN if k % 2 else DiagnosticStatus.OK, name='joint A',
+        message=f'sample {k}', values=[KeyValue(key='criterion', value=f'{0.5 * k:.3f}')])])
+    markers = MarkerArray(markers=[Marker(header=stamp(t), ns='links', id=k % 5,
+                                          type=Marker.LINE_STRIP,
+                                          points=[Point(x=float(j), y=0.1 * k) for j in range(4)])])
+    deflection = Vector3Stamped(header=stamp(t))
+    deflection.vector.x = 1e-4 * k
+    point = PointStamped(header=stamp(t), point=Point(x=k * 1.0, y=-1.0, z=0.5))
+    return {'/joint_states': joint, '/diagnostics': diag, '/linkage_markers': markers,
+            '/deflection': deflection, '/coupler_point': point, '/empty': JointState()}
+
+
+def check_values(topic, k, msg):
+    """Field-by-field comparison of a decoded message (either reader) with sample k."""
+    t = T0_NS + k * STEP_NS
+    if topic == '/empty':
+        assert list(msg.name) == [] and len(msg.position) == 0 and msg.header.frame_id == ''
+        return
+    header = msg.markers[0].header if topic == '/linkage_markers' else msg.header
+    assert header.stamp.sec == t // 10**9 and header.stamp.nanosec == t % 10**9
+    assert header.frame_id == 'ground'
+    if topic == '/joint_states':
+        assert list(msg.name) == ['crank']
+        assert list(msg.position) == [0.001 * k]
+        assert list(msg.velocity) == ([] if k % 3 == 0 else [2.0 + k])
+        assert len(msg.effort) == 0
+    elif topic == '/diagnostics':
+        (status,) = msg.status
+        assert status.level == (1 if k % 2 else 0) and status.name == 'joint A'
+        assert status.message == f'sample {k}'
+        assert (status.values[0].key, status.values[0].value) == ('criterion', f'{0.5 * k:.3f}')
+    elif topic == '/linkage_markers':
+        (marker,) = msg.markers
+        assert (marker.ns, marker.id, marker.type) == ('links', k % 5, 4)
+        assert [(p.x, p.y) for p in marker.points] == [(float(j), 0.1 * k) for j in range(4)]
+    elif topic == '/deflection':
+        assert (msg.vector.x, msg.vector.y, msg.vector.z) == (1e-4 * k, 0.0, 0.0)
+    elif topic == '/coupler_point':
+        assert (msg.point.x, msg.point.y, msg.point.z) == (k * 1.0, -1.0, 0.5)
+
+
+def record_samples(recorder, count):
+    for k in range(count):
+        t = T0_NS + k * STEP_NS
+        for topic, msg in sample_messages(k).items():
+            recorder.write(topic, msg, t + 20_000, publish_time_ns=t)
+
+
+def read_with_mcap_ros2(path):
+    with open(path, 'rb') as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        header, summary = reader.get_header(), reader.get_summary()
+        decoded = [(channel.topic, message.log_time, message.publish_time, msg)
+                   for _, channel, message, msg in reader.iter_decoded_messages(log_time_order=False)]
+    return header, summary, decoded
+
+
+def test_round_trip_both_readers(tmp_path):
+    bag = tmp_path / 'run'
+    count = 60
+    with McapRecorder(bag) as recorder:
+        record_samples(recorder, count)
+        # Bytes from a raw subscription are recorded as they are.
+        recorder.add_topic('/raw', 'sensor_msgs/msg/JointState')
+        recorder.write('/raw', serialize_exact(JointState(name=['x'], position=[1.5])), T0_NS)
+    assert recorder.state is RecorderState.CLOSED
+    recorder.close()  # idempotent
+    files = sorted(bag.glob('*.mcap'))
+    assert [f.name for f in files] == ['run_0.mcap']
+
+    header, summary, decoded = read_with_mcap_ros2(files[0])
+    assert header.profile == 'ros2'
+    assert summary.statistics.message_count == 6 * count + 1
+    schemas = {s.name: s for s in summary.schemas.values()}
+    assert schemas['sensor_msgs/msg/JointState'].encoding == 'ros2msg'
+    for schema in schemas.values():
+        assert schema.data.decode() == message_definition(schema.name)
+    joint_hash = json.loads(
+        (share_directory('sensor_msgs') / 'msg' / 'JointState.json').read_text())
+    for channel in summary.channels.values():
+        assert channel.message_encoding == 'cdr'
+        qos = yaml.safe_load(channel.metadata['offered_qos_profiles'])
+        assert qos[0]['reliability'] == 'reliable' and qos[0]['history'] == 'keep_last'
+        if channel.topic == '/joint_states':
+            assert channel.metadata['topic_type_hash'] == \
+                joint_hash['type_hashes'][0]['hash_string'] == \
+                type_hash('sensor_msgs/msg/JointState')
+        assert channel.metadata['topic_type_hash'].startswith('RIHS01_')
+    seen = {}
+    for topic, log_time, publish_time, msg in decoded:
+        if topic == '/raw':
+            assert list(msg.position) == [1.5]
+            continue
+        k = seen.get(topic, 0)
+        seen[topic] = k + 1
+        assert publish_time == T0_NS + k * STEP_NS and log_time == publish_time + 20_000
+        check_values(topic, k, msg)
+    assert seen == {topic: count for topic in sample_messages(0)}
+
+    with AnyReader([bag]) as reader:
+        counts = {c.topic: c.msgcount for c in reader.connections}
+        assert counts == {**{topic: count for topic in sample_messages(0)}, '/raw': 1}
+        seen = {}
+        for connection, timestamp, raw in reader.messages():
+            msg = reader.deserialize(raw, connection.msgtype)
+            # Independent serializer: rosbags re-encodes the decoded message to the same bytes.
+            assert reader.typestore.serialize_cdr(msg, connection.msgtype) == raw
+            if connection.topic == '/raw':
+                continue
+            k = seen.get(connection.topic, 0)
+            seen[connection.topic] = k + 1
+            assert timestamp == T0_NS + k * STEP_NS + 20_000
+            check_values(connection.topic, k, msg)
+        assert sum(seen.values()) == 6 * count
+
+
+def test_serialize_exact_trims_what_rclpy_overallocates():
+    empty = JointState()
+    # encapsulation 4 + stamp 8 + frame_id 4+1 (+3 padding) + four empty sequences 4 each
+    assert len(serialize_exact(empty)) == 36
+    assert len(serialize_message(empty)) > 36  # the rmw's estimate, trailing bytes included
+    one_byte_tail = Marker()
+    data = serialize_exact(one_byte_tail)
+    assert len(data) <= len(serialize_message(one_byte_tail))
+    assert data[-1:] == b'\x00'  # mesh_use_embedded_materials = False, no tail padding
+
+
+def test_split_by_size_and_duration(tmp_path):
+    by_size = tmp_path / 'sized'
+    with McapRecorder(by_size, split_size_bytes=20_000, chunk_size_bytes=4096) as recorder:
+        record_samples(recorder, 300)
+    files = sorted(by_size.glob('*.mcap'), key=lambda p: int(p.stem.rsplit('_', 1)[1]))
+    assert len(files) >= 3
+    assert [f.name for f in files] == [f'sized_{i}.mcap' for i in range(len(files))]
+    total = 0
+    for path in files:
+        info = mcap_info(path)
+        assert info['complete'] and info['message_count'] > 0
+        total += info['message_count']
+        # The data section ends at the first chunk boundary past the limit: at most one chunk
+        # (schemas included, ~12 kB of .msg text, uncompressed worst case) beyond it.
+        footer = path.read_bytes()[-37:]
+        (summary_start,) = struct.unpack('<Q', footer[9:17])
+        assert summary_start < 20_000 + 4096 + 16_384
+    assert total == 6 * 300
+    metadata = yaml.safe_load((by_size / 'metadata.yaml').read_text())
+    info = metadata['rosbag2_bagfile_information']
+    assert info['relative_file_paths'] == [f.name for f in files]
+    assert info['message_count'] == 6 * 300
+    with AnyReader([by_size]) as reader:
+        times = [t for _, t, _ in reader.messages()]
+        assert len(times) == 6 * 300 and times == sorted(times)
+
+    by_time = tmp_path / 'timed'
+    with McapRecorder(by_time, split_duration_s=0.1) as recorder:
+        record_samples(recorder, 250)  # 0.25 s of log time
+    infos = [mcap_info(p) for p in sorted(by_time.glob('*.mcap'))]
+    assert len(infos) == 3
+    assert all(i['duration_s'] < 0.1 for i in infos)
+    assert sum(i['message_count'] for i in infos) == 6 * 250
+
+
+def test_unwritable_and_full_device(tmp_path):
+    not_a_dir = tmp_path / 'plain_file'
+    not_a_dir.write_text('x')
+    recorder = McapRecorder(not_a_dir / 'bag')
+    with pytest.raises(RecorderError):
+        recorder.open()
+    assert recorder.state is RecorderState.FAILED
+    recorder.close()  # already reported: no second exception
+
+    full = tmp_path / 'full.mcap'
+    full.symlink_to('/dev/full')  # the kernel answers every write with ENOSPC
+    recorder = McapRecorder(full)
+    with pytest.raises(RecorderError, match='No space left'):
+        recorder.open()
+    assert recorder.state is RecorderState.FAILED
+    assert recorder.status()['state'] == 'failed' and 'No space' in recorder.status()['error']
+    assert recorder.write('/joint_states', JointState(), T0_NS) is False
+    assert recorder.status()['dropped_count'] == 1
+    recorder.close()
+
+
+@pytest.fixture
+def tiny_tmpfs(tmp_path):
+    """A 256 KiB tmpfs (needs mount rights; skipped without them)."""
+    mount_point = tmp_path / 'tiny'
+    mount_point.mkdir()
+    if shutil.which('mount') is None or os.geteuid() != 0:
+        pytest.skip('mounting a tmpfs needs root')
+    result = subprocess.run(['mount', '-t', 'tmpfs', '-o', 'size=256k', 'tmpfs', str(mount_point)],
+                            capture_output=True)
+    if result.returncode != 0:
+        pytest.skip(f'cannot mount tmpfs: {result.stderr.decode().strip()}')
+    yield mount_point
+    subprocess.run(['umount', str(mount_point)], check=True)
+
+
+def test_disk_fills_during_recording(tiny_tmpfs, tmp_path):
+    recorder = McapRecorder(tiny_tmpfs / 'bag', chunk_size_bytes=8192, flush_thread=False)
+    recorder.open()
+    raised, written, k = 0, 0, 0
+    while k < 20_000 and recorder.state is RecorderState.RECORDING:
+        try:
+            for topic, msg in sample_messages(k).items():
+                written += recorder.write(topic, msg, T0_NS + k * STEP_NS)
+        except RecorderError as exc:
+            raised += 1
+            assert 'No space left' in str(exc)
+        k += 1
+    assert recorder.state is RecorderState.FAILED and raised == 1
+    for j in range(k, k + 10):  # keeps dropping quietly
+        assert recorder.write('/joint_states', sample_messages(j)['/joint_states'],
+                              T0_NS + j * STEP_NS) is False
+    status = recorder.close()
+    assert status['state'] == 'failed' and status['dropped_count'] >= 10
+    # What reached the disk is salvageable.
+    result = recover_mcap(status['files'][0], tmp_path / 'salvaged.mcap')
+    assert 0 < result['message_count'] <= written
+    assert mcap_info(tmp_path / 'salvaged.mcap')['complete']
+
+
+def test_write_after_close_and_bad_arguments(tmp_path):
+    recorder = McapRecorder(tmp_path / 'one.mcap')
+    with pytest.raises(RecorderError):
+        recorder.write('/x', JointState(), T0_NS)  # not opened
+    recorder.open()
+    with pytest.raises(ValueError, match='add_topic'):
+        recorder.write('/bytes', b'\x00\x01\x00\x00', T0_NS)
+    recorder.close()
+    with pytest.raises(RecorderError):
+        recorder.write('/x', JointState(), T0_NS)
+    with pytest.raises(ValueError, match='split_size_bytes'):
+        McapRecorder(tmp_path / 'two.mcap', split_size_bytes=1000)
+    with pytest.raises(RecorderError, match='not empty'):
+        (tmp_path / 'busy').mkdir()
+        (tmp_path / 'busy' / 'other').write_text('x')
+        McapRecorder(tmp_path / 'busy').open()
+
+
+def test_timer_flush_makes_recent_messages_readable(tmp_path):
+    path = tmp_path / 'live.mcap'
+    recorder = McapRecorder(path, flush_period_s=0.2).open()
+    for k in range(5):  # 5 ms of log time: no flush is due from the data alone
+        recorder.write('/joint_states', sample_messages(k)['/joint_states'], T0_NS + k * STEP_NS)
+    deadline = time.monotonic() + 3.0
+    while scan_mcap(path)['message_count'] < 5 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    scan = scan_mcap(path)  # the file has no summary yet: read as a crash would leave it
+    assert scan['message_count'] == 5 and scan['end_reason'].startswith('end of file')
+    recorder.close()
+    assert mcap_info(path)['complete']
+
+
+def test_recover_truncated_file_and_cli(tmp_path, capsys):
+    path = tmp_path / 'whole.mcap'
+    with McapRecorder(path, chunk_size_bytes=4096) as recorder:
+        record_samples(recorder, 400)
+    data = path.read_bytes()
+    _, summary, complete = read_with_mcap_ros2(path)
+    for cut in (len(data) // 3, len(data) // 2, len(data) - 100):
+        truncated = tmp_path / f'cut_{cut}.mcap'
+        truncated.write_bytes(data[:cut])
+        assert not mcap_info(truncated)['complete']
+        out = tmp_path / f'fixed_{cut}.mcap'
+        assert cli.main(['mcap-recover', str(truncated), '--out', str(out), '--json']) == 0
+        result = json.loads(capsys.readouterr().out)
+        recovered = read_with_mcap_ros2(out)[2]
+        assert result['message_count'] == len(recovered) > 0
+        # A prefix of the original stream, decoded identically.
+        assert [(t, lt) for t, lt, _, _ in recovered] == \
+            [(t, lt) for t, lt, _, _ in complete[:len(recovered)]]
+        # Exactly the messages of the chunks that lie wholly before the cut survive.
+        whole = [c for c in summary.chunk_indexes if c.chunk_start_offset + c.chunk_length <= cut]
+        last_kept = max(c.message_end_time for c in whole)
+        assert sum(1 for _, lt, _, _ in complete if lt < last_kept) < len(recovered) <= \
+            sum(1 for _, lt, _, _ in complete if lt <= last_kept)
+        assert recovered[-1][1] == last_kept
+        assert mcap_info(out)['complete']
+    assert cli.main(['mcap-info', str(path)]) == 0
+    text = capsys.readouterr().out
+    assert '/joint_states' in text and '400' in text
+    assert cli.main(['mcap-recover', str(path), '--out', str(path)]) == 1
