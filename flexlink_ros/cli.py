@@ -14,6 +14,7 @@ import sys
 
 from .core.errors import FlexlinkError
 
+
 def _command_modules():
     """Every ``flexlink_ros/cli_<group>.py`` module; each defines register(subparsers)."""
     package = pathlib.Path(__file__).resolve().parent
