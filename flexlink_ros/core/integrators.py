@@ -97,7 +97,9 @@ class RadauIIA:
 
     def step_matrix(self, h, mass, damping, stiffness):
         """
-        The ``s n x s n`` matrix of one step, block (i, j) = M_i d_ij + h a_ij C_i + h^2 (aa)_ij K_i.
+        The ``s n x s n`` matrix of one step.
+
+        Block (i, j) is ``M_i d_ij + h a_ij C_i + h^2 (aa)_ij K_i``.
 
         Parameters
         ----------

@@ -1,0 +1,193 @@
+"""Model cache: round trip, and refusal (then rebuild) of every kind of bad file."""
+
+import json
+import logging
+import pickle
+import zipfile
+
+import numpy as np
+import pytest
+
+from flexlink_ros.core import cache
+from flexlink_ros.core.errors import CacheError
+from flexlink_ros.core.mechanism import load_mechanism
+
+KEY = cache.cache_key('mechanism-key', {'modes': 6})
+
+
+def content():
+    rng = np.random.default_rng(0)
+    return {'basis': rng.normal(size=(12, 4)), 'grid': np.linspace(0, 1, 9),
+            'flags': np.array([True, False]), 'count': np.arange(3)}, {'modes': 6}
+
+
+def assert_same(arrays, expected):
+    assert set(arrays) == set(expected)
+    for name in expected:
+        np.testing.assert_array_equal(arrays[name], expected[name])
+        assert arrays[name].dtype == expected[name].dtype
+
+
+def test_round_trip(tmp_path):
+    arrays, meta = content()
+    path = tmp_path / 'sub' / 'model.npz'
+    cache.save_cache(path, KEY, arrays, meta)
+    loaded, loaded_meta = cache.load_cache(path, KEY)
+    assert_same(loaded, arrays)
+    assert loaded_meta == meta
+    assert not list(path.parent.glob('*.tmp'))  # the temporary file was moved into place
+
+
+def test_key_depends_on_mechanism_and_options(config_dir):
+    mech = load_mechanism(config_dir / 'cho1992.yaml')
+    other = load_mechanism(config_dir / 'kang1990.yaml')
+    assert cache.cache_key(mech.key(), {'modes': 6}) != cache.cache_key(other.key(),
+                                                                        {'modes': 6})
+    assert cache.cache_key(mech.key(), {'modes': 6}) != cache.cache_key(mech.key(),
+                                                                        {'modes': 7})
+    assert cache.cache_key(mech.key(), {'modes': 6}) == cache.cache_key(mech.key(),
+                                                                        {'modes': 6})
+
+
+def corrupt_bytes(path):
+    data = bytearray(path.read_bytes())
+    # Flip bytes inside the stored (uncompressed) data of the largest array.
+    with zipfile.ZipFile(path) as archive:
+        info = max(archive.infolist(), key=lambda i: i.file_size)
+    start = info.header_offset + 30 + len(info.filename) + len(info.extra) + 200
+    for k in range(start, start + 8):
+        data[k] ^= 0x5A
+    path.write_bytes(bytes(data))
+
+
+def truncate(path):
+    data = path.read_bytes()
+    path.write_bytes(data[:len(data) // 2])
+
+
+def stale_key(path):
+    arrays, meta = content()
+    cache.save_cache(path, cache.cache_key('another mechanism'), arrays, meta)
+
+
+def other_version(path):
+    arrays, _ = content()
+    header = {'format': cache.FORMAT_NAME, 'version': cache.FORMAT_VERSION + 1, 'key': KEY,
+              'arrays': {n: {'dtype': a.dtype.str, 'shape': list(a.shape)}
+                         for n, a in arrays.items()},
+              'sha256': cache._array_digest(arrays), 'meta': {}}
+    np.savez(path.open('wb'), __header__=np.frombuffer(json.dumps(header).encode(), np.uint8),
+             **arrays)
+
+
+def pickle_renamed(path):
+    path.write_bytes(pickle.dumps(content()))
+
+
+def object_array(path):
+    arrays, _ = content()
+    arrays['basis'] = np.array([{'a': 1}, None], dtype=object)
+    header = {'format': cache.FORMAT_NAME, 'version': cache.FORMAT_VERSION, 'key': KEY,
+              'arrays': {n: {'dtype': a.dtype.str, 'shape': list(a.shape)}
+                         for n, a in arrays.items()},
+              'sha256': '0' * 64, 'meta': {}}
+    with path.open('wb') as stream:
+        np.savez(stream, __header__=np.frombuffer(json.dumps(header).encode(), np.uint8),
+                 **arrays)
+
+
+def foreign_npz(path):
+    with path.open('wb') as stream:
+        np.savez(stream, weights=np.ones(3))
+
+
+def extra_array(path):
+    arrays, meta = content()
+    cache.save_cache(path, KEY, arrays, meta)
+    with np.load(path) as archive:
+        stored = {name: archive[name] for name in archive.files}
+    stored['extra'] = np.zeros(2)
+    with path.open('wb') as stream:
+        np.savez(stream, **stored)
+
+
+def tampered_array(path):
+    # A valid archive whose array changed after the header was written.
+    with np.load(path) as archive:
+        stored = {name: archive[name] for name in archive.files}
+    stored['basis'] = stored['basis'] + 1e-12
+    with path.open('wb') as stream:
+        np.savez(stream, **stored)
+
+
+def empty_file(path):
+    path.write_bytes(b'')
+
+
+BAD_FILES = {
+    'corrupt bytes': (corrupt_bytes, 'checksum|unreadable'),
+    'truncated': (truncate, 'unreadable'),
+    'wrong key': (stale_key, 'stale'),
+    'wrong version': (other_version, 'version'),
+    'pickle renamed .npz': (pickle_renamed, 'unreadable'),
+    'object array': (object_array, 'unreadable|dtype'),
+    'foreign npz': (foreign_npz, 'not a flexlink_ros cache'),
+    'extra array': (extra_array, 'differ from the header'),
+    'empty file': (empty_file, 'unreadable'),
+    'tampered array': (tampered_array, 'checksum'),
+}
+
+
+@pytest.mark.parametrize('name', sorted(BAD_FILES))
+def test_bad_file_is_refused_and_rebuilt(tmp_path, caplog, name):
+    spoil, message = BAD_FILES[name]
+    path = tmp_path / 'model.npz'
+    arrays, meta = content()
+    cache.save_cache(path, KEY, arrays, meta)
+    spoil(path)
+    with pytest.raises(CacheError, match=message):
+        cache.load_cache(path, KEY)
+    calls = []
+
+    def build():
+        calls.append(1)
+        return content()
+
+    with caplog.at_level(logging.WARNING, logger='flexlink_ros.core.cache'):
+        loaded, loaded_meta, from_cache = cache.load_or_build(path, KEY, build)
+    assert calls == [1] and not from_cache
+    assert 'rebuilding' in caplog.text
+    assert_same(loaded, arrays)
+    # The rebuilt file replaced the bad one and now verifies.
+    reloaded, _, from_cache = cache.load_or_build(path, KEY, build)
+    assert from_cache and calls == [1]
+    assert_same(reloaded, arrays)
+
+
+def test_missing_file_builds_without_warning(tmp_path, caplog):
+    with caplog.at_level(logging.WARNING):
+        _, _, from_cache = cache.load_or_build(tmp_path / 'new.npz', KEY, content)
+    assert not from_cache and caplog.text == ''
+    assert cache.load_or_build(tmp_path / 'new.npz', KEY, content)[2]
+
+
+def test_no_cache_path_always_builds(tmp_path):
+    arrays, meta, from_cache = cache.load_or_build(None, KEY, content)
+    assert not from_cache and 'basis' in arrays
+
+
+def test_refuses_to_save_non_numeric_arrays(tmp_path):
+    with pytest.raises(CacheError, match='dtype'):
+        cache.save_cache(tmp_path / 'x.npz', KEY, {'names': np.array(['a', 'b'])})
+    with pytest.raises(CacheError, match='reserved'):
+        cache.save_cache(tmp_path / 'x.npz', KEY, {'__header__': np.zeros(1)})
+    assert not (tmp_path / 'x.npz').exists()
+
+
+def test_unwritable_directory_still_returns_content(tmp_path, caplog):
+    blocker = tmp_path / 'file'
+    blocker.write_text('not a directory')
+    with caplog.at_level(logging.WARNING, logger='flexlink_ros.core.cache'):
+        arrays, _, from_cache = cache.load_or_build(blocker / 'model.npz', KEY, content)
+    assert not from_cache and 'basis' in arrays
+    assert 'could not write' in caplog.text
