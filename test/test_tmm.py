@@ -234,3 +234,26 @@ def test_skipped_root_is_reported():
 def test_bad_input_names_the_argument(call, argument):
     with pytest.raises(ValueError, match=argument):
         call()
+
+
+@pytest.mark.parametrize('bc', BCS)
+def test_sparse_and_dense_eigen_paths_agree(bc, monkeypatch):
+    # 1e-8: stiffness-based solves of 80 DOFs sit near their round-off floor, eps (L/h)^4
+    model = tmm.lump_masses(BEAM, 40, 3, bc)
+    sparse_fe = tmm.fe_frequencies(BEAM, bc, 40, 4)
+    sparse_lumped = tmm.lumped_frequencies(model, bc, 4)
+    monkeypatch.setattr(tmm, 'DENSE_EIGEN_LIMIT', 10_000)
+    np.testing.assert_allclose(sparse_fe, tmm.fe_frequencies(BEAM, bc, 40, 4), rtol=1e-8)
+    np.testing.assert_allclose(sparse_lumped, tmm.lumped_frequencies(model, bc, 4), rtol=1e-8)
+    np.testing.assert_allclose(sparse_lumped, tmm.tmm_frequencies(BEAM, bc, 40, 3, 4, 'newton',
+                                                                  50.0).frequencies_rad_s,
+                               rtol=1e-8)
+
+
+def test_supported_lumping_1_and_3_coincide():
+    # observed: with both ends simply supported, masses m/n at segment centres (method 1)
+    # and at division points plus inert end halves (method 3) share every lower frequency
+    for n in (3, 6, 11):
+        centres = tmm.lumped_frequencies(tmm.lump_masses(BEAM, n, 1, 'supported'), 'supported')
+        nodes = tmm.lumped_frequencies(tmm.lump_masses(BEAM, n, 3, 'supported'), 'supported')
+        np.testing.assert_allclose(centres[:n - 1], nodes, rtol=1e-10)
