@@ -108,3 +108,285 @@ def test_wrap_angle_range():
 def test_rejects_bad_time_constant():
     with pytest.raises(ValueError, match='time_constant_s'):
         CrankRateFilter(0.0)
+
+
+# ---------------------------------------------------------------------------------------
+# StreamingEstimator on the synthetic system of test_reduced.py
+
+import dataclasses  # noqa: E402
+import logging  # noqa: E402
+
+from test_reduced import ZETA, toy_samples  # noqa: E402
+
+from flexlink_ros.core import reduced  # noqa: E402
+from flexlink_ros.core.estimator import SampleFlag, StreamingEstimator  # noqa: E402
+from flexlink_ros.core.integrators import RadauIIA  # noqa: E402
+
+SPEED_MAX = 65.0
+
+
+def toy_forces(grid):
+    """Joint reactions F = F_1 + a F_a + w^2 F_w2 with two harmonics, and dF/dtheta."""
+    theta = 2 * np.pi * np.arange(grid) / grid
+    rng = np.random.default_rng(5)
+    amp = rng.normal(size=(3, 4, 2, 2))
+    force, rate = {}, {}
+    for i, piece in enumerate(('1', 'a', 'w2')):
+        force[piece] = np.zeros((grid, 4, 2))
+        rate[piece] = np.zeros((grid, 4, 2))
+        for h in (1, 2):
+            force[piece] += amp[i, :, :, h - 1] * np.cos(h * theta + 0.3 * h)[:, None, None]
+            rate[piece] += -h * amp[i, :, :, h - 1] * np.sin(h * theta + 0.3 * h)[:, None, None]
+        force[piece] += 0.5 * (i == 2)  # an offset so reactions rarely vanish at speed
+    return {'force': force, 'force_rate': rate}, amp
+
+
+@pytest.fixture(scope='module')
+def toy_model():
+    samples = toy_samples(grid=64)
+    forces, _ = toy_forces(64)
+    return reduced.reduce_samples(samples, modes=4, static=2, speed_max=SPEED_MAX, zeta=ZETA,
+                                  forces=forces)
+
+
+def periodic_outputs(model, speed, angles):
+    """Periodic steady-state outputs of the reduced model at given crank angles."""
+    steps = 2048
+    grid, q, _ = reduced.periodic_response(model, speed, start_angle=0.0, steps=steps)
+    out = reduced.output_values(model, model.evaluate(grid, speed, 0.0), q)[:-1]
+    phase = np.mod(angles, 2 * np.pi) / (2 * np.pi) * steps * np.sign(speed)
+    # Periodic cubic interpolation of the fine reference.
+    coef = reduced.periodic_cell_coefficients(out)
+    k = np.floor(np.mod(phase, steps)).astype(int)
+    t = np.mod(phase, steps) - k
+    return np.einsum('mp,mpc->mc', t[:, None] ** np.arange(4), coef[k])
+
+
+def stream(estimator, times, angle, speed, with_speed=True):
+    samples = []
+    for t in times:
+        samples.append(estimator.update(int(round(t * 1e9)), angle(t),
+                                        speed(t) if with_speed else None))
+    return samples
+
+
+def deflections(samples):
+    return np.array([s.lever_tip + s.coupler_mid for s in samples])
+
+
+def relative_rms(estimate, exact):
+    return np.sqrt(np.mean((estimate - exact) ** 2, axis=0) / np.mean(exact ** 2, axis=0))
+
+
+@pytest.mark.parametrize('jitter', [0.0, 0.3])
+def test_warm_start_matches_periodic_state_from_the_first_revolution(toy_model, jitter):
+    speed = 41.0
+    times = sample_times(1000.0, 0.3, jitter, 0.0, seed=8)
+    samples = stream(StreamingEstimator(toy_model), times, lambda t: 0.2 + speed * t,
+                     lambda t: speed)
+    exact = periodic_outputs(toy_model, speed, 0.2 + speed * times)
+    assert samples[0].flags & SampleFlag.WARM_START and samples[0].flags & SampleFlag.RESET
+    assert np.all(relative_rms(deflections(samples), exact) < 0.01)
+
+
+def test_fused_step_equals_the_reference_radau_step(toy_model):
+    # The per-sample algebra (stacked tables, transformed unknowns) against RadauIIA.step
+    # with the same stage matrices (stage 1 linearly interpolated in time).
+    est = StreamingEstimator(toy_model, warm_start=False)
+    rng = np.random.default_rng(1)
+    stamp, angle = 0, 1.0
+    est.update(stamp, angle, 30.0)
+    method = RadauIIA(2)
+    clip = lambda a: float(np.clip(a, -est.accel_limit, est.accel_limit))  # noqa: E731
+    for _ in range(50):
+        step_ns = int(10 ** rng.uniform(4, 8))
+        speed = rng.uniform(-60, 60)
+        last = est._last
+        previous = toy_model.evaluate(last.crank_angle, last.crank_speed, clip(last.crank_accel))
+        q, v = np.array(last.modal), est._z[toy_model.size:2 * toy_model.size].copy()
+        stamp += step_ns
+        angle += speed * step_ns * 1e-9
+        sample = est.update(stamp, angle, speed)
+        current = toy_model.evaluate(sample.crank_angle, sample.crank_speed,
+                                     clip(sample.crank_accel))
+        rows = np.vstack([(1 - method.c[0]) * previous + method.c[0] * current, current])
+        q_new, _, _ = method.step(q, v, step_ns * 1e-9, *reduced.system_blocks(toy_model, rows))
+        np.testing.assert_allclose(sample.modal, q_new, rtol=1e-8,
+                                   atol=1e-10 * np.max(np.abs(q_new)))
+
+
+def test_cold_start_converges_to_the_periodic_state(toy_model):
+    speed = 30.0
+    times = sample_times(1000.0, 3.0, 0.3, 0.05, seed=9)
+    samples = stream(StreamingEstimator(toy_model, warm_start=False), times,
+                     lambda t: speed * t, lambda t: speed)
+    late = times > 2.0
+    exact = periodic_outputs(toy_model, speed, speed * times[late])
+    assert np.all(relative_rms(deflections(samples)[late], exact) < 0.01)
+
+
+def test_wrapped_and_unwrapped_angles_give_the_same_estimate(toy_model):
+    speed = 41.0
+    times = sample_times(1000.0, 0.2, 0.3, 0.1, seed=10)
+    rng = np.random.default_rng(0)
+    offsets = 2 * np.pi * rng.integers(-5, 6, times.size)
+    plain = deflections(stream(StreamingEstimator(toy_model), times, lambda t: speed * t,
+                               lambda t: speed))
+    est = StreamingEstimator(toy_model)
+    wrapped = deflections([est.update(int(round(t * 1e9)), speed * t + o, speed)
+                           for t, o in zip(times, offsets)])
+    np.testing.assert_allclose(wrapped, plain, rtol=1e-9, atol=1e-12)
+
+
+def test_repeated_and_backward_stamps(toy_model, caplog):
+    est = StreamingEstimator(toy_model)
+    first = est.update(1_000_000, 0.5, 40.0)
+    second = est.update(2_000_000, 0.54, 40.0)
+    repeated = est.update(2_000_000, 0.54, 40.0)
+    assert repeated.flags & SampleFlag.REPEATED
+    assert repeated.lever_tip == second.lever_tip
+    with caplog.at_level(logging.WARNING, logger='flexlink_ros.core.estimator'):
+        back = est.update(1_500_000, 0.52, 40.0)
+        gap = est.update(1_500_000 + 2_000_000_000, 0.6, 40.0)
+    assert back.flags & SampleFlag.RESET and 'back' in back.message
+    assert gap.flags & SampleFlag.RESET and 'gap' in gap.message
+    assert 'estimator reset' in caplog.text
+    for sample in (first, second, back, gap):
+        assert np.all(np.isfinite(sample.lever_tip + sample.coupler_mid))
+    # Same stamp, different angle: not a repeat, the estimate restarts.
+    changed = est.update(1_500_000 + 2_000_000_000, 0.7, 40.0)
+    assert changed.flags & SampleFlag.RESET
+
+
+def finite(samples):
+    values = np.array([s.lever_tip + s.coupler_mid + s.reaction_n + s.gamma_dot
+                       + (s.error_indicator, s.crank_speed, s.crank_accel) for s in samples])
+    return np.all(np.isfinite(values))
+
+
+def test_speed_steps_stops_reversal_and_sweep_stay_finite_and_bounded(toy_model):
+    times = sample_times(1000.0, 5.0, 0.5, 0.05, seed=11)
+
+    def speed(t):
+        # ramp 0 -> 62.8 rad/s (600 rpm) through the toy's resonances, step down, stop
+        # (long enough for the free vibration to die out), reverse
+        return np.where(t < 2.0, 31.4 * t, np.where(t < 2.5, 20.0,
+                        np.where(t < 4.5, 0.0, -25.0)))
+
+    fine = np.linspace(0, 5.0, 500001)
+    angle_table = np.concatenate([[0.0], np.cumsum(speed(fine[1:]) * np.diff(fine))])
+    angle = lambda t: np.interp(t, fine, angle_table)  # noqa: E731
+    for with_speed in (True, False):
+        samples = stream(StreamingEstimator(toy_model, accel_limit=500.0), times, angle, speed,
+                         with_speed)
+        assert finite(samples)
+        assert any(s.flags & SampleFlag.CLIPPED_ACCEL for s in samples)
+        peak = np.max(np.abs(deflections(samples)))
+        steady = np.max(np.abs(periodic_outputs(toy_model, 62.8, np.linspace(0, 6.3, 200))))
+        assert peak < 20 * steady
+        # At rest the free vibration around the static deflection decays at the slowest
+        # modal rate zeta * omega_1 of the model (about 3.6 /s here).
+        rest = [(t, s) for s, t in zip(samples, times) if 3.0 < t < 4.5]
+        rows = toy_model.evaluate(rest[-1][1].crank_angle, 0.0, 0.0)
+        mass, damping, stiffness, load = (b[0] for b in reduced.system_blocks(toy_model, rows))
+        static = reduced.output_values(toy_model, rows, np.linalg.solve(stiffness, load)[None])
+        free = np.array([s.lever_tip + s.coupler_mid for _, s in rest]) - static
+        t_rest = np.array([t for t, _ in rest])
+        early = np.max(np.abs(free[(t_rest > 3.3) & (t_rest < 3.6)]))
+        late = np.max(np.abs(free[(t_rest > 4.2) & (t_rest < 4.5)]))
+        size = mass.shape[0]
+        state = np.block([[np.zeros((size, size)), np.eye(size)],
+                          [-np.linalg.solve(mass, stiffness), -np.linalg.solve(mass, damping)]])
+        slowest = np.min(-np.linalg.eigvals(state).real)
+        assert late / early == pytest.approx(np.exp(-slowest * 0.9), rel=0.3)
+
+
+def test_speed_beyond_the_model_range_is_clipped(toy_model):
+    est = StreamingEstimator(toy_model)
+    samples = [est.update(k * 1_000_000, 1.2 * SPEED_MAX * k * 1e-3, 1.2 * SPEED_MAX)
+               for k in range(20)]
+    assert all(s.flags & SampleFlag.CLIPPED_SPEED for s in samples)
+    assert all(s.crank_speed == 1.2 * SPEED_MAX for s in samples) and finite(samples)
+
+
+def test_reversed_rotation_matches_its_periodic_state(toy_model):
+    speed = -35.0
+    times = sample_times(1000.0, 0.4, 0.3, 0.0, seed=12)
+    samples = stream(StreamingEstimator(toy_model), times, lambda t: 3.0 + speed * t,
+                     lambda t: speed)
+    exact = periodic_outputs(toy_model, speed, 3.0 + speed * times)
+    assert np.all(relative_rms(deflections(samples), exact) < 0.01)
+
+
+@pytest.mark.parametrize('rate_hz', [100_000.0, 10.0])
+def test_extreme_jittery_rates_stay_finite(toy_model, rate_hz):
+    speed = 41.0
+    seconds = 0.05 if rate_hz > 1000 else 5.0
+    times = sample_times(rate_hz, seconds, 0.5, 0.0, seed=13)
+    samples = stream(StreamingEstimator(toy_model), times, lambda t: speed * t,
+                     lambda t: speed)
+    assert finite(samples)
+    exact = periodic_outputs(toy_model, speed, speed * times)
+    error = relative_rms(deflections(samples), exact)
+    if rate_hz > 1000:
+        assert np.all(error < 0.01)
+    else:
+        # 100 ms steps skip most of a revolution: the L-stable step damps the resonant part
+        # and keeps the quasi-static part; flagged as large steps.
+        assert np.all(error < 1.0)
+        assert all(s.flags & SampleFlag.LARGE_STEP for s in samples[1:])
+
+
+def test_missing_speed_is_derived_and_warm_start_follows(toy_model):
+    speed = 41.0
+    times = sample_times(1000.0, 0.3, 0.3, 0.0, seed=14)
+    samples = stream(StreamingEstimator(toy_model), times, lambda t: speed * t,
+                     lambda t: speed, with_speed=False)
+    assert all(s.flags & SampleFlag.SPEED_FROM_ANGLE for s in samples)
+    started = [i for i, s in enumerate(samples) if s.flags & SampleFlag.WARM_START]
+    assert started and started[0] <= 3
+    exact = periodic_outputs(toy_model, speed, speed * times)
+    after = slice(started[0], None)
+    assert np.all(relative_rms(deflections(samples)[after], exact[after]) < 0.01)
+
+
+def test_criteria_from_the_tabulated_reactions(toy_model):
+    _, amp = toy_forces(64)
+    est = StreamingEstimator(toy_model)
+    w, a = 37.0, 0.0
+    sample = est.update(0, 1.234, w)
+    theta = sample.crank_angle
+    force = np.zeros((4, 2))
+    rate = np.zeros((4, 2))
+    for i, scale in enumerate((1.0, a, w * w)):
+        for h in (1, 2):
+            force += scale * amp[i, :, :, h - 1] * np.cos(h * theta + 0.3 * h)
+            rate += scale * -h * amp[i, :, :, h - 1] * np.sin(h * theta + 0.3 * h)
+        force += scale * 0.5 * (i == 2)
+    force_dot = w * rate
+    magnitude = np.hypot(force[:, 0], force[:, 1])
+    gamma_dot = (force[:, 0] * force_dot[:, 1] - force[:, 1] * force_dot[:, 0]) / magnitude ** 2
+    # The tables are splines on a 64-point grid: agreement to spline accuracy.
+    np.testing.assert_allclose(sample.reaction_n, magnitude, rtol=1e-3)
+    np.testing.assert_allclose(sample.gamma_dot, gamma_dot, rtol=1e-2, atol=1e-3)
+    np.testing.assert_allclose(sample.criterion, np.abs(gamma_dot) / magnitude, rtol=1e-2)
+    assert all(isinstance(flag, bool) for flag in sample.near_zero)
+
+
+def test_link_shapes_and_sample_fields(toy_model):
+    est = StreamingEstimator(toy_model)
+    sample = est.update(0, 0.7, 20.0)
+    positions, deflections_ = est.link_shapes(sample)
+    expected = toy_model.shapes(sample.crank_angle, np.array(sample.modal))
+    np.testing.assert_allclose(positions, expected[0])
+    np.testing.assert_allclose(deflections_, expected[1])
+    assert positions.shape == (3, 3, 2)
+    copy = dataclasses.replace(sample, message='x')
+    assert copy.lever_tip == sample.lever_tip and sample.error_indicator >= 0.0
+
+
+def test_rejects_bad_arguments(toy_model):
+    with pytest.raises(ValueError, match='large_step_s'):
+        StreamingEstimator(toy_model, large_step_s=0.0)
+    with pytest.raises(ValueError, match='crank_angle'):
+        StreamingEstimator(toy_model).update(0, float('nan'), 1.0)

@@ -3,9 +3,31 @@ Streaming estimation of the crank's motion and of the linkage's elastic response
 
 :class:`CrankRateFilter` turns a stream of (time, crank angle[, crank speed]) samples with
 jitter, drops and wrap-around into the unwrapped angle, speed and acceleration the model needs.
+:class:`StreamingEstimator` advances the reduced model (core/reduced.py) by one Radau IIA step
+(core/integrators.py) per sample and returns a :class:`Sample` with the deflections, the joint
+criteria and flags.
+
+Per-sample path. Everything the step needs at the new sample (M, C, K, f, output operator,
+residual correction, joint reactions) is one dot product of 4 x 5 weights with one grid cell
+of a precomputed table. The first Radau stage (at 1/3 of the step) takes its matrices by
+linear interpolation in time between the previous and the new sample, an O(h^2) error in
+slowly varying coefficients (the step's order-3 accuracy on the modal dynamics is kept). The
+two stages' block matrix and right-hand-side operator come out of one small matrix product
+with coefficients that depend only on the step h.
 """
 
+import dataclasses
+import enum
+import logging
 import math
+
+import numpy as np
+from scipy.linalg import lapack
+
+from . import reduced
+from .integrators import RADAU_TABLEAUX
+
+LOGGER = logging.getLogger(__name__)
 
 # Default time constant of the exponentially weighted fit [s]: about 20 samples at 1 kHz,
 # short against the 150 ms revolution at 391 rpm.
@@ -152,6 +174,11 @@ class CrankRateFilter:
         self.accel = 0.0         # [rad/s^2]
         self._mean_dt = None
 
+    @property
+    def count(self):
+        """Samples in the active fit since the last reset or change of input kind."""
+        return (self._speed_fit if self._mode == 'speed' else self._angle_fit).count
+
     def update(self, time_s, angle, speed=None):
         """
         Add a sample; returns (wrapped angle, speed, acceleration).
@@ -213,3 +240,441 @@ class CrankRateFilter:
                 self.speed = c1 / self.time_constant_s
                 self.accel = 2.0 * c2 / self.time_constant_s ** 2
         return wrap_angle(self._angle), self.speed, self.accel
+
+
+# ---------------------------------------------------------------------------------------
+# Streaming estimator
+
+# A step longer than this is flagged as large (accuracy degrades; still stable) [s].
+DEFAULT_LARGE_STEP_S = 0.01
+# A gap longer than this restarts the estimate (state too stale to carry) [s].
+DEFAULT_RESET_GAP_S = 0.5
+# Crank accelerations beyond this are clipped (speed steps give filter spikes) [rad/s^2].
+DEFAULT_ACCEL_LIMIT = 5000.0
+# A joint reaction below this fraction of its cycle RMS at the current speed is "near zero".
+DEFAULT_NEAR_ZERO_FRACTION = 0.05
+# Output magnitude floor of the error indicator [m] (1 um: below it relative errors mean little).
+ERROR_INDICATOR_FLOOR_M = 1e-6
+# Steps per revolution of the warm-start shooting.
+WARM_START_STEPS = 720
+
+
+class SampleFlag(enum.IntFlag):
+    """What happened at a sample."""
+
+    NONE = 0
+    RESET = 1            # state restarted (first sample, backward stamp, long gap)
+    WARM_START = 2       # state set to the periodic steady state at the current speed
+    LARGE_STEP = 4       # step longer than the large-step threshold
+    CLIPPED_SPEED = 8    # |speed| beyond the model's range, clipped for the model
+    CLIPPED_ACCEL = 16   # |acceleration| beyond the limit, clipped
+    REPEATED = 32        # same stamp and angle again: previous estimate returned
+    SPEED_FROM_ANGLE = 64  # no measured speed: differentiated from angles
+
+
+# Plain-int copies of the flags for the per-sample path (IntFlag arithmetic is slow).
+_RESET, _WARM_START, _LARGE_STEP = int(SampleFlag.RESET), int(SampleFlag.WARM_START), \
+    int(SampleFlag.LARGE_STEP)
+_CLIPPED_SPEED, _CLIPPED_ACCEL = int(SampleFlag.CLIPPED_SPEED), int(SampleFlag.CLIPPED_ACCEL)
+_REPEATED, _SPEED_FROM_ANGLE = int(SampleFlag.REPEATED), int(SampleFlag.SPEED_FROM_ANGLE)
+
+
+@dataclasses.dataclass(slots=True)
+class Sample:
+    """
+    One estimate.
+
+    Attributes
+    ----------
+    stamp_ns : int
+        Input stamp [ns].
+    crank_angle, crank_speed, crank_accel : float
+        Wrapped angle [rad] in [0, 2 pi), speed [rad/s], acceleration [rad/s^2].
+    lever_tip, coupler_mid : tuple of float
+        Elastic deflection (dx, dy) of the lever's upper end and the coupler's mid-point in
+        the ground frame [m].
+    reaction_n, gamma_dot, criterion : tuple of float
+        Per joint (O2, A, B, O4): rigid-body reaction magnitude R [N], rate of its direction
+        [rad/s], and the Earles-Wu criterion |gamma-dot / R| [rad/(s N)].
+    near_zero : tuple of bool
+        Per joint: R below the near-zero fraction of its cycle RMS at this speed.
+    error_indicator : float
+        Size of the residual-flexibility correction relative to the deflection (see
+        core/reduced.py); large values mean the reduced basis misses part of the response.
+    flags : int
+        What happened: bits of :class:`SampleFlag` (``sample.flags & SampleFlag.RESET``).
+    message : str
+        Warning text, empty if none.
+    modal : tuple of float
+        Reduced coordinates q (for :meth:`StreamingEstimator.link_shapes`).
+
+    """
+
+    stamp_ns: int
+    crank_angle: float
+    crank_speed: float
+    crank_accel: float
+    lever_tip: tuple
+    coupler_mid: tuple
+    reaction_n: tuple
+    gamma_dot: tuple
+    criterion: tuple
+    near_zero: tuple
+    error_indicator: float
+    flags: int
+    message: str
+    modal: tuple
+
+
+class _StepTables:
+    """
+    Table and coefficient stacks of the fused per-sample step (built once per model).
+
+    Per cell the table row holds, in r x r blocks: the stage values [M, C, K, F] (F's first
+    column is f, the rest zero) and then the other outputs padded to whole blocks: the
+    deflection operator [O | 0 | corr] (4 x (2 r + 1)), the reactions F (joints x 2), their
+    time derivative (joints x 2) and the squared cycle-RMS reaction (joints). Two such rows
+    (the previous and the new sample, in alternating slots) times a 10 x 2 B coefficient
+    matrix G(h) give, in one product, the Radau IIA block matrix and right-hand-side operator
+    for the state increment.
+
+    The unknowns are the state increment dz = (dq, dv) rather than the stage accelerations X:
+    with ``dz = (D2 (x) I) X + (h v, 0)`` and ``D2 = [[h^2 (aa)_21, h^2 (aa)_22],
+    [h a_21, h a_22]]`` (invertible for Radau IIA), the matrix becomes ``A (D2^-1 (x) I)`` and
+    the operator gains ``h`` times its first block column, so the solve returns dz directly.
+    G(h) is a Laurent polynomial in h (powers -2..2).
+    """
+
+    POWERS = (-2, -1, 0, 1, 2)
+
+    def __init__(self, model, stages=2):
+        if stages != 2:
+            raise ValueError('the streaming step is written for 2-stage Radau IIA')
+        a, c = RADAU_TABLEAUX[stages]
+        a2 = a @ a
+        layout = model.layout
+        r = model.size
+        n_cells, n_rows, _ = model.table.shape
+        table = model.table
+        self.size = r
+        rest = [np.zeros((n_cells, n_rows, 4, 2 * r + 1))]
+        rest[0][..., :r] = layout.block(table, 'out')
+        rest[0][..., 2 * r] = layout.block(table, 'corr')
+        rest += [layout.block(table, name) for name in ('force', 'force_dot', 'rms2')]
+        rest = np.concatenate([x.reshape(n_cells, n_rows, -1) for x in rest], axis=2)
+        extra = -(-rest.shape[2] // (r * r))
+        self.blocks = 4 + extra
+        combined = np.zeros((n_cells, n_rows, self.blocks, r, r))
+        for m, name in enumerate(('M', 'C', 'K')):
+            combined[:, :, m] = layout.block(table, name)
+        combined[:, :, 3, :, 0] = layout.block(table, 'f')
+        flat_rest = combined[:, :, 4:].reshape(n_cells, n_rows, -1)
+        flat_rest[..., :rest.shape[2]] = rest
+        combined[:, :, 4:] = flat_rest.reshape(n_cells, n_rows, extra, r, r)
+        self.table = combined.reshape(n_cells, n_rows, self.blocks * r * r)
+        self.out_width = 4 * (2 * r + 1)
+        self.rest_width = rest.shape[2]
+
+        # Laurent polynomials in h as arrays over POWERS.
+        npow = len(self.POWERS)
+        zero = self.POWERS.index(0)
+        big = np.zeros((npow, 2, 2, 4))            # original block matrix on X_{i,m}
+        for i in range(2):
+            big[zero, i, i, 0] = 1.0
+            for j in range(2):
+                big[zero + 1, i, j, 1] = a[i, j]
+                big[zero + 2, i, j, 2] = a2[i, j]
+        det = a2[1, 0] * a[1, 1] - a2[1, 1] * a[1, 0]
+        d_inv = np.zeros((npow, 2, 2))             # D2^-1
+        d_inv[zero - 2, 0, 0] = a[1, 1] / det
+        d_inv[zero - 1, 0, 1] = -a2[1, 1] / det
+        d_inv[zero - 2, 1, 0] = -a[1, 0] / det
+        d_inv[zero - 1, 1, 1] = a2[1, 0] / det
+        matrix = np.zeros((npow, 2, 2, 4))         # A D2^-1
+        for p1 in range(npow):
+            for p2 in range(npow):
+                p = p1 + p2 - zero
+                if 0 <= p < npow:
+                    matrix[p] += np.einsum('ijm,jk->ikm', big[p1], d_inv[p2])
+        operator = np.zeros((npow, 2, 3, 4))       # acting on (q, v, e1)
+        for i in range(2):
+            operator[zero, i, 0, 2] = -1.0                     # -K q
+            operator[zero, i, 1, 1] = -1.0                     # -C v
+            operator[zero + 1, i, 1, 2] = -c[i]                # -c_i h K v
+            operator[zero, i, 2, 3] = 1.0                      # +f
+        operator[1:, :, 1, :] += matrix[:-1, :, 0, :]          # + h (A D2^-1)_{i0} on v
+        rows = np.concatenate([matrix, operator], axis=2)      # (npow, 2, 5, 4)
+        self.g_stack = np.zeros((2, npow, 2, 5, 2, self.blocks))
+        for parity in (0, 1):
+            current, previous = parity, 1 - parity
+            mix = np.zeros((2, 2))
+            mix[0, previous], mix[0, current] = 1.0 - c[0], c[0]   # stage 1 at c_1 h
+            mix[1, current] = 1.0                                 # stage 2 at the sample
+            for i in range(2):
+                for b in range(2):
+                    self.g_stack[parity, :, i, :, b, :4] = mix[i, b] * rows[:, i]
+        self.g_stack = self.g_stack.reshape(2, npow, 10 * 2 * self.blocks)
+
+
+class StreamingEstimator:
+    """
+    Elastic deflections and joint criteria of the linkage, one crank sample at a time.
+
+    Parameters
+    ----------
+    model : ReducedModel
+        Precomputed reduced model (core/reduced.py).
+    fit_time_constant_s : float
+        Time constant of the crank-rate filter [s].
+    warm_start : bool
+        Start (and restart) from the periodic steady state at the current speed, so the
+        output is right from the first revolution; otherwise from the static deflection.
+    large_step_s : float
+        Steps longer than this are flagged LARGE_STEP [s].
+    reset_gap_s : float
+        Gaps longer than this restart the estimate [s].
+    accel_limit : float
+        |crank acceleration| clip [rad/s^2].
+    near_zero_fraction : float
+        Reaction below this fraction of its cycle RMS flags the joint as near zero.
+
+    """
+
+    def __init__(self, model, fit_time_constant_s=DEFAULT_FIT_TIME_CONSTANT_S,
+                 warm_start=True, large_step_s=DEFAULT_LARGE_STEP_S,
+                 reset_gap_s=DEFAULT_RESET_GAP_S, accel_limit=DEFAULT_ACCEL_LIMIT,
+                 near_zero_fraction=DEFAULT_NEAR_ZERO_FRACTION):
+        for name, value in (('large_step_s', large_step_s), ('reset_gap_s', reset_gap_s),
+                            ('accel_limit', accel_limit)):
+            if not value > 0.0:
+                raise ValueError(f'`{name}` must be positive, got {value!r}')
+        if not 0.0 <= near_zero_fraction < 1.0:
+            raise ValueError(f'`near_zero_fraction` must be in [0, 1), got {near_zero_fraction!r}')
+        self.model = model
+        self.warm_start = bool(warm_start)
+        self.large_step_s = float(large_step_s)
+        self.reset_gap_s = float(reset_gap_s)
+        self.accel_limit = float(accel_limit)
+        self.near_zero_fraction = float(near_zero_fraction)
+        self.rate_filter = CrankRateFilter(fit_time_constant_s)
+        self._speed_max = float(model.speed_max)
+        self._tables = _StepTables(model)
+        self._cells_per_radian = model.grid_size / TWO_PI
+        self._force_moments = model.force_moments.tolist()
+        r = model.size
+        self._z = np.zeros(3 * r)       # [q, v, e1]
+        self._z[2 * r] = 1.0
+        # Table rows of the previous and the new sample, in alternating slots.
+        self._stored = np.zeros((2, self._tables.blocks * r * r))
+        self._parity = 0
+        self._last = None
+        self._pending_warm_start = False
+        self._weights = np.zeros(reduced.CELL_POWERS * len(reduced.MONOMIALS))
+        if reduced.MONOMIALS != ('1', 'w', 'w2', 'a', 'w4', 'wa', 'w3'):
+            raise ValueError('monomial order changed: update StreamingEstimator._evaluate')
+        self.samples = 0
+
+    # -- state -------------------------------------------------------------------------
+
+    def reset(self):
+        """Forget the state; the next sample starts afresh."""
+        self.rate_filter.reset()
+        self._last = None
+        self._pending_warm_start = False
+
+    def _evaluate(self, angle, speed, accel):
+        """
+        Row weights (t^p times each monomial, in table-row order) and the cell index.
+
+        The weights go to a reused buffer: use them before the next call.
+        """
+        x = angle * self._cells_per_radian
+        k = int(x)
+        if k >= self.model.grid_size:
+            k = self.model.grid_size - 1
+        t = x - k
+        w, a = speed, accel
+        w2 = w * w
+        w4, wa, w3 = w2 * w2, w * a, w2 * w
+        t2 = t * t
+        t3 = t2 * t
+        # Order of reduced.MONOMIALS: 1, w, w2, a, w4, wa, w3.
+        self._weights[:] = (1.0, w, w2, a, w4, wa, w3,
+                            t, t * w, t * w2, t * a, t * w4, t * wa, t * w3,
+                            t2, t2 * w, t2 * w2, t2 * a, t2 * w4, t2 * wa, t2 * w3,
+                            t3, t3 * w, t3 * w2, t3 * a, t3 * w4, t3 * wa, t3 * w3)
+        return self._weights, k
+
+    def _set_state(self, angle, speed, accel, warm):
+        """Start from the periodic state at this speed (warm) or the static deflection."""
+        r = self.model.size
+        if warm and speed != 0.0:
+            _, q, v = reduced.periodic_response(self.model, speed, start_angle=angle,
+                                                steps=WARM_START_STEPS)
+            q0, v0 = q[0], v[0]
+        else:
+            rows = self.model.evaluate(angle, speed, accel)
+            _, _, stiffness, load = reduced.system_blocks(self.model, rows)
+            q0, v0 = np.linalg.solve(stiffness[0], load[0]), np.zeros(r)
+        self._z[:r] = q0
+        self._z[r:2 * r] = v0
+        weights, k = self._evaluate(angle, speed, accel)
+        np.dot(weights, self._tables.table[k], out=self._stored[self._parity])
+
+    # -- the per-sample path -----------------------------------------------------------
+
+    def update(self, stamp_ns, crank_angle, crank_speed=None):
+        """
+        Add one crank sample and return the estimate at its stamp.
+
+        Parameters
+        ----------
+        stamp_ns : int
+            Sample time [ns].
+        crank_angle : float
+            Crank angle [rad], any range (wrapped here).
+        crank_speed : float or None
+            Measured crank speed [rad/s]; None (or non-finite) to derive it from angles.
+
+        Returns
+        -------
+        Sample
+
+        """
+        angle_in = float(crank_angle)
+        if not math.isfinite(angle_in):
+            raise ValueError(f'`crank_angle` must be finite, got {crank_angle!r}')
+        if crank_speed is not None and not math.isfinite(crank_speed):
+            crank_speed = None
+        flags = 0
+        message = ''
+        last = self._last
+        if last is not None:
+            dt = (stamp_ns - last.stamp_ns) * 1e-9
+            if dt == 0.0 and abs(wrap_angle(angle_in) - last.crank_angle) < 1e-12:
+                return dataclasses.replace(last, flags=last.flags | _REPEATED,
+                                           message='repeated sample ignored')
+            if dt <= 0.0 or dt > self.reset_gap_s:
+                message = (f'stamp went back by {-dt:.6g} s' if dt <= 0.0
+                           else f'gap of {dt:.6g} s')
+                LOGGER.warning('estimator reset: %s', message)
+                self.reset()
+                last = None
+        if last is None:
+            return self._start(stamp_ns, angle_in, crank_speed, message)
+        angle, speed, accel = self.rate_filter.update((stamp_ns - self._stamp0_ns) * 1e-9,
+                                                      angle_in, crank_speed)
+        if crank_speed is None:
+            flags |= _SPEED_FROM_ANGLE
+        if dt > self.large_step_s:
+            flags |= _LARGE_STEP
+        model_speed, model_accel = speed, accel
+        if abs(speed) > self._speed_max:
+            model_speed = math.copysign(self._speed_max, speed)
+            flags |= _CLIPPED_SPEED
+        if abs(accel) > self.accel_limit:
+            model_accel = math.copysign(self.accel_limit, accel)
+            flags |= _CLIPPED_ACCEL
+        if self._pending_warm_start and self.rate_filter.count >= 3:
+            self._pending_warm_start = False
+            self._set_state(angle, model_speed, model_accel, True)
+            flags |= _WARM_START
+        else:
+            self._step(dt, angle, model_speed, model_accel)
+        return self._finish(stamp_ns, angle, speed, accel, model_speed, flags, message)
+
+    def _start(self, stamp_ns, angle_in, crank_speed, message):
+        self._stamp0_ns = int(stamp_ns)
+        angle, speed, accel = self.rate_filter.update(0.0, angle_in, crank_speed)
+        flags = _RESET
+        if crank_speed is None:
+            flags |= _SPEED_FROM_ANGLE
+        model_speed = max(-self._speed_max, min(self._speed_max, speed))
+        if model_speed != speed:
+            flags |= _CLIPPED_SPEED
+        warm = self.warm_start and crank_speed is not None
+        self._set_state(angle, model_speed, 0.0, warm)
+        if warm and model_speed != 0.0:
+            flags |= _WARM_START
+        self._pending_warm_start = self.warm_start and crank_speed is None
+        return self._finish(stamp_ns, angle, speed, accel, model_speed, flags, message)
+
+    def _step(self, h, angle, speed, accel):
+        """One Radau IIA step to the new sample (the fused path)."""
+        tables = self._tables
+        r = tables.size
+        weights, k = self._evaluate(angle, speed, accel)
+        parity = 1 - self._parity
+        self._parity = parity
+        stored = self._stored
+        np.dot(weights, tables.table[k], out=stored[parity])
+        inv = 1.0 / h
+        g = np.dot(np.array((inv * inv, inv, 1.0, h, h * h)), tables.g_stack[parity])
+        blocks = np.dot(g.reshape(10, 2 * tables.blocks), stored.reshape(-1, r * r))
+        # Transposed system (column block, l, i, k): its first 2 r rows are the Fortran-order
+        # block matrix LAPACK wants, the rest the transposed right-hand-side operator.
+        system_t = blocks.reshape(2, 5, r, r).transpose(1, 3, 0, 2).reshape(5 * r, 2 * r)
+        z = self._z
+        _, _, increment, _ = lapack.dgesv(system_t[:2 * r].T, np.dot(z, system_t[2 * r:]),
+                                          overwrite_a=1, overwrite_b=1)
+        z[:2 * r] += increment
+
+    def _finish(self, stamp_ns, angle, speed, accel, model_speed, flags, message):
+        tables = self._tables
+        r = tables.size
+        z = self._z
+        rest = self._stored[self._parity, 4 * r * r:]
+        width = tables.out_width
+        # [O | 0 | corr] . [q, v, 1]: the deflections with the residual correction.
+        deflection = np.dot(rest[:width].reshape(4, 2 * r + 1), z[:2 * r + 1]).tolist()
+        values = rest[:tables.rest_width].tolist()
+        correction = values[2 * r:width:2 * r + 1]
+        criteria = self._criteria(values[width:], model_speed)
+        size = math.sqrt(sum([d * d for d in deflection]))
+        sample = Sample(
+            stamp_ns=int(stamp_ns), crank_angle=angle, crank_speed=speed, crank_accel=accel,
+            lever_tip=(deflection[0], deflection[1]),
+            coupler_mid=(deflection[2], deflection[3]),
+            reaction_n=criteria[0], gamma_dot=criteria[1], criterion=criteria[2],
+            near_zero=criteria[3],
+            error_indicator=math.sqrt(sum([c * c for c in correction]))
+            / max(size, ERROR_INDICATOR_FLOOR_M),
+            flags=flags, message=message, modal=tuple(z[:r].tolist()))
+        self._last = sample
+        self.samples += 1
+        return sample
+
+    def _criteria(self, values, w):
+        """R, gamma-dot, |gamma-dot / R| and near-zero flags per joint from table values."""
+        joints = len(reduced.JOINTS)
+        force = values[:2 * joints]
+        rate = values[2 * joints:4 * joints]
+        rms2 = values[4 * joints:5 * joints]
+        limit2 = self.near_zero_fraction * self.near_zero_fraction
+        reactions, gamma_dots, ratios, near = [], [], [], []
+        for j in range(joints):
+            fx, fy = force[2 * j], force[2 * j + 1]
+            r2 = fx * fx + fy * fy
+            if r2 > 0.0:
+                magnitude = math.sqrt(r2)
+                gamma_dot = (fx * rate[2 * j + 1] - fy * rate[2 * j]) / r2
+                ratio = abs(gamma_dot) / magnitude
+            else:
+                magnitude, gamma_dot, ratio = 0.0, 0.0, math.inf
+            reactions.append(magnitude)
+            gamma_dots.append(gamma_dot)
+            ratios.append(ratio)
+            near.append(r2 < limit2 * rms2[j])
+        return tuple(reactions), tuple(gamma_dots), tuple(ratios), tuple(near)
+
+    def link_shapes(self, sample):
+        """
+        Rigid positions and elastic deflections of points along each link at a sample.
+
+        Returns
+        -------
+        positions, deflections : ndarray, shape (3, points, 2)
+            Ground frame [m].
+
+        """
+        return self.model.shapes(sample.crank_angle, np.array(sample.modal))

@@ -37,8 +37,9 @@ import numpy as np
 import scipy.interpolate
 import scipy.linalg
 
-# Monomials of (w, a) that multiply the tabulated pieces, in table-row order.
-MONOMIALS = ('1', 'w', 'w2', 'a', 'w4')
+# Monomials of (w, a) that multiply the tabulated pieces, in table-row order ('w4': damping
+# fit; 'wa', 'w3': time derivative of the joint reactions).
+MONOMIALS = ('1', 'w', 'w2', 'a', 'w4', 'wa', 'w3')
 # Polynomial degree of the spline in each cell (cubic).
 CELL_POWERS = 4
 # Exponent of the (omega_1 / omega) weight of frozen-mode snapshots in the POD.
@@ -60,7 +61,7 @@ def monomial_values(w, a):
 
     """
     w2 = w * w
-    return (1.0, w, w2, a, w2 * w2)
+    return (1.0, w, w2, a, w2 * w2, w * a, w2 * w)
 
 
 def periodic_cell_coefficients(values):
@@ -288,8 +289,7 @@ class TableLayout:
         self.size, self.outputs, self.joints = size, outputs, joints
         shapes = (('M', (size, size)), ('C', (size, size)), ('K', (size, size)),
                   ('f', (size,)), ('out', (outputs, size)), ('corr', (outputs,)),
-                  ('force', (joints, 2)), ('force_rate', (joints, 2)),
-                  ('force_w2', (joints, 2)))
+                  ('force', (joints, 2)), ('force_dot', (joints, 2)), ('rms2', (joints,)))
         self.shapes = dict(shapes)
         self.slices = {}
         start = 0
@@ -322,7 +322,8 @@ class ReducedModel:
         Constant basis V (full-order DOFs per reduced coordinate).
     force_moments : ndarray, shape (joints, 3)
         Cycle means of |F_0|^2, 2 F_0.F_w2 and |F_w2|^2 per joint, so that the RMS reaction
-        at speed w is sqrt(m0 + m1 w^2 + m2 w^4) (for the near-zero flag).
+        at speed w is sqrt(m0 + m1 w^2 + m2 w^4) (for the near-zero flag; also tabulated as
+        block 'rms2').
     speed_max : float
         Largest |crank speed| the basis and damping fit were built for [rad/s].
     zeta : float
@@ -457,7 +458,9 @@ def reduce_samples(samples, modes, static=0, speed_max=60.0, zeta=0.02, forces=N
         Modal damping ratio (recorded; the damping itself comes from ``samples.damping``).
     forces : dict or None
         Rigid-body joint reactions for the criteria: keys 'force' and 'force_rate', each a
-        dict {'1', 'a', 'w2'} of arrays (N, joints, 2) [N and N/rad]; None for zeros.
+        dict {'1', 'a', 'w2'} of arrays (N, joints, 2): F = F_1 + a F_a + w^2 F_w2 [N] and
+        its derivative in theta [N/rad]; None for zeros. The time derivative tabulated is
+        ``dF/dt = w dF/dtheta + 2 w a F_w2`` (crank jerk taken as zero).
     damping_speeds : int
         Speeds in [0, speed_max] at which the projected damping is fitted in w^2 (>= 3).
     basis_speeds : int
@@ -505,10 +508,18 @@ def reduce_samples(samples, modes, static=0, speed_max=60.0, zeta=0.02, forces=N
     joints = layout.joints
     zero_force = np.zeros((count, joints, 2))
     forces = forces or {}
-    for name in ('force', 'force_rate'):
-        for piece in ('1', 'a', 'w2'):
-            pieces[name][piece] = forces.get(name, {}).get(piece, zero_force)
-    pieces['force_w2']['1'] = forces.get('force', {}).get('w2', zero_force)
+    force = {piece: forces.get('force', {}).get(piece, zero_force) for piece in ('1', 'a', 'w2')}
+    rate = {piece: forces.get('force_rate', {}).get(piece, zero_force)
+            for piece in ('1', 'a', 'w2')}
+    pieces['force'] = force
+    pieces['force_dot'] = {'w': rate['1'], 'wa': rate['a'] + 2.0 * force['w2'],
+                           'w3': rate['w2']}
+    force_moments = np.stack([np.mean(np.sum(force['1'] ** 2, axis=-1), axis=0),
+                              2.0 * np.mean(np.sum(force['1'] * force['w2'], axis=-1), axis=0),
+                              np.mean(np.sum(force['w2'] ** 2, axis=-1), axis=0)], axis=1)
+    constant = lambda values: np.broadcast_to(values, (count, joints))  # noqa: E731
+    pieces['rms2'] = {'1': constant(force_moments[:, 0]), 'w2': constant(force_moments[:, 1]),
+                      'w4': constant(force_moments[:, 2])}
 
     table = np.zeros((count, CELL_POWERS, len(MONOMIALS), layout.width))
     for name, by_mono in pieces.items():
@@ -522,11 +533,6 @@ def reduce_samples(samples, modes, static=0, speed_max=60.0, zeta=0.02, forces=N
     shape_table = periodic_cell_coefficients(shape_values.reshape(count, -1)).reshape(
         (count, CELL_POWERS) + shape_values.shape[1:])
 
-    force0 = pieces['force']['1']
-    force2 = pieces['force']['w2']
-    force_moments = np.stack([np.mean(np.sum(force0 ** 2, axis=-1), axis=0),
-                              2.0 * np.mean(np.sum(force0 * force2, axis=-1), axis=0),
-                              np.mean(np.sum(force2 ** 2, axis=-1), axis=0)], axis=1)
     details = {'modes': int(modes), 'static': int(static), 'grid_size': int(count),
                'full_dofs': int(samples.dofs),
                'pod_modes': singular['modes'][:2 * size].tolist(),
