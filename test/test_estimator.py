@@ -390,3 +390,21 @@ def test_rejects_bad_arguments(toy_model):
         StreamingEstimator(toy_model, large_step_s=0.0)
     with pytest.raises(ValueError, match='crank_angle'):
         StreamingEstimator(toy_model).update(0, float('nan'), 1.0)
+
+
+@pytest.mark.parametrize('with_speed', [True, False])
+def test_replay_equals_streaming(toy_model, with_speed):
+    from flexlink_ros.core.estimator import replay
+    times = sample_times(1000.0, 0.5, 0.3, 0.05, seed=15)
+    stamps = np.round(times * 1e9).astype(np.int64)
+    speed = lambda t: 30.0 + 40.0 * t  # noqa: E731
+    angle = lambda t: 30.0 * t + 20.0 * t * t  # noqa: E731
+    est = StreamingEstimator(toy_model)
+    streamed = [est.update(int(s), angle(t), speed(t) if with_speed else None)
+                for s, t in zip(stamps, times)]
+    batch = replay(toy_model, stamps, angle(times), speed(times) if with_speed else None)
+    np.testing.assert_allclose(batch['lever_tip'], [s.lever_tip for s in streamed],
+                               rtol=1e-7, atol=1e-12)
+    np.testing.assert_allclose(batch['coupler_mid'], [s.coupler_mid for s in streamed],
+                               rtol=1e-7, atol=1e-12)
+    np.testing.assert_allclose(batch['crank_accel'], [s.crank_accel for s in streamed])

@@ -152,3 +152,23 @@ def test_rejects_bad_arguments():
         RadauIIA(4)
     with pytest.raises(ValueError, match='times'):
         integrate(sdof, [0.0, 0.1, 0.1], [1.0], [0.0])
+
+
+def test_batched_step_maps_and_composition_match_sequential_steps():
+    from flexlink_ros.core.integrators import compose_affine, step_maps
+    method = RadauIIA(2)
+    rng = np.random.default_rng(3)
+    steps = 37
+    h = rng.uniform(1e-3, 2e-2, steps)
+    times = np.concatenate([[0.0], np.cumsum(h)])
+    mats = [[mathieu_system(t + c * hk) for c in method.c] for t, hk in zip(times[:-1], h)]
+    mass, damping, stiffness = (np.array([[m[k] for m in row] for row in mats])
+                                for k in range(3))
+    load = np.array([[m[3] for m in row] for row in mats])
+    maps = step_maps(method, h, mass, damping, stiffness, load)
+    q, v = np.array([0.05, -0.02]), np.array([0.0, 0.3])
+    states = compose_affine(maps, np.concatenate([q, v]))
+    for k in range(steps):
+        q, v, _ = method.step(q, v, h[k], mass[k], damping[k], stiffness[k], load[k])
+        np.testing.assert_allclose(states[k + 1], np.concatenate([q, v]), rtol=1e-10,
+                                   atol=1e-14)

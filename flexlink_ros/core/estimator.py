@@ -25,7 +25,7 @@ import numpy as np
 from scipy.linalg import lapack
 
 from . import reduced
-from .integrators import RADAU_TABLEAUX
+from .integrators import RADAU_TABLEAUX, compose_affine
 
 LOGGER = logging.getLogger(__name__)
 
@@ -257,6 +257,8 @@ DEFAULT_NEAR_ZERO_FRACTION = 0.05
 ERROR_INDICATOR_FLOOR_M = 1e-6
 # Steps per revolution of the warm-start shooting.
 WARM_START_STEPS = 720
+# Samples per batch of the offline replay (bounds its memory to a few MB).
+REPLAY_CHUNK = 2048
 
 
 class SampleFlag(enum.IntFlag):
@@ -678,3 +680,93 @@ class StreamingEstimator:
 
         """
         return self.model.shapes(sample.crank_angle, np.array(sample.modal))
+
+
+def replay(model, stamps_ns, angles, speeds=None,
+           fit_time_constant_s=DEFAULT_FIT_TIME_CONSTANT_S, warm_start=True,
+           accel_limit=DEFAULT_ACCEL_LIMIT):
+    """
+    Offline estimate of a recorded crank signal: the streaming step, batched.
+
+    Same numbers as feeding :meth:`StreamingEstimator.update` sample by sample (a test checks
+    this), for strictly increasing stamps without gaps: the table rows, the step matrices and
+    their solves are computed for all samples at once, and only the state recursion
+    ``z <- z + X_n [z, e1]`` runs sample by sample.
+
+    Parameters
+    ----------
+    model : ReducedModel
+    stamps_ns : ndarray of int, shape (m,)
+        Strictly increasing stamps [ns].
+    angles : ndarray, shape (m,)
+        Crank angles [rad], any range.
+    speeds : ndarray, shape (m,), or None
+        Measured crank speeds [rad/s]; None to derive them from the angles.
+    fit_time_constant_s, warm_start, accel_limit
+        As for :class:`StreamingEstimator`.
+
+    Returns
+    -------
+    dict of str to ndarray
+        'crank_angle', 'crank_speed', 'crank_accel' (m,); 'lever_tip', 'coupler_mid' (m, 2)
+        [m]; 'modal' (m, r).
+
+    """
+    stamps_ns = np.asarray(stamps_ns, dtype=np.int64)
+    count = stamps_ns.size
+    if count < 1 or np.any(np.diff(stamps_ns) <= 0):
+        raise ValueError('`stamps_ns` must be strictly increasing')
+    angles = np.asarray(angles, dtype=float)
+    if speeds is not None:
+        speeds = np.asarray(speeds, dtype=float)
+    rate_filter = CrankRateFilter(fit_time_constant_s)
+    times = (stamps_ns - stamps_ns[0]) * 1e-9
+    motion = np.array([rate_filter.update(t, angle, None if speeds is None else speed)
+                       for t, angle, speed in zip(times.tolist(), angles.tolist(),
+                                                  [None] * count if speeds is None
+                                                  else speeds.tolist())])
+    wrapped, speed, accel = motion.T
+    model_speed = np.clip(speed, -model.speed_max, model.speed_max)
+    model_accel = np.clip(accel, -accel_limit, accel_limit)
+    tables = _StepTables(model)
+    r = tables.size
+    cells, position = model.cell(wrapped)
+    weights = model.weights(position, model_speed, model_accel)
+    rows = np.empty((count, tables.table.shape[2]))
+    order = np.argsort(cells, kind='stable')
+    bounds = np.flatnonzero(np.diff(cells[order])) + 1
+    for group in np.split(order, bounds):
+        rows[group] = weights[group] @ tables.table[cells[group[0]]]
+
+    # The first samples (start and, without measured speeds, the deferred warm start) go
+    # through the streaming estimator itself; the batched steps continue from its state.
+    estimator = StreamingEstimator(model, fit_time_constant_s, warm_start=warm_start,
+                                   accel_limit=accel_limit)
+    prefix = min(3 if (warm_start and speeds is None) else 1, count)
+    states = np.empty((count, 2 * r))
+    for n in range(prefix):
+        estimator.update(int(stamps_ns[n]), float(angles[n]),
+                         None if speeds is None else float(speeds[n]))
+        states[n] = estimator._z[:2 * r]
+    eye = np.eye(2 * r)
+    for first in range(prefix - 1, count - 1, REPLAY_CHUNK):
+        last = min(first + REPLAY_CHUNK, count - 1)
+        steps = times[first + 1:last + 1] - times[first:last]
+        inv = 1.0 / steps
+        powers = np.stack([inv * inv, inv, np.ones_like(steps), steps, steps * steps], axis=1)
+        # Slot order of g_stack[0]: the new sample in slot 0, the previous one in slot 1.
+        g = (powers @ tables.g_stack[0]).reshape(-1, 10, 2 * tables.blocks)
+        pairs = np.stack([rows[first + 1:last + 1], rows[first:last]], axis=1).reshape(
+            steps.size, 2 * tables.blocks, r * r)
+        system = np.matmul(g, pairs).reshape(-1, 2, 5, r, r).transpose(0, 1, 3, 2, 4).reshape(
+            -1, 2 * r, 5 * r)
+        # Increment dz = X [q, v, e1]; only e1's first column is non-zero.
+        increments = np.linalg.solve(system[:, :, :2 * r], system[:, :, 2 * r:4 * r + 1])
+        increments[:, :, :2 * r] += eye
+        states[first:last + 1] = compose_affine(increments, states[first])
+    full = np.concatenate([states, np.ones((count, 1))], axis=1)
+    rest = rows[:, 4 * r * r:4 * r * r + tables.out_width].reshape(count, 4, 2 * r + 1)
+    deflection = np.einsum('moc,mc->mo', rest, full)
+    return {'crank_angle': wrapped, 'crank_speed': speed, 'crank_accel': accel,
+            'lever_tip': deflection[:, :2], 'coupler_mid': deflection[:, 2:],
+            'modal': states[:, :r].copy()}

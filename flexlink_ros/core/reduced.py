@@ -574,9 +574,9 @@ def periodic_response(model, speed, start_angle=0.0, steps=720, stages=2):
     Periodic steady state of the reduced model at constant crank speed (shooting).
 
     The one-revolution map of the Radau IIA discretisation is affine in the initial state,
-    ``z_T = P z_0 + g``; it is built by propagating the 2 r unit states and the loaded zero
-    state together, and ``z_0 = (I - P)^-1 g`` is the periodic state. At zero speed the
-    static state K^-1 f is returned.
+    ``z_T = P z_0 + g``; it is the product of the steps' affine maps (all solved at once),
+    and ``z_0 = (I - P)^-1 g`` is the periodic state. At zero speed the static state K^-1 f
+    is returned.
 
     Parameters
     ----------
@@ -598,7 +598,7 @@ def periodic_response(model, speed, start_angle=0.0, steps=720, stages=2):
         Reduced coordinates and velocities.
 
     """
-    from .integrators import RadauIIA
+    from .integrators import RadauIIA, compose_affine, step_maps
     size = model.size
     if speed == 0.0:
         rows = model.evaluate(start_angle, 0.0, 0.0)
@@ -613,23 +613,13 @@ def periodic_response(model, speed, start_angle=0.0, steps=720, stages=2):
     rows = model.evaluate(start_angle + speed * stage_times.ravel(), speed, 0.0)
     mass, damping, stiffness, load = (b.reshape((steps, stages) + b.shape[1:])
                                       for b in system_blocks(model, rows))
-    columns = 2 * size + 1
-    q = np.zeros((size, columns))
-    v = np.zeros((size, columns))
-    q[:, :size] = np.eye(size)
-    v[:, size:2 * size] = np.eye(size)
-    loads = np.zeros((steps, stages, size, columns))
-    loads[..., -1] = load
-    history_q, history_v = [q], [v]
-    for i in range(steps):
-        q, v, _ = method.step(q, v, h, mass[i], damping[i], stiffness[i], loads[i])
-        history_q.append(q)
-        history_v.append(v)
-    end = np.vstack([q, v])
-    monodromy, offset = end[:, :-1], end[:, -1]
-    start = np.linalg.solve(np.eye(2 * size) - monodromy, offset)
-    state = np.concatenate([start, [1.0]])
-    q_all = np.array([hq @ state for hq in history_q])
-    v_all = np.array([hv @ state for hv in history_v])
+    maps = step_maps(method, np.full(steps, h), mass, damping, stiffness, load)
+    total = np.concatenate([np.eye(2 * size), np.zeros((2 * size, 1))], axis=1)
+    for step in maps:
+        total = step[:, :2 * size] @ total
+        total[:, -1] += step[:, -1]
+    start = np.linalg.solve(np.eye(2 * size) - total[:, :-1], total[:, -1])
+    states = compose_affine(maps, start)
+    q_all, v_all = states[:, :size], states[:, size:]
     angles = start_angle + speed * h * np.arange(steps + 1)
     return angles, q_all, v_all
