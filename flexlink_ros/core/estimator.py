@@ -460,6 +460,8 @@ class StreamingEstimator:
         self.near_zero_fraction = float(near_zero_fraction)
         self.rate_filter = CrankRateFilter(fit_time_constant_s)
         self._speed_max = float(model.speed_max)
+        if len(reduced.JOINTS) != 4:
+            raise ValueError('the criteria path is written for four joints')
         self._tables = _StepTables(model)
         self._cells_per_radian = model.grid_size / TWO_PI
         self._force_moments = model.force_moments.tolist()
@@ -648,25 +650,19 @@ class StreamingEstimator:
 
     def _criteria(self, values, w):
         """R, gamma-dot, |gamma-dot / R| and near-zero flags per joint from table values."""
-        joints = len(reduced.JOINTS)
-        force = values[:2 * joints]
-        rate = values[2 * joints:4 * joints]
-        rms2 = values[4 * joints:5 * joints]
         limit2 = self.near_zero_fraction * self.near_zero_fraction
-        reactions, gamma_dots, ratios, near = [], [], [], []
-        for j in range(joints):
-            fx, fy = force[2 * j], force[2 * j + 1]
+        reactions, gamma_dots, ratios, near = [0.0] * 4, [0.0] * 4, [0.0] * 4, [False] * 4
+        for j in range(4):
+            fx, fy = values[2 * j], values[2 * j + 1]
             r2 = fx * fx + fy * fy
+            near[j] = r2 < limit2 * values[16 + j]
             if r2 > 0.0:
                 magnitude = math.sqrt(r2)
-                gamma_dot = (fx * rate[2 * j + 1] - fy * rate[2 * j]) / r2
-                ratio = abs(gamma_dot) / magnitude
+                gamma_dot = (fx * values[9 + 2 * j] - fy * values[8 + 2 * j]) / r2
+                reactions[j], gamma_dots[j] = magnitude, gamma_dot
+                ratios[j] = abs(gamma_dot) / magnitude
             else:
-                magnitude, gamma_dot, ratio = 0.0, 0.0, math.inf
-            reactions.append(magnitude)
-            gamma_dots.append(gamma_dot)
-            ratios.append(ratio)
-            near.append(r2 < limit2 * rms2[j])
+                ratios[j] = math.inf
         return tuple(reactions), tuple(gamma_dots), tuple(ratios), tuple(near)
 
     def link_shapes(self, sample):

@@ -623,3 +623,180 @@ def periodic_response(model, speed, start_angle=0.0, steps=720, stages=2):
     q_all, v_all = states[:, :size], states[:, size:]
     angles = start_angle + speed * h * np.arange(steps + 1)
     return angles, q_all, v_all
+
+
+# ---------------------------------------------------------------------------------------
+# Models of a mechanism: options, cache, and the full-order pieces from core/assembly.py
+
+# Bump when the precompute changes what it stores; older cache files are then rebuilt.
+MODEL_VERSION = 1
+
+
+@dataclasses.dataclass(frozen=True)
+class ModelOptions:
+    """
+    Options of the precomputed reduced model (all part of the cache key).
+
+    Parameters
+    ----------
+    modes : int
+        Basis directions from the frozen modes.
+    static : int
+        Further basis directions from static load responses.
+    grid_size : int
+        Crank-angle grid points per revolution.
+    elements_per_link : int or None
+        Beam elements per link of the full model (None: the mechanism's value).
+    rigid_crank : bool
+        Treat the crank as rigid.
+    bearings : str
+        'flexible' (springs of the mechanism file) or 'rigid'.
+    geometric_stiffness : bool
+        Include the geometric stiffness of the rigid-body axial forces.
+    speed_max : float
+        Largest |crank speed| served [rad/s].
+
+    """
+
+    modes: int = 4
+    static: int = 2
+    grid_size: int = 128
+    elements_per_link: object = None
+    rigid_crank: bool = True
+    bearings: str = 'flexible'
+    geometric_stiffness: bool = True
+    speed_max: float = 65.0
+
+    def __post_init__(self):
+        if self.modes < 1 or self.static < 0:
+            raise ValueError(f'`modes` must be >= 1 and `static` >= 0, got {self.modes}, '
+                             f'{self.static}')
+        if self.grid_size < 8:
+            raise ValueError(f'`grid_size` must be >= 8, got {self.grid_size}')
+        if self.bearings not in ('flexible', 'rigid'):
+            raise ValueError(f"`bearings` must be 'flexible' or 'rigid', got {self.bearings!r}")
+        if not self.speed_max > 0.0:
+            raise ValueError(f'`speed_max` must be positive, got {self.speed_max}')
+
+
+def model_key(mechanism, options):
+    """Cache key of a mechanism's reduced model (hex)."""
+    from .cache import cache_key
+    return cache_key('reduced-model', MODEL_VERSION, mechanism.key(),
+                     dataclasses.asdict(options))
+
+
+def model_for_mechanism(mechanism, options=None, cache_dir=None, use_cache=True):
+    """
+    The reduced model of a mechanism: from a verified cache file, or built (and cached).
+
+    Parameters
+    ----------
+    mechanism : Mechanism
+    options : ModelOptions or None
+    cache_dir : str, Path or None
+        Cache directory (None: core.cache.default_cache_dir()).
+    use_cache : bool
+        False builds without reading or writing a cache.
+
+    Returns
+    -------
+    ReducedModel
+
+    """
+    from . import cache
+    options = options or ModelOptions()
+    key = model_key(mechanism, options)
+    path = None
+    if use_cache:
+        directory = cache.default_cache_dir() if cache_dir in (None, '') else cache_dir
+        path = f'{directory}/{mechanism.name}-{key[:16]}.npz'
+
+    def build():
+        return build_model(mechanism, options).to_arrays()
+
+    arrays, meta, _ = cache.load_or_build(path, key, build)
+    return ReducedModel.from_arrays(arrays, meta)
+
+
+def build_model(mechanism, options):
+    """Precompute the reduced model of a mechanism (full-order pieces from core/assembly.py)."""
+    samples = frozen_samples_for(mechanism, options)
+    angles = 2.0 * np.pi * np.arange(options.grid_size) / options.grid_size
+    forces, criteria_source = reaction_pieces(mechanism, angles)
+    return reduce_samples(samples, options.modes, options.static, options.speed_max,
+                          mechanism.damping_ratio, forces=forces,
+                          info={'options': dataclasses.asdict(options),
+                                'mechanism': mechanism.name, 'criteria': criteria_source})
+
+
+def frozen_samples_for(mechanism, options):
+    """
+    Full-order affine pieces of the flexible model on the crank-angle grid.
+
+    Raises
+    ------
+    FlexlinkError
+        If the flexible FE model (core/assembly.py) is not in this checkout.
+
+    """
+    from .errors import FlexlinkError
+    try:
+        from . import assembly  # noqa: F401
+    except ImportError as exc:
+        raise FlexlinkError('the flexible FE model (core/assembly.py) is not in this '
+                            f'checkout: {exc}') from exc
+    raise FlexlinkError('core/assembly.py is present but its adapter is not written yet')
+
+
+def reaction_pieces(mechanism, angles):
+    """
+    Rigid-body joint reactions F = F_1 + a F_a + w^2 F_w2 and dF/dtheta on the grid.
+
+    Returns
+    -------
+    forces : dict or None
+        As :func:`reduce_samples` takes them; None if core/dynamics.py is not available.
+    source : str
+        Where the reactions come from.
+
+    """
+    try:
+        from . import dynamics  # noqa: F401
+    except ImportError:
+        return None, 'unavailable (core/dynamics.py not in this checkout)'
+    return None, 'unavailable (adapter not written yet)'
+
+
+def reference_response(mechanism, options, speed, angles):
+    """
+    Full-order periodic response at constant crank speed (core/simulate.py), at given angles.
+
+    Parameters
+    ----------
+    mechanism : Mechanism
+    options : ModelOptions
+        Only the physical options (elements, rigid crank, bearings, geometric stiffness).
+    speed : float
+        Crank speed [rad/s].
+    angles : ndarray, shape (m,)
+        Crank angles [rad].
+
+    Returns
+    -------
+    dict
+        'lever_tip', 'coupler_mid': ndarray (m, 2) [m]; 'cpu_s_per_simulated_s': float.
+
+    Raises
+    ------
+    FlexlinkError
+        If the full-order simulation (core/simulate.py) is not in this checkout.
+
+    """
+    from .errors import FlexlinkError
+    try:
+        from . import simulate  # noqa: F401
+    except ImportError as exc:
+        raise FlexlinkError('the full-order reference (core/simulate.py) is not in this '
+                            f'checkout: {exc}') from exc
+    raise FlexlinkError('core/simulate.py is present but its adapter is not written yet')

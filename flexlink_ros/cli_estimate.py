@@ -1,0 +1,397 @@
+"""
+`flexlink estimate`, `flexlink plan`, `flexlink bench`: the streaming estimator offline.
+
+- ``estimate`` runs :class:`core.estimator.StreamingEstimator` on a synthetic constant-speed
+  crank signal (optionally jittered) and prints the last full revolution.
+- ``plan`` picks the smallest reduced model meeting a tolerance against the full-order
+  reference over a speed range, and shows the error and cost of the alternatives.
+- ``bench`` measures, side by side in one run: streaming cost per sample (median, p99),
+  offline samples per second, full-order CPU per simulated second, and each configuration's
+  error; it prints a table and writes a chart of error against cost.
+"""
+
+import dataclasses
+import math
+import pathlib
+import time
+
+import numpy as np
+
+from .cli import emit
+from .core import reduced
+from .core.estimator import StreamingEstimator, replay
+from .core.mechanism import load_mechanism
+
+RPM = 2.0 * math.pi / 60.0   # rad/s per rpm
+# Speeds of Cho 1992's deflection plots [rpm]: the accuracy checks use them.
+PAPER_RPM = (269.0, 391.0)
+# Samples whose update time is measured after a warm-up (median and p99 are reported).
+TIMING_WARMUP = 50
+
+
+def synthetic_signal(rpm, seconds, rate_hz, jitter=0.0, seed=0, start_angle=0.0):
+    """
+    Stamps, angles and speeds of a crank at constant speed sampled with jitter.
+
+    Parameters
+    ----------
+    rpm : float
+        Crank speed [rpm].
+    seconds : float
+        Duration [s].
+    rate_hz : float
+        Nominal sample rate [Hz].
+    jitter : float
+        Each step is (1 + jitter U(-1, 1)) / rate_hz.
+    seed : int
+        Random seed of the jitter.
+    start_angle : float
+        Crank angle at t = 0 [rad].
+
+    Returns
+    -------
+    stamps_ns : ndarray of int, shape (m,)
+    angles, speeds : ndarray, shape (m,)
+
+    """
+    if not 0.0 <= jitter < 1.0:
+        raise ValueError(f'`jitter` must be in [0, 1), got {jitter}')
+    if seconds <= 0.0 or rate_hz <= 0.0:
+        raise ValueError('`seconds` and `rate_hz` must be positive')
+    rng = np.random.default_rng(seed)
+    count = int(seconds * rate_hz * (1.0 + jitter)) + 2
+    steps = (1.0 + jitter * rng.uniform(-1.0, 1.0, count)) / rate_hz
+    times = np.concatenate([[0.0], np.cumsum(steps)])
+    times = times[times <= seconds]
+    stamps = np.round(times * 1e9).astype(np.int64)
+    speed = rpm * RPM
+    return stamps, start_angle + speed * stamps * 1e-9, np.full(stamps.size, speed)
+
+
+def last_revolution(stamps_ns, rpm):
+    """Boolean mask of the samples in the last full revolution."""
+    period_ns = 2.0 * math.pi / (abs(rpm) * RPM) * 1e9
+    return stamps_ns > stamps_ns[-1] - period_ns
+
+
+def stream_timed(model, stamps_ns, angles, speeds, warm_start=True):
+    """
+    Run the streaming estimator and time every update.
+
+    Returns
+    -------
+    samples : list of Sample
+    update_ns : ndarray of int
+        perf_counter_ns duration of each update.
+
+    """
+    estimator = StreamingEstimator(model, warm_start=warm_start)
+    samples, durations = [], []
+    clock = time.perf_counter_ns
+    for stamp, angle, speed in zip(stamps_ns.tolist(), angles.tolist(),
+                                   None if speeds is None else speeds.tolist()):
+        start = clock()
+        samples.append(estimator.update(stamp, angle, speed))
+        durations.append(clock() - start)
+    return samples, np.array(durations)
+
+
+def timing_summary(update_ns):
+    """Median and 99th percentile [us] of update durations after the warm-up samples."""
+    steady = update_ns[TIMING_WARMUP:] if update_ns.size > 2 * TIMING_WARMUP else update_ns
+    return float(np.median(steady) / 1e3), float(np.percentile(steady, 99) / 1e3)
+
+
+def run_estimate(model, rpm, seconds=3.0, rate_hz=1000.0, jitter=0.0, warm_start=True,
+                 seed=0):
+    """
+    The estimate over the last full revolution of a synthetic constant-speed signal.
+
+    Returns
+    -------
+    dict
+        JSON-ready: crank_deg, lever_tip and coupler_mid {dx_m, dy_m}, error_indicator,
+        us_per_sample_median, us_per_sample_p99, samples, flags seen.
+
+    """
+    stamps, angles, speeds = synthetic_signal(rpm, seconds, rate_hz, jitter, seed)
+    samples, update_ns = stream_timed(model, stamps, angles, speeds, warm_start)
+    mask = last_revolution(stamps, rpm)
+    chosen = [s for s, keep in zip(samples, mask) if keep]
+    median, p99 = timing_summary(update_ns)
+    return {
+        'crank_deg': [math.degrees(s.crank_angle) for s in chosen],
+        'lever_tip': {'dx_m': [s.lever_tip[0] for s in chosen],
+                      'dy_m': [s.lever_tip[1] for s in chosen]},
+        'coupler_mid': {'dx_m': [s.coupler_mid[0] for s in chosen],
+                        'dy_m': [s.coupler_mid[1] for s in chosen]},
+        'error_indicator_max': max(s.error_indicator for s in chosen),
+        'us_per_sample_median': median,
+        'us_per_sample_p99': p99,
+        'samples': len(samples),
+        'model': {'size': model.size, 'grid_size': model.grid_size,
+                  'bytes': int(model.nbytes), 'options': model.info.get('options', {})},
+    }
+
+
+def relative_rms(estimate, reference):
+    """Relative RMS error over both components, sqrt(mean |e - r|^2 / mean |r|^2)."""
+    estimate, reference = np.asarray(estimate), np.asarray(reference)
+    scale = np.mean(np.sum(reference ** 2, axis=-1))
+    return float(np.sqrt(np.mean(np.sum((estimate - reference) ** 2, axis=-1)) / scale))
+
+
+def configuration_error(mechanism, model, options, rpm, rate_hz=1000.0, jitter=0.0,
+                        seconds=None, seed=0):
+    """
+    Streaming error of a model against the full-order reference at one speed.
+
+    The estimator replays (batched, the same numbers as streaming) a synthetic signal of
+    ``seconds`` (default: two revolutions after a warm start) and the last revolution is
+    compared with the reference response at the same crank angles.
+
+    Returns
+    -------
+    dict
+        error_lever_tip, error_coupler_mid (relative RMS), reference_cpu_s_per_s.
+
+    """
+    period = 2.0 * math.pi / (rpm * RPM)
+    seconds = seconds or 2.0 * period
+    stamps, angles, speeds = synthetic_signal(rpm, seconds, rate_hz, jitter, seed)
+    out = replay(model, stamps, angles, speeds)
+    mask = last_revolution(stamps, rpm)
+    ref = reduced.reference_response(mechanism, options, rpm * RPM, angles[mask])
+    return {'error_lever_tip': relative_rms(out['lever_tip'][mask], ref['lever_tip']),
+            'error_coupler_mid': relative_rms(out['coupler_mid'][mask], ref['coupler_mid']),
+            'reference_cpu_s_per_s': ref.get('cpu_s_per_simulated_s')}
+
+
+def model_options(args, **overrides):
+    """ModelOptions from the common command-line arguments, with overrides."""
+    values = {'rigid_crank': args.rigid_crank, 'bearings': args.bearings}
+    for name in ('modes', 'static', 'grid_size', 'elements_per_link'):
+        value = getattr(args, name, None)
+        if value is not None:
+            values[name] = value
+    if getattr(args, 'rpm_max', None):
+        values['speed_max'] = max(reduced.ModelOptions.speed_max, 1.05 * args.rpm_max * RPM)
+    values.update(overrides)
+    return reduced.ModelOptions(**values)
+
+
+def load_model(mechanism, options, args):
+    """The cached (or freshly built) reduced model for the command line."""
+    return reduced.model_for_mechanism(mechanism, options, cache_dir=args.cache_dir,
+                                       use_cache=not args.no_cache)
+
+
+# ---------------------------------------------------------------------------------------
+# Commands
+
+def _estimate(args):
+    mechanism = load_mechanism(args.mechanism)
+    options = model_options(args, speed_max=max(reduced.ModelOptions.speed_max,
+                                                 1.05 * abs(args.rpm) * RPM))
+    model = load_model(mechanism, options, args)
+    result = run_estimate(model, args.rpm, args.seconds, args.rate_hz, args.jitter,
+                          not args.no_warm_start, args.seed)
+    lever = np.hypot(result['lever_tip']['dx_m'], result['lever_tip']['dy_m'])
+    coupler = np.hypot(result['coupler_mid']['dx_m'], result['coupler_mid']['dy_m'])
+    text = (f'{mechanism.name} at {args.rpm:g} rpm, {args.rate_hz:g} Hz '
+            f'(jitter {args.jitter:g}), last revolution of {result["samples"]} samples:\n'
+            f'  lever tip |d| max   {1e3 * lever.max():.4f} mm\n'
+            f'  coupler mid |d| max {1e3 * coupler.max():.4f} mm\n'
+            f'  update {result["us_per_sample_median"]:.1f} us median, '
+            f'{result["us_per_sample_p99"]:.1f} us p99 (r = {model.size}, '
+            f'{model.grid_size} grid cells)')
+    return emit(result, text, args.json)
+
+
+def plan_candidates(base):
+    """Candidate options from small to large (fewest coordinates and cells first)."""
+    candidates = []
+    for modes in (2, 3, 4, 6):
+        for static in (0, 1, 2, 3):
+            for grid in (64, 128, 256):
+                candidates.append(dataclasses.replace(base, modes=modes, static=static,
+                                                      grid_size=grid))
+    return sorted(candidates, key=lambda o: (o.modes + o.static, o.grid_size))
+
+
+def run_plan(mechanism, base, rpm_max, tolerance, rate_hz=1000.0, speeds_rpm=None,
+             max_candidates=None):
+    """
+    Evaluate candidates in order of size and pick the first meeting the tolerance.
+
+    Returns
+    -------
+    dict
+        'choice' (options and errors) or None, 'alternatives' (every evaluated candidate).
+
+    """
+    speeds_rpm = speeds_rpm or sorted({min(s, rpm_max) for s in PAPER_RPM} | {rpm_max})
+    rows, choice = [], None
+    for index, options in enumerate(plan_candidates(base)):
+        if max_candidates is not None and index >= max_candidates:
+            break
+        start = time.perf_counter()
+        model = reduced.model_for_mechanism(mechanism, options, use_cache=False)
+        build_s = time.perf_counter() - start
+        errors = [configuration_error(mechanism, model, options, rpm, rate_hz)
+                  for rpm in speeds_rpm]
+        stamps, angles, speeds = synthetic_signal(speeds_rpm[-1], 0.3, rate_hz)
+        _, update_ns = stream_timed(model, stamps, angles, speeds)
+        median, _ = timing_summary(update_ns)
+        row = {'options': dataclasses.asdict(options), 'size': model.size,
+               'bytes': int(model.nbytes), 'build_s': build_s, 'us_per_sample': median,
+               'error_coupler_mid': max(e['error_coupler_mid'] for e in errors),
+               'error_lever_tip': max(e['error_lever_tip'] for e in errors)}
+        rows.append(row)
+        if row['error_coupler_mid'] <= tolerance and row['error_lever_tip'] <= tolerance:
+            choice = row
+            break
+    return {'speeds_rpm': speeds_rpm, 'tolerance': tolerance, 'choice': choice,
+            'alternatives': rows}
+
+
+def _plan(args):
+    mechanism = load_mechanism(args.mechanism)
+    base = model_options(args)
+    result = run_plan(mechanism, base, args.rpm_max, args.tolerance, args.rate_hz)
+    lines = [f'{"modes":>5} {"static":>6} {"grid":>5} {"us":>7} {"coupler":>9} {"lever":>9}']
+    for row in result['alternatives']:
+        o = row['options']
+        lines.append(f'{o["modes"]:>5} {o["static"]:>6} {o["grid_size"]:>5} '
+                     f'{row["us_per_sample"]:>7.1f} {row["error_coupler_mid"]:>9.2e} '
+                     f'{row["error_lever_tip"]:>9.2e}')
+    chosen = result['choice']
+    lines.append('choice: ' + (f'{chosen["options"]}' if chosen else
+                               'none of the candidates meets the tolerance'))
+    return emit(result, '\n'.join(lines), args.json)
+
+
+def bench_configurations(base):
+    """The configurations compared by ``bench``: the default first."""
+    return [('default', base),
+            ('2 modes, no static', dataclasses.replace(base, modes=2, static=0)),
+            ('6 modes + 3 static', dataclasses.replace(base, modes=6, static=3)),
+            ('grid 64', dataclasses.replace(base, grid_size=64)),
+            ('grid 256', dataclasses.replace(base, grid_size=256))]
+
+
+def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM,
+              configurations=None, chart=None):
+    """
+    Side-by-side costs and errors of the configurations (see module docstring).
+
+    Returns
+    -------
+    dict
+        'configurations': per configuration us/sample (median, p99), offline samples/s,
+        errors per speed, model bytes; 'reference_cpu_s_per_s'; 'cpu_ratio'; 'chart'.
+
+    """
+    rows = []
+    reference_cpu = None
+    for label, options in configurations or bench_configurations(base):
+        model = reduced.model_for_mechanism(mechanism, options, use_cache=False)
+        stamps, angles, speeds = synthetic_signal(max(speeds_rpm), seconds, rate_hz)
+        _, update_ns = stream_timed(model, stamps, angles, speeds)
+        median, p99 = timing_summary(update_ns)
+        start = time.perf_counter()
+        replay(model, stamps, angles, speeds)
+        offline = stamps.size / (time.perf_counter() - start)
+        errors = {}
+        for rpm in speeds_rpm:
+            result = configuration_error(mechanism, model, options, rpm, rate_hz)
+            errors[f'{rpm:g}'] = result
+            reference_cpu = reference_cpu or result['reference_cpu_s_per_s']
+        rows.append({
+            'label': label, 'default': label == 'default', 'size': model.size,
+            'grid_size': model.grid_size, 'bytes': int(model.nbytes),
+            'us_per_sample': median, 'us_per_sample_p99': p99,
+            'offline_samples_per_s': offline,
+            'error_coupler_mid': max(e['error_coupler_mid'] for e in errors.values()),
+            'error_lever_tip': max(e['error_lever_tip'] for e in errors.values()),
+            'errors': errors})
+    estimator_cpu = rows[0]['us_per_sample'] * 1e-6 * rate_hz  # CPU s per simulated s
+    result = {'rate_hz': rate_hz, 'configurations': rows,
+              'reference_cpu_s_per_s': reference_cpu,
+              'estimator_cpu_s_per_s': estimator_cpu,
+              'cpu_ratio': (reference_cpu / estimator_cpu) if reference_cpu else None}
+    if chart:
+        from .plots.estimator import plot_error_vs_cost
+        result['chart'] = str(plot_error_vs_cost(rows, chart))
+    return result
+
+
+def _bench(args):
+    mechanism = load_mechanism(args.mechanism)
+    chart = None if args.no_chart else pathlib.Path(args.out) / 'estimator_error_vs_cost.png'
+    result = run_bench(mechanism, model_options(args), args.rate_hz, chart=chart)
+    lines = [f'{"configuration":<22} {"r":>3} {"grid":>5} {"us p50":>7} {"us p99":>7} '
+             f'{"offline/s":>10} {"coupler":>9} {"lever":>9} {"MB":>6}']
+    for row in result['configurations']:
+        lines.append(f'{row["label"]:<22} {row["size"]:>3} {row["grid_size"]:>5} '
+                     f'{row["us_per_sample"]:>7.1f} {row["us_per_sample_p99"]:>7.1f} '
+                     f'{row["offline_samples_per_s"]:>10.0f} '
+                     f'{row["error_coupler_mid"]:>9.2e} {row["error_lever_tip"]:>9.2e} '
+                     f'{row["bytes"] / 1e6:>6.2f}')
+    if result['cpu_ratio']:
+        lines.append(f'full-order reference: {result["reference_cpu_s_per_s"]:.3g} CPU s per '
+                     f'simulated s; estimator {result["estimator_cpu_s_per_s"]:.3g} '
+                     f'({result["cpu_ratio"]:.0f}x less)')
+    if result.get('chart'):
+        lines.append(f'chart: {result["chart"]}')
+    return emit(result, '\n'.join(lines), args.json)
+
+
+def _common(parser):
+    parser.add_argument('--mechanism', default='cho1992',
+                        help='mechanism file or name (default: cho1992)')
+    crank = parser.add_mutually_exclusive_group()
+    crank.add_argument('--rigid-crank', dest='rigid_crank', action='store_true', default=True,
+                       help='treat the crank as rigid (default)')
+    crank.add_argument('--flexible-crank', dest='rigid_crank', action='store_false',
+                       help='model the crank as a flexible beam')
+    parser.add_argument('--bearings', choices=('flexible', 'rigid'), default='flexible',
+                        help='revolute bearings: springs of the mechanism file, or rigid')
+    parser.add_argument('--modes', type=int, help='basis directions from frozen modes')
+    parser.add_argument('--static', type=int, help='basis directions from static responses')
+    parser.add_argument('--grid-size', type=int, help='crank-angle grid points')
+    parser.add_argument('--elements-per-link', type=int, help='beam elements per link')
+    parser.add_argument('--rate-hz', type=float, default=1000.0, help='sample rate [Hz]')
+    parser.add_argument('--cache-dir', default=None,
+                        help='model cache directory (default: ~/.cache/flexlink_ros)')
+    parser.add_argument('--no-cache', action='store_true', help='build without the cache')
+    parser.add_argument('--json', action='store_true', help='print one JSON object')
+
+
+def register(subparsers):
+    """Add the estimate, plan and bench subcommands."""
+    parser = subparsers.add_parser('estimate', help='streaming estimator on a synthetic '
+                                   'constant-speed crank signal (last revolution)')
+    _common(parser)
+    parser.add_argument('--rpm', type=float, required=True, help='crank speed [rpm]')
+    parser.add_argument('--seconds', type=float, default=3.0, help='signal length [s]')
+    parser.add_argument('--jitter', type=float, default=0.0,
+                        help='relative sample-time jitter, steps (1 +- jitter) / rate')
+    parser.add_argument('--no-warm-start', action='store_true',
+                        help='start from the static deflection, not the periodic state')
+    parser.add_argument('--seed', type=int, default=0, help='jitter random seed')
+    parser.set_defaults(func=_estimate)
+
+    parser = subparsers.add_parser('plan', help='smallest reduced model meeting a tolerance '
+                                   'against the full-order reference')
+    _common(parser)
+    parser.add_argument('--rpm-max', type=float, required=True, help='largest speed [rpm]')
+    parser.add_argument('--tolerance', type=float, default=0.01,
+                        help='relative RMS error target (default 0.01)')
+    parser.set_defaults(func=_plan)
+
+    parser = subparsers.add_parser('bench', help='estimator cost and accuracy side by side')
+    _common(parser)
+    parser.add_argument('--out', default='out', help='directory of the chart (default out/)')
+    parser.add_argument('--no-chart', action='store_true', help='skip the chart')
+    parser.set_defaults(func=_bench)

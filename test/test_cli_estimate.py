@@ -1,0 +1,126 @@
+"""flexlink estimate / plan / bench, on the synthetic system of test_reduced.py."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+from test_reduced import ZETA, toy_samples
+
+from flexlink_ros import cli, cli_estimate
+from flexlink_ros.core import reduced
+from flexlink_ros.plots.estimator import plot_error_vs_cost, plot_estimate
+
+TOY_CACHE = {}
+
+
+def toy_model(mechanism, options=None, cache_dir=None, use_cache=True):
+    options = options or reduced.ModelOptions()
+    key = (options.modes, options.static, options.grid_size)
+    if key not in TOY_CACHE:
+        TOY_CACHE[key] = reduced.reduce_samples(
+            toy_samples(grid=options.grid_size), options.modes, options.static,
+            speed_max=options.speed_max, zeta=ZETA, info={'options': {'modes': key[0]}})
+    return TOY_CACHE[key]
+
+
+def toy_reference(mechanism, options, speed, angles):
+    """The toy system with every direction kept, periodic at `speed`, at `angles`."""
+    full = toy_model(None, reduced.ModelOptions(modes=10, static=0, grid_size=32,
+                                                speed_max=70.0))
+    steps = 1024
+    grid, q, _ = reduced.periodic_response(full, speed, start_angle=0.0, steps=steps)
+    out = reduced.output_values(full, full.evaluate(grid, speed, 0.0), q)[:-1]
+    coef = reduced.periodic_cell_coefficients(out)
+    phase = np.mod(angles, 2 * np.pi) / (2 * np.pi) * steps
+    k = np.floor(phase).astype(int) % steps
+    values = np.einsum('mp,mpc->mc', (phase - np.floor(phase))[:, None] ** np.arange(4),
+                       coef[k])
+    return {'lever_tip': values[:, :2], 'coupler_mid': values[:, 2:],
+            'cpu_s_per_simulated_s': 1.0}
+
+
+@pytest.fixture
+def toy(monkeypatch):
+    monkeypatch.setattr(reduced, 'model_for_mechanism', toy_model)
+    monkeypatch.setattr(reduced, 'reference_response', toy_reference)
+
+
+def test_synthetic_signal_and_last_revolution():
+    stamps, angles, speeds = cli_estimate.synthetic_signal(391.0, 1.0, 1000.0, jitter=0.3)
+    steps = np.diff(stamps) * 1e-9
+    assert np.all(steps > 0.7e-3 - 1e-9) and np.all(steps < 1.3e-3 + 1e-9)
+    np.testing.assert_allclose(angles, 391.0 * cli_estimate.RPM * stamps * 1e-9)
+    mask = cli_estimate.last_revolution(stamps, 391.0)
+    swept = (angles[mask][-1] - angles[mask][0]) * 180 / math.pi
+    assert 358.0 < swept <= 360.0
+
+
+def test_estimate_json(toy, capsys):
+    code = cli.main(['estimate', '--rpm', '391', '--seconds', '0.5', '--rate-hz', '1000',
+                     '--jitter', '0.3', '--grid-size', '32', '--json'])
+    assert code == 0
+    result = json.loads(capsys.readouterr().out)
+    assert set(result) >= {'crank_deg', 'lever_tip', 'coupler_mid', 'us_per_sample_median'}
+    degrees = np.array(result['crank_deg'])
+    assert len(degrees) > 100 and np.all((degrees >= 0) & (degrees < 360))
+    assert len(result['lever_tip']['dx_m']) == len(degrees)
+    assert result['us_per_sample_median'] > 0.0
+
+
+def test_estimate_matches_the_reference_over_the_last_revolution(toy):
+    for jitter in (0.0, 0.3):
+        model = toy_model(None, reduced.ModelOptions(modes=4, static=2, grid_size=32))
+        result = cli_estimate.run_estimate(model, 391.0, seconds=0.4, jitter=jitter)
+        angles = np.radians(result['crank_deg'])
+        ref = toy_reference(None, None, 391.0 * cli_estimate.RPM, angles)
+        for key in ('lever_tip', 'coupler_mid'):
+            estimate = np.column_stack([result[key]['dx_m'], result[key]['dy_m']])
+            assert cli_estimate.relative_rms(estimate, ref[key]) < 0.01
+
+
+def test_plan_picks_the_first_candidate_within_tolerance(toy, monkeypatch):
+    monkeypatch.setattr(cli_estimate, 'plan_candidates', lambda base: [
+        reduced.ModelOptions(modes=1, static=0, grid_size=32),
+        reduced.ModelOptions(modes=4, static=2, grid_size=32),
+        reduced.ModelOptions(modes=6, static=3, grid_size=32)])
+    result = cli_estimate.run_plan(None, reduced.ModelOptions(), 391.0, 0.01)
+    assert result['choice'] is not None and result['choice']['options']['modes'] == 4
+    first = result['alternatives'][0]
+    assert first['error_coupler_mid'] > 0.01 or first['error_lever_tip'] > 0.01
+    assert all(row['us_per_sample'] > 0 for row in result['alternatives'])
+
+
+def test_bench_table_and_chart(toy, tmp_path):
+    configurations = [('default', reduced.ModelOptions(modes=4, static=2, grid_size=32)),
+                      ('small', reduced.ModelOptions(modes=2, static=0, grid_size=32))]
+    result = cli_estimate.run_bench(None, None, seconds=0.3, configurations=configurations,
+                                    chart=tmp_path / 'chart.png')
+    rows = result['configurations']
+    assert [row['label'] for row in rows] == ['default', 'small']
+    assert rows[0]['default'] and rows[0]['offline_samples_per_s'] > 0
+    assert rows[0]['error_coupler_mid'] < rows[1]['error_coupler_mid']
+    assert (tmp_path / 'chart.png').read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    assert result['cpu_ratio'] > 0
+
+
+def test_estimate_without_the_fe_model_fails_cleanly(capsys, tmp_path):
+    code = cli.main(['estimate', '--rpm', '391', '--seconds', '0.1', '--cache-dir',
+                     str(tmp_path)])
+    captured = capsys.readouterr()
+    if code == 0:  # the FE model is in this checkout
+        assert 'lever tip' in captured.out
+    else:
+        assert code == 1 and 'estimate: error:' in captured.err
+
+
+def test_plot_estimate(tmp_path):
+    angles = np.linspace(0, 360, 50, endpoint=False)
+    curve = np.column_stack([np.sin(np.radians(angles)), np.cos(np.radians(angles))]) * 1e-3
+    path = plot_estimate(angles, {'lever_tip': curve, 'coupler_mid': curve},
+                         {'lever_tip': curve * 1.01, 'coupler_mid': curve}, tmp_path / 'e.png')
+    assert path.read_bytes()[:4] == b'\x89PNG'
+    path = plot_error_vs_cost([{'label': 'a', 'us_per_sample': 10.0, 'error_lever_tip': 0.01,
+                                'error_coupler_mid': 0.001, 'default': True}],
+                              tmp_path / 'c.png', tolerance=0.01)
+    assert path.read_bytes()[:4] == b'\x89PNG'
