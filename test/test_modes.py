@@ -1,0 +1,107 @@
+"""Frozen eigen-analysis of the flexible four-bar (Cho 1992, Sec. 4.1-4.2)."""
+
+import dataclasses
+import pathlib
+
+import numpy as np
+import pytest
+
+from flexlink_ros.core.assembly import FlexibleLinkage, ModelOptions
+from flexlink_ros.core.mechanism import load_mechanism
+from flexlink_ros.core.modes import frozen_mode_sweep, modal_damping, solve_frozen_modes
+
+CONFIG = pathlib.Path(__file__).resolve().parents[1] / 'config'
+NO_KG = dict(geometric_stiffness=False)
+
+
+@pytest.fixture(scope='module')
+def cho():
+    return load_mechanism(CONFIG / 'cho1992.yaml')
+
+
+def _pinned_frequency_hz(mech, link):
+    spec = mech.links[link]
+    return (np.pi / spec.length) ** 2 * np.sqrt(
+        mech.youngs_modulus * spec.second_moment / (mech.density * spec.area)) / (2 * np.pi)
+
+
+def test_modes_are_mass_normalised_and_damping_is_modal(cho):
+    model = FlexibleLinkage(cho, ModelOptions(bearings='flexible', **NO_KG))
+    system = model.assemble(np.radians([27.0, 123.0]))
+    modes = solve_frozen_modes(system)
+    eye = np.broadcast_to(np.eye(model.size), system.mass.shape)
+    phi = modes.shapes
+    np.testing.assert_allclose(np.swapaxes(phi, 1, 2) @ system.mass @ phi, eye, atol=1e-9)
+    np.testing.assert_allclose(np.swapaxes(phi, 1, 2) @ system.stiffness @ phi,
+                               eye * modes.eigenvalues[:, None, :],
+                               atol=1e-9 * modes.eigenvalues.max())
+    damping = modal_damping(system.mass, modes.eigenvalues, phi, 0.05)
+    np.testing.assert_allclose(np.swapaxes(phi, 1, 2) @ damping @ phi,
+                               eye * (0.1 * modes.omega[:, None, :]),
+                               atol=1e-9 * modes.omega.max())
+    np.testing.assert_allclose(modes.kinetic_share.sum(-1), 1.0)
+    np.testing.assert_allclose(modes.strain_share.sum(-1), 1.0)
+
+
+def test_rigid_crank_modes_are_pinned_coupler_and_lever(cho):
+    """Rigid crank, exact pins: the lowest modes are the coupler's and the lever's first
+    pinned-pinned bending modes (B hardly moves), the paper's 'near 34 Hz and 41 Hz'."""
+    model = FlexibleLinkage(cho, ModelOptions(rigid_crank=True, **NO_KG))
+    modes = frozen_mode_sweep(model, np.radians(np.arange(0.0, 360.0, 30.0)), count=2)
+    np.testing.assert_allclose(modes.frequencies_hz[:, 0], _pinned_frequency_hz(cho, 1),
+                               rtol=1e-3)
+    np.testing.assert_allclose(modes.frequencies_hz[:, 1], _pinned_frequency_hz(cho, 2),
+                               rtol=1e-3)
+    assert np.all(modes.dominant_link == [1, 2])
+    assert 33.0 < modes.frequencies_hz[:, 0].min() and modes.frequencies_hz[:, 1].max() < 42.0
+
+
+def test_crank_mode_varies_over_the_cycle(cho):
+    """Fig. 7: modes 1-2 nearly constant, mode 3 (crank) varies strongly; no K_G, no speed."""
+    model = FlexibleLinkage(cho, ModelOptions(**NO_KG))
+    modes = frozen_mode_sweep(model, np.radians(np.arange(0.0, 360.0, 10.0)), count=3)
+    f = modes.frequencies_hz
+    spread = (f.max(0) - f.min(0)) / f.mean(0)
+    assert spread[0] < 0.05 and spread[1] < 0.05 and spread[2] > 0.3
+    assert np.mean(modes.dominant_link[:, 2] == 0) > 0.75   # crank bending at most angles
+
+
+def test_frequencies_without_geometric_stiffness_do_not_depend_on_speed(cho):
+    model = FlexibleLinkage(cho, ModelOptions(**NO_KG))
+    system = model.assemble(np.radians([27.0, 200.0]))
+    still = solve_frozen_modes(system, 3)
+    fast = solve_frozen_modes(system, 3, speed=45.0, accel=100.0)
+    np.testing.assert_array_equal(still.eigenvalues, fast.eigenvalues)
+    # the optional centrifugal term softens (the -w_L^2 M part dominates)
+    soft = solve_frozen_modes(system, 3, speed=45.0, centrifugal=True)
+    assert np.all(soft.eigenvalues[:, :2] < still.eigenvalues[:, :2])
+
+
+def test_flexible_bearings_lower_frequencies(cho):
+    theta = np.radians(np.arange(0.0, 360.0, 45.0))
+    pins = frozen_mode_sweep(FlexibleLinkage(cho, ModelOptions(**NO_KG)), theta, 3)
+    springs = frozen_mode_sweep(FlexibleLinkage(cho, ModelOptions(bearings='flexible', **NO_KG)),
+                                theta, 3)
+    assert np.all(springs.eigenvalues < pins.eigenvalues)
+
+
+def test_count_is_checked(cho):
+    system = FlexibleLinkage(cho, ModelOptions(**NO_KG)).assemble(0.0)
+    with pytest.raises(ValueError, match='count'):
+        solve_frozen_modes(system, 0)
+    with pytest.raises(ValueError, match='count'):
+        solve_frozen_modes(system, system.size + 1)
+
+
+def test_more_elements_converge(cho):
+    """Frequencies of the frozen linkage converge with elements per link (cubic elements)."""
+    theta = np.radians([60.0])
+    freqs = []
+    for elements in (2, 4, 8, 16):
+        mech = dataclasses.replace(cho, elements_per_link=elements)
+        freqs.append(frozen_mode_sweep(FlexibleLinkage(mech, ModelOptions(**NO_KG)), theta,
+                                       3).frequencies_hz[0])
+    freqs = np.array(freqs)
+    errors = np.abs(freqs[:-1] - freqs[-1])
+    assert np.all(errors[1] < errors[0]) and np.all(errors[2] < errors[1])
+    assert np.all(errors[-1] / freqs[-1] < 1e-4)
