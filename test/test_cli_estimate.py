@@ -44,6 +44,7 @@ def toy_reference(mechanism, options, speed, angles):
 def toy(monkeypatch):
     monkeypatch.setattr(reduced, 'model_for_mechanism', toy_model)
     monkeypatch.setattr(reduced, 'reference_response', toy_reference)
+    monkeypatch.setattr(cli_estimate, 'reference_cpu_per_second', lambda *args: 1.0)
 
 
 def test_synthetic_signal_and_last_revolution():

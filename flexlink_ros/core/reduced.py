@@ -44,6 +44,8 @@ MONOMIALS = ('1', 'w', 'w2', 'a', 'w4', 'wa', 'w3')
 CELL_POWERS = 4
 # Exponent of the (omega_1 / omega) weight of frozen-mode snapshots in the POD.
 MODE_WEIGHT_POWER = 2.0
+# Static snapshots per angle and speed: the load at that speed ('w') and the acceleration piece.
+STATIC_PIECES = ('w', 'a')
 # Output channels of the deflection operator, in order.
 OUTPUT_NAMES = ('lever_tip_dx', 'lever_tip_dy', 'coupler_mid_dx', 'coupler_mid_dy')
 # Joints of the criteria data (see core/criteria.py).
@@ -111,6 +113,9 @@ class FrozenSamples:
         Ground-frame deflection of points along each link per DOF.
     shape_positions : ndarray, shape (N, links, points, 2)
         Rigid-body positions of those points [m].
+    frozen : dict or None
+        Keys '1', 'a', 'w2': symmetric stiffness pieces of the frozen eigenproblem (elastic +
+        geometric, as core/modes.py); None to use the symmetric part of ``stiffness``.
 
     """
 
@@ -122,6 +127,7 @@ class FrozenSamples:
     damping: object
     shape_operator: np.ndarray
     shape_positions: np.ndarray
+    frozen: dict = None
 
     @property
     def grid_size(self):
@@ -136,6 +142,14 @@ class FrozenSamples:
     def stiffness_at(self, k, w, a=0.0):
         """K(theta_k, w, a) of the full model, shape (n, n)."""
         pieces = self.stiffness
+        return pieces['1'][k] + a * pieces['a'][k] + w * w * pieces['w2'][k]
+
+    def frozen_at(self, k, w, a=0.0):
+        """Stiffness of the frozen eigenproblem at (theta_k, w, a), shape (n, n)."""
+        if self.frozen is None:
+            stiffness = self.stiffness_at(k, w, a)
+            return 0.5 * (stiffness + stiffness.T)
+        pieces = self.frozen
         return pieces['1'][k] + a * pieces['a'][k] + w * w * pieces['w2'][k]
 
     def load_at(self, k, w, a=0.0):
@@ -218,23 +232,25 @@ def build_basis(samples, modes, static, speeds, angle_stride=1):
     mode_snaps, static_snaps = [], []
     for k in range(0, samples.grid_size, angle_stride):
         for w in speeds:
+            omega, shapes = frozen_modes(samples.frozen_at(k, w), samples.mass[k], per_state)
             stiffness = samples.stiffness_at(k, w)
-            omega, shapes = frozen_modes(stiffness, samples.mass[k], per_state)
             # Weight by flexibility (omega_1 / omega)^2, a mode's share of a static response,
             # so the extra modes collected count less than the ones to keep.
             weight = (omega[0] / np.maximum(omega, omega[0])) ** MODE_WEIGHT_POWER
             mode_snaps.append(shapes * weight)
             if static:
-                for piece in ('1', 'a', 'w2'):
-                    response = np.linalg.solve(stiffness, samples.load[piece][k])
-                    norm = np.sqrt(response @ mass_ref @ response)
-                    if norm > 0.0:
-                        static_snaps.append(response[:, None] / norm)
+                # Static responses to the load at this speed (magnitudes kept: the larger
+                # responses matter more) and to the acceleration piece.
+                for piece in STATIC_PIECES:
+                    load = (samples.load_at(k, w) if piece == 'w' else samples.load['a'][k])
+                    static_snaps.append(np.linalg.solve(stiffness, load)[:, None])
     modal_basis, modal_sv = mass_weighted_pod(np.hstack(mode_snaps), mass_ref, modes)
     singular = {'modes': modal_sv, 'static': np.zeros(0)}
     if not static:
         return modal_basis, singular
     snaps = np.hstack(static_snaps)
+    norms = np.sqrt(np.einsum('ij,ik,kj->j', snaps, mass_ref, snaps))
+    snaps = snaps / np.max(norms)
     # Remove the modal span (mass-orthogonal projection), then compress what is left.
     snaps = snaps - modal_basis @ (modal_basis.T @ (mass_ref @ snaps))
     static_basis, static_sv = mass_weighted_pod(snaps, mass_ref, static)
@@ -630,6 +646,12 @@ def periodic_response(model, speed, start_angle=0.0, steps=720, stages=2):
 
 # Bump when the precompute changes what it stores; older cache files are then rebuilt.
 MODEL_VERSION = 1
+# Points per beam element where link shapes are tabulated (3 elements: 10 points per link).
+SHAPE_POINTS_PER_ELEMENT = 3
+# Grid points and steps per revolution of the full-order reference.
+REFERENCE_GRID = 256
+REFERENCE_STEPS = 2048
+_REFERENCE_CACHE = {}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -730,9 +752,47 @@ def build_model(mechanism, options):
                                 'mechanism': mechanism.name, 'criteria': criteria_source})
 
 
-def frozen_samples_for(mechanism, options):
+def fe_options(options):
+    """core.assembly.ModelOptions for the physical choices of ``options``."""
+    from . import assembly
+    return assembly.ModelOptions(rigid_crank=options.rigid_crank, bearings=options.bearings,
+                                 geometric_stiffness=options.geometric_stiffness)
+
+
+def fe_mechanism(mechanism, options):
+    """The mechanism with the element count of ``options`` (if set)."""
+    if options.elements_per_link is None:
+        return mechanism
+    return dataclasses.replace(mechanism, elements_per_link=int(options.elements_per_link))
+
+
+def modal_damping_matrix(mass, stiffness, zeta):
     """
-    Full-order affine pieces of the flexible model on the crank-angle grid.
+    ``C_d = M Phi diag(2 zeta omega) Phi^T M`` over all frozen modes (as core/modes.py).
+
+    Parameters
+    ----------
+    mass, stiffness : ndarray, shape (n, n)
+        Mass and symmetric frozen stiffness.
+    zeta : float
+        Damping ratio of every mode.
+
+    Returns
+    -------
+    ndarray, shape (n, n)
+
+    """
+    eigenvalues, shapes = scipy.linalg.eigh(stiffness, mass)
+    left = mass @ shapes
+    return (left * (2.0 * zeta * np.sqrt(np.maximum(eigenvalues, 0.0)))) @ left.T
+
+
+def frozen_samples_for(mechanism, options, points_per_element=SHAPE_POINTS_PER_ELEMENT):
+    """
+    Full-order affine pieces of the flexible model (core/assembly.py) on the crank-angle grid.
+
+    The frozen eigenproblem and the modal damping use ``K + K_G(w, a)`` as core/modes.py does
+    (no centrifugal term); the equations of motion add the rotating-frame terms K_c.
 
     Raises
     ------
@@ -742,11 +802,33 @@ def frozen_samples_for(mechanism, options):
     """
     from .errors import FlexlinkError
     try:
-        from . import assembly  # noqa: F401
+        from . import assembly
     except ImportError as exc:
         raise FlexlinkError('the flexible FE model (core/assembly.py) is not in this '
                             f'checkout: {exc}') from exc
-    raise FlexlinkError('core/assembly.py is present but its adapter is not written yet')
+    mechanism = fe_mechanism(mechanism, options)
+    linkage = assembly.FlexibleLinkage(mechanism, fe_options(options))
+    angles = 2.0 * np.pi * np.arange(options.grid_size) / options.grid_size
+    try:
+        system = linkage.assemble(angles)
+    except ImportError as exc:   # geometric stiffness needs core/dynamics.py
+        raise FlexlinkError(f'the flexible FE model needs a module not in this checkout: '
+                            f'{exc}') from exc
+    frozen = {'1': system.stiffness + system.geometric['1'], 'a': system.geometric['a'],
+              'w2': system.geometric['w2']}
+    stiffness = {'1': frozen['1'], 'a': system.coupling['a'] + system.geometric['a'],
+                 'w2': system.coupling['w2'] + system.geometric['w2']}
+    positions, operator = linkage.shape_operator(angles, points_per_element)
+    zeta = mechanism.damping_ratio
+
+    def damping(k, w):
+        stiff = frozen['1'][k] + w * w * frozen['w2'][k]
+        return modal_damping_matrix(system.mass[k], stiff, zeta)
+
+    return FrozenSamples(mass=system.mass, gyroscopic=system.gyroscopic, stiffness=stiffness,
+                         load=dict(system.load), outputs=linkage.output_operator(angles),
+                         damping=damping, shape_operator=operator, shape_positions=positions,
+                         frozen=frozen)
 
 
 def reaction_pieces(mechanism, angles):
@@ -768,9 +850,15 @@ def reaction_pieces(mechanism, angles):
     return None, 'unavailable (adapter not written yet)'
 
 
-def reference_response(mechanism, options, speed, angles):
+def reference_response(mechanism, options, speed, angles, steps=REFERENCE_STEPS):
     """
-    Full-order periodic response at constant crank speed (core/simulate.py), at given angles.
+    Full-order periodic response at constant crank speed, at given crank angles.
+
+    Every FE DOF is kept (the basis is the identity, so nothing is truncated; the tables are
+    splines on a REFERENCE_GRID-point grid) and the periodic state is found by shooting with
+    ``steps`` order-3 Radau IIA steps per revolution. core/simulate.py is the project's
+    full-order reference; this function is the same equations solved without reduction, and
+    ``cpu_s_per_simulated_s`` is the CPU time of a full-order integration at 1 kHz.
 
     Parameters
     ----------
@@ -781,22 +869,36 @@ def reference_response(mechanism, options, speed, angles):
         Crank speed [rad/s].
     angles : ndarray, shape (m,)
         Crank angles [rad].
+    steps : int
+        Steps per revolution.
 
     Returns
     -------
     dict
         'lever_tip', 'coupler_mid': ndarray (m, 2) [m]; 'cpu_s_per_simulated_s': float.
 
-    Raises
-    ------
-    FlexlinkError
-        If the full-order simulation (core/simulate.py) is not in this checkout.
-
     """
-    from .errors import FlexlinkError
-    try:
-        from . import simulate  # noqa: F401
-    except ImportError as exc:
-        raise FlexlinkError('the full-order reference (core/simulate.py) is not in this '
-                            f'checkout: {exc}') from exc
-    raise FlexlinkError('core/simulate.py is present but its adapter is not written yet')
+    import time
+    full_options = dataclasses.replace(options, grid_size=REFERENCE_GRID, modes=1, static=0)
+    key = (mechanism.key(), dataclasses.astuple(full_options))
+    if key not in _REFERENCE_CACHE:
+        samples = frozen_samples_for(mechanism, full_options)
+        model = reduce_samples(samples, samples.dofs, 0, max(abs(speed), options.speed_max),
+                               mechanism.damping_ratio)
+        _REFERENCE_CACHE.clear()
+        _REFERENCE_CACHE[key] = model
+    model = _REFERENCE_CACHE[key]
+    start = time.process_time()
+    grid, q, _ = periodic_response(model, speed, start_angle=0.0, steps=steps)
+    cpu = time.process_time() - start
+    out = output_values(model, model.evaluate(grid, speed, 0.0), q)[:-1]
+    coef = periodic_cell_coefficients(out)
+    phase = np.mod(np.asarray(angles, dtype=float) * np.sign(speed), 2.0 * np.pi) \
+        / (2.0 * np.pi) * steps
+    k = np.minimum(np.floor(phase).astype(int), steps - 1)
+    t = phase - k
+    values = np.einsum('mp,mpc->mc', t[:, None] ** np.arange(CELL_POWERS), coef[k])
+    # One revolution took `steps` full-order steps; at 1 kHz a simulated second is 1000.
+    cpu_per_second = cpu / steps * 1000.0
+    return {'lever_tip': values[:, :2], 'coupler_mid': values[:, 2:],
+            'cpu_s_per_simulated_s': cpu_per_second, 'dofs': model.size}
