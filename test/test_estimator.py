@@ -191,7 +191,7 @@ def test_warm_start_matches_periodic_state_from_the_first_revolution(toy_model, 
 
 def test_fused_step_equals_the_reference_radau_step(toy_model):
     # The per-sample algebra (stacked tables, transformed unknowns) against RadauIIA.step
-    # with the same stage matrices (stage 1 linearly interpolated in time).
+    # with the same stage matrices (stage 1 at the crank state interpolated to c_1 h).
     est = StreamingEstimator(toy_model, warm_start=False)
     rng = np.random.default_rng(1)
     stamp, angle = 0, 1.0
@@ -202,14 +202,18 @@ def test_fused_step_equals_the_reference_radau_step(toy_model):
         step_ns = int(10 ** rng.uniform(4, 8))
         speed = rng.uniform(-60, 60)
         last = est._last
-        previous = toy_model.evaluate(last.crank_angle, last.crank_speed, clip(last.crank_accel))
         q, v = np.array(last.modal), est._z[toy_model.size:2 * toy_model.size].copy()
         stamp += step_ns
         angle += speed * step_ns * 1e-9
         sample = est.update(stamp, angle, speed)
-        current = toy_model.evaluate(sample.crank_angle, sample.crank_speed,
-                                     clip(sample.crank_accel))
-        rows = np.vstack([(1 - method.c[0]) * previous + method.c[0] * current, current])
+        c1 = method.c[0]
+        speeds = (last.crank_speed, sample.crank_speed)
+        accels = (clip(last.crank_accel), clip(sample.crank_accel))
+        stage1 = toy_model.evaluate(last.crank_angle + c1 * est.rate_filter.advance,
+                                    speeds[0] + c1 * (speeds[1] - speeds[0]),
+                                    accels[0] + c1 * (accels[1] - accels[0]))
+        current = toy_model.evaluate(sample.crank_angle, speeds[1], accels[1])
+        rows = np.vstack([stage1, current])
         q_new, _, _ = method.step(q, v, step_ns * 1e-9, *reduced.system_blocks(toy_model, rows))
         np.testing.assert_allclose(sample.modal, q_new, rtol=1e-8,
                                    atol=1e-10 * np.max(np.abs(q_new)))

@@ -8,12 +8,13 @@ jitter, drops and wrap-around into the unwrapped angle, speed and acceleration t
 criteria and flags.
 
 Per-sample path. Everything the step needs at the new sample (M, C, K, f, output operator,
-residual correction, joint reactions) is one dot product of 4 x 5 weights with one grid cell
-of a precomputed table. The first Radau stage (at 1/3 of the step) takes its matrices by
-linear interpolation in time between the previous and the new sample, an O(h^2) error in
-slowly varying coefficients (the step's order-3 accuracy on the modal dynamics is kept). The
-two stages' block matrix and right-hand-side operator come out of one small matrix product
-with coefficients that depend only on the step h.
+residual correction, joint reactions) is one dot product of 4 x 7 weights with one grid cell
+of a precomputed table, and the first Radau stage (at 1/3 of the step, crank state
+interpolated between the samples) is a second such product. (Interpolating the stage-1
+matrices linearly in time instead saves that product but, with flexible bearings near
+resonance, shifted the response by up to 40 %: the ground-frame stiffness of the rotating
+links is not linear over a step.) The two stages' block matrix and right-hand-side operator
+come out of one small matrix product with coefficients that depend only on the step h.
 """
 
 import dataclasses
@@ -172,6 +173,7 @@ class CrankRateFilter:
         self._angle = 0.0        # unwrapped angle of the newest sample [rad]
         self.speed = 0.0         # [rad/s]
         self.accel = 0.0         # [rad/s^2]
+        self.advance = 0.0       # unwrapped angle increment of the newest sample [rad]
         self._mean_dt = None
 
     @property
@@ -220,6 +222,7 @@ class CrankRateFilter:
             predicted = self.speed * dt + 0.5 * self.accel * dt * dt
         advance = predicted + _wrap_pi(angle - self._angle - predicted)
         self._angle += advance
+        self.advance = advance
         self._time = time_s
         if mode != self._mode:
             self._speed_fit.reset()
@@ -274,6 +277,8 @@ class SampleFlag(enum.IntFlag):
     SPEED_FROM_ANGLE = 64  # no measured speed: differentiated from angles
 
 
+# Node of the first Radau IIA stage (2 stages).
+_STAGE1 = float(RADAU_TABLEAUX[2][1][0])
 # Plain-int copies of the flags for the per-sample path (IntFlag arithmetic is slow).
 _RESET, _WARM_START, _LARGE_STEP = int(SampleFlag.RESET), int(SampleFlag.WARM_START), \
     int(SampleFlag.LARGE_STEP)
@@ -410,7 +415,7 @@ class _StepTables:
         for parity in (0, 1):
             current, previous = parity, 1 - parity
             mix = np.zeros((2, 2))
-            mix[0, previous], mix[0, current] = 1.0 - c[0], c[0]   # stage 1 at c_1 h
+            mix[0, previous] = 1.0      # the stage-1 row is written into the other slot
             mix[1, current] = 1.0                                 # stage 2 at the sample
             for i in range(2):
                 for b in range(2):
@@ -524,6 +529,7 @@ class StreamingEstimator:
         self._z[r:2 * r] = v0
         weights, k = self._evaluate(angle, speed, accel)
         np.dot(weights, self._tables.table[k], out=self._stored[self._parity])
+        self._previous = (angle, speed, accel)
 
     # -- the per-sample path -----------------------------------------------------------
 
@@ -607,11 +613,24 @@ class StreamingEstimator:
         """One Radau IIA step to the new sample (the fused path)."""
         tables = self._tables
         r = tables.size
-        weights, k = self._evaluate(angle, speed, accel)
         parity = 1 - self._parity
         self._parity = parity
         stored = self._stored
+        # Stage 1 at c_1 h: crank state interpolated between the samples, row into the other
+        # slot (the previous sample's row is no longer needed).
+        c1 = _STAGE1
+        previous = self._previous
+        stage_angle = previous[0] + c1 * self.rate_filter.advance
+        if stage_angle >= TWO_PI:
+            stage_angle -= TWO_PI
+        elif stage_angle < 0.0:
+            stage_angle += TWO_PI
+        weights, k = self._evaluate(stage_angle, previous[1] + c1 * (speed - previous[1]),
+                                    previous[2] + c1 * (accel - previous[2]))
+        np.dot(weights, tables.table[k], out=stored[1 - parity])
+        weights, k = self._evaluate(angle, speed, accel)
         np.dot(weights, tables.table[k], out=stored[parity])
+        self._previous = (angle, speed, accel)
         inv = 1.0 / h
         g = np.dot(np.array((inv * inv, inv, 1.0, h, h * h)), tables.g_stack[parity])
         blocks = np.dot(g.reshape(10, 2 * tables.blocks), stored.reshape(-1, r * r))
@@ -717,22 +736,33 @@ def replay(model, stamps_ns, angles, speeds=None,
         speeds = np.asarray(speeds, dtype=float)
     rate_filter = CrankRateFilter(fit_time_constant_s)
     times = (stamps_ns - stamps_ns[0]) * 1e-9
-    motion = np.array([rate_filter.update(t, angle, None if speeds is None else speed)
-                       for t, angle, speed in zip(times.tolist(), angles.tolist(),
-                                                  [None] * count if speeds is None
-                                                  else speeds.tolist())])
-    wrapped, speed, accel = motion.T
+    measured = [None] * count if speeds is None else speeds.tolist()
+    motion = np.empty((count, 4))
+    for n, (t, angle, speed) in enumerate(zip(times.tolist(), angles.tolist(), measured)):
+        motion[n, :3] = rate_filter.update(t, angle, speed)
+        motion[n, 3] = rate_filter.advance
+    wrapped, speed, accel, advance = motion.T
     model_speed = np.clip(speed, -model.speed_max, model.speed_max)
     model_accel = np.clip(accel, -accel_limit, accel_limit)
     tables = _StepTables(model)
     r = tables.size
-    cells, position = model.cell(wrapped)
-    weights = model.weights(position, model_speed, model_accel)
-    rows = np.empty((count, tables.table.shape[2]))
-    order = np.argsort(cells, kind='stable')
-    bounds = np.flatnonzero(np.diff(cells[order])) + 1
-    for group in np.split(order, bounds):
-        rows[group] = weights[group] @ tables.table[cells[group[0]]]
+
+    def table_rows(angle_values, speed_values, accel_values):
+        cells, position = model.cell(angle_values)
+        weights = model.weights(position, speed_values, accel_values)
+        rows = np.empty((angle_values.size, tables.table.shape[2]))
+        order = np.argsort(cells, kind='stable')
+        bounds = np.flatnonzero(np.diff(cells[order])) + 1
+        for group in np.split(order, bounds):
+            rows[group] = weights[group] @ tables.table[cells[group[0]]]
+        return rows
+
+    rows = table_rows(wrapped, model_speed, model_accel)
+    # Stage-1 rows of the step into each sample (as StreamingEstimator._step).
+    stage_rows = table_rows(
+        np.mod(np.concatenate([[wrapped[0]], wrapped[:-1] + _STAGE1 * advance[1:]]), TWO_PI),
+        np.concatenate([[model_speed[0]], model_speed[:-1] + _STAGE1 * np.diff(model_speed)]),
+        np.concatenate([[model_accel[0]], model_accel[:-1] + _STAGE1 * np.diff(model_accel)]))
 
     # The first samples (start and, without measured speeds, the deferred warm start) go
     # through the streaming estimator itself; the batched steps continue from its state.
@@ -750,10 +780,10 @@ def replay(model, stamps_ns, angles, speeds=None,
         steps = times[first + 1:last + 1] - times[first:last]
         inv = 1.0 / steps
         powers = np.stack([inv * inv, inv, np.ones_like(steps), steps, steps * steps], axis=1)
-        # Slot order of g_stack[0]: the new sample in slot 0, the previous one in slot 1.
+        # Slot order of g_stack[0]: the new sample in slot 0, the stage-1 row in slot 1.
         g = (powers @ tables.g_stack[0]).reshape(-1, 10, 2 * tables.blocks)
-        pairs = np.stack([rows[first + 1:last + 1], rows[first:last]], axis=1).reshape(
-            steps.size, 2 * tables.blocks, r * r)
+        pairs = np.stack([rows[first + 1:last + 1], stage_rows[first + 1:last + 1]],
+                         axis=1).reshape(steps.size, 2 * tables.blocks, r * r)
         system = np.matmul(g, pairs).reshape(-1, 2, 5, r, r).transpose(0, 1, 3, 2, 4).reshape(
             -1, 2 * r, 5 * r)
         # Increment dz = X [q, v, e1]; only e1's first column is non-zero.
