@@ -239,9 +239,9 @@ def _estimate(args):
 def plan_candidates(base):
     """Candidate options from small to large (fewest coordinates and cells first)."""
     candidates = []
-    for modes in (2, 3, 4, 6):
-        for static in (0, 1, 2, 3):
-            for grid in (64, 128, 256):
+    for modes in (2, 4, 6, 8, 10, 12, 16):
+        for static in (0, 2, 4):
+            for grid in (64, 128):
                 candidates.append(dataclasses.replace(base, modes=modes, static=static,
                                                       grid_size=grid))
     return sorted(candidates, key=lambda o: (o.modes + o.static, o.grid_size))
@@ -309,9 +309,12 @@ def reference_cpu_per_second(mechanism, options, rpm, rate_hz):
 
 def bench_configurations(base):
     """The configurations compared by ``bench``: the default first."""
+    smaller = dataclasses.replace(base, modes=max(1, base.modes - 4))
+    larger = dataclasses.replace(base, modes=base.modes + 4)
     return [('default', base),
-            ('2 modes, no static', dataclasses.replace(base, modes=2, static=0)),
-            ('6 modes + 3 static', dataclasses.replace(base, modes=6, static=3)),
+            (f'{smaller.modes} modes + {smaller.static} static', smaller),
+            (f'{larger.modes} modes + {larger.static} static', larger),
+            ('no static', dataclasses.replace(base, static=0)),
             ('grid 64', dataclasses.replace(base, grid_size=64)),
             ('grid 256', dataclasses.replace(base, grid_size=256))]
 

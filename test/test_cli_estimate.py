@@ -16,10 +16,10 @@ TOY_CACHE = {}
 
 def toy_model(mechanism, options=None, cache_dir=None, use_cache=True):
     options = options or reduced.ModelOptions()
-    key = (options.modes, options.static, options.grid_size)
+    key = (min(options.modes, 6), min(options.static, 2), options.grid_size)
     if key not in TOY_CACHE:
         TOY_CACHE[key] = reduced.reduce_samples(
-            toy_samples(grid=options.grid_size), options.modes, options.static,
+            toy_samples(grid=options.grid_size), key[0], key[1],
             speed_max=options.speed_max, zeta=ZETA, info={'options': {'modes': key[0]}})
     return TOY_CACHE[key]
 

@@ -412,3 +412,32 @@ def test_replay_equals_streaming(toy_model, with_speed):
     np.testing.assert_allclose(batch['coupler_mid'], [s.coupler_mid for s in streamed],
                                rtol=1e-7, atol=1e-12)
     np.testing.assert_allclose(batch['crank_accel'], [s.crank_accel for s in streamed])
+
+
+# ---------------------------------------------------------------------------------------
+# Accuracy targets on Cho 1992 (rigid crank, zeta 0.02) against the full-order reference
+
+@pytest.fixture(scope='module')
+def cho():
+    pytest.importorskip('flexlink_ros.core.assembly')
+    from flexlink_ros.core.mechanism import load_mechanism
+    from test_reduced import CONFIG
+    return load_mechanism(CONFIG / 'cho1992.yaml')
+
+
+# (coupler mid-point, lever tip) relative RMS limits without and with +-30 % jitter.
+TARGETS = {0.0: (0.01, 0.05), 0.3: (0.02, 0.07)}
+
+
+@pytest.mark.parametrize('bearings', ['rigid', 'flexible'])
+def test_cho1992_streaming_accuracy_at_269_and_391_rpm(cho, bearings):
+    from flexlink_ros import cli_estimate
+    # Geometric stiffness off: core/dynamics.py (its axial forces) is checked separately.
+    options = reduced.ModelOptions(bearings=bearings, geometric_stiffness=False)
+    model = reduced.model_for_mechanism(cho, options, use_cache=False)
+    for rpm in (269.0, 391.0):
+        for jitter, (coupler_limit, lever_limit) in TARGETS.items():
+            errors = cli_estimate.configuration_error(cho, model, options, rpm, 1000.0, jitter,
+                                                      seed=3)
+            assert errors['error_coupler_mid'] < coupler_limit, (rpm, jitter, errors)
+            assert errors['error_lever_tip'] < lever_limit, (rpm, jitter, errors)

@@ -1,5 +1,7 @@
 """Reduced model: spline tables, constant POD basis, residual flexibility, periodic response."""
 
+import pathlib
+
 import numpy as np
 import pytest
 import scipy.linalg
@@ -8,6 +10,7 @@ from flexlink_ros.core import reduced
 from flexlink_ros.core.integrators import RadauIIA
 
 ZETA = 0.02
+CONFIG = pathlib.Path(__file__).resolve().parents[1] / 'config'
 
 
 def _sym(rng, n, scale):
@@ -194,3 +197,26 @@ def test_shapes_interpolate_positions_and_deflections():
     np.testing.assert_allclose(positions, samples.shape_positions[5], atol=1e-14)
     np.testing.assert_allclose(deflections, samples.shape_operator[5] @ model.basis @ q,
                                atol=1e-15)
+
+
+def test_fe_pieces_of_cho1992():
+    pytest.importorskip('flexlink_ros.core.assembly')
+    from flexlink_ros.core.mechanism import load_mechanism
+    mechanism = load_mechanism(CONFIG / 'cho1992.yaml')
+    options = reduced.ModelOptions(bearings='rigid', geometric_stiffness=False, grid_size=16)
+    samples = reduced.frozen_samples_for(mechanism, options)
+    # Lowest link bending modes near 34 and 41 Hz (papers.md), coupler and lever.
+    omega, _ = reduced.frozen_modes(samples.frozen_at(0, 0.0), samples.mass[0], 2)
+    np.testing.assert_allclose(omega / (2 * np.pi), [34.5, 41.1], rtol=0.02)
+    # The modal damping gives zeta on every frozen mode.
+    damping = samples.damping(3, 30.0)
+    omega, shapes = reduced.frozen_modes(samples.frozen_at(3, 30.0), samples.mass[3],
+                                         samples.dofs)
+    np.testing.assert_allclose(np.diag(shapes.T @ damping @ shapes),
+                               2 * mechanism.damping_ratio * omega, rtol=1e-8)
+    model = reduced.reduce_samples(samples, 4, 2, speed_max=60.0,
+                                   zeta=mechanism.damping_ratio)
+    rows = model.evaluate(2 * np.pi * 5 / 16, 40.0, 3.0)
+    stiffness = reduced.system_blocks(model, rows)[2][0]
+    expected = model.basis.T @ samples.stiffness_at(5, 40.0, 3.0) @ model.basis
+    np.testing.assert_allclose(stiffness, expected, rtol=1e-9, atol=1e-9 * np.abs(expected).max())

@@ -646,6 +646,11 @@ def periodic_response(model, speed, start_angle=0.0, steps=720, stages=2):
 
 # Bump when the precompute changes what it stores; older cache files are then rebuilt.
 MODEL_VERSION = 1
+# Default (modes, static) per bearing model: the smallest sizes meeting 1 % on the coupler
+# mid-point at 269 and 391 rpm against the full-order reference (flexible bearings put the
+# 5th-7th crank harmonics on the first two modes, which a constant basis must then resolve
+# to a fraction of zeta; see flexlink plan / bench).
+DEFAULT_SIZES = {'rigid': (4, 2), 'flexible': (12, 4)}
 # Points per beam element where link shapes are tabulated (3 elements: 10 points per link).
 SHAPE_POINTS_PER_ELEMENT = 3
 # Grid points and steps per revolution of the full-order reference.
@@ -661,10 +666,10 @@ class ModelOptions:
 
     Parameters
     ----------
-    modes : int
-        Basis directions from the frozen modes.
-    static : int
-        Further basis directions from static load responses.
+    modes : int or None
+        Basis directions from the frozen modes (None: :data:`DEFAULT_SIZES` for the bearings).
+    static : int or None
+        Further basis directions from static load responses (None: as ``modes``).
     grid_size : int
         Crank-angle grid points per revolution.
     elements_per_link : int or None
@@ -680,8 +685,8 @@ class ModelOptions:
 
     """
 
-    modes: int = 4
-    static: int = 2
+    modes: object = None
+    static: object = None
     grid_size: int = 128
     elements_per_link: object = None
     rigid_crank: bool = True
@@ -690,13 +695,16 @@ class ModelOptions:
     speed_max: float = 65.0
 
     def __post_init__(self):
+        if self.bearings not in ('flexible', 'rigid'):
+            raise ValueError(f"`bearings` must be 'flexible' or 'rigid', got {self.bearings!r}")
+        modes, static = DEFAULT_SIZES[self.bearings]
+        object.__setattr__(self, 'modes', modes if self.modes is None else int(self.modes))
+        object.__setattr__(self, 'static', static if self.static is None else int(self.static))
         if self.modes < 1 or self.static < 0:
             raise ValueError(f'`modes` must be >= 1 and `static` >= 0, got {self.modes}, '
                              f'{self.static}')
         if self.grid_size < 8:
             raise ValueError(f'`grid_size` must be >= 8, got {self.grid_size}')
-        if self.bearings not in ('flexible', 'rigid'):
-            raise ValueError(f"`bearings` must be 'flexible' or 'rigid', got {self.bearings!r}")
         if not self.speed_max > 0.0:
             raise ValueError(f'`speed_max` must be positive, got {self.speed_max}')
 
