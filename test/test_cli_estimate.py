@@ -36,8 +36,7 @@ def toy_reference(mechanism, options, speed, angles):
     k = np.floor(phase).astype(int) % steps
     values = np.einsum('mp,mpc->mc', (phase - np.floor(phase))[:, None] ** np.arange(4),
                        coef[k])
-    return {'lever_tip': values[:, :2], 'coupler_mid': values[:, 2:],
-            'cpu_s_per_simulated_s': 1.0}
+    return {'lever_tip': values[:, :2], 'coupler_mid': values[:, 2:], 'source': 'toy'}
 
 
 @pytest.fixture

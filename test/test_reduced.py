@@ -220,3 +220,34 @@ def test_fe_pieces_of_cho1992():
     stiffness = reduced.system_blocks(model, rows)[2][0]
     expected = model.basis.T @ samples.stiffness_at(5, 40.0, 3.0) @ model.basis
     np.testing.assert_allclose(stiffness, expected, rtol=1e-9, atol=1e-9 * np.abs(expected).max())
+
+
+@pytest.mark.parametrize('bearings', ['rigid', 'flexible'])
+def test_unreduced_tables_agree_with_core_simulate(bearings, monkeypatch):
+    # Two independent full-order solutions: core/simulate.py (assembly at every stage) and
+    # this module's tables with every DOF kept.
+    pytest.importorskip('flexlink_ros.core.simulate')
+    from flexlink_ros.core.mechanism import load_mechanism
+    mechanism = load_mechanism(CONFIG / 'cho1992.yaml')
+    options = reduced.ModelOptions(bearings=bearings, geometric_stiffness=False)
+    speed = 391 * np.pi / 30
+    angles = np.linspace(0.0, 2 * np.pi, 90, endpoint=False)
+    simulated = reduced.reference_response(mechanism, options, speed, angles)
+    assert simulated['source'].startswith('core.simulate')
+    import builtins
+    real_import = builtins.__import__
+
+    def no_simulate(name, globals=None, locals=None, fromlist=(), level=0):
+        if fromlist and 'simulate' in fromlist:
+            raise ImportError('hidden for the test')
+        return real_import(name, globals, locals, fromlist, level)
+
+    reduced._REFERENCE_CACHE.clear()
+    monkeypatch.setattr(builtins, '__import__', no_simulate)
+    tables = reduced.reference_response(mechanism, options, speed, angles)
+    monkeypatch.undo()
+    assert tables['source'].startswith('unreduced')
+    for key in ('lever_tip', 'coupler_mid'):
+        error = np.sqrt(np.sum((tables[key] - simulated[key]) ** 2)
+                        / np.sum(simulated[key] ** 2))
+        assert error < 2e-4, (key, error)
