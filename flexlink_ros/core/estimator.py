@@ -335,15 +335,15 @@ class Sample:
 
 class _StepTables:
     """
-    Table and coefficient stacks of the fused per-sample step (built once per model).
+    Tables and coefficient stacks of the fused per-sample step (built once per model).
 
-    Per cell the table row holds, in r x r blocks: the stage values [M, C, K, F] (F's first
-    column is f, the rest zero) and then the other outputs padded to whole blocks: the
-    deflection operator [O | 0 | corr] (4 x (2 r + 1)), the reactions F (joints x 2), their
-    time derivative (joints x 2) and the squared cycle-RMS reaction (joints). Two such rows
-    (the previous and the new sample, in alternating slots) times a 10 x 2 B coefficient
-    matrix G(h) give, in one product, the Radau IIA block matrix and right-hand-side operator
-    for the state increment.
+    Rows are ``monomial * 4 + power`` (see core/reduced.py); each table keeps only the rows
+    its blocks use: ``mc`` [M | C] (monomials 1, w2, w, w4), ``kf`` [K | f] (a, 1, w2) and
+    ``rest`` (all rows) [output operator [O | 0 | corr] (4 x (2 r + 1)), reactions F
+    (joints x 2), their time derivative (joints x 2), squared cycle-RMS reaction (joints)].
+    Two samples' [M, C, K, F] (F an r x r block holding f in its first r entries) in
+    alternating slots times a 8 x 8 coefficient matrix G(h) give, in one product, the
+    Radau IIA block matrix and the right-hand-side operator on (q, v).
 
     The unknowns are the state increment dz = (dq, dv) rather than the stage accelerations X:
     with ``dz = (D2 (x) I) X + (h v, 0)`` and ``D2 = [[h^2 (aa)_21, h^2 (aa)_22],
@@ -353,39 +353,39 @@ class _StepTables:
     """
 
     POWERS = (-2, -1, 0, 1, 2)
+    ROWS_MC = slice(4, 20)     # monomials 1, w2, w, w4
+    ROWS_KF = slice(0, 12)     # monomials a, 1, w2
 
     def __init__(self, model, stages=2):
         if stages != 2:
             raise ValueError('the streaming step is written for 2-stage Radau IIA')
+        if reduced.MONOMIALS[:5] != ('a', '1', 'w2', 'w', 'w4'):
+            raise ValueError('monomial order changed: update _StepTables')
         a, c = RADAU_TABLEAUX[stages]
         a2 = a @ a
         layout = model.layout
         r = model.size
-        n_cells, n_rows, _ = model.table.shape
         table = model.table
+        n_cells = table.shape[0]
         self.size = r
-        rest = [np.zeros((n_cells, n_rows, 4, 2 * r + 1))]
-        rest[0][..., :r] = layout.block(table, 'out')
-        rest[0][..., 2 * r] = layout.block(table, 'corr')
-        rest += [layout.block(table, name) for name in ('force', 'force_dot', 'rms2')]
-        rest = np.concatenate([x.reshape(n_cells, n_rows, -1) for x in rest], axis=2)
-        extra = -(-rest.shape[2] // (r * r))
-        self.blocks = 4 + extra
-        combined = np.zeros((n_cells, n_rows, self.blocks, r, r))
-        for m, name in enumerate(('M', 'C', 'K')):
-            combined[:, :, m] = layout.block(table, name)
-        combined[:, :, 3, :, 0] = layout.block(table, 'f')
-        flat_rest = combined[:, :, 4:].reshape(n_cells, n_rows, -1)
-        flat_rest[..., :rest.shape[2]] = rest
-        combined[:, :, 4:] = flat_rest.reshape(n_cells, n_rows, extra, r, r)
-        self.table = combined.reshape(n_cells, n_rows, self.blocks * r * r)
+        block = lambda name, rows: layout.block(table[:, rows], name).reshape(  # noqa: E731
+            n_cells, rows.stop - rows.start, -1)
+        self.mc = np.ascontiguousarray(np.concatenate(
+            [block('M', self.ROWS_MC), block('C', self.ROWS_MC)], axis=2))
+        self.kf = np.ascontiguousarray(np.concatenate(
+            [block('K', self.ROWS_KF), block('f', self.ROWS_KF)], axis=2))
+        everything = slice(0, table.shape[1])
+        out = np.zeros((n_cells, table.shape[1], 4, 2 * r + 1))
+        out[..., :r] = layout.block(table, 'out')
+        out[..., 2 * r] = layout.block(table, 'corr')
+        self.rest = np.ascontiguousarray(np.concatenate(
+            [out.reshape(n_cells, table.shape[1], -1)]
+            + [block(name, everything) for name in ('force', 'force_dot', 'rms2')], axis=2))
         self.out_width = 4 * (2 * r + 1)
-        self.rest_width = rest.shape[2]
 
-        # Laurent polynomials in h as arrays over POWERS.
         npow = len(self.POWERS)
         zero = self.POWERS.index(0)
-        big = np.zeros((npow, 2, 2, 4))            # original block matrix on X_{i,m}
+        big = np.zeros((npow, 2, 2, 3))            # block matrix on the stage values M, C, K
         for i in range(2):
             big[zero, i, i, 0] = 1.0
             for j in range(2):
@@ -397,30 +397,25 @@ class _StepTables:
         d_inv[zero - 1, 0, 1] = -a2[1, 1] / det
         d_inv[zero - 2, 1, 0] = -a[1, 0] / det
         d_inv[zero - 1, 1, 1] = a2[1, 0] / det
-        matrix = np.zeros((npow, 2, 2, 4))         # A D2^-1
+        matrix = np.zeros((npow, 2, 2, 3))         # A D2^-1
         for p1 in range(npow):
             for p2 in range(npow):
                 p = p1 + p2 - zero
                 if 0 <= p < npow:
                     matrix[p] += np.einsum('ijm,jk->ikm', big[p1], d_inv[p2])
-        operator = np.zeros((npow, 2, 3, 4))       # acting on (q, v, e1)
+        operator = np.zeros((npow, 2, 2, 3))       # on (q, v); f is added separately
         for i in range(2):
             operator[zero, i, 0, 2] = -1.0                     # -K q
             operator[zero, i, 1, 1] = -1.0                     # -C v
             operator[zero + 1, i, 1, 2] = -c[i]                # -c_i h K v
-            operator[zero, i, 2, 3] = 1.0                      # +f
         operator[1:, :, 1, :] += matrix[:-1, :, 0, :]          # + h (A D2^-1)_{i0} on v
-        rows = np.concatenate([matrix, operator], axis=2)      # (npow, 2, 5, 4)
-        self.g_stack = np.zeros((2, npow, 2, 5, 2, self.blocks))
+        rows = np.concatenate([matrix, operator], axis=2)      # (npow, 2, 4, 3)
+        self.g_stack = np.zeros((2, npow, 2, 4, 2, 4))
         for parity in (0, 1):
-            current, previous = parity, 1 - parity
-            mix = np.zeros((2, 2))
-            mix[0, previous] = 1.0      # the stage-1 row is written into the other slot
-            mix[1, current] = 1.0                                 # stage 2 at the sample
-            for i in range(2):
-                for b in range(2):
-                    self.g_stack[parity, :, i, :, b, :4] = mix[i, b] * rows[:, i]
-        self.g_stack = self.g_stack.reshape(2, npow, 10 * 2 * self.blocks)
+            # Stage 1 in the other slot, stage 2 (the sample) in slot `parity`.
+            for i, slot in ((0, 1 - parity), (1, parity)):
+                self.g_stack[parity, :, i, :, slot, :3] = rows[:, i]
+        self.g_stack = self.g_stack.reshape(2, npow, 64)
 
 
 class StreamingEstimator:
@@ -471,15 +466,17 @@ class StreamingEstimator:
         self._cells_per_radian = model.grid_size / TWO_PI
         self._force_moments = model.force_moments.tolist()
         r = model.size
-        self._z = np.zeros(3 * r)       # [q, v, e1]
+        self._z = np.zeros(2 * r + 1)   # [q, v, 1]
         self._z[2 * r] = 1.0
-        # Table rows of the previous and the new sample, in alternating slots.
-        self._stored = np.zeros((2, self._tables.blocks * r * r))
+        # [M, C, K, F] of stage 1 and of the sample, in alternating slots; the sample's rest.
+        self._stored = np.zeros((2, 4, r * r))
+        self._flat = self._stored.reshape(2, 4 * r * r)
+        self._rest = np.zeros(self._tables.rest.shape[2])
         self._parity = 0
         self._last = None
         self._pending_warm_start = False
         self._weights = np.zeros(reduced.CELL_POWERS * len(reduced.MONOMIALS))
-        if reduced.MONOMIALS != ('1', 'w', 'w2', 'a', 'w4', 'wa', 'w3'):
+        if reduced.MONOMIALS != ('a', '1', 'w2', 'w', 'w4', 'wa', 'w3'):
             raise ValueError('monomial order changed: update StreamingEstimator._evaluate')
         self.samples = 0
 
@@ -493,7 +490,7 @@ class StreamingEstimator:
 
     def _evaluate(self, angle, speed, accel):
         """
-        Row weights (t^p times each monomial, in table-row order) and the cell index.
+        Row weights (monomial times t^p, in table-row order) and the cell index.
 
         The weights go to a reused buffer: use them before the next call.
         """
@@ -504,15 +501,22 @@ class StreamingEstimator:
         t = x - k
         w, a = speed, accel
         w2 = w * w
-        w4, wa, w3 = w2 * w2, w * a, w2 * w
         t2 = t * t
         t3 = t2 * t
-        # Order of reduced.MONOMIALS: 1, w, w2, a, w4, wa, w3.
-        self._weights[:] = (1.0, w, w2, a, w4, wa, w3,
-                            t, t * w, t * w2, t * a, t * w4, t * wa, t * w3,
-                            t2, t2 * w, t2 * w2, t2 * a, t2 * w4, t2 * wa, t2 * w3,
-                            t3, t3 * w, t3 * w2, t3 * a, t3 * w4, t3 * wa, t3 * w3)
+        # Order of reduced.MONOMIALS: a, 1, w2, w, w4, wa, w3.
+        self._weights[:] = (a, a * t, a * t2, a * t3, 1.0, t, t2, t3,
+                            w2, w2 * t, w2 * t2, w2 * t3, w, w * t, w * t2, w * t3,
+                            w2 * w2, w2 * w2 * t, w2 * w2 * t2, w2 * w2 * t3,
+                            w * a, w * a * t, w * a * t2, w * a * t3,
+                            w2 * w, w2 * w * t, w2 * w * t2, w2 * w * t3)
         return self._weights, k
+
+    def _load(self, slot, weights, k):
+        """Write [M, C] and [K, f] of the table rows at (weights, cell k) into a slot."""
+        tables, r2 = self._tables, self.model.size ** 2
+        flat = self._flat[slot]
+        np.dot(weights[4:20], tables.mc[k], out=flat[:2 * r2])
+        np.dot(weights[0:12], tables.kf[k], out=flat[2 * r2:3 * r2 + self.model.size])
 
     def _set_state(self, angle, speed, accel, warm):
         """Start from the periodic state at this speed (warm) or the static deflection."""
@@ -528,7 +532,8 @@ class StreamingEstimator:
         self._z[:r] = q0
         self._z[r:2 * r] = v0
         weights, k = self._evaluate(angle, speed, accel)
-        np.dot(weights, self._tables.table[k], out=self._stored[self._parity])
+        self._load(self._parity, weights, k)
+        np.dot(weights, self._tables.rest[k], out=self._rest)
         self._previous = (angle, speed, accel)
 
     # -- the per-sample path -----------------------------------------------------------
@@ -615,9 +620,7 @@ class StreamingEstimator:
         r = tables.size
         parity = 1 - self._parity
         self._parity = parity
-        stored = self._stored
-        # Stage 1 at c_1 h: crank state interpolated between the samples, row into the other
-        # slot (the previous sample's row is no longer needed).
+        # Stage 1 at c_1 h: crank state interpolated between the samples, into the other slot.
         c1 = _STAGE1
         previous = self._previous
         stage_angle = previous[0] + c1 * self.rate_filter.advance
@@ -627,18 +630,22 @@ class StreamingEstimator:
             stage_angle += TWO_PI
         weights, k = self._evaluate(stage_angle, previous[1] + c1 * (speed - previous[1]),
                                     previous[2] + c1 * (accel - previous[2]))
-        np.dot(weights, tables.table[k], out=stored[1 - parity])
+        self._load(1 - parity, weights, k)
         weights, k = self._evaluate(angle, speed, accel)
-        np.dot(weights, tables.table[k], out=stored[parity])
+        self._load(parity, weights, k)
+        np.dot(weights, tables.rest[k], out=self._rest)
         self._previous = (angle, speed, accel)
         inv = 1.0 / h
         g = np.dot(np.array((inv * inv, inv, 1.0, h, h * h)), tables.g_stack[parity])
-        blocks = np.dot(g.reshape(10, 2 * tables.blocks), stored.reshape(-1, r * r))
+        blocks = np.dot(g.reshape(8, 8), self._stored.reshape(8, r * r))
         # Transposed system (column block, l, i, k): its first 2 r rows are the Fortran-order
         # block matrix LAPACK wants, the rest the transposed right-hand-side operator.
-        system_t = blocks.reshape(2, 5, r, r).transpose(1, 3, 0, 2).reshape(5 * r, 2 * r)
+        system_t = blocks.reshape(2, 4, r, r).transpose(1, 3, 0, 2).reshape(4 * r, 2 * r)
         z = self._z
-        _, _, increment, _ = lapack.dgesv(system_t[:2 * r].T, np.dot(z, system_t[2 * r:]),
+        stored = self._stored
+        loads = np.concatenate((stored[1 - parity, 3, :r], stored[parity, 3, :r]))
+        _, _, increment, _ = lapack.dgesv(system_t[:2 * r].T,
+                                          np.dot(z[:2 * r], system_t[2 * r:]) + loads,
                                           overwrite_a=1, overwrite_b=1)
         z[:2 * r] += increment
 
@@ -646,11 +653,11 @@ class StreamingEstimator:
         tables = self._tables
         r = tables.size
         z = self._z
-        rest = self._stored[self._parity, 4 * r * r:]
+        rest = self._rest
         width = tables.out_width
         # [O | 0 | corr] . [q, v, 1]: the deflections with the residual correction.
-        deflection = np.dot(rest[:width].reshape(4, 2 * r + 1), z[:2 * r + 1]).tolist()
-        values = rest[:tables.rest_width].tolist()
+        deflection = np.dot(rest[:width].reshape(4, 2 * r + 1), z).tolist()
+        values = rest.tolist()
         correction = values[2 * r:width:2 * r + 1]
         criteria = self._criteria(values[width:], model_speed)
         size = math.sqrt(sum([d * d for d in deflection]))
@@ -747,15 +754,24 @@ def replay(model, stamps_ns, angles, speeds=None,
     tables = _StepTables(model)
     r = tables.size
 
+    layout = model.layout
+
     def table_rows(angle_values, speed_values, accel_values):
         cells, position = model.cell(angle_values)
         weights = model.weights(position, speed_values, accel_values)
-        rows = np.empty((angle_values.size, tables.table.shape[2]))
+        rows = np.empty((angle_values.size, model.table.shape[2]))
         order = np.argsort(cells, kind='stable')
         bounds = np.flatnonzero(np.diff(cells[order])) + 1
         for group in np.split(order, bounds):
-            rows[group] = weights[group] @ tables.table[cells[group[0]]]
+            rows[group] = weights[group] @ model.table[cells[group[0]]]
         return rows
+
+    def stage_values(rows):
+        # [M, C, K, 0] blocks of each row, as the streaming step's slots hold them.
+        values = np.zeros((rows.shape[0], 4, r * r))
+        for m, name in enumerate(('M', 'C', 'K')):
+            values[:, m] = layout.block(rows, name).reshape(rows.shape[0], r * r)
+        return values
 
     rows = table_rows(wrapped, model_speed, model_accel)
     # Stage-1 rows of the step into each sample (as StreamingEstimator._step).
@@ -780,19 +796,21 @@ def replay(model, stamps_ns, angles, speeds=None,
         steps = times[first + 1:last + 1] - times[first:last]
         inv = 1.0 / steps
         powers = np.stack([inv * inv, inv, np.ones_like(steps), steps, steps * steps], axis=1)
-        # Slot order of g_stack[0]: the new sample in slot 0, the stage-1 row in slot 1.
-        g = (powers @ tables.g_stack[0]).reshape(-1, 10, 2 * tables.blocks)
-        pairs = np.stack([rows[first + 1:last + 1], stage_rows[first + 1:last + 1]],
-                         axis=1).reshape(steps.size, 2 * tables.blocks, r * r)
-        system = np.matmul(g, pairs).reshape(-1, 2, 5, r, r).transpose(0, 1, 3, 2, 4).reshape(
-            -1, 2 * r, 5 * r)
-        # Increment dz = X [q, v, e1]; only e1's first column is non-zero.
-        increments = np.linalg.solve(system[:, :, :2 * r], system[:, :, 2 * r:4 * r + 1])
+        # Slot order of g_stack[0]: the new sample in slot 0, the stage-1 values in slot 1.
+        g = (powers @ tables.g_stack[0]).reshape(-1, 8, 8)
+        current, stage = rows[first + 1:last + 1], stage_rows[first + 1:last + 1]
+        pairs = np.concatenate([stage_values(current), stage_values(stage)], axis=1)
+        system = np.matmul(g, pairs).reshape(-1, 2, 4, r, r).transpose(0, 1, 3, 2, 4).reshape(
+            -1, 2 * r, 4 * r)
+        loads = np.concatenate([layout.block(stage, 'f'), layout.block(current, 'f')], axis=1)
+        # Increment dz = A^-1 (P [q, v] + f): an affine map of the state.
+        increments = np.linalg.solve(system[:, :, :2 * r],
+                                     np.concatenate([system[:, :, 2 * r:], loads[..., None]],
+                                                    axis=2))
         increments[:, :, :2 * r] += eye
         states[first:last + 1] = compose_affine(increments, states[first])
-    full = np.concatenate([states, np.ones((count, 1))], axis=1)
-    rest = rows[:, 4 * r * r:4 * r * r + tables.out_width].reshape(count, 4, 2 * r + 1)
-    deflection = np.einsum('moc,mc->mo', rest, full)
+    deflection = (np.einsum('mor,mr->mo', layout.block(rows, 'out'), states[:, :r])
+                  + layout.block(rows, 'corr'))
     return {'crank_angle': wrapped, 'crank_speed': speed, 'crank_accel': accel,
             'lever_tip': deflection[:, :2], 'coupler_mid': deflection[:, 2:],
             'modal': states[:, :r].copy()}

@@ -28,7 +28,8 @@ fitted by a quadratic in w^2 (exact at w = 0 and at the fitted speeds).
 Interpolation. Every tabulated quantity is a periodic cubic spline in theta; per grid cell it
 is stored as the coefficients of ``t^p`` (t in [0, 1) across the cell) times each monomial of
 :data:`MONOMIALS`, so one dot product of 4 x len(MONOMIALS) weights with one cell's table
-gives every matrix, load and output operator at (theta, w, a).
+gives every matrix, load and output operator at (theta, w, a); the streaming step splits
+that product by block to read only the monomial rows each block uses.
 """
 
 import dataclasses
@@ -39,7 +40,9 @@ import scipy.linalg
 
 # Monomials of (w, a) that multiply the tabulated pieces, in table-row order ('w4': damping
 # fit; 'wa', 'w3': time derivative of the joint reactions).
-MONOMIALS = ('1', 'w', 'w2', 'a', 'w4', 'wa', 'w3')
+# The order puts each matrix block's monomials next to each other (K: a, 1, w2; M: 1;
+# C: 1, w2, w, w4), so the streaming step reads only the rows a block uses.
+MONOMIALS = ('a', '1', 'w2', 'w', 'w4', 'wa', 'w3')
 # Polynomial degree of the spline in each cell (cubic).
 CELL_POWERS = 4
 # Exponent of the (omega_1 / omega) weight of frozen-mode snapshots in the POD.
@@ -63,7 +66,7 @@ def monomial_values(w, a):
 
     """
     w2 = w * w
-    return (1.0, w, w2, a, w2 * w2, w * a, w2 * w)
+    return (a, 1.0, w2, w, w2 * w2, w * a, w2 * w)
 
 
 def periodic_cell_coefficients(values):
@@ -328,9 +331,9 @@ class ReducedModel:
 
     Attributes
     ----------
-    table : ndarray, shape (N, CELL_POWERS * len(MONOMIALS), L)
+    table : ndarray, shape (N, len(MONOMIALS) * CELL_POWERS, L)
         Per cell, the spline coefficients of every block (see :class:`TableLayout`), row
-        ``p * len(MONOMIALS) + m`` multiplying ``t^p`` times monomial m.
+        ``m * CELL_POWERS + p`` multiplying monomial m times ``t^p``.
     shape_table : ndarray, shape (N, CELL_POWERS, links, points, 2, r + 1)
         Per cell, spline coefficients of rigid positions (last column) and the ground-frame
         deflection operator of points along each link.
@@ -401,7 +404,7 @@ class ReducedModel:
 
     def weights(self, t, w, a):
         """
-        Row weights t^p * monomial, shape (..., CELL_POWERS * len(MONOMIALS)).
+        Row weights monomial * t^p, shape (..., len(MONOMIALS) * CELL_POWERS).
 
         Parameters
         ----------
@@ -412,7 +415,7 @@ class ReducedModel:
         t, w, a = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (t, w, a)))
         powers = np.stack([t ** p for p in range(CELL_POWERS)], axis=-1)
         monos = np.stack(np.broadcast_arrays(*monomial_values(w, a)), axis=-1)
-        return (powers[..., :, None] * monos[..., None, :]).reshape(t.shape + (-1,))
+        return (monos[..., :, None] * powers[..., None, :]).reshape(t.shape + (-1,))
 
     def evaluate(self, theta, w, a=0.0):
         """
@@ -537,12 +540,12 @@ def reduce_samples(samples, modes, static=0, speed_max=60.0, zeta=0.02, forces=N
     pieces['rms2'] = {'1': constant(force_moments[:, 0]), 'w2': constant(force_moments[:, 1]),
                       'w4': constant(force_moments[:, 2])}
 
-    table = np.zeros((count, CELL_POWERS, len(MONOMIALS), layout.width))
+    table = np.zeros((count, len(MONOMIALS), CELL_POWERS, layout.width))
     for name, by_mono in pieces.items():
         for mono, values in by_mono.items():
             coef = periodic_cell_coefficients(values.reshape(count, -1))
-            table[:, :, MONOMIALS.index(mono), layout.slices[name]] = coef
-    table = table.reshape(count, CELL_POWERS * len(MONOMIALS), layout.width)
+            table[:, MONOMIALS.index(mono), :, layout.slices[name]] = coef
+    table = table.reshape(count, len(MONOMIALS) * CELL_POWERS, layout.width)
 
     operator = np.einsum('klpcn,nr->klpcr', samples.shape_operator, basis)
     shape_values = np.concatenate([operator, samples.shape_positions[..., None]], axis=-1)
@@ -645,7 +648,7 @@ def periodic_response(model, speed, start_angle=0.0, steps=720, stages=2):
 # Models of a mechanism: options, cache, and the full-order pieces from core/assembly.py
 
 # Bump when the precompute changes what it stores; older cache files are then rebuilt.
-MODEL_VERSION = 1
+MODEL_VERSION = 2
 # Default (modes, static) per bearing model: the smallest sizes meeting 1 % on the coupler
 # mid-point at 269 and 391 rpm against the full-order reference (flexible bearings put the
 # 5th-7th crank harmonics on the first two modes, which a constant basis must then resolve
