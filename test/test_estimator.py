@@ -441,3 +441,10 @@ def test_cho1992_streaming_accuracy_at_269_and_391_rpm(cho, bearings):
                                                       seed=3)
             assert errors['error_coupler_mid'] < coupler_limit, (rpm, jitter, errors)
             assert errors['error_lever_tip'] < lever_limit, (rpm, jitter, errors)
+
+
+def test_model_without_reactions_flags_zero_criteria():
+    model = reduced.reduce_samples(toy_samples(grid=16), modes=3, speed_max=30.0, zeta=ZETA)
+    sample = StreamingEstimator(model).update(0, 0.3, 20.0)
+    assert sample.flags & SampleFlag.NO_CRITERIA
+    assert sample.criterion == (0.0,) * 4 and sample.reaction_n == (0.0,) * 4

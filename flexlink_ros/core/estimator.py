@@ -275,6 +275,7 @@ class SampleFlag(enum.IntFlag):
     CLIPPED_ACCEL = 16   # |acceleration| beyond the limit, clipped
     REPEATED = 32        # same stamp and angle again: previous estimate returned
     SPEED_FROM_ANGLE = 64  # no measured speed: differentiated from angles
+    NO_CRITERIA = 128    # the model has no joint-reaction data: criteria are zero
 
 
 # Node of the first Radau IIA stage (2 stages).
@@ -284,6 +285,7 @@ _RESET, _WARM_START, _LARGE_STEP = int(SampleFlag.RESET), int(SampleFlag.WARM_ST
     int(SampleFlag.LARGE_STEP)
 _CLIPPED_SPEED, _CLIPPED_ACCEL = int(SampleFlag.CLIPPED_SPEED), int(SampleFlag.CLIPPED_ACCEL)
 _REPEATED, _SPEED_FROM_ANGLE = int(SampleFlag.REPEATED), int(SampleFlag.SPEED_FROM_ANGLE)
+_NO_CRITERIA = int(SampleFlag.NO_CRITERIA)
 
 
 @dataclasses.dataclass(slots=True)
@@ -460,6 +462,8 @@ class StreamingEstimator:
         self.near_zero_fraction = float(near_zero_fraction)
         self.rate_filter = CrankRateFilter(fit_time_constant_s)
         self._speed_max = float(model.speed_max)
+        # Without reaction data (core/dynamics.py absent at precompute) report zeros, flagged.
+        self._base_flags = 0 if np.any(model.force_moments) else _NO_CRITERIA
         if len(reduced.JOINTS) != 4:
             raise ValueError('the criteria path is written for four joints')
         self._tables = _StepTables(model)
@@ -669,7 +673,7 @@ class StreamingEstimator:
             near_zero=criteria[3],
             error_indicator=math.sqrt(sum([c * c for c in correction]))
             / max(size, ERROR_INDICATOR_FLOOR_M),
-            flags=flags, message=message, modal=tuple(z[:r].tolist()))
+            flags=flags | self._base_flags, message=message, modal=tuple(z[:r].tolist()))
         self._last = sample
         self.samples += 1
         return sample
@@ -687,8 +691,8 @@ class StreamingEstimator:
                 gamma_dot = (fx * values[9 + 2 * j] - fy * values[8 + 2 * j]) / r2
                 reactions[j], gamma_dots[j] = magnitude, gamma_dot
                 ratios[j] = abs(gamma_dot) / magnitude
-            else:
-                ratios[j] = math.inf
+            elif not self._base_flags:
+                ratios[j] = math.inf   # a true zero reaction: direction undefined
         return tuple(reactions), tuple(gamma_dots), tuple(ratios), tuple(near)
 
     def link_shapes(self, sample):
