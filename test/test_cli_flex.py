@@ -1,0 +1,81 @@
+"""`flexlink modes` and `flexlink simulate`: JSON keys, consistency with the core, errors."""
+
+import json
+
+import numpy as np
+import pytest
+
+from flexlink_ros import cli
+
+
+def _run(capsys, *argv):
+    code = cli.main(list(argv))
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def test_modes_json(capsys):
+    code, out, _ = _run(capsys, 'modes', '--crank-deg', '0:360:90', '--count', '2',
+                        '--rigid-crank', '--no-geometric-stiffness', '--json')
+    assert code == 0
+    result = json.loads(out)
+    assert result['crank_deg'] == [0.0, 90.0, 180.0, 270.0]
+    freqs = np.array(result['frequencies_hz'])
+    assert freqs.shape == (4, 2)
+    # coupler and lever pinned-pinned bending (the paper's 34 and 41 Hz)
+    assert 34.0 < freqs[:, 0].min() < 35.0 and 40.5 < freqs[:, 1].max() < 41.5
+    assert result['dominant_link'][0] == ['coupler', 'lever']
+    assert result['range_hz']['min'] == pytest.approx(freqs.min(axis=0).tolist())
+    assert result['options']['rigid_crank'] is True
+
+
+def test_modes_shapes_and_flexible_bearings(capsys):
+    code, out, _ = _run(capsys, 'modes', '--crank-deg', '27', '--count', '3', '--bearings',
+                        'flexible', '--no-geometric-stiffness', '--elements', '2', '--shapes',
+                        '--json')
+    assert code == 0
+    result = json.loads(out)
+    shapes = np.array(result['shapes']['deflection_per_unit_modal_m'])
+    assert shapes.shape == (1, 3, 3, 17, 2)
+    assert np.all(np.abs(shapes).reshape(3, -1).max(axis=1) > 0)
+
+
+def test_simulate_json_and_modal_equals_full_with_all_modes(capsys):
+    common = ('simulate', '--rpm', '269', '--rigid-crank', '--no-geometric-stiffness',
+              '--elements', '1', '--points-per-rev', '12', '--steps-per-rev', '120', '--json')
+    code, out, _ = _run(capsys, *common)
+    assert code == 0
+    full = json.loads(out)
+    assert len(full['crank_deg']) == 12 and full['crank_deg'][1] == pytest.approx(30.0)
+    for point in ('lever_tip', 'coupler_mid'):
+        assert len(full[point]['dx_m']) == len(full[point]['dy_m']) == 12
+    assert full['wall_s'] > 0 and full['floquet_spectral_radius'] < 1
+    dofs = full['options']['dofs']
+    code, out, _ = _run(capsys, *common, '--method', 'modal', '--modes', str(dofs))
+    modal = json.loads(out)
+    np.testing.assert_allclose(modal['coupler_mid']['dy_m'], full['coupler_mid']['dy_m'],
+                               rtol=1e-9, atol=1e-15)
+
+
+def test_simulate_convergence_check(capsys):
+    code, out, _ = _run(capsys, 'simulate', '--rigid-crank', '--no-geometric-stiffness',
+                        '--elements', '1', '--points-per-rev', '10', '--steps-per-rev', '160',
+                        '--check-convergence', '--json')
+    assert code == 0
+    conv = json.loads(out)['convergence']
+    assert conv['steps'] == [40, 80, 160] and conv['reference_steps'] == 640
+    assert conv['max_error_m'][2] < conv['max_error_m'][1] < conv['max_error_m'][0]
+
+
+@pytest.mark.parametrize('argv, message', [
+    (('modes', '--bearings', 'elastic'), '--bearings'),
+    (('modes', '--count', 'x', '--no-geometric-stiffness'), '--count'),
+    (('simulate', '--method', 'modal', '--no-geometric-stiffness'), '--modes'),
+    (('simulate', '--rpm', '-5'), '--rpm'),
+    (('simulate', '--steps-per-rev', '100', '--points-per-rev', '30',
+      '--no-geometric-stiffness'), 'multiple'),
+])
+def test_bad_input_is_one_line_error(capsys, argv, message):
+    code, out, err = _run(capsys, *argv)
+    assert code == 1 and out == ''
+    assert message in err and err.count('\n') == 1
