@@ -26,7 +26,7 @@ import numpy as np
 from scipy.linalg import lapack
 
 from . import reduced
-from .integrators import RADAU_TABLEAUX, compose_affine
+from .integrators import RADAU_TABLEAUX
 
 LOGGER = logging.getLogger(__name__)
 
@@ -715,9 +715,9 @@ def replay(model, stamps_ns, angles, speeds=None,
     Offline estimate of a recorded crank signal: the streaming step, batched.
 
     Same numbers as feeding :meth:`StreamingEstimator.update` sample by sample (a test checks
-    this), for strictly increasing stamps without gaps: the table rows, the step matrices and
-    their solves are computed for all samples at once, and only the state recursion
-    ``z <- z + X_n [z, e1]`` runs sample by sample.
+    this), for strictly increasing stamps without gaps: the crank filter runs sample by
+    sample, the table rows and step matrices are computed for all samples at once, and the
+    state recursion takes one LAPACK solve per sample.
 
     Parameters
     ----------
@@ -760,16 +760,6 @@ def replay(model, stamps_ns, angles, speeds=None,
 
     layout = model.layout
 
-    def table_rows(angle_values, speed_values, accel_values):
-        cells, position = model.cell(angle_values)
-        weights = model.weights(position, speed_values, accel_values)
-        rows = np.empty((angle_values.size, model.table.shape[2]))
-        order = np.argsort(cells, kind='stable')
-        bounds = np.flatnonzero(np.diff(cells[order])) + 1
-        for group in np.split(order, bounds):
-            rows[group] = weights[group] @ model.table[cells[group[0]]]
-        return rows
-
     def stage_values(rows):
         # [M, C, K, 0] blocks of each row, as the streaming step's slots hold them.
         values = np.zeros((rows.shape[0], 4, r * r))
@@ -777,9 +767,8 @@ def replay(model, stamps_ns, angles, speeds=None,
             values[:, m] = layout.block(rows, name).reshape(rows.shape[0], r * r)
         return values
 
-    rows = table_rows(wrapped, model_speed, model_accel)
-    # Stage-1 rows of the step into each sample (as StreamingEstimator._step).
-    stage_rows = table_rows(
+    # Crank state at the first Radau stage of the step into each sample (as _step).
+    stage_state = (
         np.mod(np.concatenate([[wrapped[0]], wrapped[:-1] + _STAGE1 * advance[1:]]), TWO_PI),
         np.concatenate([[model_speed[0]], model_speed[:-1] + _STAGE1 * np.diff(model_speed)]),
         np.concatenate([[model_accel[0]], model_accel[:-1] + _STAGE1 * np.diff(model_accel)]))
@@ -794,7 +783,6 @@ def replay(model, stamps_ns, angles, speeds=None,
         estimator.update(int(stamps_ns[n]), float(angles[n]),
                          None if speeds is None else float(speeds[n]))
         states[n] = estimator._z[:2 * r]
-    eye = np.eye(2 * r)
     for first in range(prefix - 1, count - 1, REPLAY_CHUNK):
         last = min(first + REPLAY_CHUNK, count - 1)
         steps = times[first + 1:last + 1] - times[first:last]
@@ -802,19 +790,30 @@ def replay(model, stamps_ns, angles, speeds=None,
         powers = np.stack([inv * inv, inv, np.ones_like(steps), steps, steps * steps], axis=1)
         # Slot order of g_stack[0]: the new sample in slot 0, the stage-1 values in slot 1.
         g = (powers @ tables.g_stack[0]).reshape(-1, 8, 8)
-        current, stage = rows[first + 1:last + 1], stage_rows[first + 1:last + 1]
+        chosen = slice(first + 1, last + 1)
+        current = model.evaluate(wrapped[chosen], model_speed[chosen], model_accel[chosen])
+        stage = model.evaluate(*(x[chosen] for x in stage_state))
         pairs = np.concatenate([stage_values(current), stage_values(stage)], axis=1)
         system = np.matmul(g, pairs).reshape(-1, 2, 4, r, r).transpose(0, 1, 3, 2, 4).reshape(
             -1, 2 * r, 4 * r)
         loads = np.concatenate([layout.block(stage, 'f'), layout.block(current, 'f')], axis=1)
-        # Increment dz = A^-1 (P [q, v] + f): an affine map of the state.
-        increments = np.linalg.solve(system[:, :, :2 * r],
-                                     np.concatenate([system[:, :, 2 * r:], loads[..., None]],
-                                                    axis=2))
-        increments[:, :, :2 * r] += eye
-        states[first:last + 1] = compose_affine(increments, states[first])
-    deflection = (np.einsum('mor,mr->mo', layout.block(rows, 'out'), states[:, :r])
-                  + layout.block(rows, 'corr'))
+        # dz = A^-1 (P [q, v] + f), one sample after the other (one LAPACK solve each: cheaper
+        # than propagating the whole affine map when 2 r is large).
+        matrices = np.ascontiguousarray(system[:, :, :2 * r].transpose(0, 2, 1))  # Fortran
+        operators = system[:, :, 2 * r:]
+        state = states[first].copy()
+        for n in range(steps.size):
+            rhs = np.dot(operators[n], state)
+            rhs += loads[n]
+            _, _, increment, _ = lapack.dgesv(matrices[n].T, rhs, overwrite_a=0,
+                                              overwrite_b=1)
+            state += increment
+            states[first + 1 + n] = state
+    deflection = np.empty((count, 4))
+    for first in range(0, count, REPLAY_CHUNK):
+        chosen = slice(first, first + REPLAY_CHUNK)
+        rows = model.evaluate(wrapped[chosen], model_speed[chosen], model_accel[chosen])
+        deflection[chosen] = reduced.output_values(model, rows, states[chosen, :r])
     return {'crank_angle': wrapped, 'crank_speed': speed, 'crank_accel': accel,
             'lever_tip': deflection[:, :2], 'coupler_mid': deflection[:, 2:],
             'modal': states[:, :r].copy()}

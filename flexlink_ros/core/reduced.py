@@ -434,8 +434,15 @@ class ReducedModel:
         """
         theta, w, a = np.broadcast_arrays(*(np.atleast_1d(np.asarray(v, dtype=float))
                                             for v in (theta, w, a)))
-        k, t = self.cell(theta)
-        return np.einsum('mi,mil->ml', self.weights(t, w, a), self.table[k])
+        theta, w, a = (v.ravel() for v in (theta, w, a))
+        cells, t = self.cell(theta)
+        weights = self.weights(t, w, a)
+        rows = np.empty((theta.size, self.table.shape[2]))
+        # One matrix product per grid cell (no gathered copy of the table per angle).
+        order = np.argsort(cells, kind='stable')
+        for group in np.split(order, np.flatnonzero(np.diff(cells[order])) + 1):
+            rows[group] = weights[group] @ self.table[cells[group[0]]]
+        return rows
 
     def shapes(self, theta, q):
         """
