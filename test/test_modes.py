@@ -105,3 +105,32 @@ def test_more_elements_converge(cho):
     errors = np.abs(freqs[:-1] - freqs[-1])
     assert np.all(errors[1] < errors[0]) and np.all(errors[2] < errors[1])
     assert np.all(errors[-1] / freqs[-1] < 1e-4)
+
+
+def test_geometric_stiffness_pieces_with_constant_tension(cho, monkeypatch):
+    """K_G assembly with a stand-in axial force: constant tension P on the coupler only.
+    A pinned-pinned beam under tension P has w^2 = w0^2 (1 + P L^2 / (pi^2 EI)) exactly; the
+    pieces (gravity, a, w^2) must combine linearly as P = P1 + a Pa + w^2 Pw2."""
+    import sys
+    import types
+    pieces = {'1': 4.0, 'a': 0.01, 'w2': 0.002}
+
+    def axial_force(mechanism, state, link, x):
+        gravity = pieces['1'] if mechanism.gravity != (0.0, 0.0) else 0.0
+        value = gravity + pieces['a'] * state.alpha[0] + pieces['w2'] * state.omega[0] ** 2
+        return np.outer(value, np.ones(len(x))) * (link == 1)
+
+    fake = types.ModuleType('flexlink_ros.core.dynamics')
+    fake.axial_force = axial_force
+    monkeypatch.setitem(sys.modules, 'flexlink_ros.core.dynamics', fake)
+    mech = dataclasses.replace(cho, elements_per_link=8)
+    model = FlexibleLinkage(mech, ModelOptions(rigid_crank=True))
+    system = model.assemble(np.radians([27.0, 200.0]))
+    spec = cho.links[1]
+    euler = np.pi ** 2 * cho.youngs_modulus * spec.second_moment / spec.length ** 2
+    w0 = solve_frozen_modes(dataclasses.replace(system, geometric={
+        k: 0 * v for k, v in system.geometric.items()}), 1).omega[:, 0]
+    for speed, accel in ((0.0, 0.0), (40.0, 0.0), (30.0, 500.0)):
+        tension = pieces['1'] + accel * pieces['a'] + speed ** 2 * pieces['w2']
+        omega = solve_frozen_modes(system, 1, speed, accel).omega[:, 0]
+        np.testing.assert_allclose(omega ** 2, w0 ** 2 * (1 + tension / euler), rtol=2e-4)

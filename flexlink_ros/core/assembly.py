@@ -207,8 +207,14 @@ def element_geometric_stiffness(forces, length):
 
 
 def _sandwich(left_t, matrix, right_t):
-    """sum over a, b of left_t[k, a, i] matrix[..., a, b] right_t[k, b, j] (= T X T^T forms)."""
-    return np.einsum('kai,...ab,kbj->kij', left_t, matrix, right_t, optimize=True)
+    """
+    T_left X T_right^T from gathers: sum over a, b of left_t[k, a, i] X[a, b] right_t[k, b, j].
+
+    ``matrix`` is one (a, b) matrix for every angle k, or one per angle, shape (k, a, b).
+    """
+    if matrix.ndim == 3:
+        return np.einsum('kai,kab,kbj->kij', left_t, matrix, right_t, optimize=True)
+    return np.einsum('kai,ab,kbj->kij', left_t, matrix, right_t, optimize=True)
 
 
 @dataclasses.dataclass(frozen=True)
