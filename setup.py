@@ -25,6 +25,7 @@ setup(
     entry_points={
         'console_scripts': [
             'flexlink = flexlink_ros.cli:main',
+            'crank_driver = flexlink_ros.crank_driver:main',
         ],
     },
 )

@@ -1,0 +1,126 @@
+"""crank_driver: speed profiles against quadrature, and the real node received over rclpy."""
+
+import math
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from scipy.integrate import quad
+
+from flexlink_ros.crank_driver import RPM, SpeedProfile, build_parser, wrap_angle
+
+REPO_CONFIG = 'config/crank_driver.yaml'
+
+
+@pytest.mark.parametrize('profile', [
+    SpeedProfile('constant', speed_rpm=90.0),
+    SpeedProfile('ramp', ramp_from_rpm=30.0, ramp_to_rpm=150.0, ramp_duration_s=2.0),
+    SpeedProfile('ramp', ramp_from_rpm=100.0, ramp_to_rpm=-20.0, ramp_duration_s=0.7),
+    SpeedProfile('sweep', sweep_max_rpm=120.0, sweep_period_s=1.3),
+])
+def test_angle_is_the_integral_of_speed(profile):
+    for t in (0.0, 0.2, 0.65, 0.7, 1.0, 1.3, 2.0, 2.9, 4.05):
+        integral, _ = quad(profile.speed, 0.0, t, limit=200, points=[0.65, 0.7, 1.3, 1.95, 2.0,
+                                                                     2.6, 3.25, 3.9])
+        assert profile.angle(t) == pytest.approx(integral, rel=1e-10, abs=1e-10)
+
+
+def test_profile_shapes():
+    ramp = SpeedProfile('ramp', ramp_from_rpm=0.0, ramp_to_rpm=60.0, ramp_duration_s=4.0)
+    assert ramp.speed(0.0) == 0.0 and ramp.speed(2.0) == pytest.approx(30.0 * RPM)
+    assert ramp.speed(100.0) == pytest.approx(60.0 * RPM)
+    sweep = SpeedProfile('sweep', sweep_max_rpm=120.0, sweep_period_s=2.0)
+    assert [sweep.speed(t) / RPM for t in (0.0, 0.5, 1.0, 1.5, 2.0)] == \
+        pytest.approx([0.0, 60.0, 120.0, 60.0, 0.0], abs=1e-9)
+    assert sweep.angle(4.0) == pytest.approx(2 * 0.5 * 120.0 * RPM * 2.0)
+    assert wrap_angle(math.pi) == pytest.approx(-math.pi)
+    assert wrap_angle(-math.pi) == pytest.approx(-math.pi)
+    assert wrap_angle(7.0) == pytest.approx(7.0 - 2 * math.pi)
+    with pytest.raises(ValueError, match='profile'):
+        SpeedProfile('sine')
+
+
+def test_help_lists_every_parameter(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        build_parser().parse_args(['--help'])
+    assert exit_info.value.code == 0
+    text = capsys.readouterr().out
+    for name in ('rate_hz', 'profile', 'ramp.to_rpm', 'sweep.period_s', 'jitter_us'):
+        assert name in text
+
+
+def receive_joint_states(extra_parameters, seconds):
+    """Run crank_driver in a subprocess; return (receive ns, stamp ns, position, velocity)."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from sensor_msgs.msg import JointState
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        node = rclpy.create_node('crank_listener', context=context)
+        received = []
+        node.create_subscription(
+            JointState, 'joint_states',
+            lambda m: received.append((time.time_ns(), m.header.stamp.sec * 10**9
+                                       + m.header.stamp.nanosec, m.position[0], m.velocity[0],
+                                       list(m.name))), 2000)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        command = [sys.executable, '-m', 'flexlink_ros.crank_driver', '--ros-args',
+                   '--params-file', REPO_CONFIG, '-p', f'duration_s:={seconds}']
+        for item in extra_parameters:
+            command += ['-p', item]
+        driver = subprocess.Popen(command)
+        try:
+            deadline = time.monotonic() + 10.0
+            while node.count_publishers('joint_states') == 0 and time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.05)
+            assert node.count_publishers('joint_states') == 1, 'crank_driver not discovered'
+            deadline = time.monotonic() + seconds + 10.0
+            while driver.poll() is None and time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.05)
+            for _ in range(20):  # drain
+                executor.spin_once(timeout_sec=0.01)
+            assert driver.wait(timeout=5) == 0
+        finally:
+            if driver.poll() is None:
+                driver.kill()
+                driver.wait()
+        return received
+    finally:
+        rclpy.shutdown(context=context)
+
+
+def test_driver_publishes_the_profile_at_rate(config_dir, monkeypatch):
+    monkeypatch.chdir(config_dir.parent)
+    seconds = 3.0
+    received = receive_joint_states(
+        ['profile:=ramp', 'ramp.from_rpm:=30.0', 'ramp.to_rpm:=90.0', 'ramp.duration_s:=2.0',
+         'joint_name:=crank_joint'], seconds)
+    assert len(received) > 100
+    stamp, position, velocity = (np.array([r[i] for r in received]) for i in (1, 2, 3))
+    assert all(r[4] == ['crank_joint'] for r in received)
+    assert np.all(np.diff(stamp) > 0)  # strictly monotonic stamps
+    span_s = (stamp[-1] - stamp[0]) * 1e-9
+    rate = (len(stamp) - 1) / span_s
+    print(f'received {len(stamp)} at {rate:.0f} Hz, '
+          f'dt p50 {np.median(np.diff(stamp)) / 1e6:.3f} ms')
+    assert rate > 300.0  # 1 kHz nominal; loose on a loaded 2-core machine
+    assert np.all(np.abs(position) <= math.pi)
+    # Velocity equals the ramp evaluated at the stamp: recover the start from the ramp itself.
+    omega_from, omega_to = 30.0 * RPM, 90.0 * RPM
+    slope = (omega_to - omega_from) / 2.0
+    ramping = velocity < omega_to - 1e-9
+    t_rel = (velocity[ramping] - omega_from) / slope
+    start_ns = stamp[ramping] - t_rel * 1e9
+    assert np.ptp(start_ns) < 1e3  # one start time explains every ramp sample (to 1 us)
+    t = (stamp - start_ns.mean()) * 1e-9
+    profile = SpeedProfile('ramp', ramp_from_rpm=30.0, ramp_to_rpm=90.0, ramp_duration_s=2.0)
+    assert velocity == pytest.approx([profile.speed(x) for x in t], abs=1e-6)
+    # Position is the integral of velocity: trapezoid between samples, modulo 2 pi.
+    increments = np.diff(np.unwrap(position))
+    trapezoid = 0.5 * (velocity[1:] + velocity[:-1]) * np.diff(stamp) * 1e-9
+    assert increments == pytest.approx(trapezoid, abs=1e-6 + slope * 1e-6)
