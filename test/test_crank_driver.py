@@ -114,10 +114,10 @@ def test_driver_publishes_the_profile_at_rate(config_dir, monkeypatch):
     omega_from, omega_to = 30.0 * RPM, 90.0 * RPM
     slope = (omega_to - omega_from) / 2.0
     ramping = velocity < omega_to - 1e-9
-    t_rel = (velocity[ramping] - omega_from) / slope
-    start_ns = stamp[ramping] - t_rel * 1e9
-    assert np.ptp(start_ns) < 1e3  # one start time explains every ramp sample (to 1 us)
-    t = (stamp - start_ns.mean()) * 1e-9
+    since_first_s = (stamp - stamp[0]) * 1e-9  # int64 difference first: float64 keeps the ns
+    start_s = since_first_s[ramping] - (velocity[ramping] - omega_from) / slope
+    assert np.ptp(start_s) < 1e-6  # one start time explains every ramp sample (to 1 us)
+    t = since_first_s - start_s.mean()
     profile = SpeedProfile('ramp', ramp_from_rpm=30.0, ramp_to_rpm=90.0, ramp_duration_s=2.0)
     assert velocity == pytest.approx([profile.speed(x) for x in t], abs=1e-6)
     # Position is the integral of velocity: trapezoid between samples, modulo 2 pi.
