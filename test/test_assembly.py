@@ -311,3 +311,60 @@ def test_bad_options_are_refused(cho):
     with pytest.raises(ValueError, match='bearing_stiffness'):
         FlexibleLinkage(dataclasses.replace(cho, bearing_stiffness=None),
                         ModelOptions(bearings='flexible'))
+
+
+# -- geometric stiffness from the rigid-body analysis (core/dynamics.py) ------------------
+
+@pytest.mark.parametrize('case', CASES)
+def test_rigid_body_axial_forces_equal_fe_quasi_static_element_forces(cho, case):
+    """The frozen structure (clamped crank or rigid crank) is statically determinate, so
+    K U = R (no elastic inertia) gives element axial forces EA du/l equal to the mean over
+    each element of the rigid-body axial force F(x) (dynamics.axial_force: distributed
+    inertia, gravity and joint masses); linear elements are nodally exact for bars."""
+    axial_force = pytest.importorskip('flexlink_ros.core.dynamics').axial_force
+    mech = _mechanism(cho, case)
+    model = FlexibleLinkage(mech, CASES[case])
+    theta = np.radians([17.0, 141.0, 290.0])
+    w, a = 41.0, -320.0
+    system = model.assemble(theta)
+    load = system.load_at(w, a)
+    displacement = np.linalg.solve(system.stiffness, load[..., None])[..., 0]
+    fe = model.element_axial_forces(displacement, theta)
+    state = solve_kinematics(mech, theta, w, a)
+    for link in model.links:
+        mats = model.link_matrices[link]
+        x = model.gauss_positions(link)
+        _, weights = gauss_points(mats.element_length)
+        exact = np.asarray(axial_force(mech, state, link, x.ravel())).reshape(
+            (len(theta),) + x.shape)
+        mean = exact @ weights / mats.element_length
+        np.testing.assert_allclose(fe[link], mean, rtol=1e-8, atol=1e-9 * np.abs(mean).max())
+
+
+@pytest.mark.parametrize('bearings', ['rigid', 'flexible'])
+def test_quasi_static_axial_forces_under_gravity_equal_hand_statics(cho, bearings):
+    """Rigid crank at rest: coupler and lever are pinned bars under their weight, joined at B
+    (joint mass m_B). Each bar's transverse end force is half its transverse weight; the two
+    axial end forces at B follow from the pin's equilibrium; the tension then varies linearly
+    with the axial weight component. FE element forces (K U = R) equal its element means."""
+    model = FlexibleLinkage(cho, ModelOptions(rigid_crank=True, bearings=bearings, **NO_KG))
+    theta = np.radians([33.0, 250.0])
+    system = model.assemble(theta)
+    displacement = np.linalg.solve(system.stiffness, system.load_at(0.0)[..., None])[..., 0]
+    fe = model.element_axial_forces(displacement, theta)
+    angle = solve_kinematics(cho, theta).angle
+    gravity = np.array(cho.gravity)
+    for k in range(len(theta)):
+        axes = {link: np.array([np.cos(angle[link, k]), np.sin(angle[link, k])])
+                for link in (1, 2)}
+        normals = {link: np.array([-axis[1], axis[0]]) for link, axis in axes.items()}
+        weights = {link: cho.links[link].mass * gravity for link in (1, 2)}
+        # forces of the pin B on the bars: axial a e + transverse -(W.n)/2 n, summing to m_B g
+        rhs = cho.joint_masses['B'] * gravity - sum(-(weights[j] @ normals[j]) / 2 * normals[j]
+                                                    for j in (1, 2))
+        axial_end = np.linalg.solve(np.column_stack([axes[1], axes[2]]), rhs)
+        for link, end_force in zip((1, 2), axial_end):
+            length = cho.links[link].length
+            centres = (np.arange(cho.elements_per_link) + 0.5) * length / cho.elements_per_link
+            expected = end_force + (weights[link] @ axes[link]) * (length - centres) / length
+            np.testing.assert_allclose(fe[link][k], expected, rtol=1e-9, atol=1e-12)

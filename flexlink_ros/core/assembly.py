@@ -569,6 +569,8 @@ class FlexibleLinkage:
 
         From the rigid-body analysis, linear in (gravity, a, w^2): '1' = gravity at rest,
         'a' and 'w2' = unit crank acceleration and unit speed squared without gravity.
+        ``dynamics.axial_force(mechanism, state, link, x)`` is called with x of shape (m,)
+        and must return the tension [N], shape (N, m) for the N angles of ``state``.
         """
         from .dynamics import axial_force
         still = solve_kinematics(self.mechanism, theta, 0.0, 0.0)
