@@ -11,6 +11,7 @@ MCAP subcommands: ``mcap-info``, ``mcap-recover`` and ``mcap-record``.
 """
 
 import io
+import math
 import os
 import pathlib
 import struct
@@ -360,7 +361,7 @@ def record_topics(recorder, topics, duration_s=0.0, discovery_timeout_s=10.0, ar
 
     """
     import rclpy
-    from rclpy.executors import ExternalShutdownException
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
     from .rosbag_schema import message_class
@@ -368,7 +369,8 @@ def record_topics(recorder, topics, duration_s=0.0, discovery_timeout_s=10.0, ar
     try:
         with rclpy.init(args=args):
             node = rclpy.create_node('flexlink_mcap_record')
-            executor = _make_executor()
+            # rclpy's EventsExecutor cannot deliver MessageInfo (the send time) to a callback.
+            executor = SingleThreadedExecutor()
             executor.add_node(node)
             resolved = _resolve_types(node, executor, topics, discovery_timeout_s)
             recorder.open()
@@ -381,12 +383,10 @@ def record_topics(recorder, topics, duration_s=0.0, discovery_timeout_s=10.0, ar
                                  else ReliabilityPolicy.BEST_EFFORT)
                 node.create_subscription(message_class(type_name), topic,
                                          _raw_writer(recorder, topic, clock), qos, raw=True)
-            if duration_s > 0:
-                end = time.monotonic() + duration_s
-                while rclpy.ok() and time.monotonic() < end:
-                    executor.spin_once(timeout_sec=min(0.1, max(end - time.monotonic(), 0)))
-            else:
-                executor.spin()
+            end = time.monotonic() + duration_s if duration_s > 0 else math.inf
+            # spin_once in a loop: returns on SIGINT/SIGTERM with every executor.
+            while rclpy.ok() and time.monotonic() < end:
+                executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
@@ -405,16 +405,6 @@ def _raw_writer(recorder, topic, clock):
         except RecorderError as exc:
             print(f'flexlink mcap-record: {exc}', flush=True)
     return write
-
-
-def _make_executor():
-    """EventsExecutor where rclpy has it (far cheaper dispatch), else single-threaded."""
-    try:
-        from rclpy.experimental.events_executor import EventsExecutor
-        return EventsExecutor()
-    except ImportError:
-        from rclpy.executors import SingleThreadedExecutor
-        return SingleThreadedExecutor()
 
 
 def _resolve_types(node, executor, topics, timeout_s):

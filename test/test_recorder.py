@@ -4,10 +4,13 @@ import json
 import os
 import pathlib
 import shutil
+import signal
 import struct
 import subprocess
+import sys
 import time
 
+import numpy as np
 import pytest
 import yaml
 from builtin_interfaces.msg import Time
@@ -325,3 +328,73 @@ def test_recover_truncated_file_and_cli(tmp_path, capsys):
     text = capsys.readouterr().out
     assert '/joint_states' in text and '400' in text
     assert cli.main(['mcap-recover', str(path), '--out', str(path)]) == 1
+
+
+def record_live_stream(tmp_path, stop_signal, record_s=2.5):
+    """
+    crank_driver (1 kHz) and `flexlink mcap-record` in subprocesses; signal the recorder.
+
+    Returns the output path and the wall time [ns] at which the signal was sent.
+    """
+    repo = pathlib.Path(__file__).resolve().parents[1]
+    out = tmp_path / 'live.mcap'
+    driver = subprocess.Popen([sys.executable, '-m', 'flexlink_ros.crank_driver', '--ros-args',
+                               '-p', 'duration_s:=30.0'], cwd=repo)
+    recorder = subprocess.Popen(
+        [sys.executable, '-m', 'flexlink_ros.cli', 'mcap-record', str(out),
+         '--topic', 'joint_states:sensor_msgs/msg/JointState', '--json'],
+        cwd=repo, stdout=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 15.0
+        while time.monotonic() < deadline:  # discovery, then the first flushed chunk
+            if out.exists() and scan_mcap(out)['message_count'] > 0:
+                break
+            time.sleep(0.1)
+        else:
+            pytest.fail('nothing recorded within 15 s')
+        time.sleep(record_s)
+        sent_ns = time.time_ns()
+        recorder.send_signal(stop_signal)
+        recorder.wait(timeout=10)
+    finally:
+        for process in (recorder, driver):
+            if process.poll() is None:
+                process.terminate()
+                try:
+                    process.wait(timeout=5)
+                except subprocess.TimeoutExpired:
+                    process.kill()
+                    process.wait()
+    return out, sent_ns, recorder
+
+
+def test_sigterm_closes_the_file_with_summary(tmp_path):
+    out, sent_ns, recorder = record_live_stream(tmp_path, signal.SIGTERM)
+    assert recorder.returncode == 0
+    status = json.loads(recorder.stdout.read())
+    info = mcap_info(out)
+    assert info['complete'] and status['state'] == 'closed'
+    assert info['message_count'] == status['message_count'] > 1000
+    _, summary, decoded = read_with_mcap_ros2(out)
+    assert summary.statistics.message_count == len(decoded)
+    log_times = np.array([log for _, log, _, _ in decoded])
+    publish_times = np.array([pub for _, _, pub, _ in decoded])
+    assert np.all(log_times >= publish_times)  # receive after send
+    assert (log_times - publish_times).max() < 0.5e9
+    assert abs(sent_ns - log_times[-1]) < 0.2e9  # recorded up to the signal
+    stamps = np.array([m.header.stamp.sec * 10**9 + m.header.stamp.nanosec
+                       for _, _, _, m in decoded])
+    assert np.all(np.diff(stamps) > 0)
+
+
+def test_sigkill_leaves_a_salvageable_file(tmp_path):
+    out, sent_ns, recorder = record_live_stream(tmp_path, signal.SIGKILL)
+    assert recorder.returncode == -signal.SIGKILL
+    assert not mcap_info(out)['complete']
+    result = recover_mcap(out, tmp_path / 'salvaged.mcap')
+    lost_s = (sent_ns - result['end_ns']) / 1e9
+    print(f"SIGKILL: {result['message_count']} messages salvaged, last {lost_s:.3f} s lost")
+    assert result['message_count'] > 1000
+    assert lost_s < 1.0  # one flush period (0.5 s) plus a chunk, at most
+    _, summary, decoded = read_with_mcap_ros2(tmp_path / 'salvaged.mcap')
+    assert len(decoded) == result['message_count'] == summary.statistics.message_count
