@@ -85,9 +85,10 @@ def test_pip_install_puts_scripts_and_share_files_in_the_prefix(tmp_path):
     copy_source(source)
     prefix = tmp_path / 'prefix'
     # The command of `make install` (pip install . into the venv), into a throwaway prefix.
+    # --ignore-installed: otherwise pip uninstalls the venv's own flexlink_ros first.
     result = subprocess.run(
-        [sys.executable, '-m', 'pip', 'install', '-q', '--no-deps', '--prefix', str(prefix),
-         str(source)],
+        [sys.executable, '-m', 'pip', 'install', '-q', '--no-deps', '--ignore-installed',
+         '--prefix', str(prefix), str(source)],
         env=clean_env(), capture_output=True, text=True, timeout=180)
     assert result.returncode == 0, result.stderr
     for exe in EXECUTABLES:
