@@ -108,8 +108,14 @@ def test_pip_install_puts_scripts_and_share_files_in_the_prefix(tmp_path):
 
 @pytest.mark.skipif(not (VENV_BIN / 'crank_driver').exists(),
                     reason='`make install` has not been run in this venv')
-def test_make_install_exposes_the_scripts_in_the_venv():
+def test_make_install_exposes_the_scripts_in_the_venv(tmp_path):
     for exe in EXECUTABLES:
         assert (VENV_BIN / exe).is_file()
     assert (pathlib.Path(sys.prefix) / 'share' / 'flexlink_ros' / 'config' /
             'crank_driver.yaml').is_file()
+    # A bare mechanism name resolves from the venv's share/ without a sourced workspace.
+    run = subprocess.run([str(VENV_BIN / 'flexlink'), 'modes', '--mechanism', 'cho1992',
+                          '--crank-deg', '0:10:10', '--count', '1', '--no-geometric-stiffness',
+                          '--json'], cwd=tmp_path, env=clean_env(), capture_output=True,
+                         text=True, timeout=120)
+    assert run.returncode == 0, run.stderr

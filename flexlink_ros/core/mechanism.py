@@ -17,6 +17,7 @@ import hashlib
 import json
 import math
 import pathlib
+import sys
 from typing import Optional
 
 import yaml
@@ -331,24 +332,27 @@ def find_config(name):
     """
     Resolve a mechanism or parameter file: a path, or a bare name like 'cho1992'.
 
-    Bare names are looked up in the installed share directory (ament index) and then in the
-    source tree's ``config/``.
+    Bare names are looked up in the installed share directory (ament index, then the
+    install prefix of this Python, where ``pip install .`` puts it) and then in the source
+    tree's ``config/``.
     """
     path = pathlib.Path(name)
     if path.exists():
         return path
     stem = name if name.endswith('.yaml') else name + '.yaml'
-    candidates = [pathlib.Path(__file__).resolve().parents[2] / 'config' / stem]
+    candidates = [pathlib.Path(sys.prefix) / 'share' / 'flexlink_ros' / 'config' / stem,
+                  pathlib.Path(__file__).resolve().parents[2] / 'config' / stem]
     try:
         from ament_index_python.packages import get_package_share_directory
         candidates.insert(0, pathlib.Path(get_package_share_directory('flexlink_ros'))
                           / 'config' / stem)
-    except Exception:  # noqa: BLE001 - no ament index: fall back to the source tree
+    except Exception:  # noqa: BLE001 - no ament index: fall back to the prefix and source tree
         pass
     for candidate in candidates:
         if candidate.exists():
             return candidate
-    raise MechanismError('mechanism', f'no such file: {name}')
+    looked = ', '.join(str(c.parent) for c in candidates)
+    raise MechanismError('mechanism', f'no such file: {name} (looked in {looked})')
 
 
 def load_mechanism(path_or_name):
