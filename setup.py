@@ -26,6 +26,7 @@ setup(
         'console_scripts': [
             'flexlink = flexlink_ros.cli:main',
             'crank_driver = flexlink_ros.crank_driver:main',
+            'flexlink_node = flexlink_ros.node:main',
         ],
     },
 )
