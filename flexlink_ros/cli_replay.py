@@ -1,0 +1,630 @@
+"""
+`flexlink replay`: recompute deflections and joint criteria offline from a recording.
+
+Reads the crank ``sensor_msgs/JointState`` messages of any rosbag2 MCAP (a bare ``.mcap`` file,
+a bag directory, or a truncated file: every complete chunk is used), runs the estimator over
+them in batches (:func:`core.estimator.replay`, the same numbers as the streaming node), and
+writes a new MCAP with the input and the node's output topics, each output stamped with its
+input's stamp and logged at the input's log time. ``--publish`` republishes the input with its
+recorded timing for live subscribers (a running flexlink_node, Foxglove, RViz).
+
+Like the node, a sample whose stamp goes back or jumps by more than the estimator's reset gap
+starts a new segment (the state restarts), an exactly repeated sample repeats the previous
+output, and messages without the crank joint or with a non-finite value are skipped.
+"""
+
+import math
+import pathlib
+import struct
+import sys
+import time
+
+import numpy as np
+
+from .cli import emit
+from .cli_estimate import _common, load_model, model_options
+from .cli_mcap import iter_complete_records
+from .core import estimator as core_estimator
+from .core.errors import FlexlinkError
+from .core.mechanism import load_mechanism
+from .core.reduced import JOINTS
+
+JOINT_STATE = 'sensor_msgs/msg/JointState'
+VECTOR3_STAMPED = 'geometry_msgs/msg/Vector3Stamped'
+MARKER_ARRAY = 'visualization_msgs/msg/MarkerArray'
+PROGRESS_PERIOD_S = 0.5  # seconds between progress-bar updates
+CDR_LE = b'\x00\x01\x00\x00'  # encapsulation header: plain CDR, little endian
+
+
+# -- reading ---------------------------------------------------------------------------------
+
+def recording_files(path):
+    """The MCAP files of a bare file or a bag directory (in split order)."""
+    path = pathlib.Path(path)
+    if path.is_dir():
+        files = sorted(path.glob('*.mcap'),
+                       key=lambda p: (len(p.stem.rsplit('_', 1)[-1]), p.stem))
+        if not files:
+            raise ValueError(f'`input`: no .mcap files in {path}')
+        return files
+    if not path.exists():
+        raise ValueError(f'`input`: no such file or directory: {path}')
+    return [path]
+
+
+def iter_recording(path, topics=None):
+    """
+    Messages of a recording, file by file in file order, including truncated files.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        ``.mcap`` file or bag directory.
+    topics : collection of str or None
+        Only these topics (None: all).
+
+    Yields
+    ------
+    (topic, type_name, log_time_ns, publish_time_ns, data)
+
+    """
+    for file in recording_files(path):
+        schemas, channels = {}, {}
+        with open(file, 'rb') as stream:
+            size = file.stat().st_size
+            for record in iter_complete_records(stream, size):
+                kind = type(record).__name__
+                if kind == 'Schema':
+                    schemas[record.id] = record.name
+                elif kind == 'Channel':
+                    channels[record.id] = (record.topic, schemas.get(record.schema_id, ''),
+                                           record.message_encoding)
+                elif kind == 'Message':
+                    topic, type_name, encoding = channels.get(record.channel_id,
+                                                              (None, None, None))
+                    if topic is None or (topics is not None and topic not in topics):
+                        continue
+                    if encoding != 'cdr':
+                        continue
+                    yield topic, type_name, record.log_time, record.publish_time, record.data
+
+
+def recording_topics(path):
+    """Topic name -> (type name, message count) of a recording."""
+    found = {}
+    for topic, type_name, *_ in iter_recording(path):
+        known = found.setdefault(topic, [type_name, 0])
+        known[1] += 1
+    return {topic: tuple(value) for topic, value in found.items()}
+
+
+# -- CDR of the few types replay reads and writes (rclpy's Python path is ~20 us/message) ----
+
+def _align(offset, size):
+    # Alignment counts from the end of the 4-byte encapsulation header.
+    return offset + (-(offset - 4)) % size
+
+
+def _read_string(data, offset, endian):
+    offset = _align(offset, 4)
+    (length,) = struct.unpack_from(endian + 'I', data, offset)
+    offset += 4
+    return bytes(data[offset:offset + max(length - 1, 0)]), offset + length
+
+
+def _read_doubles(data, offset, endian):
+    offset = _align(offset, 4)
+    (count,) = struct.unpack_from(endian + 'I', data, offset)
+    offset += 4
+    if count:
+        offset = _align(offset, 8)
+    values = struct.unpack_from(f'{endian}{count}d', data, offset)
+    return values, offset + 8 * count
+
+
+def parse_joint_state(data, joint_name):
+    """
+    Stamp, position and velocity of one joint from JointState CDR bytes.
+
+    Parameters
+    ----------
+    data : bytes
+        CDR (XCDR1, either byte order) of a ``sensor_msgs/JointState``.
+    joint_name : bytes
+        UTF-8 name of the joint.
+
+    Returns
+    -------
+    stamp_ns : int
+    position : float or None
+        None if the joint or its position is missing.
+    velocity : float or None
+        None if the message has no velocity for the joint.
+
+    """
+    endian = '<' if data[1] == 1 else '>'
+    sec, nanosec = struct.unpack_from(endian + 'iI', data, 4)
+    _, offset = _read_string(data, 12, endian)
+    offset = _align(offset, 4)
+    (count,) = struct.unpack_from(endian + 'I', data, offset)
+    offset += 4
+    index = None
+    for k in range(count):
+        name, offset = _read_string(data, offset, endian)
+        if index is None and name == joint_name:
+            index = k
+    positions, offset = _read_doubles(data, offset, endian)
+    velocities, offset = _read_doubles(data, offset, endian)
+    stamp_ns = sec * 1_000_000_000 + nanosec
+    if index is None or index >= len(positions):
+        return stamp_ns, None, None
+    velocity = velocities[index] if index < len(velocities) else None
+    return stamp_ns, positions[index], velocity
+
+
+def _header_bytes(sec, nanosec, frame):
+    return CDR_LE + struct.pack('<iII', sec, nanosec, len(frame) + 1) + frame + b'\x00'
+
+
+def vector3_stamped_cdr(sec, nanosec, frame, x, y, z=0.0):
+    """CDR bytes of a ``geometry_msgs/Vector3Stamped`` (frame as UTF-8 bytes)."""
+    head = _header_bytes(sec, nanosec, frame)
+    return head + bytes(_align(len(head), 8) - len(head)) + struct.pack('<3d', x, y, z)
+
+
+def criteria_cdr(sec, nanosec, frame, ratio, gamma_dot, force):
+    """CDR bytes of the criteria ``sensor_msgs/JointState`` (ros_messages.criteria_message)."""
+    out = bytearray(_header_bytes(sec, nanosec, frame))
+    out += bytes(_align(len(out), 4) - len(out)) + struct.pack('<I', len(JOINTS))
+    for name in JOINTS:
+        out += bytes(_align(len(out), 4) - len(out))
+        out += struct.pack('<I', len(name) + 1) + name.encode() + b'\x00'
+    for values in (ratio, gamma_dot, force):
+        out += bytes(_align(len(out), 4) - len(out)) + struct.pack('<I', len(values))
+        out += bytes(_align(len(out), 8) - len(out)) + struct.pack(f'<{len(values)}d', *values)
+    return bytes(out)
+
+
+# -- estimation --------------------------------------------------------------------------
+
+def criteria_batch(model, angles, speeds, accels,
+                   near_zero_fraction=core_estimator.DEFAULT_NEAR_ZERO_FRACTION):
+    """
+    Joint reactions, direction rates and Earles-Wu criteria at many crank states.
+
+    The same tabulated quantities as StreamingEstimator._criteria, vectorised.
+
+    Parameters
+    ----------
+    model : ReducedModel
+    angles, speeds, accels : ndarray, shape (m,)
+        Crank state as the model sees it (speed and acceleration clipped).
+    near_zero_fraction : float
+
+    Returns
+    -------
+    reaction_n, gamma_dot, criterion : ndarray, shape (m, 4)
+    near_zero : ndarray of bool, shape (m, 4)
+    available : bool
+        False if the model has no joint-reaction data (all zeros then).
+
+    """
+    count = len(angles)
+    zeros = np.zeros((count, len(JOINTS)))
+    if not np.any(model.force_moments):
+        return zeros, zeros, zeros, zeros.astype(bool), False
+    rows = model.evaluate(angles, speeds, accels)
+    layout = model.layout
+    force = layout.block(rows, 'force')
+    rate = layout.block(rows, 'force_dot')
+    rms2 = layout.block(rows, 'rms2')
+    r2 = np.sum(force ** 2, axis=2)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        gamma_dot = np.where(r2 > 0.0, (force[..., 0] * rate[..., 1]
+                                        - force[..., 1] * rate[..., 0]) / r2, 0.0)
+        reaction = np.sqrt(r2)
+        criterion = np.where(r2 > 0.0, np.abs(gamma_dot) / reaction, np.inf)
+    return reaction, gamma_dot, criterion, r2 < near_zero_fraction ** 2 * rms2, True
+
+
+def segments(stamps_ns, angles, reset_gap_s=core_estimator.DEFAULT_RESET_GAP_S):
+    """
+    Split a sample stream where the streaming estimator would restart.
+
+    Returns
+    -------
+    starts : list of int
+        First index of each segment.
+    repeated : ndarray of bool, shape (m,)
+        Exact repeats of the previous sample (same stamp and wrapped angle).
+
+    """
+    stamps_ns = np.asarray(stamps_ns, dtype=np.int64)
+    steps = np.diff(stamps_ns)
+    wrapped = np.mod(angles, 2.0 * math.pi)
+    repeated = np.concatenate([[False], (steps == 0) & (np.abs(np.diff(wrapped)) < 1e-12)])
+    starts = [0]
+    previous = 0
+    for n in range(1, stamps_ns.size):
+        if repeated[n]:
+            continue
+        dt = (stamps_ns[n] - stamps_ns[previous]) * 1e-9
+        if dt <= 0.0 or dt > reset_gap_s:
+            starts.append(n)
+        previous = n
+    return starts, repeated
+
+
+def estimate_offline(model, stamps_ns, angles, speeds, warm_start=True):
+    """
+    Deflections and criteria of every sample, segment by segment as the node would.
+
+    Parameters
+    ----------
+    model : ReducedModel
+    stamps_ns : ndarray of int, shape (m,)
+    angles : ndarray, shape (m,)
+    speeds : ndarray, shape (m,)
+        Measured speeds; NaN where a message had none (the segment then differentiates).
+
+    Returns
+    -------
+    dict of ndarray
+        'lever_tip', 'coupler_mid' (m, 2) [m]; 'reaction_n', 'gamma_dot', 'criterion' (m, 4);
+        'crank_angle', 'crank_speed' (m,); 'modal' (m, r); 'criteria_available' (bool);
+        'segments' (int).
+
+    """
+    count = len(stamps_ns)
+    starts, repeated = segments(stamps_ns, angles)
+    result = {key: np.zeros((count, 2)) for key in ('lever_tip', 'coupler_mid')}
+    for key in ('reaction_n', 'gamma_dot', 'criterion'):
+        result[key] = np.zeros((count, len(JOINTS)))
+    result['crank_angle'] = np.zeros(count)
+    result['crank_speed'] = np.zeros(count)
+    result['modal'] = np.zeros((count, model.size))
+    available = bool(np.any(model.force_moments))
+    for first, stop in zip(starts, starts[1:] + [count]):
+        chosen = np.arange(first, stop)[~repeated[first:stop]]
+        seg_speeds = speeds[chosen]
+        measured = None if np.any(np.isnan(seg_speeds)) else seg_speeds
+        out = core_estimator.replay(model, stamps_ns[chosen], angles[chosen], measured,
+                                    warm_start=warm_start)
+        model_speed = np.clip(out['crank_speed'], -model.speed_max, model.speed_max)
+        model_accel = np.clip(out['crank_accel'], -core_estimator.DEFAULT_ACCEL_LIMIT,
+                              core_estimator.DEFAULT_ACCEL_LIMIT)
+        reaction, gamma_dot, criterion, _, available = criteria_batch(
+            model, out['crank_angle'], model_speed, model_accel)
+        for key, values in (('lever_tip', out['lever_tip']),
+                            ('coupler_mid', out['coupler_mid']),
+                            ('crank_angle', out['crank_angle']),
+                            ('crank_speed', out['crank_speed']), ('modal', out['modal']),
+                            ('reaction_n', reaction),
+                            ('gamma_dot', gamma_dot), ('criterion', criterion)):
+            result[key][chosen] = values
+    # A repeated sample repeats the previous estimate (as StreamingEstimator.update does).
+    for n in np.flatnonzero(repeated):
+        for key in ('lever_tip', 'coupler_mid', 'crank_angle', 'crank_speed', 'modal',
+                    'reaction_n', 'gamma_dot', 'criterion'):
+            result[key][n] = result[key][n - 1]
+    result['criteria_available'] = available
+    result['segments'] = len(starts)
+    return result
+
+
+# -- the command -------------------------------------------------------------------------
+
+def choose_input_topic(path, joint_name, topic=None):
+    """The JointState topic carrying the crank joint (``topic`` if given, checked)."""
+    topics = recording_topics(path)
+    if topic is not None:
+        if topic not in topics:
+            raise ValueError(f'`--topic` {topic} is not in the recording (topics: '
+                             f'{", ".join(sorted(topics))})')
+        if topics[topic][0] != JOINT_STATE:
+            raise ValueError(f'`--topic` {topic} is {topics[topic][0]}, not {JOINT_STATE}')
+        return topic
+    candidates = []
+    for name, (type_name, _) in sorted(topics.items()):
+        if type_name != JOINT_STATE:
+            continue
+        for *_, data in iter_recording(path, {name}):
+            if parse_joint_state(data, joint_name.encode())[1] is not None:
+                candidates.append(name)
+            break
+    if not candidates:
+        raise ValueError(f'no {JOINT_STATE} topic with joint {joint_name!r} in {path} '
+                         f'(topics: {", ".join(sorted(topics)) or "none"})')
+    if len(candidates) > 1:
+        raise ValueError(f'several JointState topics carry {joint_name!r} '
+                         f'({", ".join(candidates)}): choose one with --topic')
+    return candidates[0]
+
+
+def read_crank_samples(path, topic, joint_name):
+    """
+    The crank samples of one topic.
+
+    Returns
+    -------
+    dict
+        'data' (list of bytes), 'log_ns', 'publish_ns', 'stamps_ns' (int64), 'angles',
+        'speeds' (NaN where missing) of the usable messages, and 'skipped' (count).
+
+    """
+    name = joint_name.encode()
+    data, log_ns, publish_ns, stamps, angles, speeds = [], [], [], [], [], []
+    skipped = 0
+    for _, _, log_time, publish_time, payload in iter_recording(path, {topic}):
+        try:
+            stamp, angle, speed = parse_joint_state(payload, name)
+        except (struct.error, IndexError):
+            angle = None
+        if angle is None or not math.isfinite(angle) or stamp == 0 or (
+                speed is not None and not math.isfinite(speed)):
+            skipped += 1
+            continue
+        data.append(payload)
+        log_ns.append(log_time)
+        publish_ns.append(publish_time)
+        stamps.append(stamp)
+        angles.append(angle)
+        speeds.append(math.nan if speed is None else speed)
+    return {'data': data, 'log_ns': np.array(log_ns, dtype=np.int64),
+            'publish_ns': np.array(publish_ns, dtype=np.int64),
+            'stamps_ns': np.array(stamps, dtype=np.int64), 'angles': np.array(angles),
+            'speeds': np.array(speeds), 'skipped': skipped}
+
+
+def output_topics(node_name):
+    """Output topic names of a node called ``node_name`` (as flexlink_node publishes them)."""
+    base = '/' + node_name.strip('/')
+    return {'lever_tip': f'{base}/lever_tip/deflection',
+            'coupler_mid': f'{base}/coupler_mid/deflection',
+            'criteria': f'{base}/joint_criteria', 'markers': f'{base}/markers'}
+
+
+class _Progress:
+    """A one-line progress bar on stderr (only on a terminal)."""
+
+    def __init__(self, total, label, stream=sys.stderr):
+        self.total, self.label, self.stream = max(total, 1), label, stream
+        self.enabled = stream.isatty()
+        self.last = 0.0
+
+    def __call__(self, done, force=False):
+        now = time.monotonic()
+        if not self.enabled or (not force and now - self.last < PROGRESS_PERIOD_S):
+            return
+        self.last = now
+        fraction = min(done / self.total, 1.0)
+        bar = '#' * int(30 * fraction)
+        self.stream.write(f'\r{self.label} [{bar:<30}] {100 * fraction:5.1f} %')
+        if force:
+            self.stream.write('\n')
+        self.stream.flush()
+
+
+def write_replay(out_path, samples, estimate, input_topic, topics, frame_id, model,
+                 markers_every_n=10, exaggeration=10.0, points_per_link=9):
+    """
+    Write the input and the recomputed outputs into a rosbag2 MCAP.
+
+    Returns
+    -------
+    dict
+        The recorder's final status.
+
+    """
+    from .recorder import McapRecorder
+    recorder = McapRecorder(out_path)
+    recorder.open()
+    try:
+        recorder.add_topic(input_topic, JOINT_STATE)
+        recorder.add_topic(topics['lever_tip'], VECTOR3_STAMPED)
+        recorder.add_topic(topics['coupler_mid'], VECTOR3_STAMPED)
+        recorder.add_topic(topics['criteria'], JOINT_STATE)
+        if markers_every_n:
+            recorder.add_topic(topics['markers'], MARKER_ARRAY)
+            marker_source = _MarkerSource(model, frame_id, exaggeration, points_per_link)
+        frame = frame_id.encode()
+        lever, coupler = estimate['lever_tip'].tolist(), estimate['coupler_mid'].tolist()
+        ratio, rate, force = (estimate[k].tolist() for k in ('criterion', 'gamma_dot',
+                                                             'reaction_n'))
+        progress = _Progress(len(samples['data']), f'writing {out_path}')
+        write = recorder.write
+        for n, (payload, log_ns, publish_ns, stamp) in enumerate(zip(
+                samples['data'], samples['log_ns'].tolist(), samples['publish_ns'].tolist(),
+                samples['stamps_ns'].tolist())):
+            sec, nanosec = divmod(stamp, 1_000_000_000)
+            write(input_topic, payload, log_ns, publish_ns)
+            write(topics['lever_tip'], vector3_stamped_cdr(sec, nanosec, frame, *lever[n]),
+                  log_ns)
+            write(topics['coupler_mid'], vector3_stamped_cdr(sec, nanosec, frame,
+                                                             *coupler[n]), log_ns)
+            write(topics['criteria'], criteria_cdr(sec, nanosec, frame, ratio[n], rate[n],
+                                                   force[n]), log_ns)
+            if markers_every_n and n % markers_every_n == 0:
+                write(topics['markers'], marker_source(stamp, estimate, n), log_ns)
+            progress(n)
+        progress(len(samples['data']), force=True)
+    finally:
+        status = recorder.close()
+    return status
+
+
+class _MarkerSource:
+    """MarkerArray bytes of the deformed linkage at a replayed sample."""
+
+    def __init__(self, model, frame_id, exaggeration, points_per_link):
+        from rclpy.serialization import serialize_message
+
+        from . import ros_messages
+        self.model, self.frame_id, self.exaggeration = model, frame_id, exaggeration
+        self.count = points_per_link
+        self.rm, self.serialize = ros_messages, serialize_message
+
+    def __call__(self, stamp_ns, estimate, n):
+        rm = self.rm
+        modal = estimate['modal'][n]
+        positions, deflections = self.model.shapes(estimate['crank_angle'][n], modal)
+        source = np.linspace(0.0, 1.0, positions.shape[1])
+        target = np.linspace(0.0, 1.0, self.count)
+
+        def resample(a):
+            return np.stack([np.interp(target, source, a[:, i]) for i in range(2)], axis=1)
+
+        joints = np.array([positions[0, 0], positions[0, -1], positions[1, -1],
+                           positions[2, 0]])
+        message = rm.linkage_markers(rm.ns_to_stamp(stamp_ns), self.frame_id,
+                                     [resample(p) for p in positions],
+                                     [resample(d) for d in deflections], self.exaggeration,
+                                     joints, [rm.OK] * 4)
+        return self.serialize(message)
+
+
+def publish_recording(samples, topic, speed=1.0, discovery_timeout_s=10.0):
+    """
+    Republish recorded JointState bytes with their recorded timing (log time deltas).
+
+    Returns
+    -------
+    int
+        Messages published.
+
+    """
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+    from sensor_msgs.msg import JointState
+
+    published = 0
+    try:
+        with rclpy.init():
+            node = rclpy.create_node('flexlink_replay')
+            publisher = node.create_publisher(JointState, topic, 100)
+            deadline = time.monotonic() + discovery_timeout_s
+            while publisher.get_subscription_count() == 0 and time.monotonic() < deadline:
+                time.sleep(0.05)
+            log_ns = samples['log_ns']
+            start_wall = time.monotonic()
+            progress = _Progress(len(samples['data']), f'publishing {topic}')
+            for n, payload in enumerate(samples['data']):
+                due = start_wall + (log_ns[n] - log_ns[0]) * 1e-9 / speed
+                delay = due - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+                if not rclpy.ok():
+                    break
+                publisher.publish(payload)
+                published += 1
+                progress(n)
+            progress(len(samples['data']), force=True)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    return published
+
+
+def load_model_with_fallback(mechanism, options, args, warn):
+    """The model of ``options``; without geometric stiffness if that cannot be built."""
+    from .node import build_with_fallback
+    return build_with_fallback(lambda o: load_model(mechanism, o, args), options, warn)
+
+
+def run_replay(args):
+    """Read, estimate, write and/or publish; returns the JSON-ready summary."""
+    notes = []
+    topic = choose_input_topic(args.input, args.joint, args.topic)
+    start = time.perf_counter()
+    samples = read_crank_samples(args.input, topic, args.joint)
+    if not samples['data']:
+        raise ValueError(f'no usable samples of joint {args.joint!r} on {topic}')
+    read_s = time.perf_counter() - start
+    mechanism = load_mechanism(args.mechanism)
+    model, options = load_model_with_fallback(mechanism, model_options(args), args,
+                                              notes.append)
+    start = time.perf_counter()
+    estimate = estimate_offline(model, samples['stamps_ns'], samples['angles'],
+                                samples['speeds'], warm_start=not args.no_warm_start)
+    estimate_s = time.perf_counter() - start
+    count = len(samples['data'])
+    span_s = (samples['log_ns'][-1] - samples['log_ns'][0]) * 1e-9 if count > 1 else 0.0
+    result = {'input': str(args.input), 'topic': topic, 'samples': count,
+              'skipped': samples['skipped'], 'segments': estimate['segments'],
+              'span_s': span_s, 'read_s': read_s, 'estimate_s': estimate_s,
+              'model': {'size': model.size, 'grid_size': model.grid_size,
+                        'options': str(options)},
+              'criteria_available': estimate['criteria_available'], 'notes': notes}
+    if args.out:
+        start = time.perf_counter()
+        status = write_replay(args.out, samples, estimate, topic, output_topics(args.node_name),
+                              args.frame_id, model, args.markers_every_n)
+        result['write_s'] = time.perf_counter() - start
+        result['output'] = status['path']
+        result['output_files'] = status['files']
+        result['output_topics'] = status['topics']
+    total = read_s + estimate_s + result.get('write_s', 0.0)
+    result['samples_per_s'] = count / total if total > 0 else math.inf
+    result['times_real_time'] = span_s / total if total > 0 else math.inf
+    for key in ('lever_tip', 'coupler_mid'):
+        values = estimate[key]
+        result[f'{key}_peak_to_peak_um'] = (1e6 * (values.max(axis=0) - values.min(axis=0))
+                                            ).tolist()
+    if args.publish:
+        result['published'] = publish_recording(samples, topic, args.publish_speed)
+    return result
+
+
+def _replay_command(args):
+    if not args.out and not args.publish:
+        raise ValueError('give `--out` and/or `--publish`')
+    if args.out and pathlib.Path(args.out).exists():
+        raise ValueError(f'`--out` {args.out} exists; choose a new path')
+    if not args.publish_speed > 0:
+        raise ValueError(f'`--publish-speed` must be positive, got {args.publish_speed}')
+    if args.markers_every_n < 0:
+        raise ValueError(f'`--markers-every-n` must be >= 0, got {args.markers_every_n}')
+    result = run_replay(args)
+    lines = [f"{result['input']}: {result['samples']} samples on {result['topic']} "
+             f"({result['skipped']} skipped, {result['segments']} segment(s), "
+             f"{result['span_s']:.2f} s recorded)"]
+    lines += [f'  note: {note}' for note in result['notes']]
+    lines.append(f"  lever tip peak-to-peak   dx {result['lever_tip_peak_to_peak_um'][0]:10.1f} "
+                 f"um  dy {result['lever_tip_peak_to_peak_um'][1]:10.1f} um")
+    lines.append(f"  coupler mid peak-to-peak dx "
+                 f"{result['coupler_mid_peak_to_peak_um'][0]:10.1f} um  dy "
+                 f"{result['coupler_mid_peak_to_peak_um'][1]:10.1f} um")
+    if not result['criteria_available']:
+        lines.append('  criteria unavailable: the model has no joint-reaction data '
+                     '(written as zeros)')
+    lines.append(f"  {result['samples_per_s']:.0f} samples/s, "
+                 f"{result['times_real_time']:.0f}x real time")
+    if 'output' in result:
+        lines.append(f"  wrote {result['output']}")
+    if 'published' in result:
+        lines.append(f"  republished {result['published']} messages on {result['topic']}")
+    return emit(result, '\n'.join(lines), args.json)
+
+
+def register(subparsers):
+    """Add the replay subcommand."""
+    parser = subparsers.add_parser('replay', help='recompute deflections and criteria from '
+                                   'the JointState of a recording into a new MCAP')
+    parser.add_argument('input', help='rosbag2 MCAP file or bag directory')
+    parser.add_argument('--out', help='output .mcap file or bag directory (must not exist)')
+    parser.add_argument('--topic', help='input JointState topic (default: the one carrying '
+                        'the joint)')
+    parser.add_argument('--joint', default='crank', help='crank joint name (default: crank)')
+    parser.add_argument('--node-name', default='flexlink_node',
+                        help='namespace of the output topics (default: flexlink_node)')
+    parser.add_argument('--frame-id', default='linkage_ground', help='frame of the outputs')
+    parser.add_argument('--markers-every-n', type=int, default=100,
+                        help='markers on every n-th sample (0: none; default 100, i.e. 10 Hz '
+                        'at 1 kHz: building them dominates the replay time)')
+    parser.add_argument('--no-warm-start', action='store_true',
+                        help='start from the static deflection, not the periodic state')
+    parser.add_argument('--publish', action='store_true',
+                        help='republish the input with its recorded timing')
+    parser.add_argument('--publish-speed', type=float, default=1.0,
+                        help='time scale of --publish (2 = twice as fast)')
+    _common(parser)
+    parser.set_defaults(func=_replay_command)

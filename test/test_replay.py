@@ -1,0 +1,144 @@
+"""`flexlink replay`: CDR codecs against rclpy, offline estimate against the streaming one."""
+
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from rclpy.serialization import deserialize_message, serialize_message
+from sensor_msgs.msg import JointState
+
+from flexlink_ros import cli_replay, ros_messages
+from flexlink_ros.core import reduced
+from flexlink_ros.core.estimator import StreamingEstimator
+from flexlink_ros.core.mechanism import load_mechanism
+from flexlink_ros.recorder import McapRecorder
+from flexlink_ros.rosbag_schema import serialize_exact
+
+RPM = 2.0 * math.pi / 60.0
+
+
+@pytest.fixture(scope='module')
+def model():
+    # The node's model while core/dynamics.py is absent (no geometric stiffness), cached.
+    options = reduced.ModelOptions(geometric_stiffness=False)
+    return reduced.model_for_mechanism(load_mechanism('cho1992'), options)
+
+
+def joint_state(stamp_ns, names, positions, velocities=()):
+    message = JointState(name=list(names), position=[float(p) for p in positions],
+                         velocity=[float(v) for v in velocities])
+    message.header.stamp = ros_messages.ns_to_stamp(stamp_ns)
+    message.header.frame_id = 'odd_length_frame'
+    return message
+
+
+@pytest.mark.parametrize('names, positions, velocities, expected', [
+    (['crank'], [1.25], [40.0], (1.25, 40.0)),
+    (['base', 'crank', 'z'], [0.1, -2.5, 3.0], [1.0, 2.0, 3.0], (-2.5, 2.0)),
+    (['crank'], [0.3], [], (0.3, None)),
+    (['other'], [0.3], [1.0], (None, None)),
+    (['a', 'crank'], [0.3], [], (None, None)),
+])
+def test_parse_joint_state_matches_rclpy(names, positions, velocities, expected):
+    data = serialize_message(joint_state(1_700_000_000_123_456_789, names, positions,
+                                         velocities))
+    stamp, position, velocity = cli_replay.parse_joint_state(data, b'crank')
+    assert stamp == 1_700_000_000_123_456_789
+    assert (position, velocity) == expected
+
+
+def test_output_cdr_decodes_with_rclpy_and_equals_the_node_messages():
+    stamp = ros_messages.ns_to_stamp(1_234_567_890_123)
+    vector = cli_replay.vector3_stamped_cdr(stamp.sec, stamp.nanosec, b'linkage_ground',
+                                            1.5e-3, -2e-4)
+    node_vector = ros_messages.deflection_message(stamp, 'linkage_ground', 1.5e-3, -2e-4)
+    assert vector == serialize_exact(node_vector)   # rclpy leaves padding uninitialised
+    criteria = cli_replay.criteria_cdr(stamp.sec, stamp.nanosec, b'g', [1.0, 2.0, 3.0, 4.0],
+                                       [0.1, 0.2, 0.3, 0.4], [10.0, 20.0, 30.0, 40.0])
+    node_criteria = ros_messages.criteria_message(stamp, 'g', [1.0, 2.0, 3.0, 4.0],
+                                                  [0.1, 0.2, 0.3, 0.4],
+                                                  [10.0, 20.0, 30.0, 40.0])
+    assert criteria == serialize_exact(node_criteria)
+    decoded = deserialize_message(criteria, JointState)
+    assert list(decoded.name) == ['O2', 'A', 'B', 'O4'] and decoded.effort[3] == 40.0
+
+
+def test_segments_follow_the_streaming_resets():
+    stamps = np.array([0, 1, 2, 2, 3, 10**9, 10**9 + 1, 5, 6]) * 1_000_000
+    angles = np.array([0.0, 0.1, 0.2, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7])
+    starts, repeated = cli_replay.segments(stamps, angles)
+    # 3 -> 1000 ms is a 0.997 s gap (> 0.5 s), 1000 -> 5 ms goes back.
+    assert starts == [0, 5, 7]
+    assert repeated.tolist() == [False, False, False, True] + [False] * 5
+
+
+def write_recording(path, stamps_ns, angles, speeds, bad=()):
+    """A bag of crank JointStates (receive time = stamp + 200 us), with bad messages."""
+    with McapRecorder(path) as recorder:
+        recorder.add_topic('/joint_states', JointState)
+        for stamp, angle, speed in zip(stamps_ns, angles, speeds):
+            data = serialize_message(joint_state(stamp, ['crank'], [angle], [speed]))
+            recorder.write('/joint_states', data, stamp + 200_000)
+        for stamp, message in bad:
+            recorder.write('/joint_states', serialize_message(message), stamp)
+
+
+def test_replay_equals_the_streaming_estimator(tmp_path, model):
+    rng = np.random.default_rng(3)
+    steps = (1.0 + 0.3 * rng.uniform(-1, 1, 700)) * 1e-3
+    times = np.concatenate([[0.0], np.cumsum(steps)])
+    times[400:] += 0.8             # a gap: both restart there
+    stamps = (1_700_000_000_000_000_000 + np.round(times * 1e9)).astype(np.int64)
+    speed = 391.0 * RPM
+    angles = np.mod(speed * times + 0.3 + np.pi, 2 * np.pi) - np.pi   # encoder in [-pi, pi)
+    bad = [(int(stamps[10]) + 1, joint_state(int(stamps[10]) + 1, ['crank'], [math.nan])),
+           (int(stamps[20]) + 1, joint_state(int(stamps[20]) + 1, ['lever'], [0.0]))]
+    bag = tmp_path / 'bag'
+    write_recording(bag, stamps, angles, np.full(stamps.size, speed), bad)
+    out = tmp_path / 'replay.mcap'
+    result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'replay', str(bag),
+                             '--out', str(out), '--no-geometric-stiffness', '--json',
+                             '--markers-every-n', '50'],
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary['samples'] == stamps.size and summary['skipped'] == 2
+    assert summary['segments'] == 2 and summary['topic'] == '/joint_states'
+
+    estimator = StreamingEstimator(model)
+    expected = {s: estimator.update(s, a, speed) for s, a in zip(stamps.tolist(), angles)}
+    counts = {}
+    worst = 0.0
+    for topic, type_name, log_ns, _, data in cli_replay.iter_recording(out):
+        counts[topic] = counts.get(topic, 0) + 1
+        if topic.endswith('/deflection'):
+            from geometry_msgs.msg import Vector3Stamped
+            message = deserialize_message(data, Vector3Stamped)
+            stamp = ros_messages.stamp_to_ns(message.header.stamp)
+            assert log_ns == stamp + 200_000          # logged at the input's receive time
+            sample = expected[stamp]
+            reference = sample.lever_tip if 'lever_tip' in topic else sample.coupler_mid
+            error = math.hypot(message.vector.x - reference[0], message.vector.y - reference[1])
+            worst = max(worst, error / math.hypot(*reference) if any(reference) else error)
+            assert message.header.frame_id == 'linkage_ground'
+    assert worst < 1e-6
+    assert counts == {'/joint_states': 701, '/flexlink_node/lever_tip/deflection': 701,
+                      '/flexlink_node/coupler_mid/deflection': 701,
+                      '/flexlink_node/joint_criteria': 701, '/flexlink_node/markers': 15}
+
+
+def test_replay_refuses_missing_topic_and_existing_output(tmp_path):
+    bag = tmp_path / 'bag'
+    write_recording(bag, [10**9, 10**9 + 10**6], [0.0, 0.04], [40.0, 40.0])
+    run = lambda *extra: subprocess.run(  # noqa: E731
+        [sys.executable, '-m', 'flexlink_ros.cli', 'replay', str(bag), *extra],
+        capture_output=True, text=True, timeout=120)
+    result = run('--out', str(tmp_path / 'x.mcap'), '--joint', 'wheel')
+    assert result.returncode == 1 and "joint 'wheel'" in result.stderr
+    result = run('--out', str(bag))
+    assert result.returncode == 1 and 'exists' in result.stderr
+    result = run()
+    assert result.returncode == 1 and '--publish' in result.stderr
