@@ -10,6 +10,7 @@ from flexlink_ros.core import flex_study as fs
 from flexlink_ros.core.assembly import FlexibleLinkage, ModelOptions
 from flexlink_ros.core.mechanism import load_mechanism
 from flexlink_ros.core.modes import solve_frozen_modes
+from flexlink_ros.core.simulate import periodic_response
 
 
 def _family(matrices):
@@ -118,6 +119,11 @@ def test_truncation_error_falls_with_modes_and_vanishes_with_all(small_mechanism
     assert np.all(plain[-1] < 1e-9) and np.all(static[-1] < 1e-9)
     assert np.all(static[0] < 0.1 * plain[0])   # the static correction pays at N = 1
     assert fs.modes_needed(study['modes'], static[:, 1], 0.01) == 1
+    # the post-processed static correction is the one periodic_response applies
+    run = periodic_response(model, 391.0 * fs.RPM_TO_RAD_S, 'modal', modes=2,
+                            static_correction=True, steps=120, points=30)
+    assert fs.output_errors(run.outputs, study['reference'].outputs) == pytest.approx(
+        static[1], rel=1e-9)
 
 
 def test_sweep_case_shapes_and_status(small_mechanism):

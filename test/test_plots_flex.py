@@ -1,0 +1,59 @@
+"""Report section of the flexible four-bar (plots/flex.py) on reduced sizes."""
+
+import time
+
+import numpy as np
+import pytest
+
+from flexlink_ros.core import flex_study as fs
+from flexlink_ros.plots import flex
+
+PNG_SIGNATURE = b'\x89PNG\r\n\x1a\n'
+EXPECTED = ('flex_frequencies_fig7.png', 'flex_frequencies_fig8_10.png',
+            'flex_frequencies_fig11_13.png', 'flex_mode_shapes_27deg.png',
+            'flex_mode_shapes_123deg.png', 'flex_deflected_linkage.png', 'flex_lever_tip.png',
+            'flex_coupler_mid.png', 'flex_coupler_path.png', 'flex_truncation.png')
+
+
+@pytest.fixture(scope='module')
+def section(tmp_path_factory):
+    out = tmp_path_factory.mktemp('flex')
+    started = time.perf_counter()
+    result = flex.plot_flex(out, quick=True)
+    return out, result, time.perf_counter() - started
+
+
+def test_quick_section_writes_every_chart(section):
+    out, result, seconds = section
+    assert sorted(p.name for p in result['charts']) == sorted(EXPECTED)
+    for path in result['charts']:
+        assert path.parent == out
+        data = path.read_bytes()
+        assert data.startswith(PNG_SIGNATURE) and len(data) > 20_000
+    assert seconds < 45.0
+
+
+def test_quick_section_text_carries_the_numbers(section):
+    _, result, _ = section
+    text = result['text']
+    for heading in ('Frozen natural frequencies', 'Mode veering', 'Peak-to-peak',
+                    'Modes needed', 'Paper claims'):
+        assert heading in text
+    for where in ('Fig. 7', 'Figs. 11-13', 'Fig. 20', 'Fig. 21', 'Fig. 22', 'Conclusion 3'):
+        assert f'| {where} |' in text
+    available, reason = fs.geometric_stiffness_status(flex.load_mechanism('cho1992'))
+    assert ('not computed' in text) == (not available)
+    assert ('Computed without geometric stiffness' in text) == (not available)
+
+
+def test_claims_follow_from_the_numbers():
+    data = flex.compute_flex(quick=True)
+    claims = {c['where'] + c['claim']: c for c in data['claims']}
+    fig20 = next(c for key, c in claims.items() if key.startswith('Fig. 20'))
+    tip = {key: np.ptp(r.outputs[:, :2], axis=0) for key, r in data['responses'].items()}
+    # rigid bearings leave the lever tip to axial strain only: orders of magnitude smaller
+    assert all(tip['flexible', rpm].max() > 100 * tip['rigid', rpm].max()
+               for rpm in fs.PAPER_RPM)
+    assert fig20['verdict'] == 'agree'
+    assert {c['verdict'] for c in data['claims']} <= {'agree', 'disagree', 'partly',
+                                                       'not computed'}
