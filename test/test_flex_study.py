@@ -1,6 +1,8 @@
 """Studies of the flexible four-bar (core/flex_study.py): mode events, truncation, measures."""
 
 import dataclasses
+import sys
+import types
 
 import numpy as np
 import pytest
@@ -136,3 +138,22 @@ def test_sweep_case_shapes_and_status(small_mechanism):
     assert sweep.frequencies_hz.shape == (12, 3) and sweep.shapes.shape[2] == 3
     assert np.all(np.diff(sweep.frequencies_hz, axis=1) > 0)
     assert all(max(e.modes) < 3 for e in sweep.events)
+
+
+def test_sharp_veering_between_samples_is_refined_to_a_small_nonzero_gap(small_mechanism,
+                                                                          monkeypatch):
+    """Rigid crank with K_G at 45 rad/s: coupler and lever modes veer within a sample step."""
+    module = types.ModuleType('flexlink_ros.core.dynamics')
+    module.axial_force = fs.quasi_static_axial_force
+    monkeypatch.setitem(sys.modules, module.__name__, module)
+    assert fs.geometric_stiffness_status(small_mechanism) == (True, '')
+    case = fs.paper_frequency_cases(True)['rigid_crank_kg_45']
+    sweep = fs.sweep_case(small_mechanism, case, np.arange(0.0, 360.0, 2.0), 3)
+    assert sweep.events
+    for event in sweep.events:
+        assert event.modes == (0, 1)
+        assert 0.0 < event.refined_gap <= event.gap
+        offset = (event.refined_parameter - event.parameter + 180.0) % 360.0 - 180.0
+        assert abs(offset) <= 3.0      # within a sample step of the detected event
+    swaps = [e for e in sweep.events if e.kind == 'swap']
+    assert swaps and all(e.refined_gap < 0.1 * e.gap for e in swaps)

@@ -1,6 +1,8 @@
 """Report section of the flexible four-bar (plots/flex.py) on reduced sizes."""
 
+import sys
 import time
+import types
 
 import numpy as np
 import pytest
@@ -57,3 +59,28 @@ def test_claims_follow_from_the_numbers():
     assert fig20['verdict'] == 'agree'
     assert {c['verdict'] for c in data['claims']} <= {'agree', 'disagree', 'partly',
                                                        'not computed'}
+
+
+@pytest.fixture(scope='module')
+def stand_in_dynamics():
+    """core.dynamics replaced by the FE quasi-static axial forces (same signature)."""
+    module = types.ModuleType('flexlink_ros.core.dynamics')
+    module.axial_force = fs.quasi_static_axial_force
+    saved = sys.modules.get(module.__name__)
+    sys.modules[module.__name__] = module
+    yield module
+    if saved is None:
+        del sys.modules[module.__name__]
+    else:
+        sys.modules[module.__name__] = saved
+
+
+def test_geometric_stiffness_cases_appear_when_dynamics_is_usable(stand_in_dynamics, tmp_path):
+    result = flex.plot_flex(tmp_path, quick=True)
+    text = result['text']
+    assert 'not computed' not in text and 'Computed without' not in text
+    for label in ('all flexible, K_G at 30 rad/s', 'rigid crank, K_G at 45 rad/s',
+                  'rigid crank, flexible bearings, K_G at 45 rad/s'):
+        assert f'| {label} |' in text
+    assert '| Conclusion 1 |' in text and '| Figs. 8-9 |' in text
+    assert sorted(p.name for p in result['charts']) == sorted(EXPECTED)

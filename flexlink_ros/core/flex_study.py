@@ -22,6 +22,7 @@ import dataclasses
 import importlib
 
 import numpy as np
+import scipy.optimize
 
 from .assembly import FlexibleLinkage, ModelOptions
 from .kinematics import solve_kinematics
@@ -68,6 +69,44 @@ def geometric_stiffness_status(mechanism):
     except Exception as exc:  # noqa: BLE001 - any failure means "not usable", reported as such
         return False, f'core/dynamics.py failed in a trial assembly ({type(exc).__name__}: {exc})'
     return True, ''
+
+
+def quasi_static_axial_force(mechanism, state, link, x):
+    """
+    Axial force [N] of a link from the FE quasi-static solution K U = R (tension > 0).
+
+    The paper obtains its axial loads this way ("by a quasi-static displacement analysis",
+    Conclusion 1 of Cho 1992); the rigid-body analysis (``core.dynamics.axial_force``) gives
+    the same element means (test_assembly). Same signature as ``core.dynamics.axial_force``,
+    so it can stand in for it; the force is constant over each element (A.4 as printed).
+
+    Parameters
+    ----------
+    mechanism : Mechanism
+    state : LinkageState
+        Rigid-body state at N crank angles (crank speed ``state.omega[0]``, acceleration
+        ``state.alpha[0]``).
+    link : int
+    x : ndarray, shape (m,)
+        Positions along the link [m].
+
+    Returns
+    -------
+    ndarray, shape (N, m)
+
+    """
+    model = FlexibleLinkage(mechanism, ModelOptions(geometric_stiffness=False))
+    theta = np.atleast_1d(state.angle[0])
+    system = model.assemble(theta)
+    speed = np.broadcast_to(np.asarray(state.omega[0], dtype=float), theta.shape)
+    accel = np.broadcast_to(np.asarray(state.alpha[0], dtype=float), theta.shape)
+    load = (system.load['1'] + accel[:, None] * system.load['a']
+            + (speed * speed)[:, None] * system.load['w2'])
+    displacement = np.linalg.solve(system.stiffness, load[..., None])[..., 0]
+    forces = model.element_axial_forces(displacement, theta)[link]
+    length = model.link_matrices[link].element_length
+    element = np.minimum((np.asarray(x, dtype=float) / length).astype(int), forces.shape[1] - 1)
+    return forces[:, element]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -194,14 +233,55 @@ def sweep_case(mechanism, case, crank_deg, count=3):
     steps = np.diff(crank_deg)
     periodic = bool(len(crank_deg) > 2 and np.allclose(steps, steps[0])
                     and np.isclose(crank_deg[-1] + steps[0] - crank_deg[0], 360.0))
-    events = [e for e in detect_mode_events(crank_deg, frozen.frequencies_hz, frozen.shapes,
-                                            system.mass, periodic=periodic)
+    events = [refine_mode_event(model, case.speed_rad_s, e, steps[0] if len(steps) else 1.0)
+              for e in detect_mode_events(crank_deg, frozen.frequencies_hz, frozen.shapes,
+                                          system.mass, periodic=periodic)
               if max(e.modes) < count]
     keep = slice(0, count)
     return Sweep(case=case, crank_deg=crank_deg, frequencies_hz=frozen.frequencies_hz[:, keep],
                  shapes=frozen.shapes[:, :, keep], mass=system.mass,
                  dominant_link=frozen.dominant_link[:, keep],
                  strain_share=frozen.strain_share[:, keep], events=events)
+
+
+def refine_mode_event(model, speed, event, step_deg):
+    """
+    Smallest frequency gap of an event's two modes between the neighbouring samples.
+
+    The gap ``f_j - f_i`` of the frozen eigenproblem is minimised over the crank angle within
+    one sample step either side of the event (bounded scalar search), so a sharp veering that
+    the sampling shows as a swap gets its true minimum gap (a gap that does not close is an
+    avoided crossing; symmetric one-parameter families cross only non-generically).
+
+    Parameters
+    ----------
+    model : FlexibleLinkage
+    speed : float
+        Crank speed of the axial forces in K_G [rad/s].
+    event : ModeEvent
+        From :func:`detect_mode_events` with the crank angle [deg] as parameter.
+    step_deg : float
+        Sample step [deg].
+
+    Returns
+    -------
+    ModeEvent
+        A copy with ``refined_parameter`` [deg] and ``refined_gap`` [Hz].
+
+    """
+    low, high = event.modes
+
+    def gap(deg):
+        frozen = solve_frozen_modes(model.assemble(np.radians([deg])), high + 1, speed)
+        f = frozen.frequencies_hz[0]
+        return f[high] - f[low]
+
+    centre = event.parameter
+    found = scipy.optimize.minimize_scalar(gap, bounds=(centre - step_deg, centre + step_deg),
+                                           method='bounded', options={'xatol': 1e-3})
+    best = min((found.fun, found.x), (event.gap, event.parameter))
+    return dataclasses.replace(event, refined_parameter=float(best[1] % 360.0),
+                               refined_gap=float(best[0]))
 
 
 # -- mode events -------------------------------------------------------------------------------
@@ -230,6 +310,9 @@ class ModeEvent:
     exchange : float
         Veering: MAC between the lower mode before and the upper mode after the minimum.
         Swap: MAC between mode i before and mode j after the jump.
+    refined_parameter, refined_gap : float or None
+        Parameter and gap of the smallest gap found between samples
+        (:func:`refine_mode_event`), None if not refined.
 
     """
 
@@ -240,6 +323,8 @@ class ModeEvent:
     gap: float
     relative_gap: float
     exchange: float
+    refined_parameter: float = None
+    refined_gap: float = None
 
 
 def mac(first, second, mass=None):
@@ -589,7 +674,7 @@ def shape_correlation(values, template):
 
 
 __all__ = ['PAPER_SPEEDS_RAD_S', 'PAPER_RPM', 'RPM_TO_RAD_S', 'TOLERANCES', 'OUTPUT_POINTS',
-           'geometric_stiffness_status', 'FrequencyCase', 'paper_frequency_cases', 'Sweep',
-           'sweep_case', 'ModeEvent', 'mac', 'detect_mode_events', 'relative_rms',
+           'geometric_stiffness_status', 'quasi_static_axial_force', 'FrequencyCase', 'paper_frequency_cases', 'Sweep',
+           'sweep_case', 'refine_mode_event', 'ModeEvent', 'mac', 'detect_mode_events', 'relative_rms',
            'output_errors', 'truncation_study', 'modes_needed', 'harmonic_shares',
            'signed_area', 'uniform_load_shape', 'bending_deflection', 'shape_correlation']

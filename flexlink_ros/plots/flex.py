@@ -418,16 +418,30 @@ def _unit(values_m):
     return (1e6, 'um') if peak < 1e-4 else (1e3, 'mm')
 
 
-def _mark_events(ax, sweep, modes):
-    """Mark veerings (circle) and swaps (cross) of the given modes on a frequency axis."""
+def _mark_events(ax, sweep, mode):
+    """Mark a mode's veerings (circle) and swaps (cross) on a frequency axis."""
     for event in sweep.events:
-        if not set(event.modes) <= set(modes):
+        if mode not in event.modes:
             continue
-        deg = event.parameter % 360.0
-        f = sweep.frequencies_hz[event.index, list(event.modes)]
-        marker = 'o' if event.kind == 'veering' else 'x'
-        ax.plot([deg, deg], f, marker=marker, color='black', linestyle=':', markersize=6,
-                markerfacecolor='none')
+        k = event.index
+        deg = sweep.crank_deg[k]
+        if event.kind == 'swap':   # drawn midway, at the mean of the two samples
+            k1 = (k + 1) % len(sweep.crank_deg)
+            deg = event.parameter % 360.0
+            f = 0.5 * (sweep.frequencies_hz[k, mode] + sweep.frequencies_hz[k1, mode])
+        else:
+            f = sweep.frequencies_hz[k, mode]
+        ax.plot([deg], [f], marker='o' if event.kind == 'veering' else 'X', color='black',
+                markersize=7, markerfacecolor='none' if event.kind == 'veering' else 'black',
+                linestyle='none')
+
+
+def _event_legend(ax):
+    """Legend entries for the event markers."""
+    ax.plot([], [], marker='o', color='black', markerfacecolor='none', linestyle='none',
+            label='veering (smallest gap)')
+    ax.plot([], [], marker='X', color='black', linestyle='none',
+            label='order swap between samples')
 
 
 def plot_fig7(sweep, path):
@@ -438,7 +452,8 @@ def plot_fig7(sweep, path):
         f = sweep.frequencies_hz[:, m]
         ax.plot(sweep.crank_deg, f, color=MODE_COLOURS[m],
                 label=f'mode {m + 1}: {f.min():.2f}-{f.max():.2f} Hz')
-    _mark_events(ax, sweep, range(3))
+    for m in range(sweep.frequencies_hz.shape[1]):
+        _mark_events(ax, sweep, m)
     ax.set_xlim(0, 360)
     ax.set_xticks(np.arange(0, 361, 45))
     ax.set_ylim(0, 1.1 * sweep.frequencies_hz.max())
@@ -447,6 +462,8 @@ def plot_fig7(sweep, path):
     ax.set_title('Frozen natural frequencies, all links flexible, pins, no geometric '
                  'stiffness (Fig. 7)', fontsize=10)
     ax.grid(True, alpha=0.3)
+    if sweep.events:
+        _event_legend(ax)
     ax.legend(fontsize=8, loc='center right')
     figure.savefig(path, dpi=DPI)
     return path
@@ -463,13 +480,15 @@ def _plot_mode_panels(sweeps, styles, path, title):
             sweep = sweeps[key]
             ax.plot(sweep.crank_deg, sweep.frequencies_hz[:, m], linestyle=style,
                     color=colour, label=sweep.case.label)
-            _mark_events(ax, sweep, (m,) if m == 0 else (m - 1, m))
+            _mark_events(ax, sweep, m)
         ax.set_title(f'mode {m + 1}')
         ax.set_xlim(0, 360)
         ax.set_xticks(np.arange(0, 361, 90))
         ax.set_xlabel('crank angle [deg]')
         ax.grid(True, alpha=0.3)
     axes[0].set_ylabel('natural frequency [Hz]')
+    if any(sweeps[key].events for key, _, _ in styles if key in sweeps):
+        _event_legend(axes[0])
     handles, labels = axes[0].get_legend_handles_labels()
     figure.legend(handles, labels, loc='outside lower center', ncol=3, fontsize=8)
     figure.suptitle(title, fontsize=10)
@@ -718,6 +737,7 @@ def plot_truncation(truncation, path):
 
 def report_text(data):
     """Markdown with every number of the section."""
+    step = SWEEP_STEP_DEG[1 if data['quick'] else 0]
     lines = []
     if data['geometric']:
         lines.append('Geometric stiffness (A.4) is included where the paper includes it '
@@ -739,14 +759,17 @@ def report_text(data):
         lines.append(f'| {sweep.case.label} | ' + ' | '.join(cells) + ' |')
     lines += ['', '(in brackets: the link holding most strain energy somewhere in the cycle)',
               '', '### Mode veering and order swaps (modes 1-3, '
-              f'{SWEEP_STEP_DEG[1 if data["quick"] else 0]:g}-degree sweep)', '']
+              f'{step:g}-degree sweep)', '']
     events = [(s.case.label, e) for s in data['sweeps'].values() for e in s.events]
     if events:
-        lines += ['| case | kind | modes | crank [deg] | gap [Hz] | exchange MAC |',
-                  '|---|---|---|---|---|---|']
+        lines += ['| case | kind | modes | crank [deg] | gap at the samples [Hz] | '
+                  'smallest gap [Hz] (at deg) | exchange MAC |', '|---|---|---|---|---|---|---|']
         lines += [f'| {label} | {e.kind} | {e.modes[0] + 1}-{e.modes[1] + 1} | '
-                  f'{e.parameter % 360:.1f} | {e.gap:.2f} | {e.exchange:.2f} |'
-                  for label, e in events]
+                  f'{e.parameter % 360:.1f} | {e.gap:.3f} | {e.refined_gap:.4f} '
+                  f'({e.refined_parameter:.2f}) | {e.exchange:.2f} |' for label, e in events]
+        lines += ['', f'A swap is an order change between {step:g}-degree samples; the '
+                  'refined smallest gap says whether the modes truly cross (gap 0) or veer '
+                  'sharply.']
     else:
         gaps = []
         for sweep in data['sweeps'].values():
