@@ -17,12 +17,13 @@ skipped; core errors are logged and estimation goes on.
 
 import dataclasses
 import math
+import struct
 import sys
 import time
 
 import numpy as np
 
-from . import node_params
+from . import cdr, node_params
 from .core import reduced
 from .core.errors import FlexlinkError, RecorderError
 from .core.estimator import SampleFlag, StreamingEstimator
@@ -158,6 +159,7 @@ def _make_node_class():
     from rcl_interfaces.msg import SetParametersResult
     from rclpy import logging as rclpy_logging
     from rclpy.node import Node
+    from rclpy._rclpy_pybind11 import RCLError
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rclpy.serialization import deserialize_message, serialize_message
     from sensor_msgs.msg import JointState
@@ -204,6 +206,10 @@ def _make_node_class():
             self.subscription = self.create_subscription(
                 JointState, values['input_topic'], self._on_joint_state, qos, raw=True)
             self._deserialize = lambda data: deserialize_message(data, JointState)
+            self.input_topic = self.subscription.topic_name
+            self.output_topics = {key: publisher.topic_name
+                                  for key, publisher in self.publishers_.items()}
+            self._frame = values['frame_id'].encode()
             self._serialize = serialize_message
             self.received = self.rejected = self.published = 0
             self.last_valid_wall = None
@@ -231,6 +237,7 @@ def _make_node_class():
             for parameter in parameters:
                 self.values[parameter.name] = parameter.value
             self.estimator.warm_start = self.values['model.warm_start']
+            self._frame = self.values['frame_id'].encode()
 
         # -- recording ----------------------------------------------------------------
 
@@ -254,7 +261,8 @@ def _make_node_class():
             if self.recorder is None:
                 return
             try:
-                # Exact bytes: none of the output types holds a float64[] that can be empty.
+                # rclpy's bytes are exact here: none of the types has a float64[] (which can
+                # be empty); only the input and the per-sample outputs are exact CDR anyway.
                 self.recorder.write(topic, message if isinstance(message, bytes)
                                     else self._serialize(message), log_time_ns)
             except RecorderError as exc:
@@ -265,16 +273,10 @@ def _make_node_class():
         def _on_joint_state(self, data):
             receive_ns = self._clock.now().nanoseconds
             self.received += 1
-            values = self.values
             if self.recorder is not None:
-                self._record(self.subscription.topic_name, data, receive_ns)
+                self._record(self.input_topic, data, receive_ns)
             try:
-                message = self._deserialize(data)
-                stamp_ns, angle, speed = rm.crank_from_joint_state(message,
-                                                                   values['crank_joint'])
-                if stamp_ns == 0:
-                    raise rm.InputRejected('zero stamp (the publisher does not stamp its '
-                                           'messages)')
+                stamp_ns, angle, speed = self._crank(data)
                 start = time.perf_counter_ns()
                 sample = self.estimator.update(stamp_ns, angle, speed)
                 self.period.update_ns.append(time.perf_counter_ns() - start)
@@ -289,11 +291,26 @@ def _make_node_class():
                 self.get_logger().info(f'{FIRST_INPUT_MESSAGE}: angle {angle:.4f} rad, '
                                        f'speed {speed} rad/s')
             self.last_valid_wall = time.monotonic()
-            self._publish_sample(message.header.stamp, sample)
+            self._publish_sample(stamp_ns, sample)
 
-        def _publish_sample(self, stamp, sample):
+        def _crank(self, data):
+            """Stamp, angle and speed of the crank joint; InputRejected says why not."""
+            joint = self.values['crank_joint']
+            try:
+                stamp_ns, angle, speed = cdr.parse_joint_state(data, joint.encode())
+            except (struct.error, IndexError, ValueError):
+                raise rm.InputRejected('malformed JointState CDR') from None
+            if angle is None or not math.isfinite(angle) or (
+                    speed is not None and not math.isfinite(speed)):
+                # The slow path only for bad messages: it names what is wrong.
+                stamp_ns, angle, speed = rm.crank_from_joint_state(self._deserialize(data),
+                                                                   joint)
+            if stamp_ns == 0:
+                raise rm.InputRejected('zero stamp (the publisher does not stamp its messages)')
+            return stamp_ns, angle, speed
+
+        def _publish_sample(self, stamp_ns, sample):
             values = self.values
-            frame = values['frame_id']
             period = self.period
             period.valid += 1
             period.flags |= sample.flags
@@ -306,19 +323,30 @@ def _make_node_class():
             if sample.message:
                 self.get_logger().warning(f'estimator: {sample.message}',
                                           throttle_duration_sec=WARN_THROTTLE_S)
+            # Serialised once (exact CDR), published raw and recorded as the same bytes.
+            sec, nanosec = divmod(stamp_ns, 1_000_000_000)
+            frame = self._frame
             outputs = [
-                ('lever_tip', rm.deflection_message(stamp, frame, *sample.lever_tip)),
-                ('coupler_mid', rm.deflection_message(stamp, frame, *sample.coupler_mid)),
-                ('criteria', rm.criteria_message(stamp, frame, sample.criterion,
-                                                 sample.gamma_dot, sample.reaction_n))]
+                ('lever_tip', cdr.vector3_stamped_cdr(sec, nanosec, frame, *sample.lever_tip)),
+                ('coupler_mid', cdr.vector3_stamped_cdr(sec, nanosec, frame,
+                                                        *sample.coupler_mid)),
+                ('criteria', cdr.criteria_cdr(sec, nanosec, frame, sample.criterion,
+                                              sample.gamma_dot, sample.reaction_n))]
             if self.published % values['markers.every_n'] == 0:
-                outputs.append(('markers', self._markers(stamp, sample)))
+                outputs.append(('markers', self._serialize(
+                    self._markers(rm.ns_to_stamp(stamp_ns), sample))))
             self.published += 1
-            for key, message in outputs:
-                publisher = self.publishers_[key]
-                publisher.publish(message)
-                if self.recorder is not None:
-                    self._record(publisher.topic_name, message, self._clock.now().nanoseconds)
+            for key, data in outputs:
+                try:
+                    self.publishers_[key].publish(data)
+                except RCLError:
+                    if self.context.ok():
+                        raise
+                    return   # SIGINT/SIGTERM shut the context down while this callback ran
+            if self.recorder is not None:
+                log_ns = self._clock.now().nanoseconds
+                for key, data in outputs:
+                    self._record(self.output_topics[key], data, log_ns)
 
         def _markers(self, stamp, sample):
             values = self.values
@@ -411,7 +439,12 @@ def _make_node_class():
             now = self._clock.now()
             message = rm.diagnostics_message(now.to_msg(), self.diagnostic_statuses())
             publisher = self.publishers_['diagnostics']
-            publisher.publish(message)
+            try:
+                publisher.publish(message)
+            except RCLError:
+                if self.context.ok():
+                    raise
+                return
             self._record(publisher.topic_name, message, now.nanoseconds)
 
         def close(self):

@@ -1,0 +1,345 @@
+"""flexlink_node over real rclpy between processes on loopback (conftest sets the domain)."""
+
+import math
+import os
+import pathlib
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from flexlink_ros import node as flexlink_node
+from flexlink_ros import node_params
+from flexlink_ros.core import reduced
+from flexlink_ros.core.errors import FlexlinkError
+
+READY_TIMEOUT_S = 240.0     # node start-up incl. a first model build on a loaded machine
+DISCOVERY_TIMEOUT_S = 20.0
+PARAMS_FILE = pathlib.Path(__file__).resolve().parents[1] / 'config' / 'flexlink_node.yaml'
+OUTPUTS = ('/flexlink_node/lever_tip/deflection', '/flexlink_node/coupler_mid/deflection',
+           '/flexlink_node/joint_criteria', '/flexlink_node/markers', '/diagnostics')
+
+
+# -- helpers without rclpy -----------------------------------------------------------------
+
+def test_model_options_follow_the_parameters():
+    values = node_params.defaults()
+    options = flexlink_node.model_options_from_parameters(values)
+    assert options == reduced.ModelOptions()          # 0 modes: the planned default
+    values.update({'model.modes': 6, 'model.bearings': 'rigid', 'model.rigid_crank': False,
+                   'model.geometric_stiffness': False})
+    options = flexlink_node.model_options_from_parameters(values)
+    assert (options.modes, options.bearings, options.rigid_crank,
+            options.geometric_stiffness) == (6, 'rigid', False, False)
+
+
+def test_build_falls_back_only_for_geometric_stiffness():
+    calls, notes = [], []
+
+    def build(options):
+        calls.append(options.geometric_stiffness)
+        if options.geometric_stiffness:
+            raise FlexlinkError('needs core/dynamics.py')
+        return 'model'
+
+    model, options = flexlink_node.build_with_fallback(build, reduced.ModelOptions(),
+                                                       notes.append)
+    assert (model, options.geometric_stiffness, calls) == ('model', False, [True, False])
+    assert 'geometric stiffness left out' in notes[0] and 'dynamics' in notes[0]
+
+    def failing(options):
+        raise FlexlinkError('something else')
+
+    # Without geometric stiffness requested there is nothing to leave out: the error stands.
+    with pytest.raises(FlexlinkError, match='something else'):
+        flexlink_node.build_with_fallback(failing, reduced.ModelOptions(
+            geometric_stiffness=False), notes.append)
+
+
+# -- processes ------------------------------------------------------------------------------
+
+class NodeProcess:
+    """flexlink_node in a subprocess, its log in a file."""
+
+    def __init__(self, tmp_path, *parameters):
+        self.log_path = tmp_path / f'node_{time.monotonic_ns()}.log'
+        command = [sys.executable, '-m', 'flexlink_ros.node', '--ros-args',
+                   '--params-file', str(PARAMS_FILE)]
+        for item in parameters:
+            command += ['-p', item]
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path), PYTHONUNBUFFERED='1',
+                   RCUTILS_LOGGING_BUFFERED_STREAM='0')
+        self.log_file = open(self.log_path, 'w')
+        self.process = subprocess.Popen(command, stdout=self.log_file,
+                                        stderr=subprocess.STDOUT, env=env)
+
+    def log(self):
+        return self.log_path.read_text()
+
+    def wait_for(self, fragment, timeout_s):
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if fragment in self.log():
+                return
+            assert self.process.poll() is None, 'node exited:\n' + self.log()
+            time.sleep(0.05)
+        raise AssertionError(f'{fragment!r} not logged within {timeout_s} s:\n' + self.log())
+
+    def stop(self, sig=signal.SIGTERM, timeout_s=30.0):
+        if self.process.poll() is None:
+            self.process.send_signal(sig)
+            try:
+                self.process.wait(timeout=timeout_s)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait()
+        self.log_file.close()
+        return self.process.returncode
+
+
+@pytest.fixture
+def processes():
+    """Every process a test starts, killed at the end whatever happens."""
+    started = []
+    try:
+        yield started
+    finally:
+        for item in started:
+            process = getattr(item, 'process', item)
+            if process.poll() is None:
+                process.kill()
+                process.wait()
+            if hasattr(item, 'log_file'):
+                item.log_file.close()
+
+
+@pytest.fixture
+def ros():
+    """An rclpy context, a test node and its executor (shut down at the end)."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node('flexlink_test', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    try:
+        yield node, executor
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        context.try_shutdown()
+
+
+def spin_until(executor, condition, timeout_s, what, detail=lambda: ''):
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        assert time.monotonic() < deadline, f'timed out waiting for {what}{detail()}'
+        executor.spin_once(timeout_sec=0.02)
+
+
+def joint_state(stamp_ns, names, positions, velocities):
+    from sensor_msgs.msg import JointState
+
+    from flexlink_ros.ros_messages import ns_to_stamp
+    message = JointState(name=list(names), position=[float(p) for p in positions],
+                         velocity=[float(v) for v in velocities])
+    message.header.stamp = ns_to_stamp(stamp_ns)
+    return message
+
+
+def node_model():
+    """The model the node builds with default parameters (same fallback, same cache)."""
+    model, _, _ = flexlink_node.load_node_model(node_params.defaults(), lambda note: None)
+    return model
+
+
+def read_with_rosbags(bag):
+    from rosbags.highlevel import AnyReader
+    counts, stamps = {}, {}
+    with AnyReader([bag]) as reader:
+        for connection, _, raw in reader.messages():
+            message = reader.deserialize(raw, connection.msgtype)
+            counts[connection.topic] = counts.get(connection.topic, 0) + 1
+            if hasattr(message, 'header') and connection.topic != '/diagnostics':
+                stamp = message.header.stamp.sec * 10**9 + message.header.stamp.nanosec
+                stamps.setdefault(connection.topic, []).append(stamp)
+    return counts, stamps
+
+
+def read_with_mcap_ros2(bag):
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    counts = {}
+    for path in sorted(bag.glob('*.mcap')):
+        with open(path, 'rb') as stream:
+            reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+            for _, channel, _, decoded in reader.iter_decoded_messages():
+                assert decoded is not None
+                counts[channel.topic] = counts.get(channel.topic, 0) + 1
+    return counts
+
+
+def test_node_end_to_end(tmp_path, processes, ros):
+    """Test publisher -> node -> test subscriber, bad input, parameters, SIGTERM recording."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from geometry_msgs.msg import Vector3Stamped
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import JointState
+
+    bag = tmp_path / 'bag'
+    node_process = NodeProcess(tmp_path, 'record.enabled:=true', f'record.path:={bag}',
+                               'diagnostics.period_s:=0.2', 'markers.every_n:=25')
+    processes.append(node_process)
+    model = node_model()              # meanwhile: the reference's model, from the cache
+    node_process.wait_for(flexlink_node.READY_MESSAGE, READY_TIMEOUT_S)
+
+    test_node, executor = ros
+    qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+    publisher = test_node.create_publisher(JointState, 'joint_states', qos)
+    received = {'lever': [], 'coupler': [], 'criteria': [], 'diagnostics': []}
+    test_node.create_subscription(Vector3Stamped, OUTPUTS[0], received['lever'].append, qos)
+    test_node.create_subscription(Vector3Stamped, OUTPUTS[1], received['coupler'].append, qos)
+    test_node.create_subscription(JointState, OUTPUTS[2], received['criteria'].append, qos)
+    test_node.create_subscription(DiagnosticArray, '/diagnostics',
+                                  received['diagnostics'].append, 10)
+    spin_until(executor, lambda: publisher.get_subscription_count() > 0
+               and test_node.count_publishers(OUTPUTS[0]) > 0
+               and len(received['diagnostics']) > 0, DISCOVERY_TIMEOUT_S, 'discovery')
+
+    # A crank at 391 rpm sampled with 30 % jitter, with bad messages in between.
+    rng = np.random.default_rng(7)
+    speed = 391.0 * 2.0 * math.pi / 60.0
+    times = np.cumsum((1.0 + 0.3 * rng.uniform(-1.0, 1.0, 600)) * 1e-3)
+    stamps = (1_800_000_000 * 10**9 + np.round(times * 1e9)).astype(np.int64).tolist()
+    angles = np.mod(speed * times + np.pi, 2.0 * np.pi) - np.pi
+    bad = {100: joint_state(stamps[100] + 1, ['crank'], [math.nan], [speed]),
+           200: joint_state(stamps[200] + 1, ['lever'], [0.1], [speed]),
+           300: joint_state(stamps[300] + 1, [], [], [])}
+    # Paced at the stamps' rate (a burst would overflow the node's input queue) once the
+    # first sample's warm start is done.
+    start = None
+    for n, (stamp, angle) in enumerate(zip(stamps, angles)):
+        publisher.publish(joint_state(stamp, ['base', 'crank'], [0.0, angle], [0.0, speed]))
+        if n in bad:
+            publisher.publish(bad[n])
+        if n == 0:
+            spin_until(executor, lambda: received['lever'], 20.0, 'the first output')
+            start = time.monotonic() - times[0]
+        delay = start + times[min(n + 1, len(times) - 1)] - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)    # pacing; the outputs wait in the subscriptions' queues
+        if n % 50 == 0:
+            executor.spin_once(timeout_sec=0.0)
+    spin_until(executor, lambda: len(received['lever']) >= len(stamps)
+               and len(received['criteria']) >= len(stamps), 30.0, 'all outputs',
+               lambda: f": {({k: len(v) for k, v in received.items()})}\n{node_process.log()}")
+
+    # Outputs carry the input stamps and equal the library's estimate of the same samples.
+    from flexlink_ros.core.estimator import StreamingEstimator
+    from flexlink_ros.ros_messages import stamp_to_ns
+    estimator = StreamingEstimator(model)
+    reference = [estimator.update(s, a, speed) for s, a in zip(stamps, angles)]
+    lever = [(stamp_to_ns(m.header.stamp), m.vector.x, m.vector.y) for m in received['lever']]
+    assert [entry[0] for entry in lever] == stamps
+    assert all(m.header.frame_id == 'linkage_ground' for m in received['lever'])
+    got = np.array([entry[1:] for entry in lever])
+    expected = np.array([sample.lever_tip for sample in reference])
+    assert np.max(np.abs(got - expected)) <= 1e-12 * np.max(np.abs(expected))
+    got = np.array([(m.vector.x, m.vector.y) for m in received['coupler']])
+    expected = np.array([sample.coupler_mid for sample in reference])
+    assert np.max(np.abs(got - expected)) <= 1e-12 * np.max(np.abs(expected))
+    criteria = received['criteria'][-1]
+    assert list(criteria.name) == ['O2', 'A', 'B', 'O4']
+    assert list(criteria.position) == pytest.approx(reference[-1].criterion)
+
+    # The three bad messages were counted, not fatal.
+    def skipped():
+        values = [kv.value for d in received['diagnostics'] for s in d.status
+                  if s.name.endswith('input') for kv in s.values if kv.key == 'skipped']
+        return int(values[-1]) if values else 0
+    spin_until(executor, lambda: skipped() == 3, 10.0, 'skipped count in /diagnostics')
+    assert node_process.process.poll() is None
+    assert 'input skipped' in node_process.log()
+
+    # Runtime parameters: invalid values rejected with a reason, read-only ones refused.
+    client = AsyncParameterClient(test_node, 'flexlink_node')
+    spin_until(executor, lambda: client.services_are_ready(), DISCOVERY_TIMEOUT_S,
+               'parameter services')
+
+    def set_parameter(name, value):
+        future = client.set_parameters([Parameter(name, value=value)])
+        spin_until(executor, future.done, 10.0, f'setting {name}')
+        return future.result().results[0]
+
+    result = set_parameter('diagnostics.criterion_warn', 5000.0)
+    assert not result.successful and 'must not exceed' in result.reason
+    result = set_parameter('markers.exaggeration', 0.5)
+    assert not result.successful and result.reason
+    assert not set_parameter('mechanism', 'kang1990').successful
+    assert set_parameter('frame_id', 'machine_base').successful
+    count = len(received['lever'])
+    publisher.publish(joint_state(stamps[-1] + 10**6, ['crank'], [angles[-1] + 0.04], [speed]))
+    spin_until(executor, lambda: len(received['lever']) > count, 10.0, 'output after change')
+    assert received['lever'][-1].header.frame_id == 'machine_base'
+
+    # SIGTERM closes the recording completely; two independent readers agree on it.
+    assert node_process.stop(signal.SIGTERM) == 0
+    from flexlink_ros.cli_mcap import mcap_info
+    info = mcap_info(bag)
+    assert info['complete'] and (bag / 'metadata.yaml').exists()
+    inputs = len(stamps) + len(bad) + 1
+    counts, recorded_stamps = read_with_rosbags(bag)
+    assert counts['/joint_states'] == inputs
+    for topic in OUTPUTS[:3]:
+        assert counts[topic] == len(stamps) + 1
+    assert counts[OUTPUTS[3]] == math.ceil((len(stamps) + 1) / 25)
+    assert counts['/diagnostics'] >= 2
+    assert recorded_stamps[OUTPUTS[0]][:len(stamps)] == stamps
+    assert read_with_mcap_ros2(bag) == counts
+
+
+def test_driver_to_node_and_sigkill_leaves_a_recoverable_file(tmp_path, processes):
+    """crank_driver -> node in separate processes; SIGKILL mid-recording loses < 1 s."""
+    from flexlink_ros.cli_mcap import mcap_info, recover_mcap
+
+    bag = tmp_path / 'bag'
+    node_process = NodeProcess(tmp_path, 'record.enabled:=true', f'record.path:={bag}')
+    processes.append(node_process)
+    node_process.wait_for(flexlink_node.READY_MESSAGE, READY_TIMEOUT_S)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
+    driver = subprocess.Popen([sys.executable, '-m', 'flexlink_ros.crank_driver', '--ros-args',
+                               '-p', 'speed_rpm:=269.0'], env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    processes.append(driver)
+    node_process.wait_for(flexlink_node.FIRST_INPUT_MESSAGE, DISCOVERY_TIMEOUT_S)
+    time.sleep(2.5)    # recording time, not synchronisation
+    killed_ns = time.time_ns()
+    node_process.stop(signal.SIGKILL)
+    driver.send_signal(signal.SIGINT)
+    driver.wait(timeout=20)
+    files = sorted(bag.glob('*.mcap'))
+    assert len(files) == 1 and not mcap_info(files[0])['complete']
+    recovered = tmp_path / 'recovered.mcap'
+    result = recover_mcap(files[0], recovered)
+    counts = {t['topic']: t['count'] for t in result['topics']}
+    assert counts['/joint_states'] > 1000           # about 2.5 s at 1 kHz, less the loss
+    assert (killed_ns - result['end_ns']) * 1e-9 < 1.0
+    assert abs(counts['/flexlink_node/lever_tip/deflection'] - counts['/joint_states']) <= 2
+    info = mcap_info(recovered)
+    assert info['complete'] and info['message_count'] == result['message_count']
+    rosbags_counts, _ = read_with_rosbags(recovered)
+    assert rosbags_counts == {k: v for k, v in counts.items() if v}
+
+
+def test_bad_parameters_file_value_stops_the_node_with_a_reason(tmp_path, processes):
+    node_process = NodeProcess(tmp_path, 'diagnostics.criterion_warn:=5000.0')
+    processes.append(node_process)
+    assert node_process.process.wait(timeout=READY_TIMEOUT_S) == 1
+    assert 'must not exceed' in node_process.log()
