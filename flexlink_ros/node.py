@@ -153,11 +153,12 @@ def parameter_descriptor(spec):
 
 
 def _make_node_class():
-    """The rclpy node class (built lazily so the helpers above import without rclpy)."""
+    """The rclpy node classes, plain and managed (built lazily: the helpers need no rclpy)."""
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import Vector3Stamped
     from rcl_interfaces.msg import SetParametersResult
     from rclpy import logging as rclpy_logging
+    from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
     from rclpy.node import Node
     from rclpy._rclpy_pybind11 import RCLError
     from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -168,11 +169,10 @@ def _make_node_class():
     from . import ros_messages as rm
     from .recorder import McapRecorder
 
-    class FlexlinkNode(Node):
-        """The estimator between a crank JointState and standard output topics."""
+    class Pipeline:
+        """The node's work, shared by the plain and the managed (lifecycle) node."""
 
-        def __init__(self, **kwargs):
-            super().__init__(NODE_NAME, **kwargs)
+        def _declare(self):
             for spec in node_params.PARAMETERS:
                 self.declare_parameter(spec.name, spec.default, parameter_descriptor(spec))
             self.values = node_params.validate_all(
@@ -180,46 +180,76 @@ def _make_node_class():
                  for spec in node_params.PARAMETERS})
             self.add_on_set_parameters_callback(self._validate)
             self.add_post_set_parameters_callback(self._apply)
+            self.estimator = self.recorder = self.subscription = self._timer = None
+            self.publishers_ = {}
+            self._clock = self.get_clock()
+            self._deserialize = lambda data: deserialize_message(data, JointState)
+            self._serialize = serialize_message
+            self._frame = self.values['frame_id'].encode()
+
+        def _configure(self, make_publisher):
+            """Load or build the model, create the publishers, open the recording."""
+            values = self.values
             log = self.get_logger()
             start = time.perf_counter()
-            self.model, self.options, self.notes = load_node_model(self.values, log.warning)
+            self.model, self.options, self.notes = load_node_model(values, log.warning)
             self.criteria_source = self.model.info.get('criteria', 'unknown')
             log.info(f'model: {self.model.size} coordinates, {self.model.grid_size} grid cells, '
                      f'{self.options} ({time.perf_counter() - start:.2f} s); '
                      f'criteria: {self.criteria_source}')
             self.estimator = StreamingEstimator(self.model,
-                                                warm_start=self.values['model.warm_start'])
-            values = self.values
+                                                warm_start=values['model.warm_start'])
             reliability = (ReliabilityPolicy.RELIABLE if values['qos.reliability'] == 'reliable'
                            else ReliabilityPolicy.BEST_EFFORT)
-            qos = QoSProfile(depth=values['qos.depth'], reliability=reliability)
+            self.qos = QoSProfile(depth=values['qos.depth'], reliability=reliability)
+            types = {'lever_tip': Vector3Stamped, 'coupler_mid': Vector3Stamped,
+                     'criteria': JointState, 'markers': MarkerArray,
+                     'diagnostics': DiagnosticArray}
             self.publishers_ = {
-                'lever_tip': self.create_publisher(Vector3Stamped, TOPICS['lever_tip'], qos),
-                'coupler_mid': self.create_publisher(Vector3Stamped, TOPICS['coupler_mid'],
-                                                     qos),
-                'criteria': self.create_publisher(JointState, TOPICS['criteria'], qos),
-                'markers': self.create_publisher(MarkerArray, TOPICS['markers'], 10),
-                'diagnostics': self.create_publisher(DiagnosticArray, TOPICS['diagnostics'],
-                                                     10)}
-            self._clock = self.get_clock()
-            self.recorder = self._open_recorder(qos) if values['record.enabled'] else None
-            self.subscription = self.create_subscription(
-                JointState, values['input_topic'], self._on_joint_state, qos, raw=True)
-            self._deserialize = lambda data: deserialize_message(data, JointState)
-            self.input_topic = self.subscription.topic_name
+                key: make_publisher(types[key], TOPICS[key],
+                                    self.qos if key in ('lever_tip', 'coupler_mid', 'criteria')
+                                    else 10)
+                for key in types}
+            self.input_topic = self.resolve_topic_name(values['input_topic'])
             self.output_topics = {key: publisher.topic_name
                                   for key, publisher in self.publishers_.items()}
-            self._frame = values['frame_id'].encode()
-            self._serialize = serialize_message
+            self.recorder = self._open_recorder(self.qos) if values['record.enabled'] else None
             self.received = self.rejected = self.published = 0
             self.last_valid_wall = None
             self.last_rejection = ''
+
+        def _activate(self):
+            """Subscribe and start the diagnostics timer: estimates flow from now on."""
+            values = self.values
+            self.estimator.reset()
             self.period = PeriodStats()
             self._period_start = time.monotonic()
-            self.create_timer(values['diagnostics.period_s'], self._publish_diagnostics)
-            log.info(f'{READY_MESSAGE} {self.subscription.topic_name} (joint '
-                     f'{values["crank_joint"]!r}), publishing under {self.get_name()}/'
-                     + ('' if self.recorder is None else f'; recording to {self.recorder.path}'))
+            self.subscription = self.create_subscription(
+                JointState, values['input_topic'], self._on_joint_state, self.qos, raw=True)
+            self._timer = self.create_timer(values['diagnostics.period_s'],
+                                            self._publish_diagnostics)
+            self.get_logger().info(
+                f'{READY_MESSAGE} {self.subscription.topic_name} (joint '
+                f'{values["crank_joint"]!r}), publishing under {self.get_name()}/'
+                + ('' if self.recorder is None else f'; recording to {self.recorder.path}'))
+
+        def _deactivate(self):
+            """Stop receiving (the model, publishers and recording stay)."""
+            if self.subscription is not None:
+                self.destroy_subscription(self.subscription)
+                self.subscription = None
+            if self._timer is not None:
+                self.destroy_timer(self._timer)
+                self._timer = None
+
+        def _cleanup(self):
+            """Close the recording and drop publishers and model."""
+            self._deactivate()
+            self.close()
+            for publisher in self.publishers_.values():
+                self.destroy_publisher(publisher)
+            self.publishers_ = {}
+            self.estimator = self.recorder = None
 
         # -- parameters ---------------------------------------------------------------
 
@@ -236,7 +266,8 @@ def _make_node_class():
         def _apply(self, parameters):
             for parameter in parameters:
                 self.values[parameter.name] = parameter.value
-            self.estimator.warm_start = self.values['model.warm_start']
+            if self.estimator is not None:
+                self.estimator.warm_start = self.values['model.warm_start']
             self._frame = self.values['frame_id'].encode()
 
         # -- recording ----------------------------------------------------------------
@@ -387,7 +418,7 @@ def _make_node_class():
             elif period.rejected:
                 level, message = rm.WARN, f'{period.rejected} input messages skipped'
             statuses = [rm.status(f'{NODE_NAME}: input', level, message, {
-                'topic': self.subscription.topic_name, 'rate_hz': rate,
+                'topic': self.input_topic, 'rate_hz': rate,
                 'stale_s': stale, 'received': self.received, 'skipped': self.rejected,
                 'skipped_in_period': period.rejected, 'last_skip_reason': self.last_rejection})]
             durations = np.array(period.update_ns) / 1e3
@@ -449,7 +480,7 @@ def _make_node_class():
 
         def close(self):
             """Close the recording (idempotent); returns its status or None."""
-            if self.recorder is None:
+            if self.recorder is None or self.recorder.state.value == 'closed':
                 return None
             # Not the node's logger: after shutdown its /rosout publisher is gone.
             log = rclpy_logging.get_logger(f'{NODE_NAME}.recorder')
@@ -459,15 +490,84 @@ def _make_node_class():
                 log.error(str(exc))
                 status = self.recorder.status()
             log.info(f'recording closed: {status["message_count"]} messages in '
-                                   f'{status["path"]} ({status["state"]})')
+                     f'{status["path"]} ({status["state"]})')
             return status
 
-    return FlexlinkNode
+    class FlexlinkNode(Pipeline, Node):
+        """flexlink_node: configured and streaming from construction."""
+
+        def __init__(self, **kwargs):
+            super().__init__(NODE_NAME, **kwargs)
+            self._declare()
+            self._configure(self.create_publisher)
+            self._activate()
+
+    class FlexlinkManagedNode(Pipeline, LifecycleNode):
+        """
+        flexlink_node as a managed (lifecycle) node.
+
+        configure loads or builds the model, creates the publishers and opens the recording;
+        activate subscribes and starts publishing; deactivate stops receiving; cleanup closes
+        the recording.
+        """
+
+        def __init__(self, **kwargs):
+            super().__init__(NODE_NAME, **kwargs)
+            self._declare()
+
+        def on_configure(self, state):
+            try:
+                self._configure(self.create_lifecycle_publisher)
+            except (FlexlinkError, ValueError) as exc:
+                self.get_logger().error(f'configure failed: {exc}')
+                return TransitionCallbackReturn.FAILURE
+            return TransitionCallbackReturn.SUCCESS
+
+        def on_activate(self, state):
+            self._activate()
+            return super().on_activate(state)
+
+        def on_deactivate(self, state):
+            self._deactivate()
+            return super().on_deactivate(state)
+
+        def on_cleanup(self, state):
+            self._cleanup()
+            return TransitionCallbackReturn.SUCCESS
+
+        def on_shutdown(self, state):
+            self._cleanup()
+            return TransitionCallbackReturn.SUCCESS
+
+    return FlexlinkNode, FlexlinkManagedNode
 
 
-def make_node(**kwargs):
-    """A FlexlinkNode (rclpy must be initialised)."""
-    return _make_node_class()(**kwargs)
+def make_node(managed=False, **kwargs):
+    """
+    A FlexlinkNode, or its managed (lifecycle) variant (rclpy must be initialised).
+
+    Parameters
+    ----------
+    managed : bool
+        Build the lifecycle node (unconfigured until a configure transition).
+    **kwargs
+        Passed to rclpy's Node.
+
+    """
+    plain, lifecycle = _make_node_class()
+    return (lifecycle if managed else plain)(**kwargs)
+
+
+def build_parser():
+    """Command-line parser for the non-ROS arguments."""
+    import argparse
+    parser = argparse.ArgumentParser(
+        prog=NODE_NAME, description='Elastic deflections and joint criteria of the flexible '
+        'four-bar from a crank JointState (parameters: --ros-args --params-file FILE).')
+    parser.add_argument('--managed', action='store_true',
+                        help='start as a lifecycle node (configure/activate via '
+                        'lifecycle services)')
+    return parser
 
 
 def main(args=None):
@@ -477,12 +577,15 @@ def main(args=None):
 
     from .crank_driver import make_executor
 
+    from rclpy.utilities import remove_ros_args
+
     argv = sys.argv if args is None else [NODE_NAME, *args]
+    options = build_parser().parse_args(remove_ros_args(argv)[1:])
     node = None
     try:
         with rclpy.init(args=argv):
             try:
-                node = make_node()
+                node = make_node(managed=options.managed)
             except (FlexlinkError, ValueError) as exc:
                 print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
                 return 1

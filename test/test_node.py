@@ -64,9 +64,9 @@ def test_build_falls_back_only_for_geometric_stiffness():
 class NodeProcess:
     """flexlink_node in a subprocess, its log in a file."""
 
-    def __init__(self, tmp_path, *parameters):
+    def __init__(self, tmp_path, *parameters, flags=()):
         self.log_path = tmp_path / f'node_{time.monotonic_ns()}.log'
-        command = [sys.executable, '-m', 'flexlink_ros.node', '--ros-args',
+        command = [sys.executable, '-m', 'flexlink_ros.node', *flags, '--ros-args',
                    '--params-file', str(PARAMS_FILE)]
         for item in parameters:
             command += ['-p', item]
@@ -343,3 +343,62 @@ def test_bad_parameters_file_value_stops_the_node_with_a_reason(tmp_path, proces
     processes.append(node_process)
     assert node_process.process.wait(timeout=READY_TIMEOUT_S) == 1
     assert 'must not exceed' in node_process.log()
+
+
+def test_managed_node_streams_only_while_active(tmp_path, processes, ros):
+    """Lifecycle: configure loads the model, activate subscribes, deactivate stops, cleanup."""
+    from geometry_msgs.msg import Vector3Stamped
+    from lifecycle_msgs.msg import State, Transition
+    from lifecycle_msgs.srv import ChangeState, GetState
+    from sensor_msgs.msg import JointState
+
+    bag = tmp_path / 'managed_bag'
+    node_process = NodeProcess(tmp_path, 'record.enabled:=true', f'record.path:={bag}',
+                               flags=['--managed'])
+    processes.append(node_process)
+    test_node, executor = ros
+    get_state = test_node.create_client(GetState, '/flexlink_node/get_state')
+    change_state = test_node.create_client(ChangeState, '/flexlink_node/change_state')
+    spin_until(executor, lambda: change_state.service_is_ready() and get_state.service_is_ready(),
+               READY_TIMEOUT_S, 'lifecycle services')
+
+    def call(client, request):
+        future = client.call_async(request)
+        spin_until(executor, future.done, READY_TIMEOUT_S, type(request).__name__)
+        return future.result()
+
+    def transition(transition_id):
+        return call(change_state, ChangeState.Request(
+            transition=Transition(id=transition_id))).success
+
+    def state():
+        return call(get_state, GetState.Request()).current_state.id
+
+    assert state() == State.PRIMARY_STATE_UNCONFIGURED
+    assert test_node.count_subscribers('/joint_states') == 0 and not bag.exists()
+    assert transition(Transition.TRANSITION_CONFIGURE)       # loads the model, opens the bag
+    assert state() == State.PRIMARY_STATE_INACTIVE and bag.exists()
+    assert test_node.count_subscribers('/joint_states') == 0
+
+    received = []
+    test_node.create_subscription(Vector3Stamped, OUTPUTS[0], received.append, 100)
+    publisher = test_node.create_publisher(JointState, 'joint_states', 100)
+    assert transition(Transition.TRANSITION_ACTIVATE)
+    spin_until(executor, lambda: publisher.get_subscription_count() > 0
+               and test_node.count_publishers(OUTPUTS[0]) > 0, DISCOVERY_TIMEOUT_S,
+               'discovery')
+    stamp = 1_900_000_000 * 10**9
+    publisher.publish(joint_state(stamp, ['crank'], [0.5], [30.0]))
+    spin_until(executor, lambda: received, 30.0, 'an output while active')
+    assert received[0].header.stamp.sec * 10**9 + received[0].header.stamp.nanosec == stamp
+
+    assert transition(Transition.TRANSITION_DEACTIVATE)
+    spin_until(executor, lambda: publisher.get_subscription_count() == 0, DISCOVERY_TIMEOUT_S,
+               'the subscription to go')
+    assert transition(Transition.TRANSITION_CLEANUP)          # closes the recording
+    assert state() == State.PRIMARY_STATE_UNCONFIGURED
+    from flexlink_ros.cli_mcap import mcap_info
+    info = mcap_info(bag)
+    assert info['complete'] and {t['topic']: t['count'] for t in info['topics']}[
+        '/joint_states'] == 1
+    assert node_process.stop(signal.SIGTERM) == 0
