@@ -134,6 +134,16 @@ def compute_flex(mechanism=None, quick=False):
             data['truncation'][bearings, rpm] = study
     seconds['responses and truncation study'] = time.perf_counter() - started
 
+    # Sensitivity: the bearing spring at B only (Sec. 4.1 names the coupler-lever bearing).
+    started = time.perf_counter()
+    only_b = dataclasses.replace(mechanism, bearing_joints=('B',))
+    model = FlexibleLinkage(only_b, _rigid_crank_options('flexible', geometric))
+    data['b_only_responses'] = {rpm: periodic_response(model, rpm * fs.RPM_TO_RAD_S, 'full',
+                                                       steps=REFERENCE_STEPS[q],
+                                                       points=OUTPUT_POINTS[q])
+                                for rpm in fs.PAPER_RPM}
+    seconds['spring at B only'] = time.perf_counter() - started
+
     if geometric:
         started = time.perf_counter()
         data['no_kg_responses'] = {}
@@ -275,25 +285,34 @@ def compare_claims(data):
 
     shapes = data['shapes']
     macs = {deg: np.diag(shapes[deg]['mac']) for deg in SHAPE_ANGLES_DEG}
+    swapped = [d for d in SHAPE_ANGLES_DEG
+               if min(shapes[d]['mac'][0, 1], shapes[d]['mac'][1, 0]) > 0.5]
     add('Figs. 14-15', 'crank flexibility changes the mode shapes, mode 3 most',
         'MAC of all-flexible vs rigid-crank modes on coupler and lever: ' + '; '.join(
             f'{deg:g} deg: ' + ', '.join(f'{v:.2f}' for v in macs[deg])
-            for deg in SHAPE_ANGLES_DEG),
+            for deg in SHAPE_ANGLES_DEG) + ''.join(
+            f'; at {d:g} deg modes 1 and 2 trade places between the models (cross MAC '
+            f'{shapes[d]["mac"][0, 1]:.2f}, {shapes[d]["mac"][1, 0]:.2f})' for d in swapped),
         'agree' if all(macs[d][2] < min(macs[d][:2]) for d in SHAPE_ANGLES_DEG) else 'partly')
     names = {deg: [LINK_NAMES[i] for i in shapes[deg]['flex']['dominant']]
              for deg in SHAPE_ANGLES_DEG}
     paper = {27.0: ['lever', 'coupler'], 123.0: ['coupler', 'lever']}
     matches = [names[d][:2] == paper[d] for d in SHAPE_ANGLES_DEG]
+    def dominated(d, key):
+        data = shapes[d][key]
+        return ', '.join(f'{LINK_NAMES[i]} ({data["strain_share"][m, i]:.0%})'
+                         for m, i in enumerate(data['dominant']))
+
     add('Sec. 4.2', 'all flexible: at 27 deg mode 1 is the lever, mode 2 the coupler; at '
         '123 deg mode 1 the coupler, mode 2 the lever', '; '.join(
-            f'{d:g} deg: modes 1-3 dominated by ' + ', '.join(names[d])
-            for d in SHAPE_ANGLES_DEG),
+            f'{d:g} deg: modes 1-3 dominated by ' + dominated(d, 'flex')
+            for d in SHAPE_ANGLES_DEG) + ' (strain-energy share)',
         'agree' if all(matches) else ('partly' if any(matches) else 'disagree'))
     rc_names = {deg: [LINK_NAMES[i] for i in shapes[deg]['rigid_crank']['dominant']]
                 for deg in SHAPE_ANGLES_DEG}
     ok = all(rc_names[d][:2] == ['coupler', 'lever'] for d in SHAPE_ANGLES_DEG)
     add('Sec. 4.2', 'rigid crank: mode 1 is the coupler, mode 2 the lever', '; '.join(
-        f'{d:g} deg: ' + ', '.join(rc_names[d]) for d in SHAPE_ANGLES_DEG),
+        f'{d:g} deg: ' + dominated(d, 'rigid_crank') for d in SHAPE_ANGLES_DEG),
         'agree' if ok else 'disagree')
     dominant = flex.dominant_link
     share = [(dominant[:, m] == link).mean() for m, link in enumerate((1, 2, 0))]
@@ -336,9 +355,13 @@ def compare_claims(data):
         'agree' if min(ratio_tip) > 10 else 'disagree')
     ratio_mid = [np.hypot(*p2p['flexible', rpm][2:]) / np.hypot(*p2p['rigid', rpm][2:])
                  for rpm in fs.PAPER_RPM]
+    ratio_b = [np.hypot(*_p2p(data['b_only_responses'][rpm])[2:])
+               / np.hypot(*p2p['rigid', rpm][2:]) for rpm in fs.PAPER_RPM]
     add('Fig. 21', 'coupler mid-point: bearing flexibility changes it little',
         'flexible / rigid bearings, peak-to-peak |(X, Y)|: ' + ', '.join(
-            f'{rpm:g} rpm x{r:.2f}' for rpm, r in zip(fs.PAPER_RPM, ratio_mid)),
+            f'{rpm:g} rpm x{r:.2f}' for rpm, r in zip(fs.PAPER_RPM, ratio_mid))
+        + ' (springs at all four joints); with the spring at B only: ' + ', '.join(
+            f'{rpm:g} rpm x{r:.2f}' for rpm, r in zip(fs.PAPER_RPM, ratio_b)),
         'agree' if max(abs(r - 1) for r in ratio_mid) < 0.25 else
         ('partly' if min(abs(r - 1) for r in ratio_mid) < 0.25 else 'disagree'))
     harmonics = {}
@@ -550,7 +573,7 @@ def plot_mode_shapes(shapes, deg, geometric, path):
         ax.set_xlabel('X [mm]')
     for ax in axes[:, 0]:
         ax.set_ylabel('Y [mm]')
-    axes[0, 0].legend(fontsize=8, loc='lower right')
+    axes[0, 0].legend(fontsize=8, loc='upper left')
     figure.suptitle(f'Mode shapes at crank angle {deg:g} deg (Fig. {14 if deg < 90 else 15}): '
                     f'mass-normalised x {SHAPE_SCALE:g} m/sqrt(kg) as in the paper; grey = '
                     f'undeformed; pins, '
@@ -619,8 +642,11 @@ def plot_point_deflections(responses, columns, name, fig, geometric, path):
             values = response.outputs[:, columns]
             scale, unit = _unit(values)
             p2p = values.max(axis=0) - values.min(axis=0)
-            ax.plot(deg[order], scale * values[order, 0], color='tab:blue', label='X')
-            ax.plot(deg[order], scale * values[order, 1], color='tab:red', linestyle='--',
+            # one periodic revolution: repeat the first sample at +360 degrees
+            deg_closed = np.append(deg[order], deg[order[0]] + 360.0)
+            closed = np.vstack([values[order], values[order[:1]]])
+            ax.plot(deg_closed, scale * closed[:, 0], color='tab:blue', label='X')
+            ax.plot(deg_closed, scale * closed[:, 1], color='tab:red', linestyle='--',
                     label='Y')
             ax.set_title(f'({"abcd"[2 * row + col]}) {bearings} bearings, {rpm:g} rpm: '
                          f'peak-to-peak X {scale * p2p[0]:.3g}, Y {scale * p2p[1]:.3g} {unit}',
