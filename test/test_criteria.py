@@ -61,6 +61,7 @@ def test_true_maxima_are_scan_independent_and_exceed_the_grid_at_b(kang, results
     for joint, found in results['original'].items():
         assert finer[joint].max_ratio == pytest.approx(found.max_ratio, rel=1e-6), joint
         assert finer[joint].min_force == pytest.approx(found.min_force, rel=1e-6), joint
+        assert finer[joint].max_force == pytest.approx(found.max_force, rel=1e-9), joint
     # the coupler-rocker peak is narrower than the grid: the printed 1319.45 is 25 % low
     b = results['original']['B']
     assert b.grid_shortfall_percent > 20.0

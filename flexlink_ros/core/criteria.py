@@ -64,7 +64,7 @@ class JointCriterion:
     min_force, at_min_force_angle : float
         True minimum of R [N] (refined) and where [rad].
     max_force : float
-        Maximum of R [N] over the scan.
+        True maximum of R [N] (refined).
     rms_force : float
         RMS of R over the revolution [N].
     force_floor : float
@@ -257,6 +257,10 @@ def revolution_extremes(evaluate, joints=JOINT_NAMES, grid=None, scan_points=SCA
             candidate = _refine(force_at, scan, index, step, -1.0)
             if candidate[1] < lowest[1]:
                 lowest = candidate
+        largest = float(magnitude.max())
+        if largest > 0.0:
+            largest = max(largest, _refine(force_at, scan, int(np.argmax(magnitude)), step,
+                                           1.0)[1])
         on_grid = criterion_ratio(grid_force[j], grid_rate[j], floor)
         k = int(np.argmax(on_grid)) if on_grid.size else 0
         out[joint] = JointCriterion(
@@ -264,7 +268,7 @@ def revolution_extremes(evaluate, joints=JOINT_NAMES, grid=None, scan_points=SCA
             max_ratio_on_grid=float(on_grid[k]) if on_grid.size else float('nan'),
             at_grid_angle=float(grid[k]) if on_grid.size else float('nan'),
             min_force=lowest[1], at_min_force_angle=float(np.mod(lowest[0], 2 * np.pi)),
-            max_force=float(magnitude.max()), rms_force=rms, force_floor=floor,
+            max_force=largest, rms_force=rms, force_floor=floor,
             near_zero_force=bool(lowest[1] < floor))
     return out
 
