@@ -21,12 +21,13 @@ EXPECTED = ('flex_frequencies_fig7.png', 'flex_frequencies_fig8_10.png',
 def section(tmp_path_factory):
     out = tmp_path_factory.mktemp('flex')
     started = time.perf_counter()
-    result = flex.plot_flex(out, quick=True)
-    return out, result, time.perf_counter() - started
+    data = flex.compute_flex(quick=True)
+    result = flex.plot_flex(out, data=data)
+    return out, result, time.perf_counter() - started, data
 
 
 def test_quick_section_writes_every_chart(section):
-    out, result, seconds = section
+    out, result, seconds, _ = section
     assert sorted(p.name for p in result['charts']) == sorted(EXPECTED)
     for path in result['charts']:
         assert path.parent == out
@@ -36,7 +37,7 @@ def test_quick_section_writes_every_chart(section):
 
 
 def test_quick_section_text_carries_the_numbers(section):
-    _, result, _ = section
+    _, result, _, _ = section
     text = result['text']
     for heading in ('Frozen natural frequencies', 'Mode veering', 'Peak-to-peak',
                     'Modes needed', 'Paper claims'):
@@ -48,8 +49,8 @@ def test_quick_section_text_carries_the_numbers(section):
     assert ('Computed without geometric stiffness' in text) == (not available)
 
 
-def test_claims_follow_from_the_numbers():
-    data = flex.compute_flex(quick=True)
+def test_claims_follow_from_the_numbers(section):
+    data = section[3]
     claims = {c['where'] + c['claim']: c for c in data['claims']}
     fig20 = next(c for key, c in claims.items() if key.startswith('Fig. 20'))
     tip = {key: np.ptp(r.outputs[:, :2], axis=0) for key, r in data['responses'].items()}
@@ -62,21 +63,26 @@ def test_claims_follow_from_the_numbers():
 
 
 @pytest.fixture(scope='module')
-def stand_in_dynamics():
-    """core.dynamics replaced by the FE quasi-static axial forces (same signature)."""
+def section_with_geometric_stiffness(section, tmp_path_factory):
+    """The section with K_G: from core.dynamics if usable, else its quasi-static stand-in."""
+    if section[3]['geometric']:
+        return section[1]
     module = types.ModuleType('flexlink_ros.core.dynamics')
     module.axial_force = fs.quasi_static_axial_force
     saved = sys.modules.get(module.__name__)
     sys.modules[module.__name__] = module
-    yield module
-    if saved is None:
-        del sys.modules[module.__name__]
-    else:
-        sys.modules[module.__name__] = saved
+    try:
+        return flex.plot_flex(tmp_path_factory.mktemp('flex_kg'), quick=True)
+    finally:
+        if saved is None:
+            del sys.modules[module.__name__]
+        else:
+            sys.modules[module.__name__] = saved
 
 
-def test_geometric_stiffness_cases_appear_when_dynamics_is_usable(stand_in_dynamics, tmp_path):
-    result = flex.plot_flex(tmp_path, quick=True)
+def test_geometric_stiffness_cases_appear_when_dynamics_is_usable(
+        section_with_geometric_stiffness):
+    result = section_with_geometric_stiffness
     text = result['text']
     assert 'not computed' not in text and 'Computed without' not in text
     for label in ('all flexible, K_G at 30 rad/s', 'rigid crank, K_G at 45 rad/s',

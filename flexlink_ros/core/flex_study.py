@@ -659,7 +659,8 @@ def bending_deflection(model, displacement, crank_angle, link, points_per_elemen
     _, operator = model.shape_operator(theta, points_per_element)
     deflection = np.einsum('kpcn,kn->kpc', operator[:, link], np.atleast_2d(displacement))
     angle = solve_kinematics(model.mechanism, theta).angle[link]
-    across = -np.sin(angle)[:, None] * deflection[..., 0] + np.cos(angle)[:, None] * deflection[..., 1]
+    across = (np.cos(angle)[:, None] * deflection[..., 1]
+              - np.sin(angle)[:, None] * deflection[..., 0])
     s = np.linspace(0.0, 1.0, across.shape[1])
     chord = across[:, :1] + s[None, :] * (across[:, -1:] - across[:, :1])
     return s, across - chord
@@ -674,7 +675,8 @@ def shape_correlation(values, template):
 
 
 __all__ = ['PAPER_SPEEDS_RAD_S', 'PAPER_RPM', 'RPM_TO_RAD_S', 'TOLERANCES', 'OUTPUT_POINTS',
-           'geometric_stiffness_status', 'quasi_static_axial_force', 'FrequencyCase', 'paper_frequency_cases', 'Sweep',
-           'sweep_case', 'refine_mode_event', 'ModeEvent', 'mac', 'detect_mode_events', 'relative_rms',
-           'output_errors', 'truncation_study', 'modes_needed', 'harmonic_shares',
-           'signed_area', 'uniform_load_shape', 'bending_deflection', 'shape_correlation']
+           'geometric_stiffness_status', 'quasi_static_axial_force', 'FrequencyCase',
+           'paper_frequency_cases', 'Sweep', 'sweep_case', 'refine_mode_event', 'ModeEvent',
+           'mac', 'detect_mode_events', 'relative_rms', 'output_errors', 'truncation_study',
+           'modes_needed', 'harmonic_shares', 'signed_area', 'uniform_load_shape',
+           'bending_deflection', 'shape_correlation']

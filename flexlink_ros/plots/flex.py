@@ -605,6 +605,7 @@ def plot_deflected_linkage(linkage, mechanism, geometric, path):
         chosen = [k for k, d in enumerate(deg)
                   if (d - start) % 360.0 <= (stop - start) + 1e-9 and
                   np.isclose((d - start) % 3.0, 0.0, atol=1e-6)]
+        chosen.sort(key=lambda k: (deg[k] - start) % 360.0)   # in order of travel
         for rank, k in enumerate(chosen):
             colour = cmap(rank / max(len(chosen) - 1, 1))
             for link in range(3):
@@ -772,9 +773,14 @@ def report_text(data):
         lines.append(f'**Computed without geometric stiffness**: {data["geometric_reason"]}. '
                      'The K_G cases of Figs. 8-13 are missing, and every other result (mode '
                      'shapes, deflections, truncation) is computed without K_G.')
-    lines += ['', f'Model: {data["mechanism"].elements_per_link} beam elements per link, gravity along -Y, modal damping '
-              'zeta = 0.02, flexible bearings k = 22.7 kN/m at all four joints, clamped input '
-              'shaft.', '', '### Frozen natural frequencies over the cycle [Hz]', '',
+    mech = data['mechanism']
+    lines += ['', f'Model: {mech.elements_per_link} beam elements per link, gravity '
+              f'{tuple(mech.gravity)} m/s^2, modal damping zeta = {mech.damping_ratio:g}, '
+              f'flexible bearings k = {mech.bearing_stiffness / 1e3:g} kN/m at '
+              f'{", ".join(mech.bearing_joints)}, '
+              + ('clamped input shaft.' if mech.shaft_stiffness is None
+                 else f'input shaft k_t = {mech.shaft_stiffness:g} N m/rad.'),
+              '', '### Frozen natural frequencies over the cycle [Hz]', '',
               '| case | mode 1 | mode 2 | mode 3 |', '|---|---|---|---|']
     for sweep in data['sweeps'].values():
         cells = []
@@ -837,7 +843,7 @@ def report_text(data):
     return '\n'.join(lines)
 
 
-def plot_flex(out_dir, quick=False):
+def plot_flex(out_dir, quick=False, data=None):
     """
     Report section: frozen modes, deflections, paths and truncation of Cho 1992.
 
@@ -847,6 +853,8 @@ def plot_flex(out_dir, quick=False):
         Directory (created if missing).
     quick : bool
         Reduced sizes (2 elements per link, 10-degree sweeps, few steps) for tests.
+    data : dict or None
+        A :func:`compute_flex` result to draw (computed with ``quick`` if None).
 
     Returns
     -------
@@ -856,7 +864,8 @@ def plot_flex(out_dir, quick=False):
     """
     out = pathlib.Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    data = compute_flex(quick=quick)
+    if data is None:
+        data = compute_flex(quick=quick)
     mechanism, geometric, sweeps = data['mechanism'], data['geometric'], data['sweeps']
     charts = [plot_fig7(sweeps['flex'], out / 'flex_frequencies_fig7.png'),
               plot_fig8_10(sweeps, geometric, out / 'flex_frequencies_fig8_10.png'),
