@@ -340,7 +340,7 @@ def compare_claims(data):
         'load; the crank deflects too little to see',
         f'correlation with the uniform-load shape at the largest coupler bending '
         f'({link["crank_deg"][peak] % 360:.0f} deg): coupler {corr["coupler"]:.3f}, lever '
-        f'{corr["lever"]:.3f}; largest crank deflection {1e6 * crank:.1f} um vs coupler '
+        f'{corr["lever"]:.3f}; largest crank deflection {1e6 * crank:.1f} \u00b5m vs coupler '
         f'{1e3 * coupler:.2f} mm', 'agree' if min(corr.values()) > 0.95 and
         crank < 0.05 * coupler else 'partly')
 
@@ -349,7 +349,7 @@ def compare_claims(data):
     ratio_tip = [np.hypot(*p2p['flexible', rpm][:2]) / np.hypot(*p2p['rigid', rpm][:2])
                  for rpm in fs.PAPER_RPM]
     add('Fig. 20', 'lever tip: tiny with rigid bearings, relatively very large with flexible',
-        ', '.join(f'{rpm:g} rpm: {1e6 * np.hypot(*p2p["rigid", rpm][:2]):.1f} um vs '
+        ', '.join(f'{rpm:g} rpm: {1e6 * np.hypot(*p2p["rigid", rpm][:2]):.1f} \u00b5m vs '
                   f'{1e3 * np.hypot(*p2p["flexible", rpm][:2]):.2f} mm (x{r:.0f})'
                   for rpm, r in zip(fs.PAPER_RPM, ratio_tip)) + ' (peak-to-peak, |(X, Y)|)',
         'agree' if min(ratio_tip) > 10 else 'disagree')
@@ -436,9 +436,15 @@ def _coupler_mid_path(mechanism, crank_angle):
 
 
 def _unit(values_m):
-    """Scale and unit label for deflections: um below 0.1 mm, mm otherwise."""
+    """Scale and unit label for deflections: micrometres below 0.1 mm, mm otherwise."""
     peak = np.abs(values_m).max() if np.size(values_m) else 0.0
-    return (1e6, 'um') if peak < 1e-4 else (1e3, 'mm')
+    return (1e6, '\u00b5m') if peak < 1e-4 else (1e3, 'mm')
+
+
+def _length(value_m):
+    """A deflection for people: micrometres below 0.1 mm, millimetres otherwise."""
+    scale, unit = _unit(value_m)
+    return f'{scale * value_m:.3g} {unit}' if unit != 'mm' else f'{scale * value_m:.3f} mm'
 
 
 def _mark_events(ax, sweep, mode):
@@ -815,8 +821,7 @@ def report_text(data):
               '|---|---|---|---|---|---|']
     for (bearings, rpm), response in data['responses'].items():
         p2p = _p2p(response)
-        lines.append(f'| {bearings} | {rpm:g} | ' + ' | '.join(
-            f'{1e3 * v:.4f} mm' for v in p2p) + ' |')
+        lines.append(f'| {bearings} | {rpm:g} | ' + ' | '.join(_length(v) for v in p2p) + ' |')
     lines += ['', '### Modes needed for a relative RMS error (mode superposition vs full '
               'order, rigid crank)', '',
               '| bearings | rpm | steps/rev | output | 1 % | 5 % | 1 % static corr. | '
