@@ -432,8 +432,8 @@ TARGETS = {0.0: (0.01, 0.05), 0.3: (0.02, 0.07)}
 @pytest.mark.parametrize('bearings', ['rigid', 'flexible'])
 def test_cho1992_streaming_accuracy_at_269_and_391_rpm(cho, bearings):
     from flexlink_ros import cli_estimate
-    # Geometric stiffness off: core/dynamics.py (its axial forces) is checked separately.
-    options = reduced.ModelOptions(bearings=bearings, geometric_stiffness=False)
+    # The default model: geometric stiffness of the rigid-body axial forces included.
+    options = reduced.ModelOptions(bearings=bearings)
     model = reduced.model_for_mechanism(cho, options, use_cache=False)
     for rpm in (269.0, 391.0):
         for jitter, (coupler_limit, lever_limit) in TARGETS.items():
@@ -448,3 +448,47 @@ def test_model_without_reactions_flags_zero_criteria():
     sample = StreamingEstimator(model).update(0, 0.3, 20.0)
     assert sample.flags & SampleFlag.NO_CRITERIA
     assert sample.criterion == (0.0,) * 4 and sample.reaction_n == (0.0,) * 4
+
+
+def test_cho1992_criteria_equal_the_rigid_body_analysis_at_constant_speed(cho):
+    """Tabulated reactions (F_1 + a F_a + w^2 F_w2, dF/dtheta) against core/criteria.py."""
+    criteria = pytest.importorskip('flexlink_ros.core.criteria')
+    options = reduced.ModelOptions(bearings='rigid', geometric_stiffness=False)
+    model = reduced.model_for_mechanism(cho, options, use_cache=False)
+    speed = 391.0 * 2.0 * np.pi / 60.0
+    times = np.arange(600) * 1e-3
+    angles = 0.4 + speed * times
+    est = StreamingEstimator(model)
+    samples = [est.update(int(t * 1e9), a, speed) for t, a in zip(times, angles)]
+    assert not any(s.flags & SampleFlag.NO_CRITERIA for s in samples)
+    curves = criteria.criterion_curves(cho, angles, speed)
+    force = np.array([s.reaction_n for s in samples]).T
+    ratio = np.array([s.criterion for s in samples]).T
+    rate = np.array([s.gamma_dot for s in samples]).T
+    assert np.all(np.isfinite(ratio))
+    np.testing.assert_allclose(force, curves['force'], rtol=2e-4,
+                               atol=1e-4 * curves['force'].max())
+    # Away from near-zero reactions, the direction rate and the criterion agree closely.
+    clear = curves['force'] > 0.2 * curves['force'].mean(axis=1, keepdims=True)
+    np.testing.assert_allclose(rate[clear], curves['direction_rate'][clear], rtol=2e-3,
+                               atol=1e-3 * np.abs(curves['direction_rate']).max())
+    np.testing.assert_allclose(ratio[clear], curves['ratio'][clear], rtol=2e-3,
+                               atol=1e-3 * curves['ratio'][clear].max())
+
+
+def test_criterion_is_finite_and_flagged_at_a_zero_reaction():
+    """A reaction of ~0 at a sample: clamped to a floor, finite, large, flagged near zero."""
+    samples = toy_samples(grid=16)
+    count = samples.grid_size
+    force = np.zeros((count, 4, 2))
+    force[:, :, 0] = 10.0
+    force[0, 2, :] = (1e-9, 0.0)  # joint B nearly zero at theta = 0
+    rate = np.zeros((count, 4, 2))
+    rate[:, :, 1] = 3.0
+    pieces = {'force': {'1': force}, 'force_rate': {'1': rate}}
+    model = reduced.reduce_samples(samples, modes=3, speed_max=30.0, zeta=ZETA, forces=pieces)
+    sample = StreamingEstimator(model).update(0, 0.0, 20.0)
+    assert not sample.flags & SampleFlag.NO_CRITERIA
+    assert all(math.isfinite(c) for c in sample.criterion)
+    assert sample.near_zero[2] and not sample.near_zero[0]
+    assert sample.criterion[2] > 1e3 * sample.criterion[0]

@@ -256,6 +256,8 @@ DEFAULT_RESET_GAP_S = 0.5
 DEFAULT_ACCEL_LIMIT = 5000.0
 # A joint reaction below this fraction of its cycle RMS at the current speed is "near zero".
 DEFAULT_NEAR_ZERO_FRACTION = 0.05
+# Reactions are clamped to this fraction of their cycle RMS in the criterion (finite at R = 0).
+REACTION_FLOOR_FRACTION = 1e-6
 # Output magnitude floor of the error indicator [m] (1 um: below it relative errors mean little).
 ERROR_INDICATOR_FLOOR_M = 1e-6
 # Steps per revolution of the warm-start shooting.
@@ -679,20 +681,26 @@ class StreamingEstimator:
         return sample
 
     def _criteria(self, values, w):
-        """R, gamma-dot, |gamma-dot / R| and near-zero flags per joint from table values."""
+        """
+        R, gamma-dot, |gamma-dot / R| and near-zero flags per joint from table values.
+
+        A reaction below REACTION_FLOOR_FRACTION of its cycle RMS is clamped to that floor
+        (as core/criteria.py does), so the criterion stays finite; it is flagged near zero.
+        """
         limit2 = self.near_zero_fraction * self.near_zero_fraction
+        floor_fraction2 = REACTION_FLOOR_FRACTION * REACTION_FLOOR_FRACTION
         reactions, gamma_dots, ratios, near = [0.0] * 4, [0.0] * 4, [0.0] * 4, [False] * 4
         for j in range(4):
             fx, fy = values[2 * j], values[2 * j + 1]
             r2 = fx * fx + fy * fy
-            near[j] = r2 < limit2 * values[16 + j]
+            rms2 = values[16 + j]
+            near[j] = r2 < limit2 * rms2
+            r2 = max(r2, floor_fraction2 * rms2)
             if r2 > 0.0:
                 magnitude = math.sqrt(r2)
                 gamma_dot = (fx * values[9 + 2 * j] - fy * values[8 + 2 * j]) / r2
-                reactions[j], gamma_dots[j] = magnitude, gamma_dot
+                reactions[j], gamma_dots[j] = math.sqrt(fx * fx + fy * fy), gamma_dot
                 ratios[j] = abs(gamma_dot) / magnitude
-            elif not self._base_flags:
-                ratios[j] = math.inf   # a true zero reaction: direction undefined
         return tuple(reactions), tuple(gamma_dots), tuple(ratios), tuple(near)
 
     def link_shapes(self, sample):

@@ -655,12 +655,13 @@ def periodic_response(model, speed, start_angle=0.0, steps=720, stages=2):
 # Models of a mechanism: options, cache, and the full-order pieces from core/assembly.py
 
 # Bump when the precompute changes what it stores; older cache files are then rebuilt.
-MODEL_VERSION = 2
+MODEL_VERSION = 3
 # Default (modes, static) per bearing model: the smallest sizes meeting 1 % on the coupler
-# mid-point at 269 and 391 rpm against the full-order reference (flexible bearings put the
-# 5th-7th crank harmonics on the first two modes, which a constant basis must then resolve
-# to a fraction of zeta; see flexlink plan / bench).
-DEFAULT_SIZES = {'rigid': (4, 2), 'flexible': (12, 4)}
+# mid-point at 269 and 391 rpm against the full-order reference with geometric stiffness
+# (flexible bearings put the 5th-7th crank harmonics on the first two modes, which a
+# constant basis must then resolve to a fraction of zeta; 12 + 4 gave 1.7 % at 391 rpm,
+# 14 + 4 1.1 %, 16 + 2 0.4 %; see flexlink plan / bench).
+DEFAULT_SIZES = {'rigid': (4, 2), 'flexible': (16, 2)}
 # Points per beam element where link shapes are tabulated (3 elements: 10 points per link).
 SHAPE_POINTS_PER_ELEMENT = 3
 # Grid points and steps per revolution of the full-order reference.
@@ -723,8 +724,9 @@ class ModelOptions:
 def model_key(mechanism, options):
     """Cache key of a mechanism's reduced model (hex)."""
     from .cache import cache_key
+    # A model cached before the reactions were available must not be reused once they are.
     return cache_key('reduced-model', MODEL_VERSION, mechanism.key(),
-                     dataclasses.asdict(options))
+                     dataclasses.asdict(options), {'criteria': criteria_available()})
 
 
 def model_for_mechanism(mechanism, options=None, cache_dir=None, use_cache=True):
@@ -854,6 +856,9 @@ def reaction_pieces(mechanism, angles):
     """
     Rigid-body joint reactions F = F_1 + a F_a + w^2 F_w2 and dF/dtheta on the grid.
 
+    From core/dynamics.py (Newton-Euler, reactions across each bearing with the mechanism's
+    joint-mass split; spring and gravity in F_1).
+
     Returns
     -------
     forces : dict or None
@@ -863,10 +868,21 @@ def reaction_pieces(mechanism, angles):
 
     """
     try:
-        from . import dynamics  # noqa: F401
+        from . import dynamics
     except ImportError:
         return None, 'unavailable (core/dynamics.py not in this checkout)'
-    return None, 'unavailable (adapter not written yet)'
+    pieces = dynamics.reaction_pieces(mechanism, angles)
+    forces = {'force': pieces['force'], 'force_rate': pieces['force_rate']}
+    return forces, 'rigid-body Newton-Euler reactions (core/dynamics.py)'
+
+
+def criteria_available():
+    """Whether this checkout can tabulate joint reactions (part of the cache key)."""
+    try:
+        from . import dynamics  # noqa: F401
+    except ImportError:
+        return False
+    return True
 
 
 def reference_response(mechanism, options, speed, angles, steps=REFERENCE_STEPS):
