@@ -99,3 +99,93 @@ def criteria_cdr(sec, nanosec, frame, ratio, gamma_dot, force):
         out += bytes(_align(len(out), 4) - len(out)) + struct.pack('<I', len(values))
         out += bytes(_align(len(out), 8) - len(out)) + struct.pack(f'<{len(values)}d', *values)
     return bytes(out)
+
+
+class MarkerEncoder:
+    """
+    CDR of ros_messages.linkage_markers, by patching a serialised template.
+
+    The marker array has a fixed layout for a given frame id and number of points per link,
+    so it is serialised once (exactly, zeroed padding) and each call writes only the stamps,
+    the points of the rigid and deformed links, the joint positions and the joint colours.
+    Offsets are found by serialising sentinel values; the result equals
+    ``serialize_exact(linkage_markers(...))`` (tested).
+
+    Parameters
+    ----------
+    frame_id : str
+    points_per_link : int
+    links : int
+        Number of links (3).
+
+    """
+
+    _SENTINEL_STAMP = (0x5A5A5A5A, 0x1A2B3C4D)
+    _COLOUR_AFTER_POSITION = 80   # bytes: position, orientation (7 doubles), scale (3 doubles)
+
+    def __init__(self, frame_id, points_per_link, links=3):
+        import numpy as np
+
+        from . import ros_messages as rm
+        from .rosbag_schema import serialize_exact
+        self.frame_id, self.count, self.links = frame_id, int(points_per_link), links
+        self._np, self._rm = np, rm
+        index = np.arange(self.count, dtype=float)
+        rigid = [np.stack([1e6 + 1e4 * k + index + 0.25, 2e6 + 1e4 * k + index + 0.25], axis=1)
+                 for k in range(links)]
+        offset = np.array([5e5, 5e5])
+        joints = np.array([[7e6 + j + 0.5, 8e6 + j + 0.5] for j in range(4)])
+        stamp = rm.Time(sec=self._SENTINEL_STAMP[0], nanosec=self._SENTINEL_STAMP[1])
+        template = serialize_exact(rm.linkage_markers(
+            stamp, frame_id, rigid, [np.broadcast_to(offset, p.shape) for p in rigid], 1.0,
+            joints, [rm.OK] * 4))
+        self.template = template
+        self.stamp_offsets = self._find_all(template, struct.pack('<iI', *self._SENTINEL_STAMP))
+        self.rigid_offsets = [template.index(struct.pack('<d', p[0, 0])) for p in rigid]
+        self.deformed_offsets = [template.index(struct.pack('<d', p[0, 0] + offset[0]))
+                                 for p in rigid]
+        self.joint_offsets = [template.index(struct.pack('<dd', *q)) for q in joints]
+        self.colours = {level: struct.pack('<4f', *rgb, 1.0)
+                        for level, rgb in rm.LEVEL_COLOURS.items()}
+
+    @staticmethod
+    def _find_all(data, pattern):
+        found, start = [], 0
+        while (position := data.find(pattern, start)) >= 0:
+            found.append(position)
+            start = position + 1
+        return found
+
+    def encode(self, stamp_ns, link_points, link_deflections, exaggeration, joint_positions,
+               joint_levels):
+        """
+        CDR bytes of the marker array (arguments as ros_messages.linkage_markers).
+
+        Parameters
+        ----------
+        stamp_ns : int
+        link_points, link_deflections : sequence of ndarray, shape (points_per_link, 2)
+        exaggeration : float
+        joint_positions : ndarray, shape (4, 2)
+        joint_levels : sequence of diagnostic levels, length 4
+
+        """
+        np = self._np
+        out = bytearray(self.template)
+        stamp = struct.pack('<iI', *divmod(int(stamp_ns), 1_000_000_000))
+        for position in self.stamp_offsets:
+            out[position:position + 8] = stamp
+        block = np.zeros((self.count, 3))
+        size = 24 * self.count
+        for k in range(self.links):
+            block[:, :2] = link_points[k]
+            position = self.rigid_offsets[k]
+            out[position:position + size] = block.tobytes()
+            block[:, :2] = link_points[k] + exaggeration * np.asarray(link_deflections[k])
+            position = self.deformed_offsets[k]
+            out[position:position + size] = block.tobytes()
+        for position, joint, level in zip(self.joint_offsets, joint_positions, joint_levels):
+            out[position:position + 16] = struct.pack('<dd', joint[0], joint[1])
+            colour = position + self._COLOUR_AFTER_POSITION
+            out[colour:colour + 16] = self.colours[level]
+        return bytes(out)

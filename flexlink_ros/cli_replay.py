@@ -131,11 +131,14 @@ def criteria_batch(model, angles, speeds, accels,
     rate = layout.block(rows, 'force_dot')
     rms2 = layout.block(rows, 'rms2')
     r2 = np.sum(force ** 2, axis=2)
-    with np.errstate(divide='ignore', invalid='ignore'):
-        gamma_dot = np.where(r2 > 0.0, (force[..., 0] * rate[..., 1]
-                                        - force[..., 1] * rate[..., 0]) / r2, 0.0)
-        reaction = np.sqrt(r2)
-        criterion = np.where(r2 > 0.0, np.abs(gamma_dot) / reaction, np.inf)
+    # Below REACTION_FLOOR_FRACTION of the cycle RMS the reaction is clamped (finite criterion).
+    clamped = np.maximum(r2, core_estimator.REACTION_FLOOR_FRACTION ** 2 * rms2)
+    positive = clamped > 0.0
+    safe = np.where(positive, clamped, 1.0)
+    gamma_dot = np.where(positive, (force[..., 0] * rate[..., 1]
+                                    - force[..., 1] * rate[..., 0]) / safe, 0.0)
+    criterion = np.where(positive, np.abs(gamma_dot) / np.sqrt(safe), 0.0)
+    reaction = np.where(positive, np.sqrt(r2), 0.0)
     return reaction, gamma_dot, criterion, r2 < near_zero_fraction ** 2 * rms2, True
 
 
@@ -369,30 +372,26 @@ class _MarkerSource:
     """MarkerArray bytes of the deformed linkage at a replayed sample."""
 
     def __init__(self, model, frame_id, exaggeration, points_per_link):
-        from rclpy.serialization import serialize_message
-
-        from . import ros_messages
-        self.model, self.frame_id, self.exaggeration = model, frame_id, exaggeration
-        self.count = points_per_link
-        self.rm, self.serialize = ros_messages, serialize_message
+        from .cdr import MarkerEncoder
+        from .ros_messages import OK
+        self.model, self.exaggeration = model, exaggeration
+        self.encoder = MarkerEncoder(frame_id, points_per_link)
+        self.levels = [OK] * 4
+        self.source = np.linspace(0.0, 1.0, model.shapes(0.0, np.zeros(model.size))[0].shape[1])
+        self.target = np.linspace(0.0, 1.0, points_per_link)
 
     def __call__(self, stamp_ns, estimate, n):
-        rm = self.rm
-        modal = estimate['modal'][n]
-        positions, deflections = self.model.shapes(estimate['crank_angle'][n], modal)
-        source = np.linspace(0.0, 1.0, positions.shape[1])
-        target = np.linspace(0.0, 1.0, self.count)
+        positions, deflections = self.model.shapes(estimate['crank_angle'][n],
+                                                   estimate['modal'][n])
 
         def resample(a):
-            return np.stack([np.interp(target, source, a[:, i]) for i in range(2)], axis=1)
+            return np.stack([np.interp(self.target, self.source, a[:, i]) for i in range(2)],
+                            axis=1)
 
-        joints = np.array([positions[0, 0], positions[0, -1], positions[1, -1],
-                           positions[2, 0]])
-        message = rm.linkage_markers(rm.ns_to_stamp(stamp_ns), self.frame_id,
-                                     [resample(p) for p in positions],
-                                     [resample(d) for d in deflections], self.exaggeration,
-                                     joints, [rm.OK] * 4)
-        return self.serialize(message)
+        joints = (positions[0, 0], positions[0, -1], positions[1, -1], positions[2, 0])
+        return self.encoder.encode(stamp_ns, [resample(p) for p in positions],
+                                   [resample(d) for d in deflections], self.exaggeration,
+                                   joints, self.levels)
 
 
 def publish_recording(samples, topic, speed=1.0, discovery_timeout_s=10.0):
@@ -529,9 +528,8 @@ def register(subparsers):
     parser.add_argument('--node-name', default='flexlink_node',
                         help='namespace of the output topics (default: flexlink_node)')
     parser.add_argument('--frame-id', default='linkage_ground', help='frame of the outputs')
-    parser.add_argument('--markers-every-n', type=int, default=100,
-                        help='markers on every n-th sample (0: none; default 100, i.e. 10 Hz '
-                        'at 1 kHz: building them dominates the replay time)')
+    parser.add_argument('--markers-every-n', type=int, default=10,
+                        help='markers on every n-th sample (0: none; default 10, as the node)')
     parser.add_argument('--no-warm-start', action='store_true',
                         help='start from the static deflection, not the periodic state')
     parser.add_argument('--publish', action='store_true',

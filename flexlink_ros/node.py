@@ -186,6 +186,7 @@ def _make_node_class():
             self._deserialize = lambda data: deserialize_message(data, JointState)
             self._serialize = serialize_message
             self._frame = self.values['frame_id'].encode()
+            self._marker_encoder = None
 
         def _configure(self, make_publisher):
             """Load or build the model, create the publishers, open the recording."""
@@ -364,8 +365,7 @@ def _make_node_class():
                 ('criteria', cdr.criteria_cdr(sec, nanosec, frame, sample.criterion,
                                               sample.gamma_dot, sample.reaction_n))]
             if self.published % values['markers.every_n'] == 0:
-                outputs.append(('markers', self._serialize(
-                    self._markers(rm.ns_to_stamp(stamp_ns), sample))))
+                outputs.append(('markers', self._markers(stamp_ns, sample)))
             self.published += 1
             for key, data in outputs:
                 try:
@@ -373,29 +373,32 @@ def _make_node_class():
                 except RCLError:
                     if self.context.ok():
                         raise
-                    return   # SIGINT/SIGTERM shut the context down while this callback ran
-            if self.recorder is not None:
+                    break   # SIGINT/SIGTERM shut the context down while this callback ran
+            if self.recorder is not None:   # recorded even then: the input was
                 log_ns = self._clock.now().nanoseconds
                 for key, data in outputs:
                     self._record(self.output_topics[key], data, log_ns)
 
-        def _markers(self, stamp, sample):
+        def _markers(self, stamp_ns, sample):
+            """CDR of the deformed-linkage markers (template encoder, rebuilt on changes)."""
             values = self.values
-            positions, deflections = self.estimator.link_shapes(sample)
             count = values['markers.points_per_link']
+            encoder = self._marker_encoder
+            if encoder is None or (encoder.frame_id, encoder.count) != (values['frame_id'],
+                                                                        count):
+                encoder = self._marker_encoder = cdr.MarkerEncoder(values['frame_id'], count)
+            positions, deflections = self.estimator.link_shapes(sample)
             source = np.linspace(0.0, 1.0, positions.shape[1])
             target = np.linspace(0.0, 1.0, count)
             resample = lambda a: np.stack([np.interp(target, source, a[:, i])  # noqa: E731
                                            for i in range(2)], axis=1)
-            joints = np.array([positions[0, 0], positions[0, -1], positions[1, -1],
-                               positions[2, 0]])
+            joints = (positions[0, 0], positions[0, -1], positions[1, -1], positions[2, 0])
             levels = [rm.joint_level(c, False, values['diagnostics.criterion_warn'],
                                      values['diagnostics.criterion_error'])
                       for c in sample.criterion]
-            return rm.linkage_markers(stamp, values['frame_id'],
-                                      [resample(p) for p in positions],
-                                      [resample(d) for d in deflections],
-                                      values['markers.exaggeration'], joints, levels)
+            return encoder.encode(stamp_ns, [resample(p) for p in positions],
+                                  [resample(d) for d in deflections],
+                                  values['markers.exaggeration'], joints, levels)
 
         # -- diagnostics ----------------------------------------------------------------
 

@@ -60,3 +60,22 @@ def test_big_endian_joint_state_is_read():
     big += struct.pack('>I', 0)
     assert cdr.parse_joint_state(big, b'crank') == cdr.parse_joint_state(little, b'crank') \
         == (5 * 10**9 + 7, 0.5, 2.0)
+
+
+@pytest.mark.parametrize('frame, count', [('linkage_ground', 9), ('m', 2), ('odd_frame', 17)])
+def test_marker_encoder_equals_the_exact_serialisation(frame, count):
+    import numpy as np
+    rng = np.random.default_rng(count)
+    encoder = cdr.MarkerEncoder(frame, count)
+    assert len(encoder.stamp_offsets) == 10      # 6 link strips + 4 joint spheres
+    levels = [ros_messages.OK, ros_messages.WARN, ros_messages.ERROR, ros_messages.STALE]
+    for _ in range(3):
+        points = [rng.normal(size=(count, 2)) for _ in range(3)]
+        deflections = [1e-3 * rng.normal(size=(count, 2)) for _ in range(3)]
+        joints = rng.normal(size=(4, 2))
+        stamp_ns = int(rng.integers(0, 2**31 - 1)) * 10**9 + int(rng.integers(0, 10**9))
+        rng.shuffle(levels)
+        expected = serialize_exact(ros_messages.linkage_markers(
+            ros_messages.ns_to_stamp(stamp_ns), frame, points, deflections, 37.0, joints,
+            levels))
+        assert encoder.encode(stamp_ns, points, deflections, 37.0, joints, levels) == expected

@@ -80,6 +80,7 @@ def test_replay_equals_the_streaming_estimator(tmp_path, model):
     expected = {s: estimator.update(s, a, speed) for s, a in zip(stamps.tolist(), angles)}
     counts = {}
     worst = 0.0
+    criteria_seen = False
     for topic, type_name, log_ns, _, data in cli_replay.iter_recording(out):
         counts[topic] = counts.get(topic, 0) + 1
         if topic.endswith('/deflection'):
@@ -92,7 +93,16 @@ def test_replay_equals_the_streaming_estimator(tmp_path, model):
             error = math.hypot(message.vector.x - reference[0], message.vector.y - reference[1])
             worst = max(worst, error / math.hypot(*reference) if any(reference) else error)
             assert message.header.frame_id == 'linkage_ground'
+        if topic.endswith('/joint_criteria'):
+            message = deserialize_message(data, JointState)
+            sample = expected[ros_messages.stamp_to_ns(message.header.stamp)]
+            for got, reference in ((message.position, sample.criterion),
+                                   (message.velocity, sample.gamma_dot),
+                                   (message.effort, sample.reaction_n)):
+                assert list(got) == pytest.approx(reference, rel=1e-6, abs=1e-12)
+            criteria_seen = criteria_seen or any(sample.criterion)
     assert worst < 1e-6
+    assert criteria_seen == bool(np.any(model.force_moments))
     assert counts == {'/joint_states': 701, '/flexlink_node/lever_tip/deflection': 701,
                       '/flexlink_node/coupler_mid/deflection': 701,
                       '/flexlink_node/joint_criteria': 701, '/flexlink_node/markers': 15}
