@@ -44,6 +44,15 @@ def test_quick_section_text_carries_the_numbers(section):
         assert heading in text
     for where in ('Fig. 7', 'Figs. 11-13', 'Fig. 20', 'Fig. 21', 'Fig. 22', 'Conclusion 3'):
         assert f'| {where} |' in text
+    # every row of a markdown table has as many cells as its header
+    cells = None
+    for line in text.splitlines():
+        if not line.startswith('|'):
+            cells = None
+            continue
+        count = line.count('|')
+        cells = count if cells is None else cells
+        assert count == cells, line
     available, reason = fs.geometric_stiffness_status(flex.load_mechanism('cho1992'))
     assert ('not computed' in text) == (not available)
     assert ('Computed without geometric stiffness' in text) == (not available)
