@@ -242,7 +242,7 @@ def summarise_recording(bag):
         elif topic.endswith('/coupler_mid/deflection'):
             deflections['coupler_mid'].append((message.vector.x, message.vector.y))
         elif topic.endswith('/joint_criteria'):
-            criteria.append(list(message.position))
+            criteria.append(list(message.position) + list(message.effort))
         elif type_name == 'sensor_msgs/msg/JointState':
             input_stamps.append(stamp)
             input_log.setdefault(stamp, log_ns)
@@ -260,7 +260,7 @@ def summarise_recording(bag):
         values = [float(kv.value) for s in estimator for kv in s.values
                   if kv.key == key and kv.value != 'nan']
         update[key] = values
-    available = criteria.size > 0 and np.any(criteria != 0.0)
+    available = criteria.size > 0 and bool(np.any(criteria[:, :4] != 0.0))
     from .ros_messages import JOINT_NAMES
     return {
         'path': str(bag), 'files': [f['path'] for f in info.get('files', [info])],
@@ -269,8 +269,15 @@ def summarise_recording(bag):
         'input_span_s': span, 'input_rate_hz': (samples - 1) / span if span > 0 else 0.0,
         'outputs': len(deflections['lever_tip']),
         'peak_to_peak_um': peak,
-        'criteria_max': (dict(zip(JOINT_NAMES, criteria.max(axis=0).tolist()))
+        'criteria_max': (dict(zip(JOINT_NAMES, criteria[:, :4].max(axis=0).tolist()))
                          if available else None),
+        # Reaction at the worst sample and the median reaction per joint [N]: a criterion
+        # peak where R nearly vanishes reads differently from one at full load.
+        'reaction_at_max_n': (dict(zip(JOINT_NAMES, criteria[
+            np.argmax(criteria[:, :4], axis=0), 4 + np.arange(4)].tolist()))
+            if available else None),
+        'reaction_median_n': (dict(zip(JOINT_NAMES, np.median(criteria[:, 4:], axis=0)
+                                       .tolist())) if available else None),
         'criteria_reason': None if available else source,
         'latency_us': ({'median': float(np.median(latency) / 1e3),
                         'p99': float(np.percentile(latency, 99) / 1e3)}
@@ -304,8 +311,12 @@ def summary_text(result):
         lines.append(f'  {label:<36} {value[0]:>10.1f}  {value[1]:>10.1f}' if value
                      else f'  {label:<36} no data')
     if result['criteria_max']:
-        lines.append('max Earles-Wu criterion |dgamma/dt|/R [rad/(s N)]: ' + ', '.join(
-            f'{joint} {value:.4g}' for joint, value in result['criteria_max'].items()))
+        lines.append('Earles-Wu criterion |dgamma/dt|/R    max [rad/(s N)]   R there [N]  '
+                     'median R [N]')
+        for joint, value in result['criteria_max'].items():
+            at_max = result['reaction_at_max_n'][joint]
+            median = result['reaction_median_n'][joint]
+            lines.append(f'  joint {joint:<30} {value:>12.4g}  {at_max:>12.4g}  {median:>12.4g}')
     else:
         reason = result['criteria_reason'].removeprefix('unavailable').strip(' ()')
         lines.append(f'criteria unavailable: {reason}')

@@ -47,6 +47,8 @@ def test_demo_runs_records_and_summarises(tmp_path):
         assert summary['criteria_reason']
     else:
         assert all(np.isfinite(list(summary['criteria_max'].values())))
+        assert all(value > 0 for value in summary['reaction_median_n'].values())
+        assert 'Earles-Wu criterion' in cli_demo.summary_text(summary)
     assert summary['latency_us']['median'] > 0 and summary['update_us']['median'] > 0
     text = cli_demo.summary_text(summary)
     for fragment in ('peak-to-peak', 'lever tip', 'coupler mid-point', 'Foxglove',
