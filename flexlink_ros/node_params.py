@@ -68,7 +68,7 @@ PARAMETERS = (
                   low=0.0, high=1.0, read_only=True),
     ParameterSpec('frame_id', 'linkage_ground', 'Frame of the ground (O2 at its origin, '
                   'x towards O4) for deflections and markers'),
-    ParameterSpec('markers.exaggeration', 100.0,
+    ParameterSpec('markers.exaggeration', 10.0,
                   'Scale applied to elastic deflections in the deformed-linkage markers',
                   low=1.0, high=1e6),
     ParameterSpec('markers.points_per_link', 9, 'Points drawn along each deformed link',
@@ -100,7 +100,8 @@ PARAMETERS = (
     ParameterSpec('record.max_duration_s', 0.0,
                   'Split the recording after this duration (0: never) [s]',
                   low=0.0, high=1e7, read_only=True),
-    ParameterSpec('qos.depth', 100, 'History depth of the input subscription and outputs',
+    ParameterSpec('qos.depth', 1000, 'History depth of the input subscription and outputs '
+                  '(1 s at 1 kHz: room for the warm start\'s pause)',
                   low=1, high=100000, read_only=True),
     ParameterSpec('qos.reliability', 'reliable', 'Reliability of input and outputs',
                   choices=('reliable', 'best_effort'), read_only=True),
@@ -173,6 +174,7 @@ def markdown_table():
         else:
             allowed = ''
         ro = ' (start-up only)' if spec.read_only else ''
+        description = spec.description.replace('|', '\\|')   # a bare | splits the cell
         rows.append(f'| `{spec.name}` | `{spec.default!r}` | {allowed} | '
-                    f'{spec.description}{ro} |')
+                    f'{description}{ro} |')
     return '\n'.join(rows)

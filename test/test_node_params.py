@@ -1,6 +1,9 @@
 """Node parameter table: defaults valid, bad values rejected with a reason."""
 
+import pathlib
+
 import pytest
+import yaml
 
 from flexlink_ros import node_params
 
@@ -42,3 +45,23 @@ def test_markdown_table_lists_every_parameter():
     table = node_params.markdown_table()
     for spec in node_params.PARAMETERS:
         assert f'`{spec.name}`' in table
+
+
+def _flatten(tree, prefix=''):
+    for key, value in tree.items():
+        if isinstance(value, dict):
+            yield from _flatten(value, f'{prefix}{key}.')
+        else:
+            yield f'{prefix}{key}', value
+
+
+def test_params_file_equals_the_code_defaults():
+    # `ros2 run` without --params-file must behave as with config/flexlink_node.yaml.
+    path = pathlib.Path(__file__).resolve().parents[1] / 'config' / 'flexlink_node.yaml'
+    shipped = dict(_flatten(yaml.safe_load(path.read_text())['flexlink_node']['ros__parameters']))
+    assert shipped == node_params.defaults()
+
+
+def test_markdown_table_escapes_pipes_inside_cells():
+    for row in node_params.markdown_table().splitlines():
+        assert row.replace('\\|', '').count('|') == 5, row
