@@ -35,7 +35,6 @@ that product by block to read only the monomial rows each block uses.
 import dataclasses
 
 import numpy as np
-import scipy.interpolate
 import scipy.linalg
 
 # Monomials of (w, a) that multiply the tabulated pieces, in table-row order ('w4': damping
@@ -87,6 +86,7 @@ def periodic_cell_coefficients(values):
     values = np.asarray(values, dtype=float)
     count = values.shape[0]
     closed = np.concatenate([values, values[:1]], axis=0)
+    import scipy.interpolate   # precompute only: spares the node ~20 MB of resident size
     spline = scipy.interpolate.CubicSpline(np.arange(count + 1.0), closed, axis=0,
                                            bc_type='periodic')
     # spline.c[m, k] multiplies (x - k)^(3 - m); the cell width is 1 here.
@@ -595,6 +595,10 @@ def output_values(model, rows, q):
             + layout.block(rows, 'corr'))
 
 
+# Steps per chunk of periodic_response (bounds its peak memory).
+PERIODIC_CHUNK = 60
+
+
 def periodic_response(model, speed, start_angle=0.0, steps=720, stages=2):
     """
     Periodic steady state of the reduced model at constant crank speed (shooting).
@@ -636,10 +640,16 @@ def periodic_response(model, speed, start_angle=0.0, steps=720, stages=2):
     period = 2.0 * np.pi / abs(speed)
     h = period / steps
     stage_times = (np.arange(steps)[:, None] + method.c[None, :]) * h
-    rows = model.evaluate(start_angle + speed * stage_times.ravel(), speed, 0.0)
-    mass, damping, stiffness, load = (b.reshape((steps, stages) + b.shape[1:])
-                                      for b in system_blocks(model, rows))
-    maps = step_maps(method, np.full(steps, h), mass, damping, stiffness, load)
+    maps = np.empty((steps, 2 * size, 2 * size + 1))
+    # In chunks: the table rows of a whole revolution at once would add tens of MB to the
+    # peak (and, through malloc's heap, to the node's resident size for good).
+    for first in range(0, steps, PERIODIC_CHUNK):
+        chunk = slice(first, min(first + PERIODIC_CHUNK, steps))
+        count = chunk.stop - chunk.start
+        rows = model.evaluate(start_angle + speed * stage_times[chunk].ravel(), speed, 0.0)
+        mass, damping, stiffness, load = (b.reshape((count, stages) + b.shape[1:])
+                                          for b in system_blocks(model, rows))
+        maps[chunk] = step_maps(method, np.full(count, h), mass, damping, stiffness, load)
     total = np.concatenate([np.eye(2 * size), np.zeros((2 * size, 1))], axis=1)
     for step in maps:
         total = step[:, :2 * size] @ total
