@@ -65,3 +65,8 @@ def test_params_file_equals_the_code_defaults():
 def test_markdown_table_escapes_pipes_inside_cells():
     for row in node_params.markdown_table().splitlines():
         assert row.replace('\\|', '').count('|') == 5, row
+
+
+def test_readme_parameter_table_is_current():
+    readme = pathlib.Path(__file__).resolve().parents[1] / 'README.md'
+    assert node_params.markdown_table() in readme.read_text()
