@@ -49,7 +49,10 @@ def plot_error_vs_cost(configurations, path, tolerance=None):
                        marker='*' if default else 'o',
                        color='tab:red' if default else 'tab:blue', zorder=3)
             ax.annotate(config['label'], (config['us_per_sample'], max(error, 1e-6)),
-                        textcoords='offset points', xytext=(4, 3), fontsize=7)
+                        textcoords='offset points', fontsize=7,
+                        # the default's label below its star: neighbours' labels go above
+                        xytext=(6, -10) if default else (4, 3),
+                        fontweight='bold' if default else 'normal')
         if tolerance is not None:
             ax.axhline(tolerance, color='grey', linestyle='--', linewidth=1.0,
                        label=f'tolerance {tolerance:g}')
