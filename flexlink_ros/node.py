@@ -279,13 +279,14 @@ def _make_node_class():
             path = values['record.path'] or time.strftime('flexlink_%Y%m%d_%H%M%S')
             recorder = McapRecorder(path, split_size_bytes=values['record.max_bytes'],
                                     split_duration_s=values['record.max_duration_s'])
+            # Topics first: if opening fails, writes to them are then dropped as failed,
+            # not refused as undeclared.
+            recorder.add_topic(self.resolve_topic_name(values['input_topic']), JointState, [qos])
+            for key, publisher in self.publishers_.items():
+                recorder.add_topic(publisher.topic_name, publisher.msg_type,
+                                   [publisher.qos_profile])
             try:
                 recorder.open()
-                recorder.add_topic(self.resolve_topic_name(values['input_topic']),
-                                   JointState, [qos])
-                for key, publisher in self.publishers_.items():
-                    recorder.add_topic(publisher.topic_name, publisher.msg_type,
-                                       [publisher.qos_profile])
             except RecorderError as exc:
                 self.get_logger().error(f'recording disabled: {exc}')
             return recorder

@@ -169,10 +169,12 @@ class McapRecorder:
                 if not self.bare:
                     self.path.mkdir(parents=True, exist_ok=True)
                     if any(self.path.iterdir()):
-                        raise RecorderError(f'bag directory {self.path} exists and is not empty')
+                        raise FileExistsError(f'bag directory {self.path} exists and is not '
+                                              'empty')
                 self._state = RecorderState.RECORDING
                 self._open_file()
             except OSError as exc:
+                # FAILED (not NEW): later writes are dropped quietly, not refused one by one.
                 self._fail(exc)
                 self._error_reported = True
                 raise RecorderError(f'cannot record to {self.path}: {exc}') from exc

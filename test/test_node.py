@@ -402,3 +402,49 @@ def test_managed_node_streams_only_while_active(tmp_path, processes, ros):
     assert info['complete'] and {t['topic']: t['count'] for t in info['topics']}[
         '/joint_states'] == 1
     assert node_process.stop(signal.SIGTERM) == 0
+
+
+def test_unwritable_recording_path_is_an_error_diagnostic_and_estimates_go_on(
+        tmp_path, processes, ros):
+    """record.path under a regular file (unwritable even for root): ERROR, outputs flow."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    from geometry_msgs.msg import Vector3Stamped
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import JointState
+
+    blocker = tmp_path / 'not_a_directory'
+    blocker.write_text('a file where the recording directory should go')
+    node_process = NodeProcess(tmp_path, 'record.enabled:=true',
+                               f'record.path:={blocker / "bag"}', 'diagnostics.period_s:=0.2')
+    processes.append(node_process)
+    node_process.wait_for(flexlink_node.READY_MESSAGE, READY_TIMEOUT_S)
+    assert 'recording disabled' in node_process.log()
+
+    test_node, executor = ros
+    qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+    publisher = test_node.create_publisher(JointState, 'joint_states', qos)
+    lever, diagnostics = [], []
+    test_node.create_subscription(Vector3Stamped, OUTPUTS[0], lever.append, qos)
+    test_node.create_subscription(DiagnosticArray, '/diagnostics', diagnostics.append, 10)
+    spin_until(executor, lambda: publisher.get_subscription_count() > 0
+               and test_node.count_publishers(OUTPUTS[0]) > 0 and diagnostics,
+               DISCOVERY_TIMEOUT_S, 'discovery')
+    speed = 30.0
+    stamps = [1_800_000_000 * 10**9 + n * 10**6 for n in range(200)]
+    for n, stamp in enumerate(stamps):
+        publisher.publish(joint_state(stamp, ['crank'], [speed * n * 1e-3], [speed]))
+        if n == 0:
+            spin_until(executor, lambda: lever, 20.0, 'the first output')
+        time.sleep(1e-3)
+    spin_until(executor, lambda: len(lever) >= len(stamps), 20.0, 'all outputs')
+    assert all(math.isfinite(m.vector.x) and math.isfinite(m.vector.y) for m in lever)
+
+    def recorder_levels():
+        return [s.level for d in diagnostics for s in d.status if s.name.endswith('recorder')]
+    spin_until(executor, lambda: recorder_levels(), 10.0, 'a recorder status')
+    assert recorder_levels()[-1] == DiagnosticStatus.ERROR
+    message = [s.message for d in diagnostics for s in d.status
+               if s.name.endswith('recorder')][-1]
+    assert 'FAILED' in message and 'not_a_directory' in message
+    assert node_process.stop(signal.SIGTERM) == 0
+    assert blocker.read_text().startswith('a file')

@@ -398,3 +398,24 @@ def test_sigkill_leaves_a_salvageable_file(tmp_path):
     assert lost_s < 1.0  # one flush period (0.5 s) plus a chunk, at most
     _, summary, decoded = read_with_mcap_ros2(tmp_path / 'salvaged.mcap')
     assert len(decoded) == result['message_count'] == summary.statistics.message_count
+
+
+@pytest.mark.parametrize('case', ['under_a_file', 'non_empty_bag_directory'])
+def test_failed_open_leaves_a_failed_recorder_that_drops_writes(tmp_path, case):
+    if case == 'under_a_file':
+        (tmp_path / 'file').write_text('x')
+        path = tmp_path / 'file' / 'bag'
+    else:
+        path = tmp_path / 'busy'
+        path.mkdir()
+        (path / 'other').write_text('x')
+    recorder = McapRecorder(path)
+    recorder.add_topic('/bytes', 'sensor_msgs/msg/JointState')
+    with pytest.raises(RecorderError, match='cannot record'):
+        recorder.open()
+    assert recorder.status()['state'] == 'failed'
+    # The failure was reported by open(): writes are dropped and counted, never raised.
+    assert recorder.write('/bytes', b'\x00\x01\x00\x00', T0_NS) is False
+    assert recorder.write('/x', JointState(), T0_NS) is False
+    assert recorder.status()['dropped_count'] == 2
+    recorder.close()
