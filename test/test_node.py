@@ -338,11 +338,18 @@ def test_driver_to_node_and_sigkill_leaves_a_recoverable_file(tmp_path, processe
     assert rosbags_counts == {k: v for k, v in counts.items() if v}
 
 
-def test_bad_parameters_file_value_stops_the_node_with_a_reason(tmp_path, processes):
-    node_process = NodeProcess(tmp_path, 'diagnostics.criterion_warn:=5000.0')
+@pytest.mark.parametrize('parameter, reason', [
+    ('diagnostics.criterion_warn:=5000.0', 'must not exceed'),
+    ('damping_ratio:=2.0', 'out of range'),         # refused by the descriptor's range
+])
+def test_bad_parameters_file_value_stops_the_node_with_a_reason(tmp_path, processes,
+                                                                 parameter, reason):
+    node_process = NodeProcess(tmp_path, parameter)
     processes.append(node_process)
     assert node_process.process.wait(timeout=READY_TIMEOUT_S) == 1
-    assert 'must not exceed' in node_process.log()
+    log = node_process.log()
+    assert reason in log and 'Traceback' not in log
+    assert log.strip().startswith(f'{flexlink_node.NODE_NAME}: error:')
 
 
 def test_managed_node_streams_only_while_active(tmp_path, processes, ros):
