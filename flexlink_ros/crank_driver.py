@@ -243,6 +243,7 @@ def make_executor():
 def main(args=None):
     """Entry point of the ``crank_driver`` executable."""
     import rclpy
+    from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
     from rclpy.executors import ExternalShutdownException
     from rclpy.utilities import remove_ros_args
 
@@ -250,7 +251,12 @@ def main(args=None):
     build_parser().parse_args(remove_ros_args(argv)[1:])
     try:
         with rclpy.init(args=argv):
-            node = _make_node_class()()
+            try:
+                node = _make_node_class()()
+            except (ValueError, InvalidParameterValueException,
+                    InvalidParameterTypeException) as exc:
+                print(f'crank_driver: error: {exc}', file=sys.stderr)
+                return 1
             executor = make_executor()
             executor.add_node(node)
             while rclpy.ok() and not node.finished.done():

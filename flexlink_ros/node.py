@@ -578,7 +578,7 @@ def build_parser():
 def main(args=None):
     """Entry point of the ``flexlink_node`` executable."""
     import rclpy
-    from rclpy.exceptions import InvalidParameterValueException
+    from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
     from rclpy.executors import ExternalShutdownException
 
     from .crank_driver import make_executor
@@ -592,7 +592,8 @@ def main(args=None):
         with rclpy.init(args=argv):
             try:
                 node = make_node(managed=options.managed)
-            except (FlexlinkError, ValueError, InvalidParameterValueException) as exc:
+            except (FlexlinkError, ValueError, InvalidParameterValueException,
+                    InvalidParameterTypeException) as exc:
                 print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
                 return 1
             executor = make_executor()

@@ -124,3 +124,16 @@ def test_driver_publishes_the_profile_at_rate(config_dir, monkeypatch):
     increments = np.diff(np.unwrap(position))
     trapezoid = 0.5 * (velocity[1:] + velocity[:-1]) * np.diff(stamp) * 1e-9
     assert increments == pytest.approx(trapezoid, abs=1e-6 + slope * 1e-6)
+
+
+@pytest.mark.parametrize('parameter, reason', [
+    ('profile:=zigzag', 'must be one of'),
+    ('rate_hz:=0.0', 'out of range'),
+    ('speed_rpm:=fast', 'expecting type'),
+])
+def test_bad_parameter_is_a_one_line_error(parameter, reason):
+    result = subprocess.run([sys.executable, '-m', 'flexlink_ros.crank_driver', '--ros-args',
+                             '-p', parameter], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 1
+    assert result.stderr.startswith('crank_driver: error:') and reason in result.stderr
+    assert 'Traceback' not in result.stderr

@@ -341,6 +341,7 @@ def test_driver_to_node_and_sigkill_leaves_a_recoverable_file(tmp_path, processe
 @pytest.mark.parametrize('parameter, reason', [
     ('diagnostics.criterion_warn:=5000.0', 'must not exceed'),
     ('damping_ratio:=2.0', 'out of range'),         # refused by the descriptor's range
+    ('qos.depth:=2.5', 'expecting type'),           # refused by the parameter's type
 ])
 def test_bad_parameters_file_value_stops_the_node_with_a_reason(tmp_path, processes,
                                                                  parameter, reason):
