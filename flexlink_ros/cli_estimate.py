@@ -3,8 +3,10 @@
 
 - ``estimate`` runs :class:`core.estimator.StreamingEstimator` on a synthetic constant-speed
   crank signal (optionally jittered) and prints the last full revolution.
-- ``plan`` picks the smallest reduced model meeting a tolerance against the full-order
-  reference over a speed range, and shows the error and cost of the alternatives.
+- ``plan`` picks the smallest model (physics: elements per link, rigid crank, geometric
+  stiffness, bearings; size: modes, static directions, grid) meeting a tolerance against the
+  full-order response of the richest model of the scene over a speed range, and shows the
+  error and cost of the alternatives (see :func:`run_plan`).
 - ``bench`` measures, side by side in one run: streaming cost per sample (median, p99),
   offline samples per second, full-order CPU per simulated second, and each configuration's
   error; it prints a table and writes a chart of error against cost.
@@ -238,67 +240,385 @@ def _estimate(args):
     return emit(result, text, args.json)
 
 
+# ---------------------------------------------------------------------------------------
+# plan: the smallest model (physics and size) meeting a tolerance against the scene
+
+# Element counts tried as simplifications (besides the mechanism's own count).
+PLAN_ELEMENTS = (2, 3, 4)
+# Basis sizes of the size stage: frozen-mode directions, static directions, grid points.
+PLAN_MODES = (2, 4, 6, 8, 10, 12, 16, 20, 24)
+PLAN_STATIC = (0, 2, 4)
+PLAN_GRIDS = (64, 128)
+
+
 def plan_candidates(base):
-    """Candidate options from small to large (fewest coordinates and cells first)."""
+    """
+    Size candidates (modes, static, grid) of one physics, from small to large.
+
+    Sorted by basis size r = modes + static, then grid points; the last is the generous size
+    at which :func:`run_plan` screens a physics choice.
+    """
     candidates = []
-    for modes in (2, 4, 6, 8, 10, 12, 16):
-        for static in (0, 2, 4):
-            for grid in (64, 128):
+    for modes in PLAN_MODES:
+        for static in PLAN_STATIC:
+            for grid in PLAN_GRIDS:
                 candidates.append(dataclasses.replace(base, modes=modes, static=static,
                                                       grid_size=grid))
     return sorted(candidates, key=lambda o: (o.modes + o.static, o.grid_size))
 
 
-def run_plan(mechanism, base, rpm_max, tolerance, rate_hz=1000.0, speeds_rpm=None,
-             max_candidates=None):
+def scene_options(mechanism, base):
     """
-    Evaluate candidates in order of size and pick the first meeting the tolerance.
+    The richest model of the scene: the reference every candidate is compared with.
+
+    The user's bearing model, geometric stiffness on, flexible crank, and
+    ``base.elements_per_link`` beam elements per link if given, else twice the mechanism's
+    count (Cho 1992: 6 elements; 8 differ from 6 by < 0.1 % relative RMS at 269 and 391 rpm).
+    """
+    elements = base.elements_per_link or 2 * mechanism.elements_per_link
+    return dataclasses.replace(base, elements_per_link=int(elements), rigid_crank=False,
+                               geometric_stiffness=True)
+
+
+def full_order_dofs(mechanism, options):
+    """DOFs of the full-order FE model of ``options`` (None if not available)."""
+    try:
+        from .core import assembly
+        return assembly.FlexibleLinkage(reduced.fe_mechanism(mechanism, options),
+                                        reduced.fe_options(options)).size
+    except Exception:   # noqa: BLE001 -- no FE model (toy systems, stripped checkouts)
+        return None
+
+
+def physics_candidates(mechanism, base, scene):
+    """
+    Physics simplifications of the scene, cheapest first, the scene's own physics last.
+
+    Rigid crank yes/no x geometric stiffness off/on x elements per link (:data:`PLAN_ELEMENTS`
+    and the mechanism's count, below the scene's), plus the opposite bearing model (expected
+    to fail: the scene's bearing model is the user's). Ordered by full-order DOFs, geometric
+    stiffness off before on, so the first acceptable one is the cheapest to build.
+    """
+    elements = sorted(e for e in {*PLAN_ELEMENTS, mechanism.elements_per_link}
+                      if e < scene.elements_per_link)
+    other = 'rigid' if scene.bearings == 'flexible' else 'flexible'
+    candidates = [dataclasses.replace(scene, elements_per_link=e, rigid_crank=rigid,
+                                      geometric_stiffness=geometric)
+                  for e in elements for rigid in (True, False) for geometric in (False, True)]
+    candidates.append(dataclasses.replace(scene, bearings=other,
+                                          elements_per_link=mechanism.elements_per_link))
+    if other == 'flexible' and not mechanism.bearing_stiffness:
+        candidates.pop()
+    costs = {o: (full_order_dofs(mechanism, o) or 0, o.geometric_stiffness)
+             for o in candidates}
+    return sorted(candidates, key=costs.__getitem__) + [scene]
+
+
+def physics_key(options):
+    """The physical choices of ``options`` (what its full-order reference depends on)."""
+    return (options.elements_per_link, options.rigid_crank, options.bearings,
+            options.geometric_stiffness)
+
+
+def describe_physics(options):
+    """Short label: elements, crank, geometric stiffness, bearings."""
+    return (f'{options.elements_per_link} el, {"rigid" if options.rigid_crank else "flex"} '
+            f'crank, GS {"on" if options.geometric_stiffness else "off"}, '
+            f'{options.bearings} bearings')
+
+
+class PlanSignals:
+    """
+    Per speed: the synthetic signal, the last revolution's angles, and full-order references.
+
+    Every candidate sees the same signal at a speed, so references at those angles are
+    computed once per physics (``reduced.reference_response`` keeps one entry only).
+    """
+
+    def __init__(self, mechanism, speeds_rpm, rate_hz):
+        self.mechanism = mechanism
+        self.speeds_rpm = list(speeds_rpm)
+        self.signals = {}
+        for rpm in self.speeds_rpm:
+            period = 2.0 * math.pi / (rpm * RPM)
+            stamps, angles, speeds = synthetic_signal(rpm, 2.0 * period, rate_hz)
+            self.signals[rpm] = (stamps, angles, speeds, last_revolution(stamps, rpm))
+        self.references = {}
+        self.seconds = {}
+
+    def reference(self, options, rpm):
+        """Full-order response of the physics of ``options`` at ``rpm`` (cached)."""
+        key = (physics_key(options), rpm)
+        if key not in self.references:
+            _, angles, _, mask = self.signals[rpm]
+            start = time.perf_counter()
+            self.references[key] = reduced.reference_response(self.mechanism, options,
+                                                              rpm * RPM, angles[mask])
+            self.seconds[key] = time.perf_counter() - start
+        return self.references[key]
+
+    def reference_seconds(self, options):
+        """Time spent on the full-order references of ``options`` [s]."""
+        return sum(s for (k, _), s in self.seconds.items() if k == physics_key(options))
+
+    def replay(self, model, rpm):
+        """The model's estimate over the last revolution at ``rpm``."""
+        stamps, angles, speeds, mask = self.signals[rpm]
+        out = replay(model, stamps, angles, speeds)
+        return {key: out[key][mask] for key in ('lever_tip', 'coupler_mid')}
+
+
+def _errors(estimate, reference):
+    return {key: relative_rms(estimate[key], reference[key])
+            for key in ('coupler_mid', 'lever_tip')}
+
+
+def _max_errors(rows_per_speed):
+    return {key: max(row[key] for row in rows_per_speed)
+            for key in ('coupler_mid', 'lever_tip')}
+
+
+def physics_error(signals, scene, options, budget):
+    """
+    Full-order response of ``options`` against the scene's: relative RMS, max over speeds.
+
+    Speeds are taken highest first; one already over ``budget`` ends the evaluation (the
+    candidate cannot be accepted), so the returned maximum covers ``speeds`` only.
+
+    Returns
+    -------
+    errors : dict
+        'coupler_mid', 'lever_tip'.
+    speeds : list of float
+        Speeds evaluated [rpm].
+
+    """
+    per_speed, speeds = [], []
+    for rpm in sorted(signals.speeds_rpm, reverse=True):
+        if physics_key(options) == physics_key(scene):
+            per_speed.append({'coupler_mid': 0.0, 'lever_tip': 0.0})
+        else:
+            per_speed.append(_errors(signals.reference(options, rpm),
+                                     signals.reference(scene, rpm)))
+        speeds.append(rpm)
+        if max(per_speed[-1].values()) > budget:
+            break
+    return _max_errors(per_speed), speeds
+
+
+def evaluate_model(signals, scene, options, rate_hz):
+    """
+    Build the reduced model of ``options`` and measure its cost and errors.
 
     Returns
     -------
     dict
-        'choice' (options and errors) or None, 'alternatives' (every evaluated candidate).
+        size, bytes, build_s, us_per_sample (median streaming update), error_coupler_mid and
+        error_lever_tip (against the scene reference, max over the speeds), and
+        truncation_error_* (against the full-order model of its own physics).
 
     """
-    speeds_rpm = speeds_rpm or sorted({min(s, rpm_max) for s in PAPER_RPM} | {rpm_max})
-    rows, choice = [], None
-    for index, options in enumerate(plan_candidates(base)):
-        if max_candidates is not None and index >= max_candidates:
-            break
-        start = time.perf_counter()
-        model = reduced.model_for_mechanism(mechanism, options, use_cache=False)
-        build_s = time.perf_counter() - start
-        errors = [configuration_error(mechanism, model, options, rpm, rate_hz)
-                  for rpm in speeds_rpm]
-        stamps, angles, speeds = synthetic_signal(speeds_rpm[-1], 0.3, rate_hz)
-        _, update_ns = stream_timed(model, stamps, angles, speeds)
-        median, _ = timing_summary(update_ns)
-        row = {'options': dataclasses.asdict(options), 'size': model.size,
-               'bytes': int(model.nbytes), 'build_s': build_s, 'us_per_sample': median,
-               'error_coupler_mid': max(e['error_coupler_mid'] for e in errors),
-               'error_lever_tip': max(e['error_lever_tip'] for e in errors)}
+    start = time.perf_counter()
+    model = reduced.model_for_mechanism(signals.mechanism, options, use_cache=False)
+    build_s = time.perf_counter() - start
+    total, truncation = [], []
+    for rpm in signals.speeds_rpm:
+        estimate = signals.replay(model, rpm)
+        total.append(_errors(estimate, signals.reference(scene, rpm)))
+        truncation.append(_errors(estimate, signals.reference(options, rpm)))
+    stamps, angles, speeds = synthetic_signal(max(signals.speeds_rpm), 0.3, rate_hz)
+    _, update_ns = stream_timed(model, stamps, angles, speeds)
+    median, _ = timing_summary(update_ns)
+    total, truncation = _max_errors(total), _max_errors(truncation)
+    return {'size': model.size, 'grid_size': model.grid_size, 'bytes': int(model.nbytes),
+            'build_s': build_s, 'us_per_sample': median,
+            'error_coupler_mid': total['coupler_mid'], 'error_lever_tip': total['lever_tip'],
+            'truncation_error_coupler_mid': truncation['coupler_mid'],
+            'truncation_error_lever_tip': truncation['lever_tip']}
+
+
+def _meets(row, tolerance):
+    return (row.get('error_coupler_mid') is not None
+            and row['error_coupler_mid'] <= tolerance and row['error_lever_tip'] <= tolerance)
+
+
+def run_plan(mechanism, base, rpm_max, tolerance, rate_hz=1000.0, speeds_rpm=None,
+             max_candidates=None, physics=None, scene=None):
+    """
+    The smallest model (physics and size) meeting ``tolerance`` against the scene reference.
+
+    Scene reference. The full-order periodic response (core/simulate.py via
+    ``reduced.reference_response``) of the richest model of the scene,
+    :func:`scene_options`: the user's bearings, flexible crank, geometric stiffness, refined
+    elements. Outputs are physical points (lever side of B, coupler material mid-point,
+    ground-frame elastic deflection), the same for every element count and crank model, so
+    every candidate is compared with this one reference at the same crank angles: the last
+    revolution of a constant-speed signal at each speed (the paper's speeds up to ``rpm_max``,
+    and ``rpm_max``); errors are relative RMS, the max over the speeds.
+
+    Search (two stages, every evaluated candidate is a row of 'alternatives').
+
+    1. Physics: the candidates of :func:`physics_candidates` (rigid crank, geometric stiffness
+       off/on, elements per link, the opposite bearing model; the scene's own physics last),
+       cheapest first. Each one's full-order response is compared with the scene's (the
+       physics error, no truncation in it). One within ``tolerance / 2`` (half the budget is
+       left to the reduction) is then built at the generous size (the last of
+       :func:`plan_candidates`); the first whose reduced model meets ``tolerance`` there is
+       chosen, and the later physics candidates are not evaluated.
+    2. Size: :func:`plan_candidates` of the chosen physics (modes x static x grid, sorted by
+       basis size r then grid), bisected for the first meeting ``tolerance``, assuming the
+       error falls with size (the rows show every size tried).
+
+    Parameters
+    ----------
+    mechanism : Mechanism
+    base : ModelOptions
+        Bearings, speed range, and the scene's elements (``elements_per_link``, None: twice
+        the mechanism's); its crank, geometric stiffness and sizes are what the plan chooses.
+    rpm_max : float
+        Largest speed [rpm].
+    tolerance : float
+        Relative RMS error target on both outputs.
+    rate_hz : float
+        Sample rate of the synthetic signals [Hz].
+    speeds_rpm : sequence of float or None
+        Speeds checked (default: PAPER_RPM capped at ``rpm_max``, and ``rpm_max``).
+    max_candidates : int or None
+        Stop after this many reduced models built.
+    physics : list of ModelOptions or None
+        Physics candidates in order (default :func:`physics_candidates`).
+    scene : ModelOptions or None
+        Options of the scene reference (default :func:`scene_options`).
+
+    Returns
+    -------
+    dict
+        'choice' (a row) or None, 'alternatives' (every evaluated row: 'stage' 'physics' or
+        'size', options, dofs, physics_error_* (full order vs scene), error_* (reduced vs
+        scene; None when not built), truncation_error_* (reduced vs its own full order),
+        size, bytes, build_s, us_per_sample), 'reference' (the scene), 'speeds_rpm',
+        'tolerance', 'seconds'.
+
+    """
+    started = time.perf_counter()
+    speeds_rpm = list(speeds_rpm or sorted({min(s, rpm_max) for s in PAPER_RPM} | {rpm_max}))
+    scene = scene or scene_options(mechanism, base)
+    physics = physics if physics is not None else physics_candidates(mechanism, base, scene)
+    signals = PlanSignals(mechanism, speeds_rpm, rate_hz)
+    for rpm in speeds_rpm:
+        source = signals.reference(scene, rpm).get('source')
+    reference = {'options': dataclasses.asdict(scene), 'label': describe_physics(scene),
+                 'dofs': full_order_dofs(mechanism, scene), 'source': source,
+                 'steps_per_revolution': reduced.REFERENCE_STEPS,
+                 'seconds': signals.reference_seconds(scene),
+                 'description': 'full-order periodic response of the richest model of the '
+                                'scene (flexible crank, geometric stiffness, refined '
+                                'elements, the requested bearings)'}
+    rows, built, chosen_physics = [], 0, None
+    budget = 0.5 * tolerance
+
+    def build(options, stage, extra):
+        nonlocal built
+        row = {'stage': stage, 'options': dataclasses.asdict(options),
+               'label': describe_physics(options), **extra}
+        row.update(evaluate_model(signals, scene, options, rate_hz))
+        row['meets_tolerance'] = _meets(row, tolerance)
         rows.append(row)
-        if row['error_coupler_mid'] <= tolerance and row['error_lever_tip'] <= tolerance:
-            choice = row
+        built += 1
+        return row
+
+    for options in physics:
+        if max_candidates is not None and built >= max_candidates:
             break
+        errors, evaluated = physics_error(signals, scene, options, budget)
+        extra = {'dofs': full_order_dofs(mechanism, options),
+                 'physics_error_coupler_mid': errors['coupler_mid'],
+                 'physics_error_lever_tip': errors['lever_tip'],
+                 'physics_speeds_rpm': evaluated,
+                 'reference_s': signals.reference_seconds(options)}
+        if max(errors.values()) > budget:
+            rows.append({'stage': 'physics', 'options': dataclasses.asdict(options),
+                         'label': describe_physics(options), **extra, 'size': None,
+                         'grid_size': None, 'bytes': None, 'build_s': None,
+                         'us_per_sample': None, 'error_coupler_mid': None,
+                         'error_lever_tip': None, 'meets_tolerance': False})
+            continue
+        sizes = plan_candidates(options)
+        row = build(sizes[-1], 'physics', extra)
+        if row['meets_tolerance']:
+            chosen_physics = (sizes, extra, row)
+            break
+    choice = None
+    if chosen_physics is not None:
+        sizes, extra, generous = chosen_physics
+        choice = generous
+        low, high = 0, len(sizes) - 1     # sizes[high] meets the tolerance
+        sized = []
+        while low < high and (max_candidates is None or built < max_candidates):
+            middle = (low + high) // 2
+            row = build(sizes[middle], 'size', extra)
+            sized.append(row)
+            if row['meets_tolerance']:
+                high, choice = middle, row
+            else:
+                low = middle + 1
+        rows = [r for r in rows if r['stage'] == 'physics'] + sorted(
+            sized, key=lambda r: (r['size'], r['grid_size']))
     return {'speeds_rpm': speeds_rpm, 'tolerance': tolerance, 'choice': choice,
-            'alternatives': rows}
+            'alternatives': rows, 'reference': reference,
+            'seconds': time.perf_counter() - started}
+
+
+def _fmt(value, spec, width):
+    return f'{"-":>{width}}' if value is None else f'{value:>{width}{spec}}'
+
+
+def plan_table(result):
+    """Text table of :func:`run_plan`'s rows."""
+    ref = result['reference']
+    speeds = ', '.join(f'{s:g}' for s in result['speeds_rpm'])
+    lines = [f'reference: {ref["label"]} ({ref["dofs"]} DOFs, {ref["source"]}, '
+             f'{ref["seconds"]:.1f} s), speeds {speeds} rpm, tolerance {result["tolerance"]:g}',
+             f'{"stage":<7} {"physics":<42} {"n":>3} {"modes":>5} {"stat":>4} {"grid":>4} '
+             f'{"r":>3} {"MB":>6} {"build s":>7} {"us":>6} {"phys c":>8} {"phys l":>8} '
+             f'{"trunc c":>8} {"trunc l":>8} {"coupler":>8} {"lever":>8} ok']
+    for row in result['alternatives']:
+        o = row['options']
+        built = row['size'] is not None
+        lines.append(
+            f'{row["stage"]:<7} {row["label"]:<42} {_fmt(row.get("dofs"), "d", 3)} '
+            f'{_fmt(o["modes"] if built else None, "d", 5)} '
+            f'{_fmt(o["static"] if built else None, "d", 4)} '
+            f'{_fmt(o["grid_size"] if built else None, "d", 4)} {_fmt(row["size"], "d", 3)} '
+            f'{_fmt(None if row["bytes"] is None else row["bytes"] / 1e6, ".1f", 6)} '
+            f'{_fmt(row["build_s"], ".1f", 7)} {_fmt(row["us_per_sample"], ".0f", 6)} '
+            f'{_fmt(row.get("physics_error_coupler_mid"), ".2e", 8)} '
+            f'{_fmt(row.get("physics_error_lever_tip"), ".2e", 8)} '
+            f'{_fmt(row.get("truncation_error_coupler_mid"), ".2e", 8)} '
+            f'{_fmt(row.get("truncation_error_lever_tip"), ".2e", 8)} '
+            f'{_fmt(row["error_coupler_mid"], ".2e", 8)} '
+            f'{_fmt(row["error_lever_tip"], ".2e", 8)} '
+            f'{"yes" if row["meets_tolerance"] else "no"}')
+    chosen = result['choice']
+    if chosen:
+        o = chosen['options']
+        lines.append(f'choice: {chosen["label"]}, {o["modes"]} modes + {o["static"]} static, '
+                     f'grid {o["grid_size"]} (r = {chosen["size"]}): coupler '
+                     f'{chosen["error_coupler_mid"]:.2e}, lever {chosen["error_lever_tip"]:.2e}, '
+                     f'{chosen["us_per_sample"]:.0f} us/sample')
+    else:
+        lines.append('choice: none of the candidates meets the tolerance')
+    lines.append(f'(physics error: full order vs the reference; trunc: reduced vs its own full '
+                 f'order; coupler/lever: reduced vs the reference; plan took '
+                 f'{result["seconds"]:.0f} s)')
+    return '\n'.join(lines)
 
 
 def _plan(args):
     mechanism = load_mechanism(args.mechanism)
     base = model_options(args)
     result = run_plan(mechanism, base, args.rpm_max, args.tolerance, args.rate_hz)
-    lines = [f'{"modes":>5} {"static":>6} {"grid":>5} {"us":>7} {"coupler":>9} {"lever":>9}']
-    for row in result['alternatives']:
-        o = row['options']
-        lines.append(f'{o["modes"]:>5} {o["static"]:>6} {o["grid_size"]:>5} '
-                     f'{row["us_per_sample"]:>7.1f} {row["error_coupler_mid"]:>9.2e} '
-                     f'{row["error_lever_tip"]:>9.2e}')
-    chosen = result['choice']
-    lines.append('choice: ' + (f'{chosen["options"]}' if chosen else
-                               'none of the candidates meets the tolerance'))
-    return emit(result, '\n'.join(lines), args.json)
+    return emit(result, plan_table(result), args.json)
 
 
 def reference_cpu_per_second(mechanism, options, rpm, rate_hz):
@@ -428,8 +748,11 @@ def register(subparsers):
     parser.add_argument('--seed', type=int, default=0, help='jitter random seed')
     parser.set_defaults(func=_estimate)
 
-    parser = subparsers.add_parser('plan', help='smallest reduced model meeting a tolerance '
-                                   'against the full-order reference')
+    parser = subparsers.add_parser('plan', help='smallest model (physics and size) meeting a '
+                                   'tolerance against the full-order response of the scene '
+                                   '(flexible crank, geometric stiffness, refined elements, '
+                                   '--bearings); --elements-per-link sets the reference\'s '
+                                   'elements, crank and geometric-stiffness flags are ignored')
     _common(parser)
     parser.add_argument('--rpm-max', type=float, required=True, help='largest speed [rpm]')
     parser.add_argument('--tolerance', type=float, default=0.01,

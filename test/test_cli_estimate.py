@@ -84,11 +84,20 @@ def test_plan_picks_the_first_candidate_within_tolerance(toy, monkeypatch):
         reduced.ModelOptions(modes=1, static=0, grid_size=32),
         reduced.ModelOptions(modes=4, static=2, grid_size=32),
         reduced.ModelOptions(modes=6, static=3, grid_size=32)])
-    result = cli_estimate.run_plan(None, reduced.ModelOptions(), 391.0, 0.01)
+    base = reduced.ModelOptions()
+    result = cli_estimate.run_plan(None, base, 391.0, 0.01, physics=[base], scene=base)
     assert result['choice'] is not None and result['choice']['options']['modes'] == 4
-    first = result['alternatives'][0]
+    # the physics stage builds the generous size (the last candidate); the size stage
+    # bisects the smaller ones, listed from small to large
+    stages = [row['stage'] for row in result['alternatives']]
+    assert stages == ['physics', 'size', 'size']
+    assert result['alternatives'][0]['options']['modes'] == 6
+    first = result['alternatives'][1]
+    assert first['options']['modes'] == 1 and not first['meets_tolerance']
     assert first['error_coupler_mid'] > 0.01 or first['error_lever_tip'] > 0.01
     assert all(row['us_per_sample'] > 0 for row in result['alternatives'])
+    assert result['alternatives'][0]['physics_error_coupler_mid'] == 0.0
+    assert 'choice: ' in cli_estimate.plan_table(result)
 
 
 def test_bench_table_and_chart(toy, tmp_path):
