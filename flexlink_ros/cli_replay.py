@@ -18,13 +18,14 @@ import pathlib
 import struct
 import sys
 import time
+import zlib
 
 import numpy as np
 
 from .cli import emit
 from .cli_estimate import _common, load_model, model_options
 from .cdr import criteria_cdr, parse_joint_state, vector3_stamped_cdr
-from .cli_mcap import iter_complete_records
+from .cli_mcap import MCAP_MAGIC, iter_complete_records
 from .core import estimator as core_estimator
 from .core.mechanism import load_mechanism
 from .core.reduced import JOINTS
@@ -90,11 +91,148 @@ def iter_recording(path, topics=None):
 
 def recording_topics(path):
     """Topic name -> (type name, message count) of a recording."""
-    found = {}
-    for topic, type_name, *_ in iter_recording(path):
-        known = found.setdefault(topic, [type_name, 0])
-        known[1] += 1
-    return {topic: tuple(value) for topic, value in found.items()}
+    counts, _ = scan_recording(path)
+    return {topic: tuple(value) for topic, value in counts.items()}
+
+
+_MESSAGE, _CHANNEL, _SCHEMA, _CHUNK = 0x05, 0x04, 0x03, 0x06
+_DATA_END, _FOOTER = 0x0F, 0x02
+_PREFIX = struct.Struct('<BQ')
+_MESSAGE_HEAD = struct.Struct('<BQHIQQ')   # opcode, length, channel, sequence, log, publish
+_CHUNK_HEAD = struct.Struct('<QQQII')      # start, end, uncompressed size, crc, name length
+
+
+def _mcap_string(data, offset):
+    (length,) = struct.unpack_from('<I', data, offset)
+    offset += 4
+    return bytes(data[offset:offset + length]).decode('utf-8'), offset + length
+
+
+def _file_messages(file, wanted):
+    """
+    Complete messages of one (possibly truncated) MCAP file, read in one pass.
+
+    Like ``cli_mcap.iter_complete_records`` (every complete record up to the first damaged
+    one; a chunk is used only whole and with a matching CRC) but parsing only what replay
+    needs, with plain ``struct`` on the file's bytes.
+
+    Parameters
+    ----------
+    file : pathlib.Path
+    wanted : callable
+        ``wanted(topic, type_name)``: keep the payloads of this channel's messages.
+
+    Returns
+    -------
+    counts : dict
+        Topic -> [type name, message count] of every CDR channel with messages.
+    kept : dict
+        Topic -> list of (log_time_ns, publish_time_ns, data) of the wanted channels.
+
+    """
+    data = file.read_bytes()
+    schemas, channels, counts, kept = {}, {}, {}, {}
+    if data[:8] != MCAP_MAGIC:
+        return counts, kept
+
+    def records(buffer, start, stop, commit):
+        # Schemas, channels and messages of one run of records; raises if damaged.
+        offset = start
+        while offset < stop:
+            opcode, length = _PREFIX.unpack_from(buffer, offset)
+            end = offset + 9 + length
+            if end > stop:
+                raise ValueError('record overruns its container')
+            if opcode == _MESSAGE:
+                channel = channels.get(struct.unpack_from('<H', buffer, offset + 9)[0])
+                if channel is not None:
+                    commit(channel, buffer, offset, end)
+            elif opcode == _CHANNEL:
+                channel_id, schema_id = struct.unpack_from('<HH', buffer, offset + 9)
+                topic, position = _mcap_string(buffer, offset + 13)
+                encoding, _ = _mcap_string(buffer, position)
+                type_name = schemas.get(schema_id, '')
+                if encoding == 'cdr':
+                    entry = counts.get(topic)
+                    if entry is None:
+                        entry = [type_name, 0]
+                    store = kept.setdefault(topic, []) if wanted(topic, type_name) else None
+                    channels[channel_id] = (topic, entry, store)
+                else:
+                    channels.pop(channel_id, None)
+            elif opcode == _SCHEMA:
+                (schema_id,) = struct.unpack_from('<H', buffer, offset + 9)
+                schemas[schema_id], _ = _mcap_string(buffer, offset + 11)
+            offset = end
+
+    def commit(channel, buffer, offset, end):
+        topic, entry, store = channel
+        if entry[1] == 0:
+            counts[topic] = entry
+        entry[1] += 1
+        if store is not None:
+            _, _, _, _, log_time, publish_time = _MESSAGE_HEAD.unpack_from(buffer, offset)
+            store.append((log_time, publish_time, buffer[offset + 31:end]))
+
+    size = len(data)
+    offset = 8
+    while offset + 9 <= size:
+        opcode, length = _PREFIX.unpack_from(data, offset)
+        end = offset + 9 + length
+        if end > size or opcode in (_DATA_END, _FOOTER):
+            break
+        try:
+            if opcode == _CHUNK:
+                _, _, raw_size, crc, name_length = _CHUNK_HEAD.unpack_from(data, offset + 9)
+                position = offset + 9 + 32
+                compression = data[position:position + name_length].decode()
+                position += name_length
+                (stored,) = struct.unpack_from('<Q', data, position)
+                payload = data[position + 8:position + 8 + stored]
+                if compression == 'zstd':
+                    import zstandard
+                    payload = zstandard.decompress(payload, raw_size)
+                elif compression == 'lz4':
+                    import lz4.frame
+                    payload = lz4.frame.decompress(payload)
+                elif compression:
+                    raise ValueError(f'unknown compression {compression!r}')
+                if crc and zlib.crc32(payload) != crc:
+                    raise ValueError('chunk CRC mismatch')
+                # Parse the whole chunk before keeping anything (a damaged chunk adds nothing).
+                pending = []
+                records(payload, 0, len(payload), lambda *item: pending.append(item))
+                for item in pending:
+                    commit(*item)
+            elif opcode in (_MESSAGE, _CHANNEL, _SCHEMA):
+                records(data, offset, end, commit)
+        except (ValueError, struct.error, UnicodeDecodeError, ImportError):
+            break
+        offset = end
+    return counts, kept
+
+
+def scan_recording(path, keep_type=JOINT_STATE):
+    """
+    Topics and the messages of one type of a recording, in one pass over its files.
+
+    Returns
+    -------
+    counts : dict
+        Topic -> [type name, message count] (CDR channels with messages).
+    kept : dict
+        Topic -> list of (log_time_ns, publish_time_ns, data) of the ``keep_type`` topics.
+
+    """
+    counts, kept = {}, {}
+    for file in recording_files(path):
+        file_counts, file_kept = _file_messages(
+            file, lambda topic, type_name: type_name == keep_type)
+        for topic, (type_name, count) in file_counts.items():
+            counts.setdefault(topic, [type_name, 0])[1] += count
+        for topic, messages in file_kept.items():
+            kept.setdefault(topic, []).extend(messages)
+    return counts, kept
 
 
 # -- estimation --------------------------------------------------------------------------
@@ -229,9 +367,14 @@ def estimate_offline(model, stamps_ns, angles, speeds, warm_start=True):
 
 # -- the command -------------------------------------------------------------------------
 
-def choose_input_topic(path, joint_name, topic=None):
-    """The JointState topic carrying the crank joint (``topic`` if given, checked)."""
-    topics = recording_topics(path)
+def choose_input_topic(path, joint_name, topic=None, scan=None):
+    """
+    The JointState topic carrying the crank joint (``topic`` if given, checked).
+
+    ``scan`` is :func:`scan_recording` of ``path`` if already done (the file is read once).
+    """
+    counts, kept = scan_recording(path) if scan is None else scan
+    topics = {name: tuple(value) for name, value in counts.items()}
     if topic is not None:
         if topic not in topics:
             raise ValueError(f'`--topic` {topic} is not in the recording (topics: '
@@ -241,12 +384,10 @@ def choose_input_topic(path, joint_name, topic=None):
         return topic
     candidates = []
     for name, (type_name, _) in sorted(topics.items()):
-        if type_name != JOINT_STATE:
+        if type_name != JOINT_STATE or not kept.get(name):
             continue
-        for *_, data in iter_recording(path, {name}):
-            if parse_joint_state(data, joint_name.encode())[1] is not None:
-                candidates.append(name)
-            break
+        if parse_joint_state(kept[name][0][2], joint_name.encode())[1] is not None:
+            candidates.append(name)
     if not candidates:
         raise ValueError(f'no {JOINT_STATE} topic with joint {joint_name!r} in {path} '
                          f'(topics: {", ".join(sorted(topics)) or "none"})')
@@ -256,9 +397,123 @@ def choose_input_topic(path, joint_name, topic=None):
     return candidates[0]
 
 
-def read_crank_samples(path, topic, joint_name):
+def _joint_state_layout(data, joint_name):
+    """
+    Byte layout of a little-endian JointState CDR message, for reading many like it at once.
+
+    Returns
+    -------
+    (variable, position, velocity) or None
+        ``variable``: byte ranges that may differ between messages of the same layout (stamp
+        and value arrays); ``position``/``velocity``: offsets of the joint's values (velocity
+        None if absent). None if the message is not little endian or lacks the joint.
+
+    """
+    if len(data) < 16 or data[:4] != b'\x00\x01\x00\x00':
+        return None
+    offset = 12
+    (length,) = struct.unpack_from('<I', data, offset)
+    offset = _cdr_align(offset + 4 + length, 4)
+    (count,) = struct.unpack_from('<I', data, offset)
+    offset += 4
+    index = None
+    for k in range(count):
+        offset = _cdr_align(offset, 4)
+        (length,) = struct.unpack_from('<I', data, offset)
+        if index is None and data[offset + 4:offset + 4 + max(length - 1, 0)] == joint_name:
+            index = k
+        offset += 4 + length
+    variable, starts, sizes = [(4, 12)], [], []
+    for _ in range(3):   # position, velocity, effort
+        offset = _cdr_align(offset, 4)
+        (size,) = struct.unpack_from('<I', data, offset)
+        offset += 4
+        if size:
+            offset = _cdr_align(offset, 8)
+        starts.append(offset)
+        sizes.append(size)
+        variable.append((offset, offset + 8 * size))
+        offset += 8 * size
+    if index is None or index >= sizes[0] or offset != len(data):
+        return None
+    velocity = starts[1] + 8 * index if index < sizes[1] else None
+    return variable, starts[0] + 8 * index, velocity
+
+
+def _cdr_align(offset, size):
+    return offset + (-(offset - 4)) % size
+
+
+def _parse_crank_states(payloads, joint_name):
+    """
+    Stamp [ns], angle and speed (NaN if absent) of the joint in many JointState payloads.
+
+    Messages with the first usable message's byte layout (the usual case: one publisher) are
+    read together with numpy; the others one by one (:func:`cdr.parse_joint_state`).
+
+    Returns
+    -------
+    stamps (int64), angles, speeds : ndarray, shape (m,)
+    valid : ndarray of bool
+        The joint has a position (else the values are meaningless).
+    has_speed : ndarray of bool
+        The message has a velocity for the joint.
+
+    """
+    count = len(payloads)
+    stamps = np.zeros(count, dtype=np.int64)
+    angles = np.full(count, math.nan)
+    speeds = np.full(count, math.nan)
+    valid = np.zeros(count, dtype=bool)
+    has_speed = np.zeros(count, dtype=bool)
+    fast = np.zeros(count, dtype=bool)
+    layout = None
+    for n, payload in enumerate(payloads[:16]):
+        layout = _joint_state_layout(payload, joint_name)
+        if layout is not None:
+            reference = payloads[n]
+            break
+    if layout is not None:
+        variable, position, velocity = layout
+        size = len(reference)
+        same = np.fromiter((len(p) == size for p in payloads), dtype=bool, count=count)
+        chosen = np.flatnonzero(same)
+        rows = np.frombuffer(b''.join([payloads[n] for n in chosen]),
+                             dtype=np.uint8).reshape(chosen.size, size)
+        fixed = np.ones(size, dtype=bool)
+        for first, stop in variable:
+            fixed[first:stop] = False
+        expected = np.frombuffer(reference, dtype=np.uint8)[fixed]
+        match = np.all(rows[:, fixed] == expected, axis=1)
+        chosen, rows = chosen[match], rows[match]
+        fast[chosen] = True
+        valid[chosen] = True
+        sec = rows[:, 4:8].copy().view('<i4')[:, 0].astype(np.int64)
+        nanosec = rows[:, 8:12].copy().view('<u4')[:, 0].astype(np.int64)
+        stamps[chosen] = sec * 1_000_000_000 + nanosec
+        angles[chosen] = rows[:, position:position + 8].copy().view('<f8')[:, 0]
+        if velocity is not None:
+            speeds[chosen] = rows[:, velocity:velocity + 8].copy().view('<f8')[:, 0]
+            has_speed[chosen] = True
+    for n in np.flatnonzero(~fast).tolist():
+        try:
+            stamp, angle, speed = parse_joint_state(payloads[n], joint_name)
+        except (struct.error, IndexError):
+            continue
+        if angle is None:
+            continue
+        valid[n] = True
+        stamps[n], angles[n] = stamp, angle
+        if speed is not None:
+            speeds[n], has_speed[n] = speed, True
+    return stamps, angles, speeds, valid, has_speed
+
+
+def read_crank_samples(path, topic, joint_name, scan=None):
     """
     The crank samples of one topic.
+
+    ``scan`` is :func:`scan_recording` of ``path`` if already done (the file is read once).
 
     Returns
     -------
@@ -267,28 +522,25 @@ def read_crank_samples(path, topic, joint_name):
         'speeds' (NaN where missing) of the usable messages, and 'skipped' (count).
 
     """
-    name = joint_name.encode()
-    data, log_ns, publish_ns, stamps, angles, speeds = [], [], [], [], [], []
-    skipped = 0
-    for _, _, log_time, publish_time, payload in iter_recording(path, {topic}):
-        try:
-            stamp, angle, speed = parse_joint_state(payload, name)
-        except (struct.error, IndexError):
-            angle = None
-        if angle is None or not math.isfinite(angle) or stamp == 0 or (
-                speed is not None and not math.isfinite(speed)):
-            skipped += 1
-            continue
-        data.append(payload)
-        log_ns.append(log_time)
-        publish_ns.append(publish_time)
-        stamps.append(stamp)
-        angles.append(angle)
-        speeds.append(math.nan if speed is None else speed)
-    return {'data': data, 'log_ns': np.array(log_ns, dtype=np.int64),
-            'publish_ns': np.array(publish_ns, dtype=np.int64),
-            'stamps_ns': np.array(stamps, dtype=np.int64), 'angles': np.array(angles),
-            'speeds': np.array(speeds), 'skipped': skipped}
+    if scan is None:
+        messages = list(iter_recording(path, {topic}))
+        messages = [(log, publish, data) for _, _, log, publish, data in messages]
+    else:
+        messages = scan[1].get(topic, [])
+    if not messages:
+        empty = np.zeros(0, dtype=np.int64)
+        return {'data': [], 'log_ns': empty, 'publish_ns': empty, 'stamps_ns': empty,
+                'angles': np.zeros(0), 'speeds': np.zeros(0), 'skipped': 0}
+    log_ns, publish_ns, payloads = zip(*messages)
+    stamps, angles, speeds, valid, has_speed = _parse_crank_states(payloads,
+                                                                   joint_name.encode())
+    usable = valid & np.isfinite(angles) & (stamps != 0) & (np.isfinite(speeds) | ~has_speed)
+    chosen = np.flatnonzero(usable)
+    return {'data': [payloads[n] for n in chosen.tolist()],
+            'log_ns': np.array(log_ns, dtype=np.int64)[chosen],
+            'publish_ns': np.array(publish_ns, dtype=np.int64)[chosen],
+            'stamps_ns': stamps[chosen], 'angles': angles[chosen], 'speeds': speeds[chosen],
+            'skipped': len(payloads) - chosen.size}
 
 
 def output_topics(node_name):
@@ -444,9 +696,11 @@ def load_model_with_fallback(mechanism, options, args, warn):
 def run_replay(args):
     """Read, estimate, write and/or publish; returns the JSON-ready summary."""
     notes = []
-    topic = choose_input_topic(args.input, args.joint, args.topic)
     start = time.perf_counter()
-    samples = read_crank_samples(args.input, topic, args.joint)
+    scan = scan_recording(args.input)
+    topic = choose_input_topic(args.input, args.joint, args.topic, scan)
+    samples = read_crank_samples(args.input, topic, args.joint, scan)
+    del scan
     if not samples['data']:
         raise ValueError(f'no usable samples of joint {args.joint!r} on {topic}')
     read_s = time.perf_counter() - start
