@@ -24,7 +24,7 @@ import numpy as np
 
 from .cli import emit
 from .cli_estimate import _common, load_model, model_options
-from .cdr import criteria_cdr, parse_joint_state, vector3_stamped_cdr
+from .cdr import parse_joint_state
 from .cli_mcap import MCAP_MAGIC, iter_complete_records
 from .core import estimator as core_estimator
 from .core.mechanism import load_mechanism
@@ -572,10 +572,19 @@ class _Progress:
         self.stream.flush()
 
 
+# Samples per batch of write_replay (the progress bar moves between batches).
+WRITE_BATCH = 1024
+
+
 def write_replay(out_path, samples, estimate, input_topic, topics, frame_id, model,
                  markers_every_n=10, exaggeration=10.0, points_per_link=9):
     """
     Write the input and the recomputed outputs into a rosbag2 MCAP.
+
+    Per sample: the input, the two deflections and the criteria, and every
+    ``markers_every_n``-th sample the markers, each logged at the input's log time (the
+    order :meth:`McapRecorder.write` calls would give). The messages are encoded in bulk
+    (cdr.py row encoders) and written in batches (:meth:`McapRecorder.write_batch`).
 
     Returns
     -------
@@ -583,6 +592,7 @@ def write_replay(out_path, samples, estimate, input_topic, topics, frame_id, mod
         The recorder's final status.
 
     """
+    from .cdr import criteria_rows, rows_to_bytes, vector3_stamped_rows
     from .recorder import McapRecorder
     recorder = McapRecorder(out_path)
     recorder.open()
@@ -595,33 +605,51 @@ def write_replay(out_path, samples, estimate, input_topic, topics, frame_id, mod
             recorder.add_topic(topics['markers'], MARKER_ARRAY)
             marker_source = _MarkerSource(model, frame_id, exaggeration, points_per_link)
         frame = frame_id.encode()
-        lever, coupler = estimate['lever_tip'].tolist(), estimate['coupler_mid'].tolist()
-        ratio, rate, force = (estimate[k].tolist() for k in ('criterion', 'gamma_dot',
-                                                             'reaction_n'))
-        progress = _Progress(len(samples['data']), f'writing {out_path}')
-        write = recorder.write
-        for n, (payload, log_ns, publish_ns, stamp) in enumerate(zip(
-                samples['data'], samples['log_ns'].tolist(), samples['publish_ns'].tolist(),
-                samples['stamps_ns'].tolist())):
-            sec, nanosec = divmod(stamp, 1_000_000_000)
-            write(input_topic, payload, log_ns, publish_ns)
-            write(topics['lever_tip'], vector3_stamped_cdr(sec, nanosec, frame, *lever[n]),
-                  log_ns)
-            write(topics['coupler_mid'], vector3_stamped_cdr(sec, nanosec, frame,
-                                                             *coupler[n]), log_ns)
-            write(topics['criteria'], criteria_cdr(sec, nanosec, frame, ratio[n], rate[n],
-                                                   force[n]), log_ns)
-            if markers_every_n and n % markers_every_n == 0:
-                write(topics['markers'], marker_source(stamp, estimate, n), log_ns)
-            progress(n)
-        progress(len(samples['data']), force=True)
+        count = len(samples['data'])
+        progress = _Progress(count, f'writing {out_path}')
+        names = (input_topic, topics['lever_tip'], topics['coupler_mid'], topics['criteria'])
+        for first in range(0, count, WRITE_BATCH):
+            chosen = slice(first, min(first + WRITE_BATCH, count))
+            stamps = samples['stamps_ns'][chosen]
+            log_ns = samples['log_ns'][chosen]
+            columns = [samples['data'][chosen],
+                       rows_to_bytes(vector3_stamped_rows(stamps, frame,
+                                                          estimate['lever_tip'][chosen])),
+                       rows_to_bytes(vector3_stamped_rows(stamps, frame,
+                                                          estimate['coupler_mid'][chosen])),
+                       rows_to_bytes(criteria_rows(stamps, frame,
+                                                   estimate['criterion'][chosen],
+                                                   estimate['gamma_dot'][chosen],
+                                                   estimate['reaction_n'][chosen]))]
+            per_sample = np.full(stamps.size, len(names))
+            if markers_every_n:
+                marked = np.flatnonzero(np.arange(first, chosen.stop) % markers_every_n == 0)
+                markers = iter(rows_to_bytes(marker_source.rows(
+                    stamps[marked], estimate['crank_angle'][first + marked],
+                    estimate['modal'][first + marked])))
+                per_sample[marked] += 1
+            messages, topic_of = [], []
+            with_marker = (per_sample > len(names)).tolist()
+            for n, row in enumerate(zip(*columns)):
+                messages += row
+                topic_of += names
+                if with_marker[n]:
+                    messages.append(next(markers))
+                    topic_of.append(topics['markers'])
+            log_times = np.repeat(log_ns, per_sample)
+            publish_times = log_times.copy()
+            # The input keeps its publish time; the outputs are logged and sent at its log time.
+            publish_times[np.cumsum(per_sample) - per_sample] = samples['publish_ns'][chosen]
+            recorder.write_batch(topic_of, messages, log_times, publish_times)
+            progress(chosen.stop)
+        progress(count, force=True)
     finally:
         status = recorder.close()
     return status
 
 
 class _MarkerSource:
-    """MarkerArray bytes of the deformed linkage at a replayed sample."""
+    """MarkerArray bytes of the deformed linkage at replayed samples."""
 
     def __init__(self, model, frame_id, exaggeration, points_per_link):
         from .cdr import MarkerEncoder
@@ -629,21 +657,41 @@ class _MarkerSource:
         self.model, self.exaggeration = model, exaggeration
         self.encoder = MarkerEncoder(frame_id, points_per_link)
         self.levels = [OK] * 4
-        self.source = np.linspace(0.0, 1.0, model.shapes(0.0, np.zeros(model.size))[0].shape[1])
-        self.target = np.linspace(0.0, 1.0, points_per_link)
-
-    def __call__(self, stamp_ns, estimate, n):
-        positions, deflections = self.model.shapes(estimate['crank_angle'][n],
-                                                   estimate['modal'][n])
-
-        def resample(a):
-            return np.stack([np.interp(self.target, self.source, a[:, i]) for i in range(2)],
+        # Resampling the link points (linear interpolation along each link) is linear: apply
+        # it to the shape table once.
+        table = model.shape_table
+        source = np.linspace(0.0, 1.0, table.shape[3])
+        target = np.linspace(0.0, 1.0, points_per_link)
+        resample = np.stack([np.interp(target, source, unit) for unit in np.eye(source.size)],
                             axis=1)
+        self.table = np.einsum('ts,nclsdr->ncltdr', resample, table)
 
-        joints = (positions[0, 0], positions[0, -1], positions[1, -1], positions[2, 0])
-        return self.encoder.encode(stamp_ns, [resample(p) for p in positions],
-                                   [resample(d) for d in deflections], self.exaggeration,
-                                   joints, self.levels)
+    def rows(self, stamps_ns, angles, modal):
+        """
+        Marker arrays at many samples.
+
+        Parameters
+        ----------
+        stamps_ns : ndarray of int, shape (m,)
+        angles : ndarray, shape (m,)
+            Crank angles [rad].
+        modal : ndarray, shape (m, r)
+            Reduced coordinates.
+
+        Returns
+        -------
+        ndarray of uint8, shape (m, length)
+            One CDR message per row.
+
+        """
+        cells, t = self.model.cell(angles)
+        powers = t[:, None] ** np.arange(self.table.shape[1])
+        values = np.einsum('mp,mpltdr->mltdr', powers, self.table[cells])
+        positions = values[..., -1]
+        deflections = np.einsum('mltdr,mr->mltd', values[..., :-1], modal)
+        joints = positions[:, (0, 0, 1, 2), (0, -1, -1, 0)]
+        return self.encoder.encode_rows(stamps_ns, positions, deflections, self.exaggeration,
+                                        joints, self.levels)
 
 
 def publish_recording(samples, topic, speed=1.0, discovery_timeout_s=10.0):

@@ -79,3 +79,30 @@ def test_marker_encoder_equals_the_exact_serialisation(frame, count):
             ros_messages.ns_to_stamp(stamp_ns), frame, points, deflections, 37.0, joints,
             levels))
         assert encoder.encode(stamp_ns, points, deflections, 37.0, joints, levels) == expected
+
+
+@pytest.mark.parametrize('frame', ['linkage_ground', 'm', 'odd_frame'])
+def test_row_encoders_equal_the_one_message_encoders(frame):
+    import numpy as np
+    rng = np.random.default_rng(len(frame))
+    count = 7
+    stamps = rng.integers(0, 2**31 - 1, count) * 10**9 + rng.integers(0, 10**9, count)
+    values = rng.normal(size=(count, 2))
+    ratio, rate, force = (rng.normal(size=(count, 4)) for _ in range(3))
+    encoded = frame.encode()
+    vectors = cdr.rows_to_bytes(cdr.vector3_stamped_rows(stamps, encoded, values))
+    criteria = cdr.rows_to_bytes(cdr.criteria_rows(stamps, encoded, ratio, rate, force))
+    encoder = cdr.MarkerEncoder(frame, 5)
+    points = rng.normal(size=(count, 3, 5, 2))
+    deflections = 1e-3 * rng.normal(size=(count, 3, 5, 2))
+    joints = rng.normal(size=(count, 4, 2))
+    levels = [ros_messages.OK, ros_messages.WARN, ros_messages.ERROR, ros_messages.OK]
+    markers = cdr.rows_to_bytes(encoder.encode_rows(stamps, points, deflections, 11.0, joints,
+                                                    levels))
+    for n, stamp in enumerate(stamps.tolist()):
+        sec, nanosec = divmod(stamp, 10**9)
+        assert vectors[n] == cdr.vector3_stamped_cdr(sec, nanosec, encoded, *values[n])
+        assert criteria[n] == cdr.criteria_cdr(sec, nanosec, encoded, ratio[n], rate[n],
+                                               force[n])
+        assert markers[n] == encoder.encode(stamp, list(points[n]), list(deflections[n]), 11.0,
+                                            joints[n], levels)

@@ -419,3 +419,42 @@ def test_failed_open_leaves_a_failed_recorder_that_drops_writes(tmp_path, case):
     assert recorder.write('/x', JointState(), T0_NS) is False
     assert recorder.status()['dropped_count'] == 2
     recorder.close()
+
+
+@pytest.mark.parametrize('chunk_size, bag', [(1024, False), (128 * 1024, True), (10**7, False)])
+def test_write_batch_writes_the_same_file_as_write(tmp_path, chunk_size, bag):
+    """Batches (mixed with single writes) give byte-identical files, metadata and status."""
+    rng = np.random.default_rng(chunk_size)
+    count = 3000
+    topics = np.where(rng.uniform(size=count) < 0.3, '/b', '/a').tolist()
+    steps = rng.choice([1_000_000, 2_000_000, 90_000_000, -500_000], size=count)
+    log = 10**18 + np.cumsum(steps)
+    publish = log - 7
+    data = [bytes([n % 256]) * int(rng.integers(1, 400)) for n in range(count)]
+
+    def record(name, batched):
+        path = tmp_path / (name if bag else f'{name}.mcap')
+        recorder = McapRecorder(path, chunk_size_bytes=chunk_size, flush_thread=False)
+        recorder.open()
+        recorder.add_topic('/a', 'sensor_msgs/msg/JointState')
+        recorder.add_topic('/b', 'geometry_msgs/msg/Vector3Stamped')
+        if batched:
+            edges = [0, 1, 5, 900, 901, 2000, 2700, count]
+            for n, (first, stop) in enumerate(zip(edges, edges[1:])):
+                if n % 3 == 1:      # single writes in between
+                    for k in range(first, stop):
+                        recorder.write(topics[k], data[k], int(log[k]), int(publish[k]))
+                else:
+                    assert recorder.write_batch(topics[first:stop], data[first:stop],
+                                                log[first:stop], publish[first:stop]) \
+                        == stop - first
+        else:
+            for k in range(count):
+                recorder.write(topics[k], data[k], int(log[k]), int(publish[k]))
+        status = recorder.close()
+        files = [pathlib.Path(f).read_bytes() for f in status['files']]
+        metadata = (path / 'metadata.yaml').read_text().replace(name, 'X') if bag else None
+        status.pop('path'), status.pop('files')
+        return files, metadata, status
+
+    assert record('single', False) == record('batch', True)
