@@ -238,7 +238,7 @@ def scan_recording(path, keep_type=JOINT_STATE):
 # -- estimation --------------------------------------------------------------------------
 
 def criteria_batch(model, angles, speeds, accels,
-                   near_zero_fraction=core_estimator.DEFAULT_NEAR_ZERO_FRACTION):
+                   near_zero_fraction=core_estimator.DEFAULT_NEAR_ZERO_FRACTION, blocks=None):
     """
     Joint reactions, direction rates and Earles-Wu criteria at many crank states.
 
@@ -250,6 +250,9 @@ def criteria_batch(model, angles, speeds, accels,
     angles, speeds, accels : ndarray, shape (m,)
         Crank state as the model sees it (speed and acceleration clipped).
     near_zero_fraction : float
+    blocks : dict, optional
+        'force', 'force_dot' (m, joints, 2) and 'rms2' (m, joints) at these states, if
+        already evaluated (core.estimator.replay returns them); else the table is evaluated.
 
     Returns
     -------
@@ -263,11 +266,11 @@ def criteria_batch(model, angles, speeds, accels,
     zeros = np.zeros((count, len(JOINTS)))
     if not np.any(model.force_moments):
         return zeros, zeros, zeros, zeros.astype(bool), False
-    rows = model.evaluate(angles, speeds, accels)
-    layout = model.layout
-    force = layout.block(rows, 'force')
-    rate = layout.block(rows, 'force_dot')
-    rms2 = layout.block(rows, 'rms2')
+    if blocks is None:
+        rows = model.evaluate(angles, speeds, accels)
+        blocks = {name: model.layout.block(rows, name)
+                  for name in ('force', 'force_dot', 'rms2')}
+    force, rate, rms2 = blocks['force'], blocks['force_dot'], blocks['rms2']
     r2 = np.sum(force ** 2, axis=2)
     # Below REACTION_FLOOR_FRACTION of the cycle RMS the reaction is clamped (finite criterion).
     clamped = np.maximum(r2, core_estimator.REACTION_FLOOR_FRACTION ** 2 * rms2)
@@ -296,15 +299,10 @@ def segments(stamps_ns, angles, reset_gap_s=core_estimator.DEFAULT_RESET_GAP_S):
     steps = np.diff(stamps_ns)
     wrapped = np.mod(angles, 2.0 * math.pi)
     repeated = np.concatenate([[False], (steps == 0) & (np.abs(np.diff(wrapped)) < 1e-12)])
-    starts = [0]
-    previous = 0
-    for n in range(1, stamps_ns.size):
-        if repeated[n]:
-            continue
-        dt = (stamps_ns[n] - stamps_ns[previous]) * 1e-9
-        if dt <= 0.0 or dt > reset_gap_s:
-            starts.append(n)
-        previous = n
+    # Each kept sample against the previous kept one (repeats are skipped, as the node does).
+    kept = np.flatnonzero(~repeated)
+    dt = np.diff(stamps_ns[kept]) * 1e-9
+    starts = [0] + kept[1:][(dt <= 0.0) | (dt > reset_gap_s)].tolist()
     return starts, repeated
 
 
@@ -347,7 +345,8 @@ def estimate_offline(model, stamps_ns, angles, speeds, warm_start=True):
         model_accel = np.clip(out['crank_accel'], -core_estimator.DEFAULT_ACCEL_LIMIT,
                               core_estimator.DEFAULT_ACCEL_LIMIT)
         reaction, gamma_dot, criterion, _, available = criteria_batch(
-            model, out['crank_angle'], model_speed, model_accel)
+            model, out['crank_angle'], model_speed, model_accel,
+            blocks=out if 'force' in out else None)
         for key, values in (('lever_tip', out['lever_tip']),
                             ('coupler_mid', out['coupler_mid']),
                             ('crank_angle', out['crank_angle']),

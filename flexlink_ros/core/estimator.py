@@ -716,6 +716,185 @@ class StreamingEstimator:
         return self.model.shapes(sample.crank_angle, np.array(sample.modal))
 
 
+def _crank_motion(times, angles, speeds, time_constant_s):
+    """
+    CrankRateFilter.update over a whole signal: (wrapped angle, speed, accel, advance) rows.
+
+    The same arithmetic as :class:`CrankRateFilter` and :class:`_ForgettingPolyFit` (degree
+    2), in one loop with local variables (about five times faster than the method calls).
+    Falls back to the filter object when measured and missing speeds mix.
+    """
+    count = len(times)
+    motion = np.empty((count, 4))
+    has = None if speeds is None else [s is not None and math.isfinite(s) for s in speeds]
+    if has is not None and not (all(has) or not any(has)):
+        rate_filter = CrankRateFilter(time_constant_s)
+        for n, (t, angle, speed) in enumerate(zip(times, angles, speeds)):
+            motion[n, :3] = rate_filter.update(t, angle, speed)
+            motion[n, 3] = rate_filter.advance
+        return motion
+    measured = bool(has and has[0])
+    rows = []
+    append = rows.append
+    tc = float(time_constant_s)
+    exp, wrap = math.exp, _wrap_pi
+    previous_time = times[0]
+    unwrapped = float(angles[0])
+    speed = float(speeds[0]) if measured else 0.0
+    accel = 0.0
+    append((wrap_angle(unwrapped), speed, accel, 0.0))
+    s0, s1, s2, s3, s4, t0, t1, t2 = 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    fitted = 1
+    mean_dt = None
+    for n in range(1, count):
+        time_s, angle = times[n], angles[n]
+        dt = time_s - previous_time
+        mean_dt = dt if mean_dt is None else 0.9 * mean_dt + 0.1 * dt
+        tau = max(tc, MIN_FIT_SAMPLES * mean_dt)
+        f = exp(-dt / tau)
+        shift = dt / tc
+        if measured:
+            value = speeds[n]
+            predicted = 0.5 * (speed + value) * dt
+        else:
+            predicted = speed * dt + 0.5 * accel * dt * dt
+        advance = predicted + wrap(angle - unwrapped - predicted)
+        unwrapped += advance
+        previous_time = time_s
+        dy = value - speed if measured else advance
+        # _ForgettingPolyFit.add(shift, f, dy, 0.0), degree 2 (count >= 1 here).
+        d = -shift
+        t0, t1, t2 = t0 - dy * s0, t1 - dy * s1, t2 - dy * s2
+        d2 = d * d
+        s0, s1, s2, s3, s4 = (
+            f * s0, f * (s1 + d * s0), f * (s2 + 2 * d * s1 + d2 * s0),
+            f * (s3 + 3 * d * s2 + 3 * d2 * s1 + d2 * d * s0),
+            f * (s4 + 4 * d * s3 + 6 * d2 * s2 + 4 * d2 * d * s1 + d2 * d2 * s0))
+        t0, t1, t2 = f * t0, f * (t1 + d * t0), f * (t2 + 2 * d * t1 + d2 * t0)
+        s0 += 1.0
+        t0 += 0.0
+        fitted += 1
+        # _ForgettingPolyFit.coefficients()
+        c1 = c2 = None
+        if fitted >= 3:
+            a00, a01, a02, a12, a22 = s0, s1, s2, s3, s4
+            a11 = a02
+            m00 = a11 * a22 - a12 * a12
+            m01 = a02 * a12 - a01 * a22
+            m02 = a01 * a12 - a02 * a11
+            det = a00 * m00 + a01 * m01 + a02 * m02
+            if abs(det) > 1e-12 * abs(a00 * a11 * a22):
+                m11 = a00 * a22 - a02 * a02
+                m12 = a01 * a02 - a00 * a12
+                m22 = a00 * a11 - a01 * a01
+                c1 = (m01 * t0 + m11 * t1 + m12 * t2) / det
+                c2 = (m02 * t0 + m12 * t1 + m22 * t2) / det
+        if c1 is None:
+            det = s0 * s2 - s1 * s1
+            if fitted < 2 or abs(det) <= 1e-12 * s0 * s2:
+                c1 = 0.0
+            else:
+                c1 = (s0 * t1 - s1 * t0) / det
+            c2 = 0.0
+        if measured:
+            speed = float(value)
+            accel = c1 / tc
+        elif fitted < 2:
+            speed, accel = advance / dt, 0.0
+        else:
+            speed = c1 / tc
+            accel = 2.0 * c2 / tc ** 2
+        append((wrap_angle(unwrapped), speed, accel, advance))
+    motion[:] = rows
+    return motion
+
+
+# Steps per batch of replay's step matrices (a few MB of buffers).
+_REPLAY_STEP_BATCH = 256
+
+
+class _ReplayTables:
+    """
+    Per-cell tables of the blocks replay needs, each with only the table rows it uses.
+
+    ``products`` evaluates them at many crank states with one matrix product per grid cell
+    (and per few samples: products stay small enough for single-threaded BLAS, which a busy
+    machine runs far faster than threaded BLAS).
+    """
+
+    BLAS_SIZE = 200_000   # multiply-adds per product (OpenBLAS threads larger ones)
+    _cache = {}
+
+    def __init__(self, model):
+        layout = model.layout
+        table = model.table
+        self.model = model
+        self.size = model.size
+        self.grid_size = model.grid_size
+        self.cells_per_radian = model.grid_size / TWO_PI
+        self.entries = {}
+        for name in ('M', 'C', 'K', 'f', 'out', 'corr', 'force', 'force_dot', 'rms2'):
+            block = layout.block(table, name).reshape(table.shape[0], table.shape[1], -1)
+            used = np.flatnonzero(np.any(block != 0.0, axis=(0, 2)))
+            rows = slice(int(used[0]), int(used[-1]) + 1) if used.size else slice(0, 0)
+            self.entries[name] = (rows, np.ascontiguousarray(block[:, rows]))
+
+    @classmethod
+    def of(cls, model):
+        """The tables of a model (cached while the model lives)."""
+        key = id(model)
+        cached = cls._cache.get(key)
+        if cached is not None and cached.model is model:
+            return cached
+        tables = cls(model)
+        cls._cache.clear()
+        cls._cache[key] = tables
+        return tables
+
+    def weights(self, angles, speeds, accels):
+        """Cells and row weights (as StreamingEstimator._evaluate) of many crank states."""
+        x = angles * self.cells_per_radian
+        cells = np.minimum(x.astype(np.int64), self.grid_size - 1)
+        t = x - cells
+        w, a = speeds, accels
+        w2 = w * w
+        monomials = (a, np.ones_like(w), w2, w, w2 * w2, w * a, w2 * w)
+        if reduced.MONOMIALS != ('a', '1', 'w2', 'w', 'w4', 'wa', 'w3'):
+            raise ValueError('monomial order changed: update _ReplayTables.weights')
+        powers = (np.ones_like(t), t, t * t, t * t * t)
+        weights = np.empty((angles.size, len(monomials) * len(powers)))
+        for i, mono in enumerate(monomials):
+            for p, power in enumerate(powers):
+                weights[:, 4 * i + p] = mono * power
+        return cells, weights
+
+    def products(self, names, angles, speeds, accels):
+        """Blocks ``names`` at many crank states: dict name -> (m, block size) arrays."""
+        cells, weights = self.weights(angles, speeds, accels)
+        order = np.argsort(cells, kind='stable')
+        cells, weights = cells[order], weights[order]
+        count = cells.size
+        sorted_out = {name: np.empty((count, self.entries[name][1].shape[2]))
+                      for name in names}
+        bounds = np.concatenate([[0], np.flatnonzero(np.diff(cells)) + 1, [count]]).tolist()
+        for first, stop in zip(bounds[:-1], bounds[1:]):
+            k = int(cells[first])
+            for name in names:
+                rows, table = self.entries[name]
+                cell = table[k]
+                out = sorted_out[name]
+                step = max(1, self.BLAS_SIZE // max(cell.size, 1))
+                for a in range(first, stop, step):
+                    b = min(a + step, stop)
+                    np.dot(weights[a:b, rows], cell, out=out[a:b])
+        result = {}
+        for name, values in sorted_out.items():
+            unsorted = np.empty_like(values)
+            unsorted[order] = values
+            result[name] = unsorted
+        return result
+
+
 def replay(model, stamps_ns, angles, speeds=None,
            fit_time_constant_s=DEFAULT_FIT_TIME_CONSTANT_S, warm_start=True,
            accel_limit=DEFAULT_ACCEL_LIMIT):
@@ -724,8 +903,8 @@ def replay(model, stamps_ns, angles, speeds=None,
 
     Same numbers as feeding :meth:`StreamingEstimator.update` sample by sample (a test checks
     this), for strictly increasing stamps without gaps: the crank filter runs sample by
-    sample, the table rows and step matrices are computed for all samples at once, and the
-    state recursion takes one LAPACK solve per sample.
+    sample, the table blocks each stage needs and the step matrices are computed for all
+    samples at once, and the state recursion takes one LAPACK solve per sample.
 
     Parameters
     ----------
@@ -743,7 +922,8 @@ def replay(model, stamps_ns, angles, speeds=None,
     -------
     dict of str to ndarray
         'crank_angle', 'crank_speed', 'crank_accel' (m,); 'lever_tip', 'coupler_mid' (m, 2)
-        [m]; 'modal' (m, r).
+        [m]; 'modal' (m, r); 'force', 'force_dot' (m, joints, 2) and 'rms2' (m, joints): the
+        tabulated joint reactions at the model's (clipped) crank state.
 
     """
     stamps_ns = np.asarray(stamps_ns, dtype=np.int64)
@@ -753,27 +933,17 @@ def replay(model, stamps_ns, angles, speeds=None,
     angles = np.asarray(angles, dtype=float)
     if speeds is not None:
         speeds = np.asarray(speeds, dtype=float)
-    rate_filter = CrankRateFilter(fit_time_constant_s)
     times = (stamps_ns - stamps_ns[0]) * 1e-9
-    measured = [None] * count if speeds is None else speeds.tolist()
-    motion = np.empty((count, 4))
-    for n, (t, angle, speed) in enumerate(zip(times.tolist(), angles.tolist(), measured)):
-        motion[n, :3] = rate_filter.update(t, angle, speed)
-        motion[n, 3] = rate_filter.advance
+    if not fit_time_constant_s > 0.0:
+        raise ValueError(f'`time_constant_s` must be positive, got {fit_time_constant_s!r}')
+    motion = _crank_motion(times.tolist(), angles.tolist(),
+                           None if speeds is None else speeds.tolist(), fit_time_constant_s)
     wrapped, speed, accel, advance = motion.T
     model_speed = np.clip(speed, -model.speed_max, model.speed_max)
     model_accel = np.clip(accel, -accel_limit, accel_limit)
-    tables = _StepTables(model)
-    r = tables.size
-
-    layout = model.layout
-
-    def stage_values(rows):
-        # [M, C, K, 0] blocks of each row, as the streaming step's slots hold them.
-        values = np.zeros((rows.shape[0], 4, r * r))
-        for m, name in enumerate(('M', 'C', 'K')):
-            values[:, m] = layout.block(rows, name).reshape(rows.shape[0], r * r)
-        return values
+    step_tables = _StepTables(model) if count > 1 else None
+    tables = _ReplayTables.of(model)
+    r = model.size
 
     # Crank state at the first Radau stage of the step into each sample (as _step).
     stage_state = (
@@ -791,37 +961,65 @@ def replay(model, stamps_ns, angles, speeds=None,
         estimator.update(int(stamps_ns[n]), float(angles[n]),
                          None if speeds is None else float(speeds[n]))
         states[n] = estimator._z[:2 * r]
-    for first in range(prefix - 1, count - 1, REPLAY_CHUNK):
-        last = min(first + REPLAY_CHUNK, count - 1)
-        steps = times[first + 1:last + 1] - times[first:last]
-        inv = 1.0 / steps
-        powers = np.stack([inv * inv, inv, np.ones_like(steps), steps, steps * steps], axis=1)
-        # Slot order of g_stack[0]: the new sample in slot 0, the stage-1 values in slot 1.
-        g = (powers @ tables.g_stack[0]).reshape(-1, 8, 8)
-        chosen = slice(first + 1, last + 1)
-        current = model.evaluate(wrapped[chosen], model_speed[chosen], model_accel[chosen])
-        stage = model.evaluate(*(x[chosen] for x in stage_state))
-        pairs = np.concatenate([stage_values(current), stage_values(stage)], axis=1)
-        system = np.matmul(g, pairs).reshape(-1, 2, 4, r, r).transpose(0, 1, 3, 2, 4).reshape(
-            -1, 2 * r, 4 * r)
-        loads = np.concatenate([layout.block(stage, 'f'), layout.block(current, 'f')], axis=1)
-        # dz = A^-1 (P [q, v] + f), one sample after the other (one LAPACK solve each: cheaper
-        # than propagating the whole affine map when 2 r is large).
-        matrices = np.ascontiguousarray(system[:, :, :2 * r].transpose(0, 2, 1))  # Fortran
-        operators = system[:, :, 2 * r:]
-        state = states[first].copy()
-        for n in range(steps.size):
-            rhs = np.dot(operators[n], state)
-            rhs += loads[n]
-            _, _, increment, _ = lapack.dgesv(matrices[n].T, rhs, overwrite_a=0,
-                                              overwrite_b=1)
-            state += increment
-            states[first + 1 + n] = state
-    deflection = np.empty((count, 4))
-    for first in range(0, count, REPLAY_CHUNK):
-        chosen = slice(first, first + REPLAY_CHUNK)
-        rows = model.evaluate(wrapped[chosen], model_speed[chosen], model_accel[chosen])
-        deflection[chosen] = reduced.output_values(model, rows, states[chosen, :r])
+    stage_names = ('M', 'C', 'K', 'f')
+    # Small batches with reused buffers: arrays of tens of MB are fresh memory each time (page
+    # faults cost more than the arithmetic).
+    batch = _REPLAY_STEP_BATCH
+    pairs = np.empty((batch, 6, r * r))
+    system = np.empty((batch, 8, r * r))
+    matrices = np.empty((batch, 2, r, 2, r))
+    operators = np.empty((batch, 2, r, 2, r))
+    loads = np.empty((batch, 2 * r))
+    dgesv, dot = lapack.dgesv, np.dot
+    for outer in range(prefix - 1, count - 1, REPLAY_CHUNK):
+        outer_last = min(outer + REPLAY_CHUNK, count - 1)
+        # Table blocks at the samples and at the first stages of this chunk's steps.
+        chosen = slice(outer + 1, outer_last + 1)
+        current = tables.products(stage_names, wrapped[chosen], model_speed[chosen],
+                                  model_accel[chosen])
+        stage = tables.products(stage_names, *(x[chosen] for x in stage_state))
+        for first in range(outer, outer_last, batch):
+            last = min(first + batch, outer_last)
+            size = last - first
+            steps = times[first + 1:last + 1] - times[first:last]
+            inv = 1.0 / steps
+            powers = np.stack([inv * inv, inv, np.ones_like(steps), steps, steps * steps],
+                              axis=1)
+            # Slot order of g_stack[0]: the new sample in slot 0, the stage-1 values in
+            # slot 1; the slots' fourth (load) block has no coefficient.
+            g = (powers @ step_tables.g_stack[0]).reshape(-1, 8, 2, 4)[..., :3].reshape(
+                -1, 8, 6)
+            part = slice(first - outer, last - outer)
+            for slot, values in enumerate((current, stage)):
+                for m, name in enumerate(('M', 'C', 'K')):
+                    pairs[:size, 3 * slot + m] = values[name][part]
+            np.matmul(g, pairs[:size], out=system[:size])
+            blocks = system[:size].reshape(size, 2, 4, r, r)
+            loads[:size, :r] = stage['f'][part]
+            loads[:size, r:] = current['f'][part]
+            # dz = A^-1 (P [q, v] + f), one sample after the other (one LAPACK solve each:
+            # cheaper than propagating the whole affine map when 2 r is large). LAPACK wants
+            # A in Fortran order: its transpose (column block, column, row block, row).
+            np.copyto(matrices[:size], blocks[:, :, :2].transpose(0, 2, 4, 1, 3))
+            np.copyto(operators[:size], blocks[:, :, 2:].transpose(0, 1, 3, 2, 4))
+            matrix = matrices.reshape(batch, 2 * r, 2 * r)
+            operator = operators.reshape(batch, 2 * r, 2 * r)
+            state = states[first].copy()
+            for n in range(size):
+                rhs = dot(operator[n], state)
+                rhs += loads[n]
+                _, _, increment, _ = dgesv(matrix[n].T, rhs, overwrite_a=0, overwrite_b=1)
+                state += increment
+                states[first + 1 + n] = state
+    rest = tables.products(('out', 'corr', 'force', 'force_dot', 'rms2'), wrapped,
+                           model_speed, model_accel)
+    outputs = len(reduced.OUTPUT_NAMES)
+    deflection = np.einsum('mor,mr->mo', rest['out'].reshape(count, outputs, r),
+                           states[:, :r]) + rest['corr']
+    joints = len(reduced.JOINTS)
     return {'crank_angle': wrapped, 'crank_speed': speed, 'crank_accel': accel,
             'lever_tip': deflection[:, :2], 'coupler_mid': deflection[:, 2:],
-            'modal': states[:, :r].copy()}
+            'modal': states[:, :r].copy(),
+            'force': rest['force'].reshape(count, joints, 2),
+            'force_dot': rest['force_dot'].reshape(count, joints, 2),
+            'rms2': rest['rms2'].reshape(count, joints)}
