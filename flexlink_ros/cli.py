@@ -10,6 +10,7 @@ import importlib
 import json
 import math
 import pathlib
+import re
 import sys
 
 from .core.errors import FlexlinkError
@@ -66,22 +67,46 @@ def degree_range(text):
             f'expected START:STOP:STEP in degrees or a comma list, got {text!r}') from None
 
 
-def build_parser():
-    """The argument parser with every registered subcommand."""
+def _command_module(argv):
+    """
+    The one ``cli_<group>`` module that registers the command in ``argv``, or None.
+
+    Found by reading the modules' source for ``add_parser('<command>'``, without importing
+    them (importing every group costs about a second: the beam and FE modules' imports).
+    None (import everything) when the command is absent, an option, unknown or ambiguous.
+    """
+    if not argv or argv[0].startswith('-'):
+        return None
+    pattern = re.compile(r"""add_parser\(\s*['"]""" + re.escape(argv[0]) + r"""['"]""")
+    package = pathlib.Path(__file__).resolve().parent
+    found = [name for name in COMMAND_MODULES
+             if pattern.search((package / f'{name.rsplit(".", 1)[1]}.py').read_text('utf-8'))]
+    return found[0] if len(found) == 1 else None
+
+
+def build_parser(argv=None):
+    """
+    The argument parser with every registered subcommand.
+
+    With ``argv``, only the module of its subcommand is imported and registered when it can
+    be told from the source (the parse of ``argv`` is the same).
+    """
     parser = argparse.ArgumentParser(
         prog='flexlink',
         description='Flexible four-bar linkage: kinematics, joint criteria, beam and FE '
                     'models, streaming estimator, ROS 2 node and MCAP tools.')
     subparsers = parser.add_subparsers(dest='command', metavar='COMMAND')
     subparsers.required = True
-    for name in COMMAND_MODULES:
+    only = _command_module(argv) if argv is not None else None
+    for name in (COMMAND_MODULES if only is None else (only,)):
         importlib.import_module(name).register(subparsers)
     return parser
 
 
 def main(argv=None):
     """Entry point of the `flexlink` script."""
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(argv)
     args = parser.parse_args(argv)
     try:
         return args.func(args)
