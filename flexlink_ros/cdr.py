@@ -101,6 +101,70 @@ def criteria_cdr(sec, nanosec, frame, ratio, gamma_dot, force):
     return bytes(out)
 
 
+_BASIC_FORMATS = {
+    'boolean': '?', 'octet': 'B', 'char': 'B', 'int8': 'b', 'uint8': 'B', 'int16': 'h',
+    'uint16': 'H', 'int32': 'i', 'uint32': 'I', 'float': 'f', 'int64': 'q', 'uint64': 'Q',
+    'double': 'd',
+}
+
+
+def _serialize_plain(message):
+    """
+    CDR bytes of a message object by walking its fields in Python (zeroed padding).
+
+    The same bytes as ``rosbag_schema.serialize_exact`` (tested through MarkerEncoder), but
+    without rclpy's serialiser: importing rclpy and the type support costs about 0.1 s, more
+    than a replay writes in.
+    """
+    out = bytearray(CDR_LE)
+    _write_message(out, message)
+    return bytes(out)
+
+
+def _pad(out, alignment):
+    remainder = (len(out) - 4) % alignment
+    if remainder:
+        out += bytes(alignment - remainder)
+
+
+def _write_message(out, message):
+    cls = type(message)
+    for slot, member_type in zip(cls.__slots__, cls.SLOT_TYPES):
+        _write_value(out, member_type, getattr(message, slot))
+
+
+def _write_value(out, member_type, value):
+    from rosidl_parser import definition
+    if isinstance(member_type, definition.BasicType):
+        code = _BASIC_FORMATS[member_type.typename]
+        size = struct.calcsize(code)
+        _pad(out, min(size, 8))
+        out += struct.pack('<' + code, value)
+    elif isinstance(member_type, definition.AbstractWString):
+        raise ValueError('wstring is not supported')
+    elif isinstance(member_type, definition.AbstractString):
+        data = value.encode('utf-8')
+        _pad(out, 4)
+        out += struct.pack('<I', len(data) + 1) + data + b'\x00'
+    elif isinstance(member_type, definition.NamespacedType):
+        _write_message(out, value)
+    elif isinstance(member_type, definition.AbstractNestedType):
+        if isinstance(member_type, definition.AbstractSequence):
+            _pad(out, 4)
+            out += struct.pack('<I', len(value))
+        element = member_type.value_type
+        if isinstance(element, definition.BasicType):
+            code = _BASIC_FORMATS[element.typename]
+            if len(value):
+                _pad(out, min(struct.calcsize(code), 8))
+                out += struct.pack(f'<{len(value)}{code}', *value)
+        else:
+            for item in value:
+                _write_value(out, element, item)
+    else:
+        raise ValueError(f'CDR of {type(member_type).__name__} is not supported')
+
+
 class MarkerEncoder:
     """
     CDR of ros_messages.linkage_markers, by patching a serialised template.
@@ -127,7 +191,6 @@ class MarkerEncoder:
         import numpy as np
 
         from . import ros_messages as rm
-        from .rosbag_schema import serialize_exact
         self.frame_id, self.count, self.links = frame_id, int(points_per_link), links
         self._np, self._rm = np, rm
         index = np.arange(self.count, dtype=float)
@@ -136,7 +199,7 @@ class MarkerEncoder:
         offset = np.array([5e5, 5e5])
         joints = np.array([[7e6 + j + 0.5, 8e6 + j + 0.5] for j in range(4)])
         stamp = rm.Time(sec=self._SENTINEL_STAMP[0], nanosec=self._SENTINEL_STAMP[1])
-        template = serialize_exact(rm.linkage_markers(
+        template = _serialize_plain(rm.linkage_markers(
             stamp, frame_id, rigid, [np.broadcast_to(offset, p.shape) for p in rigid], 1.0,
             joints, [rm.OK] * 4))
         self.template = template
