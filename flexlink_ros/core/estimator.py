@@ -956,11 +956,12 @@ def replay(model, stamps_ns, angles, speeds=None,
     estimator = StreamingEstimator(model, fit_time_constant_s, warm_start=warm_start,
                                    accel_limit=accel_limit)
     prefix = min(3 if (warm_start and speeds is None) else 1, count)
-    states = np.empty((count, 2 * r))
+    # States [q, v, 1] (the 1 carries the loads through the step operator).
+    states = np.ones((count, 2 * r + 1))
     for n in range(prefix):
         estimator.update(int(stamps_ns[n]), float(angles[n]),
                          None if speeds is None else float(speeds[n]))
-        states[n] = estimator._z[:2 * r]
+        states[n, :2 * r] = estimator._z[:2 * r]
     stage_names = ('M', 'C', 'K', 'f')
     # Small batches with reused buffers: arrays of tens of MB are fresh memory each time (page
     # faults cost more than the arithmetic).
@@ -968,9 +969,8 @@ def replay(model, stamps_ns, angles, speeds=None,
     pairs = np.empty((batch, 6, r * r))
     system = np.empty((batch, 8, r * r))
     matrices = np.empty((batch, 2, r, 2, r))
-    operators = np.empty((batch, 2, r, 2, r))
-    loads = np.empty((batch, 2 * r))
-    dgesv, dot = lapack.dgesv, np.dot
+    operators = np.empty((batch, 2 * r, 2 * r + 1))     # [P | loads]
+    dgesv, dot, add = lapack.dgesv, np.dot, np.add
     for outer in range(prefix - 1, count - 1, REPLAY_CHUNK):
         outer_last = min(outer + REPLAY_CHUNK, count - 1)
         # Table blocks at the samples and at the first stages of this chunk's steps.
@@ -995,22 +995,23 @@ def replay(model, stamps_ns, angles, speeds=None,
                     pairs[:size, 3 * slot + m] = values[name][part]
             np.matmul(g, pairs[:size], out=system[:size])
             blocks = system[:size].reshape(size, 2, 4, r, r)
-            loads[:size, :r] = stage['f'][part]
-            loads[:size, r:] = current['f'][part]
-            # dz = A^-1 (P [q, v] + f), one sample after the other (one LAPACK solve each:
+            operators[:size, :r, 2 * r] = stage['f'][part]
+            operators[:size, r:, 2 * r] = current['f'][part]
+            # dz = A^-1 [P | f] [q, v, 1], one sample after the other (one LAPACK solve each:
             # cheaper than propagating the whole affine map when 2 r is large). LAPACK wants
-            # A in Fortran order: its transpose (column block, column, row block, row).
+            # A in Fortran order: its transpose (column block, column, row block, row) in C
+            # order; the buffer is scratch, so the LU overwrites it.
             np.copyto(matrices[:size], blocks[:, :, :2].transpose(0, 2, 4, 1, 3))
-            np.copyto(operators[:size], blocks[:, :, 2:].transpose(0, 1, 3, 2, 4))
-            matrix = matrices.reshape(batch, 2 * r, 2 * r)
-            operator = operators.reshape(batch, 2 * r, 2 * r)
-            state = states[first].copy()
+            np.copyto(operators[:size, :, :2 * r].reshape(size, 2, r, 2, r),
+                      blocks[:, :, 2:].transpose(0, 1, 3, 2, 4))
+            matrix = list(matrices[:size].reshape(size, 2 * r, 2 * r).transpose(0, 2, 1))
+            operator = list(operators[:size])
+            rows = list(states[first:last + 1])
+            heads = [row[:2 * r] for row in rows]
             for n in range(size):
-                rhs = dot(operator[n], state)
-                rhs += loads[n]
-                _, _, increment, _ = dgesv(matrix[n].T, rhs, overwrite_a=0, overwrite_b=1)
-                state += increment
-                states[first + 1 + n] = state
+                _, _, increment, _ = dgesv(matrix[n], dot(operator[n], rows[n]),
+                                           overwrite_a=1, overwrite_b=1)
+                add(heads[n], increment, out=heads[n + 1])
     rest = tables.products(('out', 'corr', 'force', 'force_dot', 'rms2'), wrapped,
                            model_speed, model_accel)
     outputs = len(reduced.OUTPUT_NAMES)
