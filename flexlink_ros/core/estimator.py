@@ -941,7 +941,6 @@ def replay(model, stamps_ns, angles, speeds=None,
     wrapped, speed, accel, advance = motion.T
     model_speed = np.clip(speed, -model.speed_max, model.speed_max)
     model_accel = np.clip(accel, -accel_limit, accel_limit)
-    step_tables = _StepTables(model) if count > 1 else None
     tables = _ReplayTables.of(model)
     r = model.size
 
@@ -956,6 +955,7 @@ def replay(model, stamps_ns, angles, speeds=None,
     estimator = StreamingEstimator(model, fit_time_constant_s, warm_start=warm_start,
                                    accel_limit=accel_limit)
     prefix = min(3 if (warm_start and speeds is None) else 1, count)
+    step_tables = estimator._tables
     # States [q, v, 1] (the 1 carries the loads through the step operator).
     states = np.ones((count, 2 * r + 1))
     for n in range(prefix):
