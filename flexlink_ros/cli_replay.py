@@ -108,7 +108,7 @@ def _mcap_string(data, offset):
     return bytes(data[offset:offset + length]).decode('utf-8'), offset + length
 
 
-def _file_messages(file, wanted):
+def _file_messages(file, wanted, keep_rest=None):
     """
     Complete messages of one (possibly truncated) MCAP file, read in one pass.
 
@@ -121,6 +121,8 @@ def _file_messages(file, wanted):
     file : pathlib.Path
     wanted : callable
         ``wanted(topic, type_name)``: keep the payloads of this channel's messages.
+    keep_rest : callable, optional
+        ``keep_rest(data)`` of a wanted channel's first message: False keeps only that one.
 
     Returns
     -------
@@ -132,32 +134,39 @@ def _file_messages(file, wanted):
     """
     data = file.read_bytes()
     schemas, channels, counts, kept = {}, {}, {}, {}
+    stored = {}       # channel id -> list of kept messages (wanted channels)
     if data[:8] != MCAP_MAGIC:
         return counts, kept
+    prefix_unpack = _PREFIX.unpack_from
+    channel_unpack = struct.Struct('<H').unpack_from
 
-    def records(buffer, start, stop, commit):
-        # Schemas, channels and messages of one run of records; raises if damaged.
+    def records(buffer, start, stop, seen, keep):
+        # Schemas and channels of a run of records, message counts (seen) and the offsets of
+        # the wanted messages (keep); raises if damaged.
         offset = start
         while offset < stop:
-            opcode, length = _PREFIX.unpack_from(buffer, offset)
+            opcode, length = prefix_unpack(buffer, offset)
             end = offset + 9 + length
             if end > stop:
                 raise ValueError('record overruns its container')
             if opcode == _MESSAGE:
-                channel = channels.get(struct.unpack_from('<H', buffer, offset + 9)[0])
-                if channel is not None:
-                    commit(channel, buffer, offset, end)
+                (channel_id,) = channel_unpack(buffer, offset + 9)
+                seen[channel_id] = seen.get(channel_id, 0) + 1
+                if channel_id in stored:
+                    keep.append((channel_id, offset, end))
             elif opcode == _CHANNEL:
                 channel_id, schema_id = struct.unpack_from('<HH', buffer, offset + 9)
                 topic, position = _mcap_string(buffer, offset + 13)
                 encoding, _ = _mcap_string(buffer, position)
                 type_name = schemas.get(schema_id, '')
+                stored.pop(channel_id, None)
                 if encoding == 'cdr':
                     entry = counts.get(topic)
                     if entry is None:
                         entry = [type_name, 0]
-                    store = kept.setdefault(topic, []) if wanted(topic, type_name) else None
-                    channels[channel_id] = (topic, entry, store)
+                    channels[channel_id] = (topic, entry)
+                    if wanted(topic, type_name):
+                        stored[channel_id] = kept.setdefault(topic, [])
                 else:
                     channels.pop(channel_id, None)
             elif opcode == _SCHEMA:
@@ -165,30 +174,40 @@ def _file_messages(file, wanted):
                 schemas[schema_id], _ = _mcap_string(buffer, offset + 11)
             offset = end
 
-    def commit(channel, buffer, offset, end):
-        topic, entry, store = channel
-        if entry[1] == 0:
-            counts[topic] = entry
-        entry[1] += 1
-        if store is not None:
-            _, _, _, _, log_time, publish_time = _MESSAGE_HEAD.unpack_from(buffer, offset)
+    def commit(buffer, seen, keep):
+        for channel_id, number in seen.items():
+            channel = channels.get(channel_id)
+            if channel is not None:
+                topic, entry = channel
+                if entry[1] == 0:
+                    counts[topic] = entry
+                entry[1] += number
+        head = _MESSAGE_HEAD.unpack_from
+        for channel_id, offset, end in keep:
+            store = stored.get(channel_id)
+            if store is None:
+                continue
+            _, _, _, _, log_time, publish_time = head(buffer, offset)
             store.append((log_time, publish_time, buffer[offset + 31:end]))
+            if len(store) == 1 and keep_rest is not None and not keep_rest(store[0][2]):
+                del stored[channel_id]
 
     size = len(data)
     offset = 8
     while offset + 9 <= size:
-        opcode, length = _PREFIX.unpack_from(data, offset)
+        opcode, length = prefix_unpack(data, offset)
         end = offset + 9 + length
         if end > size or opcode in (_DATA_END, _FOOTER):
             break
+        seen, keep = {}, []
         try:
             if opcode == _CHUNK:
                 _, _, raw_size, crc, name_length = _CHUNK_HEAD.unpack_from(data, offset + 9)
                 position = offset + 9 + 32
                 compression = data[position:position + name_length].decode()
                 position += name_length
-                (stored,) = struct.unpack_from('<Q', data, position)
-                payload = data[position + 8:position + 8 + stored]
+                (length,) = struct.unpack_from('<Q', data, position)
+                payload = data[position + 8:position + 8 + length]
                 if compression == 'zstd':
                     import zstandard
                     payload = zstandard.decompress(payload, raw_size)
@@ -200,38 +219,60 @@ def _file_messages(file, wanted):
                 if crc and zlib.crc32(payload) != crc:
                     raise ValueError('chunk CRC mismatch')
                 # Parse the whole chunk before keeping anything (a damaged chunk adds nothing).
-                pending = []
-                records(payload, 0, len(payload), lambda *item: pending.append(item))
-                for item in pending:
-                    commit(*item)
+                records(payload, 0, len(payload), seen, keep)
+                commit(payload, seen, keep)
             elif opcode in (_MESSAGE, _CHANNEL, _SCHEMA):
-                records(data, offset, end, commit)
+                records(data, offset, end, seen, keep)
+                commit(data, seen, keep)
         except (ValueError, struct.error, UnicodeDecodeError, ImportError):
             break
         offset = end
     return counts, kept
 
 
-def scan_recording(path, keep_type=JOINT_STATE):
+def scan_recording(path, keep_type=JOINT_STATE, topic=None, joint_name=None):
     """
     Topics and the messages of one type of a recording, in one pass over its files.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    keep_type : str
+        Keep the messages of the topics of this type ...
+    topic : str, optional
+        ... only of this topic ...
+    joint_name : str, optional
+        ... or (no ``topic``) only of topics whose first message has this joint (of the
+        others only the first message).
 
     Returns
     -------
     counts : dict
         Topic -> [type name, message count] (CDR channels with messages).
     kept : dict
-        Topic -> list of (log_time_ns, publish_time_ns, data) of the ``keep_type`` topics.
+        Topic -> list of (log_time_ns, publish_time_ns, data) of the kept topics.
 
     """
+    def wanted(name, type_name):
+        return type_name == keep_type and (topic is None or name == topic)
+
+    keep_rest = None
+    if topic is None and joint_name is not None:
+        name = joint_name.encode()
+
+        def keep_rest(data):
+            try:
+                return parse_joint_state(data, name)[1] is not None
+            except (struct.error, IndexError):
+                return False
+
     counts, kept = {}, {}
     for file in recording_files(path):
-        file_counts, file_kept = _file_messages(
-            file, lambda topic, type_name: type_name == keep_type)
-        for topic, (type_name, count) in file_counts.items():
-            counts.setdefault(topic, [type_name, 0])[1] += count
-        for topic, messages in file_kept.items():
-            kept.setdefault(topic, []).extend(messages)
+        file_counts, file_kept = _file_messages(file, wanted, keep_rest)
+        for topic_name, (type_name, count) in file_counts.items():
+            counts.setdefault(topic_name, [type_name, 0])[1] += count
+        for topic_name, messages in file_kept.items():
+            kept.setdefault(topic_name, []).extend(messages)
     return counts, kept
 
 
@@ -744,7 +785,7 @@ def run_replay(args):
     """Read, estimate, write and/or publish; returns the JSON-ready summary."""
     notes = []
     start = time.perf_counter()
-    scan = scan_recording(args.input)
+    scan = scan_recording(args.input, topic=args.topic, joint_name=args.joint)
     topic = choose_input_topic(args.input, args.joint, args.topic, scan)
     samples = read_crank_samples(args.input, topic, args.joint, scan)
     del scan
