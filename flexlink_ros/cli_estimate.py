@@ -19,6 +19,7 @@ import time
 
 import numpy as np
 
+from . import node_params
 from .cli import emit
 from .core import reduced
 from .core.estimator import StreamingEstimator, replay
@@ -199,9 +200,19 @@ def full_order_cpu_per_second(mechanism, options, rpm, rate_hz=1000.0, steps=40)
 
 
 def model_options(args, **overrides):
-    """ModelOptions from the common command-line arguments, with overrides."""
-    values = {'rigid_crank': args.rigid_crank, 'bearings': args.bearings,
-              'geometric_stiffness': not args.no_geometric_stiffness}
+    """
+    ModelOptions from the common command-line arguments, with overrides.
+
+    Without size arguments the sizes are the node's defaults for the chosen bearing and crank
+    models (node_params.default_model_options); a flexible crank gets the node's elements per
+    link, a rigid crank the mechanism file's.
+    """
+    rigid_crank = bool(args.rigid_crank)
+    default = node_params.default_model_options(bearings=args.bearings,
+                                                rigid_crank=rigid_crank)
+    values = {'rigid_crank': rigid_crank, 'bearings': args.bearings,
+              'geometric_stiffness': not args.no_geometric_stiffness,
+              'elements_per_link': None if rigid_crank else default.elements_per_link}
     for name in ('modes', 'static', 'grid_size', 'elements_per_link'):
         value = getattr(args, name, None)
         if value is not None:
@@ -740,10 +751,11 @@ def _common(parser):
     parser.add_argument('--mechanism', default='cho1992',
                         help='mechanism file or name (default: cho1992)')
     crank = parser.add_mutually_exclusive_group()
-    crank.add_argument('--rigid-crank', dest='rigid_crank', action='store_true', default=True,
-                       help='treat the crank as rigid (default)')
+    crank.add_argument('--rigid-crank', dest='rigid_crank', action='store_true', default=False,
+                       help='treat the crank as rigid (pin A fixed; the paper\'s Figs 20-22 '
+                       'case)')
     crank.add_argument('--flexible-crank', dest='rigid_crank', action='store_false',
-                       help='model the crank as a flexible beam')
+                       help='model the crank as a flexible beam (default, as the node)')
     parser.add_argument('--bearings', choices=('flexible', 'rigid'), default='flexible',
                         help='revolute bearings: springs of the mechanism file, or rigid')
     parser.add_argument('--no-geometric-stiffness', action='store_true',

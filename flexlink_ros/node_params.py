@@ -49,12 +49,20 @@ PARAMETERS = (
     ParameterSpec('crank_joint', 'crank', 'Name of the crank joint in the input JointState'),
     ParameterSpec('input_topic', 'joint_states', 'JointState topic carrying the crank',
                   read_only=True),
-    ParameterSpec('model.tolerance', 0.01,
-                  'Relative RMS error target that picks the reduced model (flexlink plan)',
+    ParameterSpec('model.tolerance', 0.02,
+                  'Relative RMS error the default sizes were planned for; a smaller value '
+                  'warns that `flexlink plan` should choose the model.* sizes',
                   low=1e-4, high=0.5, read_only=True),
-    ParameterSpec('model.modes', 0, 'Modes kept in the reduced model; 0 = chosen from '
-                  'model.tolerance', low=0, high=60, read_only=True),
-    ParameterSpec('model.rigid_crank', True, 'Treat the crank as rigid', read_only=True),
+    ParameterSpec('model.modes', 0, 'Basis directions from frozen modes; 0 = the planned '
+                  'default for the bearing model', low=0, high=80, read_only=True),
+    ParameterSpec('model.static', -1, 'Basis directions from static load responses; -1 = the '
+                  'planned default', low=-1, high=20, read_only=True),
+    ParameterSpec('model.grid_size', 128, 'Crank-angle grid points of the precomputed tables',
+                  low=8, high=4096, read_only=True),
+    ParameterSpec('model.elements_per_link', 4, 'Beam elements per link; 0 = the mechanism '
+                  'file\'s value', low=0, high=40, read_only=True),
+    ParameterSpec('model.rigid_crank', False, 'Treat the crank as rigid (its pin A fixed)',
+                  read_only=True),
     ParameterSpec('model.bearings', 'flexible', 'Revolute bearings: flexible springs or rigid',
                   choices=('flexible', 'rigid'), read_only=True),
     ParameterSpec('model.geometric_stiffness', True,
@@ -178,3 +186,44 @@ def markdown_table():
         rows.append(f'| `{spec.name}` | `{spec.default!r}` | {allowed} | '
                     f'{description}{ro} |')
     return '\n'.join(rows)
+
+
+def model_options(values):
+    """
+    The reduced-model options selected by parameter values.
+
+    Parameters
+    ----------
+    values : dict
+        Parameter name -> value (:data:`PARAMETERS`).
+
+    Returns
+    -------
+    core.reduced.ModelOptions
+
+    """
+    from .core import reduced
+    modes = values['model.modes'] or None   # 0: the planned default for the bearing model
+    static = None if values['model.static'] < 0 else values['model.static']
+    return reduced.ModelOptions(modes=modes, static=static,
+                                grid_size=values['model.grid_size'],
+                                elements_per_link=values['model.elements_per_link'] or None,
+                                rigid_crank=values['model.rigid_crank'],
+                                bearings=values['model.bearings'],
+                                geometric_stiffness=values['model.geometric_stiffness'])
+
+
+def default_model_options(**overrides):
+    """
+    The node's default reduced model, with ``model.*`` parameters overridden by keyword.
+
+    Also the default of `flexlink estimate / bench / replay`. Sizes left at their defaults are
+    resolved for the overridden bearing and crank models (core.reduced.DEFAULT_SIZES).
+    """
+    values = defaults()
+    for name, value in overrides.items():
+        key = f'model.{name}'
+        if key not in values:
+            raise ValueError(f'unknown model option {name!r}')
+        values[key] = value
+    return model_options(values)

@@ -10,7 +10,7 @@ import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 
-from flexlink_ros import cli_replay, ros_messages
+from flexlink_ros import cli_replay, node_params, ros_messages
 from flexlink_ros.core import reduced
 from flexlink_ros.core.estimator import StreamingEstimator
 from flexlink_ros.core.mechanism import load_mechanism
@@ -21,8 +21,8 @@ RPM = 2.0 * math.pi / 60.0
 
 @pytest.fixture(scope='module')
 def model():
-    # The node's model while core/dynamics.py is absent (no geometric stiffness), cached.
-    options = reduced.ModelOptions(geometric_stiffness=False)
+    # The replay's default model (the node's) without geometric stiffness, cached.
+    options = node_params.default_model_options(geometric_stiffness=False)
     return reduced.model_for_mechanism(load_mechanism('cho1992'), options)
 
 

@@ -666,12 +666,16 @@ def periodic_response(model, speed, start_angle=0.0, steps=720, stages=2):
 
 # Bump when the precompute changes what it stores; older cache files are then rebuilt.
 MODEL_VERSION = 3
-# Default (modes, static) per bearing model: the smallest sizes meeting 1 % on the coupler
-# mid-point at 269 and 391 rpm against the full-order reference with geometric stiffness
-# (flexible bearings put the 5th-7th crank harmonics on the first two modes, which a
-# constant basis must then resolve to a fraction of zeta; 12 + 4 gave 1.7 % at 391 rpm,
-# 14 + 4 1.1 %, 16 + 2 0.4 %; see flexlink plan / bench).
-DEFAULT_SIZES = {'rigid': (4, 2), 'flexible': (16, 2)}
+# Default (modes, static) per (bearing model, rigid crank), from flexlink plan on Cho 1992
+# with geometric stiffness, 269 and 391 rpm. Rigid crank: the smallest sizes meeting 1 % on
+# the coupler mid-point against that model's own full order (flexible bearings put the
+# 5th-7th crank harmonics on the first two modes, which a constant basis must resolve to a
+# fraction of zeta; 12 + 4 gave 1.7 % at 391 rpm, 14 + 4 1.1 %, 16 + 2 0.4 %). Flexible
+# crank: the crank-dominated mode (72-127 Hz over the cycle) needs far more directions;
+# 24 + 2 at grid 128 and 4 elements gives 1.3 % / 0.9 % (coupler / lever) against a
+# 6-element reference, 16 + 4 gave 16 %; with rigid bearings 8 + 4 at grid 256 gives 0.9 %.
+DEFAULT_SIZES = {('rigid', True): (4, 2), ('flexible', True): (16, 2),
+                 ('rigid', False): (8, 4), ('flexible', False): (24, 2)}
 # Points per beam element where link shapes are tabulated (3 elements: 10 points per link).
 SHAPE_POINTS_PER_ELEMENT = 3
 # Grid points and steps per revolution of the full-order reference.
@@ -689,7 +693,8 @@ class ModelOptions:
     Parameters
     ----------
     modes : int or None
-        Basis directions from the frozen modes (None: :data:`DEFAULT_SIZES` for the bearings).
+        Basis directions from the frozen modes (None: :data:`DEFAULT_SIZES` for the bearings
+        and the crank model).
     static : int or None
         Further basis directions from static load responses (None: as ``modes``).
     grid_size : int
@@ -719,7 +724,7 @@ class ModelOptions:
     def __post_init__(self):
         if self.bearings not in ('flexible', 'rigid'):
             raise ValueError(f"`bearings` must be 'flexible' or 'rigid', got {self.bearings!r}")
-        modes, static = DEFAULT_SIZES[self.bearings]
+        modes, static = DEFAULT_SIZES[self.bearings, bool(self.rigid_crank)]
         object.__setattr__(self, 'modes', modes if self.modes is None else int(self.modes))
         object.__setattr__(self, 'static', static if self.static is None else int(self.static))
         if self.modes < 1 or self.static < 0:

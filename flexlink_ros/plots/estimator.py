@@ -124,6 +124,7 @@ def plot_estimator(out_dir):
         model is not available in this checkout.
 
     """
+    from .. import node_params
     from ..cli_estimate import PAPER_RPM, RPM, run_bench, run_estimate
     from ..core import reduced
     from ..core.errors import FlexlinkError
@@ -131,7 +132,7 @@ def plot_estimator(out_dir):
     out = pathlib.Path(out_dir)
     try:
         mechanism = load_mechanism('cho1992')
-        options = reduced.ModelOptions()
+        options = node_params.default_model_options()   # the node's default model
         bench = run_bench(mechanism, options, chart=out / 'estimator_error_vs_cost.png')
         model = reduced.model_for_mechanism(mechanism, options)
         estimate = run_estimate(model, PAPER_RPM[-1])
