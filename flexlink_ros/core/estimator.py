@@ -263,7 +263,7 @@ ERROR_INDICATOR_FLOOR_M = 1e-6
 # Steps per revolution of the warm-start shooting.
 WARM_START_STEPS = 720
 # Samples per batch of the offline replay (bounds its memory to a few MB).
-REPLAY_CHUNK = 4096
+REPLAY_CHUNK = 2048
 
 
 class SampleFlag(enum.IntFlag):
@@ -974,14 +974,10 @@ def replay(model, stamps_ns, angles, speeds=None,
     for outer in range(prefix - 1, count - 1, REPLAY_CHUNK):
         outer_last = min(outer + REPLAY_CHUNK, count - 1)
         # Table blocks at the samples and at the first stages of this chunk's steps.
-        # Both in one call: more samples per grid cell, fewer and larger matrix products.
         chosen = slice(outer + 1, outer_last + 1)
-        both = tables.products(stage_names, *(
-            np.concatenate((x[chosen], y[chosen]))
-            for x, y in zip((wrapped, model_speed, model_accel), stage_state)))
-        middle = outer_last - outer
-        current = {name: values[:middle] for name, values in both.items()}
-        stage = {name: values[middle:] for name, values in both.items()}
+        current = tables.products(stage_names, wrapped[chosen], model_speed[chosen],
+                                  model_accel[chosen])
+        stage = tables.products(stage_names, *(x[chosen] for x in stage_state))
         for first in range(outer, outer_last, batch):
             last = min(first + batch, outer_last)
             size = last - first
