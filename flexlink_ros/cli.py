@@ -9,6 +9,7 @@ import argparse
 import importlib
 import json
 import math
+import os
 import pathlib
 import re
 import sys
@@ -110,7 +111,14 @@ def main(argv=None):
     args = parser.parse_args(argv)
     try:
         return args.func(args)
+    except BrokenPipeError:
+        # The reader went away (`flexlink ... | head`): stop quietly, as Unix tools do.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
     except (FlexlinkError, ValueError) as exc:
+        print(f'flexlink {args.command}: error: {exc}', file=sys.stderr)
+        return 1
+    except OSError as exc:   # a missing or unreadable file, a full disk: said in one line
         print(f'flexlink {args.command}: error: {exc}', file=sys.stderr)
         return 1
     except KeyboardInterrupt:

@@ -102,6 +102,9 @@ def mcap_info(path):
                 'topics': sorted(topics.values(), key=lambda t: t['topic'])}
     summary = None
     with open(path, 'rb') as stream:
+        if stream.read(MAGIC_SIZE) != MCAP_MAGIC:
+            raise ValueError(f'{path} is not an MCAP file (bad magic)')
+        stream.seek(0)
         try:
             reader = make_reader(stream)
             header = reader.get_header()

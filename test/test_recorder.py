@@ -458,3 +458,18 @@ def test_write_batch_writes_the_same_file_as_write(tmp_path, chunk_size, bag):
         return files, metadata, status
 
     assert record('single', False) == record('batch', True)
+
+
+@pytest.mark.parametrize('content', [None, b'not an mcap file at all' * 100])
+def test_mcap_info_on_a_missing_or_foreign_file_is_a_one_line_error(tmp_path, content):
+    import subprocess
+    import sys
+    path = tmp_path / 'input.mcap'
+    if content is not None:
+        path.write_bytes(content)
+    result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'mcap-info', str(path)],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 1
+    assert result.stderr.startswith('flexlink mcap-info: error:')
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert ('bad magic' if content else 'No such file') in result.stderr
