@@ -1,5 +1,6 @@
 """CDR codecs of flexlink_ros.cdr against rclpy's serialisation."""
 
+import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
@@ -106,3 +107,14 @@ def test_row_encoders_equal_the_one_message_encoders(frame):
                                                force[n])
         assert markers[n] == encoder.encode(stamp, list(points[n]), list(deflections[n]), 11.0,
                                             joints[n], levels)
+
+
+@pytest.mark.parametrize('frame', ['g', 'linkage_ground', 'abc', 'machine_base_frame'])
+def test_criteria_template_path_equals_rclpy_for_any_frame_length(frame):
+    """The per-sample template encoder against rclpy, frames of every padding class."""
+    rng = np.random.default_rng(len(frame))
+    values = [rng.normal(size=4).tolist() for _ in range(3)]
+    for stamp_ns in (1, 1_700_000_000_987_654_321):
+        stamp = ros_messages.ns_to_stamp(stamp_ns)
+        got = cdr.criteria_cdr(stamp.sec, stamp.nanosec, frame.encode(), *values)
+        assert got == serialize_exact(ros_messages.criteria_message(stamp, frame, *values))
