@@ -188,6 +188,8 @@ def _make_node_class():
                      f'criteria: {self.criteria_source}')
             self.estimator = StreamingEstimator(self.model,
                                                 warm_start=values['model.warm_start'])
+            # The node only streams: the step tables serve it, the full table can go.
+            self.model = self.estimator.release_model_table()
             reliability = (ReliabilityPolicy.RELIABLE if values['qos.reliability'] == 'reliable'
                            else ReliabilityPolicy.BEST_EFFORT)
             self.qos = QoSProfile(depth=values['qos.depth'], reliability=reliability)

@@ -579,3 +579,22 @@ def test_gap_in_the_input_costs_no_accuracy(cho, gap_s):
     # Measured 0.9 % of the peak-to-peak (as without a gap); one 15 ms step gave 28 %.
     assert np.abs(got - reference['coupler_mid']).max() < 0.03 * size
     assert any(s.flags & SampleFlag.LARGE_STEP for s in samples)
+
+
+def test_released_model_table_changes_nothing_streamed(toy_model):
+    """Warm start, cold start and steps from the step tables alone (the node's memory)."""
+    kept, released = StreamingEstimator(toy_model), StreamingEstimator(toy_model)
+    model = released.release_model_table()
+    assert model.table.size == 0 and toy_model.table.size > 0
+    theta = np.linspace(-1.0, 8.0, 37)
+    for ours, theirs in zip(kept.system_blocks(theta, 20.0, 3.0),
+                            reduced.system_blocks(toy_model, toy_model.evaluate(theta, 20.0, 3.0))):
+        np.testing.assert_allclose(ours, theirs, rtol=1e-12, atol=1e-12 * np.abs(theirs).max())
+    for estimator in (kept, released):
+        estimator.update(0, 0.4, None)          # cold start, then the deferred warm start
+        for n in range(1, 200):
+            sample = estimator.update(n * 10**6, 0.4 + 25.0 * n * 1e-3, None)
+        estimator.last = sample
+    assert kept.last.coupler_mid == pytest.approx(released.last.coupler_mid, rel=1e-10)
+    assert kept.last.flags == released.last.flags
+    assert released.link_shapes(released.last)[1].shape == kept.link_shapes(kept.last)[1].shape

@@ -534,11 +534,11 @@ class StreamingEstimator:
         r = self.model.size
         if warm and speed != 0.0:
             _, q, v = reduced.periodic_response(self.model, speed, start_angle=angle,
-                                                steps=WARM_START_STEPS)
+                                                steps=WARM_START_STEPS,
+                                                blocks=self.system_blocks)
             q0, v0 = q[0], v[0]
         else:
-            rows = self.model.evaluate(angle, speed, accel)
-            _, _, stiffness, load = reduced.system_blocks(self.model, rows)
+            _, _, stiffness, load = self.system_blocks(np.array([angle]), speed, accel)
             q0, v0 = np.linalg.solve(stiffness[0], load[0]), np.zeros(r)
         self._z[:r] = q0
         self._z[r:2 * r] = v0
@@ -546,6 +546,40 @@ class StreamingEstimator:
         self._load(self._parity, weights, k)
         np.dot(weights, self._tables.rest[k], out=self._rest)
         self._previous = (angle, speed, accel)
+
+    def system_blocks(self, theta, w, a):
+        """
+        M, C, K, f at crank angles ``theta`` (array), speed ``w``, acceleration ``a``.
+
+        From the step tables (the rows each block uses), so the estimator needs nothing of
+        the model's full table: see :meth:`release_model_table`.
+        """
+        model, tables, r = self.model, self._tables, self.model.size
+        theta = np.asarray(theta, dtype=float)
+        cells, t = model.cell(theta)
+        weights = model.weights(t, w, a).reshape(theta.size, -1)
+        mc = np.empty((theta.size, 2 * r * r))
+        kf = np.empty((theta.size, r * r + r))
+        order = np.argsort(cells, kind='stable')
+        for group in np.split(order, np.flatnonzero(np.diff(cells[order])) + 1):
+            k = cells[group[0]]
+            mc[group] = weights[group, tables.ROWS_MC] @ tables.mc[k]
+            kf[group] = weights[group, tables.ROWS_KF] @ tables.kf[k]
+        shape = (theta.size, r, r)
+        return (mc[:, :r * r].reshape(shape), mc[:, r * r:].reshape(shape),
+                kf[:, :r * r].reshape(shape), kf[:, r * r:])
+
+    def release_model_table(self):
+        """
+        Drop this estimator's reference to the model's full table (tens of MB).
+
+        Streaming, warm starts and link shapes need only the step tables and the shape
+        table; ``model.evaluate`` of the model this estimator then holds raises. For a process
+        that only streams (the node), which must drop its own references to the model too.
+        """
+        empty = np.empty((self.model.grid_size,) + self.model.table.shape[1:2] + (0,))
+        self.model = dataclasses.replace(self.model, table=empty)
+        return self.model
 
     # -- the per-sample path -----------------------------------------------------------
 

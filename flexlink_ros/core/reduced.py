@@ -599,7 +599,7 @@ def output_values(model, rows, q):
 PERIODIC_CHUNK = 60
 
 
-def periodic_response(model, speed, start_angle=0.0, steps=720, stages=2):
+def periodic_response(model, speed, start_angle=0.0, steps=720, stages=2, blocks=None):
     """
     Periodic steady state of the reduced model at constant crank speed (shooting).
 
@@ -619,6 +619,9 @@ def periodic_response(model, speed, start_angle=0.0, steps=720, stages=2):
         Time steps per revolution.
     stages : int
         Radau IIA stages.
+    blocks : callable or None
+        ``blocks(theta, w, a)`` -> M, C, K, f at crank angles ``theta`` (arrays of shapes
+        (m, r, r) x 3 and (m, r)); None: from ``model.evaluate``.
 
     Returns
     -------
@@ -630,9 +633,10 @@ def periodic_response(model, speed, start_angle=0.0, steps=720, stages=2):
     """
     from .integrators import RadauIIA, compose_affine, step_maps
     size = model.size
+    if blocks is None:
+        blocks = lambda theta, w, a: system_blocks(model, model.evaluate(theta, w, a))  # noqa
     if speed == 0.0:
-        rows = model.evaluate(start_angle, 0.0, 0.0)
-        _, _, stiffness, load = system_blocks(model, rows)
+        _, _, stiffness, load = blocks(np.atleast_1d(float(start_angle)), 0.0, 0.0)
         q = np.linalg.solve(stiffness[0], load[0])
         return (np.full(steps + 1, float(start_angle)), np.tile(q, (steps + 1, 1)),
                 np.zeros((steps + 1, size)))
@@ -646,9 +650,9 @@ def periodic_response(model, speed, start_angle=0.0, steps=720, stages=2):
     for first in range(0, steps, PERIODIC_CHUNK):
         chunk = slice(first, min(first + PERIODIC_CHUNK, steps))
         count = chunk.stop - chunk.start
-        rows = model.evaluate(start_angle + speed * stage_times[chunk].ravel(), speed, 0.0)
-        mass, damping, stiffness, load = (b.reshape((count, stages) + b.shape[1:])
-                                          for b in system_blocks(model, rows))
+        mass, damping, stiffness, load = (
+            b.reshape((count, stages) + b.shape[1:])
+            for b in blocks(start_angle + speed * stage_times[chunk].ravel(), speed, 0.0))
         maps[chunk] = step_maps(method, np.full(count, h), mass, damping, stiffness, load)
     total = np.concatenate([np.eye(2 * size), np.zeros((2 * size, 1))], axis=1)
     for step in maps:
