@@ -203,16 +203,15 @@ def model_options(args, **overrides):
     """
     ModelOptions from the common command-line arguments, with overrides.
 
-    Without size arguments the sizes are the node's defaults for the chosen bearing and crank
-    models (node_params.default_model_options); a flexible crank gets the node's elements per
-    link, a rigid crank the mechanism file's.
+    Without size arguments the sizes are the defaults for the chosen bearing and crank models
+    (core.reduced.DEFAULT_SIZES); a flexible crank gets the node's elements per link, a rigid
+    crank the mechanism file's.
     """
     rigid_crank = bool(args.rigid_crank)
-    default = node_params.default_model_options(bearings=args.bearings,
-                                                rigid_crank=rigid_crank)
+    node_elements = node_params.defaults()['model.elements_per_link'] or None
     values = {'rigid_crank': rigid_crank, 'bearings': args.bearings,
               'geometric_stiffness': not args.no_geometric_stiffness,
-              'elements_per_link': None if rigid_crank else default.elements_per_link}
+              'elements_per_link': None if rigid_crank else node_elements}
     for name in ('modes', 'static', 'grid_size', 'elements_per_link'):
         value = getattr(args, name, None)
         if value is not None:

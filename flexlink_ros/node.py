@@ -43,11 +43,6 @@ READY_MESSAGE = 'ready: listening on'  # logged once the node is subscribed (cli
 FIRST_INPUT_MESSAGE = 'first crank sample'
 
 
-def model_options_from_parameters(values):
-    """The reduced-model options selected by the node parameters (node_params.model_options)."""
-    return node_params.model_options(values)
-
-
 def load_node_model(values, warn):
     """
     Load the mechanism and its reduced model (cached), falling back where a module is missing.
@@ -74,7 +69,7 @@ def load_node_model(values, warn):
     mechanism = load_mechanism(values['mechanism'])
     if values['damping_ratio'] != mechanism.damping_ratio:
         mechanism = dataclasses.replace(mechanism, damping_ratio=values['damping_ratio'])
-    options = model_options_from_parameters(values)
+    options = node_params.model_options(values)
     notes = []
     if values['model.modes'] == 0 and values['model.tolerance'] < DEFAULT_MODEL_TOLERANCE:
         notes.append(f'the default model was planned for {DEFAULT_MODEL_TOLERANCE:g} relative '

@@ -27,14 +27,14 @@ OUTPUTS = ('/flexlink_node/lever_tip/deflection', '/flexlink_node/coupler_mid/de
 
 def test_model_options_follow_the_parameters():
     values = node_params.defaults()
-    options = flexlink_node.model_options_from_parameters(values)
+    options = node_params.model_options(values)
     # 0 modes: the planned default, for the flexible crank of the node's default scene.
     assert options == reduced.ModelOptions(rigid_crank=False, elements_per_link=4)
     assert (options.modes, options.static) == reduced.DEFAULT_SIZES['flexible', False]
     values.update({'model.modes': 6, 'model.bearings': 'rigid', 'model.rigid_crank': False,
                    'model.geometric_stiffness': False, 'model.static': 0,
                    'model.grid_size': 256, 'model.elements_per_link': 4})
-    options = flexlink_node.model_options_from_parameters(values)
+    options = node_params.model_options(values)
     assert (options.modes, options.bearings, options.rigid_crank,
             options.geometric_stiffness) == (6, 'rigid', False, False)
     assert (options.static, options.grid_size, options.elements_per_link) == (0, 256, 4)

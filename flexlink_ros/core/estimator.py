@@ -51,6 +51,54 @@ def _wrap_pi(angle):
     return (angle + math.pi) % TWO_PI - math.pi
 
 
+def _shift_quadratic_moments(s, t, d, f, dy):
+    """
+    Moments of a degree-2 fit with the origin moved by ``d``, the values re-referred to
+    ``y - dy`` and every weight multiplied by ``f`` (before the new sample is added).
+
+    ``s`` = (s0..s4), ``t`` = (t0..t2); returns the new ``(s, t)`` tuples.
+    """
+    s0, s1, s2, s3, s4 = s
+    t0, t1, t2 = t
+    # Re-refer the values (y - dy) with the old moments, then move the origin.
+    t0, t1, t2 = t0 - dy * s0, t1 - dy * s1, t2 - dy * s2
+    d2 = d * d
+    return ((f * s0, f * (s1 + d * s0), f * (s2 + 2 * d * s1 + d2 * s0),
+             f * (s3 + 3 * d * s2 + 3 * d2 * s1 + d2 * d * s0),
+             f * (s4 + 4 * d * s3 + 6 * d2 * s2 + 4 * d2 * d * s1 + d2 * d2 * s0)),
+            (f * t0, f * (t1 + d * t0), f * (t2 + 2 * d * t1 + d2 * t0)))
+
+
+def _parabola_coefficients(s, t):
+    """(c0, c1, c2) of the weighted parabola through moments ``s``, ``t``; None if singular."""
+    a00, a01, a02, a12, a22 = s
+    a11 = a02
+    m00 = a11 * a22 - a12 * a12
+    m01 = a02 * a12 - a01 * a22
+    m02 = a01 * a12 - a02 * a11
+    det = a00 * m00 + a01 * m01 + a02 * m02
+    if not abs(det) > 1e-12 * abs(a00 * a11 * a22):
+        return None
+    m11 = a00 * a22 - a02 * a02
+    m12 = a01 * a02 - a00 * a12
+    m22 = a00 * a11 - a01 * a01
+    t0, t1, t2 = t
+    return ((m00 * t0 + m01 * t1 + m02 * t2) / det,
+            (m01 * t0 + m11 * t1 + m12 * t2) / det,
+            (m02 * t0 + m12 * t1 + m22 * t2) / det)
+
+
+def _line_coefficients(s, t, count):
+    """(c0, c1) of the weighted line through moments ``s``, ``t`` (constant if degenerate)."""
+    if count == 0:
+        return 0.0, 0.0
+    det = s[0] * s[2] - s[1] * s[1]
+    if count < 2 or abs(det) <= 1e-12 * s[0] * s[2]:
+        return t[0] / s[0], 0.0
+    c1 = (s[0] * t[1] - s[1] * t[0]) / det
+    return (t[0] - s[1] * c1) / s[0], c1
+
+
 class _ForgettingPolyFit:
     """
     Exponentially weighted least-squares polynomial of degree 1 or 2, updated recursively.
@@ -82,15 +130,8 @@ class _ForgettingPolyFit:
         if self.count:
             d, f, dy = -shift, forget, value_shift
             if self.degree == 2:
-                s0, s1, s2, s3, s4 = self.s
-                t0, t1, t2 = self.t
-                # Re-refer the values (y - dy) with the old moments, then move the origin.
-                t0, t1, t2 = t0 - dy * s0, t1 - dy * s1, t2 - dy * s2
-                d2 = d * d
-                self.s = [f * s0, f * (s1 + d * s0), f * (s2 + 2 * d * s1 + d2 * s0),
-                          f * (s3 + 3 * d * s2 + 3 * d2 * s1 + d2 * d * s0),
-                          f * (s4 + 4 * d * s3 + 6 * d2 * s2 + 4 * d2 * d * s1 + d2 * d2 * s0)]
-                self.t = [f * t0, f * (t1 + d * t0), f * (t2 + 2 * d * t1 + d2 * t0)]
+                moments, values = _shift_quadratic_moments(self.s, self.t, d, f, dy)
+                self.s, self.t = list(moments), list(values)
             else:
                 s0, s1, s2 = self.s
                 t0, t1 = self.t
@@ -103,30 +144,12 @@ class _ForgettingPolyFit:
 
     def coefficients(self):
         """Fitted (c0, c1, c2) of y = c0 + c1 u + c2 u^2 at the newest sample (c2 = 0: line)."""
-        s, t = self.s, self.t
         if self.degree == 2 and self.count >= 3:
-            a00, a01, a02, a12, a22 = s[0], s[1], s[2], s[3], s[4]
-            a11 = a02
-            m00 = a11 * a22 - a12 * a12
-            m01 = a02 * a12 - a01 * a22
-            m02 = a01 * a12 - a02 * a11
-            det = a00 * m00 + a01 * m01 + a02 * m02
-            if abs(det) > 1e-12 * abs(a00 * a11 * a22):
-                m11 = a00 * a22 - a02 * a02
-                m12 = a01 * a02 - a00 * a12
-                m22 = a00 * a11 - a01 * a01
-                t0, t1, t2 = t
-                return ((m00 * t0 + m01 * t1 + m02 * t2) / det,
-                        (m01 * t0 + m11 * t1 + m12 * t2) / det,
-                        (m02 * t0 + m12 * t1 + m22 * t2) / det)
+            coefficients = _parabola_coefficients(self.s, self.t)
+            if coefficients is not None:
+                return coefficients
         # Linear fit (degree 1, or too few distinct samples for a parabola).
-        if self.count == 0:
-            return 0.0, 0.0, 0.0
-        det = s[0] * s[2] - s[1] * s[1]
-        if self.count < 2 or abs(det) <= 1e-12 * s[0] * s[2]:
-            return t[0] / s[0], 0.0, 0.0
-        c1 = (s[0] * t[1] - s[1] * t[0]) / det
-        return (t[0] - s[1] * c1) / s[0], c1, 0.0
+        return (*_line_coefficients(self.s, self.t, self.count), 0.0)
 
 
 class CrankRateFilter:
@@ -560,9 +583,7 @@ class StreamingEstimator:
         weights = model.weights(t, w, a).reshape(theta.size, -1)
         mc = np.empty((theta.size, 2 * r * r))
         kf = np.empty((theta.size, r * r + r))
-        order = np.argsort(cells, kind='stable')
-        for group in np.split(order, np.flatnonzero(np.diff(cells[order])) + 1):
-            k = cells[group[0]]
+        for k, group in reduced.cell_groups(cells):
             mc[group] = weights[group, tables.ROWS_MC] @ tables.mc[k]
             kf[group] = weights[group, tables.ROWS_KF] @ tables.kf[k]
         shape = (theta.size, r, r)
@@ -574,8 +595,9 @@ class StreamingEstimator:
         Drop this estimator's reference to the model's full table (tens of MB).
 
         Streaming, warm starts and link shapes need only the step tables and the shape
-        table; ``model.evaluate`` of the model this estimator then holds raises. For a process
-        that only streams (the node), which must drop its own references to the model too.
+        table; ``model.evaluate`` of the model this estimator then holds returns rows of zero
+        width. For a process that only streams (the node), which must drop its own references
+        to the model too (it gets the released model back).
         """
         empty = np.empty((self.model.grid_size,) + self.model.table.shape[1:2] + (0,))
         self.model = dataclasses.replace(self.model, table=empty)
@@ -796,12 +818,14 @@ def _crank_motion(times, angles, speeds, time_constant_s):
     append = rows.append
     tc = float(time_constant_s)
     exp, wrap = math.exp, _wrap_pi
+    shift_moments, parabola, line = (_shift_quadratic_moments, _parabola_coefficients,
+                                     _line_coefficients)
     previous_time = times[0]
     unwrapped = float(angles[0])
     speed = float(speeds[0]) if measured else 0.0
     accel = 0.0
     append((wrap_angle(unwrapped), speed, accel, 0.0))
-    s0, s1, s2, s3, s4, t0, t1, t2 = 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    moments, values = (1.0, 0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
     fitted = 1
     mean_dt = None
     for n in range(1, count):
@@ -820,40 +844,15 @@ def _crank_motion(times, angles, speeds, time_constant_s):
         unwrapped += advance
         previous_time = time_s
         dy = value - speed if measured else advance
-        # _ForgettingPolyFit.add(shift, f, dy, 0.0), degree 2 (count >= 1 here).
-        d = -shift
-        t0, t1, t2 = t0 - dy * s0, t1 - dy * s1, t2 - dy * s2
-        d2 = d * d
-        s0, s1, s2, s3, s4 = (
-            f * s0, f * (s1 + d * s0), f * (s2 + 2 * d * s1 + d2 * s0),
-            f * (s3 + 3 * d * s2 + 3 * d2 * s1 + d2 * d * s0),
-            f * (s4 + 4 * d * s3 + 6 * d2 * s2 + 4 * d2 * d * s1 + d2 * d2 * s0))
-        t0, t1, t2 = f * t0, f * (t1 + d * t0), f * (t2 + 2 * d * t1 + d2 * t0)
-        s0 += 1.0
-        t0 += 0.0
+        # _ForgettingPolyFit.add(shift, f, dy, 0.0) and .coefficients(), degree 2.
+        moments, values = shift_moments(moments, values, -shift, f, dy)
+        moments = (moments[0] + 1.0,) + moments[1:]
         fitted += 1
-        # _ForgettingPolyFit.coefficients()
-        c1 = c2 = None
-        if fitted >= 3:
-            a00, a01, a02, a12, a22 = s0, s1, s2, s3, s4
-            a11 = a02
-            m00 = a11 * a22 - a12 * a12
-            m01 = a02 * a12 - a01 * a22
-            m02 = a01 * a12 - a02 * a11
-            det = a00 * m00 + a01 * m01 + a02 * m02
-            if abs(det) > 1e-12 * abs(a00 * a11 * a22):
-                m11 = a00 * a22 - a02 * a02
-                m12 = a01 * a02 - a00 * a12
-                m22 = a00 * a11 - a01 * a01
-                c1 = (m01 * t0 + m11 * t1 + m12 * t2) / det
-                c2 = (m02 * t0 + m12 * t1 + m22 * t2) / det
-        if c1 is None:
-            det = s0 * s2 - s1 * s1
-            if fitted < 2 or abs(det) <= 1e-12 * s0 * s2:
-                c1 = 0.0
-            else:
-                c1 = (s0 * t1 - s1 * t0) / det
-            c2 = 0.0
+        coefficients = parabola(moments, values) if fitted >= 3 else None
+        if coefficients is None:
+            c1, c2 = line(moments, values, fitted)[1], 0.0
+        else:
+            _, c1, c2 = coefficients
         if measured:
             speed = float(value)
             accel = c1 / tc

@@ -324,6 +324,14 @@ class TableLayout:
         return part.reshape(part.shape[:-1] + self.shapes[name])
 
 
+def cell_groups(cells):
+    """(cell, indices of the angles in it) for each grid cell present in ``cells``."""
+    order = np.argsort(cells, kind='stable')
+    for group in np.split(order, np.flatnonzero(np.diff(cells[order])) + 1):
+        if group.size:
+            yield int(cells[group[0]]), group
+
+
 @dataclasses.dataclass(frozen=True)
 class ReducedModel:
     """
@@ -439,9 +447,8 @@ class ReducedModel:
         weights = self.weights(t, w, a)
         rows = np.empty((theta.size, self.table.shape[2]))
         # One matrix product per grid cell (no gathered copy of the table per angle).
-        order = np.argsort(cells, kind='stable')
-        for group in np.split(order, np.flatnonzero(np.diff(cells[order])) + 1):
-            rows[group] = weights[group] @ self.table[cells[group[0]]]
+        for k, group in cell_groups(cells):
+            rows[group] = weights[group] @ self.table[k]
         return rows
 
     def shapes(self, theta, q):
