@@ -5,11 +5,11 @@ import pathlib
 
 import pytest
 
+from flexlink_ros.cli_demo import isolate_ros_environment   # imports no rclpy
+
 # Before anything imports rclpy: discovery on this machine only, and a domain id unique to
-# this run (0-101 is the valid range; the pid spreads concurrent runs apart).
-os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 100))
-os.environ.pop('ROS_LOCALHOST_ONLY', None)
+# this run (also when the shell has one set), inherited by every process a test starts.
+isolate_ros_environment()
 os.environ.setdefault('MPLBACKEND', 'Agg')
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
