@@ -393,10 +393,7 @@ def criteria_rows(stamps_ns, frame, ratio, gamma_dot, force):
     ndarray of uint8, shape (m, length)
 
     """
-    joints = len(JOINTS)
-    sentinels = [[1.0e300 + k * 1e285 + j * 1e284 for j in range(joints)] for k in range(3)]
-    template = criteria_cdr(0, 0, frame, *sentinels)
-    offsets = [template.index(struct.pack(f'<{joints}d', *values)) for values in sentinels]
+    template, offsets = _criteria_template(frame)
     rows = _template_rows(template, len(stamps_ns))
     rows[:, 4:12] = _stamp_columns(stamps_ns)
     for offset, values in zip(offsets, (ratio, gamma_dot, force)):
