@@ -89,12 +89,6 @@ def iter_recording(path, topics=None):
                     yield topic, type_name, record.log_time, record.publish_time, record.data
 
 
-def recording_topics(path):
-    """Topic name -> (type name, message count) of a recording."""
-    counts, _ = scan_recording(path)
-    return {topic: tuple(value) for topic, value in counts.items()}
-
-
 _MESSAGE, _CHANNEL, _SCHEMA, _CHUNK = 0x05, 0x04, 0x03, 0x06
 _DATA_END, _FOOTER = 0x0F, 0x02
 _PREFIX = struct.Struct('<BQ')
@@ -563,10 +557,8 @@ def read_crank_samples(path, topic, joint_name, scan=None):
 
     """
     if scan is None:
-        messages = list(iter_recording(path, {topic}))
-        messages = [(log, publish, data) for _, _, log, publish, data in messages]
-    else:
-        messages = scan[1].get(topic, [])
+        scan = scan_recording(path, topic=topic)
+    messages = scan[1].get(topic, [])
     if not messages:
         empty = np.zeros(0, dtype=np.int64)
         return {'data': [], 'log_ns': empty, 'publish_ns': empty, 'stamps_ns': empty,
