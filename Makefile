@@ -17,8 +17,10 @@ $(STAMP): requirements.txt requirements-test.txt
 
 # Non-editable install: console scripts in $(VENV)/bin and config files in
 # $(VENV)/share/flexlink_ros, where ament_index finds them (AMENT_PREFIX_PATH=$(VENV)).
+# The compiled step is also built in place, for the tests and tools run from this tree.
 install: venv
 	$(PY) -m pip install -q --no-deps --force-reinstall .
+	$(PY) setup.py -q build_ext --inplace
 
 demo: install
 	$(VENV)/bin/flexlink demo
@@ -33,4 +35,4 @@ report: install
 	$(VENV)/bin/flexlink report --out out/report
 
 clean:
-	rm -rf build install log out demo_out *.egg-info
+	rm -rf build install log out demo_out *.egg-info flexlink_ros/core/*.so

@@ -2,7 +2,7 @@
 
 from glob import glob
 
-from setuptools import find_packages, setup
+from setuptools import Extension, find_packages, setup
 
 package_name = 'flexlink_ros'
 
@@ -15,8 +15,12 @@ setup(
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', glob('config/*.yaml')),
     ],
+    # The streaming estimator's per-sample step in C (plain C API, no numpy headers); the
+    # package falls back to its numpy step when the extension is not built.
+    ext_modules=[Extension('flexlink_ros.core._radau_step', ['flexlink_ros/core/_radau_step.c'],
+                           extra_compile_args=['-O3'])],
     install_requires=['setuptools'],
-    zip_safe=True,
+    zip_safe=False,
     maintainer='flexlink_ros developers',
     maintainer_email='flexlink@example.com',
     description='Elastic deflection and joint-contact estimates of a flexible four-bar linkage',

@@ -416,6 +416,104 @@ def test_replay_equals_streaming(toy_model, with_speed):
     np.testing.assert_allclose(batch['crank_accel'], [s.crank_accel for s in streamed])
 
 
+def test_compiled_step_is_built():
+    """The package's compiled step is built (make install and colcon build build it)."""
+    from flexlink_ros.core import estimator
+    assert estimator._radau_step is not None, 'flexlink_ros.core._radau_step is not built'
+    assert StreamingEstimator.__init__.__defaults__[-1] is True
+
+
+def compiled_or_skip():
+    from flexlink_ros.core import estimator
+    if estimator._radau_step is None:
+        pytest.skip('the compiled step is not built (test_compiled_step_is_built fails)')
+
+
+def _samples_fields(samples):
+    return {name: np.array([getattr(s, name) for s in samples], dtype=float)
+            for name in ('lever_tip', 'coupler_mid', 'reaction_n', 'gamma_dot', 'criterion',
+                         'error_indicator', 'modal', 'crank_speed', 'crank_accel')}
+
+
+@pytest.mark.parametrize('with_speed', [True, False])
+def test_compiled_step_equals_numpy_step(toy_model, with_speed):
+    # Jitter, drops, gaps that take sub-steps (7 and 40 ms), a reset (stamp back) and a
+    # speed beyond the model's range: every branch of the step runs on both paths.
+    compiled_or_skip()
+    times = sample_times(1000.0, 0.4, 0.5, 0.05, seed=21)
+    times = np.concatenate([times, times[-1] + 0.007 + times[:200],
+                            times[-1] + 0.247 + times[:200], times[-1] + 0.1 + times[:100]])
+    stamps = np.round(times * 1e9).astype(np.int64)
+    speed = lambda t: 30.0 + 60.0 * np.sin(3.0 * t)  # noqa: E731
+    angle = lambda t: 30.0 * t + 20.0 * (1.0 - np.cos(3.0 * t))  # noqa: E731
+    runs = {}
+    for compiled in (True, False):
+        est = StreamingEstimator(toy_model, compiled=compiled)
+        assert est.compiled is compiled
+        runs[compiled] = [est.update(int(s), float(angle(t)),
+                                     float(speed(t)) if with_speed else None)
+                          for s, t in zip(stamps, times)]
+    assert [s.flags for s in runs[True]] == [s.flags for s in runs[False]]
+    assert any(s.flags & SampleFlag.RESET for s in runs[True][1:])
+    compiled, numpy_step = _samples_fields(runs[True]), _samples_fields(runs[False])
+    for name, values in numpy_step.items():
+        scale = max(np.max(np.abs(values)), 1e-30)
+        np.testing.assert_allclose(compiled[name], values, rtol=0.0, atol=1e-9 * scale,
+                                   err_msg=name)
+
+
+def test_compiled_replay_equals_numpy_replay(toy_model):
+    from flexlink_ros.core.estimator import replay
+    compiled_or_skip()
+    times = sample_times(2000.0, 0.6, 0.5, 0.1, seed=5)
+    times[300:] += 0.013       # one gap that takes sub-steps
+    stamps = np.round(times * 1e9).astype(np.int64)
+    angles, speeds = 40.0 * times, np.full(times.size, 40.0)
+    fast = replay(toy_model, stamps, angles, speeds)
+    slow = replay(toy_model, stamps, angles, speeds, compiled=False)
+    for name in ('lever_tip', 'coupler_mid', 'modal', 'force', 'force_dot', 'rms2'):
+        scale = np.max(np.abs(slow[name]))
+        np.testing.assert_allclose(fast[name], slow[name], rtol=0.0, atol=1e-9 * scale,
+                                   err_msg=name)
+
+
+def test_compiled_step_rejects_bad_buffers(toy_model):
+    from flexlink_ros.core import estimator
+    compiled_or_skip()
+    est = StreamingEstimator(toy_model)
+    est.update(0, 0.0, 30.0)
+    t = est._tables
+    row = np.array([1e-3, 1.0, 0.03, 30.0, 0.0, 0.03])
+
+    def call(**change):
+        args = dict(mass=t.mass, damping=t.damping, kf=t.kf, out=t.out, joint=t.joint,
+                    g0=t.g0, cells=est._cells_per_radian, c1=estimator._STAGE1, z=est._z,
+                    prev=est._previous, rows=row, states=est._no_states, records=est._record)
+        args.update(change)
+        estimator._radau_step.advance(*args.values())
+
+    z_before = est._z.copy()
+    with pytest.raises(ValueError, match='kf'):
+        call(kf=t.kf[:-1])
+    with pytest.raises(ValueError, match='damping'):
+        call(damping=np.zeros(7))
+    with pytest.raises(TypeError, match='float64'):
+        call(mass=t.mass.astype(np.float32))
+    with pytest.raises(ValueError, match='rows'):
+        call(rows=row[:5])
+    with pytest.raises(ValueError, match='non-positive step'):
+        call(rows=np.array([0.0, 1.0, 0.03, 30.0, 0.0, 0.03]))
+    with pytest.raises(ValueError, match='records'):
+        call(records=np.zeros(5))
+    with pytest.raises(ValueError, match='states'):
+        call(states=np.zeros(3))
+    with pytest.raises((BufferError, ValueError), match='read-only|writable'):
+        call(z=np.frombuffer(bytes(z_before.nbytes)))
+    np.testing.assert_array_equal(est._z, z_before)
+    call()
+    assert np.all(np.isfinite(est._z)) and not np.array_equal(est._z, z_before)
+
+
 # ---------------------------------------------------------------------------------------
 # Accuracy targets on Cho 1992 (rigid crank, zeta 0.02) against the full-order reference
 

@@ -15,6 +15,10 @@ matrices linearly in time instead saves that product but, with flexible bearings
 resonance, shifted the response by up to 40 %: the ground-frame stiffness of the rotating
 links is not linear over a step.) The two stages' block matrix and right-hand-side operator
 come out of one small matrix product with coefficients that depend only on the step h.
+
+The same step is compiled (core/_radau_step.c, built with the package): one call per sample
+instead of about thirty numpy calls, the same arithmetic to rounding (a test compares the two).
+Without the extension (a source tree that was not built) the numpy step runs.
 """
 
 import dataclasses
@@ -27,6 +31,11 @@ from scipy.linalg import lapack
 
 from . import reduced
 from .integrators import RADAU_TABLEAUX
+
+try:
+    from . import _radau_step
+except ImportError:     # not built: the numpy step serves
+    _radau_step = None
 
 LOGGER = logging.getLogger(__name__)
 
@@ -291,7 +300,11 @@ MAX_SUBSTEP_NS = 2_000_000
 # Steps per revolution of the warm-start shooting.
 WARM_START_STEPS = 720
 # Samples per batch of the offline replay (bounds its memory to a few MB).
-REPLAY_CHUNK = 2048
+REPLAY_CHUNK = 4096
+# A sample's record (the compiled step's output; _StepTables.record in numpy): deflections
+# with the residual correction (outputs), the correction alone (outputs), joint reactions
+# (joints x 2), their time derivative (joints x 2) and squared cycle-RMS reactions (joints).
+RECORD_SIZE = 2 * len(reduced.OUTPUT_NAMES) + 5 * len(reduced.JOINTS)
 
 
 class SampleFlag(enum.IntFlag):
@@ -367,12 +380,14 @@ class Sample:
 
 class _StepTables:
     """
-    Tables and coefficient stacks of the fused per-sample step (built once per model).
+    Tables and coefficient stacks of the per-sample step (built once per model).
 
     Rows are ``monomial * 4 + power`` (see core/reduced.py); each table keeps only the rows
-    its blocks use: ``mc`` [M | C] (monomials 1, w2, w, w4), ``kf`` [K | f] (a, 1, w2) and
-    ``rest`` (all rows) [output operator [O | 0 | corr] (4 x (2 r + 1)), reactions F
-    (joints x 2), their time derivative (joints x 2), squared cycle-RMS reaction (joints)].
+    and columns its block uses, so a sample reads as little memory as it can (a grid cell's
+    tables come from main memory at most sample rates): ``mass`` M (monomial 1),
+    ``damping`` C (1, w2, w, w4), ``kf`` [K | f] (a, 1, w2), ``out`` the output operator
+    [O | corr] (outputs x (r + 1), leading rows used) and ``joint`` [reactions F (joints x 2),
+    their time derivative (joints x 2), squared cycle-RMS reaction (joints)] (all rows).
     Two samples' [M, C, K, F] (F an r x r block holding f in its first r entries) in
     alternating slots times a 8 x 8 coefficient matrix G(h) give, in one product, the
     Radau IIA block matrix and the right-hand-side operator on (q, v).
@@ -385,6 +400,7 @@ class _StepTables:
     """
 
     POWERS = (-2, -1, 0, 1, 2)
+    FIRST_MC = 4               # M and C start at monomial 1
     ROWS_MC = slice(4, 20)     # monomials 1, w2, w, w4
     ROWS_KF = slice(0, 12)     # monomials a, 1, w2
 
@@ -398,22 +414,36 @@ class _StepTables:
         layout = model.layout
         r = model.size
         table = model.table
-        n_cells = table.shape[0]
+        n_cells, n_rows = table.shape[:2]
         self.size = r
-        block = lambda name, rows: layout.block(table[:, rows], name).reshape(  # noqa: E731
-            n_cells, rows.stop - rows.start, -1)
-        self.mc = np.ascontiguousarray(np.concatenate(
-            [block('M', self.ROWS_MC), block('C', self.ROWS_MC)], axis=2))
+
+        def block(name, rows=slice(0, n_rows)):
+            return layout.block(table[:, rows], name).reshape(
+                n_cells, rows.stop - rows.start, -1)
+
+        def rows_used(name, first=0):
+            used = np.flatnonzero(np.any(block(name)[:, first:] != 0.0, axis=(0, 2)))
+            return int(used[-1]) + 1 if used.size else 1
+
+        for name, rows in (('M', self.ROWS_MC), ('C', self.ROWS_MC), ('K', self.ROWS_KF),
+                           ('f', self.ROWS_KF)):
+            if np.any(block(name)[:, rows.stop:] != 0.0):
+                raise ValueError(f'{name} uses table rows beyond {rows.stop}: update _StepTables')
+        self.mass_rows = rows_used('M', self.FIRST_MC)
+        self.mass = np.ascontiguousarray(
+            block('M', slice(self.FIRST_MC, self.FIRST_MC + self.mass_rows)))
+        self.damping = np.ascontiguousarray(block('C', self.ROWS_MC))
         self.kf = np.ascontiguousarray(np.concatenate(
             [block('K', self.ROWS_KF), block('f', self.ROWS_KF)], axis=2))
-        everything = slice(0, table.shape[1])
-        out = np.zeros((n_cells, table.shape[1], 4, 2 * r + 1))
-        out[..., :r] = layout.block(table, 'out')
-        out[..., 2 * r] = layout.block(table, 'corr')
-        self.rest = np.ascontiguousarray(np.concatenate(
-            [out.reshape(n_cells, table.shape[1], -1)]
-            + [block(name, everything) for name in ('force', 'force_dot', 'rms2')], axis=2))
-        self.out_width = 4 * (2 * r + 1)
+        self.out_rows = max(rows_used('out'), rows_used('corr'))
+        rows = slice(0, self.out_rows)
+        outputs = len(reduced.OUTPUT_NAMES)
+        out = np.zeros((n_cells, self.out_rows, outputs, r + 1))
+        out[..., :r] = block('out', rows).reshape(n_cells, self.out_rows, outputs, r)
+        out[..., r] = block('corr', rows)
+        self.out = out.reshape(n_cells, self.out_rows, -1)
+        self.joint = np.ascontiguousarray(np.concatenate(
+            [block(name) for name in ('force', 'force_dot', 'rms2')], axis=2))
 
         npow = len(self.POWERS)
         zero = self.POWERS.index(0)
@@ -448,6 +478,22 @@ class _StepTables:
             for i, slot in ((0, 1 - parity), (1, parity)):
                 self.g_stack[parity, :, i, :, slot, :3] = rows[:, i]
         self.g_stack = self.g_stack.reshape(2, npow, 64)
+        # The compiled step's convention: the sample in slot 0, stage 1 in slot 1.
+        self.g0 = np.ascontiguousarray(self.g_stack[0])
+
+    def record(self, weights, k, z, out):
+        """
+        The sample's record (RECORD_FIELDS) from the row weights at cell k and z = [q, v, 1].
+
+        The numpy twin of the compiled step's record.
+        """
+        r = self.size
+        operator = np.dot(weights[:self.out_rows], self.out[k]).reshape(-1, r + 1)
+        outputs = operator.shape[0]
+        np.dot(operator[:, :r], z[:r], out=out[:outputs])
+        out[:outputs] += operator[:, r]
+        out[outputs:2 * outputs] = operator[:, r]
+        np.dot(weights, self.joint[k], out=out[2 * outputs:])
 
 
 class StreamingEstimator:
@@ -471,13 +517,16 @@ class StreamingEstimator:
         |crank acceleration| clip [rad/s^2].
     near_zero_fraction : float
         Reaction below this fraction of its cycle RMS flags the joint as near zero.
+    compiled : bool
+        Use the compiled step when it is built (see :func:`compiled_step_available`);
+        False runs the numpy step (the same numbers to rounding).
 
     """
 
     def __init__(self, model, fit_time_constant_s=DEFAULT_FIT_TIME_CONSTANT_S,
                  warm_start=True, large_step_s=DEFAULT_LARGE_STEP_S,
                  reset_gap_s=DEFAULT_RESET_GAP_S, accel_limit=DEFAULT_ACCEL_LIMIT,
-                 near_zero_fraction=DEFAULT_NEAR_ZERO_FRACTION):
+                 near_zero_fraction=DEFAULT_NEAR_ZERO_FRACTION, compiled=True):
         for name, value in (('large_step_s', large_step_s), ('reset_gap_s', reset_gap_s),
                             ('accel_limit', accel_limit)):
             if not value > 0.0:
@@ -505,8 +554,12 @@ class StreamingEstimator:
         # [M, C, K, F] of stage 1 and of the sample, in alternating slots; the sample's rest.
         self._stored = np.zeros((2, 4, r * r))
         self._flat = self._stored.reshape(2, 4 * r * r)
-        self._rest = np.zeros(self._tables.rest.shape[2])
+        self._record = np.zeros(RECORD_SIZE)
         self._parity = 0
+        self._previous = np.zeros(3)    # crank state (angle, speed, accel) of the last step
+        self._kernel = _radau_step if compiled else None
+        self._row = np.zeros(6)         # the compiled step's row: h, sub-steps, state, advance
+        self._no_states = np.empty(0)
         self._last = None
         self._pending_warm_start = False
         self._weights = np.zeros(reduced.CELL_POWERS * len(reduced.MONOMIALS))
@@ -546,11 +599,13 @@ class StreamingEstimator:
         return self._weights, k
 
     def _load(self, slot, weights, k):
-        """Write [M, C] and [K, f] of the table rows at (weights, cell k) into a slot."""
+        """Write M, C and [K, f] of the table rows at (weights, cell k) into a slot."""
         tables, r2 = self._tables, self.model.size ** 2
         flat = self._flat[slot]
-        np.dot(weights[4:20], tables.mc[k], out=flat[:2 * r2])
-        np.dot(weights[0:12], tables.kf[k], out=flat[2 * r2:3 * r2 + self.model.size])
+        first = tables.FIRST_MC
+        np.dot(weights[first:first + tables.mass_rows], tables.mass[k], out=flat[:r2])
+        np.dot(weights[tables.ROWS_MC], tables.damping[k], out=flat[r2:2 * r2])
+        np.dot(weights[tables.ROWS_KF], tables.kf[k], out=flat[2 * r2:3 * r2 + self.model.size])
 
     def _set_state(self, angle, speed, accel, warm):
         """Start from the periodic state at this speed (warm) or the static deflection."""
@@ -566,9 +621,13 @@ class StreamingEstimator:
         self._z[:r] = q0
         self._z[r:2 * r] = v0
         weights, k = self._evaluate(angle, speed, accel)
-        self._load(self._parity, weights, k)
-        np.dot(weights, self._tables.rest[k], out=self._rest)
-        self._previous = (angle, speed, accel)
+        self._tables.record(weights, k, self._z, self._record)
+        self._previous[:] = (angle, speed, accel)
+
+    @property
+    def compiled(self):
+        """True when this estimator steps with the compiled kernel."""
+        return self._kernel is not None
 
     def system_blocks(self, theta, w, a):
         """
@@ -581,14 +640,17 @@ class StreamingEstimator:
         theta = np.asarray(theta, dtype=float)
         cells, t = model.cell(theta)
         weights = model.weights(t, w, a).reshape(theta.size, -1)
-        mc = np.empty((theta.size, 2 * r * r))
+        mass = np.empty((theta.size, r * r))
+        damping = np.empty((theta.size, r * r))
         kf = np.empty((theta.size, r * r + r))
+        first = tables.FIRST_MC
         for k, group in reduced.cell_groups(cells):
-            mc[group] = weights[group, tables.ROWS_MC] @ tables.mc[k]
+            mass[group] = weights[group, first:first + tables.mass_rows] @ tables.mass[k]
+            damping[group] = weights[group, tables.ROWS_MC] @ tables.damping[k]
             kf[group] = weights[group, tables.ROWS_KF] @ tables.kf[k]
         shape = (theta.size, r, r)
-        return (mc[:, :r * r].reshape(shape), mc[:, r * r:].reshape(shape),
-                kf[:, :r * r].reshape(shape), kf[:, r * r:])
+        return (mass.reshape(shape), damping.reshape(shape), kf[:, :r * r].reshape(shape),
+                kf[:, r * r:])
 
     def release_model_table(self):
         """
@@ -662,9 +724,19 @@ class StreamingEstimator:
             self._pending_warm_start = False
             self._set_state(angle, model_speed, model_accel, True)
             flags |= _WARM_START
+        elif self._kernel is not None:
+            tables = self._tables
+            row = self._row
+            row[:] = (dt, -(-dt_ns // MAX_SUBSTEP_NS), angle, model_speed, model_accel,
+                      self.rate_filter.advance)
+            self._kernel.advance(tables.mass, tables.damping, tables.kf, tables.out,
+                                 tables.joint, tables.g0, self._cells_per_radian, _STAGE1,
+                                 self._z, self._previous, row, self._no_states, self._record)
         else:
             self._advance(dt, -(-dt_ns // MAX_SUBSTEP_NS), angle, model_speed, model_accel,
                           self.rate_filter.advance)
+            weights, k = self._evaluate(angle, model_speed, model_accel)
+            self._tables.record(weights, k, self._z, self._record)
         return self._finish(stamp_ns, angle, speed, accel, model_speed, flags, message)
 
     def _start(self, stamp_ns, angle_in, crank_speed, message):
@@ -691,7 +763,7 @@ class StreamingEstimator:
         acceleration interpolated (replay() builds the same sub-step rows).
         """
         if count > 1:
-            angle0, speed0, accel0 = self._previous
+            angle0, speed0, accel0 = self._previous.tolist()
             for i in range(1, count):
                 f = i / count
                 self._step(h / count, (angle0 + advance * f) % TWO_PI,
@@ -701,14 +773,14 @@ class StreamingEstimator:
         self._step(h, angle, speed, accel, advance)
 
     def _step(self, h, angle, speed, accel, advance):
-        """One Radau IIA step to the new crank state (the fused path)."""
+        """One Radau IIA step to the new crank state (the numpy path; see _radau_step.c)."""
         tables = self._tables
         r = tables.size
         parity = 1 - self._parity
         self._parity = parity
         # Stage 1 at c_1 h: crank state interpolated between the samples, into the other slot.
         c1 = _STAGE1
-        previous = self._previous
+        previous = self._previous.tolist()
         stage_angle = previous[0] + c1 * advance
         if stage_angle >= TWO_PI:
             stage_angle -= TWO_PI
@@ -719,8 +791,7 @@ class StreamingEstimator:
         self._load(1 - parity, weights, k)
         weights, k = self._evaluate(angle, speed, accel)
         self._load(parity, weights, k)
-        np.dot(weights, tables.rest[k], out=self._rest)
-        self._previous = (angle, speed, accel)
+        self._previous[:] = (angle, speed, accel)
         inv = 1.0 / h
         g = np.dot(np.array((inv * inv, inv, 1.0, h, h * h)), tables.g_stack[parity])
         blocks = np.dot(g.reshape(8, 8), self._stored.reshape(8, r * r))
@@ -736,16 +807,13 @@ class StreamingEstimator:
         z[:2 * r] += increment
 
     def _finish(self, stamp_ns, angle, speed, accel, model_speed, flags, message):
-        tables = self._tables
-        r = tables.size
+        values = self._record.tolist()
+        outputs = len(reduced.OUTPUT_NAMES)
+        deflection = values[:outputs]
+        correction = values[outputs:2 * outputs]
+        criteria = self._criteria(values[2 * outputs:], model_speed)
         z = self._z
-        rest = self._rest
-        width = tables.out_width
-        # [O | 0 | corr] . [q, v, 1]: the deflections with the residual correction.
-        deflection = np.dot(rest[:width].reshape(4, 2 * r + 1), z).tolist()
-        values = rest.tolist()
-        correction = values[2 * r:width:2 * r + 1]
-        criteria = self._criteria(values[width:], model_speed)
+        r = self._tables.size
         size = math.sqrt(sum([d * d for d in deflection]))
         sample = Sample(
             stamp_ns=int(stamp_ns), crank_angle=angle, crank_speed=speed, crank_accel=accel,
@@ -866,151 +934,16 @@ def _crank_motion(times, angles, speeds, time_constant_s):
     return motion
 
 
-# Steps per batch of replay's step matrices (a few MB of buffers).
-_REPLAY_STEP_BATCH = 256
-
-
-class _ReplayTables:
-    """
-    Per-cell tables of the blocks replay needs, each with only the table rows it uses.
-
-    ``products`` evaluates them at many crank states with one matrix product per grid cell
-    (and per few samples: products stay small enough for single-threaded BLAS, which a busy
-    machine runs far faster than threaded BLAS).
-    """
-
-    BLAS_SIZE = 200_000   # multiply-adds per product (OpenBLAS threads larger ones)
-    _cache = {}
-
-    def __init__(self, model):
-        layout = model.layout
-        table = model.table
-        self.model = model
-        self.size = model.size
-        self.grid_size = model.grid_size
-        self.cells_per_radian = model.grid_size / TWO_PI
-        self.entries = {}
-        for name in ('M', 'C', 'K', 'f', 'out', 'corr', 'force', 'force_dot', 'rms2'):
-            block = layout.block(table, name).reshape(table.shape[0], table.shape[1], -1)
-            used = np.flatnonzero(np.any(block != 0.0, axis=(0, 2)))
-            rows = slice(int(used[0]), int(used[-1]) + 1) if used.size else slice(0, 0)
-            self.entries[name] = (rows, np.ascontiguousarray(block[:, rows]))
-
-    @classmethod
-    def of(cls, model):
-        """The tables of a model (cached while the model lives)."""
-        key = id(model)
-        cached = cls._cache.get(key)
-        if cached is not None and cached.model is model:
-            return cached
-        tables = cls(model)
-        cls._cache.clear()
-        cls._cache[key] = tables
-        return tables
-
-    def weights(self, angles, speeds, accels):
-        """Cells and row weights (as StreamingEstimator._evaluate) of many crank states."""
-        x = angles * self.cells_per_radian
-        cells = np.minimum(x.astype(np.int64), self.grid_size - 1)
-        t = x - cells
-        w, a = speeds, accels
-        w2 = w * w
-        monomials = (a, np.ones_like(w), w2, w, w2 * w2, w * a, w2 * w)
-        if reduced.MONOMIALS != ('a', '1', 'w2', 'w', 'w4', 'wa', 'w3'):
-            raise ValueError('monomial order changed: update _ReplayTables.weights')
-        powers = (np.ones_like(t), t, t * t, t * t * t)
-        weights = np.empty((angles.size, len(monomials) * len(powers)))
-        for i, mono in enumerate(monomials):
-            for p, power in enumerate(powers):
-                weights[:, 4 * i + p] = mono * power
-        return cells, weights
-
-    def products(self, names, angles, speeds, accels):
-        """Blocks ``names`` at many crank states: dict name -> (m, block size) arrays."""
-        cells, weights = self.weights(angles, speeds, accels)
-        order = np.argsort(cells, kind='stable')
-        cells, weights = cells[order], weights[order]
-        count = cells.size
-        sorted_out = {name: np.empty((count, self.entries[name][1].shape[2]))
-                      for name in names}
-        bounds = np.concatenate([[0], np.flatnonzero(np.diff(cells)) + 1, [count]]).tolist()
-        for first, stop in zip(bounds[:-1], bounds[1:]):
-            k = int(cells[first])
-            for name in names:
-                rows, table = self.entries[name]
-                cell = table[k]
-                out = sorted_out[name]
-                step = max(1, self.BLAS_SIZE // max(cell.size, 1))
-                for a in range(first, stop, step):
-                    b = min(a + step, stop)
-                    np.dot(weights[a:b, rows], cell, out=out[a:b])
-        result = {}
-        for name, values in sorted_out.items():
-            unsorted = np.empty_like(values)
-            unsorted[order] = values
-            result[name] = unsorted
-        return result
-
-
-def _substep_rows(stamps_ns, times, values):
-    """
-    The recursion's rows: sub-step rows inserted before every sample a long step leads to.
-
-    A step of ``dt_ns`` is split into ``ceil(dt_ns / MAX_SUBSTEP_NS)`` equal steps, as
-    StreamingEstimator._advance splits it; in between, the angle is the previous one plus the
-    fraction of the advance (wrapped), speed and acceleration are linear, and each row's
-    advance is the sample's advance over the number of steps.
-
-    Parameters
-    ----------
-    stamps_ns : ndarray of int, shape (m,)
-    times : ndarray, shape (m,)
-        Sample times [s].
-    values : tuple of ndarray, shape (m,)
-        Wrapped angle, speed, acceleration and advance of each sample (the model's).
-
-    Returns
-    -------
-    real_rows : ndarray of int, shape (m,)
-        Row of each sample.
-    rows : tuple of ndarray
-        Times, angle, speed, acceleration and advance of every row.
-
-    """
-    count = stamps_ns.size
-    splits = np.ones(count, dtype=np.int64)
-    splits[1:] = -(-np.diff(stamps_ns) // MAX_SUBSTEP_NS)
-    angle, speed, accel, advance = values
-    if count < 2 or splits.max() == 1:
-        return np.arange(count), (times, angle, speed, accel, advance)
-    owner = np.repeat(np.arange(count), splits)
-    position = np.arange(owner.size) - np.repeat(np.cumsum(splits) - splits, splits) + 1
-    fraction = position / splits[owner]
-    before = np.maximum(owner - 1, 0)
-    real = position == splits[owner]
-
-    def between(series):
-        out = series[before] + fraction * (series[owner] - series[before])
-        out[real] = series
-        return out
-
-    row_angle = np.mod(angle[before] + advance[owner] * fraction, TWO_PI)
-    row_angle[real] = angle
-    row_times = between(times)
-    return np.flatnonzero(real), (row_times, row_angle, between(speed), between(accel),
-                                  advance[owner] / splits[owner])
-
-
 def replay(model, stamps_ns, angles, speeds=None,
            fit_time_constant_s=DEFAULT_FIT_TIME_CONSTANT_S, warm_start=True,
-           accel_limit=DEFAULT_ACCEL_LIMIT):
+           accel_limit=DEFAULT_ACCEL_LIMIT, compiled=True):
     """
-    Offline estimate of a recorded crank signal: the streaming step, batched.
+    Offline estimate of a recorded crank signal: the streaming step over the whole signal.
 
     Same numbers as feeding :meth:`StreamingEstimator.update` sample by sample (a test checks
-    this), for strictly increasing stamps without gaps: the crank filter runs sample by
-    sample, the table blocks each stage needs and the step matrices are computed for all
-    samples at once, and the state recursion takes one LAPACK solve per sample.
+    this), for strictly increasing stamps without gaps: the crank filter runs over the signal
+    in one loop, then the compiled step advances through all samples in one call per chunk
+    (the numpy step, sample by sample, where the extension is not built).
 
     Parameters
     ----------
@@ -1021,7 +954,7 @@ def replay(model, stamps_ns, angles, speeds=None,
         Crank angles [rad], any range.
     speeds : ndarray, shape (m,), or None
         Measured crank speeds [rad/s]; None to derive them from the angles.
-    fit_time_constant_s, warm_start, accel_limit
+    fit_time_constant_s, warm_start, accel_limit, compiled
         As for :class:`StreamingEstimator`.
 
     Returns
@@ -1039,101 +972,54 @@ def replay(model, stamps_ns, angles, speeds=None,
     angles = np.asarray(angles, dtype=float)
     if speeds is not None:
         speeds = np.asarray(speeds, dtype=float)
-    times = (stamps_ns - stamps_ns[0]) * 1e-9
     if not fit_time_constant_s > 0.0:
         raise ValueError(f'`time_constant_s` must be positive, got {fit_time_constant_s!r}')
+    times = (stamps_ns - stamps_ns[0]) * 1e-9
     motion = _crank_motion(times.tolist(), angles.tolist(),
                            None if speeds is None else speeds.tolist(), fit_time_constant_s)
     wrapped, speed, accel, advance = motion.T
     model_speed = np.clip(speed, -model.speed_max, model.speed_max)
     model_accel = np.clip(accel, -accel_limit, accel_limit)
-    tables = _ReplayTables.of(model)
     r = model.size
-
-    # Rows of the recursion: each sample, preceded by the sub-step rows of a long step into it
-    # (as StreamingEstimator._advance: crank state linear between the samples).
-    real_rows, (times, step_angle, step_speed, step_accel, advance) = _substep_rows(
-        stamps_ns, times, (wrapped, model_speed, model_accel, advance))
-    rows_count = times.size
-    # Crank state at the first Radau stage of the step into each row (as _step).
-    stage_state = (
-        np.mod(np.concatenate([[step_angle[0]], step_angle[:-1] + _STAGE1 * advance[1:]]),
-               TWO_PI),
-        np.concatenate([[step_speed[0]], step_speed[:-1] + _STAGE1 * np.diff(step_speed)]),
-        np.concatenate([[step_accel[0]], step_accel[:-1] + _STAGE1 * np.diff(step_accel)]))
+    modal = np.empty((count, r))
+    records = np.empty((count, RECORD_SIZE))
 
     # The first samples (start and, without measured speeds, the deferred warm start) go
-    # through the streaming estimator itself; the batched steps continue from its state.
+    # through update() itself; the steps continue from its state.
     estimator = StreamingEstimator(model, fit_time_constant_s, warm_start=warm_start,
-                                   accel_limit=accel_limit)
+                                   accel_limit=accel_limit, compiled=compiled)
     prefix = min(3 if (warm_start and speeds is None) else 1, count)
-    step_tables = estimator._tables
-    # States [q, v, 1] (the 1 carries the loads through the step operator), one per row.
-    states = np.ones((rows_count, 2 * r + 1))
     for n in range(prefix):
         estimator.update(int(stamps_ns[n]), float(angles[n]),
                          None if speeds is None else float(speeds[n]))
-        states[real_rows[n], :2 * r] = estimator._z[:2 * r]
-    stage_names = ('M', 'C', 'K', 'f')
-    # Small batches with reused buffers: arrays of tens of MB are fresh memory each time (page
-    # faults cost more than the arithmetic).
-    batch = _REPLAY_STEP_BATCH
-    pairs = np.empty((batch, 6, r * r))
-    system = np.empty((batch, 8, r * r))
-    matrices = np.empty((batch, 2, r, 2, r))
-    operators = np.empty((batch, 2 * r, 2 * r + 1))     # [P | loads]
-    dgesv, dot, add = lapack.dgesv, np.dot, np.add
-    for outer in range(real_rows[prefix - 1], rows_count - 1, REPLAY_CHUNK):
-        outer_last = min(outer + REPLAY_CHUNK, rows_count - 1)
-        # Table blocks at the rows and at the first stages of this chunk's steps.
-        chosen = slice(outer + 1, outer_last + 1)
-        current = tables.products(stage_names, step_angle[chosen], step_speed[chosen],
-                                  step_accel[chosen])
-        stage = tables.products(stage_names, *(x[chosen] for x in stage_state))
-        for first in range(outer, outer_last, batch):
-            last = min(first + batch, outer_last)
-            size = last - first
-            steps = times[first + 1:last + 1] - times[first:last]
-            inv = 1.0 / steps
-            powers = np.stack([inv * inv, inv, np.ones_like(steps), steps, steps * steps],
-                              axis=1)
-            # Slot order of g_stack[0]: the new sample in slot 0, the stage-1 values in
-            # slot 1; the slots' fourth (load) block has no coefficient.
-            g = (powers @ step_tables.g_stack[0]).reshape(-1, 8, 2, 4)[..., :3].reshape(
-                -1, 8, 6)
-            part = slice(first - outer, last - outer)
-            for slot, values in enumerate((current, stage)):
-                for m, name in enumerate(('M', 'C', 'K')):
-                    pairs[:size, 3 * slot + m] = values[name][part]
-            np.matmul(g, pairs[:size], out=system[:size])
-            blocks = system[:size].reshape(size, 2, 4, r, r)
-            operators[:size, :r, 2 * r] = stage['f'][part]
-            operators[:size, r:, 2 * r] = current['f'][part]
-            # dz = A^-1 [P | f] [q, v, 1], one sample after the other (one LAPACK solve each:
-            # cheaper than propagating the whole affine map when 2 r is large). LAPACK wants
-            # A in Fortran order: its transpose (column block, column, row block, row) in C
-            # order; the buffer is scratch, so the LU overwrites it.
-            np.copyto(matrices[:size], blocks[:, :, :2].transpose(0, 2, 4, 1, 3))
-            np.copyto(operators[:size, :, :2 * r].reshape(size, 2, r, 2, r),
-                      blocks[:, :, 2:].transpose(0, 1, 3, 2, 4))
-            matrix = list(matrices[:size].reshape(size, 2 * r, 2 * r).transpose(0, 2, 1))
-            operator = list(operators[:size])
-            rows = list(states[first:last + 1])
-            heads = [row[:2 * r] for row in rows]
-            for n in range(size):
-                _, _, increment, _ = dgesv(matrix[n], dot(operator[n], rows[n]),
-                                           overwrite_a=1, overwrite_b=1)
-                add(heads[n], increment, out=heads[n + 1])
-    states = states[real_rows]
-    rest = tables.products(('out', 'corr', 'force', 'force_dot', 'rms2'), wrapped,
-                           model_speed, model_accel)
-    outputs = len(reduced.OUTPUT_NAMES)
-    deflection = np.einsum('mor,mr->mo', rest['out'].reshape(count, outputs, r),
-                           states[:, :r]) + rest['corr']
-    joints = len(reduced.JOINTS)
+        modal[n] = estimator._z[:r]
+        records[n] = estimator._record
+    # Rows as update() builds them: step [s], sub-steps, crank state, advance.
+    dt_ns = np.diff(stamps_ns)[prefix - 1:]
+    rows = np.column_stack([dt_ns * 1e-9, -(-dt_ns // MAX_SUBSTEP_NS), wrapped[prefix:],
+                            model_speed[prefix:], model_accel[prefix:], advance[prefix:]])
+    tables = estimator._tables
+    kernel = estimator._kernel
+    states = np.empty((min(REPLAY_CHUNK, rows.shape[0]), 2 * r))
+    for first in range(0, rows.shape[0], REPLAY_CHUNK):
+        chunk = rows[first:first + REPLAY_CHUNK]
+        done = slice(prefix + first, prefix + first + chunk.shape[0])
+        if kernel is not None:
+            kernel.advance(tables.mass, tables.damping, tables.kf, tables.out, tables.joint,
+                           tables.g0, estimator._cells_per_radian, _STAGE1, estimator._z,
+                           estimator._previous, chunk, states[:chunk.shape[0]], records[done])
+            modal[done] = states[:chunk.shape[0], :r]
+            continue
+        for n, (h, splits, angle, w, a, step) in enumerate(chunk.tolist(), start=done.start):
+            estimator._advance(h, int(splits), angle, w, a, step)
+            weights, k = estimator._evaluate(angle, w, a)
+            tables.record(weights, k, estimator._z, records[n])
+            modal[n] = estimator._z[:r]
+    outputs, joints = len(reduced.OUTPUT_NAMES), len(reduced.JOINTS)
+    joint = records[:, 2 * outputs:]
     return {'crank_angle': wrapped, 'crank_speed': speed, 'crank_accel': accel,
-            'lever_tip': deflection[:, :2], 'coupler_mid': deflection[:, 2:],
-            'modal': states[:, :r].copy(),
-            'force': rest['force'].reshape(count, joints, 2),
-            'force_dot': rest['force_dot'].reshape(count, joints, 2),
-            'rms2': rest['rms2'].reshape(count, joints)}
+            'lever_tip': records[:, 0:2].copy(), 'coupler_mid': records[:, 2:4].copy(),
+            'modal': modal,
+            'force': joint[:, :2 * joints].reshape(count, joints, 2),
+            'force_dot': joint[:, 2 * joints:4 * joints].reshape(count, joints, 2),
+            'rms2': joint[:, 4 * joints:].copy()}

@@ -1,0 +1,481 @@
+/*
+ * The streaming estimator's per-sample step in C: the same arithmetic as
+ * StreamingEstimator._step_numpy (core/estimator.py), without its ~30 numpy calls.
+ *
+ * One 2-stage Radau IIA step of the reduced model M q'' + C q' + K q = f over h:
+ *   - M, C, K, f at the first stage (crank state at c1 h, interpolated between samples)
+ *     and at the sample, from the per-cell cubic tables (row weights = monomial * t^p);
+ *   - the step matrix and the operator on (q, v) from the 8 x 8 coefficient matrix
+ *     G(h) = sum_p h^p g[p] (slot 0 = the sample, slot 1 = stage 1, see _StepTables);
+ *   - the 2 r x 2 r system solved by LU with partial pivoting, z = (q, v) += dz.
+ * A sample whose step is split into sub-steps (MAX_SUBSTEP_NS) is advanced here too,
+ * with the crank state linear between the samples, as _advance does.
+ *
+ * No numpy headers: arrays come through the buffer protocol (C-contiguous float64).
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define FIRST_MC 4      /* M and C start at monomial 1: weights[4:] */
+#define ROWS_MC 16      /* C: monomials 1, w2, w, w4 (x 4 powers of t): weights[4:20] */
+#define ROWS_KF 12      /* K, f: monomials a, 1, w2: weights[0:12] */
+#define ROWS_ALL 28     /* all seven monomials */
+#define OUTPUTS 4       /* deflection channels (reduced.OUTPUT_NAMES) */
+#define JOINT_WIDTH 20  /* reactions (4 x 2), their rates (4 x 2), squared RMS (4) */
+#define RECORD_SIZE (2 * OUTPUTS + JOINT_WIDTH)
+#define POWERS 5        /* h^-2 .. h^2 */
+#define ROW_FIELDS 6    /* h, count, angle, speed, accel, advance */
+
+static const double TWO_PI = 6.283185307179586;
+
+typedef struct {
+    Py_ssize_t r, cells, mass_rows, out_rows, joint_rows;
+    const double *mass, *damping, *kf, *out, *joint, *g0;
+    double cells_per_radian, c1;
+    /* scratch */
+    double *blocks;     /* [slot][m] r x r, m = M, C, K; slot 0 sample, 1 stage 1 */
+    double *loads;      /* [slot] r */
+    double *products;   /* [slot][m][l] r: X_{slot,m} z_l */
+    double *matrix;     /* 2r x 2r */
+    double *rhs;        /* 2r */
+    double weights[ROWS_ALL];
+} Step;
+
+/* Row weights at (angle, w, a) and the cell: StreamingEstimator._evaluate. */
+static Py_ssize_t evaluate(const Step *s, double angle, double w, double a, double *weights)
+{
+    double x = angle * s->cells_per_radian;
+    Py_ssize_t k = (Py_ssize_t)x;
+    if (k >= s->cells)
+        k = s->cells - 1;
+    if (k < 0)
+        k = 0;
+    double t = x - (double)k, t2 = t * t, t3 = t2 * t;
+    double w2 = w * w;
+    double mono[7] = {a, 1.0, w2, w, w2 * w2, w * a, w2 * w};
+    for (int m = 0; m < 7; m++) {
+        weights[4 * m] = mono[m];
+        weights[4 * m + 1] = mono[m] * t;
+        weights[4 * m + 2] = mono[m] * t2;
+        weights[4 * m + 3] = mono[m] * t3;
+    }
+    return k;
+}
+
+/*
+ * out[j] (+)= sum_i weights[i] table[i * stride + j], i < rows, j < width: four rows (one
+ * monomial's powers of t) per pass, so out is loaded and stored once per four products.
+ */
+static void combine(const double *weights, const double *table, Py_ssize_t rows,
+                    Py_ssize_t stride, Py_ssize_t width, double *restrict out)
+{
+    memset(out, 0, (size_t)width * sizeof(double));
+    if (rows > ROWS_ALL)    /* never: the callers check; tells the compiler the bound */
+        rows = ROWS_ALL;
+    Py_ssize_t i = 0;
+    for (; i + 4 <= rows; i += 4) {
+        const double w0 = weights[i], w1 = weights[i + 1], w2 = weights[i + 2],
+                     w3 = weights[i + 3];
+        if (w0 == 0.0 && w1 == 0.0 && w2 == 0.0 && w3 == 0.0)
+            continue;
+        const double *restrict r0 = table + i * stride, *restrict r1 = r0 + stride,
+                     *restrict r2 = r1 + stride, *restrict r3 = r2 + stride;
+        for (Py_ssize_t j = 0; j < width; j++)
+            out[j] += w0 * r0[j] + w1 * r1[j] + w2 * r2[j] + w3 * r3[j];
+    }
+    for (; i < rows; i++) {
+        const double wi = weights[i];
+        const double *restrict row = table + i * stride;
+        for (Py_ssize_t j = 0; j < width; j++)
+            out[j] += wi * row[j];
+    }
+}
+
+/* M, C, K and f of the crank state into a slot (StreamingEstimator._load). */
+static void load(Step *s, int slot, double angle, double w, double a)
+{
+    const Py_ssize_t r = s->r, r2 = r * r;
+    Py_ssize_t k = evaluate(s, angle, w, a, s->weights);
+    double *blocks = s->blocks + (Py_ssize_t)slot * 3 * r2;
+    combine(s->weights + FIRST_MC, s->mass + k * s->mass_rows * r2, s->mass_rows, r2, r2,
+            blocks);
+    combine(s->weights + FIRST_MC, s->damping + k * ROWS_MC * r2, ROWS_MC, r2, r2,
+            blocks + r2);
+    /* [K | f] from the kf table (rows 0..11 of the weights) */
+    const Py_ssize_t kf_width = r2 + r;
+    const double *kf = s->kf + k * ROWS_KF * kf_width;
+    combine(s->weights, kf, ROWS_KF, kf_width, r2, blocks + 2 * r2);
+    combine(s->weights, kf + r2, ROWS_KF, kf_width, r, s->loads + slot * r);
+}
+
+/* The record of the crank state prev at the state z (_StepTables.record). */
+static void record(Step *s, const double *z, const double *prev, double *restrict out)
+{
+    const Py_ssize_t r = s->r, width = OUTPUTS * (r + 1);
+    Py_ssize_t k = evaluate(s, prev[0], prev[1], prev[2], s->weights);
+    double *op = s->matrix;   /* scratch: the step's matrix is no longer needed */
+    combine(s->weights, s->out + k * s->out_rows * width, s->out_rows, width, width, op);
+    for (int o = 0; o < OUTPUTS; o++) {
+        const double *row = op + o * (r + 1);
+        double sum = 0.0;
+        for (Py_ssize_t j = 0; j < r; j++)
+            sum += row[j] * z[j];
+        out[o] = sum + row[r];
+        out[OUTPUTS + o] = row[r];
+    }
+    combine(s->weights, s->joint + k * s->joint_rows * JOINT_WIDTH, s->joint_rows, JOINT_WIDTH,
+            JOINT_WIDTH, out + 2 * OUTPUTS);
+}
+
+/* Solve a x = b (n x n, row-major) in place by LU with partial pivoting; -1 if singular. */
+static int solve(Py_ssize_t n, double *restrict a, double *restrict b)
+{
+    for (Py_ssize_t k = 0; k < n; k++) {
+        Py_ssize_t p = k;
+        double best = fabs(a[k * n + k]);
+        for (Py_ssize_t i = k + 1; i < n; i++) {
+            double v = fabs(a[i * n + k]);
+            if (v > best) {
+                best = v;
+                p = i;
+            }
+        }
+        if (!(best > 0.0))
+            return -1;
+        if (p != k) {
+            for (Py_ssize_t j = 0; j < n; j++) {
+                double t = a[k * n + j];
+                a[k * n + j] = a[p * n + j];
+                a[p * n + j] = t;
+            }
+            double t = b[k];
+            b[k] = b[p];
+            b[p] = t;
+        }
+        const double inv = 1.0 / a[k * n + k];
+        const double *restrict pivot_row = a + k * n;
+        for (Py_ssize_t i = k + 1; i < n; i++) {
+            double *restrict row = a + i * n;
+            const double l = row[k] * inv;
+            if (l == 0.0)
+                continue;
+            row[k] = l;
+            for (Py_ssize_t j = k + 1; j < n; j++)
+                row[j] -= l * pivot_row[j];
+            b[i] -= l * b[k];
+        }
+    }
+    for (Py_ssize_t i = n - 1; i >= 0; i--) {
+        double sum = b[i];
+        const double *row = a + i * n;
+        for (Py_ssize_t j = i + 1; j < n; j++)
+            sum -= row[j] * b[j];
+        b[i] = sum / row[i];
+    }
+    return 0;
+}
+
+static double wrap_once(double angle)
+{
+    if (angle >= TWO_PI)
+        angle -= TWO_PI;
+    else if (angle < 0.0)
+        angle += TWO_PI;
+    return angle;
+}
+
+/* Python's float %: the result takes the sign of the divisor. */
+static double python_mod(double x, double y)
+{
+    double mod = fmod(x, y);
+    if (mod != 0.0) {
+        if ((y < 0.0) != (mod < 0.0))
+            mod += y;
+    }
+    else {
+        mod = copysign(0.0, y);
+    }
+    return mod;
+}
+
+/* x86-64 with GCC: an AVX2/FMA clone of the step, chosen at load time (ifunc). */
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
+#define STEP_CLONES __attribute__((target_clones("arch=x86-64-v3", "default")))
+#else
+#define STEP_CLONES
+#endif
+
+/* One Radau IIA step of h to crank state (angle, w, a) from prev (StreamingEstimator._step). */
+STEP_CLONES static int radau_step(Step *s, double *z, double *prev, double h, double angle, double w,
+                      double a, double advance)
+{
+    const Py_ssize_t r = s->r, r2 = r * r, n = 2 * r;
+    const double c1 = s->c1;
+    load(s, 1, wrap_once(prev[0] + c1 * advance), prev[1] + c1 * (w - prev[1]),
+         prev[2] + c1 * (a - prev[2]));
+    load(s, 0, angle, w, a);
+    prev[0] = angle;
+    prev[1] = w;
+    prev[2] = a;
+
+    const double inv = 1.0 / h;
+    const double hp[POWERS] = {inv * inv, inv, 1.0, h, h * h};
+    double g[64];
+    for (int e = 0; e < 64; e++) {
+        double sum = 0.0;
+        for (int p = 0; p < POWERS; p++)
+            sum += hp[p] * s->g0[p * 64 + e];
+        g[e] = sum;
+    }
+    /* X_{slot,m} z_l for the operator blocks (l = 2, 3 act on q, v) with any coefficient. */
+    for (int slot = 0; slot < 2; slot++)
+        for (int m = 0; m < 3; m++)
+            for (int l = 0; l < 2; l++) {
+                int used = 0;
+                for (int i = 0; i < 2; i++)
+                    used |= g[(i * 4 + 2 + l) * 8 + slot * 4 + m] != 0.0;
+                double *out = s->products + ((slot * 3 + m) * 2 + l) * r;
+                if (!used)
+                    continue;
+                const double *X = s->blocks + (slot * 3 + m) * r2;
+                const double *zl = z + l * r;
+                for (Py_ssize_t row = 0; row < r; row++) {
+                    double sum = 0.0;
+                    const double *Xrow = X + row * r;
+                    for (Py_ssize_t col = 0; col < r; col++)
+                        sum += Xrow[col] * zl[col];
+                    out[row] = sum;
+                }
+            }
+    /* matrix[(i, row), (l, col)] = sum_{slot, m} g[i, l; slot, m] X_{slot,m}[row, col] */
+    for (int i = 0; i < 2; i++) {
+        /* loads: stage 1 (slot 1) for the first block row, the sample (slot 0) for the second */
+        const double *f = s->loads + (i == 0 ? 1 : 0) * r;
+        double *rhs = s->rhs + i * r;
+        for (Py_ssize_t row = 0; row < r; row++)
+            rhs[row] = f[row];
+        for (int l = 0; l < 4; l++) {
+            const double *gl = g + (i * 4 + l) * 8;
+            if (l < 2) {
+                for (Py_ssize_t row = 0; row < r; row++)
+                    memset(s->matrix + (i * r + row) * n + l * r, 0, (size_t)r * sizeof(double));
+            }
+            for (int slot = 0; slot < 2; slot++)
+                for (int m = 0; m < 3; m++) {
+                    const double coefficient = gl[slot * 4 + m];
+                    if (coefficient == 0.0)
+                        continue;
+                    if (l < 2) {
+                        const double *X = s->blocks + (slot * 3 + m) * r2;
+                        for (Py_ssize_t row = 0; row < r; row++) {
+                            double *restrict out = s->matrix + (i * r + row) * n + l * r;
+                            const double *restrict Xrow = X + row * r;
+                            for (Py_ssize_t col = 0; col < r; col++)
+                                out[col] += coefficient * Xrow[col];
+                        }
+                    }
+                    else {
+                        const double *y = s->products + ((slot * 3 + m) * 2 + (l - 2)) * r;
+                        for (Py_ssize_t row = 0; row < r; row++)
+                            rhs[row] += coefficient * y[row];
+                    }
+                }
+        }
+    }
+    if (solve(n, s->matrix, s->rhs) != 0)
+        return -1;
+    for (Py_ssize_t j = 0; j < n; j++)
+        z[j] += s->rhs[j];
+    return 0;
+}
+
+static int get_buffer(PyObject *object, Py_buffer *view, int writable, const char *name,
+                      Py_ssize_t count)
+{
+    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
+    if (PyObject_GetBuffer(object, view, flags) != 0)
+        return -1;
+    if (view->itemsize != 8 || view->format == NULL || strcmp(view->format, "d") != 0) {
+        PyErr_Format(PyExc_TypeError, "`%s` must hold float64", name);
+        PyBuffer_Release(view);
+        return -1;
+    }
+    if (count >= 0 && view->len != count * 8) {
+        PyErr_Format(PyExc_ValueError, "`%s` has %zd values, expected %zd", name,
+                     view->len / 8, count);
+        PyBuffer_Release(view);
+        return -1;
+    }
+    return 0;
+}
+
+PyDoc_STRVAR(advance_doc,
+"advance(mass, damping, kf, out, joint, g0, cells_per_radian, c1, z, prev, rows, states,\n"
+"        records)\n"
+"\n"
+"Advance the modal state z = [q, v, 1] through the sample rows (h, sub-steps, angle,\n"
+"speed, acceleration, advance; 6 values each), 2-stage Radau IIA, as\n"
+"StreamingEstimator._step. Tables as _StepTables (float64, C order). prev (angle, speed,\n"
+"acceleration of the last step) is updated; states (rows x 2 r, or empty) receives\n"
+"z[:2 r] after each row; records (rows x 28, or 28 for the last row only) the sample's\n"
+"record (estimator.RECORD_SIZE).");
+
+/* Step size and the per-sample counts, or -1 with an exception set. */
+static Py_ssize_t rows_of(const Py_buffer *view, Py_ssize_t per_row, Py_ssize_t cells,
+                          Py_ssize_t most, const char *name)
+{
+    Py_ssize_t values = view->len / 8, rows = values / (cells * per_row);
+    if (rows < 1 || rows > most || rows * cells * per_row != values) {
+        PyErr_Format(PyExc_ValueError, "`%s` does not match the model size and grid", name);
+        return -1;
+    }
+    return rows;
+}
+
+static PyObject *advance(PyObject *module, PyObject *args)
+{
+    PyObject *objects[13];
+    double cells_per_radian, c1;
+    (void)module;
+    if (!PyArg_ParseTuple(args, "OOOOOOddOOOOO", &objects[0], &objects[1], &objects[2],
+                          &objects[3], &objects[4], &objects[5], &cells_per_radian, &c1,
+                          &objects[8], &objects[9], &objects[10], &objects[11], &objects[12]))
+        return NULL;
+    Py_buffer mass = {0}, damping = {0}, kf = {0}, out = {0}, joint = {0}, g0 = {0}, z = {0},
+              prev = {0}, rows = {0}, states = {0}, records = {0};
+    PyObject *result = NULL;
+    double *scratch = NULL;
+    Step s;
+    memset(&s, 0, sizeof(s));
+    if (get_buffer(objects[8], &z, 1, "z", -1) != 0)
+        return NULL;
+    const Py_ssize_t r = (z.len / 8 - 1) / 2, r2 = r * r, n = 2 * r;
+    if (r < 1 || z.len / 8 != 2 * r + 1) {
+        PyErr_SetString(PyExc_ValueError, "`z` must have 2 r + 1 values");
+        goto done;
+    }
+    if (get_buffer(objects[1], &damping, 0, "damping", -1) != 0)
+        goto done;
+    const Py_ssize_t cells = damping.len / 8 / (ROWS_MC * r2);
+    if (cells < 1 || damping.len / 8 != cells * ROWS_MC * r2) {
+        PyErr_SetString(PyExc_ValueError, "`damping` does not match the size of `z`");
+        goto done;
+    }
+    if (get_buffer(objects[0], &mass, 0, "mass", -1) != 0
+        || (s.mass_rows = rows_of(&mass, r2, cells, ROWS_MC, "mass")) < 0
+        || get_buffer(objects[2], &kf, 0, "kf", cells * ROWS_KF * (r2 + r)) != 0
+        || get_buffer(objects[3], &out, 0, "out", -1) != 0
+        || (s.out_rows = rows_of(&out, OUTPUTS * (r + 1), cells, ROWS_ALL, "out")) < 0
+        || get_buffer(objects[4], &joint, 0, "joint", -1) != 0
+        || (s.joint_rows = rows_of(&joint, JOINT_WIDTH, cells, ROWS_ALL, "joint")) < 0
+        || get_buffer(objects[5], &g0, 0, "g0", POWERS * 64) != 0
+        || get_buffer(objects[9], &prev, 1, "prev", 3) != 0
+        || get_buffer(objects[10], &rows, 0, "rows", -1) != 0)
+        goto done;
+    const Py_ssize_t count = rows.len / 8 / ROW_FIELDS;
+    if (rows.len / 8 != count * ROW_FIELDS) {
+        PyErr_SetString(PyExc_ValueError, "`rows` must have 6 values per row");
+        goto done;
+    }
+    if (get_buffer(objects[11], &states, 1, "states", -1) != 0
+        || get_buffer(objects[12], &records, 1, "records", -1) != 0)
+        goto done;
+    if (states.len != 0 && states.len / 8 != count * n) {
+        PyErr_SetString(PyExc_ValueError, "`states` must be empty or rows x 2 r");
+        goto done;
+    }
+    const int every_record = records.len / 8 == count * RECORD_SIZE;
+    if (!every_record && records.len / 8 != RECORD_SIZE) {
+        PyErr_SetString(PyExc_ValueError, "`records` must be rows x 28 or 28");
+        goto done;
+    }
+    s.r = r;
+    s.cells = cells;
+    s.mass = mass.buf;
+    s.damping = damping.buf;
+    s.kf = kf.buf;
+    s.out = out.buf;
+    s.joint = joint.buf;
+    s.g0 = g0.buf;
+    s.cells_per_radian = cells_per_radian;
+    s.c1 = c1;
+    scratch = malloc(sizeof(double) * (size_t)(6 * r2 + 2 * r + 12 * r + n * n + n));
+    if (scratch == NULL) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    s.blocks = scratch;
+    s.loads = s.blocks + 6 * r2;
+    s.products = s.loads + 2 * r;
+    s.matrix = s.products + 12 * r;
+    s.rhs = s.matrix + n * n;
+
+    double *zv = z.buf, *pv = prev.buf, *state_out = states.len ? states.buf : NULL;
+    double *record_out = records.buf;
+    const double *row = rows.buf;
+    int failed = 0, bad_row = 0;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t m = 0; m < count && !failed; m++, row += ROW_FIELDS) {
+        const double h = row[0], angle = row[2], w = row[3], a = row[4], step = row[5];
+        const long splits = row[1] >= 1.0 && row[1] < 1e9 ? (long)row[1] : 0;
+        if (!(h > 0.0) || splits < 1) {
+            failed = bad_row = 1;
+            break;
+        }
+        const double sub_h = h / (double)splits, sub_step = step / (double)splits;
+        const double angle0 = pv[0], w0 = pv[1], a0 = pv[2];
+        for (long i = 1; i < splits && !failed; i++) {
+            const double f = (double)i / (double)splits;
+            failed = radau_step(&s, zv, pv, sub_h, python_mod(angle0 + step * f, TWO_PI),
+                                w0 + f * (w - w0), a0 + f * (a - a0), sub_step) != 0;
+        }
+        if (!failed)
+            failed = radau_step(&s, zv, pv, sub_h, angle, w, a, sub_step) != 0;
+        if (failed)
+            break;
+        if (state_out != NULL)
+            memcpy(state_out + m * n, zv, (size_t)n * sizeof(double));
+        if (every_record || m == count - 1)
+            record(&s, zv, pv, record_out + (every_record ? m * RECORD_SIZE : 0));
+    }
+    Py_END_ALLOW_THREADS
+    if (failed) {
+        PyErr_SetString(PyExc_ValueError, bad_row ? "a row has a non-positive step or no sub-steps"
+                                                  : "singular Radau step matrix");
+        goto done;
+    }
+    result = Py_NewRef(Py_None);
+done:
+    free(scratch);
+    PyBuffer_Release(&mass);
+    PyBuffer_Release(&damping);
+    PyBuffer_Release(&kf);
+    PyBuffer_Release(&out);
+    PyBuffer_Release(&joint);
+    PyBuffer_Release(&g0);
+    PyBuffer_Release(&z);
+    PyBuffer_Release(&prev);
+    PyBuffer_Release(&rows);
+    PyBuffer_Release(&states);
+    PyBuffer_Release(&records);
+    return result;
+}
+
+static PyMethodDef methods[] = {
+    {"advance", advance, METH_VARARGS, advance_doc},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module_def = {
+    PyModuleDef_HEAD_INIT, "_radau_step",
+    "Compiled per-sample Radau IIA step of the streaming estimator (core/estimator.py).",
+    -1, methods, NULL, NULL, NULL, NULL,
+};
+
+PyMODINIT_FUNC PyInit__radau_step(void)
+{
+    return PyModule_Create(&module_def);
+}
