@@ -22,7 +22,7 @@ import numpy as np
 from . import node_params
 from .cli import emit
 from .core import reduced
-from .core.estimator import StreamingEstimator, replay
+from .core.estimator import StreamingEstimator, compiled_step_available, replay
 from .core.mechanism import load_mechanism
 
 RPM = 2.0 * math.pi / 60.0   # rad/s per rpm
@@ -79,9 +79,9 @@ def last_revolution(stamps_ns, rpm):
     return stamps_ns > stamps_ns[-1] - period_ns
 
 
-def stream_timed(model, stamps_ns, angles, speeds, warm_start=True):
+def stream_timed(model, stamps_ns, angles, speeds, warm_start=True, compiled=True):
     """
-    Run the streaming estimator and time every update.
+    Run the streaming estimator (its compiled step, or its numpy step) and time every update.
 
     Returns
     -------
@@ -90,7 +90,7 @@ def stream_timed(model, stamps_ns, angles, speeds, warm_start=True):
         perf_counter_ns duration of each update.
 
     """
-    estimator = StreamingEstimator(model, warm_start=warm_start)
+    estimator = StreamingEstimator(model, warm_start=warm_start, compiled=compiled)
     samples, durations = [], []
     clock = time.perf_counter_ns
     for stamp, angle, speed in zip(stamps_ns.tolist(), angles.tolist(),
@@ -718,7 +718,29 @@ def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM
     result = {'rate_hz': rate_hz, 'configurations': rows,
               'reference_cpu_s_per_s': reference_cpu,
               'estimator_cpu_s_per_s': estimator_cpu,
-              'cpu_ratio': (reference_cpu / estimator_cpu) if reference_cpu else None}
+              'cpu_ratio': (reference_cpu / estimator_cpu) if reference_cpu else None,
+              'compiled_step': compiled_step_available()}
+    # The default model's numpy step (the reference path), timed in the same run.
+    model = reduced.model_for_mechanism(mechanism, (configurations or
+                                                    bench_configurations(base))[0][1],
+                                        use_cache=False)
+    stamps, angles, speeds = synthetic_signal(max(speeds_rpm), seconds, rate_hz)
+    median, p99 = timing_summary(stream_timed(model, stamps, angles, speeds,
+                                              compiled=False)[1])
+    start = time.perf_counter()
+    replay(model, long_stamps, long_angles, long_speeds, compiled=False)
+    result['numpy_step'] = {'us_per_sample': median, 'us_per_sample_p99': p99,
+                            'offline_samples_per_s':
+                                long_stamps.size / (time.perf_counter() - start)}
+    default = rows[0]
+    result['targets'] = [
+        {'name': 'update median', 'value': default['us_per_sample'], 'unit': 'us',
+         'target': '<= 20', 'met': default['us_per_sample'] <= 20.0},
+        {'name': 'offline', 'value': default['offline_samples_per_s'], 'unit': 'samples/s',
+         'target': '>= 50000', 'met': default['offline_samples_per_s'] >= 50_000.0},
+        {'name': 'CPU vs full order at 1 kHz', 'value': result['cpu_ratio'], 'unit': 'x less',
+         'target': '>= 100', 'met': bool(result['cpu_ratio'] and result['cpu_ratio'] >= 100.0)},
+    ]
     if chart:
         from .plots.estimator import plot_error_vs_cost
         result['chart'] = str(plot_error_vs_cost(rows, chart))
@@ -737,10 +759,20 @@ def _bench(args):
                      f'{row["offline_samples_per_s"]:>10.0f} '
                      f'{row["error_coupler_mid"]:>9.2e} {row["error_lever_tip"]:>9.2e} '
                      f'{row["bytes"] / 1e6:>6.2f}')
+    numpy_step = result['numpy_step']
+    lines.append(f'{"default, numpy step":<22} {"":>3} {"":>5} '
+                 f'{numpy_step["us_per_sample"]:>7.1f} {numpy_step["us_per_sample_p99"]:>7.1f} '
+                 f'{numpy_step["offline_samples_per_s"]:>10.0f}   (the same numbers; the '
+                 f'compiled step is {"" if result["compiled_step"] else "NOT "}built)')
     if result['cpu_ratio']:
         lines.append(f'full-order reference: {result["reference_cpu_s_per_s"]:.3g} CPU s per '
                      f'simulated s; estimator {result["estimator_cpu_s_per_s"]:.3g} '
                      f'({result["cpu_ratio"]:.0f}x less)')
+    for target in result['targets']:
+        value = target['value']
+        lines.append(f'target {target["name"]}: {"n/a" if value is None else f"{value:.4g}"} '
+                     f'{target["unit"]} (target {target["target"]}) '
+                     f'{"met" if target["met"] else "NOT met"}')
     if result.get('chart'):
         lines.append(f'chart: {result["chart"]}')
     return emit(result, '\n'.join(lines), args.json)

@@ -462,9 +462,15 @@ def test_compiled_step_equals_numpy_step(toy_model, with_speed):
                                    err_msg=name)
 
 
-def test_compiled_replay_equals_numpy_replay(toy_model):
+@pytest.mark.parametrize('modes, static', [(4, 2), (1, 0)])
+def test_compiled_replay_equals_numpy_replay(modes, static):
+    # r = 1 too: the compiled step's scratch sizes hold for the smallest model.
     from flexlink_ros.core.estimator import replay
     compiled_or_skip()
+    forces, _ = toy_forces(32)
+    toy_model = reduced.reduce_samples(toy_samples(grid=32), modes=modes, static=static,
+                                       speed_max=SPEED_MAX, zeta=ZETA, forces=forces)
+    assert toy_model.size == modes + static
     times = sample_times(2000.0, 0.6, 0.5, 0.1, seed=5)
     times[300:] += 0.013       # one gap that takes sub-steps
     stamps = np.round(times * 1e9).astype(np.int64)

@@ -41,6 +41,7 @@ typedef struct {
     double *products;   /* [slot][m][l] r: X_{slot,m} z_l */
     double *matrix;     /* 2r x 2r */
     double *rhs;        /* 2r */
+    double *operator;   /* outputs x (r + 1): [O | corr] of the record */
     double weights[ROWS_ALL];
 } Step;
 
@@ -116,7 +117,7 @@ static void record(Step *s, const double *z, const double *prev, double *restric
 {
     const Py_ssize_t r = s->r, width = OUTPUTS * (r + 1);
     Py_ssize_t k = evaluate(s, prev[0], prev[1], prev[2], s->weights);
-    double *op = s->matrix;   /* scratch: the step's matrix is no longer needed */
+    double *op = s->operator;
     combine(s->weights, s->out + k * s->out_rows * width, s->out_rows, width, width, op);
     for (int o = 0; o < OUTPUTS; o++) {
         const double *row = op + o * (r + 1);
@@ -402,7 +403,8 @@ static PyObject *advance(PyObject *module, PyObject *args)
     s.g0 = g0.buf;
     s.cells_per_radian = cells_per_radian;
     s.c1 = c1;
-    scratch = malloc(sizeof(double) * (size_t)(6 * r2 + 2 * r + 12 * r + n * n + n));
+    scratch = malloc(sizeof(double)
+                     * (size_t)(6 * r2 + 2 * r + 12 * r + n * n + n + OUTPUTS * (r + 1)));
     if (scratch == NULL) {
         PyErr_NoMemory();
         goto done;
@@ -412,6 +414,7 @@ static PyObject *advance(PyObject *module, PyObject *args)
     s.products = s.loads + 2 * r;
     s.matrix = s.products + 12 * r;
     s.rhs = s.matrix + n * n;
+    s.operator = s.rhs + n;
 
     double *zv = z.buf, *pv = prev.buf, *state_out = states.len ? states.buf : NULL;
     double *record_out = records.buf;

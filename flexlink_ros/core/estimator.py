@@ -47,6 +47,11 @@ MIN_FIT_SAMPLES = 4.0
 TWO_PI = 2.0 * math.pi
 
 
+def compiled_step_available():
+    """True when the compiled step (core/_radau_step.c) is built and estimators use it."""
+    return _radau_step is not None
+
+
 def wrap_angle(angle):
     """Angle wrapped to [0, 2 pi)."""
     wrapped = math.fmod(angle, TWO_PI)
