@@ -389,7 +389,14 @@ def record_topics(recorder, topics, duration_s=0.0, discovery_timeout_s=10.0, ar
             end = time.monotonic() + duration_s if duration_s > 0 else math.inf
             # spin_once in a loop: returns on SIGINT/SIGTERM with every executor.
             while rclpy.ok() and time.monotonic() < end:
-                executor.spin_once(timeout_sec=0.1)
+                try:
+                    executor.spin_once(timeout_sec=0.1)
+                except Exception:
+                    # A signal between ok() and the wait set shuts the context down under
+                    # spin_once (RCLError "context is not valid"): that is the stop asked for.
+                    if rclpy.ok():
+                        raise
+                    break
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
