@@ -162,6 +162,13 @@ def test_bench_table_and_chart(toy, tmp_path):
     assert rows[0]['error_coupler_mid'] < rows[1]['error_coupler_mid']
     assert (tmp_path / 'chart.png').read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
     assert result['cpu_ratio'] > 0
+    # the numpy step timed beside the compiled one; each target judged from the figures
+    assert result['numpy_step']['us_per_sample'] > 0
+    assert result['numpy_step']['offline_samples_per_s'] > 0
+    targets = {t['name']: t for t in result['targets']}
+    assert targets['update median']['met'] == (rows[0]['us_per_sample'] <= 20.0)
+    assert targets['offline']['met'] == (rows[0]['offline_samples_per_s'] >= 50_000.0)
+    assert targets['CPU vs full order at 1 kHz']['met'] == (result['cpu_ratio'] >= 100.0)
 
 
 def test_estimate_without_the_fe_model_fails_cleanly(capsys, tmp_path):
