@@ -676,9 +676,9 @@ def bench_configurations(base):
             ('grid 256', dataclasses.replace(base, grid_size=256))]
 
 
-def paired_step_timing(model, signal, long_signal, rounds=3):
+def paired_step_timing(model, signal, long_signal, rounds=3, paths=('compiled', 'numpy')):
     """
-    The compiled and the numpy step of one model, timed in alternation.
+    The compiled and the numpy step (``paths``) of one model, timed in alternation.
 
     Each path's best round (lowest median) of ``rounds``: on a shared machine the slower
     rounds measure the neighbours. Streaming over ``signal``, offline replay over
@@ -690,8 +690,8 @@ def paired_step_timing(model, signal, long_signal, rounds=3):
         'compiled' (None if not built) and 'numpy': us_per_sample, us_per_sample_p99,
         offline_samples_per_s.
     """
-    paths = {'compiled': True, 'numpy': False} if compiled_step_available() \
-        else {'numpy': False}
+    paths = {name: name == 'compiled' for name in paths
+             if name == 'numpy' or compiled_step_available()} or {'numpy': False}
     best = {name: None for name in paths}
     for _ in range(rounds):
         for name, compiled in paths.items():
@@ -705,6 +705,7 @@ def paired_step_timing(model, signal, long_signal, rounds=3):
             row['offline_samples_per_s'] = max(row['offline_samples_per_s'], offline)
             best[name] = row
     best.setdefault('compiled', None)
+    best.setdefault('numpy', None)
     return best
 
 
@@ -722,16 +723,16 @@ def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM
     """
     rows = []
     reference_cpu = None
+    signal = synthetic_signal(max(speeds_rpm), seconds, rate_hz)
+    long_signal = synthetic_signal(max(speeds_rpm), OFFLINE_SECONDS, rate_hz)
     for label, options in configurations or bench_configurations(base):
         model = reduced.model_for_mechanism(mechanism, options, use_cache=False)
-        stamps, angles, speeds = synthetic_signal(max(speeds_rpm), seconds, rate_hz)
-        _, update_ns = stream_timed(model, stamps, angles, speeds)
-        median, p99 = timing_summary(update_ns)
-        long_stamps, long_angles, long_speeds = synthetic_signal(max(speeds_rpm),
-                                                                 OFFLINE_SECONDS, rate_hz)
-        start = time.perf_counter()
-        replay(model, long_stamps, long_angles, long_speeds)
-        offline = long_stamps.size / (time.perf_counter() - start)
+        # Every configuration timed the same way: best of three rounds (the default's
+        # rounds alternate with its numpy step, below).
+        timing = paired_step_timing(model, signal, long_signal, paths=('compiled',))
+        timing = timing['compiled'] or timing['numpy']
+        median, p99 = timing['us_per_sample'], timing['us_per_sample_p99']
+        offline = timing['offline_samples_per_s']
         errors = {}
         for rpm in speeds_rpm:
             errors[f'{rpm:g}'] = configuration_error(mechanism, model, options, rpm, rate_hz)
@@ -750,8 +751,7 @@ def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM
     model = reduced.model_for_mechanism(mechanism, (configurations or
                                                     bench_configurations(base))[0][1],
                                         use_cache=False)
-    paired = paired_step_timing(model, synthetic_signal(max(speeds_rpm), seconds, rate_hz),
-                                synthetic_signal(max(speeds_rpm), OFFLINE_SECONDS, rate_hz))
+    paired = paired_step_timing(model, signal, long_signal)
     if paired['compiled'] is not None:
         rows[0].update(paired['compiled'])
     estimator_cpu = rows[0]['us_per_sample'] * 1e-6 * rate_hz  # CPU s per simulated s
