@@ -416,6 +416,29 @@ def test_replay_equals_streaming(toy_model, with_speed):
     np.testing.assert_allclose(batch['crank_accel'], [s.crank_accel for s in streamed])
 
 
+@pytest.mark.parametrize('speed', [30.0, -45.0])
+def test_warm_start_reuses_the_periodic_orbit(toy_model, speed):
+    # A second warm start at the same speed interpolates the kept orbit: the same state as
+    # shooting afresh from that angle, to the interpolation's accuracy; another speed shoots.
+    from flexlink_ros.core import estimator as estimator_module
+    kept = StreamingEstimator(toy_model)
+    kept.periodic_state(0.4, speed)
+    scale_q = scale_v = 0.0
+    for angle in (0.4, 1.234, 3.0, 6.2):
+        q, v = kept.periodic_state(angle, speed * (1.0 + 0.5e-4))
+        q_ref, v_ref = StreamingEstimator(toy_model).periodic_state(angle, speed)
+        scale_q = max(scale_q, np.max(np.abs(q_ref)))
+        scale_v = max(scale_v, np.max(np.abs(v_ref)))
+        np.testing.assert_allclose(q, q_ref, rtol=0, atol=1e-6 * np.max(np.abs(q_ref)))
+        np.testing.assert_allclose(v, v_ref, rtol=0, atol=1e-3 * np.max(np.abs(v_ref)))
+    assert scale_q > 0.0 and scale_v > 0.0
+    assert kept._orbit[0] == speed
+    other = speed * (1.0 + 10 * estimator_module.WARM_START_SPEED_TOLERANCE)
+    q, _ = kept.periodic_state(1.0, other)
+    assert kept._orbit[0] == other
+    np.testing.assert_array_equal(q, StreamingEstimator(toy_model).periodic_state(1.0, other)[0])
+
+
 def test_compiled_step_is_built():
     """The package's compiled step is built (make install and colcon build build it)."""
     from flexlink_ros.core import estimator
