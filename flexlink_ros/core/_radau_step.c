@@ -28,6 +28,7 @@
 #define RECORD_SIZE (2 * OUTPUTS + JOINT_WIDTH)
 #define POWERS 5        /* h^-2 .. h^2 */
 #define ROW_FIELDS 6    /* h, count, angle, speed, accel, advance */
+#define RELEASE_GIL_ROWS 64
 
 static const double TWO_PI = 6.283185307179586;
 
@@ -42,7 +43,7 @@ typedef struct {
     double *matrix;     /* 2r x 2r */
     double *rhs;        /* 2r */
     double *operator;   /* outputs x (r + 1): [O | corr] of the record */
-    double weights[ROWS_ALL];
+    double weights[ROWS_ALL + FIRST_MC];   /* padded: combine may be passed weights + FIRST_MC */
 } Step;
 
 /* Row weights at (angle, w, a) and the cell: StreamingEstimator._evaluate. */
@@ -65,6 +66,12 @@ static Py_ssize_t evaluate(const Step *s, double angle, double w, double a, doub
     }
     return k;
 }
+
+#if defined(__GNUC__) && !defined(__clang__)
+/* GCC 12 warns of an overflow at iteration 2^61 of combine's loops, which the row bound
+   (at most ROWS_ALL) excludes. */
+#pragma GCC diagnostic ignored "-Waggressive-loop-optimizations"
+#endif
 
 /*
  * out[j] (+)= sum_i weights[i] table[i * stride + j], i < rows, j < width: four rows (one
@@ -420,7 +427,9 @@ static PyObject *advance(PyObject *module, PyObject *args)
     double *record_out = records.buf;
     const double *row = rows.buf;
     int failed = 0, bad_row = 0;
-    Py_BEGIN_ALLOW_THREADS
+    /* Batches (replay) let other threads run; a single sample keeps the GIL: getting it back
+       can wait for another thread's switch interval (5 ms), far longer than the step. */
+    PyThreadState *released = count >= RELEASE_GIL_ROWS ? PyEval_SaveThread() : NULL;
     for (Py_ssize_t m = 0; m < count && !failed; m++, row += ROW_FIELDS) {
         const double h = row[0], angle = row[2], w = row[3], a = row[4], step = row[5];
         const long splits = row[1] >= 1.0 && row[1] < 1e9 ? (long)row[1] : 0;
@@ -444,7 +453,8 @@ static PyObject *advance(PyObject *module, PyObject *args)
         if (every_record || m == count - 1)
             record(&s, zv, pv, record_out + (every_record ? m * RECORD_SIZE : 0));
     }
-    Py_END_ALLOW_THREADS
+    if (released != NULL)
+        PyEval_RestoreThread(released);
     if (failed) {
         PyErr_SetString(PyExc_ValueError, bad_row ? "a row has a non-positive step or no sub-steps"
                                                   : "singular Radau step matrix");
