@@ -218,6 +218,11 @@ def _make_node_class():
                 f'{READY_MESSAGE} {self.subscription.topic_name} (joint '
                 f'{values["crank_joint"]!r}), publishing under {self.get_name()}/'
                 + ('' if self.recorder is None else f'; recording to {self.recorder.path}'))
+            if not self.estimator.compiled:
+                self.get_logger().warning(
+                    'the compiled estimator step (flexlink_ros.core._radau_step) is not built: '
+                    'the numpy step runs, about twice as slow (build the package with '
+                    'colcon build or pip install .)')
 
         def _deactivate(self):
             """Stop receiving (the model, publishers and recording stay)."""
