@@ -367,6 +367,7 @@ def record_topics(recorder, topics, duration_s=0.0, discovery_timeout_s=10.0, ar
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
+    from .crank_driver import spin_until_shutdown
     from .rosbag_schema import message_class
 
     try:
@@ -387,16 +388,7 @@ def record_topics(recorder, topics, duration_s=0.0, discovery_timeout_s=10.0, ar
                 node.create_subscription(message_class(type_name), topic,
                                          _raw_writer(recorder, topic, clock), qos, raw=True)
             end = time.monotonic() + duration_s if duration_s > 0 else math.inf
-            # spin_once in a loop: returns on SIGINT/SIGTERM with every executor.
-            while rclpy.ok() and time.monotonic() < end:
-                try:
-                    executor.spin_once(timeout_sec=0.1)
-                except Exception:
-                    # A signal between ok() and the wait set shuts the context down under
-                    # spin_once (RCLError "context is not valid"): that is the stop asked for.
-                    if rclpy.ok():
-                        raise
-                    break
+            spin_until_shutdown(executor, lambda: time.monotonic() >= end)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

@@ -62,7 +62,7 @@ def echo_main():
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import JointState
 
-    from .crank_driver import make_executor
+    from .crank_driver import make_executor, spin_until_shutdown
 
     try:
         with rclpy.init():
@@ -72,8 +72,7 @@ def echo_main():
             node.create_subscription(JointState, INPUT_TOPIC, publisher.publish, qos, raw=True)
             executor = make_executor()
             executor.add_node(node)
-            while rclpy.ok():
-                executor.spin_once(timeout_sec=0.1)
+            spin_until_shutdown(executor)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
 

@@ -240,6 +240,23 @@ def make_executor():
         return SingleThreadedExecutor()
 
 
+def spin_until_shutdown(executor, done=None, period_s=0.1):
+    """
+    ``spin_once`` until SIGINT/SIGTERM shuts the context down (or ``done()`` is true).
+
+    A signal landing between ``rclpy.ok()`` and the wait set that ``spin_once`` builds makes it
+    raise (RCLError: the context is not valid): that is the shutdown asked for, not a failure.
+    """
+    import rclpy
+    while rclpy.ok() and not (done is not None and done()):
+        try:
+            executor.spin_once(timeout_sec=period_s)
+        except Exception:
+            if rclpy.ok():
+                raise
+            return
+
+
 def main(args=None):
     """Entry point of the ``crank_driver`` executable."""
     import rclpy
@@ -259,8 +276,7 @@ def main(args=None):
                 return 1
             executor = make_executor()
             executor.add_node(node)
-            while rclpy.ok() and not node.finished.done():
-                executor.spin_once(timeout_sec=0.1)
+            spin_until_shutdown(executor, node.finished.done)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     return 0
