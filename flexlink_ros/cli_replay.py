@@ -370,12 +370,14 @@ def estimate_offline(model, stamps_ns, angles, speeds, warm_start=True):
     result['crank_speed'] = np.zeros(count)
     result['modal'] = np.zeros((count, model.size))
     available = bool(np.any(model.force_moments))
+    orbit = None    # carried across segments, as one streaming estimator carries it
     for first, stop in zip(starts, starts[1:] + [count]):
         chosen = np.arange(first, stop)[~repeated[first:stop]]
         seg_speeds = speeds[chosen]
         measured = None if np.any(np.isnan(seg_speeds)) else seg_speeds
         out = core_estimator.replay(model, stamps_ns[chosen], angles[chosen], measured,
-                                    warm_start=warm_start)
+                                    warm_start=warm_start, orbit=orbit)
+        orbit = out['orbit']
         model_speed = np.clip(out['crank_speed'], -model.speed_max, model.speed_max)
         model_accel = np.clip(out['crank_accel'], -core_estimator.DEFAULT_ACCEL_LIMIT,
                               core_estimator.DEFAULT_ACCEL_LIMIT)

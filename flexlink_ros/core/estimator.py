@@ -970,7 +970,7 @@ def _crank_motion(times, angles, speeds, time_constant_s):
 
 def replay(model, stamps_ns, angles, speeds=None,
            fit_time_constant_s=DEFAULT_FIT_TIME_CONSTANT_S, warm_start=True,
-           accel_limit=DEFAULT_ACCEL_LIMIT, compiled=True):
+           accel_limit=DEFAULT_ACCEL_LIMIT, compiled=True, orbit=None):
     """
     Offline estimate of a recorded crank signal: the streaming step over the whole signal.
 
@@ -990,13 +990,18 @@ def replay(model, stamps_ns, angles, speeds=None,
         Measured crank speeds [rad/s]; None to derive them from the angles.
     fit_time_constant_s, warm_start, accel_limit, compiled
         As for :class:`StreamingEstimator`.
+    orbit : tuple or None
+        The periodic orbit a streaming estimator would remember from earlier warm starts
+        (the 'orbit' of a previous call): pass it on from segment to segment of one recording
+        and the segments restart exactly as one streaming estimator does.
 
     Returns
     -------
     dict of str to ndarray
         'crank_angle', 'crank_speed', 'crank_accel' (m,); 'lever_tip', 'coupler_mid' (m, 2)
         [m]; 'modal' (m, r); 'force', 'force_dot' (m, joints, 2) and 'rms2' (m, joints): the
-        tabulated joint reactions at the model's (clipped) crank state.
+        tabulated joint reactions at the model's (clipped) crank state; 'orbit' for the next
+        call.
 
     """
     stamps_ns = np.asarray(stamps_ns, dtype=np.int64)
@@ -1022,6 +1027,7 @@ def replay(model, stamps_ns, angles, speeds=None,
     # through update() itself; the steps continue from its state.
     estimator = StreamingEstimator(model, fit_time_constant_s, warm_start=warm_start,
                                    accel_limit=accel_limit, compiled=compiled)
+    estimator._orbit = orbit
     prefix = min(3 if (warm_start and speeds is None) else 1, count)
     for n in range(prefix):
         estimator.update(int(stamps_ns[n]), float(angles[n]),
@@ -1056,4 +1062,4 @@ def replay(model, stamps_ns, angles, speeds=None,
             'modal': modal,
             'force': joint[:, :2 * joints].reshape(count, joints, 2),
             'force_dot': joint[:, 2 * joints:4 * joints].reshape(count, joints, 2),
-            'rms2': joint[:, 4 * joints:].copy()}
+            'rms2': joint[:, 4 * joints:].copy(), 'orbit': estimator._orbit}
