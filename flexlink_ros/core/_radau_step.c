@@ -1,6 +1,6 @@
 /*
  * The streaming estimator's per-sample step in C: the same arithmetic as
- * StreamingEstimator._step_numpy (core/estimator.py), without its ~30 numpy calls.
+ * the numpy step, StreamingEstimator._step (core/estimator.py), without its ~30 numpy calls.
  *
  * One 2-stage Radau IIA step of the reduced model M q'' + C q' + K q = f over h:
  *   - M, C, K, f at the first stage (crank state at c1 h, interpolated between samples)
@@ -43,7 +43,7 @@ typedef struct {
     double *matrix;     /* 2r x 2r */
     double *rhs;        /* 2r */
     double *operator;   /* outputs x (r + 1): [O | corr] of the record */
-    double weights[ROWS_ALL + FIRST_MC];   /* padded: combine may be passed weights + FIRST_MC */
+    double weights[ROWS_ALL];
 } Step;
 
 /* Row weights at (angle, w, a) and the cell: StreamingEstimator._evaluate. */
@@ -68,8 +68,8 @@ static Py_ssize_t evaluate(const Step *s, double angle, double w, double a, doub
 }
 
 #if defined(__GNUC__) && !defined(__clang__)
-/* GCC 12 warns of an overflow at iteration 2^61 of combine's loops, which the row bound
-   (at most ROWS_ALL) excludes. */
+/* GCC 12 warns of an overflow at iteration 2^61 of combine's loops, which the row bounds
+   (at most ROWS_ALL, checked when the tables are taken) exclude. */
 #pragma GCC diagnostic ignored "-Waggressive-loop-optimizations"
 #endif
 
@@ -81,8 +81,6 @@ static void combine(const double *weights, const double *table, Py_ssize_t rows,
                     Py_ssize_t stride, Py_ssize_t width, double *restrict out)
 {
     memset(out, 0, (size_t)width * sizeof(double));
-    if (rows > ROWS_ALL)    /* never: the callers check; tells the compiler the bound */
-        rows = ROWS_ALL;
     Py_ssize_t i = 0;
     for (; i + 4 <= rows; i += 4) {
         const double w0 = weights[i], w1 = weights[i + 1], w2 = weights[i + 2],
@@ -367,7 +365,7 @@ PyDoc_STRVAR(advance_doc,
 "z[:2 r] after each row; records (rows x 28, or 28 for the last row only) the sample's\n"
 "record (estimator.RECORD_SIZE).");
 
-/* Step size and the per-sample counts, or -1 with an exception set. */
+/* Rows per grid cell of a table (at most `most`), or -1 with an exception set. */
 static Py_ssize_t rows_of(const Py_buffer *view, Py_ssize_t per_row, Py_ssize_t cells,
                           Py_ssize_t most, const char *name)
 {

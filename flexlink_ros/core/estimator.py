@@ -492,7 +492,7 @@ class _StepTables:
 
     def record(self, weights, k, z, out):
         """
-        The sample's record (RECORD_FIELDS) from the row weights at cell k and z = [q, v, 1].
+        The sample's record (RECORD_SIZE) from the row weights at cell k and z = [q, v, 1].
 
         The numpy twin of the compiled step's record.
         """
@@ -560,7 +560,7 @@ class StreamingEstimator:
         r = model.size
         self._z = np.zeros(2 * r + 1)   # [q, v, 1]
         self._z[2 * r] = 1.0
-        # [M, C, K, F] of stage 1 and of the sample, in alternating slots; the sample's rest.
+        # [M, C, K, F] of stage 1 and of the sample, in alternating slots (the numpy step).
         self._stored = np.zeros((2, 4, r * r))
         self._flat = self._stored.reshape(2, 4 * r * r)
         self._record = np.zeros(RECORD_SIZE)
@@ -758,19 +758,10 @@ class StreamingEstimator:
             self._pending_warm_start = False
             self._set_state(angle, model_speed, model_accel, True)
             flags |= _WARM_START
-        elif self._kernel is not None:
-            tables = self._tables
-            row = self._row
-            row[:] = (dt, -(-dt_ns // MAX_SUBSTEP_NS), angle, model_speed, model_accel,
-                      self.rate_filter.advance)
-            self._kernel.advance(tables.mass, tables.damping, tables.kf, tables.out,
-                                 tables.joint, tables.g0, self._cells_per_radian, _STAGE1,
-                                 self._z, self._previous, row, self._no_states, self._record)
         else:
-            self._advance(dt, -(-dt_ns // MAX_SUBSTEP_NS), angle, model_speed, model_accel,
-                          self.rate_filter.advance)
-            weights, k = self._evaluate(angle, model_speed, model_accel)
-            self._tables.record(weights, k, self._z, self._record)
+            self._row[:] = (dt, -(-dt_ns // MAX_SUBSTEP_NS), angle, model_speed, model_accel,
+                            self.rate_filter.advance)
+            self._step_rows(self._row, self._no_states, self._record)
         return self._finish(stamp_ns, angle, speed, accel, model_speed, flags, message)
 
     def _start(self, stamp_ns, angle_in, crank_speed, message):
@@ -788,6 +779,30 @@ class StreamingEstimator:
             flags |= _WARM_START
         self._pending_warm_start = self.warm_start and crank_speed is None
         return self._finish(stamp_ns, angle, speed, accel, model_speed, flags, message)
+
+    def _step_rows(self, rows, states, records):
+        """
+        Advance through sample rows (h, sub-steps, angle, speed, acceleration, advance).
+
+        The compiled step in one call, or the numpy step row by row. ``states`` is empty or
+        rows x 2 r (z[:2 r] after each row); ``records`` is rows x RECORD_SIZE, or one record
+        (of the last row).
+        """
+        tables = self._tables
+        if self._kernel is not None:
+            self._kernel.advance(tables.mass, tables.damping, tables.kf, tables.out,
+                                 tables.joint, tables.g0, self._cells_per_radian, _STAGE1,
+                                 self._z, self._previous, rows, states, records)
+            return
+        rows = rows.reshape(-1, 6).tolist()
+        every = records.ndim == 2
+        for n, (h, splits, angle, w, a, step) in enumerate(rows):
+            self._advance(h, int(splits), angle, w, a, step)
+            if every or n == len(rows) - 1:
+                weights, k = self._evaluate(angle, w, a)
+                tables.record(weights, k, self._z, records[n] if every else records)
+            if states.size:
+                states[n] = self._z[:states.shape[1]]
 
     def _advance(self, h, count, angle, speed, accel, advance):
         """
@@ -1038,23 +1053,12 @@ def replay(model, stamps_ns, angles, speeds=None,
     dt_ns = np.diff(stamps_ns)[prefix - 1:]
     rows = np.column_stack([dt_ns * 1e-9, -(-dt_ns // MAX_SUBSTEP_NS), wrapped[prefix:],
                             model_speed[prefix:], model_accel[prefix:], advance[prefix:]])
-    tables = estimator._tables
-    kernel = estimator._kernel
     states = np.empty((min(REPLAY_CHUNK, rows.shape[0]), 2 * r))
     for first in range(0, rows.shape[0], REPLAY_CHUNK):
         chunk = rows[first:first + REPLAY_CHUNK]
         done = slice(prefix + first, prefix + first + chunk.shape[0])
-        if kernel is not None:
-            kernel.advance(tables.mass, tables.damping, tables.kf, tables.out, tables.joint,
-                           tables.g0, estimator._cells_per_radian, _STAGE1, estimator._z,
-                           estimator._previous, chunk, states[:chunk.shape[0]], records[done])
-            modal[done] = states[:chunk.shape[0], :r]
-            continue
-        for n, (h, splits, angle, w, a, step) in enumerate(chunk.tolist(), start=done.start):
-            estimator._advance(h, int(splits), angle, w, a, step)
-            weights, k = estimator._evaluate(angle, w, a)
-            tables.record(weights, k, estimator._z, records[n])
-            modal[n] = estimator._z[:r]
+        estimator._step_rows(chunk, states[:chunk.shape[0]], records[done])
+        modal[done] = states[:chunk.shape[0], :r]
     outputs, joints = len(reduced.OUTPUT_NAMES), len(reduced.JOINTS)
     joint = records[:, 2 * outputs:]
     return {'crank_angle': wrapped, 'crank_speed': speed, 'crank_accel': accel,
