@@ -725,11 +725,15 @@ def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM
     reference_cpu = None
     signal = synthetic_signal(max(speeds_rpm), seconds, rate_hz)
     long_signal = synthetic_signal(max(speeds_rpm), OFFLINE_SECONDS, rate_hz)
+    numpy_step = None
     for label, options in configurations or bench_configurations(base):
         model = reduced.model_for_mechanism(mechanism, options, use_cache=False)
-        # Every configuration timed the same way: best of three rounds (the default's
-        # rounds alternate with its numpy step, below).
-        timing = paired_step_timing(model, signal, long_signal, paths=('compiled',))
+        # Every configuration timed the same way, best of three rounds; the default's rounds
+        # alternate with its numpy step.
+        paths = ('compiled', 'numpy') if not rows else ('compiled',)
+        timing = paired_step_timing(model, signal, long_signal, paths=paths)
+        if not rows:
+            numpy_step = timing['numpy']
         timing = timing['compiled'] or timing['numpy']
         median, p99 = timing['us_per_sample'], timing['us_per_sample_p99']
         offline = timing['offline_samples_per_s']
@@ -747,20 +751,13 @@ def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM
             'error_coupler_mid': max(e['error_coupler_mid'] for e in errors.values()),
             'error_lever_tip': max(e['error_lever_tip'] for e in errors.values()),
             'errors': errors})
-    # The default model's compiled and numpy steps, timed in alternation (noisy machines).
-    model = reduced.model_for_mechanism(mechanism, (configurations or
-                                                    bench_configurations(base))[0][1],
-                                        use_cache=False)
-    paired = paired_step_timing(model, signal, long_signal)
-    if paired['compiled'] is not None:
-        rows[0].update(paired['compiled'])
     estimator_cpu = rows[0]['us_per_sample'] * 1e-6 * rate_hz  # CPU s per simulated s
     result = {'rate_hz': rate_hz, 'configurations': rows,
               'reference_cpu_s_per_s': reference_cpu,
               'estimator_cpu_s_per_s': estimator_cpu,
               'cpu_ratio': (reference_cpu / estimator_cpu) if reference_cpu else None,
               'compiled_step': compiled_step_available(),
-              'numpy_step': paired['numpy']}
+              'numpy_step': numpy_step}
     default = rows[0]
     result['targets'] = [
         {'name': 'update median', 'value': default['us_per_sample'], 'unit': 'us',
