@@ -288,8 +288,8 @@ def _make_node_class():
             try:
                 # rclpy's bytes are exact here: none of the types has a float64[] (which can
                 # be empty); only the input and the per-sample outputs are exact CDR anyway.
-                self.recorder.write(topic, message if isinstance(message, bytes)
-                                    else self._serialize(message), log_time_ns)
+                self.recorder.enqueue(topic, message if isinstance(message, bytes)
+                                      else self._serialize(message), log_time_ns)
             except RecorderError as exc:
                 self.get_logger().error(f'recording stopped, estimation goes on: {exc}')
 
@@ -348,7 +348,9 @@ def _make_node_class():
             if sample.message:
                 self.get_logger().warning(f'estimator: {sample.message}',
                                           throttle_duration_sec=WARN_THROTTLE_S)
-            # Serialised once (exact CDR), published raw and recorded as the same bytes.
+            # Serialised once (exact CDR), published raw and recorded as the same bytes. The
+            # per-sample outputs go out first; the markers (every n-th sample, ~10 times their
+            # cost) after them, so they do not delay this sample's deflection.
             sec, nanosec = divmod(stamp_ns, 1_000_000_000)
             frame = self._frame
             outputs = [
@@ -357,20 +359,27 @@ def _make_node_class():
                                                         *sample.coupler_mid)),
                 ('criteria', cdr.criteria_cdr(sec, nanosec, frame, sample.criterion,
                                               sample.gamma_dot, sample.reaction_n))]
-            if self.published % values['markers.every_n'] == 0:
-                outputs.append(('markers', self._markers(stamp_ns, sample)))
+            published = self._publish(outputs)
+            if published and self.published % values['markers.every_n'] == 0:
+                markers = [('markers', self._markers(stamp_ns, sample))]
+                self._publish(markers)
+                outputs += markers
             self.published += 1
+            if self.recorder is not None:   # recorded even if shut down meanwhile: the input was
+                log_ns = self._clock.now().nanoseconds
+                for key, data in outputs:
+                    self._record(self.output_topics[key], data, log_ns)
+
+        def _publish(self, outputs):
+            """Publish (key, CDR) pairs; False if SIGINT/SIGTERM shut the context down."""
             for key, data in outputs:
                 try:
                     self.publishers_[key].publish(data)
                 except RCLError:
                     if self.context.ok():
                         raise
-                    break   # SIGINT/SIGTERM shut the context down while this callback ran
-            if self.recorder is not None:   # recorded even then: the input was
-                log_ns = self._clock.now().nanoseconds
-                for key, data in outputs:
-                    self._record(self.output_topics[key], data, log_ns)
+                    return False
+            return True
 
         def _markers(self, stamp_ns, sample):
             """CDR of the deformed-linkage markers (template encoder, rebuilt on changes)."""

@@ -14,8 +14,9 @@ which ``ros2 bag play DIR``, ``ros2 bag info DIR`` and ``rosbags`` need.
 
 Crash safety. Chunks are small (128 KiB before compression) and the open chunk is written and
 flushed to the OS whenever a flush period (0.5 s) of data has accumulated, and also by a
-background timer when no message comes. A SIGKILL therefore loses at most one flush period
-plus what was in the chunk; the file lacks its summary but every complete chunk is readable by
+background timer when no message comes (which also writes what :meth:`McapRecorder.enqueue`
+queued, every 20 ms). A SIGKILL therefore loses at most one flush period plus what was in the
+chunk; the file lacks its summary but every complete chunk is readable by
 a streaming reader (``flexlink mcap-recover`` rewrites it with a summary). Data are not
 fsync'ed: a killed process loses nothing the kernel already has; power loss is out of scope.
 
@@ -24,6 +25,7 @@ Errors. An unwritable path or a full disk raises :class:`RecorderError` once (fr
 counts them, so the caller can report it (a diagnostic) and carry on.
 """
 
+import collections
 import dataclasses
 import enum
 import logging
@@ -45,6 +47,7 @@ LOGGER = logging.getLogger(__name__)
 
 DEFAULT_CHUNK_SIZE = 128 * 1024  # bytes before compression; one chunk is the unit of loss
 DEFAULT_FLUSH_PERIOD_S = 0.5  # at most this much data (log time, or wall time) sits in memory
+QUEUE_PERIOD_S = 0.02  # the background thread writes enqueued messages this often
 ROSBAG2_METADATA_VERSION = 9  # rosbag2 metadata.yaml version written (QoS policies as names)
 ROS_DISTRO = 'kilted'
 LIBRARY = f'flexlink_ros recorder; {LIBRARY_IDENTIFIER}'
@@ -151,6 +154,7 @@ class McapRecorder:
         self._last_flush_wall = time.monotonic()
         self._stop_flusher = threading.Event()
         self._flusher = None
+        self._queue = collections.deque()   # (topic, bytes, log_ns) from enqueue()
 
     # -- life cycle -------------------------------------------------------------------------
 
@@ -204,6 +208,7 @@ class McapRecorder:
         self._stop_flusher.set()
         if self._flusher is not None and self._flusher is not threading.current_thread():
             self._flusher.join()
+        self._write_queue()
         with self._lock:
             if self._state is RecorderState.RECORDING:
                 try:
@@ -330,6 +335,38 @@ class McapRecorder:
                 self._flush_locked(log_time_ns)
             return True
 
+    def enqueue(self, topic, message, log_time_ns):
+        """
+        Record one message without writing it in the calling thread.
+
+        For a latency-sensitive caller (the node's subscription callback): the message is
+        queued and the background thread writes the queue every ``QUEUE_PERIOD_S`` in one
+        :meth:`write_batch` (so neither the per-message cost of :meth:`write` nor a slow disk
+        holding the recorder's lock lands in the caller); :meth:`flush` and :meth:`close`
+        write what is left. It records what :meth:`write` calls in the same order would.
+        Without the background thread (``flush_thread=False``) this is :meth:`write`.
+
+        Parameters and errors as :meth:`write`; a failure in the background thread is raised
+        (once) by the next call.
+
+        """
+        if not self._use_flush_thread:
+            return self.write(topic, message, log_time_ns)
+        if isinstance(message, (bytes, bytearray, memoryview)):
+            data = bytes(message)
+            if topic not in self._topics:
+                raise ValueError(f'`topic` {topic!r}: declare it with add_topic() before '
+                                 'writing serialised bytes')
+        else:
+            if topic not in self._topics:
+                self.add_topic(topic, message_type_name(message))
+            data = serialize_exact(message)
+        if self._state is not RecorderState.RECORDING:
+            with self._lock:
+                return self._refuse()
+        self._queue.append((topic, data, int(log_time_ns)))
+        return True
+
     def write_batch(self, topics, messages, log_times_ns, publish_times_ns=None):
         """
         Record many serialised messages, exactly as the same :meth:`write` calls in order.
@@ -426,7 +463,8 @@ class McapRecorder:
             return count
 
     def flush(self):
-        """Write the open chunk and flush it to the OS (no fsync)."""
+        """Write the queue and the open chunk and flush them to the OS (no fsync)."""
+        self._write_queue()
         with self._lock:
             if self._state is RecorderState.RECORDING:
                 self._flush_locked(self._last_flush_log_ns)
@@ -447,8 +485,9 @@ class McapRecorder:
     def files(self):
         """Paths of every file written or being written."""
         paths = [entry['path'] for entry in self._closed_files]
-        if self._file is not None:
-            paths.append(self._file.path)
+        current = self._file    # read once: another thread may close it meanwhile
+        if current is not None:
+            paths.append(current.path)
         return paths
 
     def status(self):
@@ -462,23 +501,25 @@ class McapRecorder:
             ``topics`` (name -> count), ``bytes_written``.
 
         """
-        with self._lock:
-            size = 0
-            for path in self.files:
-                try:
-                    size += os.stat(path).st_size
-                except OSError:
-                    pass
-            return {
-                'state': self._state.value,
-                'error': None if self._error is None else str(self._error),
-                'path': str(self.path),
-                'files': [str(p) for p in self.files],
-                'message_count': self._message_count,
-                'dropped_count': self._dropped,
-                'topics': {t.name: t.message_count for t in self._topics.values()},
-                'bytes_written': size,
-            }
+        # Without the lock: the writing thread may hold it through a slow disk write, and
+        # diagnostics must not wait for that (each field is read atomically; the set may be
+        # one write apart).
+        size = 0
+        for path in self.files:
+            try:
+                size += os.stat(path).st_size
+            except OSError:
+                pass
+        return {
+            'state': self._state.value,
+            'error': None if self._error is None else str(self._error),
+            'path': str(self.path),
+            'files': [str(p) for p in self.files],
+            'message_count': self._message_count,
+            'dropped_count': self._dropped,
+            'topics': {t.name: t.message_count for t in self._topics.values()},
+            'bytes_written': size,
+        }
 
     # -- internals --------------------------------------------------------------------------
 
@@ -576,9 +617,24 @@ class McapRecorder:
         self._last_flush_log_ns = log_time_ns
         self._last_flush_wall = time.monotonic()
 
+    def _write_queue(self):
+        """Write the messages enqueued so far (enqueue), in order, as one batch."""
+        queue = self._queue
+        count = len(queue)      # appends may go on meanwhile: take only these
+        if not count:
+            return
+        items = [queue.popleft() for _ in range(count)]
+        topics, messages, log_times = zip(*items)
+        try:
+            self.write_batch(list(topics), list(messages), log_times)
+        except RecorderError:
+            with self._lock:    # told to the enqueuing thread at its next call, or by close
+                self._error_reported = False
+
     def _flush_loop(self):
         period_s = self.flush_period_ns / 1e9
-        while not self._stop_flusher.wait(period_s / 2):
+        while not self._stop_flusher.wait(QUEUE_PERIOD_S):
+            self._write_queue()
             with self._lock:
                 if (self._state is RecorderState.RECORDING and self._unflushed
                         and time.monotonic() - self._last_flush_wall >= period_s):
