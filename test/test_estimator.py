@@ -661,6 +661,42 @@ def test_replay_crank_motion_is_the_rate_filter(kind):
     assert motion.tolist() == [list(row) for row in expected]
 
 
+@pytest.mark.parametrize('kind', ['speed', 'angle', 'mixed', 'steps'])
+def test_compiled_crank_filter_gives_the_python_filter_bit_for_bit(kind):
+    """The C filter (streaming and over a signal) returns the Python filter's doubles."""
+    from flexlink_ros.core.estimator import (CompiledCrankRateFilter, CrankRateFilter,
+                                             compiled_step_available)
+    if not compiled_step_available():
+        pytest.skip('compiled step not built')
+    rng = np.random.default_rng(11)
+    count = 3000
+    steps = 1e-3 * (1.0 + 0.5 * rng.uniform(-1, 1, count))
+    if kind == 'steps':     # 10 us to 100 ms steps, a speed step, a stop and a reversal
+        steps = 10.0 ** rng.uniform(-5, -1, count)
+    times = np.cumsum(steps)
+    speed_true = np.where(times < times[-1] / 2, 40.0 + 6.0 * times, -20.0 * np.sin(times))
+    angles = np.cumsum(speed_true * steps) + 7.0 * np.pi     # unwrapped, any range
+    speeds = (speed_true + 0.01 * rng.normal(size=count)).tolist()
+    if kind == 'angle':
+        speeds = None
+    elif kind in ('mixed', 'steps'):
+        speeds[100:150] = [None] * 50
+        speeds[900:905] = [math.nan] * 5
+    python, compiled = CrankRateFilter(0.02), CompiledCrankRateFilter(0.02)
+    expected, got = [], []
+    for n, (t, angle) in enumerate(zip(times.tolist(), angles.tolist())):
+        speed = None if speeds is None else speeds[n]
+        if n == 2000:       # a reset midway
+            python.reset()
+            compiled.reset()
+        expected.append(python.update(t, angle, speed) + (python.advance, python.count))
+        got.append(compiled.update(t, angle, speed) + (compiled.advance, compiled.count))
+    assert got == expected
+    motion = CompiledCrankRateFilter(0.02).signal(times[:2000], angles[:2000],
+                                                   None if speeds is None else speeds[:2000])
+    assert motion.tolist() == [list(row[:4]) for row in expected[:2000]]
+
+
 def test_node_default_model_meets_its_budget_against_the_scene_reference(cho):
     """The node's default (flexible crank, 4 elements, 24 + 2) against the 6-element scene."""
     from flexlink_ros import cli_estimate, node, node_params
@@ -742,3 +778,28 @@ def test_released_model_table_changes_nothing_streamed(toy_model):
     assert kept.last.coupler_mid == pytest.approx(released.last.coupler_mid, rel=1e-10)
     assert kept.last.flags == released.last.flags
     assert released.link_shapes(released.last)[1].shape == kept.link_shapes(kept.last)[1].shape
+
+
+def test_compiled_criteria_give_the_python_criteria_bit_for_bit(toy_model):
+    """The C criteria (the node's path) equal StreamingEstimator._criteria, zeros included."""
+    from flexlink_ros.core.estimator import (RECORD_SIZE, REACTION_FLOOR_FRACTION,
+                                             StreamingEstimator, compiled_step_available)
+    if not compiled_step_available():
+        pytest.skip('compiled step not built')
+    from flexlink_ros.core import _radau_step
+    estimator = StreamingEstimator(toy_model, compiled=False)
+    rng = np.random.default_rng(5)
+    for n in range(2000):
+        record = rng.normal(size=RECORD_SIZE) * 10.0 ** rng.uniform(-8, 3)
+        joint = record[8:]
+        if n % 4 == 1:
+            joint[0:2] = 0.0                        # a zero reaction: clamped, flagged
+        if n % 4 == 2:
+            joint[2:4] *= 1e-9                      # near zero
+        if n % 7 == 3:
+            joint[16:] = 0.0                        # no cycle RMS either: criterion 0
+        joint[16:] = np.abs(joint[16:])
+        expected = estimator._criteria(record[8:].tolist(), 40.0)
+        got = _radau_step.criteria(record, estimator.near_zero_fraction,
+                                   REACTION_FLOOR_FRACTION)
+        assert got == expected

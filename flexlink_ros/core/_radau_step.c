@@ -31,6 +31,7 @@
 #define RELEASE_GIL_ROWS 64
 
 static const double TWO_PI = 6.283185307179586;
+static const double PI = 3.141592653589793;     /* math.pi */
 
 typedef struct {
     Py_ssize_t r, cells, mass_rows, out_rows, joint_rows;
@@ -511,6 +512,255 @@ done:
     return result;
 }
 
+/* ---- crank-rate filter: CrankRateFilter.update (core/estimator.py), the same arithmetic -- */
+
+/* State layout (float64), mirrored by estimator.FILTER_STATE_* */
+enum {
+    F_STARTED, F_TIME, F_ANGLE, F_MODE, F_SPEED, F_ACCEL, F_ADVANCE, F_MEAN_DT, F_TC,
+    F_MIN_SAMPLES, F_SPEED_FIT, F_ANGLE_FIT = F_SPEED_FIT + 9, FILTER_STATE = F_ANGLE_FIT + 9
+};
+enum { MODE_NONE = 0, MODE_SPEED = 1, MODE_ANGLE = 2 };
+/* A fit: s0..s4, t0..t2, count (_ForgettingPolyFit, degree 2). */
+
+/* The Python expressions' order, without fused multiply-adds, so the results are the same
+   doubles as the Python filter's (the step's tolerance would allow less, replay's tests not). */
+#if defined(__GNUC__) && !defined(__clang__)
+#define EXACT_ARITHMETIC __attribute__((optimize("fp-contract=off")))
+#else
+#define EXACT_ARITHMETIC
+#endif
+
+/* _ForgettingPolyFit.add (degree 2) with _shift_quadratic_moments. */
+EXACT_ARITHMETIC static void fit_add(double *fit, double shift, double forget, double dy,
+                                     double value)
+{
+    if (fit[8] != 0.0) {
+        const double d = -shift, f = forget;
+        const double s0 = fit[0], s1 = fit[1], s2 = fit[2], s3 = fit[3], s4 = fit[4];
+        const double t0 = fit[5] - dy * s0, t1 = fit[6] - dy * s1, t2 = fit[7] - dy * s2;
+        const double d2 = d * d;
+        fit[0] = f * s0;
+        fit[1] = f * (s1 + d * s0);
+        fit[2] = f * (s2 + 2.0 * d * s1 + d2 * s0);
+        fit[3] = f * (s3 + 3.0 * d * s2 + 3.0 * d2 * s1 + d2 * d * s0);
+        fit[4] = f * (s4 + 4.0 * d * s3 + 6.0 * d2 * s2 + 4.0 * d2 * d * s1 + d2 * d2 * s0);
+        fit[5] = f * t0;
+        fit[6] = f * (t1 + d * t0);
+        fit[7] = f * (t2 + 2.0 * d * t1 + d2 * t0);
+    }
+    fit[0] += 1.0;
+    fit[5] += value;
+    fit[8] += 1.0;
+}
+
+/* _ForgettingPolyFit.coefficients (degree 2): c1, c2 (c0 is not used). */
+EXACT_ARITHMETIC static void fit_slopes(const double *fit, double *c1, double *c2)
+{
+    const double a00 = fit[0], a01 = fit[1], a02 = fit[2], a12 = fit[3], a22 = fit[4];
+    const double t0 = fit[5], t1 = fit[6], t2 = fit[7], count = fit[8];
+    if (count >= 3.0) {     /* _parabola_coefficients */
+        const double a11 = a02;
+        const double m00 = a11 * a22 - a12 * a12;
+        const double m01 = a02 * a12 - a01 * a22;
+        const double m02 = a01 * a12 - a02 * a11;
+        const double det = a00 * m00 + a01 * m01 + a02 * m02;
+        if (fabs(det) > 1e-12 * fabs(a00 * a11 * a22)) {
+            const double m11 = a00 * a22 - a02 * a02;
+            const double m12 = a01 * a02 - a00 * a12;
+            const double m22 = a00 * a11 - a01 * a01;
+            *c1 = (m01 * t0 + m11 * t1 + m12 * t2) / det;
+            *c2 = (m02 * t0 + m12 * t1 + m22 * t2) / det;
+            return;
+        }
+    }
+    *c2 = 0.0;              /* _line_coefficients */
+    const double det = a00 * a02 - a01 * a01;
+    if (count == 0.0 || count < 2.0 || fabs(det) <= 1e-12 * a00 * a02)
+        *c1 = 0.0;
+    else
+        *c1 = (a00 * t1 - a01 * t0) / det;
+}
+
+/* wrap_angle: [0, 2 pi). */
+static double wrap_angle(double angle)
+{
+    double wrapped = fmod(angle, TWO_PI);
+    if (wrapped < 0.0)
+        wrapped += TWO_PI;
+    return wrapped < TWO_PI ? wrapped : 0.0;
+}
+
+/* CrankRateFilter.update; speed NaN (or infinite) when not measured. out: wrapped angle,
+   speed, acceleration, advance. */
+EXACT_ARITHMETIC static void filter_update(double *st, double time_s, double angle,
+                                           double speed, double *out)
+{
+    const int has_speed = isfinite(speed);
+    const double mode = has_speed ? MODE_SPEED : MODE_ANGLE;
+    double *speed_fit = st + F_SPEED_FIT, *angle_fit = st + F_ANGLE_FIT;
+    if (st[F_STARTED] == 0.0) {
+        st[F_STARTED] = 1.0;
+        st[F_TIME] = time_s;
+        st[F_ANGLE] = angle;
+        st[F_MODE] = mode;
+        st[F_SPEED] = has_speed ? speed : 0.0;
+        st[F_ACCEL] = 0.0;
+        fit_add(has_speed ? speed_fit : angle_fit, 0.0, 1.0, 0.0, 0.0);
+        out[0] = wrap_angle(st[F_ANGLE]);
+        out[1] = st[F_SPEED];
+        out[2] = st[F_ACCEL];
+        out[3] = st[F_ADVANCE];
+        return;
+    }
+    const double tc = st[F_TC];
+    const double dt = time_s - st[F_TIME];
+    st[F_MEAN_DT] = isnan(st[F_MEAN_DT]) ? dt : 0.9 * st[F_MEAN_DT] + 0.1 * dt;
+    const double span = st[F_MIN_SAMPLES] * st[F_MEAN_DT];
+    const double tau = span > tc ? span : tc;     /* max(tc, span) */
+    const double forget = exp(-dt / tau);
+    double shift = dt / tc;
+    const double predicted = has_speed ? 0.5 * (st[F_SPEED] + speed) * dt
+                                       : st[F_SPEED] * dt + 0.5 * st[F_ACCEL] * dt * dt;
+    const double advance = predicted
+        + (python_mod(angle - st[F_ANGLE] - predicted + PI, TWO_PI) - PI);
+    st[F_ANGLE] += advance;
+    st[F_ADVANCE] = advance;
+    st[F_TIME] = time_s;
+    if (mode != st[F_MODE]) {
+        memset(speed_fit, 0, 9 * sizeof(double));
+        memset(angle_fit, 0, 9 * sizeof(double));
+        st[F_MODE] = mode;
+        shift = 0.0;
+    }
+    double c1, c2;
+    if (has_speed) {
+        fit_add(speed_fit, shift, forget, speed - st[F_SPEED], 0.0);
+        fit_slopes(speed_fit, &c1, &c2);
+        st[F_SPEED] = speed;
+        st[F_ACCEL] = c1 / tc;
+    }
+    else {
+        fit_add(angle_fit, shift, forget, advance, 0.0);
+        fit_slopes(angle_fit, &c1, &c2);
+        if (angle_fit[8] < 2.0) {
+            st[F_SPEED] = advance / dt;
+            st[F_ACCEL] = 0.0;
+        }
+        else {
+            st[F_SPEED] = c1 / tc;
+            st[F_ACCEL] = 2.0 * c2 / pow(tc, 2.0);
+        }
+    }
+    out[0] = wrap_angle(st[F_ANGLE]);
+    out[1] = st[F_SPEED];
+    out[2] = st[F_ACCEL];
+    out[3] = advance;
+}
+
+PyDoc_STRVAR(filter_update_doc,
+"filter_update(state, time_s, angle, speed) -> (angle, speed, accel)\n"
+"\n"
+"CrankRateFilter.update on a state array (estimator.FILTER_STATE float64 values); speed NaN\n"
+"when not measured. Returns the wrapped angle, speed and acceleration.");
+
+static PyObject *filter_update_py(PyObject *module, PyObject *args)
+{
+    PyObject *state_object;
+    double time_s, angle, speed, out[4];
+    Py_buffer state = {0};
+    (void)module;
+    if (!PyArg_ParseTuple(args, "Oddd", &state_object, &time_s, &angle, &speed)
+        || get_buffer(state_object, &state, 1, "state", FILTER_STATE) != 0)
+        return NULL;
+    filter_update(state.buf, time_s, angle, speed, out);
+    PyBuffer_Release(&state);
+    return Py_BuildValue("(ddd)", out[0], out[1], out[2]);
+}
+
+PyDoc_STRVAR(filter_signal_doc,
+"filter_signal(state, times, angles, speeds, motion)\n"
+"\n"
+"filter_update over a signal (speeds NaN where not measured): motion (n x 4) receives the\n"
+"wrapped angle, speed, acceleration and advance of every sample.");
+
+static PyObject *filter_signal_py(PyObject *module, PyObject *args)
+{
+    PyObject *objects[5];
+    Py_buffer state = {0}, times = {0}, angles = {0}, speeds = {0}, motion = {0};
+    PyObject *result = NULL;
+    (void)module;
+    if (!PyArg_ParseTuple(args, "OOOOO", &objects[0], &objects[1], &objects[2], &objects[3],
+                          &objects[4]))
+        return NULL;
+    if (get_buffer(objects[0], &state, 1, "state", FILTER_STATE) != 0
+        || get_buffer(objects[1], &times, 0, "times", -1) != 0)
+        goto done;
+    const Py_ssize_t count = times.len / 8;
+    if (get_buffer(objects[2], &angles, 0, "angles", count) != 0
+        || get_buffer(objects[3], &speeds, 0, "speeds", count) != 0
+        || get_buffer(objects[4], &motion, 1, "motion", 4 * count) != 0)
+        goto done;
+    const double *t = times.buf, *a = angles.buf, *w = speeds.buf;
+    double *m = motion.buf;
+    for (Py_ssize_t n = 0; n < count; n++)
+        filter_update(state.buf, t[n], a[n], w[n], m + 4 * n);
+    result = Py_NewRef(Py_None);
+done:
+    PyBuffer_Release(&state);
+    PyBuffer_Release(&times);
+    PyBuffer_Release(&angles);
+    PyBuffer_Release(&speeds);
+    PyBuffer_Release(&motion);
+    return result;
+}
+
+/* ---- joint criteria: StreamingEstimator._criteria, the same arithmetic ---------------- */
+
+PyDoc_STRVAR(criteria_doc,
+"criteria(record, near_zero_fraction, floor_fraction) -> (R, gamma_dot, ratio, near_zero)\n"
+"\n"
+"StreamingEstimator._criteria from a record (estimator.RECORD_SIZE): per joint the reaction\n"
+"magnitude R, its direction's rate gamma_dot = (Fx dFy - Fy dFx) / R^2 with R^2 clamped to\n"
+"floor_fraction^2 of the cycle mean square, |gamma_dot| / R, and whether R is below\n"
+"near_zero_fraction of the cycle RMS (four-tuples).");
+
+EXACT_ARITHMETIC static PyObject *criteria_py(PyObject *module, PyObject *args)
+{
+    PyObject *record_object;
+    double near_zero_fraction, floor_fraction;
+    Py_buffer record_view = {0};
+    (void)module;
+    if (!PyArg_ParseTuple(args, "Odd", &record_object, &near_zero_fraction, &floor_fraction)
+        || get_buffer(record_object, &record_view, 0, "record", RECORD_SIZE) != 0)
+        return NULL;
+    const double *v = (const double *)record_view.buf + 2 * OUTPUTS;
+    const double limit2 = near_zero_fraction * near_zero_fraction;
+    const double floor2 = floor_fraction * floor_fraction;
+    double reactions[4] = {0.0}, gamma_dots[4] = {0.0}, ratios[4] = {0.0};
+    int near[4];
+    for (int j = 0; j < 4; j++) {
+        const double fx = v[2 * j], fy = v[2 * j + 1], rms2 = v[16 + j];
+        double r2 = fx * fx + fy * fy;
+        near[j] = r2 < limit2 * rms2;
+        const double floored = floor2 * rms2;
+        if (floored > r2)
+            r2 = floored;
+        if (r2 > 0.0) {
+            const double magnitude = sqrt(r2);
+            const double gamma_dot = (fx * v[9 + 2 * j] - fy * v[8 + 2 * j]) / r2;
+            reactions[j] = sqrt(fx * fx + fy * fy);
+            gamma_dots[j] = gamma_dot;
+            ratios[j] = fabs(gamma_dot) / magnitude;
+        }
+    }
+    PyBuffer_Release(&record_view);
+    return Py_BuildValue("((dddd)(dddd)(dddd)(NNNN))", reactions[0], reactions[1],
+                         reactions[2], reactions[3], gamma_dots[0], gamma_dots[1],
+                         gamma_dots[2], gamma_dots[3], ratios[0], ratios[1], ratios[2],
+                         ratios[3], PyBool_FromLong(near[0]), PyBool_FromLong(near[1]),
+                         PyBool_FromLong(near[2]), PyBool_FromLong(near[3]));
+}
+
 PyDoc_STRVAR(lu_solve_doc,
 "lu_solve(a, b)\n"
 "\n"
@@ -547,6 +797,9 @@ done:
 static PyMethodDef methods[] = {
     {"lu_solve", lu_solve, METH_VARARGS, lu_solve_doc},
     {"advance", advance, METH_VARARGS, advance_doc},
+    {"filter_update", filter_update_py, METH_VARARGS, filter_update_doc},
+    {"filter_signal", filter_signal_py, METH_VARARGS, filter_signal_doc},
+    {"criteria", criteria_py, METH_VARARGS, criteria_doc},
     {NULL, NULL, 0, NULL},
 };
 
