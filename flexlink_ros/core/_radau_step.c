@@ -47,6 +47,34 @@ typedef struct {
     double weights[ROWS_ALL];
 } Step;
 
+/* x86-64 with GCC: AVX2/FMA clones of the step and of the kernels it calls (the table
+   combination and the LU are not inlined into the step's clone), chosen at load time (ifunc). */
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
+#define STEP_CLONES __attribute__((target_clones("arch=x86-64-v3", "default")))
+#else
+#define STEP_CLONES
+#endif
+
+/*
+ * sum_j a[j] b[j] with four independent partial sums: a single running sum is a chain of
+ * dependent additions (4 cycles each) that C may not reorder without -ffast-math; four
+ * chains run in parallel and vectorise. (Round-off differs from numpy's order, not more.)
+ */
+static inline double dot(const double *restrict a, const double *restrict b, Py_ssize_t n)
+{
+    double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+    Py_ssize_t j = 0;
+    for (; j + 4 <= n; j += 4) {
+        s0 += a[j] * b[j];
+        s1 += a[j + 1] * b[j + 1];
+        s2 += a[j + 2] * b[j + 2];
+        s3 += a[j + 3] * b[j + 3];
+    }
+    for (; j < n; j++)
+        s0 += a[j] * b[j];
+    return (s0 + s1) + (s2 + s3);
+}
+
 /* Row weights at (angle, w, a) and the cell: StreamingEstimator._evaluate. */
 static Py_ssize_t evaluate(const Step *s, double angle, double w, double a, double *weights)
 {
@@ -78,7 +106,7 @@ static Py_ssize_t evaluate(const Step *s, double angle, double w, double a, doub
  * out[j] (+)= sum_i weights[i] table[i * stride + j], i < rows, j < width: four rows (one
  * monomial's powers of t) per pass, so out is loaded and stored once per four products.
  */
-static void combine(const double *weights, const double *table, Py_ssize_t rows,
+STEP_CLONES static void combine(const double *weights, const double *table, Py_ssize_t rows,
                     Py_ssize_t stride, Py_ssize_t width, double *restrict out)
 {
     memset(out, 0, (size_t)width * sizeof(double));
@@ -127,10 +155,7 @@ static void record(Step *s, const double *z, const double *prev, double *restric
     combine(s->weights, s->out + k * s->out_rows * width, s->out_rows, width, width, op);
     for (int o = 0; o < OUTPUTS; o++) {
         const double *row = op + o * (r + 1);
-        double sum = 0.0;
-        for (Py_ssize_t j = 0; j < r; j++)
-            sum += row[j] * z[j];
-        out[o] = sum + row[r];
+        out[o] = dot(row, z, r) + row[r];
         out[OUTPUTS + o] = row[r];
     }
     combine(s->weights, s->joint + k * s->joint_rows * JOINT_WIDTH, s->joint_rows, JOINT_WIDTH,
@@ -144,7 +169,7 @@ static void record(Step *s, const double *z, const double *prev, double *restric
  * products: about 25 % faster than the unblocked LU at n = 52 here). b follows the swaps.
  */
 #define LU_PANEL 4
-static int solve(Py_ssize_t n, double *restrict a, double *restrict b)
+STEP_CLONES static int solve(Py_ssize_t n, double *restrict a, double *restrict b)
 {
     for (Py_ssize_t k0 = 0; k0 < n; k0 += LU_PANEL) {
         const Py_ssize_t k1 = n - k0 < LU_PANEL ? n : k0 + LU_PANEL;
@@ -204,19 +229,11 @@ static int solve(Py_ssize_t n, double *restrict a, double *restrict b)
                 row[j] -= l0 * u0[j] + l1 * u1[j] + l2 * u2[j] + l3 * u3[j];
         }
     }
-    for (Py_ssize_t i = 1; i < n; i++) {       /* L y = b, L unit lower */
-        double sum = b[i];
-        const double *row = a + i * n;
-        for (Py_ssize_t j = 0; j < i; j++)
-            sum -= row[j] * b[j];
-        b[i] = sum;
-    }
+    for (Py_ssize_t i = 1; i < n; i++)         /* L y = b, L unit lower */
+        b[i] -= dot(a + i * n, b, i);
     for (Py_ssize_t i = n - 1; i >= 0; i--) {  /* U x = y */
-        double sum = b[i];
         const double *row = a + i * n;
-        for (Py_ssize_t j = i + 1; j < n; j++)
-            sum -= row[j] * b[j];
-        b[i] = sum / row[i];
+        b[i] = (b[i] - dot(row + i + 1, b + i + 1, n - i - 1)) / row[i];
     }
     return 0;
 }
@@ -243,13 +260,6 @@ static double python_mod(double x, double y)
     }
     return mod;
 }
-
-/* x86-64 with GCC: an AVX2/FMA clone of the step, chosen at load time (ifunc). */
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
-#define STEP_CLONES __attribute__((target_clones("arch=x86-64-v3", "default")))
-#else
-#define STEP_CLONES
-#endif
 
 /* One Radau IIA step of h to crank state (angle, w, a) from prev (StreamingEstimator._step). */
 STEP_CLONES static int radau_step(Step *s, double *z, double *prev, double h, double angle, double w,
@@ -285,13 +295,8 @@ STEP_CLONES static int radau_step(Step *s, double *z, double *prev, double h, do
                     continue;
                 const double *X = s->blocks + (slot * 3 + m) * r2;
                 const double *zl = z + l * r;
-                for (Py_ssize_t row = 0; row < r; row++) {
-                    double sum = 0.0;
-                    const double *Xrow = X + row * r;
-                    for (Py_ssize_t col = 0; col < r; col++)
-                        sum += Xrow[col] * zl[col];
-                    out[row] = sum;
-                }
+                for (Py_ssize_t row = 0; row < r; row++)
+                    out[row] = dot(X + row * r, zl, r);
             }
     /* matrix[(i, row), (l, col)] = sum_{slot, m} g[i, l; slot, m] X_{slot,m}[row, col] */
     for (int i = 0; i < 2; i++) {
