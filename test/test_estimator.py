@@ -217,8 +217,10 @@ def test_fused_step_equals_the_reference_radau_step(toy_model):
         current = toy_model.evaluate(sample.crank_angle, speeds[1], accels[1])
         rows = np.vstack([stage1, current])
         q_new, _, _ = method.step(q, v, step_ns * 1e-9, *reduced.system_blocks(toy_model, rows))
-        np.testing.assert_allclose(sample.modal, q_new, rtol=1e-8,
-                                   atol=1e-10 * np.max(np.abs(q_new)))
+        # 1e-6: the step tables hold M and C in float32 (2e-8 of the outputs; an error in
+        # the algebra shows at O(h) or more).
+        np.testing.assert_allclose(sample.modal, q_new, rtol=1e-6,
+                                   atol=1e-8 * np.max(np.abs(q_new)))
 
 
 def test_cold_start_converges_to_the_periodic_state(toy_model):
@@ -542,9 +544,11 @@ def test_compiled_step_rejects_bad_buffers(toy_model):
     with pytest.raises(ValueError, match='kf'):
         call(kf=t.kf[:-1])
     with pytest.raises(ValueError, match='damping'):
-        call(damping=np.zeros(7))
+        call(damping=np.zeros(7, dtype=np.float32))
+    with pytest.raises(TypeError, match='float32'):
+        call(mass=t.mass.astype(np.float64))
     with pytest.raises(TypeError, match='float64'):
-        call(mass=t.mass.astype(np.float32))
+        call(kf=t.kf.astype(np.float32))
     with pytest.raises(ValueError, match='rows'):
         call(rows=row[:5])
     with pytest.raises(ValueError, match='non-positive step'):
@@ -767,9 +771,11 @@ def test_released_model_table_changes_nothing_streamed(toy_model):
     model = released.release_model_table()
     assert model.table.size == 0 and toy_model.table.size > 0
     theta = np.linspace(-1.0, 8.0, 37)
-    for ours, theirs in zip(kept.system_blocks(theta, 20.0, 3.0),
-                            reduced.system_blocks(toy_model, toy_model.evaluate(theta, 20.0, 3.0))):
-        np.testing.assert_allclose(ours, theirs, rtol=1e-12, atol=1e-12 * np.abs(theirs).max())
+    blocks = zip(kept.system_blocks(theta, 20.0, 3.0),
+                 reduced.system_blocks(toy_model, toy_model.evaluate(theta, 20.0, 3.0)))
+    # M and C come from float32 step tables (6e-8 per entry); K and f are float64, exact.
+    for (ours, theirs), rtol in zip(blocks, (1e-6, 1e-6, 1e-12, 1e-12)):
+        np.testing.assert_allclose(ours, theirs, rtol=rtol, atol=rtol * np.abs(theirs).max())
     for estimator in (kept, released):
         estimator.update(0, 0.4, None)          # cold start, then the deferred warm start
         for n in range(1, 200):

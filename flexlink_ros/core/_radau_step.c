@@ -35,7 +35,8 @@ static const double PI = 3.141592653589793;     /* math.pi */
 
 typedef struct {
     Py_ssize_t r, cells, mass_rows, out_rows, joint_rows;
-    const double *mass, *damping, *kf, *out, *joint, *g0;
+    const float *mass, *damping;    /* float32: see _StepTables */
+    const double *kf, *out, *joint, *g0;
     double cells_per_radian, c1;
     /* scratch */
     double *blocks;     /* [slot][m] r x r, m = M, C, K; slot 0 sample, 1 stage 1 */
@@ -105,29 +106,35 @@ static Py_ssize_t evaluate(const Step *s, double angle, double w, double a, doub
 /*
  * out[j] (+)= sum_i weights[i] table[i * stride + j], i < rows, j < width: four rows (one
  * monomial's powers of t) per pass, so out is loaded and stored once per four products.
+ * One body for float64 tables and for the float32 ones (M, C), summed in double.
  */
-STEP_CLONES static void combine(const double *weights, const double *table, Py_ssize_t rows,
-                    Py_ssize_t stride, Py_ssize_t width, double *restrict out)
-{
-    memset(out, 0, (size_t)width * sizeof(double));
-    Py_ssize_t i = 0;
-    for (; i + 4 <= rows; i += 4) {
-        const double w0 = weights[i], w1 = weights[i + 1], w2 = weights[i + 2],
-                     w3 = weights[i + 3];
-        if (w0 == 0.0 && w1 == 0.0 && w2 == 0.0 && w3 == 0.0)
-            continue;
-        const double *restrict r0 = table + i * stride, *restrict r1 = r0 + stride,
-                     *restrict r2 = r1 + stride, *restrict r3 = r2 + stride;
-        for (Py_ssize_t j = 0; j < width; j++)
-            out[j] += w0 * r0[j] + w1 * r1[j] + w2 * r2[j] + w3 * r3[j];
+#define DEFINE_COMBINE(name, type)                                                          \
+    STEP_CLONES static void name(const double *weights, const type *table, Py_ssize_t rows, \
+                                 Py_ssize_t stride, Py_ssize_t width, double *restrict out) \
+    {                                                                                       \
+        memset(out, 0, (size_t)width * sizeof(double));                                     \
+        Py_ssize_t i = 0;                                                                   \
+        for (; i + 4 <= rows; i += 4) {                                                     \
+            const double w0 = weights[i], w1 = weights[i + 1], w2 = weights[i + 2],         \
+                         w3 = weights[i + 3];                                               \
+            if (w0 == 0.0 && w1 == 0.0 && w2 == 0.0 && w3 == 0.0)                           \
+                continue;                                                                   \
+            const type *restrict r0 = table + i * stride, *restrict r1 = r0 + stride,       \
+                       *restrict r2 = r1 + stride, *restrict r3 = r2 + stride;              \
+            for (Py_ssize_t j = 0; j < width; j++)                                          \
+                out[j] += w0 * (double)r0[j] + w1 * (double)r1[j] + w2 * (double)r2[j]      \
+                          + w3 * (double)r3[j];                                             \
+        }                                                                                   \
+        for (; i < rows; i++) {                                                             \
+            const double wi = weights[i];                                                   \
+            const type *restrict row = table + i * stride;                                  \
+            for (Py_ssize_t j = 0; j < width; j++)                                          \
+                out[j] += wi * (double)row[j];                                              \
+        }                                                                                   \
     }
-    for (; i < rows; i++) {
-        const double wi = weights[i];
-        const double *restrict row = table + i * stride;
-        for (Py_ssize_t j = 0; j < width; j++)
-            out[j] += wi * row[j];
-    }
-}
+
+DEFINE_COMBINE(combine, double)
+DEFINE_COMBINE(combine_f32, float)
 
 /* M, C, K and f of the crank state into a slot (StreamingEstimator._load). */
 static void load(Step *s, int slot, double angle, double w, double a)
@@ -135,9 +142,9 @@ static void load(Step *s, int slot, double angle, double w, double a)
     const Py_ssize_t r = s->r, r2 = r * r;
     Py_ssize_t k = evaluate(s, angle, w, a, s->weights);
     double *blocks = s->blocks + (Py_ssize_t)slot * 3 * r2;
-    combine(s->weights + FIRST_MC, s->mass + k * s->mass_rows * r2, s->mass_rows, r2, r2,
+    combine_f32(s->weights + FIRST_MC, s->mass + k * s->mass_rows * r2, s->mass_rows, r2, r2,
             blocks);
-    combine(s->weights + FIRST_MC, s->damping + k * ROWS_MC * r2, ROWS_MC, r2, r2,
+    combine_f32(s->weights + FIRST_MC, s->damping + k * ROWS_MC * r2, ROWS_MC, r2, r2,
             blocks + r2);
     /* [K | f] from the kf table (rows 0..11 of the weights) */
     const Py_ssize_t kf_width = r2 + r;
@@ -340,24 +347,33 @@ STEP_CLONES static int radau_step(Step *s, double *z, double *prev, double h, do
     return 0;
 }
 
-static int get_buffer(PyObject *object, Py_buffer *view, int writable, const char *name,
-                      Py_ssize_t count)
+/* A C-contiguous buffer of `count` values (any if < 0) of format "d" or "f" (item size). */
+static int get_typed_buffer(PyObject *object, Py_buffer *view, int writable, const char *name,
+                            Py_ssize_t count, const char *format)
 {
+    const Py_ssize_t size = format[0] == 'f' ? 4 : 8;
     int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
     if (PyObject_GetBuffer(object, view, flags) != 0)
         return -1;
-    if (view->itemsize != 8 || view->format == NULL || strcmp(view->format, "d") != 0) {
-        PyErr_Format(PyExc_TypeError, "`%s` must hold float64", name);
+    if (view->itemsize != size || view->format == NULL || strcmp(view->format, format) != 0) {
+        PyErr_Format(PyExc_TypeError, "`%s` must hold %s", name,
+                     size == 4 ? "float32" : "float64");
         PyBuffer_Release(view);
         return -1;
     }
-    if (count >= 0 && view->len != count * 8) {
+    if (count >= 0 && view->len != count * size) {
         PyErr_Format(PyExc_ValueError, "`%s` has %zd values, expected %zd", name,
-                     view->len / 8, count);
+                     view->len / size, count);
         PyBuffer_Release(view);
         return -1;
     }
     return 0;
+}
+
+static int get_buffer(PyObject *object, Py_buffer *view, int writable, const char *name,
+                      Py_ssize_t count)
+{
+    return get_typed_buffer(object, view, writable, name, count, "d");
 }
 
 PyDoc_STRVAR(advance_doc,
@@ -366,7 +382,8 @@ PyDoc_STRVAR(advance_doc,
 "\n"
 "Advance the modal state z = [q, v, 1] through the sample rows (h, sub-steps, angle,\n"
 "speed, acceleration, advance; 6 values each), 2-stage Radau IIA, as\n"
-"StreamingEstimator._step. Tables as _StepTables (float64, C order). prev (angle, speed,\n"
+"StreamingEstimator._step. Tables as _StepTables (C order; mass and damping float32, the\n"
+"rest float64). prev (angle, speed,\n"
 "acceleration of the last step) is updated; states (rows x 2 r, or empty) receives\n"
 "z[:2 r] after each row; records (rows x 28, or 28 for the last row only) the sample's\n"
 "record (estimator.RECORD_SIZE).");
@@ -375,7 +392,7 @@ PyDoc_STRVAR(advance_doc,
 static Py_ssize_t rows_of(const Py_buffer *view, Py_ssize_t per_row, Py_ssize_t cells,
                           Py_ssize_t most, const char *name)
 {
-    Py_ssize_t values = view->len / 8, rows = values / (cells * per_row);
+    Py_ssize_t values = view->len / view->itemsize, rows = values / (cells * per_row);
     if (rows < 1 || rows > most || rows * cells * per_row != values) {
         PyErr_Format(PyExc_ValueError, "`%s` does not match the model size and grid", name);
         return -1;
@@ -405,14 +422,14 @@ static PyObject *advance(PyObject *module, PyObject *args)
         PyErr_SetString(PyExc_ValueError, "`z` must have 2 r + 1 values");
         goto done;
     }
-    if (get_buffer(objects[1], &damping, 0, "damping", -1) != 0)
+    if (get_typed_buffer(objects[1], &damping, 0, "damping", -1, "f") != 0)
         goto done;
-    const Py_ssize_t cells = damping.len / 8 / (ROWS_MC * r2);
-    if (cells < 1 || damping.len / 8 != cells * ROWS_MC * r2) {
+    const Py_ssize_t cells = damping.len / 4 / (ROWS_MC * r2);
+    if (cells < 1 || damping.len / 4 != cells * ROWS_MC * r2) {
         PyErr_SetString(PyExc_ValueError, "`damping` does not match the size of `z`");
         goto done;
     }
-    if (get_buffer(objects[0], &mass, 0, "mass", -1) != 0
+    if (get_typed_buffer(objects[0], &mass, 0, "mass", -1, "f") != 0
         || (s.mass_rows = rows_of(&mass, r2, cells, ROWS_MC, "mass")) < 0
         || get_buffer(objects[2], &kf, 0, "kf", cells * ROWS_KF * (r2 + r)) != 0
         || get_buffer(objects[3], &out, 0, "out", -1) != 0

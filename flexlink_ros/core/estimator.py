@@ -507,9 +507,12 @@ class _StepTables:
             if np.any(block(name)[:, rows.stop:] != 0.0):
                 raise ValueError(f'{name} uses table rows beyond {rows.stop}: update _StepTables')
         self.mass_rows = rows_used('M', self.FIRST_MC)
+        # M and C in float32: a sample reads 31 % fewer bytes (the table reads are about
+        # a third of the step) and the outputs move by 2e-8 of their size; K and f stay in
+        # float64 (float32 there moves them by 1e-3: the static directions are stiff).
         self.mass = np.ascontiguousarray(
-            block('M', slice(self.FIRST_MC, self.FIRST_MC + self.mass_rows)))
-        self.damping = np.ascontiguousarray(block('C', self.ROWS_MC))
+            block('M', slice(self.FIRST_MC, self.FIRST_MC + self.mass_rows)), dtype=np.float32)
+        self.damping = np.ascontiguousarray(block('C', self.ROWS_MC), dtype=np.float32)
         self.kf = np.ascontiguousarray(np.concatenate(
             [block('K', self.ROWS_KF), block('f', self.ROWS_KF)], axis=2))
         self.out_rows = max(rows_used('out'), rows_used('corr'))
