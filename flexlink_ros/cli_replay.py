@@ -439,41 +439,48 @@ def _joint_state_layout(data, joint_name):
 
     Returns
     -------
-    (variable, position, velocity) or None
-        ``variable``: byte ranges that may differ between messages of the same layout (stamp
-        and value arrays); ``position``/``velocity``: offsets of the joint's values (velocity
-        None if absent). None if the message is not little endian or lacks the joint.
+    (fixed, position, velocity) or None
+        ``fixed``: byte ranges that messages of the same layout share (encapsulation, frame
+        id, joint names, array lengths); the rest is the stamp, the values and alignment
+        padding, which serialisers need not zero (rclpy's does not). ``position`` /
+        ``velocity``: offsets of the joint's values (velocity None if absent). None if the
+        message is not little endian or lacks the joint.
 
     """
     if len(data) < 16 or data[:4] != b'\x00\x01\x00\x00':
         return None
+    fixed = [(0, 4)]
     offset = 12
     (length,) = struct.unpack_from('<I', data, offset)
+    fixed.append((offset, offset + 4 + length))                 # frame id
     offset = _cdr_align(offset + 4 + length, 4)
     (count,) = struct.unpack_from('<I', data, offset)
+    fixed.append((offset, offset + 4))
     offset += 4
     index = None
     for k in range(count):
         offset = _cdr_align(offset, 4)
         (length,) = struct.unpack_from('<I', data, offset)
+        fixed.append((offset, offset + 4 + length))             # joint name
         if index is None and data[offset + 4:offset + 4 + max(length - 1, 0)] == joint_name:
             index = k
         offset += 4 + length
-    variable, starts, sizes = [(4, 12)], [], []
+    starts, sizes = [], []
     for _ in range(3):   # position, velocity, effort
         offset = _cdr_align(offset, 4)
         (size,) = struct.unpack_from('<I', data, offset)
+        fixed.append((offset, offset + 4))
         offset += 4
         if size:
             offset = _cdr_align(offset, 8)
         starts.append(offset)
         sizes.append(size)
-        variable.append((offset, offset + 8 * size))
         offset += 8 * size
-    if index is None or index >= sizes[0] or offset != len(data):
+    # What follows the last array is padding to the serialiser's alignment (at most 8).
+    if index is None or index >= sizes[0] or not 0 <= len(data) - offset < 8:
         return None
     velocity = starts[1] + 8 * index if index < sizes[1] else None
-    return variable, starts[0] + 8 * index, velocity
+    return fixed, starts[0] + 8 * index, velocity
 
 
 def _cdr_align(offset, size):
@@ -510,15 +517,15 @@ def _parse_crank_states(payloads, joint_name):
             reference = payloads[n]
             break
     if layout is not None:
-        variable, position, velocity = layout
+        ranges, position, velocity = layout
         size = len(reference)
         same = np.fromiter((len(p) == size for p in payloads), dtype=bool, count=count)
         chosen = np.flatnonzero(same)
         rows = np.frombuffer(b''.join([payloads[n] for n in chosen]),
                              dtype=np.uint8).reshape(chosen.size, size)
-        fixed = np.ones(size, dtype=bool)
-        for first, stop in variable:
-            fixed[first:stop] = False
+        fixed = np.zeros(size, dtype=bool)
+        for first, stop in ranges:
+            fixed[first:stop] = True
         expected = np.frombuffer(reference, dtype=np.uint8)[fixed]
         match = np.all(rows[:, fixed] == expected, axis=1)
         chosen, rows = chosen[match], rows[match]

@@ -120,3 +120,36 @@ def test_replay_refuses_missing_topic_and_existing_output(tmp_path):
     assert result.returncode == 1 and 'exists' in result.stderr
     result = run()
     assert result.returncode == 1 and '--publish' in result.stderr
+
+
+def test_crank_states_of_rclpy_messages_are_read_in_bulk(monkeypatch):
+    """rclpy's CDR leaves alignment padding unzeroed: the bulk reader must not need it."""
+    rng = np.random.default_rng(2)
+    payloads = []
+    for n in range(500):
+        message = joint_state(10**9 + n * 10**6, ['crank', 'other'],
+                              rng.normal(size=2), rng.normal(size=2))
+        payloads.append(bytes(serialize_message(message)))
+    odd = {100: joint_state(5, ['other', 'crank'], [1.0, 2.0], [3.0, 4.0]),
+           200: joint_state(6, ['crank'], [1.5]),                      # no velocity
+           300: joint_state(7, ['crank', 'other'], [math.nan, 0.0], [0.0, 0.0])}
+    odd[300].header.frame_id = 'x'                                      # another length
+    for n, message in odd.items():
+        payloads[n] = bytes(serialize_message(message))
+    assert any(payloads[0][k] for k in (34, 35))    # the name's padding is not zero here
+    calls = []
+    original = cli_replay.parse_joint_state
+
+    def counted(data, name):
+        calls.append(data)
+        return original(data, name)
+    monkeypatch.setattr(cli_replay, 'parse_joint_state', counted)
+    stamps, angles, speeds, valid, has_speed = cli_replay._parse_crank_states(payloads, b'crank')
+    assert len(calls) <= len(odd)           # only the odd ones one by one
+    for n, payload in enumerate(payloads):
+        stamp, angle, speed = original(payload, b'crank')
+        assert stamps[n] == stamp
+        assert (angles[n] == angle) or (math.isnan(angles[n]) and math.isnan(angle))
+        assert has_speed[n] == (speed is not None)
+        if speed is not None:
+            assert speeds[n] == speed
