@@ -254,11 +254,12 @@ def scan_recording(path, keep_type=JOINT_STATE, topic=None, joint_name=None):
     if topic is None and joint_name is not None:
         name = joint_name.encode()
 
-        def keep_rest(data):
+        def has_joint(data):
             try:
                 return parse_joint_state(data, name)[1] is not None
             except (struct.error, IndexError):
                 return False
+        keep_rest = has_joint
 
     counts, kept = {}, {}
     for file in recording_files(path):

@@ -33,6 +33,7 @@ that product by block to read only the monomial rows each block uses.
 """
 
 import dataclasses
+import importlib
 
 import numpy as np
 import scipy.linalg
@@ -905,7 +906,7 @@ def reaction_pieces(mechanism, angles):
 def criteria_available():
     """Whether this checkout can tabulate joint reactions (part of the cache key)."""
     try:
-        from . import dynamics  # noqa: F401
+        importlib.import_module('.dynamics', __package__)
     except ImportError:
         return False
     return True
