@@ -375,11 +375,17 @@ def _make_node_class():
             for key, data in outputs:
                 try:
                     self.publishers_[key].publish(data)
-                except RCLError:
-                    if self.context.ok():
+                except RCLError as exc:
+                    if not self._shutting_down(exc):
                         raise
                     return False
             return True
+
+        def _shutting_down(self, exc):
+            """Whether a publish error is SIGINT/SIGTERM shutting the context down."""
+            # rcl invalidates the context before rclpy's Context.ok() turns False: a publish
+            # in between fails with 'context is invalid' while ok() still says True.
+            return not self.context.ok() or 'context is invalid' in str(exc)
 
         def _markers(self, stamp_ns, sample):
             """CDR of the deformed-linkage markers (template encoder, rebuilt on changes)."""
@@ -477,8 +483,8 @@ def _make_node_class():
             publisher = self.publishers_['diagnostics']
             try:
                 publisher.publish(message)
-            except RCLError:
-                if self.context.ok():
+            except RCLError as exc:
+                if not self._shutting_down(exc):
                     raise
                 return
             self._record(publisher.topic_name, message, now.nanoseconds)
