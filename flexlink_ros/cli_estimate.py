@@ -676,36 +676,36 @@ def bench_configurations(base):
             ('grid 256', dataclasses.replace(base, grid_size=256))]
 
 
-def paired_step_timing(model, signal, long_signal, rounds=3, paths=('compiled', 'numpy')):
+def interleaved_timing(entries, signal, long_signal, rounds=3):
     """
-    The compiled and the numpy step (``paths``) of one model, timed in alternation.
+    Streaming and offline cost of several (model, step) entries, timed in interleaved rounds.
 
-    Each path's best round (lowest median) of ``rounds``: on a shared machine the slower
-    rounds measure the neighbours. Streaming over ``signal``, offline replay over
-    ``long_signal`` (stamps, angles, speeds).
+    Every round times every entry once, so a slow spell of a shared machine hits all of them
+    alike; each entry keeps its best round (lowest median: the slower rounds measure the
+    neighbours). Streaming over ``signal``, offline replay over ``long_signal`` (stamps,
+    angles, speeds).
+
+    Parameters
+    ----------
+    entries : dict
+        key -> (model, compiled).
 
     Returns
     -------
     dict
-        'compiled' (None if not built) and 'numpy': us_per_sample, us_per_sample_p99,
-        offline_samples_per_s.
+        key -> us_per_sample, us_per_sample_p99, offline_samples_per_s.
     """
-    paths = {name: name == 'compiled' for name in paths
-             if name == 'numpy' or compiled_step_available()} or {'numpy': False}
-    best = {name: None for name in paths}
+    best = {key: {'us_per_sample': math.inf, 'offline_samples_per_s': 0.0} for key in entries}
     for _ in range(rounds):
-        for name, compiled in paths.items():
+        for key, (model, compiled) in entries.items():
             median, p99 = timing_summary(stream_timed(model, *signal, compiled=compiled)[1])
             start = time.perf_counter()
             replay(model, *long_signal, compiled=compiled)
             offline = long_signal[0].size / (time.perf_counter() - start)
-            row = best[name] or {'us_per_sample': math.inf, 'offline_samples_per_s': 0.0}
+            row = best[key]
             if median < row['us_per_sample']:
                 row.update(us_per_sample=median, us_per_sample_p99=p99)
             row['offline_samples_per_s'] = max(row['offline_samples_per_s'], offline)
-            best[name] = row
-    best.setdefault('compiled', None)
-    best.setdefault('numpy', None)
     return best
 
 
@@ -725,18 +725,18 @@ def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM
     reference_cpu = None
     signal = synthetic_signal(max(speeds_rpm), seconds, rate_hz)
     long_signal = synthetic_signal(max(speeds_rpm), OFFLINE_SECONDS, rate_hz)
-    numpy_step = None
+    models, entries = [], {}
     for label, options in configurations or bench_configurations(base):
         model = reduced.model_for_mechanism(mechanism, options, use_cache=False)
-        # Every configuration timed the same way, best of three rounds; the default's rounds
-        # alternate with its numpy step.
-        paths = ('compiled', 'numpy') if not rows else ('compiled',)
-        timing = paired_step_timing(model, signal, long_signal, paths=paths)
-        if not rows:
-            numpy_step = timing['numpy']
-        timing = timing['compiled'] or timing['numpy']
-        median, p99 = timing['us_per_sample'], timing['us_per_sample_p99']
-        offline = timing['offline_samples_per_s']
+        models.append((label, options, model))
+        entries[label] = (model, compiled_step_available())
+    # The default's numpy step too (the compiled step's reference and fallback).
+    numpy_key = ('numpy step',)
+    entries[numpy_key] = (models[0][2], False)
+    timings = interleaved_timing(entries, signal, long_signal)
+    numpy_step = timings.pop(numpy_key)
+    for label, options, model in models:
+        timing = timings[label]
         errors = {}
         for rpm in speeds_rpm:
             errors[f'{rpm:g}'] = configuration_error(mechanism, model, options, rpm, rate_hz)
@@ -746,8 +746,9 @@ def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM
         rows.append({
             'label': label, 'default': label == 'default', 'size': model.size,
             'grid_size': model.grid_size, 'bytes': int(model.nbytes),
-            'us_per_sample': median, 'us_per_sample_p99': p99,
-            'offline_samples_per_s': offline,
+            'us_per_sample': timing['us_per_sample'],
+            'us_per_sample_p99': timing['us_per_sample_p99'],
+            'offline_samples_per_s': timing['offline_samples_per_s'],
             'error_coupler_mid': max(e['error_coupler_mid'] for e in errors.values()),
             'error_lever_tip': max(e['error_lever_tip'] for e in errors.values()),
             'errors': errors})
@@ -789,7 +790,7 @@ def _bench(args):
     lines.append(f'{"default, numpy step":<22} {"":>3} {"":>5} '
                  f'{numpy_step["us_per_sample"]:>7.1f} {numpy_step["us_per_sample_p99"]:>7.1f} '
                  f'{numpy_step["offline_samples_per_s"]:>10.0f}   (the same numbers; '
-                 + ('default and numpy step timed in alternation, best of 3)'
+                 + ('every row timed in interleaved rounds, best of 3)'
                     if result['compiled_step'] else 'the compiled step is NOT built)'))
     if result['cpu_ratio']:
         lines.append(f'full-order reference: {result["reference_cpu_s_per_s"]:.3g} CPU s per '
