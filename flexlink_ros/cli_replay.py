@@ -13,10 +13,12 @@ starts a new segment (the state restarts), an exactly repeated sample repeats th
 output, and messages without the crank joint or with a non-finite value are skipped.
 """
 
+import functools
 import math
 import pathlib
 import struct
 import sys
+import threading
 import time
 import zlib
 
@@ -342,7 +344,23 @@ def segments(stamps_ns, angles, reset_gap_s=core_estimator.DEFAULT_RESET_GAP_S):
     return starts, repeated
 
 
-def estimate_offline(model, stamps_ns, angles, speeds, warm_start=True):
+def allocate_estimate(model, count):
+    """The arrays :func:`estimate_offline` fills (zeros)."""
+    result = {key: np.zeros((count, 2)) for key in ('lever_tip', 'coupler_mid')}
+    for key in ('reaction_n', 'gamma_dot', 'criterion'):
+        result[key] = np.zeros((count, len(JOINTS)))
+    result['crank_angle'] = np.zeros(count)
+    result['crank_speed'] = np.zeros(count)
+    result['modal'] = np.zeros((count, model.size))
+    return result
+
+
+_ESTIMATE_KEYS = ('lever_tip', 'coupler_mid', 'crank_angle', 'crank_speed', 'modal',
+                  'reaction_n', 'gamma_dot', 'criterion')
+
+
+def estimate_offline(model, stamps_ns, angles, speeds, warm_start=True, result=None,
+                     progress=None):
     """
     Deflections and criteria of every sample, segment by segment as the node would.
 
@@ -353,6 +371,11 @@ def estimate_offline(model, stamps_ns, angles, speeds, warm_start=True):
     angles : ndarray, shape (m,)
     speeds : ndarray, shape (m,)
         Measured speeds; NaN where a message had none (the segment then differentiates).
+    result : dict or None
+        The arrays to fill (:func:`allocate_estimate`); new ones if None.
+    progress : callable or None
+        ``progress(n)`` whenever the first n samples are final (the writer of the outputs
+        follows it while the rest is computed).
 
     Returns
     -------
@@ -364,40 +387,57 @@ def estimate_offline(model, stamps_ns, angles, speeds, warm_start=True):
     """
     count = len(stamps_ns)
     starts, repeated = segments(stamps_ns, angles)
-    result = {key: np.zeros((count, 2)) for key in ('lever_tip', 'coupler_mid')}
-    for key in ('reaction_n', 'gamma_dot', 'criterion'):
-        result[key] = np.zeros((count, len(JOINTS)))
-    result['crank_angle'] = np.zeros(count)
-    result['crank_speed'] = np.zeros(count)
-    result['modal'] = np.zeros((count, model.size))
-    available = bool(np.any(model.force_moments))
+    if result is None:
+        result = allocate_estimate(model, count)
+    available = [bool(np.any(model.force_moments))]
+    repeats = np.flatnonzero(repeated).tolist()
+    filled = [0, 0]     # samples final, repeated samples copied
+
+    def finish_until(stop):
+        # A repeated sample repeats the previous estimate (as StreamingEstimator.update does).
+        while filled[1] < len(repeats) and repeats[filled[1]] < stop:
+            n = repeats[filled[1]]
+            for key in _ESTIMATE_KEYS:
+                result[key][n] = result[key][n - 1]
+            filled[1] += 1
+        filled[0] = stop
+        if progress is not None:
+            progress(stop)
+
     orbit = None    # carried across segments, as one streaming estimator carries it
     for first, stop in zip(starts, starts[1:] + [count]):
         chosen = np.arange(first, stop)[~repeated[first:stop]]
         seg_speeds = speeds[chosen]
         measured = None if np.any(np.isnan(seg_speeds)) else seg_speeds
+        done = [0]
+
+        def on_rows(out, upto, chosen=chosen, stop=stop, done=done):
+            rows = slice(done[0], upto)
+            if upto <= done[0]:
+                return
+            model_speed = np.clip(out['crank_speed'][rows], -model.speed_max, model.speed_max)
+            model_accel = np.clip(out['crank_accel'][rows], -core_estimator.DEFAULT_ACCEL_LIMIT,
+                                  core_estimator.DEFAULT_ACCEL_LIMIT)
+            blocks = {name: out[name][rows] for name in ('force', 'force_dot', 'rms2')}
+            reaction, gamma_dot, criterion, _, available[0] = criteria_batch(
+                model, out['crank_angle'][rows], model_speed, model_accel, blocks=blocks)
+            target = chosen[rows]
+            for key, values in (('lever_tip', out['lever_tip'][rows]),
+                                ('coupler_mid', out['coupler_mid'][rows]),
+                                ('crank_angle', out['crank_angle'][rows]),
+                                ('crank_speed', out['crank_speed'][rows]),
+                                ('modal', out['modal'][rows]),
+                                ('reaction_n', reaction),
+                                ('gamma_dot', gamma_dot), ('criterion', criterion)):
+                result[key][target] = values
+            done[0] = upto
+            finish_until(stop if upto == chosen.size else int(chosen[upto]))
+
         out = core_estimator.replay(model, stamps_ns[chosen], angles[chosen], measured,
-                                    warm_start=warm_start, orbit=orbit)
+                                    warm_start=warm_start, orbit=orbit, on_rows=on_rows)
         orbit = out['orbit']
-        model_speed = np.clip(out['crank_speed'], -model.speed_max, model.speed_max)
-        model_accel = np.clip(out['crank_accel'], -core_estimator.DEFAULT_ACCEL_LIMIT,
-                              core_estimator.DEFAULT_ACCEL_LIMIT)
-        reaction, gamma_dot, criterion, _, available = criteria_batch(
-            model, out['crank_angle'], model_speed, model_accel,
-            blocks=out if 'force' in out else None)
-        for key, values in (('lever_tip', out['lever_tip']),
-                            ('coupler_mid', out['coupler_mid']),
-                            ('crank_angle', out['crank_angle']),
-                            ('crank_speed', out['crank_speed']), ('modal', out['modal']),
-                            ('reaction_n', reaction),
-                            ('gamma_dot', gamma_dot), ('criterion', criterion)):
-            result[key][chosen] = values
-    # A repeated sample repeats the previous estimate (as StreamingEstimator.update does).
-    for n in np.flatnonzero(repeated):
-        for key in ('lever_tip', 'coupler_mid', 'crank_angle', 'crank_speed', 'modal',
-                    'reaction_n', 'gamma_dot', 'criterion'):
-            result[key][n] = result[key][n - 1]
-    result['criteria_available'] = available
+    finish_until(count)
+    result['criteria_available'] = available[0]
     result['segments'] = len(starts)
     return result
 
@@ -619,7 +659,7 @@ WRITE_BATCH = 1024
 
 
 def write_replay(out_path, samples, estimate, input_topic, topics, frame_id, model,
-                 markers_every_n=10, exaggeration=10.0, points_per_link=9):
+                 markers_every_n=10, exaggeration=10.0, points_per_link=9, wait_for=None):
     """
     Write the input and the recomputed outputs into a rosbag2 MCAP.
 
@@ -627,6 +667,9 @@ def write_replay(out_path, samples, estimate, input_topic, topics, frame_id, mod
     ``markers_every_n``-th sample the markers, each logged at the input's log time (the
     order :meth:`McapRecorder.write` calls would give). The messages are encoded in bulk
     (cdr.py row encoders) and written in batches (:meth:`McapRecorder.write_batch`).
+
+    ``wait_for(n)``, if given, returns once the first n samples of ``estimate`` are final
+    (the estimate is then computed while this writes).
 
     Returns
     -------
@@ -652,6 +695,8 @@ def write_replay(out_path, samples, estimate, input_topic, topics, frame_id, mod
         names = (input_topic, topics['lever_tip'], topics['coupler_mid'], topics['criteria'])
         for first in range(0, count, WRITE_BATCH):
             chosen = slice(first, min(first + WRITE_BATCH, count))
+            if wait_for is not None:
+                wait_for(chosen.stop)
             stamps = samples['stamps_ns'][chosen]
             log_ns = samples['log_ns'][chosen]
             columns = [samples['data'][chosen],
@@ -783,6 +828,48 @@ def load_model_with_fallback(mechanism, options, args, warn):
     return build_with_fallback(lambda o: load_model(mechanism, o, args), options, warn)
 
 
+class _Background:
+    """estimate_offline in a thread, with the number of final samples for a reader to follow."""
+
+    def __init__(self, run_estimate, result):
+        self.result = result
+        self.seconds = None
+        self._done = 0
+        self._error = None
+        self._condition = threading.Condition()
+        self._thread = threading.Thread(target=self._run, args=(run_estimate,),
+                                        name='replay-estimate', daemon=True)
+        self._thread.start()
+
+    def _run(self, run_estimate):
+        start = time.perf_counter()
+        try:
+            run_estimate(result=self.result, progress=self._progress)
+        except BaseException as exc:   # handed to the waiting thread
+            with self._condition:
+                self._error = exc
+                self._condition.notify_all()
+        self.seconds = time.perf_counter() - start
+
+    def _progress(self, count):
+        with self._condition:
+            self._done = count
+            self._condition.notify_all()
+
+    def wait_for(self, count):
+        """Return once the first ``count`` samples are final; raise the estimate's error."""
+        with self._condition:
+            while self._done < count and self._error is None:
+                self._condition.wait(0.5)
+            if self._error is not None:
+                raise self._error
+
+    def join(self):
+        self._thread.join()
+        if self._error is not None:
+            raise self._error
+
+
 def run_replay(args):
     """Read, estimate, write and/or publish; returns the JSON-ready summary."""
     notes = []
@@ -798,26 +885,38 @@ def run_replay(args):
     model, options = load_model_with_fallback(mechanism, model_options(args), args,
                                               notes.append)
     start = time.perf_counter()
-    estimate = estimate_offline(model, samples['stamps_ns'], samples['angles'],
-                                samples['speeds'], warm_start=not args.no_warm_start)
-    estimate_s = time.perf_counter() - start
+    run_estimate = functools.partial(estimate_offline, model, samples['stamps_ns'],
+                                     samples['angles'], samples['speeds'],
+                                     warm_start=not args.no_warm_start)
+    if args.out:
+        # The outputs are written while the rest is computed: the compiled step runs without
+        # the GIL, so the estimate and the writing share the two cores of a small machine.
+        background = _Background(run_estimate, allocate_estimate(model, len(samples['data'])))
+        estimate = background.result
+    else:
+        estimate = run_estimate()
+        estimate_s = time.perf_counter() - start
     count = len(samples['data'])
     span_s = (samples['log_ns'][-1] - samples['log_ns'][0]) * 1e-9 if count > 1 else 0.0
     result = {'input': str(args.input), 'topic': topic, 'samples': count,
-              'skipped': samples['skipped'], 'segments': estimate['segments'],
-              'span_s': span_s, 'read_s': read_s, 'estimate_s': estimate_s,
+              'skipped': samples['skipped'], 'span_s': span_s, 'read_s': read_s,
               'model': {'size': model.size, 'grid_size': model.grid_size,
-                        'options': str(options)},
-              'criteria_available': estimate['criteria_available'], 'notes': notes}
+                        'options': str(options)}, 'notes': notes}
     if args.out:
-        start = time.perf_counter()
-        status = write_replay(args.out, samples, estimate, topic, output_topics(args.node_name),
-                              args.frame_id, model, args.markers_every_n)
-        result['write_s'] = time.perf_counter() - start
+        try:
+            status = write_replay(args.out, samples, estimate, topic,
+                                  output_topics(args.node_name), args.frame_id, model,
+                                  args.markers_every_n, wait_for=background.wait_for)
+        finally:
+            background.join()
+        estimate_s = background.seconds
+        result['write_s'] = time.perf_counter() - start   # estimate and writing, overlapped
         result['output'] = status['path']
         result['output_files'] = status['files']
         result['output_topics'] = status['topics']
-    total = read_s + estimate_s + result.get('write_s', 0.0)
+    result.update(estimate_s=estimate_s, segments=estimate['segments'],
+                  criteria_available=estimate['criteria_available'])
+    total = read_s + result.get('write_s', estimate_s)
     result['samples_per_s'] = count / total if total > 0 else math.inf
     result['times_real_time'] = span_s / total if total > 0 else math.inf
     for key in ('lever_tip', 'coupler_mid'):

@@ -164,3 +164,41 @@ def test_crank_states_of_rclpy_messages_are_read_in_bulk(monkeypatch):
         assert has_speed[n] == (speed is not None)
         if speed is not None:
             assert speeds[n] == speed
+
+
+def test_estimate_reports_only_final_samples_to_the_writer(model, monkeypatch):
+    """progress(n) comes only once the first n samples are final, through gaps and repeats."""
+    from flexlink_ros.core import estimator as core_estimator
+    monkeypatch.setattr(core_estimator, 'REPLAY_CHUNK', 64)     # many chunks per segment
+    stamps = np.arange(700) * 1_000_000
+    stamps[400:] += 800_000_000                                 # a gap: two segments
+    stamps[200] = stamps[199]                                   # a repeated sample
+    angles = 391 * RPM * stamps * 1e-9
+    angles[200] = angles[199]
+    speeds = np.full(stamps.size, 391 * RPM)
+    speeds[300:310] = np.nan                                    # no speed in a stretch
+    snapshots = []
+    result = cli_replay.allocate_estimate(model, stamps.size)
+
+    def progress(count):
+        snapshots.append((count, {key: result[key][:count].copy()
+                                  for key in ('lever_tip', 'criterion', 'modal')}))
+    cli_replay.estimate_offline(model, stamps, angles, speeds, result=result, progress=progress)
+    counts = [count for count, _ in snapshots]
+    assert counts == sorted(counts) and counts[-1] == stamps.size and len(counts) > 10
+    for count, early in snapshots:
+        for key, values in early.items():
+            np.testing.assert_array_equal(values, result[key][:count])
+    assert result['segments'] == 2
+    np.testing.assert_array_equal(result['lever_tip'][200], result['lever_tip'][199])
+
+
+def test_replay_writer_gets_the_estimate_error():
+    def failing(result, progress):
+        progress(10)
+        raise ValueError('estimate failed')
+    background = cli_replay._Background(failing, {})
+    with pytest.raises(ValueError, match='estimate failed'):
+        background.wait_for(11)
+    with pytest.raises(ValueError, match='estimate failed'):
+        background.join()

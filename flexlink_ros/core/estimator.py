@@ -1062,7 +1062,7 @@ def _crank_motion(times, angles, speeds, time_constant_s):
 
 def replay(model, stamps_ns, angles, speeds=None,
            fit_time_constant_s=DEFAULT_FIT_TIME_CONSTANT_S, warm_start=True,
-           accel_limit=DEFAULT_ACCEL_LIMIT, compiled=True, orbit=None):
+           accel_limit=DEFAULT_ACCEL_LIMIT, compiled=True, orbit=None, on_rows=None):
     """
     Offline estimate of a recorded crank signal: the streaming step over the whole signal.
 
@@ -1086,6 +1086,10 @@ def replay(model, stamps_ns, angles, speeds=None,
         The periodic orbit a streaming estimator would remember from earlier warm starts
         (the 'orbit' of a previous call): pass it on from segment to segment of one recording
         and the segments restart exactly as one streaming estimator does.
+    on_rows : callable or None
+        ``on_rows(result, done)`` after each chunk of rows: ``result`` is the returned dict
+        (its arrays are being filled), final for the first ``done`` samples. Lets a caller
+        use the estimate while the rest is computed (the compiled step releases the GIL).
 
     Returns
     -------
@@ -1134,16 +1138,21 @@ def replay(model, stamps_ns, angles, speeds=None,
     rows = np.column_stack([dt_ns * 1e-9, -(-dt_ns // MAX_SUBSTEP_NS), wrapped[prefix:],
                             model_speed[prefix:], model_accel[prefix:], advance[prefix:]])
     states = np.empty((min(REPLAY_CHUNK, rows.shape[0]), 2 * r))
+    outputs, joints = len(reduced.OUTPUT_NAMES), len(reduced.JOINTS)
+    joint = records[:, 2 * outputs:]
+    result = {'crank_angle': wrapped, 'crank_speed': speed, 'crank_accel': accel,
+              'lever_tip': records[:, 0:2], 'coupler_mid': records[:, 2:4], 'modal': modal,
+              'force': joint[:, :2 * joints].reshape(count, joints, 2),
+              'force_dot': joint[:, 2 * joints:4 * joints].reshape(count, joints, 2),
+              'rms2': joint[:, 4 * joints:], 'orbit': None}
+    if on_rows is not None:
+        on_rows(result, prefix)
     for first in range(0, rows.shape[0], REPLAY_CHUNK):
         chunk = rows[first:first + REPLAY_CHUNK]
         done = slice(prefix + first, prefix + first + chunk.shape[0])
         estimator._step_rows(chunk, states[:chunk.shape[0]], records[done])
         modal[done] = states[:chunk.shape[0], :r]
-    outputs, joints = len(reduced.OUTPUT_NAMES), len(reduced.JOINTS)
-    joint = records[:, 2 * outputs:]
-    return {'crank_angle': wrapped, 'crank_speed': speed, 'crank_accel': accel,
-            'lever_tip': records[:, 0:2].copy(), 'coupler_mid': records[:, 2:4].copy(),
-            'modal': modal,
-            'force': joint[:, :2 * joints].reshape(count, joints, 2),
-            'force_dot': joint[:, 2 * joints:4 * joints].reshape(count, joints, 2),
-            'rms2': joint[:, 4 * joints:].copy(), 'orbit': estimator._orbit}
+        if on_rows is not None:
+            on_rows(result, done.stop)
+    result['orbit'] = estimator._orbit
+    return result
