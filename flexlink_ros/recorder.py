@@ -297,15 +297,7 @@ class McapRecorder:
             recorder is not open.
 
         """
-        if isinstance(message, (bytes, bytearray, memoryview)):
-            data = bytes(message)
-            if topic not in self._topics:
-                raise ValueError(f'`topic` {topic!r}: declare it with add_topic() before '
-                                 'writing serialised bytes')
-        else:
-            if topic not in self._topics:
-                self.add_topic(topic, message_type_name(message))
-            data = serialize_exact(message)
+        data = self._message_bytes(topic, message)
         log_time_ns = int(log_time_ns)
         publish_time_ns = log_time_ns if publish_time_ns is None else int(publish_time_ns)
         with self._lock:
@@ -335,6 +327,17 @@ class McapRecorder:
                 self._flush_locked(log_time_ns)
             return True
 
+    def _message_bytes(self, topic, message):
+        """CDR bytes of ``message`` (bytes as given, for a declared topic; or serialised)."""
+        if isinstance(message, (bytes, bytearray, memoryview)):
+            if topic not in self._topics:
+                raise ValueError(f'`topic` {topic!r}: declare it with add_topic() before '
+                                 'writing serialised bytes')
+            return bytes(message)
+        if topic not in self._topics:
+            self.add_topic(topic, message_type_name(message))
+        return serialize_exact(message)
+
     def enqueue(self, topic, message, log_time_ns):
         """
         Record one message without writing it in the calling thread.
@@ -352,15 +355,7 @@ class McapRecorder:
         """
         if not self._use_flush_thread:
             return self.write(topic, message, log_time_ns)
-        if isinstance(message, (bytes, bytearray, memoryview)):
-            data = bytes(message)
-            if topic not in self._topics:
-                raise ValueError(f'`topic` {topic!r}: declare it with add_topic() before '
-                                 'writing serialised bytes')
-        else:
-            if topic not in self._topics:
-                self.add_topic(topic, message_type_name(message))
-            data = serialize_exact(message)
+        data = self._message_bytes(topic, message)
         if self._state is not RecorderState.RECORDING:
             with self._lock:
                 return self._refuse()
