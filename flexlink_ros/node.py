@@ -349,8 +349,8 @@ def _make_node_class():
                 self.get_logger().warning(f'estimator: {sample.message}',
                                           throttle_duration_sec=WARN_THROTTLE_S)
             # Serialised once (exact CDR), published raw and recorded as the same bytes. The
-            # per-sample outputs go out first; the markers (every n-th sample, ~10 times their
-            # cost) after them, so they do not delay this sample's deflection.
+            # per-sample outputs go out first; the markers (every n-th sample: link shapes
+            # and a MarkerArray) after them, so they do not delay this sample's deflection.
             sec, nanosec = divmod(stamp_ns, 1_000_000_000)
             frame = self._frame
             outputs = [

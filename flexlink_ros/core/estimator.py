@@ -294,8 +294,9 @@ class CompiledCrankRateFilter:
     """
     :class:`CrankRateFilter` in C (core/_radau_step.c): the same arithmetic, the same doubles.
 
-    The state is one float64 array, so a sample costs one call (about 1 us instead of ~10 us
-    of Python). Needs the compiled extension (:func:`compiled_step_available`).
+    The state is one float64 array, so a sample costs one call (1.1 us against 6 us for the
+    Python filter, measured with the harness's loop). Needs the compiled extension
+    (:func:`compiled_step_available`).
     """
 
     def __init__(self, time_constant_s=DEFAULT_FIT_TIME_CONSTANT_S):
