@@ -475,8 +475,13 @@ def test_mcap_info_on_a_missing_or_foreign_file_is_a_one_line_error(tmp_path, co
     assert ('bad magic' if content else 'No such file') in result.stderr
 
 
-def test_enqueued_messages_are_written_in_order_by_the_background_thread(tmp_path):
+def test_enqueued_messages_are_written_in_order_by_the_background_thread(tmp_path,
+                                                                        monkeypatch):
     """enqueue: nothing written in the caller; every message on disk, in order, exact bytes."""
+    from flexlink_ros import recorder as recorder_module
+    # The thread first wakes after a second, long after the enqueuing below (a few ms): what
+    # is on disk before then was written by enqueue itself, which must be nothing.
+    monkeypatch.setattr(recorder_module, 'QUEUE_PERIOD_S', 1.0)
     path = tmp_path / 'queued.mcap'
     recorder = McapRecorder(path, chunk_size_bytes=4096).open()
     recorder.add_topic('/a', 'sensor_msgs/msg/JointState')
@@ -491,7 +496,7 @@ def test_enqueued_messages_are_written_in_order_by_the_background_thread(tmp_pat
             topic = '/a'
             sent.append((topic, data, T0_NS + k * STEP_NS))
         assert recorder.enqueue(topic, data, T0_NS + k * STEP_NS) is True
-    assert recorder.status()['message_count'] < len(sent)    # some still queued
+    assert recorder.status()['message_count'] == 0          # all still queued
     deadline = time.monotonic() + 5.0
     while recorder.status()['message_count'] < len(sent) and time.monotonic() < deadline:
         time.sleep(0.01)
