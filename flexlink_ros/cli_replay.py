@@ -405,6 +405,7 @@ def estimate_offline(model, stamps_ns, angles, speeds, warm_start=True, result=N
             progress(stop)
 
     orbit = None    # carried across segments, as one streaming estimator carries it
+    tables = core_estimator.step_tables(model)     # built once, not per segment
     for first, stop in zip(starts, starts[1:] + [count]):
         chosen = np.arange(first, stop)[~repeated[first:stop]]
         seg_speeds = speeds[chosen]
@@ -434,7 +435,8 @@ def estimate_offline(model, stamps_ns, angles, speeds, warm_start=True, result=N
             finish_until(stop if upto == chosen.size else int(chosen[upto]))
 
         out = core_estimator.replay(model, stamps_ns[chosen], angles[chosen], measured,
-                                    warm_start=warm_start, orbit=orbit, on_rows=on_rows)
+                                    warm_start=warm_start, orbit=orbit, on_rows=on_rows,
+                                    tables=tables)
         orbit = out['orbit']
     finish_until(count)
     result['criteria_available'] = available[0]

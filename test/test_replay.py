@@ -202,3 +202,24 @@ def test_replay_writer_gets_the_estimate_error():
         background.wait_for(11)
     with pytest.raises(ValueError, match='estimate failed'):
         background.join()
+
+
+def test_segments_share_one_set_of_step_tables(model, monkeypatch):
+    """A recording with many gaps builds the step tables once, not per segment."""
+    from flexlink_ros.core import estimator as core_estimator
+    built = []
+    original = core_estimator._StepTables.__init__
+
+    def counted(self, *args, **kwargs):
+        built.append(1)
+        original(self, *args, **kwargs)
+    monkeypatch.setattr(core_estimator._StepTables, '__init__', counted)
+    stamps = np.arange(60) * 1_000_000 + np.repeat(np.arange(6), 10) * 700_000_000
+    angles = 391 * RPM * stamps * 1e-9
+    speeds = np.full(stamps.size, 391 * RPM)
+    result = cli_replay.estimate_offline(model, stamps, angles, speeds)
+    assert result['segments'] == 6 and len(built) == 1
+    with pytest.raises(ValueError, match='do not match the model'):
+        small = reduced.model_for_mechanism(load_mechanism('cho1992'), reduced.ModelOptions(
+            rigid_crank=True, bearings='rigid', geometric_stiffness=False))
+        StreamingEstimator(model, step_tables=core_estimator.step_tables(small))

@@ -577,6 +577,11 @@ class _StepTables:
         np.dot(weights, self.joint[k], out=out[2 * outputs:])
 
 
+def step_tables(model):
+    """The per-sample step's tables of a model (to share between estimators: replay)."""
+    return _StepTables(model)
+
+
 class StreamingEstimator:
     """
     Elastic deflections and joint criteria of the linkage, one crank sample at a time.
@@ -601,13 +606,17 @@ class StreamingEstimator:
     compiled : bool
         Use the compiled step when it is built (see :func:`compiled_step_available`);
         False runs the numpy step (the same numbers to rounding).
+    step_tables : object or None
+        :func:`step_tables` of ``model``, to share between estimators of one model (they
+        are read only); built here if None.
 
     """
 
     def __init__(self, model, fit_time_constant_s=DEFAULT_FIT_TIME_CONSTANT_S,
                  warm_start=True, large_step_s=DEFAULT_LARGE_STEP_S,
                  reset_gap_s=DEFAULT_RESET_GAP_S, accel_limit=DEFAULT_ACCEL_LIMIT,
-                 near_zero_fraction=DEFAULT_NEAR_ZERO_FRACTION, compiled=True):
+                 near_zero_fraction=DEFAULT_NEAR_ZERO_FRACTION, compiled=True,
+                 step_tables=None):
         for name, value in (('large_step_s', large_step_s), ('reset_gap_s', reset_gap_s),
                             ('accel_limit', accel_limit)):
             if not value > 0.0:
@@ -628,7 +637,9 @@ class StreamingEstimator:
         self._base_flags = 0 if np.any(model.force_moments) else _NO_CRITERIA
         if len(reduced.JOINTS) != 4:
             raise ValueError('the criteria path is written for four joints')
-        self._tables = _StepTables(model)
+        self._tables = _StepTables(model) if step_tables is None else step_tables
+        if (self._tables.size, self._tables.mass.shape[0]) != (model.size, model.grid_size):
+            raise ValueError('`step_tables` do not match the model (size and grid)')
         self._cells_per_radian = model.grid_size / TWO_PI
         self._force_moments = model.force_moments.tolist()
         r = model.size
@@ -1063,7 +1074,8 @@ def _crank_motion(times, angles, speeds, time_constant_s):
 
 def replay(model, stamps_ns, angles, speeds=None,
            fit_time_constant_s=DEFAULT_FIT_TIME_CONSTANT_S, warm_start=True,
-           accel_limit=DEFAULT_ACCEL_LIMIT, compiled=True, orbit=None, on_rows=None):
+           accel_limit=DEFAULT_ACCEL_LIMIT, compiled=True, orbit=None, on_rows=None,
+           tables=None):
     """
     Offline estimate of a recorded crank signal: the streaming step over the whole signal.
 
@@ -1087,6 +1099,8 @@ def replay(model, stamps_ns, angles, speeds=None,
         The periodic orbit a streaming estimator would remember from earlier warm starts
         (the 'orbit' of a previous call): pass it on from segment to segment of one recording
         and the segments restart exactly as one streaming estimator does.
+    tables : object or None
+        :func:`step_tables` of ``model``, when one caller replays many segments.
     on_rows : callable or None
         ``on_rows(result, done)`` after each chunk of rows: ``result`` is the returned dict
         (its arrays are being filled), final for the first ``done`` samples. Lets a caller
@@ -1126,7 +1140,8 @@ def replay(model, stamps_ns, angles, speeds=None,
     # The first samples (start and, without measured speeds, the deferred warm start) go
     # through update() itself; the steps continue from its state.
     estimator = StreamingEstimator(model, fit_time_constant_s, warm_start=warm_start,
-                                   accel_limit=accel_limit, compiled=compiled)
+                                   accel_limit=accel_limit, compiled=compiled,
+                                   step_tables=tables)
     estimator._orbit = orbit
     prefix = min(3 if (warm_start and speeds is None) else 1, count)
     for n in range(prefix):
