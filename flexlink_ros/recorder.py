@@ -614,16 +614,20 @@ class McapRecorder:
 
     def _write_queue(self):
         """Write the messages enqueued so far (enqueue), in order, as one batch."""
-        queue = self._queue
-        count = len(queue)      # appends may go on meanwhile: take only these
-        if not count:
-            return
-        items = [queue.popleft() for _ in range(count)]
-        topics, messages, log_times = zip(*items)
-        try:
-            self.write_batch(list(topics), list(messages), log_times)
-        except RecorderError:
-            with self._lock:    # told to the enqueuing thread at its next call, or by close
+        # Under the lock: flush() and the background thread may both get here, and two
+        # writers popping one queue would interleave its messages (enqueue only appends,
+        # without the lock).
+        with self._lock:
+            queue = self._queue
+            count = len(queue)      # appends may go on meanwhile: take only these
+            if not count:
+                return
+            items = [queue.popleft() for _ in range(count)]
+            topics, messages, log_times = zip(*items)
+            try:
+                self.write_batch(list(topics), list(messages), log_times)
+            except RecorderError:
+                # told to the enqueuing thread at its next call, or by close
                 self._error_reported = False
 
     def _flush_loop(self):
