@@ -389,20 +389,46 @@ def estimate_offline(model, stamps_ns, angles, speeds, warm_start=True, result=N
     starts, repeated = segments(stamps_ns, angles)
     if result is None:
         result = allocate_estimate(model, count)
-    available = [bool(np.any(model.force_moments))]
+    available = bool(np.any(model.force_moments))
     repeats = np.flatnonzero(repeated).tolist()
-    filled = [0, 0]     # samples final, repeated samples copied
+    copied = 0          # repeated samples filled in so far
+    chosen = stop = None
+    done = 0            # samples of the current segment final so far
 
-    def finish_until(stop):
+    def finish_until(final):
         # A repeated sample repeats the previous estimate (as StreamingEstimator.update does).
-        while filled[1] < len(repeats) and repeats[filled[1]] < stop:
-            n = repeats[filled[1]]
+        nonlocal copied
+        while copied < len(repeats) and repeats[copied] < final:
+            n = repeats[copied]
             for key in _ESTIMATE_KEYS:
                 result[key][n] = result[key][n - 1]
-            filled[1] += 1
-        filled[0] = stop
+            copied += 1
         if progress is not None:
-            progress(stop)
+            progress(final)
+
+    def on_rows(out, upto):
+        # The rows of the current segment replay() has finished since the last call.
+        nonlocal available, done
+        if upto <= done:
+            return
+        rows = slice(done, upto)
+        model_speed = np.clip(out['crank_speed'][rows], -model.speed_max, model.speed_max)
+        model_accel = np.clip(out['crank_accel'][rows], -core_estimator.DEFAULT_ACCEL_LIMIT,
+                              core_estimator.DEFAULT_ACCEL_LIMIT)
+        blocks = {name: out[name][rows] for name in ('force', 'force_dot', 'rms2')}
+        reaction, gamma_dot, criterion, _, available = criteria_batch(
+            model, out['crank_angle'][rows], model_speed, model_accel, blocks=blocks)
+        target = chosen[rows]
+        for key, values in (('lever_tip', out['lever_tip'][rows]),
+                            ('coupler_mid', out['coupler_mid'][rows]),
+                            ('crank_angle', out['crank_angle'][rows]),
+                            ('crank_speed', out['crank_speed'][rows]),
+                            ('modal', out['modal'][rows]),
+                            ('reaction_n', reaction),
+                            ('gamma_dot', gamma_dot), ('criterion', criterion)):
+            result[key][target] = values
+        done = upto
+        finish_until(stop if upto == chosen.size else int(chosen[upto]))
 
     orbit = None    # carried across segments, as one streaming estimator carries it
     tables = core_estimator.step_tables(model)     # built once, not per segment
@@ -410,36 +436,13 @@ def estimate_offline(model, stamps_ns, angles, speeds, warm_start=True, result=N
         chosen = np.arange(first, stop)[~repeated[first:stop]]
         seg_speeds = speeds[chosen]
         measured = None if np.any(np.isnan(seg_speeds)) else seg_speeds
-        done = [0]
-
-        def on_rows(out, upto, chosen=chosen, stop=stop, done=done):
-            rows = slice(done[0], upto)
-            if upto <= done[0]:
-                return
-            model_speed = np.clip(out['crank_speed'][rows], -model.speed_max, model.speed_max)
-            model_accel = np.clip(out['crank_accel'][rows], -core_estimator.DEFAULT_ACCEL_LIMIT,
-                                  core_estimator.DEFAULT_ACCEL_LIMIT)
-            blocks = {name: out[name][rows] for name in ('force', 'force_dot', 'rms2')}
-            reaction, gamma_dot, criterion, _, available[0] = criteria_batch(
-                model, out['crank_angle'][rows], model_speed, model_accel, blocks=blocks)
-            target = chosen[rows]
-            for key, values in (('lever_tip', out['lever_tip'][rows]),
-                                ('coupler_mid', out['coupler_mid'][rows]),
-                                ('crank_angle', out['crank_angle'][rows]),
-                                ('crank_speed', out['crank_speed'][rows]),
-                                ('modal', out['modal'][rows]),
-                                ('reaction_n', reaction),
-                                ('gamma_dot', gamma_dot), ('criterion', criterion)):
-                result[key][target] = values
-            done[0] = upto
-            finish_until(stop if upto == chosen.size else int(chosen[upto]))
-
+        done = 0
         out = core_estimator.replay(model, stamps_ns[chosen], angles[chosen], measured,
                                     warm_start=warm_start, orbit=orbit, on_rows=on_rows,
                                     tables=tables)
         orbit = out['orbit']
     finish_until(count)
-    result['criteria_available'] = available[0]
+    result['criteria_available'] = available
     result['segments'] = len(starts)
     return result
 

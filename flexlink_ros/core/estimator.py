@@ -1125,7 +1125,11 @@ def replay(model, stamps_ns, angles, speeds=None,
     if not fit_time_constant_s > 0.0:
         raise ValueError(f'`time_constant_s` must be positive, got {fit_time_constant_s!r}')
     times = (stamps_ns - stamps_ns[0]) * 1e-9
-    if compiled and _radau_step is not None:
+    estimator = StreamingEstimator(model, fit_time_constant_s, warm_start=warm_start,
+                                   accel_limit=accel_limit, compiled=compiled,
+                                   step_tables=tables)
+    estimator._orbit = orbit
+    if estimator.compiled:
         motion = CompiledCrankRateFilter(fit_time_constant_s).signal(times, angles, speeds)
     else:
         motion = _crank_motion(times.tolist(), angles.tolist(),
@@ -1136,13 +1140,8 @@ def replay(model, stamps_ns, angles, speeds=None,
     r = model.size
     modal = np.empty((count, r))
     records = np.empty((count, RECORD_SIZE))
-
     # The first samples (start and, without measured speeds, the deferred warm start) go
     # through update() itself; the steps continue from its state.
-    estimator = StreamingEstimator(model, fit_time_constant_s, warm_start=warm_start,
-                                   accel_limit=accel_limit, compiled=compiled,
-                                   step_tables=tables)
-    estimator._orbit = orbit
     prefix = min(3 if (warm_start and speeds is None) else 1, count)
     for n in range(prefix):
         estimator.update(int(stamps_ns[n]), float(angles[n]),
