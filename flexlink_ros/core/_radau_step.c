@@ -4,7 +4,8 @@
  *
  * One 2-stage Radau IIA step of the reduced model M q'' + C q' + K q = f over h:
  *   - M, C, K, f at the first stage (crank state at c1 h, interpolated between samples)
- *     and at the sample, from the per-cell cubic tables (row weights = monomial * t^p);
+ *     and at the sample, from the node tables of the cubic spline (Hermite weights =
+ *     monomial * h00, h10, h01, h11 on nodes k and k + 1);
  *   - the step matrix and the operator on (q, v) from the 8 x 8 coefficient matrix
  *     G(h) = sum_p h^p g[p] (slot 0 = the sample, slot 1 = stage 1, see _StepTables);
  *   - the 2 r x 2 r system solved by LU with partial pivoting, z = (q, v) += dz.
@@ -20,9 +21,9 @@
 #include <string.h>
 
 #define FIRST_MC 4      /* M and C start at monomial 1: weights[4:] */
-#define ROWS_MC 16      /* C: monomials 1, w2, w, w4 (x 4 powers of t): weights[4:20] */
-#define ROWS_KF 12      /* K, f: monomials a, 1, w2: weights[0:12] */
-#define ROWS_ALL 28     /* all seven monomials */
+#define GROUPS_C 4      /* C: monomials 1, w2, w, w4 (node rows V, S each) */
+#define GROUPS_KF 3     /* K, f: monomials a, 1, w2 */
+#define ROWS_ALL 28     /* all seven monomials x 4 (powers of t, or Hermite weights) */
 #define OUTPUTS 4       /* deflection channels (reduced.OUTPUT_NAMES) */
 #define JOINT_WIDTH 20  /* reactions (4 x 2), their rates (4 x 2), squared RMS (4) */
 #define RECORD_SIZE (2 * OUTPUTS + JOINT_WIDTH)
@@ -34,8 +35,8 @@ static const double TWO_PI = 6.283185307179586;
 static const double PI = 3.141592653589793;     /* math.pi */
 
 typedef struct {
-    Py_ssize_t r, cells, mass_rows, out_rows, joint_rows;
-    const float *mass, *damping;    /* float32: see _StepTables */
+    Py_ssize_t r, cells, mass_groups, out_rows, joint_rows;
+    const float *mass, *damping;    /* float32, node tables: see _StepTables */
     const double *kf, *out, *joint, *g0;
     double cells_per_radian, c1;
     /* scratch */
@@ -45,7 +46,8 @@ typedef struct {
     double *matrix;     /* 2r x 2r */
     double *rhs;        /* 2r */
     double *operator;   /* outputs x (r + 1): [O | corr] of the record */
-    double weights[ROWS_ALL];
+    double weights[ROWS_ALL];   /* power form: the record's per-cell tables */
+    double hermite[ROWS_ALL];   /* Hermite form: the node tables */
 } Step;
 
 /* x86-64 with GCC: AVX2/FMA clones of the step and of the kernels it calls (the table
@@ -76,8 +78,9 @@ static inline double dot(const double *restrict a, const double *restrict b, Py_
     return (s0 + s1) + (s2 + s3);
 }
 
-/* Row weights at (angle, w, a) and the cell: StreamingEstimator._evaluate. */
-static Py_ssize_t evaluate(const Step *s, double angle, double w, double a, double *weights)
+/* Row and Hermite weights at (angle, w, a) and the cell: StreamingEstimator._evaluate. */
+static Py_ssize_t evaluate(const Step *s, double angle, double w, double a, double *weights,
+                           double *hermite)
 {
     double x = angle * s->cells_per_radian;
     Py_ssize_t k = (Py_ssize_t)x;
@@ -88,11 +91,15 @@ static Py_ssize_t evaluate(const Step *s, double angle, double w, double a, doub
     double t = x - (double)k, t2 = t * t, t3 = t2 * t;
     double w2 = w * w;
     double mono[7] = {a, 1.0, w2, w, w2 * w2, w * a, w2 * w};
+    const double h01 = t2 * (3.0 - 2.0 * t);
+    const double basis[4] = {1.0 - h01, t - 2.0 * t2 + t3, h01, t3 - t2};
     for (int m = 0; m < 7; m++) {
         weights[4 * m] = mono[m];
         weights[4 * m + 1] = mono[m] * t;
         weights[4 * m + 2] = mono[m] * t2;
         weights[4 * m + 3] = mono[m] * t3;
+        for (int i = 0; i < 4; i++)
+            hermite[4 * m + i] = mono[m] * basis[i];
     }
     return k;
 }
@@ -134,30 +141,57 @@ static Py_ssize_t evaluate(const Step *s, double angle, double w, double a, doub
     }
 
 DEFINE_COMBINE(combine, double)
-DEFINE_COMBINE(combine_f32, float)
+
+/*
+ * out[j] = sum over monomial groups g of the Hermite weights [4 g .. 4 g + 3] times the rows
+ * V, S of node `lo` (2 g, 2 g + 1) and V, S of node `hi`: the node tables' form of combine.
+ */
+#define DEFINE_COMBINE_NODES(name, type)                                                    \
+    STEP_CLONES static void name(const double *weights, const type *lo, const type *hi,     \
+                                 Py_ssize_t groups, Py_ssize_t stride, Py_ssize_t width,    \
+                                 double *restrict out)                                      \
+    {                                                                                       \
+        memset(out, 0, (size_t)width * sizeof(double));                                     \
+        for (Py_ssize_t g = 0; g < groups; g++) {                                           \
+            const double w0 = weights[4 * g], w1 = weights[4 * g + 1],                      \
+                         w2 = weights[4 * g + 2], w3 = weights[4 * g + 3];                  \
+            if (w0 == 0.0 && w1 == 0.0 && w2 == 0.0 && w3 == 0.0)                           \
+                continue;                                                                   \
+            const type *restrict r0 = lo + 2 * g * stride, *restrict r1 = r0 + stride,      \
+                       *restrict r2 = hi + 2 * g * stride, *restrict r3 = r2 + stride;      \
+            for (Py_ssize_t j = 0; j < width; j++)                                          \
+                out[j] += w0 * (double)r0[j] + w1 * (double)r1[j] + w2 * (double)r2[j]      \
+                          + w3 * (double)r3[j];                                             \
+        }                                                                                   \
+    }
+
+DEFINE_COMBINE_NODES(combine_nodes, double)
+DEFINE_COMBINE_NODES(combine_nodes_f32, float)
 
 /* M, C, K and f of the crank state into a slot (StreamingEstimator._load). */
 static void load(Step *s, int slot, double angle, double w, double a)
 {
     const Py_ssize_t r = s->r, r2 = r * r;
-    Py_ssize_t k = evaluate(s, angle, w, a, s->weights);
+    const Py_ssize_t k = evaluate(s, angle, w, a, s->weights, s->hermite);
+    const Py_ssize_t k1 = k + 1 < s->cells ? k + 1 : 0;
     double *blocks = s->blocks + (Py_ssize_t)slot * 3 * r2;
-    combine_f32(s->weights + FIRST_MC, s->mass + k * s->mass_rows * r2, s->mass_rows, r2, r2,
-            blocks);
-    combine_f32(s->weights + FIRST_MC, s->damping + k * ROWS_MC * r2, ROWS_MC, r2, r2,
-            blocks + r2);
-    /* [K | f] from the kf table (rows 0..11 of the weights) */
-    const Py_ssize_t kf_width = r2 + r;
-    const double *kf = s->kf + k * ROWS_KF * kf_width;
-    combine(s->weights, kf, ROWS_KF, kf_width, r2, blocks + 2 * r2);
-    combine(s->weights, kf + r2, ROWS_KF, kf_width, r, s->loads + slot * r);
+    const Py_ssize_t mass_node = 2 * s->mass_groups * r2, damping_node = 2 * GROUPS_C * r2;
+    combine_nodes_f32(s->hermite + FIRST_MC, s->mass + k * mass_node, s->mass + k1 * mass_node,
+                      s->mass_groups, r2, r2, blocks);
+    combine_nodes_f32(s->hermite + FIRST_MC, s->damping + k * damping_node,
+                      s->damping + k1 * damping_node, GROUPS_C, r2, r2, blocks + r2);
+    /* [K | f] from the kf table (monomials a, 1, w2) */
+    const Py_ssize_t kf_width = r2 + r, kf_node = 2 * GROUPS_KF * kf_width;
+    const double *lo = s->kf + k * kf_node, *hi = s->kf + k1 * kf_node;
+    combine_nodes(s->hermite, lo, hi, GROUPS_KF, kf_width, r2, blocks + 2 * r2);
+    combine_nodes(s->hermite, lo + r2, hi + r2, GROUPS_KF, kf_width, r, s->loads + slot * r);
 }
 
 /* The record of the crank state prev at the state z (_StepTables.record). */
 static void record(Step *s, const double *z, const double *prev, double *restrict out)
 {
     const Py_ssize_t r = s->r, width = OUTPUTS * (r + 1);
-    Py_ssize_t k = evaluate(s, prev[0], prev[1], prev[2], s->weights);
+    Py_ssize_t k = evaluate(s, prev[0], prev[1], prev[2], s->weights, s->hermite);
     double *op = s->operator;
     combine(s->weights, s->out + k * s->out_rows * width, s->out_rows, width, width, op);
     for (int o = 0; o < OUTPUTS; o++) {
@@ -388,7 +422,7 @@ PyDoc_STRVAR(advance_doc,
 "z[:2 r] after each row; records (rows x 28, or 28 for the last row only) the sample's\n"
 "record (estimator.RECORD_SIZE).");
 
-/* Rows per grid cell of a table (at most `most`), or -1 with an exception set. */
+/* Rows (row groups) per grid cell or node of a table (at most `most`), or -1 with an exception set. */
 static Py_ssize_t rows_of(const Py_buffer *view, Py_ssize_t per_row, Py_ssize_t cells,
                           Py_ssize_t most, const char *name)
 {
@@ -424,14 +458,14 @@ static PyObject *advance(PyObject *module, PyObject *args)
     }
     if (get_typed_buffer(objects[1], &damping, 0, "damping", -1, "f") != 0)
         goto done;
-    const Py_ssize_t cells = damping.len / 4 / (ROWS_MC * r2);
-    if (cells < 1 || damping.len / 4 != cells * ROWS_MC * r2) {
+    const Py_ssize_t cells = damping.len / 4 / (2 * GROUPS_C * r2);
+    if (cells < 1 || damping.len / 4 != cells * 2 * GROUPS_C * r2) {
         PyErr_SetString(PyExc_ValueError, "`damping` does not match the size of `z`");
         goto done;
     }
     if (get_typed_buffer(objects[0], &mass, 0, "mass", -1, "f") != 0
-        || (s.mass_rows = rows_of(&mass, r2, cells, ROWS_MC, "mass")) < 0
-        || get_buffer(objects[2], &kf, 0, "kf", cells * ROWS_KF * (r2 + r)) != 0
+        || (s.mass_groups = rows_of(&mass, 2 * r2, cells, GROUPS_C, "mass")) < 0
+        || get_buffer(objects[2], &kf, 0, "kf", cells * 2 * GROUPS_KF * (r2 + r)) != 0
         || get_buffer(objects[3], &out, 0, "out", -1) != 0
         || (s.out_rows = rows_of(&out, OUTPUTS * (r + 1), cells, ROWS_ALL, "out")) < 0
         || get_buffer(objects[4], &joint, 0, "joint", -1) != 0

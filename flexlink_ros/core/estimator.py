@@ -460,12 +460,18 @@ class _StepTables:
     """
     Tables and coefficient stacks of the per-sample step (built once per model).
 
-    Rows are ``monomial * 4 + power`` (see core/reduced.py); each table keeps only the rows
-    and columns its block uses, so a sample reads as little memory as it can (a grid cell's
-    tables come from main memory at most sample rates): ``mass`` M (monomial 1),
-    ``damping`` C (1, w2, w, w4), ``kf`` [K | f] (a, 1, w2), ``out`` the output operator
-    [O | corr] (outputs x (r + 1), leading rows used) and ``joint`` [reactions F (joints x 2),
-    their time derivative (joints x 2), squared cycle-RMS reaction (joints)] (all rows).
+    M, C and [K | f] are kept at the grid nodes as cubic Hermite data: per monomial the
+    node's value V and slope S (d/dt, cell units) of the model's periodic cubic spline (see
+    core/reduced.py), which is C1, so cell k's cubic is exactly
+    ``h00(t) V_k + h10(t) S_k + h01(t) V_k+1 + h11(t) S_k+1``. A cell then reads two rows
+    per monomial of its own and two of the next node, which the next cell reads again:
+    streaming through the cells (a cell's tables come from main memory at most sample rates)
+    reads half the bytes of the per-cell power form, and the tables take half the memory.
+    ``mass`` M (monomial 1), ``damping`` C (1, w2, w, w4) and ``kf`` [K | f] (a, 1, w2):
+    node x (monomial, V/S) x width. ``out`` (the output operator [O | corr], outputs x
+    (r + 1), leading rows used) and ``joint`` [reactions F (joints x 2), their time
+    derivative (joints x 2), squared cycle-RMS reaction (joints)] stay per cell in power form
+    (rows ``monomial * 4 + power``; small, read once per sample).
     Two samples' [M, C, K, F] (F an r x r block holding f in its first r entries) in
     alternating slots times a 8 x 8 coefficient matrix G(h) give, in one product, the
     Radau IIA block matrix and the right-hand-side operator on (q, v).
@@ -478,15 +484,17 @@ class _StepTables:
     """
 
     POWERS = (-2, -1, 0, 1, 2)
-    FIRST_MC = 4               # M and C start at monomial 1
-    ROWS_MC = slice(4, 20)     # monomials 1, w2, w, w4
-    ROWS_KF = slice(0, 12)     # monomials a, 1, w2
+    FIRST_MC = 1               # M and C start at monomial 1
+    GROUPS_C = 4               # C: monomials 1, w2, w, w4
+    GROUPS_KF = 3              # K, f: monomials a, 1, w2
 
     def __init__(self, model, stages=2):
         if stages != 2:
             raise ValueError('the streaming step is written for 2-stage Radau IIA')
         if reduced.MONOMIALS[:5] != ('a', '1', 'w2', 'w', 'w4'):
             raise ValueError('monomial order changed: update _StepTables')
+        if reduced.CELL_POWERS != 4:
+            raise ValueError('the step tables are written for cubic cells')
         a, c = RADAU_TABLEAUX[stages]
         a2 = a @ a
         layout = model.layout
@@ -503,19 +511,27 @@ class _StepTables:
             used = np.flatnonzero(np.any(block(name)[:, first:] != 0.0, axis=(0, 2)))
             return int(used[-1]) + 1 if used.size else 1
 
-        for name, rows in (('M', self.ROWS_MC), ('C', self.ROWS_MC), ('K', self.ROWS_KF),
-                           ('f', self.ROWS_KF)):
-            if np.any(block(name)[:, rows.stop:] != 0.0):
-                raise ValueError(f'{name} uses table rows beyond {rows.stop}: update _StepTables')
-        self.mass_rows = rows_used('M', self.FIRST_MC)
+        def nodes(name, first_group, groups):
+            """Node values and slopes (node, group * 2 + V/S, width) of cells' cubics."""
+            cells = block(name, slice(4 * first_group, 4 * (first_group + groups)))
+            cells = cells.reshape(n_cells, groups, 4, -1)
+            return cells[:, :, :2].reshape(n_cells, 2 * groups, -1)
+
+        for name, stop in (('M', 1 + self.GROUPS_C), ('C', 1 + self.GROUPS_C),
+                           ('K', self.GROUPS_KF), ('f', self.GROUPS_KF)):
+            if np.any(block(name)[:, 4 * stop:] != 0.0):
+                raise ValueError(f'{name} uses monomials beyond the first {stop}: '
+                                 'update _StepTables')
+        self.mass_groups = -(-(rows_used('M', 4 * self.FIRST_MC)) // 4)
         # M and C in float32: a sample reads 31 % fewer bytes (the table reads are about
         # a third of the step) and the outputs move by 2e-8 of their size; K and f stay in
         # float64 (float32 there moves them by 1e-3: the static directions are stiff).
-        self.mass = np.ascontiguousarray(
-            block('M', slice(self.FIRST_MC, self.FIRST_MC + self.mass_rows)), dtype=np.float32)
-        self.damping = np.ascontiguousarray(block('C', self.ROWS_MC), dtype=np.float32)
+        self.mass = np.ascontiguousarray(nodes('M', self.FIRST_MC, self.mass_groups),
+                                         dtype=np.float32)
+        self.damping = np.ascontiguousarray(nodes('C', self.FIRST_MC, self.GROUPS_C),
+                                            dtype=np.float32)
         self.kf = np.ascontiguousarray(np.concatenate(
-            [block('K', self.ROWS_KF), block('f', self.ROWS_KF)], axis=2))
+            [nodes('K', 0, self.GROUPS_KF), nodes('f', 0, self.GROUPS_KF)], axis=2))
         self.out_rows = max(rows_used('out'), rows_used('corr'))
         rows = slice(0, self.out_rows)
         outputs = len(reduced.OUTPUT_NAMES)
@@ -658,6 +674,7 @@ class StreamingEstimator:
         self._pending_warm_start = False
         self._orbit = None      # (speed, start angle, q, v) of the last periodic orbit
         self._weights = np.zeros(reduced.CELL_POWERS * len(reduced.MONOMIALS))
+        self._hermite = np.zeros(reduced.CELL_POWERS * len(reduced.MONOMIALS))
         if reduced.MONOMIALS != ('a', '1', 'w2', 'w', 'w4', 'wa', 'w3'):
             raise ValueError('monomial order changed: update StreamingEstimator._evaluate')
         self.samples = 0
@@ -672,35 +689,46 @@ class StreamingEstimator:
 
     def _evaluate(self, angle, speed, accel):
         """
-        Row weights (monomial times t^p, in table-row order) and the cell index.
+        Row weights of the power-form tables (monomial times t^p, in table-row order), the
+        Hermite weights of the node tables (monomial times h00, h10, h01, h11) and the cell.
 
-        The weights go to a reused buffer: use them before the next call.
+        The weights go to reused buffers: use them before the next call.
         """
         x = angle * self._cells_per_radian
         k = int(x)
         if k >= self.model.grid_size:
             k = self.model.grid_size - 1
         t = x - k
-        w, a = speed, accel
-        w2 = w * w
         t2 = t * t
         t3 = t2 * t
+        h01 = t2 * (3.0 - 2.0 * t)
+        basis = np.array(((1.0, t, t2, t3), (1.0 - h01, t - 2.0 * t2 + t3, h01, t3 - t2)))
+        w, a = speed, accel
+        w2 = w * w
         # Order of reduced.MONOMIALS: a, 1, w2, w, w4, wa, w3.
-        self._weights[:] = (a, a * t, a * t2, a * t3, 1.0, t, t2, t3,
-                            w2, w2 * t, w2 * t2, w2 * t3, w, w * t, w * t2, w * t3,
-                            w2 * w2, w2 * w2 * t, w2 * w2 * t2, w2 * w2 * t3,
-                            w * a, w * a * t, w * a * t2, w * a * t3,
-                            w2 * w, w2 * w * t, w2 * w * t2, w2 * w * t3)
-        return self._weights, k
+        monomials = np.array((a, 1.0, w2, w, w2 * w2, w * a, w2 * w))
+        np.multiply(monomials[:, None], basis[0], out=self._weights.reshape(-1, 4))
+        np.multiply(monomials[:, None], basis[1], out=self._hermite.reshape(-1, 4))
+        return self._weights, self._hermite, k
 
-    def _load(self, slot, weights, k):
-        """Write M, C and [K, f] of the table rows at (weights, cell k) into a slot."""
+    def _combine_nodes(self, hermite, k, first_group, groups, table, out=None):
+        """Sum of Hermite weights times the node rows of cell k (nodes k and k + 1)."""
+        weights = hermite.reshape(-1, 2, 2)[first_group:first_group + groups]
+        after = k + 1 if k + 1 < self.model.grid_size else 0
+        result = np.dot(weights[:, 0].ravel(), table[k], out=out)
+        result += np.dot(weights[:, 1].ravel(), table[after])
+        return result
+
+    def _load(self, slot, hermite, k):
+        """Write M, C and [K, f] of the node tables at (Hermite weights, cell k) into a slot."""
         tables, r2 = self._tables, self.model.size ** 2
         flat = self._flat[slot]
         first = tables.FIRST_MC
-        np.dot(weights[first:first + tables.mass_rows], tables.mass[k], out=flat[:r2])
-        np.dot(weights[tables.ROWS_MC], tables.damping[k], out=flat[r2:2 * r2])
-        np.dot(weights[tables.ROWS_KF], tables.kf[k], out=flat[2 * r2:3 * r2 + self.model.size])
+        self._combine_nodes(hermite, k, first, tables.mass_groups, tables.mass, flat[:r2])
+        self._combine_nodes(hermite, k, first, tables.GROUPS_C, tables.damping,
+                            flat[r2:2 * r2])
+        self._combine_nodes(hermite, k, 0, tables.GROUPS_KF, tables.kf,
+                            flat[2 * r2:3 * r2 + self.model.size])
 
     def _set_state(self, angle, speed, accel, warm):
         """Start from the periodic state at this speed (warm) or the static deflection."""
@@ -712,7 +740,7 @@ class StreamingEstimator:
             q0, v0 = np.linalg.solve(stiffness[0], load[0]), np.zeros(r)
         self._z[:r] = q0
         self._z[r:2 * r] = v0
-        weights, k = self._evaluate(angle, speed, accel)
+        weights, _, k = self._evaluate(angle, speed, accel)
         self._tables.record(weights, k, self._z, self._record)
         self._previous[:] = (angle, speed, accel)
 
@@ -758,15 +786,26 @@ class StreamingEstimator:
         model, tables, r = self.model, self._tables, self.model.size
         theta = np.asarray(theta, dtype=float)
         cells, t = model.cell(theta)
-        weights = model.weights(t, w, a).reshape(theta.size, -1)
+        t2 = t * t
+        h01 = t2 * (3.0 - 2.0 * t)
+        basis = np.stack([1.0 - h01, t - 2.0 * t2 + t2 * t, h01, t2 * t - t2], axis=-1)
+        monomials = np.stack(np.broadcast_arrays(*reduced.monomial_values(
+            np.full(theta.size, float(w)), np.full(theta.size, float(a)))), axis=-1)
+        # (angle, monomial, node k / k + 1, V / S)
+        weights = (monomials[:, :, None] * basis[:, None, :]).reshape(theta.size, -1, 2, 2)
         mass = np.empty((theta.size, r * r))
         damping = np.empty((theta.size, r * r))
         kf = np.empty((theta.size, r * r + r))
-        first = tables.FIRST_MC
+        first, after = tables.FIRST_MC, tables.FIRST_MC + tables.mass_groups
         for k, group in reduced.cell_groups(cells):
-            mass[group] = weights[group, first:first + tables.mass_rows] @ tables.mass[k]
-            damping[group] = weights[group, tables.ROWS_MC] @ tables.damping[k]
-            kf[group] = weights[group, tables.ROWS_KF] @ tables.kf[k]
+            k1 = (k + 1) % model.grid_size
+            for out, table, groups in ((mass, tables.mass, slice(first, after)),
+                                       (damping, tables.damping,
+                                        slice(first, first + tables.GROUPS_C)),
+                                       (kf, tables.kf, slice(0, tables.GROUPS_KF))):
+                node = weights[group, groups]
+                out[group] = (node[:, :, 0].reshape(group.size, -1) @ table[k]
+                              + node[:, :, 1].reshape(group.size, -1) @ table[k1])
         shape = (theta.size, r, r)
         return (mass.reshape(shape), damping.reshape(shape), kf[:, :r * r].reshape(shape),
                 kf[:, r * r:])
@@ -884,7 +923,7 @@ class StreamingEstimator:
         for n, (h, splits, angle, w, a, step) in enumerate(rows):
             self._advance(h, int(splits), angle, w, a, step)
             if every or n == len(rows) - 1:
-                weights, k = self._evaluate(angle, w, a)
+                weights, _, k = self._evaluate(angle, w, a)
                 tables.record(weights, k, self._z, records[n] if every else records)
             if states.size:
                 states[n] = self._z[:states.shape[1]]
@@ -920,11 +959,11 @@ class StreamingEstimator:
             stage_angle -= TWO_PI
         elif stage_angle < 0.0:
             stage_angle += TWO_PI
-        weights, k = self._evaluate(stage_angle, previous[1] + c1 * (speed - previous[1]),
-                                    previous[2] + c1 * (accel - previous[2]))
-        self._load(1 - parity, weights, k)
-        weights, k = self._evaluate(angle, speed, accel)
-        self._load(parity, weights, k)
+        _, hermite, k = self._evaluate(stage_angle, previous[1] + c1 * (speed - previous[1]),
+                                       previous[2] + c1 * (accel - previous[2]))
+        self._load(1 - parity, hermite, k)
+        _, hermite, k = self._evaluate(angle, speed, accel)
+        self._load(parity, hermite, k)
         self._previous[:] = (angle, speed, accel)
         inv = 1.0 / h
         g = np.dot(np.array((inv * inv, inv, 1.0, h, h * h)), tables.g_stack[parity])
