@@ -524,6 +524,13 @@ def test_compiled_lu_solve_with_pivoting(n):
     np.testing.assert_allclose(x, expected, rtol=1e-9, atol=1e-9 * np.max(np.abs(expected)))
     with pytest.raises(ValueError, match='singular'):
         estimator._radau_step.lu_solve(np.zeros((n, n)), b.copy())
+    # A zero column inside a panel and the last one: their pivots are found in the
+    # elimination's pass (not by a search of their own).
+    for column in {n // 2, n - 1} - {0}:
+        deficient = a.copy()
+        deficient[:, column] = 0.0
+        with pytest.raises(ValueError, match='singular'):
+            estimator._radau_step.lu_solve(deficient, b.copy())
 
 
 def test_compiled_step_rejects_bad_buffers(toy_model):
