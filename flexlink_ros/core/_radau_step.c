@@ -389,23 +389,18 @@ STEP_CLONES static int radau_step(Step *s, double *z, double *prev, double h, do
             rhs[row] = f[row];
         for (int l = 0; l < 4; l++) {
             const double *gl = g + (i * 4 + l) * 8;
-            if (l < 2) {
-                for (Py_ssize_t row = 0; row < r; row++)
-                    memset(s->matrix + (i * r + row) * n + l * r, 0, (size_t)r * sizeof(double));
-            }
+            /* the block's terms (M, C, K of one stage: three), summed in one pass */
+            const double *terms[6];
+            double coefficients[6];
+            int count = 0;
             for (int slot = 0; slot < 2; slot++)
                 for (int m = 0; m < 3; m++) {
                     const double coefficient = gl[slot * 4 + m];
                     if (coefficient == 0.0)
                         continue;
                     if (l < 2) {
-                        const double *X = s->blocks + (slot * 3 + m) * r2;
-                        for (Py_ssize_t row = 0; row < r; row++) {
-                            double *restrict out = s->matrix + (i * r + row) * n + l * r;
-                            const double *restrict Xrow = X + row * r;
-                            for (Py_ssize_t col = 0; col < r; col++)
-                                out[col] += coefficient * Xrow[col];
-                        }
+                        terms[count] = s->blocks + (slot * 3 + m) * r2;
+                        coefficients[count++] = coefficient;
                     }
                     else {
                         const double *y = s->products + ((slot * 3 + m) * 2 + (l - 2)) * r;
@@ -413,6 +408,27 @@ STEP_CLONES static int radau_step(Step *s, double *z, double *prev, double h, do
                             rhs[row] += coefficient * y[row];
                     }
                 }
+            if (l >= 2)
+                continue;
+            for (Py_ssize_t row = 0; row < r; row++) {
+                double *restrict out = s->matrix + (i * r + row) * n + l * r;
+                if (count == 3) {
+                    const double c0 = coefficients[0], c1 = coefficients[1],
+                                 c2 = coefficients[2];
+                    const double *restrict x0 = terms[0] + row * r, *restrict x1 = terms[1] + row * r,
+                                           *restrict x2 = terms[2] + row * r;
+                    for (Py_ssize_t col = 0; col < r; col++)
+                        out[col] = c0 * x0[col] + c1 * x1[col] + c2 * x2[col];
+                    continue;
+                }
+                memset(out, 0, (size_t)r * sizeof(double));
+                for (int t = 0; t < count; t++) {
+                    const double c = coefficients[t];
+                    const double *restrict x = terms[t] + row * r;
+                    for (Py_ssize_t col = 0; col < r; col++)
+                        out[col] += c * x[col];
+                }
+            }
         }
     }
     if (solve(n, s->matrix, s->rhs) != 0)
