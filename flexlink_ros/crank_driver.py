@@ -240,19 +240,37 @@ def make_executor():
         return SingleThreadedExecutor()
 
 
-def spin_until_shutdown(executor, done=None, period_s=0.1):
-    """
-    ``spin_once`` until SIGINT/SIGTERM shuts the context down (or ``done()`` is true).
+# rcl invalidates a context before rclpy's Context.ok() turns False: an rcl call in between
+# fails with one of these (publish; spin_once building its wait set) while ok() says True.
+INVALID_CONTEXT_TEXTS = ("context is invalid", "context is not valid")
 
-    A signal landing between ``rclpy.ok()`` and the wait set that ``spin_once`` builds makes it
-    raise (RCLError: the context is not valid): that is the shutdown asked for, not a failure.
+
+def is_shutdown_error(exc, context=None):
+    """
+    Whether ``exc`` is SIGINT/SIGTERM shutting ``context`` (default: rclpy's) down.
+
+    True when the context is no longer ok, or when rcl already refused it as invalid (the
+    race above); such an error is the shutdown asked for, not a failure to report.
     """
     import rclpy
-    while rclpy.ok() and not (done is not None and done()):
+    ok = context.ok() if context is not None else rclpy.ok()
+    return not ok or any(text in str(exc) for text in INVALID_CONTEXT_TEXTS)
+
+
+def spin_until_shutdown(executor, done=None, period_s=0.1):
+    """
+    ``spin_once`` until SIGINT/SIGTERM shuts the executor's context down (or ``done()``).
+
+    A signal landing between the ``ok()`` check and the wait set that ``spin_once`` builds
+    makes it raise (RCLError: the context is not valid): that is the shutdown asked for, not a
+    failure. Any other error is raised.
+    """
+    context = executor.context
+    while context.ok() and not (done is not None and done()):
         try:
             executor.spin_once(timeout_sec=period_s)
-        except Exception:
-            if rclpy.ok():
+        except Exception as exc:
+            if not is_shutdown_error(exc, context):
                 raise
             return
 

@@ -383,9 +383,8 @@ def _make_node_class():
 
         def _shutting_down(self, exc):
             """Whether a publish error is SIGINT/SIGTERM shutting the context down."""
-            # rcl invalidates the context before rclpy's Context.ok() turns False: a publish
-            # in between fails with 'context is invalid' while ok() still says True.
-            return not self.context.ok() or 'context is invalid' in str(exc)
+            from .crank_driver import is_shutdown_error
+            return is_shutdown_error(exc, self.context)
 
         def _markers(self, stamp_ns, sample):
             """CDR of the deformed-linkage markers (template encoder, rebuilt on changes)."""

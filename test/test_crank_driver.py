@@ -137,3 +137,46 @@ def test_bad_parameter_is_a_one_line_error(parameter, reason):
     assert result.returncode == 1
     assert result.stderr.startswith('crank_driver: error:') and reason in result.stderr
     assert 'Traceback' not in result.stderr
+
+
+def test_shutdown_errors_are_told_from_failures():
+    """rcl's invalid-context errors mean shutdown even while Context.ok() still says True."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    from flexlink_ros.crank_driver import is_shutdown_error, spin_until_shutdown
+
+    live = rclpy.Context()
+    rclpy.init(context=live)
+    closing = rclpy.Context()
+    rclpy.init(context=closing)
+    try:
+        node = rclpy.create_node('closing', context=closing)
+        executor = SingleThreadedExecutor(context=closing)
+        executor.add_node(node)
+        closing.try_shutdown()
+        # The real error rcl gives a wait set on a context it has shut down.
+        with pytest.raises(Exception) as caught:
+            executor.spin_once(timeout_sec=0.01)
+        error = caught.value
+        assert 'context is not valid' in str(error)
+        assert is_shutdown_error(error, closing)
+        # The race: the same error while the context still reports ok.
+        assert live.ok() and is_shutdown_error(error, live)
+        assert not is_shutdown_error(ValueError('a failure'), live)
+        assert is_shutdown_error(ValueError('any error'), closing)
+        # spin_until_shutdown re-raises real failures of a live context.
+        failing = rclpy.create_node('failing', context=live)
+        failing.create_timer(0.001, lambda: 1 / 0)
+        live_executor = SingleThreadedExecutor(context=live)
+        live_executor.add_node(failing)
+        with pytest.raises(ZeroDivisionError):
+            spin_until_shutdown(live_executor)
+        # ... and return quietly once the context is shut down.
+        live_executor.remove_node(failing)
+        live_executor.add_node(rclpy.create_node('quiet', context=live))
+        live.try_shutdown()
+        spin_until_shutdown(live_executor)
+    finally:
+        for context in (live, closing):
+            context.try_shutdown()
