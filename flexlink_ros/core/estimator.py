@@ -674,7 +674,7 @@ class StreamingEstimator:
         self._pending_warm_start = False
         self._orbit = None      # (speed, start angle, q, v) of the last periodic orbit
         self._weights = np.zeros(reduced.CELL_POWERS * len(reduced.MONOMIALS))
-        self._hermite = np.zeros(reduced.CELL_POWERS * len(reduced.MONOMIALS))
+        self._hermite = np.zeros((2, 2 * len(reduced.MONOMIALS)))
         if reduced.MONOMIALS != ('a', '1', 'w2', 'w', 'w4', 'wa', 'w3'):
             raise ValueError('monomial order changed: update StreamingEstimator._evaluate')
         self.samples = 0
@@ -690,7 +690,8 @@ class StreamingEstimator:
     def _evaluate(self, angle, speed, accel):
         """
         Row weights of the power-form tables (monomial times t^p, in table-row order), the
-        Hermite weights of the node tables (monomial times h00, h10, h01, h11) and the cell.
+        Hermite weights of the node tables ((2, monomials x 2): node k's monomial times h00,
+        h10 and node k + 1's times h01, h11) and the cell.
 
         The weights go to reused buffers: use them before the next call.
         """
@@ -702,22 +703,27 @@ class StreamingEstimator:
         t2 = t * t
         t3 = t2 * t
         h01 = t2 * (3.0 - 2.0 * t)
-        basis = np.array(((1.0, t, t2, t3), (1.0 - h01, t - 2.0 * t2 + t3, h01, t3 - t2)))
+        h00, h10, h11 = 1.0 - h01, t - 2.0 * t2 + t3, t3 - t2
         w, a = speed, accel
         w2 = w * w
         # Order of reduced.MONOMIALS: a, 1, w2, w, w4, wa, w3.
-        monomials = np.array((a, 1.0, w2, w, w2 * w2, w * a, w2 * w))
-        np.multiply(monomials[:, None], basis[0], out=self._weights.reshape(-1, 4))
-        np.multiply(monomials[:, None], basis[1], out=self._hermite.reshape(-1, 4))
+        monomials = (a, 1.0, w2, w, w2 * w2, w * a, w2 * w)
+        self._weights[:] = [m * p for m in monomials for p in (1.0, t, t2, t3)]
+        self._hermite[0] = [m * p for m in monomials for p in (h00, h10)]
+        self._hermite[1] = [m * p for m in monomials for p in (h01, h11)]
         return self._weights, self._hermite, k
 
-    def _combine_nodes(self, hermite, k, first_group, groups, table, out=None):
-        """Sum of Hermite weights times the node rows of cell k (nodes k and k + 1)."""
-        weights = hermite.reshape(-1, 2, 2)[first_group:first_group + groups]
-        after = k + 1 if k + 1 < self.model.grid_size else 0
-        result = np.dot(weights[:, 0].ravel(), table[k], out=out)
-        result += np.dot(weights[:, 1].ravel(), table[after])
-        return result
+    def _combine_nodes(self, hermite, k, first_group, groups, table, out):
+        """Hermite weights times the node rows of cell k (nodes k and k + 1) into ``out``."""
+        rows = slice(2 * first_group, 2 * (first_group + groups))
+        if k + 1 < self.model.grid_size:
+            # Nodes k and k + 1 are adjacent: one product over both (a float32 table is
+            # converted once).
+            weights = np.concatenate((hermite[0, rows], hermite[1, rows]))
+            np.dot(weights, table[k:k + 2].reshape(-1, table.shape[2]), out=out)
+        else:
+            np.dot(hermite[0, rows], table[k], out=out)
+            out += np.dot(hermite[1, rows], table[0])
 
     def _load(self, slot, hermite, k):
         """Write M, C and [K, f] of the node tables at (Hermite weights, cell k) into a slot."""
