@@ -778,7 +778,11 @@ def test_released_model_table_changes_nothing_streamed(toy_model):
     kept, released = StreamingEstimator(toy_model), StreamingEstimator(toy_model)
     model = released.release_model_table()
     assert model.table.size == 0 and toy_model.table.size > 0
-    theta = np.linspace(-1.0, 8.0, 37)
+    # Angles in every cell, at the grid nodes and in the last cell (whose second node is
+    # node 0): the step's node tables (value and slope per node) give the model's cubics.
+    nodes = np.arange(toy_model.grid_size) * (2.0 * np.pi / toy_model.grid_size)
+    theta = np.concatenate([np.linspace(-1.0, 8.0, 37), nodes, nodes + 0.7 * nodes[1],
+                            [2.0 * np.pi - 1e-9]])
     blocks = zip(kept.system_blocks(theta, 20.0, 3.0),
                  reduced.system_blocks(toy_model, toy_model.evaluate(theta, 20.0, 3.0)))
     # M and C come from float32 step tables (6e-8 per entry); K and f are float64, exact.
