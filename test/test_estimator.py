@@ -533,6 +533,22 @@ def test_compiled_lu_solve_with_pivoting(n):
             estimator._radau_step.lu_solve(deficient, b.copy())
 
 
+@pytest.mark.parametrize('compiled', [False, True])
+def test_non_finite_step_is_refused_and_keeps_the_state(toy_model, compiled):
+    """A table gone non-finite makes the step raise; the state keeps its last finite value."""
+    if compiled:
+        compiled_or_skip()
+    est = StreamingEstimator(toy_model, compiled=compiled)
+    for n in range(5):
+        est.update(n * 10**6, 0.4 + 0.02 * n, 20.0)
+    z_before = est._z.copy()
+    est._tables.kf = est._tables.kf.copy()
+    est._tables.kf[..., 0] = np.nan
+    with pytest.raises(ValueError, match='non-finite'):
+        est.update(5 * 10**6, 0.5, 20.0)
+    np.testing.assert_array_equal(est._z, z_before)
+
+
 def test_compiled_step_rejects_bad_buffers(toy_model):
     from flexlink_ros.core import estimator
     compiled_or_skip()
@@ -567,6 +583,11 @@ def test_compiled_step_rejects_bad_buffers(toy_model):
         call(states=np.zeros(3))
     with pytest.raises((BufferError, ValueError), match='read-only|writable'):
         call(z=np.frombuffer(bytes(z_before.nbytes)))
+    np.testing.assert_array_equal(est._z, z_before)
+    poisoned = t.kf.copy()
+    poisoned[..., 0] = np.nan
+    with pytest.raises(ValueError, match='non-finite'):
+        call(kf=poisoned)
     np.testing.assert_array_equal(est._z, z_before)
     call()
     assert np.all(np.isfinite(est._z)) and not np.array_equal(est._z, z_before)

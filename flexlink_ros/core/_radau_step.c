@@ -433,6 +433,11 @@ STEP_CLONES static int radau_step(Step *s, double *z, double *prev, double h, do
     }
     if (solve(n, s->matrix, s->rhs) != 0)
         return -1;
+    /* A non-finite increment (from a non-finite table or state) is refused like a singular
+       matrix, so z keeps its last finite value. */
+    for (Py_ssize_t j = 0; j < n; j++)
+        if (!isfinite(s->rhs[j]))
+            return -1;
     for (Py_ssize_t j = 0; j < n; j++)
         z[j] += s->rhs[j];
     return 0;
@@ -605,7 +610,7 @@ static PyObject *advance(PyObject *module, PyObject *args)
         PyEval_RestoreThread(released);
     if (failed) {
         PyErr_SetString(PyExc_ValueError, bad_row ? "a row has a non-positive step or no sub-steps"
-                                                  : "singular Radau step matrix");
+                                                  : "singular or non-finite Radau step");
         goto done;
     }
     result = Py_NewRef(Py_None);

@@ -980,9 +980,11 @@ class StreamingEstimator:
         z = self._z
         stored = self._stored
         loads = np.concatenate((stored[1 - parity, 3, :r], stored[parity, 3, :r]))
-        _, _, increment, _ = lapack.dgesv(system_t[:2 * r].T,
-                                          np.dot(z[:2 * r], system_t[2 * r:]) + loads,
-                                          overwrite_a=1, overwrite_b=1)
+        _, _, increment, info = lapack.dgesv(system_t[:2 * r].T,
+                                             np.dot(z[:2 * r], system_t[2 * r:]) + loads,
+                                             overwrite_a=1, overwrite_b=1)
+        if info != 0 or not np.all(np.isfinite(increment)):
+            raise ValueError('singular or non-finite Radau step')   # as the compiled step
         z[:2 * r] += increment
 
     def _finish(self, stamp_ns, angle, speed, accel, model_speed, flags, message):
