@@ -465,8 +465,9 @@ class _StepTables:
     core/reduced.py), which is C1, so cell k's cubic is exactly
     ``h00(t) V_k + h10(t) S_k + h01(t) V_k+1 + h11(t) S_k+1``. A cell then reads two rows
     per monomial of its own and two of the next node, which the next cell reads again:
-    streaming through the cells (a cell's tables come from main memory at most sample rates)
-    reads half the bytes of the per-cell power form, and the tables take half the memory.
+    streaming through the cells (a new cell's tables are not in the core's own caches at
+    most sample rates) reads half the bytes of the per-cell power form, and the tables take
+    half the memory.
     ``mass`` M (monomial 1), ``damping`` C (1, w2, w, w4) and ``kf`` [K | f] (a, 1, w2):
     node x (monomial, V/S) x width. ``out`` (the output operator [O | corr], outputs x
     (r + 1), leading rows used) and ``joint`` [reactions F (joints x 2), their time
