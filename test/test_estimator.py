@@ -673,27 +673,6 @@ def test_criterion_is_finite_and_flagged_at_a_zero_reaction():
     assert sample.criterion[2] > 1e3 * sample.criterion[0]
 
 
-@pytest.mark.parametrize('kind', ['speed', 'angle', 'mixed'])
-def test_replay_crank_motion_is_the_rate_filter(kind):
-    """The replay's inlined crank filter gives the filter's numbers bit for bit."""
-    from flexlink_ros.core.estimator import CrankRateFilter, _crank_motion
-    rng = np.random.default_rng(4)
-    times = np.cumsum(1e-3 * (1.0 + 0.3 * rng.uniform(-1, 1, 400)))
-    angles = np.mod(40.0 * times + 3.0 * times ** 2, 2 * np.pi) - np.pi
-    speeds = (40.0 + 6.0 * times + 0.01 * rng.normal(size=times.size)).tolist()
-    if kind == 'angle':
-        speeds = None
-    elif kind == 'mixed':
-        speeds[100:150] = [None] * 50
-    rate_filter = CrankRateFilter(0.02)
-    expected = []
-    for n, (t, angle) in enumerate(zip(times.tolist(), angles.tolist())):
-        values = rate_filter.update(t, angle, None if speeds is None else speeds[n])
-        expected.append(values + (rate_filter.advance,))
-    motion = _crank_motion(times.tolist(), angles.tolist(), speeds, 0.02)
-    assert motion.tolist() == [list(row) for row in expected]
-
-
 @pytest.mark.parametrize('kind', ['speed', 'angle', 'mixed', 'steps'])
 def test_compiled_crank_filter_gives_the_python_filter_bit_for_bit(kind):
     """The C filter (streaming and over a signal) returns the Python filter's doubles."""

@@ -1054,69 +1054,14 @@ def _crank_motion(times, angles, speeds, time_constant_s):
     """
     CrankRateFilter.update over a whole signal: (wrapped angle, speed, accel, advance) rows.
 
-    The same arithmetic as :class:`CrankRateFilter` and :class:`_ForgettingPolyFit` (degree
-    2), in one loop with local variables (about five times faster than the method calls).
-    Falls back to the filter object when measured and missing speeds mix.
+    Replay's numpy path (the compiled one runs CompiledCrankRateFilter.signal, the same
+    doubles); ``speeds`` None, or per sample a speed or None/NaN where there is none.
     """
-    count = len(times)
-    motion = np.empty((count, 4))
-    has = None if speeds is None else [s is not None and math.isfinite(s) for s in speeds]
-    if has is not None and not (all(has) or not any(has)):
-        rate_filter = CrankRateFilter(time_constant_s)
-        for n, (t, angle, speed) in enumerate(zip(times, angles, speeds)):
-            motion[n, :3] = rate_filter.update(t, angle, speed)
-            motion[n, 3] = rate_filter.advance
-        return motion
-    measured = bool(has and has[0])
-    rows = []
-    append = rows.append
-    tc = float(time_constant_s)
-    exp, wrap = math.exp, _wrap_pi
-    shift_moments, parabola, line = (_shift_quadratic_moments, _parabola_coefficients,
-                                     _line_coefficients)
-    previous_time = times[0]
-    unwrapped = float(angles[0])
-    speed = float(speeds[0]) if measured else 0.0
-    accel = 0.0
-    append((wrap_angle(unwrapped), speed, accel, 0.0))
-    moments, values = (1.0, 0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
-    fitted = 1
-    mean_dt = None
-    for n in range(1, count):
-        time_s, angle = times[n], angles[n]
-        dt = time_s - previous_time
-        mean_dt = dt if mean_dt is None else 0.9 * mean_dt + 0.1 * dt
-        tau = max(tc, MIN_FIT_SAMPLES * mean_dt)
-        f = exp(-dt / tau)
-        shift = dt / tc
-        if measured:
-            value = speeds[n]
-            predicted = 0.5 * (speed + value) * dt
-        else:
-            predicted = speed * dt + 0.5 * accel * dt * dt
-        advance = predicted + wrap(angle - unwrapped - predicted)
-        unwrapped += advance
-        previous_time = time_s
-        dy = value - speed if measured else advance
-        # _ForgettingPolyFit.add(shift, f, dy, 0.0) and .coefficients(), degree 2.
-        moments, values = shift_moments(moments, values, -shift, f, dy)
-        moments = (moments[0] + 1.0,) + moments[1:]
-        fitted += 1
-        coefficients = parabola(moments, values) if fitted >= 3 else None
-        if coefficients is None:
-            c1, c2 = line(moments, values, fitted)[1], 0.0
-        else:
-            _, c1, c2 = coefficients
-        if measured:
-            speed = float(value)
-            accel = c1 / tc
-        elif fitted < 2:
-            speed, accel = advance / dt, 0.0
-        else:
-            speed = c1 / tc
-            accel = 2.0 * c2 / tc ** 2
-        append((wrap_angle(unwrapped), speed, accel, advance))
-    motion[:] = rows
+    rate_filter = CrankRateFilter(time_constant_s)
+    motion = np.empty((len(times), 4))
+    for n, (time_s, angle) in enumerate(zip(times, angles)):
+        motion[n, :3] = rate_filter.update(time_s, angle, None if speeds is None else speeds[n])
+        motion[n, 3] = rate_filter.advance
     return motion
 
 
