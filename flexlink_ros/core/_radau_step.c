@@ -111,36 +111,31 @@ static Py_ssize_t evaluate(const Step *s, double angle, double w, double a, doub
 #endif
 
 /*
- * out[j] (+)= sum_i weights[i] table[i * stride + j], i < rows, j < width: four rows (one
+ * out[j] = sum_i weights[i] table[i * stride + j], i < rows, j < width: four rows (one
  * monomial's powers of t) per pass, so out is loaded and stored once per four products.
- * One body for float64 tables and for the float32 ones (M, C), summed in double.
  */
-#define DEFINE_COMBINE(name, type)                                                          \
-    STEP_CLONES static void name(const double *weights, const type *table, Py_ssize_t rows, \
-                                 Py_ssize_t stride, Py_ssize_t width, double *restrict out) \
-    {                                                                                       \
-        memset(out, 0, (size_t)width * sizeof(double));                                     \
-        Py_ssize_t i = 0;                                                                   \
-        for (; i + 4 <= rows; i += 4) {                                                     \
-            const double w0 = weights[i], w1 = weights[i + 1], w2 = weights[i + 2],         \
-                         w3 = weights[i + 3];                                               \
-            if (w0 == 0.0 && w1 == 0.0 && w2 == 0.0 && w3 == 0.0)                           \
-                continue;                                                                   \
-            const type *restrict r0 = table + i * stride, *restrict r1 = r0 + stride,       \
-                       *restrict r2 = r1 + stride, *restrict r3 = r2 + stride;              \
-            for (Py_ssize_t j = 0; j < width; j++)                                          \
-                out[j] += w0 * (double)r0[j] + w1 * (double)r1[j] + w2 * (double)r2[j]      \
-                          + w3 * (double)r3[j];                                             \
-        }                                                                                   \
-        for (; i < rows; i++) {                                                             \
-            const double wi = weights[i];                                                   \
-            const type *restrict row = table + i * stride;                                  \
-            for (Py_ssize_t j = 0; j < width; j++)                                          \
-                out[j] += wi * (double)row[j];                                              \
-        }                                                                                   \
+STEP_CLONES static void combine(const double *weights, const double *table, Py_ssize_t rows,
+                                Py_ssize_t stride, Py_ssize_t width, double *restrict out)
+{
+    memset(out, 0, (size_t)width * sizeof(double));
+    Py_ssize_t i = 0;
+    for (; i + 4 <= rows; i += 4) {
+        const double w0 = weights[i], w1 = weights[i + 1], w2 = weights[i + 2],
+                     w3 = weights[i + 3];
+        if (w0 == 0.0 && w1 == 0.0 && w2 == 0.0 && w3 == 0.0)
+            continue;
+        const double *restrict r0 = table + i * stride, *restrict r1 = r0 + stride,
+                     *restrict r2 = r1 + stride, *restrict r3 = r2 + stride;
+        for (Py_ssize_t j = 0; j < width; j++)
+            out[j] += w0 * r0[j] + w1 * r1[j] + w2 * r2[j] + w3 * r3[j];
     }
-
-DEFINE_COMBINE(combine, double)
+    for (; i < rows; i++) {
+        const double wi = weights[i];
+        const double *restrict row = table + i * stride;
+        for (Py_ssize_t j = 0; j < width; j++)
+            out[j] += wi * row[j];
+    }
+}
 
 /*
  * out[j] = sum over monomial groups g of the Hermite weights [4 g .. 4 g + 3] times the rows
@@ -693,7 +688,7 @@ EXACT_ARITHMETIC static void fit_slopes(const double *fit, double *c1, double *c
     }
     *c2 = 0.0;              /* _line_coefficients */
     const double det = a00 * a02 - a01 * a01;
-    if (count == 0.0 || count < 2.0 || fabs(det) <= 1e-12 * a00 * a02)
+    if (count < 2.0 || fabs(det) <= 1e-12 * a00 * a02)
         *c1 = 0.0;
     else
         *c1 = (a00 * t1 - a01 * t0) / det;
