@@ -60,6 +60,14 @@ def wrap_angle(angle):
     return wrapped if wrapped < TWO_PI else 0.0
 
 
+def _hermite_basis(t):
+    """Cubic Hermite basis h00, h10, h01, h11 at t in [0, 1] (floats or arrays)."""
+    t2 = t * t
+    t3 = t2 * t
+    h01 = t2 * (3.0 - 2.0 * t)
+    return 1.0 - h01, t - 2.0 * t2 + t3, h01, t3 - t2
+
+
 def _wrap_pi(angle):
     """Angle wrapped to [-pi, pi)."""
     return (angle + math.pi) % TWO_PI - math.pi
@@ -280,6 +288,19 @@ class CrankRateFilter:
                 self.speed = c1 / self.time_constant_s
                 self.accel = 2.0 * c2 / self.time_constant_s ** 2
         return wrap_angle(self._angle), self.speed, self.accel
+
+    def signal(self, times, angles, speeds=None):
+        """update() over arrays: rows of (wrapped angle, speed, accel, advance).
+
+        ``speeds`` None, or per sample a speed or NaN where there is none.
+        """
+        speeds = [None] * len(times) if speeds is None else np.asarray(speeds).tolist()
+        motion = np.empty((len(times), 4))
+        for n, (time_s, angle, speed) in enumerate(zip(np.asarray(times).tolist(),
+                                                       np.asarray(angles).tolist(), speeds)):
+            motion[n, :3] = self.update(time_s, angle, speed)
+            motion[n, 3] = self.advance
+        return motion
 
 
 # The compiled filter's state (core/_radau_step.c, enum F_*): started, time, unwrapped angle,
@@ -703,8 +724,7 @@ class StreamingEstimator:
         t = x - k
         t2 = t * t
         t3 = t2 * t
-        h01 = t2 * (3.0 - 2.0 * t)
-        h00, h10, h11 = 1.0 - h01, t - 2.0 * t2 + t3, t3 - t2
+        h00, h10, h01, h11 = _hermite_basis(t)
         w, a = speed, accel
         w2 = w * w
         # Order of reduced.MONOMIALS: a, 1, w2, w, w4, wa, w3.
@@ -793,9 +813,7 @@ class StreamingEstimator:
         model, tables, r = self.model, self._tables, self.model.size
         theta = np.asarray(theta, dtype=float)
         cells, t = model.cell(theta)
-        t2 = t * t
-        h01 = t2 * (3.0 - 2.0 * t)
-        basis = np.stack([1.0 - h01, t - 2.0 * t2 + t2 * t, h01, t2 * t - t2], axis=-1)
+        basis = np.stack(_hermite_basis(t), axis=-1)
         monomials = np.stack(np.broadcast_arrays(*reduced.monomial_values(
             np.full(theta.size, float(w)), np.full(theta.size, float(a)))), axis=-1)
         # (angle, monomial, node k / k + 1, V / S)
@@ -1050,21 +1068,6 @@ class StreamingEstimator:
         return self.model.shapes(sample.crank_angle, np.array(sample.modal))
 
 
-def _crank_motion(times, angles, speeds, time_constant_s):
-    """
-    CrankRateFilter.update over a whole signal: (wrapped angle, speed, accel, advance) rows.
-
-    Replay's numpy path (the compiled one runs CompiledCrankRateFilter.signal, the same
-    doubles); ``speeds`` None, or per sample a speed or None/NaN where there is none.
-    """
-    rate_filter = CrankRateFilter(time_constant_s)
-    motion = np.empty((len(times), 4))
-    for n, (time_s, angle) in enumerate(zip(times, angles)):
-        motion[n, :3] = rate_filter.update(time_s, angle, None if speeds is None else speeds[n])
-        motion[n, 3] = rate_filter.advance
-    return motion
-
-
 def replay(model, stamps_ns, angles, speeds=None,
            fit_time_constant_s=DEFAULT_FIT_TIME_CONSTANT_S, warm_start=True,
            accel_limit=DEFAULT_ACCEL_LIMIT, compiled=True, orbit=None, on_rows=None,
@@ -1122,11 +1125,8 @@ def replay(model, stamps_ns, angles, speeds=None,
                                    accel_limit=accel_limit, compiled=compiled,
                                    step_tables=tables)
     estimator._orbit = orbit
-    if estimator.compiled:
-        motion = CompiledCrankRateFilter(fit_time_constant_s).signal(times, angles, speeds)
-    else:
-        motion = _crank_motion(times.tolist(), angles.tolist(),
-                               None if speeds is None else speeds.tolist(), fit_time_constant_s)
+    # A fresh filter of the estimator's kind (compiled or not) over the whole signal.
+    motion = type(estimator.rate_filter)(fit_time_constant_s).signal(times, angles, speeds)
     wrapped, speed, accel, advance = motion.T
     model_speed = np.clip(speed, -model.speed_max, model.speed_max)
     model_accel = np.clip(accel, -accel_limit, accel_limit)
