@@ -49,3 +49,16 @@ class CacheError(FlexlinkError):
 
 class RecorderError(FlexlinkError):
     """Raised if the MCAP recorder cannot write (unwritable path, full disk, closed file)."""
+
+
+class OutlierSample(FlexlinkError):
+    """
+    Raised for an input sample the crank cannot have produced (counted and skipped).
+
+    A speed beyond the mechanism's plausible range, or a change of speed or angle the crank
+    cannot make in the sample interval. ``reason`` is one line naming the test it failed.
+    """
+
+    def __init__(self, reason):
+        self.reason = reason
+        super().__init__(f'outlier: {reason}')

@@ -418,6 +418,9 @@ class SampleFlag(enum.IntFlag):
     REPEATED = 32        # same stamp and angle again: previous estimate returned
     SPEED_FROM_ANGLE = 64  # no measured speed: differentiated from angles
     NO_CRITERIA = 128    # the model has no joint-reaction data: criteria are zero
+    OUTLIER = 256        # an implausible input sample was skipped before this one
+    OUT_OF_BOUND = 512   # deflection beyond the model's bound: not a number to publish; reset
+    COLD_START = 1024    # warm start skipped (rate limit of warm starts): static start
 
 
 # Node of the first Radau IIA stage (2 stages).
