@@ -1,35 +1,28 @@
 """
 MCAP subcommands: ``mcap-info``, ``mcap-recover`` and ``mcap-record``.
 
-- ``flexlink mcap-info FILE|BAG_DIR [--json]``: topics, types, counts, time range, whether the
-  file is complete (has its summary).
-- ``flexlink mcap-recover IN.mcap --out OUT.mcap [--json]``: read a truncated file (a recorder
-  killed with SIGKILL, a full disk) record by record, keep every complete chunk and message,
-  and write a proper file with summary and statistics.
+- ``flexlink mcap-info FILE|BAG_DIR [--json]``: topics, types, counts, time range, and whether
+  the file is complete, checked: every chunk is decompressed (bounded) and CRC-checked, and
+  damaged chunks are listed with their offsets rather than trusting the summary.
+- ``flexlink mcap-recover IN.mcap --out OUT.mcap [--json]``: read a truncated or damaged file
+  (a recorder killed with SIGKILL, a full disk, a bad sector) record by record, keep every
+  intact chunk and message, skipping damaged chunks, and write a proper file with summary
+  and statistics. Bounds and salvage rules: :mod:`flexlink_ros.mcap_salvage`.
 - ``flexlink mcap-record BAG --topic NAME[:TYPE] ...``: record topics from the ROS graph as
   rosbag2 does (raw CDR, offered QoS, receive and send times), for machines without rosbag2.
 """
 
-import io
 import math
-import os
 import pathlib
-import struct
 import time
 
-from mcap.data_stream import ReadDataStream
-from mcap.exceptions import McapError
-from mcap.opcode import Opcode
-from mcap.reader import make_reader
-from mcap.records import Channel, Chunk, Header, Message, Schema
-from mcap.stream_reader import MAGIC_SIZE, breakup_chunk
 from mcap.writer import LIBRARY_IDENTIFIER, Writer
 
 from .cli import emit
 from .core.errors import RecorderError
+from .mcap_salvage import (_MESSAGE_HEAD, MCAP_MAGIC, MESSAGE_HEAD_SIZE, Salvage,  # noqa: F401
+                           iter_messages, map_file)
 
-MCAP_MAGIC = b'\x89MCAP0\r\n'
-RECORD_PREFIX_SIZE = 9  # opcode (1) + length (8)
 RECOVER_LIBRARY = f'flexlink mcap-recover; {LIBRARY_IDENTIFIER}'
 
 
@@ -66,7 +59,10 @@ def register(subparsers):
 
 def mcap_info(path):
     """
-    Describe an MCAP file, or every MCAP file of a bag directory.
+    Describe an MCAP file, or every MCAP file of a bag directory, from what is readable.
+
+    Every chunk is decompressed (bounded) and its CRC and records checked; the counts are
+    those of the intact chunks, not the summary's.
 
     Parameters
     ----------
@@ -75,72 +71,92 @@ def mcap_info(path):
     Returns
     -------
     dict
-        For a file: ``path``, ``profile``, ``library``, ``complete`` (summary present),
-        ``message_count``, ``start_ns``, ``end_ns``, ``duration_s``, ``chunk_count``,
-        ``topics`` (list of dicts: ``topic``, ``type``, ``encoding``, ``count``). For a
-        directory: ``files`` (those dicts) and the totals.
+        For a file: ``path``, ``profile``, ``library``, ``complete`` (summary present, every
+        chunk intact, counts as the summary says), ``status`` (one line: ``complete``,
+        ``damaged: N chunks (offsets ...)`` or ``incomplete: ...``), ``damaged`` (list of
+        ``offset``, ``reason``), ``damaged_count``, ``message_count``, ``start_ns``,
+        ``end_ns``, ``duration_s``, ``chunk_count`` (intact chunks), ``topics`` (list of
+        dicts: ``topic``, ``type``, ``encoding``, ``count``). For a directory: ``files``
+        (those dicts) and the totals.
 
     """
     path = pathlib.Path(path)
     if path.is_dir():
-        files = [mcap_info(p) for p in sorted(path.glob('*.mcap'))]
-        if not files:
-            raise ValueError(f'`path`: no .mcap files in {path}')
-        topics = {}
-        for entry in files:
-            for topic in entry['topics']:
-                merged = topics.setdefault(topic['topic'], dict(topic, count=0))
-                merged['count'] += topic['count']
-        starts = [f['start_ns'] for f in files if f['message_count']]
-        ends = [f['end_ns'] for f in files if f['message_count']]
-        return {'path': str(path), 'files': files,
-                'complete': all(f['complete'] for f in files),
-                'message_count': sum(f['message_count'] for f in files),
-                'start_ns': min(starts) if starts else None,
-                'end_ns': max(ends) if ends else None,
-                'duration_s': (max(ends) - min(starts)) / 1e9 if starts else 0.0,
-                'topics': sorted(topics.values(), key=lambda t: t['topic'])}
-    summary = None
-    with open(path, 'rb') as stream:
-        if stream.read(MAGIC_SIZE) != MCAP_MAGIC:
-            raise ValueError(f'{path} is not an MCAP file (bad magic)')
-        stream.seek(0)
-        try:
-            reader = make_reader(stream)
-            header = reader.get_header()
-            summary = reader.get_summary()
-        except (McapError, struct.error, ValueError, OSError):
-            header = None
-    if summary is not None and summary.statistics is not None:
-        stats = summary.statistics
-        schemas = summary.schemas
-        topics = [{'topic': channel.topic,
-                   'type': schemas[channel.schema_id].name if channel.schema_id in schemas else '',
-                   'encoding': channel.message_encoding,
-                   'count': stats.channel_message_counts.get(channel.id, 0)}
-                  for channel in summary.channels.values()]
-        count, start, end = stats.message_count, stats.message_start_time, stats.message_end_time
-        chunks, complete = stats.chunk_count, True
-    else:
-        scan = scan_mcap(path)
-        header = scan['header']
-        topics, count = scan['topics'], scan['message_count']
-        start, end, chunks, complete = scan['start_ns'], scan['end_ns'], scan['chunk_count'], False
-    return {'path': str(path), 'profile': header.profile if header else None,
-            'library': header.library if header else None, 'complete': complete,
+        return _directory_info(path)
+    scan = _stream_copy(path, None)
+    summary = scan['summary']
+    count, start, end = scan['message_count'], scan['start_ns'], scan['end_ns']
+    complete = (summary is not None and scan['end_reason'] == 'complete'
+                and not scan['damaged_count']
+                and summary.get('message_count', count) == count)
+    header = scan['header']
+    return {'path': str(path), 'profile': header[0] if header else None,
+            'library': header[1] if header else None, 'complete': complete,
+            'status': _status(scan, complete), 'damaged': scan['damaged'],
+            'damaged_count': scan['damaged_count'],
+            'summary_message_count': summary.get('message_count') if summary else None,
             'message_count': count, 'start_ns': start if count else None,
             'end_ns': end if count else None,
-            'duration_s': (end - start) / 1e9 if count else 0.0, 'chunk_count': chunks,
-            'topics': sorted(topics, key=lambda t: t['topic'])}
+            'duration_s': (end - start) / 1e9 if count else 0.0,
+            'chunk_count': scan['chunk_count'],
+            'topics': sorted(scan['topics'], key=lambda t: t['topic'])}
+
+
+def _status(scan, complete):
+    if complete:
+        return 'complete'
+    if scan['damaged_count']:
+        offsets = ', '.join(str(d['offset']) for d in scan['damaged'][:10])
+        more = ', ...' if scan['damaged_count'] > 10 else ''
+        return f"damaged: {scan['damaged_count']} chunks (offsets {offsets}{more})"
+    summary = scan['summary']
+    if summary is None:
+        return f"incomplete: no summary ({scan['end_reason']})"
+    if scan['end_reason'] != 'complete':
+        return f"incomplete: {scan['end_reason']}"
+    return (f"damaged: the summary counts {summary.get('message_count')} messages, "
+            f"{scan['message_count']} are readable")
+
+
+def _directory_info(path):
+    files = [mcap_info(p) for p in sorted(path.glob('*.mcap'))]
+    if not files:
+        raise ValueError(f'`path`: no .mcap files in {path}')
+    topics = {}
+    for entry in files:
+        for topic in entry['topics']:
+            merged = topics.setdefault(topic['topic'], dict(topic, count=0))
+            merged['count'] += topic['count']
+    starts = [f['start_ns'] for f in files if f['message_count']]
+    ends = [f['end_ns'] for f in files if f['message_count']]
+    complete = all(f['complete'] for f in files)
+    damaged = sum(f['damaged_count'] for f in files)
+    return {'path': str(path), 'files': files, 'complete': complete,
+            'status': 'complete' if complete else (
+                f'damaged: {damaged} chunks' if damaged else 'incomplete'),
+            'damaged_count': damaged,
+            'message_count': sum(f['message_count'] for f in files),
+            'start_ns': min(starts) if starts else None,
+            'end_ns': max(ends) if ends else None,
+            'duration_s': (max(ends) - min(starts)) / 1e9 if starts else 0.0,
+            'topics': sorted(topics.values(), key=lambda t: t['topic'])}
 
 
 def _info_text(info):
+    state = '' if info['complete'] else f"  ({info['status'].upper()}; run mcap-recover)"
     lines = [f"{info['path']}: {info['message_count']} messages over "
-             f"{info['duration_s']:.3f} s" + ('' if info['complete'] else
-                                             '  (INCOMPLETE: no summary; run mcap-recover)')]
+             f"{info['duration_s']:.3f} s{state}"]
+    lines += _damage_lines(info.get('damaged', []), info.get('damaged_count', 0))
     for topic in info['topics']:
         lines.append(f"  {topic['topic']:<32} {topic['type']:<40} {topic['count']:>9}")
     return '\n'.join(lines)
+
+
+def _damage_lines(damaged, count, shown=5):
+    lines = [f"  skipped at offset {d['offset']}: {d['reason']}" for d in damaged[:shown]]
+    if count > shown:
+        lines.append(f'  ... and {count - shown} more damaged places')
+    return lines
 
 
 def _info_command(args):
@@ -150,65 +166,9 @@ def _info_command(args):
 
 # -- mcap-recover ---------------------------------------------------------------------------
 
-def iter_complete_records(stream, size):
-    """
-    Yield the schemas, channels and messages of an MCAP stream up to its first damaged record.
-
-    Parameters
-    ----------
-    stream : binary file object positioned at the start
-    size : int
-        Total byte count of the stream.
-
-    Yields
-    ------
-    Header, Schema, Channel or Message, or the tuple ``('end', reason, offset)`` last.
-
-    """
-    if stream.read(MAGIC_SIZE) != MCAP_MAGIC:
-        yield ('end', 'not an MCAP file (bad magic)', 0)
-        return
-    offset = MAGIC_SIZE
-    while True:
-        prefix = stream.read(RECORD_PREFIX_SIZE)
-        if len(prefix) < RECORD_PREFIX_SIZE:
-            yield ('end', 'truncated' if prefix else 'end of file without footer', offset)
-            return
-        opcode, length = struct.unpack('<BQ', prefix)
-        if offset + RECORD_PREFIX_SIZE + length > size:
-            yield ('end', f'truncated inside a {_opcode_name(opcode)} record', offset)
-            return
-        record_stream = ReadDataStream(io.BytesIO(stream.read(length)))
-        try:
-            if opcode == Opcode.HEADER:
-                yield Header.read(record_stream)
-            elif opcode == Opcode.SCHEMA:
-                yield Schema.read(record_stream)
-            elif opcode == Opcode.CHANNEL:
-                yield Channel.read(record_stream)
-            elif opcode == Opcode.MESSAGE:
-                yield Message.read(record_stream, length)
-            elif opcode == Opcode.CHUNK:
-                yield from breakup_chunk(Chunk.read(record_stream), validate_crc=True)
-            elif opcode in (Opcode.DATA_END, Opcode.FOOTER):
-                yield ('end', 'complete', offset)
-                return
-        except Exception as exc:  # noqa: B902 - any decoding failure ends the readable part
-            yield ('end', f'damaged {_opcode_name(opcode)} record ({exc})', offset)
-            return
-        offset += RECORD_PREFIX_SIZE + length
-
-
-def _opcode_name(opcode):
-    try:
-        return Opcode(opcode).name
-    except ValueError:
-        return f'opcode {opcode:#x}'
-
-
 def scan_mcap(path):
     """
-    Count what a (possibly truncated) MCAP file holds by streaming it.
+    Count what a (possibly truncated or damaged) MCAP file holds by reading every chunk.
 
     Parameters
     ----------
@@ -217,8 +177,11 @@ def scan_mcap(path):
     Returns
     -------
     dict
-        ``header``, ``topics``, ``message_count``, ``start_ns``, ``end_ns``, ``chunk_count``
-        (always 0: chunks are not counted when streaming), ``end_reason``, ``readable_bytes``.
+        ``header`` ((profile, library) or None), ``topics``, ``message_count``, ``start_ns``,
+        ``end_ns``, ``chunk_count`` (intact chunks), ``damaged`` (list of ``offset``,
+        ``reason``), ``damaged_count``, ``unknown_channel_messages``, ``summary`` (message and
+        chunk counts of an intact summary, or None), ``end_reason``, ``readable_bytes``,
+        ``source_bytes``.
 
     """
     return _stream_copy(path, None)
@@ -226,7 +189,10 @@ def scan_mcap(path):
 
 def recover_mcap(source, destination):
     """
-    Rewrite every complete message of a (truncated) MCAP file into a complete MCAP file.
+    Rewrite every intact message of a truncated or damaged MCAP file into a complete file.
+
+    Damaged chunks are skipped (``damaged`` says where and why) and reading goes on after
+    them; a file cut short ends at its last complete chunk.
 
     Parameters
     ----------
@@ -235,81 +201,105 @@ def recover_mcap(source, destination):
     Returns
     -------
     dict
-        ``message_count``, ``topics`` (list: topic, type, encoding, count), ``start_ns``,
-        ``end_ns``, ``end_reason`` (why reading stopped), ``readable_bytes`` and
-        ``source_bytes``.
+        As :func:`scan_mcap`, plus ``output``.
 
     """
     if pathlib.Path(source).resolve() == pathlib.Path(destination).resolve():
         raise ValueError('`--out` must differ from the input file')
     with open(destination, 'wb') as out:
-        writer = Writer(out)
-        result = _stream_copy(source, writer)
-        writer.finish()
+        copier = _Copier(Writer(out))
+        result = _stream_copy(source, copier)
+        copier.finish(result['header'])
+    if result['header'] is None and not result['message_count']:
+        raise RecorderError(f"{source}: nothing readable ({result['end_reason']})")
     result['output'] = str(destination)
     return result
 
 
-def _stream_copy(source, writer):
-    size = os.path.getsize(source)
-    schemas, channels, schema_map, channel_map, counts = {}, {}, {}, {}, {}
-    header, count, start, end = None, 0, None, None
-    reason, readable = 'empty', 0
-    with open(source, 'rb') as stream:
-        for record in iter_complete_records(stream, size):
-            if isinstance(record, tuple):
-                _, reason, readable = record
-            elif isinstance(record, Header):
-                header = record
-                if writer is not None:
-                    writer.start(profile=header.profile, library=RECOVER_LIBRARY)
-            elif isinstance(record, Schema):
-                schemas[record.id] = record
-            elif isinstance(record, Channel):
-                channels[record.id] = record
-            elif isinstance(record, Message):
-                channel = channels.get(record.channel_id)
-                if channel is None:
-                    continue
-                if writer is not None:
-                    if channel.id not in channel_map:
-                        schema = schemas.get(channel.schema_id)
-                        new_schema = 0
-                        if schema is not None:
-                            if schema.id not in schema_map:
-                                schema_map[schema.id] = writer.register_schema(
-                                    schema.name, schema.encoding, schema.data)
-                            new_schema = schema_map[schema.id]
-                        channel_map[channel.id] = writer.register_channel(
-                            channel.topic, channel.message_encoding, new_schema,
-                            dict(channel.metadata))
-                    writer.add_message(channel_map[channel.id], record.log_time, record.data,
-                                       record.publish_time, record.sequence)
-                counts[channel.id] = counts.get(channel.id, 0) + 1
-                count += 1
-                start = record.log_time if start is None else min(start, record.log_time)
-                end = record.log_time if end is None else max(end, record.log_time)
-    if header is None and writer is not None:
-        raise RecorderError(f'{source}: no MCAP header could be read ({reason})')
+class _Copier:
+    """Writes salvaged messages with their schemas and channels into a new MCAP writer."""
+
+    def __init__(self, writer):
+        self.writer = writer
+        self.started = False
+        self.schema_ids, self.channel_ids = {}, {}
+
+    def start(self, header):
+        if not self.started:
+            self.writer.start(profile=header[0] if header else '', library=RECOVER_LIBRARY)
+            self.started = True
+
+    def add(self, salvage, channel, sequence, log_time, publish_time, data):
+        self.start((salvage.profile, salvage.library) if salvage.profile is not None else None)
+        key = (channel.id, channel.topic, channel.schema_id)
+        if key not in self.channel_ids:
+            schema = salvage.schemas.get(channel.schema_id)
+            new_schema = 0
+            if schema is not None:
+                schema_key = (schema.id, schema.name)
+                if schema_key not in self.schema_ids:
+                    self.schema_ids[schema_key] = self.writer.register_schema(
+                        schema.name, schema.encoding, schema.data)
+                new_schema = self.schema_ids[schema_key]
+            self.channel_ids[key] = self.writer.register_channel(
+                channel.topic, channel.message_encoding, new_schema, dict(channel.metadata))
+        self.writer.add_message(self.channel_ids[key], log_time, data, publish_time, sequence)
+
+    def finish(self, header):
+        self.start(header)
+        self.writer.finish()
+
+
+def _stream_copy(source, copier):
+    salvage = Salvage()
+    counts, count, start, end, unknown = {}, 0, None, None, 0
+    buffer = map_file(source)
+    try:
+        for records, body, stop in iter_messages(buffer, salvage):
+            channel_id, sequence, log_time, publish_time = _MESSAGE_HEAD.unpack_from(
+                records, body)
+            channel = salvage.channels.get(channel_id)
+            if channel is None:
+                unknown += 1
+                continue
+            if copier is not None:
+                copier.add(salvage, channel, sequence, log_time, publish_time,
+                           bytes(records[body + MESSAGE_HEAD_SIZE:stop]))
+            counts[channel_id] = counts.get(channel_id, 0) + 1
+            count += 1
+            start = log_time if start is None or log_time < start else start
+            end = log_time if end is None or log_time > end else end
+    finally:
+        buffer.close()
     topics = []
-    for channel_id, channel in channels.items():
-        schema = schemas.get(channel.schema_id)
+    for channel_id, number in counts.items():
+        channel = salvage.channels[channel_id]
+        schema = salvage.schemas.get(channel.schema_id)
         topics.append({'topic': channel.topic, 'type': schema.name if schema else '',
-                       'encoding': channel.message_encoding,
-                       'count': counts.get(channel_id, 0)})
-    return {'header': header, 'topics': topics, 'message_count': count, 'start_ns': start,
-            'end_ns': end, 'chunk_count': 0, 'end_reason': reason, 'readable_bytes': readable,
-            'source_bytes': size}
+                       'encoding': channel.message_encoding, 'count': number})
+    return {'header': (salvage.profile, salvage.library) if salvage.profile is not None
+            else None, 'topics': topics, 'message_count': count, 'start_ns': start,
+            'end_ns': end, 'chunk_count': salvage.chunk_count,
+            'damaged': [{'offset': o, 'reason': r} for o, r in salvage.damaged],
+            'damaged_count': salvage.damaged_count, 'unknown_channel_messages': unknown,
+            'summary': salvage.summary, 'end_reason': salvage.end_reason,
+            'readable_bytes': salvage.readable_bytes, 'source_bytes': salvage.size}
 
 
 def _recover_command(args):
     result = recover_mcap(args.input, args.out)
-    result.pop('header', None)
-    result.pop('chunk_count', None)
+    for key in ('header', 'chunk_count', 'summary'):
+        result.pop(key, None)
     span = (result['end_ns'] - result['start_ns']) / 1e9 if result['message_count'] else 0.0
     lines = [f"recovered {result['message_count']} messages ({span:.3f} s) from "
              f"{args.input} into {args.out}; input ended: {result['end_reason']} "
              f"after {result['readable_bytes']} of {result['source_bytes']} bytes"]
+    if result['damaged_count']:
+        lines.append(f"  skipped {result['damaged_count']} damaged chunks")
+    lines += _damage_lines(result['damaged'], result['damaged_count'])
+    if result['unknown_channel_messages']:
+        lines.append(f"  dropped {result['unknown_channel_messages']} messages of channels "
+                     'whose definition was lost')
     lines += [f"  {t['topic']:<32} {t['type']:<40} {t['count']:>9}" for t in result['topics']]
     return emit(result, '\n'.join(lines), args.json)
 

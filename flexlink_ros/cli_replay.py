@@ -20,17 +20,17 @@ import struct
 import sys
 import threading
 import time
-import zlib
 
 import numpy as np
 
 from .cli import emit
 from .cli_estimate import _common, load_model, model_options
 from .cdr import parse_joint_state
-from .cli_mcap import MCAP_MAGIC, iter_complete_records
 from .core import estimator as core_estimator
 from .core.mechanism import load_mechanism
 from .core.reduced import JOINTS
+from .mcap_salvage import (MESSAGE_HEAD_SIZE, McapFileError, Salvage, iter_messages, map_file,
+                           message_fields)
 
 JOINT_STATE = 'sensor_msgs/msg/JointState'
 VECTOR3_STAMPED = 'geometry_msgs/msg/Vector3Stamped'
@@ -54,9 +54,11 @@ def recording_files(path):
     return [path]
 
 
-def iter_recording(path, topics=None):
+def iter_recording(path, topics=None, damaged=None):
     """
     Messages of a recording, file by file in file order, including truncated files.
+
+    Damaged chunks are skipped (:mod:`mcap_salvage`); a file that is not MCAP is skipped.
 
     Parameters
     ----------
@@ -64,6 +66,8 @@ def iter_recording(path, topics=None):
         ``.mcap`` file or bag directory.
     topics : collection of str or None
         Only these topics (None: all).
+    damaged : list, optional
+        Receives (file, offset, reason) of every skipped file, chunk or record.
 
     Yields
     ------
@@ -71,46 +75,53 @@ def iter_recording(path, topics=None):
 
     """
     for file in recording_files(path):
-        schemas, channels = {}, {}
-        with open(file, 'rb') as stream:
-            size = file.stat().st_size
-            for record in iter_complete_records(stream, size):
-                kind = type(record).__name__
-                if kind == 'Schema':
-                    schemas[record.id] = record.name
-                elif kind == 'Channel':
-                    channels[record.id] = (record.topic, schemas.get(record.schema_id, ''),
-                                           record.message_encoding)
-                elif kind == 'Message':
-                    topic, type_name, encoding = channels.get(record.channel_id,
-                                                              (None, None, None))
-                    if topic is None or (topics is not None and topic not in topics):
-                        continue
-                    if encoding != 'cdr':
-                        continue
-                    yield topic, type_name, record.log_time, record.publish_time, record.data
+        salvage = Salvage()
+        buffer = _map_or_report(file, damaged)
+        if buffer is None:
+            continue
+        try:
+            for records, body, stop in iter_messages(buffer, salvage):
+                channel_id, _, log_time, publish_time, data = message_fields(records, body, stop)
+                channel = salvage.channels.get(channel_id)
+                if channel is None or channel.message_encoding != 'cdr':
+                    continue
+                if topics is not None and channel.topic not in topics:
+                    continue
+                schema = salvage.schemas.get(channel.schema_id)
+                yield (channel.topic, schema.name if schema else '', log_time, publish_time,
+                       data)
+        finally:
+            buffer.close()
+            _report(file, salvage, damaged)
 
 
-_MESSAGE, _CHANNEL, _SCHEMA, _CHUNK = 0x05, 0x04, 0x03, 0x06
-_DATA_END, _FOOTER = 0x0F, 0x02
-_PREFIX = struct.Struct('<BQ')
-_MESSAGE_HEAD = struct.Struct('<BQHIQQ')   # opcode, length, channel, sequence, log, publish
-_CHUNK_HEAD = struct.Struct('<QQQII')      # start, end, uncompressed size, crc, name length
+# A channel of the wanted type is probed for the crank joint in at most this many messages.
+JOINT_PROBE_MESSAGES = 1000
 
 
-def _mcap_string(data, offset):
-    (length,) = struct.unpack_from('<I', data, offset)
-    offset += 4
-    return bytes(data[offset:offset + length]).decode('utf-8'), offset + length
+def _map_or_report(file, damaged):
+    try:
+        return map_file(file)
+    except McapFileError as exc:
+        if damaged is not None:
+            damaged.append((str(file), 0, str(exc)))
+        return None
 
 
-def _file_messages(file, wanted, keep_rest=None):
+def _report(file, salvage, damaged):
+    if damaged is not None:
+        damaged.extend((str(file), offset, reason) for offset, reason in salvage.damaged)
+        hidden = salvage.damaged_count - len(salvage.damaged)
+        if hidden:
+            damaged.append((str(file), None, f'{hidden} more damaged places'))
+
+
+def _file_messages(file, wanted, keep_rest=None, damaged=None):
     """
-    Complete messages of one (possibly truncated) MCAP file, read in one pass.
+    Intact messages of one (possibly truncated or damaged) MCAP file, read in one pass.
 
-    Like ``cli_mcap.iter_complete_records`` (every complete record up to the first damaged
-    one; a chunk is used only whole and with a matching CRC) but parsing only what replay
-    needs, with plain ``struct`` on the file's bytes.
+    Reads with :func:`mcap_salvage.iter_messages` (bounded; damaged chunks skipped and
+    reported in ``damaged``) and keeps only the payloads replay needs.
 
     Parameters
     ----------
@@ -118,7 +129,11 @@ def _file_messages(file, wanted, keep_rest=None):
     wanted : callable
         ``wanted(topic, type_name)``: keep the payloads of this channel's messages.
     keep_rest : callable, optional
-        ``keep_rest(data)`` of a wanted channel's first message: False keeps only that one.
+        ``keep_rest(data)``: the message carries what replay looks for. A wanted channel is
+        kept from its start once one of its first ``JOINT_PROBE_MESSAGES`` messages does;
+        if none does, only those are kept.
+    damaged : list, optional
+        Receives (file, offset, reason) of every skipped file, chunk or record.
 
     Returns
     -------
@@ -128,105 +143,63 @@ def _file_messages(file, wanted, keep_rest=None):
         Topic -> list of (log_time_ns, publish_time_ns, data) of the wanted channels.
 
     """
-    data = file.read_bytes()
-    schemas, channels, counts, kept = {}, {}, {}, {}
-    stored = {}       # channel id -> list of kept messages (wanted channels)
-    if data[:8] != MCAP_MAGIC:
+    counts, kept, states = {}, {}, {}
+    salvage = Salvage()
+    buffer = _map_or_report(file, damaged)
+    if buffer is None:
         return counts, kept
-    prefix_unpack = _PREFIX.unpack_from
-    channel_unpack = struct.Struct('<H').unpack_from
-
-    def records(buffer, start, stop, seen, keep):
-        # Schemas and channels of a run of records, message counts (seen) and the offsets of
-        # the wanted messages (keep); raises if damaged.
-        offset = start
-        while offset < stop:
-            opcode, length = prefix_unpack(buffer, offset)
-            end = offset + 9 + length
-            if end > stop:
-                raise ValueError('record overruns its container')
-            if opcode == _MESSAGE:
-                (channel_id,) = channel_unpack(buffer, offset + 9)
-                seen[channel_id] = seen.get(channel_id, 0) + 1
-                if channel_id in stored:
-                    keep.append((channel_id, offset, end))
-            elif opcode == _CHANNEL:
-                channel_id, schema_id = struct.unpack_from('<HH', buffer, offset + 9)
-                topic, position = _mcap_string(buffer, offset + 13)
-                encoding, _ = _mcap_string(buffer, position)
-                type_name = schemas.get(schema_id, '')
-                stored.pop(channel_id, None)
-                if encoding == 'cdr':
-                    entry = counts.get(topic)
-                    if entry is None:
-                        entry = [type_name, 0]
-                    channels[channel_id] = (topic, entry)
-                    if wanted(topic, type_name):
-                        stored[channel_id] = kept.setdefault(topic, [])
-                else:
-                    channels.pop(channel_id, None)
-            elif opcode == _SCHEMA:
-                (schema_id,) = struct.unpack_from('<H', buffer, offset + 9)
-                schemas[schema_id], _ = _mcap_string(buffer, offset + 11)
-            offset = end
-
-    def commit(buffer, seen, keep):
-        for channel_id, number in seen.items():
-            channel = channels.get(channel_id)
-            if channel is not None:
-                topic, entry = channel
-                if entry[1] == 0:
-                    counts[topic] = entry
-                entry[1] += number
-        head = _MESSAGE_HEAD.unpack_from
-        for channel_id, offset, end in keep:
-            store = stored.get(channel_id)
+    head = struct.Struct('<HIQQ').unpack_from
+    try:
+        for records, body, stop in iter_messages(buffer, salvage):
+            channel_id, _, log_time, publish_time = head(records, body)
+            channel = salvage.channels.get(channel_id)
+            state = states.get(channel_id)
+            if state is None or state[0] is not channel:
+                state = states[channel_id] = _channel_state(channel, salvage, wanted,
+                                                            keep_rest, counts, kept)
+            entry, store = state[1], state[2]
+            if entry is None:
+                continue
+            entry[1] += 1
             if store is None:
                 continue
-            _, _, _, _, log_time, publish_time = head(buffer, offset)
-            store.append((log_time, publish_time, buffer[offset + 31:end]))
-            if len(store) == 1 and keep_rest is not None and not keep_rest(store[0][2]):
-                del stored[channel_id]
-
-    size = len(data)
-    offset = 8
-    while offset + 9 <= size:
-        opcode, length = prefix_unpack(data, offset)
-        end = offset + 9 + length
-        if end > size or opcode in (_DATA_END, _FOOTER):
-            break
-        seen, keep = {}, []
-        try:
-            if opcode == _CHUNK:
-                _, _, raw_size, crc, name_length = _CHUNK_HEAD.unpack_from(data, offset + 9)
-                position = offset + 9 + 32
-                compression = data[position:position + name_length].decode()
-                position += name_length
-                (length,) = struct.unpack_from('<Q', data, position)
-                payload = data[position + 8:position + 8 + length]
-                if compression == 'zstd':
-                    import zstandard
-                    payload = zstandard.decompress(payload, raw_size)
-                elif compression == 'lz4':
-                    import lz4.frame
-                    payload = lz4.frame.decompress(payload)
-                elif compression:
-                    raise ValueError(f'unknown compression {compression!r}')
-                if crc and zlib.crc32(payload) != crc:
-                    raise ValueError('chunk CRC mismatch')
-                # Parse the whole chunk before keeping anything (a damaged chunk adds nothing).
-                records(payload, 0, len(payload), seen, keep)
-                commit(payload, seen, keep)
-            elif opcode in (_MESSAGE, _CHANNEL, _SCHEMA):
-                records(data, offset, end, seen, keep)
-                commit(data, seen, keep)
-        except (ValueError, struct.error, UnicodeDecodeError, ImportError):
-            break
-        offset = end
-    return counts, kept
+            data = records[body + MESSAGE_HEAD_SIZE:stop]
+            store.append((log_time, publish_time, data))
+            if state[3] is not None:     # still probing for the joint
+                if keep_rest(data):
+                    state[3] = None
+                else:
+                    state[3] -= 1
+                    if state[3] == 0:
+                        state[2] = None
+    finally:
+        buffer.close()
+        _report(file, salvage, damaged)
+    return {topic: entry for topic, entry in counts.items() if entry[1]}, kept
 
 
-def scan_recording(path, keep_type=JOINT_STATE, topic=None, joint_name=None):
+def _channel_state(channel, salvage, wanted, keep_rest, counts, kept):
+    # [channel, counts entry (None: not CDR), kept list (None: not kept), probes left].
+    if channel is None or channel.message_encoding != 'cdr':
+        return [channel, None, None, None]
+    schema = salvage.schemas.get(channel.schema_id)
+    type_name = schema.name if schema else ''
+    entry = counts.setdefault(channel.topic, [type_name, 0])
+    if not wanted(channel.topic, type_name):
+        return [channel, entry, None, None]
+    probes = None if keep_rest is None else JOINT_PROBE_MESSAGES
+    return [channel, entry, kept.setdefault(channel.topic, []), probes]
+
+
+def has_joint(data, joint_name):
+    """Whether JointState CDR bytes carry a position for ``joint_name`` (False if malformed)."""
+    try:
+        return parse_joint_state(data, joint_name)[1] is not None
+    except (struct.error, IndexError, ValueError, OverflowError):
+        return False
+
+
+def scan_recording(path, keep_type=JOINT_STATE, topic=None, joint_name=None, damaged=None):
     """
     Topics and the messages of one type of a recording, in one pass over its files.
 
@@ -238,8 +211,10 @@ def scan_recording(path, keep_type=JOINT_STATE, topic=None, joint_name=None):
     topic : str, optional
         ... only of this topic ...
     joint_name : str, optional
-        ... or (no ``topic``) only of topics whose first message has this joint (of the
-        others only the first message).
+        ... or (no ``topic``) only of topics with this joint in one of their first
+        ``JOINT_PROBE_MESSAGES`` messages (of the others only those).
+    damaged : list, optional
+        Receives (file, offset, reason) of every skipped file, chunk or record.
 
     Returns
     -------
@@ -254,18 +229,10 @@ def scan_recording(path, keep_type=JOINT_STATE, topic=None, joint_name=None):
 
     keep_rest = None
     if topic is None and joint_name is not None:
-        name = joint_name.encode()
-
-        def has_joint(data):
-            try:
-                return parse_joint_state(data, name)[1] is not None
-            except (struct.error, IndexError):
-                return False
-        keep_rest = has_joint
-
+        keep_rest = functools.partial(has_joint, joint_name=joint_name.encode())
     counts, kept = {}, {}
     for file in recording_files(path):
-        file_counts, file_kept = _file_messages(file, wanted, keep_rest)
+        file_counts, file_kept = _file_messages(file, wanted, keep_rest, damaged)
         for topic_name, (type_name, count) in file_counts.items():
             counts.setdefault(topic_name, [type_name, 0])[1] += count
         for topic_name, messages in file_kept.items():
@@ -465,10 +432,12 @@ def choose_input_topic(path, joint_name, topic=None, scan=None):
             raise ValueError(f'`--topic` {topic} is {topics[topic][0]}, not {JOINT_STATE}')
         return topic
     candidates = []
+    name_bytes = joint_name.encode()
     for name, (type_name, _) in sorted(topics.items()):
         if type_name != JOINT_STATE or not kept.get(name):
             continue
-        if parse_joint_state(kept[name][0][2], joint_name.encode())[1] is not None:
+        # The joint may first appear after other messages (bounded probe, as scan_recording).
+        if any(has_joint(data, name_bytes) for _, _, data in kept[name][:JOINT_PROBE_MESSAGES]):
             candidates.append(name)
     if not candidates:
         raise ValueError(f'no {JOINT_STATE} topic with joint {joint_name!r} in {path} '
@@ -558,7 +527,10 @@ def _parse_crank_states(payloads, joint_name):
     fast = np.zeros(count, dtype=bool)
     layout = None
     for n, payload in enumerate(payloads[:16]):
-        layout = _joint_state_layout(payload, joint_name)
+        try:
+            layout = _joint_state_layout(payload, joint_name)
+        except (struct.error, IndexError, ValueError, OverflowError):
+            layout = None     # not a JointState after all: read one by one below
         if layout is not None:
             reference = payloads[n]
             break
@@ -587,7 +559,7 @@ def _parse_crank_states(payloads, joint_name):
     for n in np.flatnonzero(~fast).tolist():
         try:
             stamp, angle, speed = parse_joint_state(payloads[n], joint_name)
-        except (struct.error, IndexError):
+        except (struct.error, IndexError, ValueError, OverflowError):
             continue
         if angle is None:
             continue
@@ -617,7 +589,8 @@ def read_crank_samples(path, topic, joint_name, scan=None):
     if not messages:
         empty = np.zeros(0, dtype=np.int64)
         return {'data': [], 'log_ns': empty, 'publish_ns': empty, 'stamps_ns': empty,
-                'angles': np.zeros(0), 'speeds': np.zeros(0), 'skipped': 0}
+                'angles': np.zeros(0), 'speeds': np.zeros(0), 'skipped': 0,
+                'skipped_reasons': {}}
     log_ns, publish_ns, payloads = zip(*messages)
     stamps, angles, speeds, valid, has_speed = _parse_crank_states(payloads,
                                                                    joint_name.encode())
@@ -627,7 +600,33 @@ def read_crank_samples(path, topic, joint_name, scan=None):
             'log_ns': np.array(log_ns, dtype=np.int64)[chosen],
             'publish_ns': np.array(publish_ns, dtype=np.int64)[chosen],
             'stamps_ns': stamps[chosen], 'angles': angles[chosen], 'speeds': speeds[chosen],
-            'skipped': len(payloads) - chosen.size}
+            'skipped': len(payloads) - chosen.size,
+            'skipped_reasons': _skip_reasons(payloads, valid, usable, joint_name.encode())}
+
+
+def _skip_reasons(payloads, valid, usable, joint_name):
+    # Why the unusable messages were skipped, counted: {one-line reason: count}.
+    reasons = {}
+    for n in np.flatnonzero(~usable).tolist():
+        if valid[n]:
+            reason = 'zero stamp or non-finite position or velocity'
+        else:
+            try:
+                parse_joint_state(payloads[n], joint_name)
+                reason = f'no position for joint {joint_name.decode()!r}'
+            except (struct.error, IndexError, ValueError, OverflowError) as exc:
+                reason = f'not a readable JointState ({type(exc).__name__})'
+        reasons[reason] = reasons.get(reason, 0) + 1
+    return reasons
+
+
+def _damage_note(damaged):
+    """' (N damaged places skipped; first: ...)' for an error message, or ''."""
+    if not damaged:
+        return ''
+    file, offset, reason = damaged[0]
+    where = '' if offset is None else f' at offset {offset}'
+    return f' ({len(damaged)} damaged places skipped; first in {file}{where}: {reason})'
 
 
 def output_topics(node_name):
@@ -879,12 +878,19 @@ def run_replay(args):
     """Read, estimate, write and/or publish; returns the JSON-ready summary."""
     notes = []
     start = time.perf_counter()
-    scan = scan_recording(args.input, topic=args.topic, joint_name=args.joint)
-    topic = choose_input_topic(args.input, args.joint, args.topic, scan)
-    samples = read_crank_samples(args.input, topic, args.joint, scan)
+    damaged = []     # (file, offset, reason) of what the reader skipped
+    scan = scan_recording(args.input, topic=args.topic, joint_name=args.joint,
+                          damaged=damaged)
+    try:
+        topic = choose_input_topic(args.input, args.joint, args.topic, scan)
+        samples = read_crank_samples(args.input, topic, args.joint, scan)
+        if not samples['data']:
+            raise ValueError(f'no usable samples of joint {args.joint!r} on {topic}'
+                             + ''.join(f'; {n} {why}'
+                                       for why, n in samples['skipped_reasons'].items()))
+    except ValueError as exc:
+        raise ValueError(f'{exc}{_damage_note(damaged)}') from None
     del scan
-    if not samples['data']:
-        raise ValueError(f'no usable samples of joint {args.joint!r} on {topic}')
     read_s = time.perf_counter() - start
     mechanism = load_mechanism(args.mechanism)
     model, options = load_model_with_fallback(mechanism, model_options(args), args,
@@ -904,7 +910,9 @@ def run_replay(args):
     count = len(samples['data'])
     span_s = (samples['log_ns'][-1] - samples['log_ns'][0]) * 1e-9 if count > 1 else 0.0
     result = {'input': str(args.input), 'topic': topic, 'samples': count,
-              'skipped': samples['skipped'], 'span_s': span_s, 'read_s': read_s,
+              'skipped': samples['skipped'], 'skipped_reasons': samples['skipped_reasons'],
+              'damaged': [{'file': f, 'offset': o, 'reason': r} for f, o, r in damaged],
+              'span_s': span_s, 'read_s': read_s,
               'model': {'size': model.size, 'grid_size': model.grid_size,
                         'options': str(options)}, 'notes': notes}
     if args.out:
@@ -946,6 +954,12 @@ def _replay_command(args):
     lines = [f"{result['input']}: {result['samples']} samples on {result['topic']} "
              f"({result['skipped']} skipped, {result['segments']} segment(s), "
              f"{result['span_s']:.2f} s recorded)"]
+    lines += [f'  skipped {n} messages: {why}' for why, n in result['skipped_reasons'].items()]
+    lines += [f"  skipped damaged data in {d['file']}"
+              + ('' if d['offset'] is None else f" at offset {d['offset']}")
+              + f": {d['reason']}" for d in result['damaged'][:10]]
+    if len(result['damaged']) > 10:
+        lines.append(f"  ... and {len(result['damaged']) - 10} more damaged places")
     lines += [f'  note: {note}' for note in result['notes']]
     lines.append(f"  lever tip peak-to-peak   dx {result['lever_tip_peak_to_peak_um'][0]:10.1f} "
                  f"um  dy {result['lever_tip_peak_to_peak_um'][1]:10.1f} um")
