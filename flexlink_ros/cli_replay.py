@@ -614,8 +614,8 @@ def _skip_reasons(payloads, valid, usable, joint_name):
             try:
                 parse_joint_state(payloads[n], joint_name)
                 reason = f'no position for joint {joint_name.decode()!r}'
-            except (struct.error, IndexError, ValueError, OverflowError) as exc:
-                reason = f'not a readable JointState ({type(exc).__name__})'
+            except (struct.error, IndexError, ValueError, OverflowError):
+                reason = 'not a readable JointState (cut short or malformed)'
         reasons[reason] = reasons.get(reason, 0) + 1
     return reasons
 

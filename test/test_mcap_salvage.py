@@ -1,0 +1,282 @@
+"""Damaged, truncated and crafted MCAP files through mcap-info, mcap-recover and replay's reader."""
+
+import json
+import math
+import random
+import struct
+import subprocess
+import sys
+import zlib
+
+import pytest
+import zstandard
+from mcap.reader import make_reader
+from rclpy.serialization import serialize_message
+from sensor_msgs.msg import JointState
+
+from flexlink_ros import cli, cli_replay, mcap_salvage, ros_messages
+from flexlink_ros.cli_mcap import mcap_info, recover_mcap, scan_mcap
+from flexlink_ros.recorder import McapRecorder
+
+T0_NS = 1_700_000_000_000_000_000
+STEP_NS = 1_000_000
+SPEED = 40.0    # rad/s
+
+
+def crank_state(k, names=('crank',)):
+    message = JointState(name=list(names), position=[0.04 * k] * len(names),
+                         velocity=[SPEED] * len(names))
+    message.header.stamp = ros_messages.ns_to_stamp(T0_NS + k * STEP_NS)
+    message.header.frame_id = 'ground'
+    return bytes(serialize_message(message))
+
+
+def write_crank_recording(path, count, chunk_size_bytes=16384, payload=crank_state):
+    """A real recording: ``count`` JointStates on /joint_states, log time = stamp + 200 us."""
+    with McapRecorder(path, chunk_size_bytes=chunk_size_bytes, flush_thread=False) as recorder:
+        recorder.add_topic('/joint_states', JointState)
+        for k in range(count):
+            recorder.write('/joint_states', payload(k), T0_NS + k * STEP_NS + 200_000)
+    return path
+
+
+def chunks_of(path):
+    """(offset, length, message count) of every chunk, from mcap's own summary reader."""
+    with open(path, 'rb') as stream:
+        summary = make_reader(stream).get_summary()
+        messages = [m.log_time for _, _, m in make_reader(stream).iter_messages()]
+    return [(c.chunk_start_offset, c.chunk_length,
+             sum(c.message_start_time <= t <= c.message_end_time for t in messages))
+            for c in summary.chunk_indexes]
+
+
+def read_messages(path):
+    """(topic, log time, data) of every message, by mcap's reader (for written outputs)."""
+    with open(path, 'rb') as stream:
+        return [(channel.topic, message.log_time, message.data)
+                for _, channel, message in make_reader(stream).iter_messages(
+                    log_time_order=False)]
+
+
+@pytest.fixture(scope='module')
+def recording(tmp_path_factory):
+    path = write_crank_recording(tmp_path_factory.mktemp('rec') / 'crank.mcap', 5000)
+    return path, chunks_of(path), read_messages(path)
+
+
+def damaged_copy(path, tmp_path, edit, name='damaged.mcap'):
+    data = bytearray(path.read_bytes())
+    edit(data)
+    out = tmp_path / name
+    out.write_bytes(bytes(data))
+    return out
+
+
+def test_a_bad_crc_in_the_first_chunk_loses_only_that_chunk(recording, tmp_path, capsys):
+    path, chunks, original = recording
+    assert len(chunks) > 5 and len(original) == 5000
+    first, _, lost = chunks[0]
+    crc_field = first + 9 + 24      # prefix, then start, end, uncompressed size
+
+    def flip_crc(data):
+        data[crc_field] ^= 0x01
+    bad = damaged_copy(path, tmp_path, flip_crc)
+
+    info = mcap_info(bad)
+    assert not info['complete'] and info['status'] == f'damaged: 1 chunks (offsets {first})'
+    assert info['damaged'][0]['reason'].startswith('chunk: CRC mismatch')
+    assert info['message_count'] == 5000 - lost and info['summary_message_count'] == 5000
+    assert mcap_info(path)['status'] == 'complete'
+
+    out = tmp_path / 'recovered.mcap'
+    assert cli.main(['mcap-recover', str(bad), '--out', str(out), '--json']) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result['message_count'] == 5000 - lost
+    assert result['damaged_count'] == 1 and result['damaged'][0]['offset'] == first
+    assert read_messages(out) == original[lost:]        # every message of the intact chunks
+    assert mcap_info(out)['complete']
+
+    damaged = []
+    counts, kept = cli_replay.scan_recording(bad, joint_name='crank', damaged=damaged)
+    assert counts == {'/joint_states': [cli_replay.JOINT_STATE, 5000 - lost]}
+    assert [data for _, _, data in kept['/joint_states']] == [d for _, _, d in original[lost:]]
+    assert [(f, o) for f, o, _ in damaged] == [(str(bad), first)]
+
+
+def test_a_damaged_chunk_length_is_passed_by_finding_the_next_chunk(recording, tmp_path):
+    path, chunks, original = recording
+    offset, _, lost = chunks[2]
+
+    def break_length(data):
+        data[offset + 1:offset + 9] = struct.pack('<Q', 2**62 + 12345)
+    bad = damaged_copy(path, tmp_path, break_length)
+    result = recover_mcap(bad, tmp_path / 'out.mcap')
+    before = sum(c[2] for c in chunks[:2])
+    assert result['message_count'] == 5000 - lost
+    assert read_messages(tmp_path / 'out.mcap') == original[:before] + original[before + lost:]
+    assert result['damaged'][0]['offset'] == offset
+    assert 'does not fit' in result['damaged'][0]['reason']
+
+
+def test_corrupt_zstd_and_a_foreign_payload_do_not_stop_replay(tmp_path):
+    """Replay skips a chunk whose zstd is corrupt and a payload that is not a JointState."""
+    def payload(k):
+        return b'\x00\x01\x00\x00' + b'\xff' * 7 if k == 700 else crank_state(k)
+    path = write_crank_recording(tmp_path / 'rec.mcap', 1500, chunk_size_bytes=4096,
+                                 payload=payload)
+    chunks = chunks_of(path)
+    offset, length, lost = chunks[1]
+
+    def garble(data):
+        # Overwrite the middle of the chunk's zstd data and fix nothing else.
+        middle = offset + length // 2
+        data[middle:middle + 16] = bytes(range(16))
+    bad = damaged_copy(path, tmp_path, garble)
+    out = tmp_path / 'replay.mcap'
+    run = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'replay', str(bad),
+                          '--out', str(out), '--no-geometric-stiffness', '--json',
+                          '--markers-every-n', '0'],
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    assert 'Traceback' not in run.stderr
+    summary = json.loads(run.stdout)
+    assert summary['samples'] == 1500 - lost - 1 and summary['skipped'] == 1
+    assert list(summary['skipped_reasons']) == ['not a readable JointState (cut short or malformed)']
+    assert [d['offset'] for d in summary['damaged']] == [offset]
+    text = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'replay', str(bad),
+                           '--out', str(tmp_path / 'again.mcap'), '--no-geometric-stiffness',
+                           '--markers-every-n', '0'],
+                          capture_output=True, text=True, timeout=300)
+    assert text.returncode == 0
+    assert f'skipped damaged data in {bad} at offset {offset}: chunk:' in text.stdout
+    assert 'skipped 1 messages: not a readable JointState' in text.stdout
+
+
+def test_replay_with_nothing_usable_is_a_one_line_error(tmp_path):
+    path = write_crank_recording(tmp_path / 'rec.mcap', 300, chunk_size_bytes=4096)
+    chunks = chunks_of(path)
+
+    def break_every_crc(data):
+        for offset, _, _ in chunks:
+            data[offset + 9 + 24] ^= 0xff
+    bad = damaged_copy(path, tmp_path, break_every_crc)
+    run = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'replay', str(bad),
+                          '--out', str(tmp_path / 'x.mcap'), '--no-geometric-stiffness'],
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 1 and len(run.stderr.strip().splitlines()) == 1
+    assert f'{len(chunks)} damaged places skipped' in run.stderr
+    assert 'CRC mismatch' in run.stderr
+
+
+def test_joint_detection_looks_past_the_first_messages(tmp_path):
+    """The crank joint first appears in the 50th message of its topic: still found."""
+    def payload(k):
+        return crank_state(k, ('lever',) if k < 49 else ('crank',))
+    path = write_crank_recording(tmp_path / 'rec.mcap', 400, payload=payload)
+    scan = cli_replay.scan_recording(path, joint_name='crank')
+    topic = cli_replay.choose_input_topic(path, 'crank', scan=scan)
+    samples = cli_replay.read_crank_samples(path, topic, 'crank', scan)
+    assert topic == '/joint_states' and len(samples['data']) == 400 - 49
+    assert samples['skipped_reasons'] == {"no position for joint 'crank'": 49}
+    # Beyond the probe the topic is not taken (bounded), with the usual one-line refusal.
+    late = write_crank_recording(
+        tmp_path / 'late.mcap', cli_replay.JOINT_PROBE_MESSAGES + 20,
+        payload=lambda k: crank_state(k, ('lever',) if k < cli_replay.JOINT_PROBE_MESSAGES
+                                      else ('crank',)))
+    scan = cli_replay.scan_recording(late, joint_name='crank')
+    assert len(scan[1]['/joint_states']) == cli_replay.JOINT_PROBE_MESSAGES
+    with pytest.raises(ValueError, match="no sensor_msgs/msg/JointState topic with joint"):
+        cli_replay.choose_input_topic(late, 'crank', scan=scan)
+
+
+# -- decompression bombs -------------------------------------------------------------------
+
+def zstd_zeros(size):
+    """A zstd frame of ``size`` zero bytes (content size in its header), made by streaming."""
+    compressor = zstandard.ZstdCompressor(level=1).compressobj(size=size)
+    block = bytes(1 << 20)
+    parts = [compressor.compress(block) for _ in range(size >> 20)]
+    return b''.join(parts) + compressor.flush()
+
+
+def chunk_record(records_compressed, uncompressed_size, crc=0, compression=b'zstd'):
+    body = struct.pack('<QQQII', T0_NS, T0_NS, uncompressed_size, crc, len(compression)) + \
+        compression + struct.pack('<Q', len(records_compressed)) + records_compressed
+    return struct.pack('<BQ', mcap_salvage.CHUNK, len(body)) + body
+
+
+def bomb_file(tmp_path, name, declared):
+    """A real 50-message recording with a chunk of ``declared`` zeros after its header."""
+    path = write_crank_recording(tmp_path / 'base.mcap', 50)
+    data = path.read_bytes()
+    (header_length,) = struct.unpack_from('<Q', data, 9)
+    cut = 8 + 9 + header_length
+    bomb = chunk_record(zstd_zeros(declared), declared)
+    out = tmp_path / name
+    out.write_bytes(data[:cut] + bomb + data[cut:])
+    return out, cut
+
+
+def peak_rss_of(args):
+    """Exit code, stdout, stderr and peak resident size [MiB] of a child process."""
+    wrapper = ('import resource, subprocess, sys\n'
+               'run = subprocess.run(sys.argv[1:], capture_output=True, text=True)\n'
+               'sys.stdout.write(run.stdout); sys.stderr.write(run.stderr)\n'
+               'print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)\n'
+               'sys.exit(run.returncode)\n')
+    run = subprocess.run([sys.executable, '-c', wrapper, *args], capture_output=True,
+                         text=True, timeout=300)
+    *lines, peak_kib = run.stdout.strip().splitlines()
+    return run.returncode, '\n'.join(lines), run.stderr, int(peak_kib) / 1024
+
+
+@pytest.mark.parametrize('declared, expected_kb', [(3 * 2**29, 49), (2**28, 8)])
+def test_decompression_bombs_are_refused_with_a_bound(tmp_path, declared, expected_kb):
+    path, offset = bomb_file(tmp_path, 'bomb.mcap', declared)
+    bomb_size = len(zstd_zeros(declared))
+    assert abs(bomb_size / 1000 - expected_kb) < 0.3 * expected_kb      # the issue's files
+    flexlink = [sys.executable, '-m', 'flexlink_ros.cli']
+    code, out, err, peak = peak_rss_of(flexlink + ['mcap-info', str(path), '--json'])
+    assert code == 0 and 'Traceback' not in err, err
+    info = json.loads(out)
+    assert info['damaged'][0]['offset'] == offset
+    assert f'declares {declared} bytes uncompressed' in info['damaged'][0]['reason']
+    assert info['message_count'] == 50 and info['status'].startswith('damaged: 1 chunks')
+    assert peak < 200, f'mcap-info peaked at {peak:.0f} MiB'
+
+    recovered = tmp_path / 'recovered.mcap'
+    code, out, err, peak = peak_rss_of(flexlink + ['mcap-recover', str(path), '--out',
+                                                    str(recovered)])
+    assert code == 0 and 'declares' in out and peak < 200, (err, peak)
+    assert len(read_messages(recovered)) == 50
+
+    reader = ('import sys; from flexlink_ros import cli_replay; damaged = []\n'
+              'counts, kept = cli_replay.scan_recording(sys.argv[1], joint_name="crank", '
+              'damaged=damaged)\n'
+              'print(len(kept["/joint_states"]), damaged[0][1], damaged[0][2])\n')
+    code, out, err, peak = peak_rss_of([sys.executable, '-c', reader, str(path)])
+    assert code == 0 and out.startswith(f'50 {offset} chunk: declares'), err
+    assert peak < 200, f"replay's reader peaked at {peak:.0f} MiB"
+
+
+def test_a_bomb_within_the_size_bound_but_beyond_the_ratio_is_refused(tmp_path):
+    declared = 32 * 2**20      # under 64 MiB, but about 3000 times its compressed size
+    frame = zstd_zeros(declared)
+    assert declared > mcap_salvage.MAX_CHUNK_RATIO * len(frame)
+    with pytest.raises(mcap_salvage._Damaged, match='bound'):
+        mcap_salvage.decode_chunk(chunk_record(frame, declared), 9,
+                                  len(chunk_record(frame, declared)))
+    # A frame that claims less than the chunk, or more, is refused before decompressing.
+    noise = random.Random(1).randbytes(2**16)
+    frame = zstandard.ZstdCompressor().compress(noise)
+    for claimed in (2**16 - 1, 2**16 + 1):
+        record = chunk_record(frame, claimed)
+        with pytest.raises(mcap_salvage._Damaged, match='zstd frame declares 65536 bytes'):
+            mcap_salvage.decode_chunk(record, 9, len(record))
+    record = chunk_record(frame, 2**16, zlib.crc32(noise))
+    assert mcap_salvage.decode_chunk(record, 9, len(record)) == noise
+    records = b''.join(bytes([mcap_salvage.MESSAGE]) + struct.pack('<Q', 30) + bytes(30)
+                       for _ in range(10))
+    record = chunk_record(records, len(records), zlib.crc32(records), b'')
+    assert mcap_salvage.decode_chunk(record, 9, len(record)) == records
+    assert math.isclose(mcap_salvage.chunk_bound(10), mcap_salvage.CHUNK_RATIO_FLOOR)
