@@ -143,7 +143,8 @@ def _directory_info(path):
 
 
 def _info_text(info):
-    state = '' if info['complete'] else f"  ({info['status'].upper()}; run mcap-recover)"
+    word, _, detail = info['status'].partition(':')
+    state = '' if info['complete'] else f"  ({word.upper()}:{detail}; run mcap-recover)"
     lines = [f"{info['path']}: {info['message_count']} messages over "
              f"{info['duration_s']:.3f} s{state}"]
     lines += _damage_lines(info.get('damaged', []), info.get('damaged_count', 0))

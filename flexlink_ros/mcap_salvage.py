@@ -10,6 +10,8 @@ what is damaged with a counted, one-line reason; it never allocates beyond state
   size is checked first, since zstandard allocates it without looking at ``max_output_size``),
   then its CRC and every record in it are checked before any of its records is used: a chunk
   is used whole or not at all.
+- At most ``MAX_CHUNK_RATIO`` times the file's size plus ``MAX_CHUNK_BYTES`` is decompressed
+  per file in all (so overlapping candidates met while resynchronising cannot add up).
 - Record lengths are checked against what contains them (the file, the chunk); strings, maps
   and schema data against their record. The file itself is memory-mapped, never read whole.
 
@@ -87,6 +89,7 @@ class Salvage:
     damaged: list = dataclasses.field(default_factory=list)   # (offset, reason)
     damaged_count: int = 0
     summary: dict = None          # 'message_count', 'chunk_count' of an intact summary
+    budget: list = None           # [bytes still to decompress]; set by iter_messages
     end_reason: str = 'empty'
     readable_bytes: int = 0       # offset where reading ended
 
@@ -136,6 +139,7 @@ def iter_messages(buffer, salvage):
 
     """
     size = salvage.size = len(buffer)
+    salvage.budget = [decompression_budget(size)]
     _read_summary(buffer, salvage)
     offset = len(MCAP_MAGIC)
     while True:
@@ -150,7 +154,7 @@ def iter_messages(buffer, salvage):
             salvage.end_reason = 'complete'
             return
         if end > size or (opcode not in KNOWN_OPCODES and opcode < 0x80):
-            resume = find_chunk(buffer, offset + 1)
+            resume = find_chunk(buffer, offset + 1, salvage.budget)
             if resume is None:
                 salvage.end_reason = (f'truncated inside a {opcode_name(opcode)} record '
                                       f'at offset {offset}' if end > size else
@@ -163,7 +167,8 @@ def iter_messages(buffer, salvage):
         try:
             yield from _records(buffer, offset, end, opcode, salvage)
         except _Damaged as exc:
-            resume = end if _plausible_record(buffer, end) else find_chunk(buffer, offset + 1)
+            resume = (end if _plausible_record(buffer, end)
+                      else find_chunk(buffer, offset + 1, salvage.budget))
             where = 'end of file' if resume is None else resume
             salvage.damage(offset, f'{opcode_name(opcode)}: {exc}; skipped to {where}')
             if resume is None:
@@ -176,7 +181,7 @@ def iter_messages(buffer, salvage):
 def _records(buffer, offset, end, opcode, salvage):
     # The messages of one top-level record (a chunk's after checking all of it).
     if opcode == CHUNK:
-        payload = decode_chunk(buffer, offset + _PREFIX.size, end)
+        payload = decode_chunk(buffer, offset + _PREFIX.size, end, salvage.budget)
         records, start, stop = payload, 0, len(payload)
     else:
         records, start, stop = buffer, offset, end
@@ -220,14 +225,21 @@ def message_fields(records, start, end):
         bytes(records[start + MESSAGE_HEAD_SIZE:end]),)
 
 
+def decompression_budget(file_size):
+    """Bytes decompressed per file at most (chunks and resynchronisation candidates together)."""
+    return MAX_CHUNK_RATIO * file_size + MAX_CHUNK_BYTES
+
+
 def chunk_bound(compressed_size):
     """Largest uncompressed size accepted for a chunk of this compressed size [bytes]."""
     return min(MAX_CHUNK_BYTES, max(CHUNK_RATIO_FLOOR, MAX_CHUNK_RATIO * compressed_size))
 
 
-def decode_chunk(buffer, start, end):
+def decode_chunk(buffer, start, end, budget=None):
     """
     The checked, uncompressed records of a chunk record's body ``buffer[start:end]``.
+
+    ``budget``, if given, is ``[bytes]`` still allowed to be decompressed (reduced here).
 
     Raises
     ------
@@ -253,6 +265,11 @@ def decode_chunk(buffer, start, end):
         raise _Damaged(f'declares {raw_size} bytes uncompressed from {length} '
                        f'(bound {bound}: at most {MAX_CHUNK_BYTES >> 20} MiB and '
                        f'{MAX_CHUNK_RATIO}x the compressed size)')
+    if budget is not None and compression and raw_size > budget[0]:
+        raise _Damaged(f'decompression budget of the file exhausted ({budget[0]} bytes left, '
+                       f'{raw_size} declared)')
+    if budget is not None and compression:
+        budget[0] -= raw_size
     data = buffer[position:end]
     if compression == b'':
         payload = data
@@ -304,7 +321,7 @@ def _plausible_record(buffer, offset):
         offset + _PREFIX.size + length <= len(buffer)
 
 
-def find_chunk(buffer, offset):
+def find_chunk(buffer, offset, budget=None):
     """Offset of the next chunk record at or after ``offset`` that decodes with a CRC; or None."""
     size = len(buffer)
     while True:
@@ -313,16 +330,16 @@ def find_chunk(buffer, offset):
             return None
         (length,) = struct.unpack_from('<Q', buffer, offset + 1)
         end = offset + _PREFIX.size + length
-        if end <= size and _chunk_with_crc(buffer, offset + _PREFIX.size, end):
+        if end <= size and _chunk_with_crc(buffer, offset + _PREFIX.size, end, budget):
             return offset
         offset += 1
 
 
-def _chunk_with_crc(buffer, start, end):
+def _chunk_with_crc(buffer, start, end, budget):
     if end - start < _CHUNK_HEAD.size + 8 or _CHUNK_HEAD.unpack_from(buffer, start)[3] == 0:
         return False
     try:
-        decode_chunk(buffer, start, end)
+        decode_chunk(buffer, start, end, budget)
     except _Damaged:
         return False
     return True

@@ -257,6 +257,12 @@ def test_decompression_bombs_are_refused_with_a_bound(tmp_path, declared, expect
     code, out, err, peak = peak_rss_of([sys.executable, '-c', reader, str(path)])
     assert code == 0 and out.startswith(f'50 {offset} chunk: declares'), err
     assert peak < 200, f"replay's reader peaked at {peak:.0f} MiB"
+    run = subprocess.run(flexlink + ['replay', str(path), '--out', str(tmp_path / 'r.mcap'),
+                                     '--no-geometric-stiffness', '--markers-every-n', '0'],
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0 and 'Traceback' not in run.stderr, run.stderr
+    assert run.stdout.startswith(f'{path}: 50 samples on /joint_states')
+    assert f'at offset {offset}: chunk: declares {declared} bytes uncompressed' in run.stdout
 
 
 def test_a_bomb_within_the_size_bound_but_beyond_the_ratio_is_refused(tmp_path):
@@ -280,3 +286,26 @@ def test_a_bomb_within_the_size_bound_but_beyond_the_ratio_is_refused(tmp_path):
     record = chunk_record(records, len(records), zlib.crc32(records), b'')
     assert mcap_salvage.decode_chunk(record, 9, len(record)) == records
     assert math.isclose(mcap_salvage.chunk_bound(10), mcap_salvage.CHUNK_RATIO_FLOOR)
+
+
+def test_overlapping_bomb_candidates_share_one_decompression_budget(tmp_path):
+    """
+    Chunk records nested in each other's data, each claiming the rest of the file and 64 MiB
+    of zeros, behind a broken record: the search for the next chunk stops at the file's
+    decompression budget instead of decompressing 64 MiB per candidate.
+    """
+    frame = zstd_zeros(mcap_salvage.MAX_CHUNK_BYTES)
+    tail = b''
+    for _ in range(100):
+        tail = chunk_record(frame + tail, mcap_salvage.MAX_CHUNK_BYTES, crc=1)
+    broken = struct.pack('<BQ', mcap_salvage.CHUNK, 2**40)
+    buffer = mcap_salvage.MCAP_MAGIC + broken + tail
+    budget = mcap_salvage.decompression_budget(len(buffer))
+    # Candidates whose ratio bound lets them decompress 64 MiB: many more than the budget.
+    eligible = sum(mcap_salvage.chunk_bound(len(buffer) - offset) == mcap_salvage.MAX_CHUNK_BYTES
+                   for offset in range(len(buffer)) if buffer[offset] == mcap_salvage.CHUNK)
+    assert eligible * mcap_salvage.MAX_CHUNK_BYTES > 5 * budget
+    salvage = mcap_salvage.Salvage()
+    assert list(mcap_salvage.iter_messages(buffer, salvage)) == []
+    assert salvage.end_reason == 'truncated inside a chunk record at offset 8'
+    assert 0 <= salvage.budget[0] < mcap_salvage.MAX_CHUNK_BYTES     # spent, not exceeded
