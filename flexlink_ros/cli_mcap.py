@@ -20,8 +20,7 @@ from mcap.writer import LIBRARY_IDENTIFIER, Writer
 
 from .cli import emit
 from .core.errors import RecorderError
-from .mcap_salvage import (_MESSAGE_HEAD, MCAP_MAGIC, MESSAGE_HEAD_SIZE, Salvage,  # noqa: F401
-                           iter_messages, map_file)
+from .mcap_salvage import MESSAGE_HEAD, MESSAGE_HEAD_SIZE, Salvage, iter_messages, map_file
 
 RECOVER_LIBRARY = f'flexlink mcap-recover; {LIBRARY_IDENTIFIER}'
 
@@ -207,11 +206,13 @@ def recover_mcap(source, destination):
     """
     if pathlib.Path(source).resolve() == pathlib.Path(destination).resolve():
         raise ValueError('`--out` must differ from the input file')
+    map_file(source).close()    # not an MCAP file: refused before the output is created
     with open(destination, 'wb') as out:
         copier = _Copier(Writer(out))
         result = _stream_copy(source, copier)
         copier.finish(result['header'])
     if result['header'] is None and not result['message_count']:
+        pathlib.Path(destination).unlink()      # nothing to keep: no empty output either
         raise RecorderError(f"{source}: nothing readable ({result['end_reason']})")
     result['output'] = str(destination)
     return result
@@ -257,7 +258,7 @@ def _stream_copy(source, copier):
     buffer = map_file(source)
     try:
         for records, body, stop in iter_messages(buffer, salvage):
-            channel_id, sequence, log_time, publish_time = _MESSAGE_HEAD.unpack_from(
+            channel_id, sequence, log_time, publish_time = MESSAGE_HEAD.unpack_from(
                 records, body)
             channel = salvage.channels.get(channel_id)
             if channel is None:

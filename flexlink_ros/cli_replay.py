@@ -2,7 +2,8 @@
 `flexlink replay`: recompute deflections and joint criteria offline from a recording.
 
 Reads the crank ``sensor_msgs/JointState`` messages of any rosbag2 MCAP (a bare ``.mcap`` file,
-a bag directory, or a truncated file: every complete chunk is used), runs the estimator over
+a bag directory, or a truncated or damaged file: every intact chunk is used, damaged ones are
+skipped and listed, :mod:`mcap_salvage`), runs the estimator over
 them in batches (:func:`core.estimator.replay`, the same numbers as the streaming node), and
 writes a new MCAP with the input and the node's output topics, each output stamped with its
 input's stamp and logged at the input's log time. ``--publish`` republishes the input with its
@@ -10,7 +11,8 @@ recorded timing for live subscribers (a running flexlink_node, Foxglove, RViz).
 
 Like the node, a sample whose stamp goes back or jumps by more than the estimator's reset gap
 starts a new segment (the state restarts), an exactly repeated sample repeats the previous
-output, and messages without the crank joint or with a non-finite value are skipped.
+output, and messages without the crank joint, with a non-finite value or that are not a
+readable JointState are skipped and counted by reason.
 """
 
 import functools

@@ -39,14 +39,17 @@ MAX_DAMAGE_REPORTED = 1000  # damaged places listed per file (all are counted)
 
 HEADER, FOOTER, SCHEMA, CHANNEL, MESSAGE, CHUNK = 0x01, 0x02, 0x03, 0x04, 0x05, 0x06
 STATISTICS, DATA_END = 0x0B, 0x0F
+MESSAGE_INDEX = 0x07
 KNOWN_OPCODES = frozenset(range(0x01, 0x10))  # 0x80-0xff are user records, skipped by length
+# What the data section holds (the rest belongs to the summary; anything else there is damage).
+DATA_OPCODES = frozenset((HEADER, SCHEMA, CHANNEL, MESSAGE, CHUNK, MESSAGE_INDEX, 0x09, 0x0C))
 _PREFIX = struct.Struct('<BQ')
 _CHUNK_HEAD = struct.Struct('<QQQII')  # start, end, uncompressed size, crc, name length
-_MESSAGE_HEAD = struct.Struct('<HIQQ')  # channel id, sequence, log time, publish time
-MESSAGE_HEAD_SIZE = _MESSAGE_HEAD.size
+MESSAGE_HEAD = struct.Struct('<HIQQ')  # channel id, sequence, log time, publish time
+MESSAGE_HEAD_SIZE = MESSAGE_HEAD.size
 OPCODE_NAMES = {HEADER: 'header', FOOTER: 'footer', SCHEMA: 'schema', CHANNEL: 'channel',
-                MESSAGE: 'message', CHUNK: 'chunk', 0x07: 'message index', 0x08: 'chunk index',
-                0x09: 'attachment', 0x0A: 'attachment index', STATISTICS: 'statistics',
+                MESSAGE: 'message', CHUNK: 'chunk', MESSAGE_INDEX: 'message index',
+                0x08: 'chunk index',                0x09: 'attachment', 0x0A: 'attachment index', STATISTICS: 'statistics',
                 0x0C: 'metadata', 0x0D: 'metadata index', 0x0E: 'summary offset',
                 DATA_END: 'data end'}
 
@@ -55,8 +58,8 @@ class McapFileError(FlexlinkError):
     """Raised if a file is not an MCAP file at all (its reason names why)."""
 
 
-class _Damaged(Exception):
-    """A record that cannot be used (internal; its message is the one-line reason)."""
+class DamagedRecord(Exception):
+    """Raised if a record cannot be used; the message is the one-line reason (always caught)."""
 
 
 @dataclasses.dataclass
@@ -150,23 +153,24 @@ def iter_messages(buffer, salvage):
             return
         opcode, length = _PREFIX.unpack_from(buffer, offset)
         end = offset + _PREFIX.size + length
-        if opcode in (DATA_END, FOOTER) and end <= size:
+        if _data_section_ends(buffer, offset, opcode, length):
             salvage.end_reason = 'complete'
             return
-        if end > size or (opcode not in KNOWN_OPCODES and opcode < 0x80):
+        if end > size or (opcode not in DATA_OPCODES and opcode < 0x80):
             resume = find_chunk(buffer, offset + 1, salvage.budget)
             if resume is None:
                 salvage.end_reason = (f'truncated inside a {opcode_name(opcode)} record '
                                       f'at offset {offset}' if end > size else
                                       f'unknown {opcode_name(opcode)} at offset {offset}')
                 return
-            salvage.damage(offset, f'{opcode_name(opcode)} of {length} bytes does not fit; '
+            what = 'does not fit in the file' if end > size else 'is not an MCAP record'
+            salvage.damage(offset, f'{opcode_name(opcode)} of {length} bytes {what}; '
                            f'resumed at the chunk at {resume}')
             offset = resume
             continue
         try:
             yield from _records(buffer, offset, end, opcode, salvage)
-        except _Damaged as exc:
+        except DamagedRecord as exc:
             resume = (end if _plausible_record(buffer, end)
                       else find_chunk(buffer, offset + 1, salvage.budget))
             where = 'end of file' if resume is None else resume
@@ -176,6 +180,15 @@ def iter_messages(buffer, salvage):
                 return
             end = resume
         offset = end
+
+
+def _data_section_ends(buffer, offset, opcode, length):
+    # A data end record of its size, or the footer where it belongs (a damaged opcode that
+    # reads as one of these must not end salvage early).
+    if opcode == DATA_END:
+        return length == 4 and offset + _PREFIX.size + length <= len(buffer)
+    return opcode == FOOTER and length == 20 and \
+        offset + _PREFIX.size + length + len(MCAP_MAGIC) == len(buffer)
 
 
 def _records(buffer, offset, end, opcode, salvage):
@@ -191,14 +204,14 @@ def _records(buffer, offset, end, opcode, salvage):
     position = start
     while position < stop:
         if position + _PREFIX.size > stop:
-            raise _Damaged(f'record prefix cut at {position}')
+            raise DamagedRecord(f'record prefix cut at {position}')
         code, length = _PREFIX.unpack_from(records, position)
         body, position = position + _PREFIX.size, position + _PREFIX.size + length
         if position > stop:
-            raise _Damaged(f'{opcode_name(code)} of {length} bytes overruns its container')
+            raise DamagedRecord(f'{opcode_name(code)} of {length} bytes overruns its container')
         if code == MESSAGE:
             if length < MESSAGE_HEAD_SIZE:
-                raise _Damaged(f'message of {length} bytes')
+                raise DamagedRecord(f'message of {length} bytes')
             messages.append((body, position))
         elif code == CHANNEL:
             channel = parse_channel(records, body, position)
@@ -208,6 +221,10 @@ def _records(buffer, offset, end, opcode, salvage):
             schemas[schema.id] = schema
         elif code == HEADER:
             header = _read_strings(records, body, position, 2)[0]
+        elif code == MESSAGE_INDEX:
+            entries = struct.unpack_from('<I', records, body + 2)[0] if length >= 6 else -1
+            if entries != length - 6 or entries % 16:
+                raise DamagedRecord(f'message index of {length} bytes lists {entries}')
     # Only now, with every record of it checked, is the unit used.
     if opcode == CHUNK:
         salvage.chunk_count += 1
@@ -221,7 +238,7 @@ def _records(buffer, offset, end, opcode, salvage):
 
 def message_fields(records, start, end):
     """(channel_id, sequence, log_time_ns, publish_time_ns, data) of a message body."""
-    return _MESSAGE_HEAD.unpack_from(records, start) + (
+    return MESSAGE_HEAD.unpack_from(records, start) + (
         bytes(records[start + MESSAGE_HEAD_SIZE:end]),)
 
 
@@ -243,30 +260,30 @@ def decode_chunk(buffer, start, end, budget=None):
 
     Raises
     ------
-    _Damaged
+    DamagedRecord
         Lengths that disagree, a size beyond :func:`chunk_bound`, unknown compression, a
         decompression error or a CRC mismatch.
 
     """
     if end - start < _CHUNK_HEAD.size + 8:
-        raise _Damaged(f'chunk record of {end - start} bytes')
+        raise DamagedRecord(f'chunk record of {end - start} bytes')
     _, _, raw_size, crc, name_length = _CHUNK_HEAD.unpack_from(buffer, start)
     position = start + _CHUNK_HEAD.size
     if name_length > MAX_COMPRESSION_NAME or position + name_length + 8 > end:
-        raise _Damaged(f'compression name of {name_length} bytes')
+        raise DamagedRecord(f'compression name of {name_length} bytes')
     compression = bytes(buffer[position:position + name_length])
     position += name_length
     (length,) = struct.unpack_from('<Q', buffer, position)
     position += 8
     if position + length != end:
-        raise _Damaged(f'records of {length} bytes in a chunk of {end - start}')
+        raise DamagedRecord(f'records of {length} bytes in a chunk of {end - start}')
     bound = chunk_bound(length)
     if raw_size > bound:
-        raise _Damaged(f'declares {raw_size} bytes uncompressed from {length} '
+        raise DamagedRecord(f'declares {raw_size} bytes uncompressed from {length} '
                        f'(bound {bound}: at most {MAX_CHUNK_BYTES >> 20} MiB and '
                        f'{MAX_CHUNK_RATIO}x the compressed size)')
     if budget is not None and compression and raw_size > budget[0]:
-        raise _Damaged(f'decompression budget of the file exhausted ({budget[0]} bytes left, '
+        raise DamagedRecord(f'decompression budget of the file exhausted ({budget[0]} bytes left, '
                        f'{raw_size} declared)')
     if budget is not None and compression:
         budget[0] -= raw_size
@@ -278,11 +295,11 @@ def decode_chunk(buffer, start, end, budget=None):
     elif compression == b'lz4':
         payload = _lz4(data, raw_size)
     else:
-        raise _Damaged(f'unknown compression {compression[:MAX_COMPRESSION_NAME]!r}')
+        raise DamagedRecord(f'unknown compression {compression[:MAX_COMPRESSION_NAME]!r}')
     if len(payload) != raw_size:
-        raise _Damaged(f'{len(payload)} bytes uncompressed, {raw_size} declared')
+        raise DamagedRecord(f'{len(payload)} bytes uncompressed, {raw_size} declared')
     if crc and zlib.crc32(payload) != crc:
-        raise _Damaged('CRC mismatch')
+        raise DamagedRecord('CRC mismatch')
     return payload
 
 
@@ -292,10 +309,10 @@ def _zstd(data, raw_size):
         # zstandard allocates a frame's declared content size whatever max_output_size says.
         declared = zstandard.frame_content_size(data)
         if declared not in (-1, raw_size):
-            raise _Damaged(f'zstd frame declares {declared} bytes, the chunk {raw_size}')
+            raise DamagedRecord(f'zstd frame declares {declared} bytes, the chunk {raw_size}')
         return zstandard.ZstdDecompressor().decompress(data, max_output_size=raw_size)
     except zstandard.ZstdError as exc:
-        raise _Damaged(f'zstd: {exc}') from None
+        raise DamagedRecord(f'zstd: {exc}') from None
 
 
 def _lz4(data, raw_size):
@@ -304,9 +321,9 @@ def _lz4(data, raw_size):
     try:
         payload = decompressor.decompress(data, max_length=raw_size)
     except RuntimeError as exc:
-        raise _Damaged(f'lz4: {exc}') from None
+        raise DamagedRecord(f'lz4: {exc}') from None
     if not decompressor.eof:
-        raise _Damaged(f'lz4 frame longer than the {raw_size} bytes declared')
+        raise DamagedRecord(f'lz4 frame longer than the {raw_size} bytes declared')
     return payload
 
 
@@ -340,7 +357,7 @@ def _chunk_with_crc(buffer, start, end, budget):
         return False
     try:
         decode_chunk(buffer, start, end, budget)
-    except _Damaged:
+    except DamagedRecord:
         return False
     return True
 
@@ -353,17 +370,17 @@ def _read_strings(buffer, offset, end, count):
         try:
             values.append(data.decode('utf-8'))
         except UnicodeDecodeError:
-            raise _Damaged(f'string is not UTF-8 at {offset}') from None
+            raise DamagedRecord(f'string is not UTF-8 at {offset}') from None
     return values, offset
 
 
 def _read_bytes(buffer, offset, end, prefix):
     if offset + prefix > end:
-        raise _Damaged(f'length cut at {offset}')
+        raise DamagedRecord(f'length cut at {offset}')
     (length,) = struct.unpack_from('<I' if prefix == 4 else '<Q', buffer, offset)
     offset += prefix
     if offset + length > end:
-        raise _Damaged(f'{length} bytes declared at {offset - prefix}, '
+        raise DamagedRecord(f'{length} bytes declared at {offset - prefix}, '
                        f'{end - offset} left in the record')
     return bytes(buffer[offset:offset + length]), offset + length
 
@@ -371,7 +388,7 @@ def _read_bytes(buffer, offset, end, prefix):
 def parse_schema(buffer, start, end):
     """A schema record's body ``buffer[start:end]`` (checked against its length)."""
     if start + 2 > end:
-        raise _Damaged('schema record too short')
+        raise DamagedRecord('schema record too short')
     (schema_id,) = struct.unpack_from('<H', buffer, start)
     (name, encoding), offset = _read_strings(buffer, start + 2, end, 2)
     data, _ = _read_bytes(buffer, offset, end, 4)
@@ -381,7 +398,7 @@ def parse_schema(buffer, start, end):
 def parse_channel(buffer, start, end):
     """A channel record's body ``buffer[start:end]`` (checked against its length)."""
     if start + 4 > end:
-        raise _Damaged('channel record too short')
+        raise DamagedRecord('channel record too short')
     channel_id, schema_id = struct.unpack_from('<HH', buffer, start)
     (topic, encoding), offset = _read_strings(buffer, start + 4, end, 2)
     entries, _ = _read_bytes(buffer, offset, end, 4)
@@ -423,7 +440,7 @@ def _read_summary(buffer, salvage):
             elif code == STATISTICS and length >= 42:
                 message_count, *_, chunk_count = struct.unpack_from('<QHIIII', buffer, body)
                 statistics = {'message_count': message_count, 'chunk_count': chunk_count}
-    except (_Damaged, struct.error):
+    except (DamagedRecord, struct.error):
         return
     salvage.schemas.update(schemas)
     salvage.channels.update(channels)

@@ -6,10 +6,12 @@ in-process, under tracemalloc; a few go through the real ``flexlink`` script.
 """
 
 import random
+import re
 import struct
 import subprocess
 import sys
 import tracemalloc
+import zlib
 
 import pytest
 import zstandard
@@ -58,7 +60,7 @@ def inner_record_edit(data, chunk_offset, opcode, field, value):
     payload = bytes(payload)
     compressed = zstandard.ZstdCompressor().compress(payload)
     start, end = struct.unpack_from('<QQ', data, chunk_offset + 9)
-    chunk = struct.pack('<QQQII', start, end, len(payload), __import__('zlib').crc32(payload),
+    chunk = struct.pack('<QQQII', start, end, len(payload), zlib.crc32(payload),
                         4) + b'zstd' + struct.pack('<Q', len(compressed)) + compressed
     old_end = chunk_offset + 9 + struct.unpack_from('<Q', data, chunk_offset + 1)[0]
     return data[:chunk_offset] + struct.pack('<BQ', 6, len(chunk)) + chunk + data[old_end:]
@@ -132,6 +134,7 @@ def test_mutated_and_truncated_recordings(tmp_path):
     rng = random.Random(12)
     tally = {'files': 0, 'refused': 0, 'salvaged': 0, 'complete': 0, 'messages kept': 0,
              'damaged places': 0}
+    reasons = {}
     for n, (kind, mutated, cut) in enumerate(mutations(data, chunks, rng)):
         path, out = tmp_path / f'm{n}.mcap', tmp_path / f'r{n}.mcap'
         path.write_bytes(mutated)
@@ -158,9 +161,12 @@ def test_mutated_and_truncated_recordings(tmp_path):
         tally['complete'] += info['complete']
         tally['messages kept'] += len(kept)
         tally['damaged places'] += info['damaged_count']
+        for damage in info['damaged']:
+            reason = re.sub(r'\d+', 'N', damage['reason'].split(';')[0])[:40]
+            reasons[reason] = reasons.get(reason, 0) + 1
         path.unlink()
         out.unlink()
-    print('\nMCAP fuzz:', tally)
+    print('\nMCAP fuzz:', tally, '\nreasons:', sorted(reasons.items(), key=lambda r: -r[1]))
     assert tally['files'] >= 300 and tally['salvaged'] > tally['files'] // 2
 
 

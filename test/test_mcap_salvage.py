@@ -269,7 +269,7 @@ def test_a_bomb_within_the_size_bound_but_beyond_the_ratio_is_refused(tmp_path):
     declared = 32 * 2**20      # under 64 MiB, but about 3000 times its compressed size
     frame = zstd_zeros(declared)
     assert declared > mcap_salvage.MAX_CHUNK_RATIO * len(frame)
-    with pytest.raises(mcap_salvage._Damaged, match='bound'):
+    with pytest.raises(mcap_salvage.DamagedRecord, match='bound'):
         mcap_salvage.decode_chunk(chunk_record(frame, declared), 9,
                                   len(chunk_record(frame, declared)))
     # A frame that claims less than the chunk, or more, is refused before decompressing.
@@ -277,7 +277,7 @@ def test_a_bomb_within_the_size_bound_but_beyond_the_ratio_is_refused(tmp_path):
     frame = zstandard.ZstdCompressor().compress(noise)
     for claimed in (2**16 - 1, 2**16 + 1):
         record = chunk_record(frame, claimed)
-        with pytest.raises(mcap_salvage._Damaged, match='zstd frame declares 65536 bytes'):
+        with pytest.raises(mcap_salvage.DamagedRecord, match='zstd frame declares 65536 bytes'):
             mcap_salvage.decode_chunk(record, 9, len(record))
     record = chunk_record(frame, 2**16, zlib.crc32(noise))
     assert mcap_salvage.decode_chunk(record, 9, len(record)) == noise
@@ -309,3 +309,17 @@ def test_overlapping_bomb_candidates_share_one_decompression_budget(tmp_path):
     assert list(mcap_salvage.iter_messages(buffer, salvage)) == []
     assert salvage.end_reason == 'truncated inside a chunk record at offset 8'
     assert 0 <= salvage.budget[0] < mcap_salvage.MAX_CHUNK_BYTES     # spent, not exceeded
+
+
+@pytest.mark.parametrize('content', [b'', b'\x89MCAP0\r', b'not an mcap file' * 10,
+                                     mcap_salvage.MCAP_MAGIC + b'\x00' * 100])
+def test_unreadable_files_are_refused_in_one_line_without_output(tmp_path, content):
+    path = tmp_path / 'in.mcap'
+    path.write_bytes(content)
+    out = tmp_path / 'out.mcap'
+    run = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'mcap-recover', str(path),
+                          '--out', str(out)], capture_output=True, text=True, timeout=60)
+    assert run.returncode == 1 and len(run.stderr.strip().splitlines()) == 1, run.stderr
+    expected = 'nothing readable' if content.startswith(mcap_salvage.MCAP_MAGIC) else 'bad magic'
+    assert expected in run.stderr
+    assert not out.exists()
