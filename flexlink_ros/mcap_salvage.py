@@ -49,9 +49,9 @@ MESSAGE_HEAD = struct.Struct('<HIQQ')  # channel id, sequence, log time, publish
 MESSAGE_HEAD_SIZE = MESSAGE_HEAD.size
 OPCODE_NAMES = {HEADER: 'header', FOOTER: 'footer', SCHEMA: 'schema', CHANNEL: 'channel',
                 MESSAGE: 'message', CHUNK: 'chunk', MESSAGE_INDEX: 'message index',
-                0x08: 'chunk index',                0x09: 'attachment', 0x0A: 'attachment index', STATISTICS: 'statistics',
-                0x0C: 'metadata', 0x0D: 'metadata index', 0x0E: 'summary offset',
-                DATA_END: 'data end'}
+                0x08: 'chunk index', 0x09: 'attachment', 0x0A: 'attachment index',
+                STATISTICS: 'statistics', 0x0C: 'metadata', 0x0D: 'metadata index',
+                0x0E: 'summary offset', DATA_END: 'data end'}
 
 
 class McapFileError(FlexlinkError):
@@ -280,11 +280,11 @@ def decode_chunk(buffer, start, end, budget=None):
     bound = chunk_bound(length)
     if raw_size > bound:
         raise DamagedRecord(f'declares {raw_size} bytes uncompressed from {length} '
-                       f'(bound {bound}: at most {MAX_CHUNK_BYTES >> 20} MiB and '
-                       f'{MAX_CHUNK_RATIO}x the compressed size)')
+                            f'(bound {bound}: at most {MAX_CHUNK_BYTES >> 20} MiB and '
+                            f'{MAX_CHUNK_RATIO}x the compressed size)')
     if budget is not None and compression and raw_size > budget[0]:
-        raise DamagedRecord(f'decompression budget of the file exhausted ({budget[0]} bytes left, '
-                       f'{raw_size} declared)')
+        raise DamagedRecord(f'decompression budget of the file exhausted '
+                            f'({budget[0]} bytes left, {raw_size} declared)')
     if budget is not None and compression:
         budget[0] -= raw_size
     data = buffer[position:end]
@@ -381,7 +381,7 @@ def _read_bytes(buffer, offset, end, prefix):
     offset += prefix
     if offset + length > end:
         raise DamagedRecord(f'{length} bytes declared at {offset - prefix}, '
-                       f'{end - offset} left in the record')
+                            f'{end - offset} left in the record')
     return bytes(buffer[offset:offset + length]), offset + length
 
 

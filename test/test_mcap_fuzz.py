@@ -79,7 +79,8 @@ def mutations(data, chunks, rng):
         edit(copy)
         return bytes(copy)
     for _ in range(60):
-        flips = [(rng.randrange(len(data)), 1 << rng.randrange(8)) for _ in range(rng.randint(1, 4))]
+        flips = [(rng.randrange(len(data)), 1 << rng.randrange(8))
+                 for _ in range(rng.randint(1, 4))]
         yield 'bit flips', edited(lambda d: [d.__setitem__(i, d[i] ^ b) for i, b in flips]), None
     for _ in range(50):
         at, run = rng.randrange(len(data)), rng.randint(1, 64)
