@@ -323,7 +323,8 @@ def _lz4(data, raw_size):
     except RuntimeError as exc:
         raise DamagedRecord(f'lz4: {exc}') from None
     if not decompressor.eof:
-        raise DamagedRecord(f'lz4 frame longer than the {raw_size} bytes declared')
+        raise DamagedRecord(f'lz4 frame does not end after the {raw_size} bytes declared'
+                            if len(payload) >= raw_size else 'lz4 frame cut short')
     return payload
 
 

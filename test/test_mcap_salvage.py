@@ -324,3 +324,22 @@ def test_unreadable_files_are_refused_in_one_line_without_output(tmp_path, conte
     expected = 'nothing readable' if content.startswith(mcap_salvage.MCAP_MAGIC) else 'bad magic'
     assert expected in run.stderr
     assert not out.exists()
+
+
+def test_lz4_chunks_are_decompressed_within_their_declared_size():
+    import lz4.frame
+    records = b''.join(bytes([mcap_salvage.MESSAGE]) + struct.pack('<Q', 30) + bytes(30)
+                       for _ in range(100))
+    frame = lz4.frame.compress(records)
+    record = chunk_record(frame, len(records), zlib.crc32(records), b'lz4')
+    assert mcap_salvage.decode_chunk(record, 9, len(record)) == records
+    # The same frame under a smaller declared size: refused after at most that many bytes.
+    record = chunk_record(frame, len(records) // 2, 0, b'lz4')
+    with pytest.raises(mcap_salvage.DamagedRecord, match='lz4 frame does not end after the 1950 bytes'):
+        mcap_salvage.decode_chunk(record, 9, len(record))
+    record = chunk_record(frame[:-4], len(records), 0, b'lz4')
+    with pytest.raises(mcap_salvage.DamagedRecord, match='lz4 frame does not end after the 3900 bytes'):
+        mcap_salvage.decode_chunk(record, 9, len(record))
+    record = chunk_record(frame[:12] + b'\xff' * 8 + frame[20:], len(records), 0, b'lz4')
+    with pytest.raises(mcap_salvage.DamagedRecord, match='lz4'):
+        mcap_salvage.decode_chunk(record, 9, len(record))
