@@ -10,7 +10,11 @@ recorded timing for live subscribers (a running flexlink_node, Foxglove, RViz).
 
 Like the node, a sample whose stamp goes back or jumps by more than the estimator's reset gap
 starts a new segment (the state restarts), an exactly repeated sample repeats the previous
-output, and messages without the crank joint or with a non-finite value are skipped.
+output, and messages without the crank joint or with a non-finite value are skipped. Samples
+the estimator's input gate refuses (core.estimator.InputGate: an implausible speed, speed jump
+or angle advance) are counted as outliers, and an estimate beyond the model's deflection bound
+as out of bound: both keep their input in the output file but get no output messages, and
+after an out-of-bound sample the estimate restarts, as in the node.
 """
 
 import functools
@@ -345,24 +349,32 @@ def segments(stamps_ns, angles, reset_gap_s=core_estimator.DEFAULT_RESET_GAP_S):
 
 
 def allocate_estimate(model, count):
-    """The arrays :func:`estimate_offline` fills (zeros)."""
+    """The arrays :func:`estimate_offline` fills (zeros; 'flags' per sample)."""
     result = {key: np.zeros((count, 2)) for key in ('lever_tip', 'coupler_mid')}
     for key in ('reaction_n', 'gamma_dot', 'criterion'):
         result[key] = np.zeros((count, len(JOINTS)))
     result['crank_angle'] = np.zeros(count)
     result['crank_speed'] = np.zeros(count)
     result['modal'] = np.zeros((count, model.size))
+    result['flags'] = np.zeros(count, dtype=np.int64)
     return result
 
 
 _ESTIMATE_KEYS = ('lever_tip', 'coupler_mid', 'crank_angle', 'crank_speed', 'modal',
                   'reaction_n', 'gamma_dot', 'criterion')
+_Gate = core_estimator.InputGate
+_Flag = core_estimator.SampleFlag
 
 
 def estimate_offline(model, stamps_ns, angles, speeds, warm_start=True, result=None,
                      progress=None):
     """
     Deflections and criteria of every sample, segment by segment as the node would.
+
+    The rows are planned as StreamingEstimator.update decides (core.estimator.plan_rows:
+    restarts, repeats, outliers); each segment is replayed in one go. Outlier rows and rows
+    whose estimate left the model's deflection bound are NaN (flagged OUTLIER and
+    OUT_OF_BOUND); after an out-of-bound row the rest is planned again, as the node restarts.
 
     Parameters
     ----------
@@ -381,44 +393,109 @@ def estimate_offline(model, stamps_ns, angles, speeds, warm_start=True, result=N
     -------
     dict of ndarray
         'lever_tip', 'coupler_mid' (m, 2) [m]; 'reaction_n', 'gamma_dot', 'criterion' (m, 4);
-        'crank_angle', 'crank_speed' (m,); 'modal' (m, r); 'criteria_available' (bool);
-        'segments' (int).
+        'crank_angle', 'crank_speed' (m,); 'modal' (m, r); 'flags' (m,); 'criteria_available'
+        (bool); 'segments', 'outliers', 'out_of_bound' (int).
 
     """
     count = len(stamps_ns)
-    starts, repeated = segments(stamps_ns, angles)
     if result is None:
         result = allocate_estimate(model, count)
-    available = bool(np.any(model.force_moments))
-    repeats = np.flatnonzero(repeated).tolist()
-    copied = 0          # repeated samples filled in so far
-    chosen = stop = None
-    done = 0            # samples of the current segment final so far
+    run = _OfflineRun(model, np.asarray(stamps_ns, dtype=np.int64), np.asarray(angles, float),
+                      np.asarray(speeds, float), warm_start, result, progress)
+    position = 0
+    while position < count:
+        gate = _Gate(model.speed_max, core_estimator.DEFAULT_ACCEL_LIMIT)
+        kinds, _ = core_estimator.plan_rows(run.stamps_ns[position:], run.angles[position:],
+                                            run.speeds[position:], gate)
+        position = run.replay_plan(position, kinds)
+    run.finish_until(count)
+    flags = result['flags']
+    result.update(criteria_available=run.available, segments=run.segments,
+                  outliers=int(np.count_nonzero(flags & _Flag.OUTLIER)),
+                  out_of_bound=int(np.count_nonzero(flags & _Flag.OUT_OF_BOUND)))
+    return result
 
-    def finish_until(final):
-        # A repeated sample repeats the previous estimate (as StreamingEstimator.update does).
-        nonlocal copied
-        while copied < len(repeats) and repeats[copied] < final:
-            n = repeats[copied]
-            for key in _ESTIMATE_KEYS:
-                result[key][n] = result[key][n - 1]
-            copied += 1
-        if progress is not None:
-            progress(final)
 
-    def on_rows(out, upto):
-        # The rows of the current segment replay() has finished since the last call.
-        nonlocal available, done
-        if upto <= done:
+class _OfflineRun:
+    """The state of :func:`estimate_offline`: segments, repeats to copy, rows final so far."""
+
+    def __init__(self, model, stamps_ns, angles, speeds, warm_start, result, progress):
+        self.model, self.stamps_ns, self.angles, self.speeds = model, stamps_ns, angles, speeds
+        self.warm_start, self.result, self.progress = warm_start, result, progress
+        self.count = stamps_ns.size
+        self.available = bool(np.any(model.force_moments))
+        self.tables = core_estimator.step_tables(model)    # built once, not per segment
+        self.orbit = None   # carried across segments, as one streaming estimator carries it
+        # Warm starts rate-limited on the recording's clock (its latest stamp so far): the
+        # same numbers on any machine, and a storm of restarts costs no more than the node's.
+        self.clock_s = -math.inf
+        self.limiter = core_estimator.WarmStartLimiter(clock=lambda: self.clock_s)
+        self.repeats = []           # (row, row it repeats), in order, not yet copied
+        self.copied = 0
+        self.segments = 0
+        self.final = 0
+        self.chosen = self.stop = None
+        self.done = 0
+
+    def replay_plan(self, offset, kinds):
+        """Replay the segments of a plan of rows offset...; returns where to plan next."""
+        rows = offset + np.arange(kinds.size)
+        accepted = (kinds == _Gate.STEP) | (kinds == _Gate.START)
+        # Each repeat copies the last accepted row before it.
+        source = np.maximum.accumulate(np.where(accepted, rows, -1))
+        repeated = np.flatnonzero(kinds == _Gate.REPEATED)
+        self.repeats = self.repeats[:self.copied] + list(zip(
+            rows[repeated].tolist(), source[repeated].tolist()))
+        starts = rows[kinds == _Gate.START].tolist()
+        self.mark(rows[kinds == _Gate.OUTLIER], _Flag.OUTLIER)
+        for first, stop in zip(starts, starts[1:] + [self.count]):
+            chosen = rows[accepted & (rows >= first) & (rows < stop)]
+            stopped = self.segment(chosen, stop)
+            if stopped is not None:
+                # The node restarts at the next sample: plan the rest again from there.
+                self.result['flags'][stopped + 1:] = 0
+                return stopped + 1
+        return self.count
+
+    def mark(self, rows, flag):
+        """Rows with no estimate (NaN), flagged."""
+        for key in _ESTIMATE_KEYS:
+            self.result[key][rows] = math.nan
+        self.result['flags'][rows] = int(flag)
+
+    def segment(self, chosen, stop):
+        """Replay one segment; the row that went out of bound, or None."""
+        self.chosen, self.stop, self.done = chosen, stop, 0
+        seg_speeds = self.speeds[chosen]
+        measured = None if np.any(np.isnan(seg_speeds)) else seg_speeds
+        self.clock_s = max(self.clock_s, self.stamps_ns[chosen[0]] * 1e-9)
+        out = core_estimator.replay(self.model, self.stamps_ns[chosen], self.angles[chosen],
+                                    measured, warm_start=self.warm_start, orbit=self.orbit,
+                                    on_rows=self.on_rows, tables=self.tables,
+                                    warm_start_limiter=self.limiter)
+        self.orbit = out['orbit']
+        self.segments += 1
+        self.result['flags'][chosen[0]] |= int(_Flag.RESET)
+        if out['stopped'] is None:
+            return None
+        row = int(chosen[out['stopped']])
+        self.mark([row], _Flag.OUT_OF_BOUND)
+        self.finish_until(row + 1)
+        return row
+
+    def on_rows(self, out, upto):
+        """The rows of the current segment replay() has finished since the last call."""
+        if upto <= self.done:
             return
-        rows = slice(done, upto)
+        rows = slice(self.done, upto)
+        model = self.model
         model_speed = np.clip(out['crank_speed'][rows], -model.speed_max, model.speed_max)
         model_accel = np.clip(out['crank_accel'][rows], -core_estimator.DEFAULT_ACCEL_LIMIT,
                               core_estimator.DEFAULT_ACCEL_LIMIT)
         blocks = {name: out[name][rows] for name in ('force', 'force_dot', 'rms2')}
-        reaction, gamma_dot, criterion, _, available = criteria_batch(
+        reaction, gamma_dot, criterion, _, self.available = criteria_batch(
             model, out['crank_angle'][rows], model_speed, model_accel, blocks=blocks)
-        target = chosen[rows]
+        target = self.chosen[rows]
         for key, values in (('lever_tip', out['lever_tip'][rows]),
                             ('coupler_mid', out['coupler_mid'][rows]),
                             ('crank_angle', out['crank_angle'][rows]),
@@ -426,25 +503,22 @@ def estimate_offline(model, stamps_ns, angles, speeds, warm_start=True, result=N
                             ('modal', out['modal'][rows]),
                             ('reaction_n', reaction),
                             ('gamma_dot', gamma_dot), ('criterion', criterion)):
-            result[key][target] = values
-        done = upto
-        finish_until(stop if upto == chosen.size else int(chosen[upto]))
+            self.result[key][target] = values
+        self.done = upto
+        self.finish_until(self.stop if upto == self.chosen.size else int(self.chosen[upto]))
 
-    orbit = None    # carried across segments, as one streaming estimator carries it
-    tables = core_estimator.step_tables(model)     # built once, not per segment
-    for first, stop in zip(starts, starts[1:] + [count]):
-        chosen = np.arange(first, stop)[~repeated[first:stop]]
-        seg_speeds = speeds[chosen]
-        measured = None if np.any(np.isnan(seg_speeds)) else seg_speeds
-        done = 0
-        out = core_estimator.replay(model, stamps_ns[chosen], angles[chosen], measured,
-                                    warm_start=warm_start, orbit=orbit, on_rows=on_rows,
-                                    tables=tables)
-        orbit = out['orbit']
-    finish_until(count)
-    result['criteria_available'] = available
-    result['segments'] = len(starts)
-    return result
+    def finish_until(self, final):
+        """Copy the repeats before ``final`` (as StreamingEstimator.update) and report it."""
+        result = self.result
+        while self.copied < len(self.repeats) and self.repeats[self.copied][0] < final:
+            row, source = self.repeats[self.copied]
+            for key in _ESTIMATE_KEYS:
+                result[key][row] = result[key][source]
+            result['flags'][row] = int(_Flag.REPEATED)
+            self.copied += 1
+        self.final = max(self.final, final)
+        if self.progress is not None:
+            self.progress(self.final)
 
 
 # -- the command -------------------------------------------------------------------------
@@ -713,16 +787,25 @@ def write_replay(out_path, samples, estimate, input_topic, topics, frame_id, mod
                                                    estimate['criterion'][chosen],
                                                    estimate['gamma_dot'][chosen],
                                                    estimate['reaction_n'][chosen]))]
-            per_sample = np.full(stamps.size, len(names))
+            # Outlier and out-of-bound samples (NaN) keep their input, with no outputs.
+            valid = (np.all(np.isfinite(estimate['lever_tip'][chosen]), axis=1)
+                     & np.all(np.isfinite(estimate['coupler_mid'][chosen]), axis=1))
+            per_sample = np.where(valid, len(names), 1)
             if markers_every_n:
-                marked = np.flatnonzero(np.arange(first, chosen.stop) % markers_every_n == 0)
+                marked = np.flatnonzero((np.arange(first, chosen.stop) % markers_every_n == 0)
+                                        & valid)
                 markers = iter(rows_to_bytes(marker_source.rows(
                     stamps[marked], estimate['crank_angle'][first + marked],
                     estimate['modal'][first + marked])))
                 per_sample[marked] += 1
             messages, topic_of = [], []
             with_marker = (per_sample > len(names)).tolist()
+            valid = valid.tolist()
             for n, row in enumerate(zip(*columns)):
+                if not valid[n]:
+                    messages.append(row[0])
+                    topic_of.append(names[0])
+                    continue
                 messages += row
                 topic_of += names
                 if with_marker[n]:
@@ -920,14 +1003,16 @@ def run_replay(args):
         result['output_files'] = status['files']
         result['output_topics'] = status['topics']
     result.update(estimate_s=estimate_s, segments=estimate['segments'],
+                  outliers=estimate['outliers'], out_of_bound=estimate['out_of_bound'],
                   criteria_available=estimate['criteria_available'])
     total = read_s + result.get('write_s', estimate_s)
     result['samples_per_s'] = count / total if total > 0 else math.inf
     result['times_real_time'] = span_s / total if total > 0 else math.inf
+    estimated = np.isfinite(estimate['lever_tip'][:, 0])     # not outlier, not out of bound
     for key in ('lever_tip', 'coupler_mid'):
-        values = estimate[key]
-        result[f'{key}_peak_to_peak_um'] = (1e6 * (values.max(axis=0) - values.min(axis=0))
-                                            ).tolist()
+        values = estimate[key][estimated]
+        result[f'{key}_peak_to_peak_um'] = ((1e6 * (values.max(axis=0) - values.min(axis=0))
+                                             ).tolist() if values.size else [math.nan] * 2)
     if args.publish:
         result['published'] = publish_recording(samples, topic, args.publish_speed)
     return result
@@ -944,7 +1029,8 @@ def _replay_command(args):
         raise ValueError(f'`--markers-every-n` must be >= 0, got {args.markers_every_n}')
     result = run_replay(args)
     lines = [f"{result['input']}: {result['samples']} samples on {result['topic']} "
-             f"({result['skipped']} skipped, {result['segments']} segment(s), "
+             f"({result['skipped']} skipped, {result['outliers']} outlier(s), "
+             f"{result['out_of_bound']} out of bound, {result['segments']} segment(s), "
              f"{result['span_s']:.2f} s recorded)"]
     lines += [f'  note: {note}' for note in result['notes']]
     lines.append(f"  lever tip peak-to-peak   dx {result['lever_tip_peak_to_peak_um'][0]:10.1f} "
