@@ -327,7 +327,10 @@ def criteria_batch(model, angles, speeds, accels,
 
 def segments(stamps_ns, angles, reset_gap_s=core_estimator.DEFAULT_RESET_GAP_S):
     """
-    Split a sample stream where the streaming estimator would restart.
+    Split a sample stream where the streaming estimator would restart on its stamps.
+
+    Stamps and angles only, without the input gate's outliers (estimate_offline plans its
+    rows with core.estimator.plan_rows, which has both).
 
     Returns
     -------

@@ -245,9 +245,11 @@ def test_replay_skips_poisoned_speeds_and_matches_a_clean_replay(tmp_path):
     speed = 391.0 * RPM
     angles = speed * (stamps - stamps[0]) * 1e-9
     poison = {300: 1.7e308, 301: -1.7e308, 450: 1e6}
-    bad = [(int(stamps[n]) + 400_000, joint_state(int(stamps[n]) + 400_000, ['crank'],
-                                                   [angles[n] + 0.4e-3 * speed], [value]))
-           for n, value in poison.items()]
+    bad = []
+    for n, value in poison.items():
+        stamp = int(stamps[n]) + 400_000       # between two samples, at a plausible angle
+        bad.append((stamp, joint_state(stamp, ['crank'], [angles[n] + 0.4e-3 * speed],
+                                       [value])))
     results = {}
     for name, extra in (('clean', []), ('poisoned', bad)):
         bag = tmp_path / name
@@ -268,8 +270,8 @@ def test_replay_skips_poisoned_speeds_and_matches_a_clean_replay(tmp_path):
         assert poisoned[stamp] == values
 
 
-def test_offline_estimate_equals_streaming_through_outliers_and_out_of_bound(model,
-                                                                            monkeypatch):
+def test_offline_estimate_equals_streaming_through_outliers_and_out_of_bound(
+        model, monkeypatch):
     """Outliers, a new regime and out-of-bound resets: replay's rows are the node's samples."""
     from flexlink_ros.core import estimator as core_estimator
     from flexlink_ros.core.errors import OutlierSample
@@ -299,7 +301,8 @@ def test_offline_estimate_equals_streaming_through_outliers_and_out_of_bound(mod
     refused = [n for n, s in enumerate(streamed) if s is None]
     assert refused == np.flatnonzero(flags & SampleFlag.OUTLIER).tolist()
     assert refused[:4] == [200, 201, 600, 1000]
-    out = [n for n, s in enumerate(streamed) if s is not None and s.flags & SampleFlag.OUT_OF_BOUND]
+    out = [n for n, s in enumerate(streamed)
+           if s is not None and s.flags & SampleFlag.OUT_OF_BOUND]
     assert len(out) > 5 and out == np.flatnonzero(flags & SampleFlag.OUT_OF_BOUND).tolist()
     assert result['outliers'] == len(refused) and result['out_of_bound'] == len(out)
     for n, sample in enumerate(streamed):

@@ -19,6 +19,12 @@ come out of one small matrix product with coefficients that depend only on the s
 The same step is compiled (core/_radau_step.c, built with the package): one call per sample
 instead of about thirty numpy calls, the same arithmetic to rounding (a test compares the two).
 Without the extension (a source tree that was not built) the numpy step runs.
+
+Hostile input. :class:`InputGate` refuses implausible samples before the filter sees them
+(:class:`OutlierSample`; the state is untouched), so one bad sample changes no later output;
+an estimate beyond the model's deflection bound, or a non-finite one, is flagged OUT_OF_BOUND
+with NaN deflections and the next sample restarts; warm starts that shoot are rate-limited
+(:class:`WarmStartLimiter`), so a storm of restarts degrades to cold starts.
 """
 
 import dataclasses
@@ -1076,7 +1082,8 @@ class StreamingEstimator:
     def _orbit_serves(self, speed):
         """True if the kept periodic orbit serves a warm start at ``speed`` (no shooting)."""
         orbit = self._orbit
-        return orbit is not None and abs(orbit[0] - speed) <= WARM_START_SPEED_TOLERANCE * abs(speed)
+        return (orbit is not None
+                and abs(orbit[0] - speed) <= WARM_START_SPEED_TOLERANCE * abs(speed))
 
     def _may_warm_start(self, speed):
         """True if a warm start at ``speed`` is cheap or the rate limit allows a shooting."""
@@ -1084,7 +1091,8 @@ class StreamingEstimator:
             return True
         self.cold_starts += 1
         now = time.monotonic()
-        if self._cold_warned_at is None or now - self._cold_warned_at > COLD_START_WARNING_PERIOD_S:
+        last = self._cold_warned_at
+        if last is None or now - last > COLD_START_WARNING_PERIOD_S:
             self._cold_warned_at = now
             LOGGER.warning('warm start skipped (at most %d at once, then %g per second): cold '
                            'start from the static deflection (%d so far)', WARM_START_BURST,
