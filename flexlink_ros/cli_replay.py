@@ -367,6 +367,10 @@ _ESTIMATE_KEYS = ('lever_tip', 'coupler_mid', 'crank_angle', 'crank_speed', 'mod
                   'reaction_n', 'gamma_dot', 'criterion')
 _Gate = core_estimator.InputGate
 _Flag = core_estimator.SampleFlag
+# Rows planned at a time (core.estimator.plan_rows) ahead of the segment being replayed;
+# after a restart the window starts small and doubles (little work lost if it stops again).
+PLAN_WINDOW = 4096
+FIRST_PLAN_WINDOW = 64
 
 
 def estimate_offline(model, stamps_ns, angles, speeds, warm_start=True, result=None,
@@ -407,10 +411,7 @@ def estimate_offline(model, stamps_ns, angles, speeds, warm_start=True, result=N
                       np.asarray(speeds, float), warm_start, result, progress)
     position = 0
     while position < count:
-        gate = _Gate(model.speed_max, core_estimator.DEFAULT_ACCEL_LIMIT)
-        kinds, _ = core_estimator.plan_rows(run.stamps_ns[position:], run.angles[position:],
-                                            run.speeds[position:], gate)
-        position = run.replay_plan(position, kinds)
+        position = run.next_segment(position)
     run.finish_until(count)
     flags = result['flags']
     result.update(criteria_available=run.available, segments=run.segments,
@@ -433,32 +434,90 @@ class _OfflineRun:
         # same numbers on any machine, and a storm of restarts costs no more than the node's.
         self.clock_s = -math.inf
         self.limiter = core_estimator.WarmStartLimiter(clock=lambda: self.clock_s)
-        self.repeats = []           # (row, row it repeats), in order, not yet copied
-        self.copied = 0
+        self.repeats = []           # (row, row it repeats), in order
+        self.copied = 0             # repeats copied so far
+        self.kinds = np.zeros(self.count, dtype=np.int8)    # InputGate kinds, as planned
+        self.restart_plan(0)
         self.segments = 0
         self.final = 0
-        self.chosen = self.stop = None
+        self.chosen = self.stop = self.resume = None
+        self.measured = True
         self.done = 0
+        self.last_accepted = -1
 
-    def replay_plan(self, offset, kinds):
-        """Replay the segments of a plan of rows offset...; returns where to plan next."""
-        rows = offset + np.arange(kinds.size)
-        accepted = (kinds == _Gate.STEP) | (kinds == _Gate.START)
-        # Each repeat copies the last accepted row before it.
-        source = np.maximum.accumulate(np.where(accepted, rows, -1))
-        repeated = np.flatnonzero(kinds == _Gate.REPEATED)
-        self.repeats = self.repeats[:self.copied] + list(zip(
-            rows[repeated].tolist(), source[repeated].tolist()))
-        starts = rows[kinds == _Gate.START].tolist()
-        self.mark(rows[kinds == _Gate.OUTLIER], _Flag.OUTLIER)
-        for first, stop in zip(starts, starts[1:] + [self.count]):
-            chosen = rows[accepted & (rows >= first) & (rows < stop)]
-            stopped = self.segment(chosen, stop)
+    def restart_plan(self, position):
+        """Plan the rows from ``position`` afresh (the first sample, or after out of bound)."""
+        self.gate = _Gate(self.model.speed_max, core_estimator.DEFAULT_ACCEL_LIMIT)
+        self.planned = position
+        self.window = FIRST_PLAN_WINDOW
+
+    def plan_window(self):
+        """Plan a window more rows (core.estimator.plan_rows, the gate carried on)."""
+        stop = min(self.planned + min(self.window, PLAN_WINDOW), self.count)
+        self.window *= 2
+        window = slice(self.planned, stop)
+        self.kinds[window], _ = core_estimator.plan_rows(
+            self.stamps_ns[window], self.angles[window], self.speeds[window], self.gate)
+        self.planned = stop
+
+    def next_start(self, position):
+        """The first START row at or after ``position`` in the planned rows, or None."""
+        starts = np.flatnonzero(self.kinds[position:self.planned] == _Gate.START)
+        return position + int(starts[0]) if starts.size else None
+
+    def next_segment(self, position):
+        """
+        Replay the segment that starts at or after ``position``; where the next one may start.
+
+        Planned and replayed a window at a time (one replay() call resumed per window): an
+        out-of-bound row wastes at most a window of planning and stepping, so a recording
+        that goes out of bound often costs time linear in its length.
+        """
+        first = self.next_start(position)
+        while first is None and self.planned < self.count:
+            self.plan_window()
+            first = self.next_start(position)
+        first = self.count if first is None else first
+        self.mark(np.arange(position, first), _Flag.OUTLIER)   # no start before: outliers
+        if first == self.count:
+            return self.count
+        while self.planned < min(first + 3, self.count):
+            self.plan_window()      # replay()'s first call takes the deferred warm start
+        self.segments += 1
+        self.result['flags'][first] |= int(_Flag.RESET)
+        self.last_accepted, self.resume = first, None
+        start, search = first, first + 1
+        while True:
+            found = self.next_start(search)
+            stop = self.planned if found is None else found
+            stopped = self.piece(start, stop)
             if stopped is not None:
                 # The node restarts at the next sample: plan the rest again from there.
-                self.result['flags'][stopped + 1:] = 0
+                self.restart_plan(stopped + 1)
+                self.result['flags'][stopped + 1:stop] = 0
+                del self.repeats[self.copied:]
                 return stopped + 1
-        return self.count
+            if found is not None or stop == self.count:
+                return stop
+            self.plan_window()
+            start = search = stop
+
+    def piece(self, start, stop):
+        """Rows start...stop of the current segment: outliers, repeats, steps; None or a stop."""
+        rows = np.arange(start, stop)
+        kinds = self.kinds[start:stop]
+        self.mark(rows[kinds == _Gate.OUTLIER], _Flag.OUTLIER)
+        accepted = (kinds == _Gate.STEP) | (kinds == _Gate.START)
+        # Each repeat copies the last accepted row before it.
+        source = np.maximum.accumulate(np.where(accepted, rows, self.last_accepted))
+        repeated = np.flatnonzero(kinds == _Gate.REPEATED)
+        self.repeats += zip(rows[repeated].tolist(), source[repeated].tolist())
+        chosen = rows[accepted]
+        if chosen.size == 0:
+            self.finish_until(stop)
+            return None
+        self.last_accepted = int(chosen[-1])
+        return self.segment(chosen, stop)
 
     def mark(self, rows, flag):
         """Rows with no estimate (NaN), flagged."""
@@ -467,18 +526,19 @@ class _OfflineRun:
         self.result['flags'][rows] = int(flag)
 
     def segment(self, chosen, stop):
-        """Replay one segment; the row that went out of bound, or None."""
+        """Replay (or resume) the segment over rows ``chosen``; the row out of bound, or None."""
         self.chosen, self.stop, self.done = chosen, stop, 0
         seg_speeds = self.speeds[chosen]
-        measured = None if np.any(np.isnan(seg_speeds)) else seg_speeds
+        if self.resume is None:
+            # Measured speeds if every sample of the segment's first window has one.
+            self.measured = not np.any(np.isnan(seg_speeds))
+        measured = seg_speeds if self.measured else None
         self.clock_s = max(self.clock_s, self.stamps_ns[chosen[0]] * 1e-9)
         out = core_estimator.replay(self.model, self.stamps_ns[chosen], self.angles[chosen],
                                     measured, warm_start=self.warm_start, orbit=self.orbit,
                                     on_rows=self.on_rows, tables=self.tables,
-                                    warm_start_limiter=self.limiter)
-        self.orbit = out['orbit']
-        self.segments += 1
-        self.result['flags'][chosen[0]] |= int(_Flag.RESET)
+                                    warm_start_limiter=self.limiter, resume=self.resume)
+        self.orbit, self.resume = out['orbit'], out['resume']
         if out['stopped'] is None:
             return None
         row = int(chosen[out['stopped']])

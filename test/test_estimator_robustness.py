@@ -233,7 +233,7 @@ def test_reset_storm_degrades_to_cold_starts_and_valid_input_behind_it_goes_on(
     assert sum(1 for s in stormed.values() if s.flags & SampleFlag.COLD_START) == \
         estimator.cold_starts
     warnings = [r for r in caplog.records if 'warm start skipped' in r.getMessage()]
-    period_s = core_estimator.COLD_START_WARNING_PERIOD_S
+    period_s = core_estimator.WARNING_PERIOD_S
     assert 1 <= len(warnings) <= 1 + math.ceil(elapsed / period_s)
     # Valid input behind the storm: every sample processed; settled, it equals a clean run.
     behind, refused = feed(estimator, events[split:])

@@ -270,9 +270,11 @@ def test_replay_skips_poisoned_speeds_and_matches_a_clean_replay(tmp_path):
         assert poisoned[stamp] == values
 
 
+@pytest.mark.parametrize('window', [cli_replay.PLAN_WINDOW, 7])
 def test_offline_estimate_equals_streaming_through_outliers_and_out_of_bound(
-        model, monkeypatch):
-    """Outliers, a new regime and out-of-bound resets: replay's rows are the node's samples."""
+        model, monkeypatch, window):
+    """Outliers, a jump and out-of-bound resets: replay's rows are the node's samples."""
+    monkeypatch.setattr(cli_replay, 'PLAN_WINDOW', window)     # planned in windows or not
     from flexlink_ros.core import estimator as core_estimator
     from flexlink_ros.core.errors import OutlierSample
     from flexlink_ros.core.estimator import SampleFlag
@@ -281,6 +283,7 @@ def test_offline_estimate_equals_streaming_through_outliers_and_out_of_bound(
     speed[1000:] = -100.0            # a jump: outliers until it is plausible over their dt
     angles = np.cumsum(speed) * 1e-3
     speed[[200, 201, 600]] = (1.7e308, -1.7e308, 1e6)
+    stamps[800], angles[800] = stamps[799], angles[799]       # an exact repeat
     reference = StreamingEstimator(model)
     normal = max(max(map(abs, reference.update(int(s), a, w).lever_tip))
                  for s, a, w in zip(stamps[:400].tolist(), angles[:400], speed[:400])
@@ -309,7 +312,9 @@ def test_offline_estimate_equals_streaming_through_outliers_and_out_of_bound(
         if sample is None or sample.flags & SampleFlag.OUT_OF_BOUND:
             assert np.all(np.isnan(result['lever_tip'][n]))
             continue
-        assert bool(flags[n] & SampleFlag.RESET) == bool(sample.flags & SampleFlag.RESET)
+        assert bool(flags[n] & SampleFlag.REPEATED) == bool(sample.flags & SampleFlag.REPEATED)
+        if not sample.flags & SampleFlag.REPEATED:
+            assert bool(flags[n] & SampleFlag.RESET) == bool(sample.flags & SampleFlag.RESET)
         np.testing.assert_allclose(result['lever_tip'][n], sample.lever_tip, rtol=1e-7,
                                    atol=1e-12)
         np.testing.assert_allclose(result['coupler_mid'][n], sample.coupler_mid, rtol=1e-7,

@@ -432,8 +432,9 @@ QUASI_STATIC_SPEEDS = 5
 WARM_START_BURST = 3
 # ... then this many per second; beyond it the state starts cold (static deflection).
 WARM_START_RATE_HZ = 1.0
-# At most one warning per this many seconds about skipped warm starts [s].
-COLD_START_WARNING_PERIOD_S = 1.0
+# At most one warning per this many seconds about skipped warm starts, and one about
+# out-of-bound estimates [s].
+WARNING_PERIOD_S = 1.0
 # A sample's record (the compiled step's output; _StepTables.record in numpy): deflections
 # with the residual correction (outputs), the correction alone (outputs), joint reactions
 # (joints x 2), their time derivative (joints x 2) and squared cycle-RMS reactions (joints).
@@ -967,7 +968,7 @@ class StreamingEstimator:
         self._gate = InputGate(self._speed_max, self.accel_limit, self.reset_gap_s)
         self.warm_start_limiter = (WarmStartLimiter() if warm_start_limiter is None
                                    else warm_start_limiter)
-        self._cold_warned_at = None
+        self._cold_warned_at = self._bound_warned_at = None
         self.deflection_bound_m = self._tables.deflection_bound(self)
 
     # -- state -------------------------------------------------------------------------
@@ -1092,7 +1093,7 @@ class StreamingEstimator:
         self.cold_starts += 1
         now = time.monotonic()
         last = self._cold_warned_at
-        if last is None or now - last > COLD_START_WARNING_PERIOD_S:
+        if last is None or now - last > WARNING_PERIOD_S:
             self._cold_warned_at = now
             LOGGER.warning('warm start skipped (at most %d at once, then %g per second): cold '
                            'start from the static deflection (%d so far)', WARM_START_BURST,
@@ -1274,7 +1275,11 @@ class StreamingEstimator:
     def _out_of_bound(self, stamp_ns, angle, speed, accel, flags, message):
         """A sample flagged OUT_OF_BOUND, not a number to publish; the next one restarts."""
         self.out_of_bound += 1
-        LOGGER.warning('estimate out of bound, state reset: %s', message)
+        now = time.monotonic()
+        if self._bound_warned_at is None or now - self._bound_warned_at > WARNING_PERIOD_S:
+            self._bound_warned_at = now
+            LOGGER.warning('estimate out of bound, state reset: %s (%d so far)', message,
+                           self.out_of_bound)
         nan2, nan4 = (math.nan,) * 2, (math.nan,) * 4
         sample = Sample(
             stamp_ns=int(stamp_ns), crank_angle=angle, crank_speed=speed, crank_accel=accel,
@@ -1433,7 +1438,7 @@ class StreamingEstimator:
 def replay(model, stamps_ns, angles, speeds=None,
            fit_time_constant_s=DEFAULT_FIT_TIME_CONSTANT_S, warm_start=True,
            accel_limit=DEFAULT_ACCEL_LIMIT, compiled=True, orbit=None, on_rows=None,
-           tables=None, warm_start_limiter=None):
+           tables=None, warm_start_limiter=None, resume=None):
     """
     Offline estimate of a recorded crank signal: the streaming step over the whole signal.
 
@@ -1464,6 +1469,11 @@ def replay(model, stamps_ns, angles, speeds=None,
         :func:`step_tables` of ``model``, when one caller replays many segments.
     warm_start_limiter : WarmStartLimiter or None
         Shared by the segments of one recording (a new one, wall clock, if None).
+    resume : tuple or None
+        The 'resume' of the previous call when these samples continue its segment (same
+        numbers as one call; the first call must hold at least 3 samples, or all of them).
+        A caller that replays a long segment in pieces wastes at most a piece when one
+        goes out of bound.
     on_rows : callable or None
         ``on_rows(result, done)`` after each chunk of rows: ``result`` is the returned dict
         (its arrays are being filled), final for the first ``done`` samples. Lets a caller
@@ -1476,7 +1486,7 @@ def replay(model, stamps_ns, angles, speeds=None,
         [m]; 'modal' (m, r); 'force', 'force_dot' (m, joints, 2) and 'rms2' (m, joints): the
         tabulated joint reactions at the model's (clipped) crank state; 'orbit' for the next
         call; 'stopped': the index of the sample that went out of bound (the rows after it
-        are not computed), or None.
+        are not computed), or None; 'resume' for a call on the samples that follow.
 
     """
     stamps_ns = np.asarray(stamps_ns, dtype=np.int64)
@@ -1488,21 +1498,29 @@ def replay(model, stamps_ns, angles, speeds=None,
         speeds = np.asarray(speeds, dtype=float)
     if not fit_time_constant_s > 0.0:
         raise ValueError(f'`time_constant_s` must be positive, got {fit_time_constant_s!r}')
-    times = (stamps_ns - stamps_ns[0]) * 1e-9
-    estimator = StreamingEstimator(model, fit_time_constant_s, warm_start=warm_start,
-                                   accel_limit=accel_limit, compiled=compiled,
-                                   step_tables=tables, warm_start_limiter=warm_start_limiter)
-    estimator._orbit = orbit
-    # A fresh filter of the estimator's kind (compiled or not) over the whole signal.
-    motion = type(estimator.rate_filter)(fit_time_constant_s).signal(times, angles, speeds)
+    if resume is None:
+        estimator = StreamingEstimator(model, fit_time_constant_s, warm_start=warm_start,
+                                       accel_limit=accel_limit, compiled=compiled,
+                                       step_tables=tables,
+                                       warm_start_limiter=warm_start_limiter)
+        estimator._orbit = orbit
+        # A fresh filter of the estimator's kind (compiled or not) over the whole signal.
+        rate_filter = type(estimator.rate_filter)(fit_time_constant_s)
+        stamp0_ns, previous_ns = int(stamps_ns[0]), None
+    else:
+        estimator, rate_filter, stamp0_ns, previous_ns = resume
+        if not stamps_ns[0] > previous_ns:
+            raise ValueError('`stamps_ns` must continue after the resumed ones')
+    motion = rate_filter.signal((stamps_ns - stamp0_ns) * 1e-9, angles, speeds)
     result = {'crank_angle': motion[:, 0], 'crank_speed': motion[:, 1],
               'crank_accel': motion[:, 2], 'orbit': None, 'stopped': None}
-    _replay_rows(estimator, stamps_ns, angles, speeds, motion, result, on_rows)
+    _replay_rows(estimator, stamps_ns, angles, speeds, motion, result, on_rows, previous_ns)
     result['orbit'] = estimator._orbit
+    result['resume'] = (estimator, rate_filter, stamp0_ns, int(stamps_ns[-1]))
     return result
 
 
-def _replay_rows(estimator, stamps_ns, angles, speeds, motion, result, on_rows):
+def _replay_rows(estimator, stamps_ns, angles, speeds, motion, result, on_rows, previous_ns):
     """The steps of :func:`replay` into ``result`` (its 'stopped' set where one failed)."""
     model, count, r = estimator.model, stamps_ns.size, estimator.model.size
     wrapped, speed, accel, advance = motion.T
@@ -1519,6 +1537,8 @@ def _replay_rows(estimator, stamps_ns, angles, speeds, motion, result, on_rows):
     # The first samples (start and, without measured speeds, the deferred warm start) go
     # through update() itself; the steps continue from its state.
     prefix = min(3 if (estimator.warm_start and speeds is None) else 1, count)
+    if previous_ns is not None:
+        prefix = 0              # a resumed segment: the estimator has its state
     for n in range(prefix):
         sample = estimator.update(int(stamps_ns[n]), float(angles[n]),
                                   None if speeds is None else float(speeds[n]))
@@ -1530,7 +1550,8 @@ def _replay_rows(estimator, stamps_ns, angles, speeds, motion, result, on_rows):
     finite = np.all(np.isfinite(motion[prefix:]), axis=1)
     last = prefix + (int(np.argmin(finite)) if not np.all(finite) else finite.size)
     # Rows as update() builds them: step [s], sub-steps, crank state, advance.
-    dt_ns = np.diff(stamps_ns)[prefix - 1:last - 1]
+    before = stamps_ns[0] if previous_ns is None else previous_ns
+    dt_ns = np.diff(stamps_ns, prepend=before)[prefix:last]
     rows = np.column_stack([dt_ns * 1e-9, -(-dt_ns // MAX_SUBSTEP_NS), wrapped[prefix:last],
                             model_speed[prefix:last], model_accel[prefix:last],
                             advance[prefix:last]])
