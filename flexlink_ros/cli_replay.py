@@ -12,7 +12,11 @@ recorded timing for live subscribers (a running flexlink_node, Foxglove, RViz).
 Like the node, a sample whose stamp goes back or jumps by more than the estimator's reset gap
 starts a new segment (the state restarts), an exactly repeated sample repeats the previous
 output, and messages without the crank joint, with a non-finite value or that are not a
-readable JointState are skipped and counted by reason.
+readable JointState are skipped and counted by reason. Samples the estimator's input gate
+refuses (core.estimator.InputGate: an implausible speed, speed jump or angle advance) are
+counted as outliers, and an estimate beyond the model's deflection bound as out of bound: both
+keep their input in the output file but get no output messages, and after an out-of-bound
+sample the estimate restarts, as in the node.
 """
 
 import functools
@@ -292,7 +296,10 @@ def criteria_batch(model, angles, speeds, accels,
 
 def segments(stamps_ns, angles, reset_gap_s=core_estimator.DEFAULT_RESET_GAP_S):
     """
-    Split a sample stream where the streaming estimator would restart.
+    Split a sample stream where the streaming estimator would restart on its stamps.
+
+    Stamps and angles only, without the input gate's outliers (estimate_offline plans its
+    rows with core.estimator.plan_rows, which has both).
 
     Returns
     -------
@@ -314,24 +321,36 @@ def segments(stamps_ns, angles, reset_gap_s=core_estimator.DEFAULT_RESET_GAP_S):
 
 
 def allocate_estimate(model, count):
-    """The arrays :func:`estimate_offline` fills (zeros)."""
+    """The arrays :func:`estimate_offline` fills (zeros; 'flags' per sample)."""
     result = {key: np.zeros((count, 2)) for key in ('lever_tip', 'coupler_mid')}
     for key in ('reaction_n', 'gamma_dot', 'criterion'):
         result[key] = np.zeros((count, len(JOINTS)))
     result['crank_angle'] = np.zeros(count)
     result['crank_speed'] = np.zeros(count)
     result['modal'] = np.zeros((count, model.size))
+    result['flags'] = np.zeros(count, dtype=np.int64)
     return result
 
 
 _ESTIMATE_KEYS = ('lever_tip', 'coupler_mid', 'crank_angle', 'crank_speed', 'modal',
                   'reaction_n', 'gamma_dot', 'criterion')
+_Gate = core_estimator.InputGate
+_Flag = core_estimator.SampleFlag
+# Rows planned at a time (core.estimator.plan_rows) ahead of the segment being replayed;
+# after a restart the window starts small and doubles (little work lost if it stops again).
+PLAN_WINDOW = 4096
+FIRST_PLAN_WINDOW = 64
 
 
 def estimate_offline(model, stamps_ns, angles, speeds, warm_start=True, result=None,
                      progress=None):
     """
     Deflections and criteria of every sample, segment by segment as the node would.
+
+    The rows are planned as StreamingEstimator.update decides (core.estimator.plan_rows:
+    restarts, repeats, outliers); each segment is replayed in one go. Outlier rows and rows
+    whose estimate left the model's deflection bound are NaN (flagged OUTLIER and
+    OUT_OF_BOUND); after an out-of-bound row the rest is planned again, as the node restarts.
 
     Parameters
     ----------
@@ -350,44 +369,165 @@ def estimate_offline(model, stamps_ns, angles, speeds, warm_start=True, result=N
     -------
     dict of ndarray
         'lever_tip', 'coupler_mid' (m, 2) [m]; 'reaction_n', 'gamma_dot', 'criterion' (m, 4);
-        'crank_angle', 'crank_speed' (m,); 'modal' (m, r); 'criteria_available' (bool);
-        'segments' (int).
+        'crank_angle', 'crank_speed' (m,); 'modal' (m, r); 'flags' (m,); 'criteria_available'
+        (bool); 'segments', 'outliers', 'out_of_bound' (int).
 
     """
     count = len(stamps_ns)
-    starts, repeated = segments(stamps_ns, angles)
     if result is None:
         result = allocate_estimate(model, count)
-    available = bool(np.any(model.force_moments))
-    repeats = np.flatnonzero(repeated).tolist()
-    copied = 0          # repeated samples filled in so far
-    chosen = stop = None
-    done = 0            # samples of the current segment final so far
+    run = _OfflineRun(model, np.asarray(stamps_ns, dtype=np.int64), np.asarray(angles, float),
+                      np.asarray(speeds, float), warm_start, result, progress)
+    position = 0
+    while position < count:
+        position = run.next_segment(position)
+    run.finish_until(count)
+    flags = result['flags']
+    result.update(criteria_available=run.available, segments=run.segments,
+                  outliers=int(np.count_nonzero(flags & _Flag.OUTLIER)),
+                  out_of_bound=int(np.count_nonzero(flags & _Flag.OUT_OF_BOUND)))
+    return result
 
-    def finish_until(final):
-        # A repeated sample repeats the previous estimate (as StreamingEstimator.update does).
-        nonlocal copied
-        while copied < len(repeats) and repeats[copied] < final:
-            n = repeats[copied]
-            for key in _ESTIMATE_KEYS:
-                result[key][n] = result[key][n - 1]
-            copied += 1
-        if progress is not None:
-            progress(final)
 
-    def on_rows(out, upto):
-        # The rows of the current segment replay() has finished since the last call.
-        nonlocal available, done
-        if upto <= done:
+class _OfflineRun:
+    """The state of :func:`estimate_offline`: segments, repeats to copy, rows final so far."""
+
+    def __init__(self, model, stamps_ns, angles, speeds, warm_start, result, progress):
+        self.model, self.stamps_ns, self.angles, self.speeds = model, stamps_ns, angles, speeds
+        self.warm_start, self.result, self.progress = warm_start, result, progress
+        self.count = stamps_ns.size
+        self.available = bool(np.any(model.force_moments))
+        self.tables = core_estimator.step_tables(model)    # built once, not per segment
+        self.orbit = None   # carried across segments, as one streaming estimator carries it
+        # Warm starts rate-limited on the recording's clock (its latest stamp so far): the
+        # same numbers on any machine, and a storm of restarts costs no more than the node's.
+        self.clock_s = -math.inf
+        self.limiter = core_estimator.WarmStartLimiter(clock=lambda: self.clock_s)
+        self.repeats = []           # (row, row it repeats), in order
+        self.copied = 0             # repeats copied so far
+        self.kinds = np.zeros(self.count, dtype=np.int8)    # InputGate kinds, as planned
+        self.restart_plan(0)
+        self.segments = 0
+        self.final = 0
+        self.chosen = self.stop = self.resume = None
+        self.measured = True
+        self.done = 0
+        self.last_accepted = -1
+
+    def restart_plan(self, position):
+        """Plan the rows from ``position`` afresh (the first sample, or after out of bound)."""
+        self.gate = _Gate(self.model.speed_max, core_estimator.DEFAULT_ACCEL_LIMIT)
+        self.planned = position
+        self.window = FIRST_PLAN_WINDOW
+
+    def plan_window(self):
+        """Plan a window more rows (core.estimator.plan_rows, the gate carried on)."""
+        stop = min(self.planned + min(self.window, PLAN_WINDOW), self.count)
+        self.window *= 2
+        window = slice(self.planned, stop)
+        self.kinds[window], _ = core_estimator.plan_rows(
+            self.stamps_ns[window], self.angles[window], self.speeds[window], self.gate)
+        self.planned = stop
+
+    def next_start(self, position):
+        """The first START row at or after ``position`` in the planned rows, or None."""
+        starts = np.flatnonzero(self.kinds[position:self.planned] == _Gate.START)
+        return position + int(starts[0]) if starts.size else None
+
+    def next_segment(self, position):
+        """
+        Replay the segment that starts at or after ``position``; where the next one may start.
+
+        Planned and replayed a window at a time (one replay() call resumed per window): an
+        out-of-bound row wastes at most a window of planning and stepping, so a recording
+        that goes out of bound often costs time linear in its length.
+        """
+        first = self.next_start(position)
+        while first is None and self.planned < self.count:
+            self.plan_window()
+            first = self.next_start(position)
+        first = self.count if first is None else first
+        self.mark(np.arange(position, first), _Flag.OUTLIER)   # no start before: outliers
+        if first == self.count:
+            return self.count
+        while self.planned < min(first + 3, self.count):
+            self.plan_window()      # replay()'s first call takes the deferred warm start
+        self.segments += 1
+        self.result['flags'][first] |= int(_Flag.RESET)
+        self.last_accepted, self.resume = first, None
+        start, search = first, first + 1
+        while True:
+            found = self.next_start(search)
+            stop = self.planned if found is None else found
+            stopped = self.piece(start, stop)
+            if stopped is not None:
+                # The node restarts at the next sample: plan the rest again from there.
+                self.restart_plan(stopped + 1)
+                self.result['flags'][stopped + 1:stop] = 0
+                del self.repeats[self.copied:]
+                return stopped + 1
+            if found is not None or stop == self.count:
+                return stop
+            self.plan_window()
+            start = search = stop
+
+    def piece(self, start, stop):
+        """Rows start...stop of the current segment: outliers, repeats, steps; None or a stop."""
+        rows = np.arange(start, stop)
+        kinds = self.kinds[start:stop]
+        self.mark(rows[kinds == _Gate.OUTLIER], _Flag.OUTLIER)
+        accepted = (kinds == _Gate.STEP) | (kinds == _Gate.START)
+        # Each repeat copies the last accepted row before it.
+        source = np.maximum.accumulate(np.where(accepted, rows, self.last_accepted))
+        repeated = np.flatnonzero(kinds == _Gate.REPEATED)
+        self.repeats += zip(rows[repeated].tolist(), source[repeated].tolist())
+        chosen = rows[accepted]
+        if chosen.size == 0:
+            self.finish_until(stop)
+            return None
+        self.last_accepted = int(chosen[-1])
+        return self.segment(chosen, stop)
+
+    def mark(self, rows, flag):
+        """Rows with no estimate (NaN), flagged."""
+        for key in _ESTIMATE_KEYS:
+            self.result[key][rows] = math.nan
+        self.result['flags'][rows] = int(flag)
+
+    def segment(self, chosen, stop):
+        """Replay (or resume) the segment over rows ``chosen``; the row out of bound, or None."""
+        self.chosen, self.stop, self.done = chosen, stop, 0
+        seg_speeds = self.speeds[chosen]
+        if self.resume is None:
+            # Measured speeds if every sample of the segment's first window has one.
+            self.measured = not np.any(np.isnan(seg_speeds))
+        measured = seg_speeds if self.measured else None
+        self.clock_s = max(self.clock_s, self.stamps_ns[chosen[0]] * 1e-9)
+        out = core_estimator.replay(self.model, self.stamps_ns[chosen], self.angles[chosen],
+                                    measured, warm_start=self.warm_start, orbit=self.orbit,
+                                    on_rows=self.on_rows, tables=self.tables,
+                                    warm_start_limiter=self.limiter, resume=self.resume)
+        self.orbit, self.resume = out['orbit'], out['resume']
+        if out['stopped'] is None:
+            return None
+        row = int(chosen[out['stopped']])
+        self.mark([row], _Flag.OUT_OF_BOUND)
+        self.finish_until(row + 1)
+        return row
+
+    def on_rows(self, out, upto):
+        """The rows of the current segment replay() has finished since the last call."""
+        if upto <= self.done:
             return
-        rows = slice(done, upto)
+        rows = slice(self.done, upto)
+        model = self.model
         model_speed = np.clip(out['crank_speed'][rows], -model.speed_max, model.speed_max)
         model_accel = np.clip(out['crank_accel'][rows], -core_estimator.DEFAULT_ACCEL_LIMIT,
                               core_estimator.DEFAULT_ACCEL_LIMIT)
         blocks = {name: out[name][rows] for name in ('force', 'force_dot', 'rms2')}
-        reaction, gamma_dot, criterion, _, available = criteria_batch(
+        reaction, gamma_dot, criterion, _, self.available = criteria_batch(
             model, out['crank_angle'][rows], model_speed, model_accel, blocks=blocks)
-        target = chosen[rows]
+        target = self.chosen[rows]
         for key, values in (('lever_tip', out['lever_tip'][rows]),
                             ('coupler_mid', out['coupler_mid'][rows]),
                             ('crank_angle', out['crank_angle'][rows]),
@@ -395,25 +535,22 @@ def estimate_offline(model, stamps_ns, angles, speeds, warm_start=True, result=N
                             ('modal', out['modal'][rows]),
                             ('reaction_n', reaction),
                             ('gamma_dot', gamma_dot), ('criterion', criterion)):
-            result[key][target] = values
-        done = upto
-        finish_until(stop if upto == chosen.size else int(chosen[upto]))
+            self.result[key][target] = values
+        self.done = upto
+        self.finish_until(self.stop if upto == self.chosen.size else int(self.chosen[upto]))
 
-    orbit = None    # carried across segments, as one streaming estimator carries it
-    tables = core_estimator.step_tables(model)     # built once, not per segment
-    for first, stop in zip(starts, starts[1:] + [count]):
-        chosen = np.arange(first, stop)[~repeated[first:stop]]
-        seg_speeds = speeds[chosen]
-        measured = None if np.any(np.isnan(seg_speeds)) else seg_speeds
-        done = 0
-        out = core_estimator.replay(model, stamps_ns[chosen], angles[chosen], measured,
-                                    warm_start=warm_start, orbit=orbit, on_rows=on_rows,
-                                    tables=tables)
-        orbit = out['orbit']
-    finish_until(count)
-    result['criteria_available'] = available
-    result['segments'] = len(starts)
-    return result
+    def finish_until(self, final):
+        """Copy the repeats before ``final`` (as StreamingEstimator.update) and report it."""
+        result = self.result
+        while self.copied < len(self.repeats) and self.repeats[self.copied][0] < final:
+            row, source = self.repeats[self.copied]
+            for key in _ESTIMATE_KEYS:
+                result[key][row] = result[key][source]
+            result['flags'][row] = int(_Flag.REPEATED)
+            self.copied += 1
+        self.final = max(self.final, final)
+        if self.progress is not None:
+            self.progress(self.final)
 
 
 # -- the command -------------------------------------------------------------------------
@@ -714,16 +851,25 @@ def write_replay(out_path, samples, estimate, input_topic, topics, frame_id, mod
                                                    estimate['criterion'][chosen],
                                                    estimate['gamma_dot'][chosen],
                                                    estimate['reaction_n'][chosen]))]
-            per_sample = np.full(stamps.size, len(names))
+            # Outlier and out-of-bound samples (NaN) keep their input, with no outputs.
+            valid = (np.all(np.isfinite(estimate['lever_tip'][chosen]), axis=1)
+                     & np.all(np.isfinite(estimate['coupler_mid'][chosen]), axis=1))
+            per_sample = np.where(valid, len(names), 1)
             if markers_every_n:
-                marked = np.flatnonzero(np.arange(first, chosen.stop) % markers_every_n == 0)
+                marked = np.flatnonzero((np.arange(first, chosen.stop) % markers_every_n == 0)
+                                        & valid)
                 markers = iter(rows_to_bytes(marker_source.rows(
                     stamps[marked], estimate['crank_angle'][first + marked],
                     estimate['modal'][first + marked])))
                 per_sample[marked] += 1
             messages, topic_of = [], []
             with_marker = (per_sample > len(names)).tolist()
+            valid = valid.tolist()
             for n, row in enumerate(zip(*columns)):
+                if not valid[n]:
+                    messages.append(row[0])
+                    topic_of.append(names[0])
+                    continue
                 messages += row
                 topic_of += names
                 if with_marker[n]:
@@ -930,14 +1076,16 @@ def run_replay(args):
         result['output_files'] = status['files']
         result['output_topics'] = status['topics']
     result.update(estimate_s=estimate_s, segments=estimate['segments'],
+                  outliers=estimate['outliers'], out_of_bound=estimate['out_of_bound'],
                   criteria_available=estimate['criteria_available'])
     total = read_s + result.get('write_s', estimate_s)
     result['samples_per_s'] = count / total if total > 0 else math.inf
     result['times_real_time'] = span_s / total if total > 0 else math.inf
+    estimated = np.isfinite(estimate['lever_tip'][:, 0])     # not outlier, not out of bound
     for key in ('lever_tip', 'coupler_mid'):
-        values = estimate[key]
-        result[f'{key}_peak_to_peak_um'] = (1e6 * (values.max(axis=0) - values.min(axis=0))
-                                            ).tolist()
+        values = estimate[key][estimated]
+        result[f'{key}_peak_to_peak_um'] = ((1e6 * (values.max(axis=0) - values.min(axis=0))
+                                             ).tolist() if values.size else [math.nan] * 2)
     if args.publish:
         result['published'] = publish_recording(samples, topic, args.publish_speed)
     return result
@@ -954,7 +1102,8 @@ def _replay_command(args):
         raise ValueError(f'`--markers-every-n` must be >= 0, got {args.markers_every_n}')
     result = run_replay(args)
     lines = [f"{result['input']}: {result['samples']} samples on {result['topic']} "
-             f"({result['skipped']} skipped, {result['segments']} segment(s), "
+             f"({result['skipped']} skipped, {result['outliers']} outlier(s), "
+             f"{result['out_of_bound']} out of bound, {result['segments']} segment(s), "
              f"{result['span_s']:.2f} s recorded)"]
     lines += [f'  skipped {n} messages: {why}' for why, n in result['skipped_reasons'].items()]
     lines += [f"  skipped damaged data in {d['file']}"

@@ -195,14 +195,15 @@ def test_fused_step_equals_the_reference_radau_step(toy_model):
     # with the same stage matrices (stage 1 at the crank state interpolated to c_1 h).
     est = StreamingEstimator(toy_model, warm_start=False)
     rng = np.random.default_rng(1)
-    stamp, angle = 0, 1.0
-    est.update(stamp, angle, 30.0)
+    stamp, angle, speed = 0, 1.0, 30.0
+    est.update(stamp, angle, speed)
     method = RadauIIA(2)
     clip = lambda a: float(np.clip(a, -est.accel_limit, est.accel_limit))  # noqa: E731
     for _ in range(50):
         # One step per sample up to MAX_SUBSTEP_NS (longer ones are split: tested below).
         step_ns = int(10 ** rng.uniform(4, np.log10(MAX_SUBSTEP_NS)))
-        speed = rng.uniform(-60, 60)
+        # Random speeds, each within the jump a sample may make (InputGate).
+        speed = float(np.clip(speed + rng.uniform(-25, 25), -60, 60))
         last = est._last
         q, v = np.array(last.modal), est._z[toy_model.size:2 * toy_model.size].copy()
         stamp += step_ns
@@ -534,19 +535,24 @@ def test_compiled_lu_solve_with_pivoting(n):
 
 
 @pytest.mark.parametrize('compiled', [False, True])
-def test_non_finite_step_is_refused_and_keeps_the_state(toy_model, compiled):
-    """A table gone non-finite makes the step raise; the state keeps its last finite value."""
+def test_non_finite_step_is_flagged_and_the_next_sample_restarts(toy_model, compiled):
+    """A table gone non-finite: that sample is OUT_OF_BOUND (NaN), the next one restarts."""
     if compiled:
         compiled_or_skip()
     est = StreamingEstimator(toy_model, compiled=compiled)
     for n in range(5):
         est.update(n * 10**6, 0.4 + 0.02 * n, 20.0)
-    z_before = est._z.copy()
-    est._tables.kf = est._tables.kf.copy()
+    kf = est._tables.kf
+    est._tables.kf = kf.copy()
     est._tables.kf[..., 0] = np.nan
-    with pytest.raises(ValueError, match='non-finite'):
-        est.update(5 * 10**6, 0.5, 20.0)
-    np.testing.assert_array_equal(est._z, z_before)
+    bad = est.update(5 * 10**6, 0.5, 20.0)
+    assert bad.flags & SampleFlag.OUT_OF_BOUND and 'non-finite' in bad.message
+    assert np.all(np.isnan(bad.lever_tip + bad.coupler_mid))
+    est._tables.kf = kf
+    after = est.update(6 * 10**6, 0.52, 20.0)
+    assert after.flags & SampleFlag.RESET and not after.flags & SampleFlag.OUT_OF_BOUND
+    assert np.all(np.isfinite(after.lever_tip + after.coupler_mid))
+    assert est.out_of_bound == 1
 
 
 def test_compiled_step_rejects_bad_buffers(toy_model):

@@ -223,3 +223,99 @@ def test_segments_share_one_set_of_step_tables(model, monkeypatch):
         small = reduced.model_for_mechanism(load_mechanism('cho1992'), reduced.ModelOptions(
             rigid_crank=True, bearings='rigid', geometric_stiffness=False))
         StreamingEstimator(model, step_tables=core_estimator.step_tables(small))
+
+
+def deflections_by_stamp(path):
+    """{stamp: (lever_tip x, y, coupler_mid x, y)} of a replay's output MCAP."""
+    from geometry_msgs.msg import Vector3Stamped
+    found = {}
+    for topic, _, _, _, data in cli_replay.iter_recording(path):
+        if topic.endswith('/deflection'):
+            message = deserialize_message(data, Vector3Stamped)
+            stamp = ros_messages.stamp_to_ns(message.header.stamp)
+            offset = 0 if 'lever_tip' in topic else 2
+            found.setdefault(stamp, [math.nan] * 4)[offset:offset + 2] = (
+                message.vector.x, message.vector.y)
+    return found
+
+
+def test_replay_skips_poisoned_speeds_and_matches_a_clean_replay(tmp_path):
+    """+1.7e308, -1.7e308 and 1e6 rad/s in a recording: counted outliers, nothing else moves."""
+    stamps = 1_700_000_000_000_000_000 + np.arange(600, dtype=np.int64) * 1_000_000
+    speed = 391.0 * RPM
+    angles = speed * (stamps - stamps[0]) * 1e-9
+    poison = {300: 1.7e308, 301: -1.7e308, 450: 1e6}
+    bad = []
+    for n, value in poison.items():
+        stamp = int(stamps[n]) + 400_000       # between two samples, at a plausible angle
+        bad.append((stamp, joint_state(stamp, ['crank'], [angles[n] + 0.4e-3 * speed],
+                                       [value])))
+    results = {}
+    for name, extra in (('clean', []), ('poisoned', bad)):
+        bag = tmp_path / name
+        write_recording(bag, stamps, angles, np.full(stamps.size, speed), extra)
+        out = tmp_path / f'{name}.mcap'
+        result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'replay', str(bag),
+                                 '--out', str(out), '--no-geometric-stiffness',
+                                 '--markers-every-n', '0'],
+                                capture_output=True, text=True, timeout=300)
+        assert result.returncode == 0, result.stderr
+        results[name] = (result.stdout, deflections_by_stamp(out))
+    assert '3 outlier(s), 0 out of bound, 1 segment(s)' in results['poisoned'][0]
+    assert '0 outlier(s)' in results['clean'][0]
+    clean, poisoned = results['clean'][1], results['poisoned'][1]
+    # The poison has no outputs; every other sample's output equals the clean replay's.
+    assert sorted(poisoned) == sorted(clean) == stamps.tolist()
+    for stamp, values in clean.items():
+        assert poisoned[stamp] == values
+
+
+@pytest.mark.parametrize('window', [cli_replay.PLAN_WINDOW, 7])
+def test_offline_estimate_equals_streaming_through_outliers_and_out_of_bound(
+        model, monkeypatch, window):
+    """Outliers, a jump and out-of-bound resets: replay's rows are the node's samples."""
+    monkeypatch.setattr(cli_replay, 'PLAN_WINDOW', window)     # planned in windows or not
+    from flexlink_ros.core import estimator as core_estimator
+    from flexlink_ros.core.errors import OutlierSample
+    from flexlink_ros.core.estimator import SampleFlag
+    stamps = 10**9 + np.arange(1500, dtype=np.int64) * 1_000_000
+    speed = np.full(stamps.size, 391.0 * RPM)
+    speed[1000:] = -100.0            # a jump: outliers until it is plausible over their dt
+    angles = np.cumsum(speed) * 1e-3
+    speed[[200, 201, 600]] = (1.7e308, -1.7e308, 1e6)
+    stamps[800], angles[800] = stamps[799], angles[799]       # an exact repeat
+    reference = StreamingEstimator(model)
+    normal = max(max(map(abs, reference.update(int(s), a, w).lever_tip))
+                 for s, a, w in zip(stamps[:400].tolist(), angles[:400], speed[:400])
+                 if abs(w) < 1e3)
+    # A bound below the normal peak: the peaks go out of bound and restart the estimate.
+    monkeypatch.setattr(core_estimator, 'DEFLECTION_SAFETY_FACTOR',
+                        core_estimator.DEFLECTION_SAFETY_FACTOR * 0.9 * normal
+                        / reference.deflection_bound_m)
+    estimator = StreamingEstimator(model)
+    streamed = []
+    for stamp, angle, value in zip(stamps.tolist(), angles.tolist(), speed.tolist()):
+        try:
+            streamed.append(estimator.update(stamp, angle, value))
+        except OutlierSample:
+            streamed.append(None)
+    result = cli_replay.estimate_offline(model, stamps, angles, speed)
+    flags = result['flags']
+    refused = [n for n, s in enumerate(streamed) if s is None]
+    assert refused == np.flatnonzero(flags & SampleFlag.OUTLIER).tolist()
+    assert refused[:4] == [200, 201, 600, 1000]
+    out = [n for n, s in enumerate(streamed)
+           if s is not None and s.flags & SampleFlag.OUT_OF_BOUND]
+    assert len(out) > 5 and out == np.flatnonzero(flags & SampleFlag.OUT_OF_BOUND).tolist()
+    assert result['outliers'] == len(refused) and result['out_of_bound'] == len(out)
+    for n, sample in enumerate(streamed):
+        if sample is None or sample.flags & SampleFlag.OUT_OF_BOUND:
+            assert np.all(np.isnan(result['lever_tip'][n]))
+            continue
+        assert bool(flags[n] & SampleFlag.REPEATED) == bool(sample.flags & SampleFlag.REPEATED)
+        if not sample.flags & SampleFlag.REPEATED:
+            assert bool(flags[n] & SampleFlag.RESET) == bool(sample.flags & SampleFlag.RESET)
+        np.testing.assert_allclose(result['lever_tip'][n], sample.lever_tip, rtol=1e-7,
+                                   atol=1e-12)
+        np.testing.assert_allclose(result['coupler_mid'][n], sample.coupler_mid, rtol=1e-7,
+                                   atol=1e-12)

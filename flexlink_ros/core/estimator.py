@@ -19,17 +19,25 @@ come out of one small matrix product with coefficients that depend only on the s
 The same step is compiled (core/_radau_step.c, built with the package): one call per sample
 instead of about thirty numpy calls, the same arithmetic to rounding (a test compares the two).
 Without the extension (a source tree that was not built) the numpy step runs.
+
+Hostile input. :class:`InputGate` refuses implausible samples before the filter sees them
+(:class:`OutlierSample`; the state is untouched), so one bad sample changes no later output;
+an estimate beyond the model's deflection bound, or a non-finite one, is flagged OUT_OF_BOUND
+with NaN deflections and the next sample restarts; warm starts that shoot are rate-limited
+(:class:`WarmStartLimiter`), so a storm of restarts degrades to cold starts.
 """
 
 import dataclasses
 import enum
 import logging
 import math
+import time
 
 import numpy as np
 from scipy.linalg import lapack
 
 from . import reduced
+from .errors import FlexlinkError, OutlierSample
 from .integrators import RADAU_TABLEAUX
 
 try:
@@ -400,6 +408,33 @@ WARM_START_STEPS = 720
 WARM_START_SPEED_TOLERANCE = 1e-4
 # Samples per batch of the offline replay (bounds its memory to a few MB).
 REPLAY_CHUNK = 4096
+# Plausibility of an input sample (InputGate). A measured |speed| beyond this multiple of the
+# model's speed_max is an outlier (between speed_max and it the model sees the clipped speed,
+# as before): 2 leaves room for a model built a little short of the run's top speed.
+SPEED_PLAUSIBLE_FACTOR = 2.0
+# A measured speed may change between samples by this multiple of accel_limit times the
+# interval ...
+JUMP_ACCEL_FACTOR = 4.0
+# ... plus this fraction of speed_max: a commanded step across the whole speed range in one
+# sample still passes (it is clipped for the model, as before), a jump beyond it does not.
+JUMP_ALLOWANCE_FRACTION = 1.0
+# The angle may advance by the plausible speed times the interval plus this [rad].
+ANGLE_ALLOWANCE_RAD = 0.05
+# This many consecutive outliers that agree with each other are a new regime, not outliers:
+# the estimate restarts from the last of them (a real change is never locked out).
+REGIME_SAMPLES = 5
+# Deflection bound: this factor times the resonant amplification 1 / (2 zeta) times the
+# largest quasi-static deflection over the grid at constant speeds up to speed_max.
+DEFLECTION_SAFETY_FACTOR = 2.0
+# Speeds 0 ... speed_max at which the quasi-static deflection is evaluated.
+QUASI_STATIC_SPEEDS = 5
+# Warm starts that shoot (about 0.1 s each) come from a token bucket: this many at once ...
+WARM_START_BURST = 3
+# ... then this many per second; beyond it the state starts cold (static deflection).
+WARM_START_RATE_HZ = 1.0
+# At most one warning per this many seconds about skipped warm starts, and one about
+# out-of-bound estimates [s].
+WARNING_PERIOD_S = 1.0
 # A sample's record (the compiled step's output; _StepTables.record in numpy): deflections
 # with the residual correction (outputs), the correction alone (outputs), joint reactions
 # (joints x 2), their time derivative (joints x 2) and squared cycle-RMS reactions (joints).
@@ -431,6 +466,8 @@ _RESET, _WARM_START, _LARGE_STEP = int(SampleFlag.RESET), int(SampleFlag.WARM_ST
 _CLIPPED_SPEED, _CLIPPED_ACCEL = int(SampleFlag.CLIPPED_SPEED), int(SampleFlag.CLIPPED_ACCEL)
 _REPEATED, _SPEED_FROM_ANGLE = int(SampleFlag.REPEATED), int(SampleFlag.SPEED_FROM_ANGLE)
 _NO_CRITERIA = int(SampleFlag.NO_CRITERIA)
+_OUTLIER, _OUT_OF_BOUND = int(SampleFlag.OUTLIER), int(SampleFlag.OUT_OF_BOUND)
+_COLD_START = int(SampleFlag.COLD_START)
 
 
 @dataclasses.dataclass(slots=True)
@@ -478,6 +515,204 @@ class Sample:
     flags: int
     message: str
     modal: tuple
+
+
+class InputGate:
+    """
+    Plausibility of input samples, checked before the crank filter sees them.
+
+    A sample is an outlier (the filter and the model never see it) when its measured |speed|
+    exceeds ``SPEED_PLAUSIBLE_FACTOR * speed_max``, when its speed differs from the last
+    accepted one by more than ``JUMP_ACCEL_FACTOR * accel_limit * dt + JUMP_ALLOWANCE_FRACTION
+    * speed_max``, or when its angle moved by more than ``SPEED_PLAUSIBLE_FACTOR * speed_max *
+    dt + ANGLE_ALLOWANCE_RAD`` (modulo a revolution). ``REGIME_SAMPLES`` consecutive outliers
+    that pass these tests against each other start a new regime (RESET | OUTLIER). Stamps that
+    go back or leave a gap restart the estimate, as before; exact repeats are ignored.
+    StreamingEstimator.update and the offline replay (:func:`plan_rows`) share this class.
+
+    Parameters
+    ----------
+    speed_max : float
+        The model's speed range [rad/s].
+    accel_limit : float
+        The estimator's acceleration clip [rad/s^2].
+    reset_gap_s : float
+        Gaps longer than this restart the estimate [s].
+
+    """
+
+    STEP, START, OUTLIER, REPEATED = 0, 1, 2, 3
+
+    def __init__(self, speed_max, accel_limit, reset_gap_s=DEFAULT_RESET_GAP_S):
+        self.speed_bound = SPEED_PLAUSIBLE_FACTOR * float(speed_max)
+        self.jump_accel = JUMP_ACCEL_FACTOR * float(accel_limit)
+        self.jump_allowance = JUMP_ALLOWANCE_FRACTION * float(speed_max)
+        self.reset_gap_s = float(reset_gap_s)
+        self.reset()
+
+    def reset(self):
+        """Forget the last accepted sample: the next one starts afresh."""
+        self.last = None        # (stamp_ns, angle, speed) of the last accepted sample
+        self.pending = []       # consecutive outliers that agree with each other
+        self.skipped = 0        # outliers since the last accepted sample
+
+    def implausible(self, reference, stamp_ns, angle, speed):
+        """Why a sample cannot follow ``reference`` (stamp_ns, angle, speed); '' if it can."""
+        dt = (stamp_ns - reference[0]) * 1e-9
+        if not dt > 0.0:
+            return f'stamp {stamp_ns} not after {reference[0]}'
+        if speed is not None and reference[2] is not None:
+            jump = abs(speed - reference[2])
+            if jump > self.jump_accel * dt + self.jump_allowance:
+                return f'speed jumped by {jump:.6g} rad/s in {dt:.6g} s'
+        advance = abs(_wrap_pi(angle - reference[1]))
+        if advance > self.speed_bound * dt + ANGLE_ALLOWANCE_RAD:
+            return f'angle moved by {advance:.6g} rad in {dt:.6g} s'
+        return ''
+
+    def decide(self, stamp_ns, angle, speed):
+        """
+        (kind, flags, message) of a sample: STEP, START, OUTLIER or REPEATED.
+
+        An accepted sample (STEP, START) becomes the reference of the next; ``flags`` has
+        RESET for START and OUTLIER when outliers were skipped before it.
+        """
+        if not math.isfinite(angle):
+            return self._outlier(f'angle {angle!r} not finite')
+        if speed is not None and not abs(speed) <= self.speed_bound:
+            return self._outlier(f'speed {speed:.6g} rad/s beyond the plausible '
+                                 f'{self.speed_bound:.6g} rad/s')
+        kind, message, last = self.STEP, '', self.last
+        if last is None:
+            kind = self.START
+        else:
+            dt = (stamp_ns - last[0]) * 1e-9
+            if dt == 0.0 and abs(wrap_angle(angle) - wrap_angle(last[1])) < 1e-12:
+                return self.REPEATED, 0, 'repeated sample ignored'
+            if dt <= 0.0 or dt > self.reset_gap_s:
+                kind = self.START
+                message = f'stamp went back by {-dt:.6g} s' if dt <= 0.0 else f'gap of {dt:.6g} s'
+            else:
+                reason = self.implausible(last, stamp_ns, angle, speed)
+                if reason:
+                    sample = (stamp_ns, angle, speed)
+                    if self.pending and not self.implausible(self.pending[-1], *sample):
+                        self.pending.append(sample)
+                    else:
+                        self.pending = [sample]
+                    if len(self.pending) < REGIME_SAMPLES:
+                        return self._outlier(reason)
+                    kind = self.START
+                    message = f'new regime after {REGIME_SAMPLES} consistent outliers ({reason})'
+        # A new regime follows its REGIME_SAMPLES - 1 skipped outliers: RESET | OUTLIER.
+        flags = (_OUTLIER if self.skipped else 0) | (_RESET if kind == self.START else 0)
+        self.last, self.pending, self.skipped = (stamp_ns, angle, speed), [], 0
+        return kind, flags, message
+
+    def _outlier(self, reason):
+        self.skipped += 1
+        return self.OUTLIER, 0, reason
+
+    def candidates(self, stamps_ns, angles, speeds):
+        """
+        Rows of a signal that might not be a plain STEP after the row before (vectorised).
+
+        Conservative (thresholds scaled by 0.999): :func:`plan_rows` decides these rows one
+        by one with :meth:`decide`; any other row after an accepted row is a STEP.
+        """
+        margin = 0.999
+        has_speed = ~np.isnan(speeds)
+        out = has_speed & ~(np.abs(speeds) <= margin * self.speed_bound)
+        out |= ~np.isfinite(angles)
+        dt = np.diff(stamps_ns) * 1e-9
+        later = out[1:]
+        later |= (dt <= 0.0) | (dt > margin * self.reset_gap_s)
+        both = has_speed[1:] & has_speed[:-1]
+        jump = np.abs(np.diff(np.where(has_speed, speeds, 0.0)))
+        later |= both & (jump > margin * (self.jump_accel * dt + self.jump_allowance))
+        advance = np.abs(np.mod(np.diff(angles) + math.pi, TWO_PI) - math.pi)
+        later |= ~(advance <= margin * (self.speed_bound * dt + ANGLE_ALLOWANCE_RAD))
+        out[0] = True
+        return out
+
+
+def plan_rows(stamps_ns, angles, speeds, gate):
+    """
+    What :meth:`StreamingEstimator.update` does with each row of a signal (its InputGate).
+
+    Parameters
+    ----------
+    stamps_ns : ndarray of int, shape (m,)
+    angles, speeds : ndarray, shape (m,)
+        Speeds NaN where a sample has none.
+    gate : InputGate
+        Fresh or carried over; left at the end of the signal.
+
+    Returns
+    -------
+    kinds : ndarray of int8, shape (m,)
+        InputGate.STEP, START, OUTLIER or REPEATED per row.
+    flags : ndarray of int, shape (m,)
+        RESET and OUTLIER bits of the accepted rows (as :meth:`InputGate.decide`).
+
+    """
+    stamps_ns = np.asarray(stamps_ns, dtype=np.int64)
+    angles = np.asarray(angles, dtype=float)
+    speeds = np.asarray(speeds, dtype=float)
+    count = stamps_ns.size
+    kinds = np.zeros(count, dtype=np.int8)
+    flags = np.zeros(count, dtype=np.int64)
+    if count == 0:
+        return kinds, flags
+    candidates = gate.candidates(stamps_ns, angles, speeds)
+    candidate_rows = np.flatnonzero(candidates)
+    synced = False          # the gate's reference is the row before
+    n = 0
+    while n < count:
+        if synced and not candidates[n]:
+            # Every row up to the next candidate passes against the row before it.
+            after = np.searchsorted(candidate_rows, n)
+            stop = int(candidate_rows[after]) if after < candidate_rows.size else count
+            speed = float(speeds[stop - 1])
+            gate.last = (int(stamps_ns[stop - 1]), float(angles[stop - 1]),
+                         None if math.isnan(speed) else speed)
+            n = stop
+            continue
+        speed = float(speeds[n])
+        kind, flag, _ = gate.decide(int(stamps_ns[n]), float(angles[n]),
+                                    None if math.isnan(speed) else speed)
+        kinds[n], flags[n] = kind, flag
+        synced = kind in (gate.STEP, gate.START)
+        n += 1
+    return kinds, flags
+
+
+class WarmStartLimiter:
+    """
+    Token bucket of warm starts that shoot (about 0.1 s each): a storm degrades to cold starts.
+
+    ``burst`` at once, then ``rate_hz`` per second of ``clock`` (seconds): the node uses
+    ``time.monotonic``, the offline replay the recording's stamps. Counts what it refused.
+    """
+
+    def __init__(self, burst=WARM_START_BURST, rate_hz=WARM_START_RATE_HZ, clock=time.monotonic):
+        self.burst, self.rate_hz, self.clock = float(burst), float(rate_hz), clock
+        self._tokens = self.burst
+        self._time = None
+        self.refused = 0
+
+    def take(self):
+        """True (and one token less) if a warm start may shoot now."""
+        now = self.clock()
+        if self._time is not None:
+            self._tokens = min(self.burst,
+                               self._tokens + max(0.0, now - self._time) * self.rate_hz)
+        self._time = now
+        if self._tokens >= 1.0:
+            self._tokens -= 1.0
+            return True
+        self.refused += 1
+        return False
 
 
 class _StepTables:
@@ -602,6 +837,19 @@ class _StepTables:
         self.g_stack = self.g_stack.reshape(2, npow, 64)
         # The compiled step's convention: the sample in slot 0, stage 1 in slot 1.
         self.g0 = np.ascontiguousarray(self.g_stack[0])
+        self._bounds = {}
+
+    def deflection_bound(self, estimator):
+        """The ``deflection_bound_m`` of an estimator on these tables (computed once)."""
+        zeta = float(estimator.model.zeta)
+        key = (estimator.model.speed_max, zeta)
+        if key not in self._bounds:
+            bound = math.inf
+            if zeta > 0.0:
+                bound = DEFLECTION_SAFETY_FACTOR / (2.0 * zeta) * estimator.quasi_static_peak()
+            # No load at all (or a singular K somewhere): no bound rather than a zero one.
+            self._bounds[key] = bound if math.isfinite(bound) and bound > 0.0 else math.inf
+        return self._bounds[key]
 
     def record(self, weights, k, z, out):
         """
@@ -650,6 +898,19 @@ class StreamingEstimator:
     step_tables : object or None
         :func:`step_tables` of ``model``, to share between estimators of one model (they
         are read only); built here if None.
+    warm_start_limiter : WarmStartLimiter or None
+        Rate limit of the warm starts that shoot; a new one (wall clock) if None.
+
+    Attributes
+    ----------
+    deflection_bound_m : float
+        Largest |deflection component| published as a number [m]: DEFLECTION_SAFETY_FACTOR
+        / (2 zeta) times the largest quasi-static deflection over the grid at constant
+        speeds up to speed_max (:meth:`quasi_static_peak`). Beyond it a sample is
+        OUT_OF_BOUND.
+    outliers, out_of_bound, warm_starts, cold_starts : int
+        Samples refused as outliers, estimates out of bound (or non-finite), warm starts
+        that shot, and warm starts the rate limit turned into cold starts.
 
     """
 
@@ -657,7 +918,7 @@ class StreamingEstimator:
                  warm_start=True, large_step_s=DEFAULT_LARGE_STEP_S,
                  reset_gap_s=DEFAULT_RESET_GAP_S, accel_limit=DEFAULT_ACCEL_LIMIT,
                  near_zero_fraction=DEFAULT_NEAR_ZERO_FRACTION, compiled=True,
-                 step_tables=None):
+                 step_tables=None, warm_start_limiter=None):
         for name, value in (('large_step_s', large_step_s), ('reset_gap_s', reset_gap_s),
                             ('accel_limit', accel_limit)):
             if not value > 0.0:
@@ -703,14 +964,51 @@ class StreamingEstimator:
         if reduced.MONOMIALS != ('a', '1', 'w2', 'w', 'w4', 'wa', 'w3'):
             raise ValueError('monomial order changed: update StreamingEstimator._evaluate')
         self.samples = 0
+        self.outliers = self.out_of_bound = self.warm_starts = self.cold_starts = 0
+        self._gate = InputGate(self._speed_max, self.accel_limit, self.reset_gap_s)
+        self.warm_start_limiter = (WarmStartLimiter() if warm_start_limiter is None
+                                   else warm_start_limiter)
+        self._cold_warned_at = self._bound_warned_at = None
+        self.deflection_bound_m = self._tables.deflection_bound(self)
 
     # -- state -------------------------------------------------------------------------
 
     def reset(self):
         """Forget the state; the next sample starts afresh."""
+        self._gate.reset()
+        self._restart()
+
+    def _restart(self):
+        """Forget the filter and the model state (the gate keeps its reference)."""
         self.rate_filter.reset()
         self._last = None
         self._pending_warm_start = False
+
+    def quasi_static_peak(self):
+        """
+        Largest |deflection component| of the quasi-static response over the grid [m].
+
+        K q = f at every grid node, at constant speeds 0 ... speed_max (QUASI_STATIC_SPEEDS
+        of them) and zero acceleration: batched solves of the step tables. (At accel_limit
+        the axial inertia loads take the geometric stiffness of the node's default model to
+        buckling, K indefinite: no bound of anything. Acceleration loads are left to
+        DEFLECTION_SAFETY_FACTOR.)
+        """
+        model, tables, r = self.model, self._tables, self.model.size
+        theta = np.arange(model.grid_size) / self._cells_per_radian
+        operator_rows = np.zeros(tables.out_rows)
+        peak = 0.0
+        for w in np.linspace(0.0, self._speed_max, QUASI_STATIC_SPEEDS).tolist():
+            _, _, stiffness, load = self.system_blocks(theta, w, 0.0)
+            q = np.linalg.solve(stiffness, load[..., None])[..., 0]
+            # Power 0 of each monomial (a, 1, w2, w, w4, wa, w3): the node's operator.
+            monomials = (0.0, 1.0, w * w, w, w ** 4, 0.0, w ** 3)
+            operator_rows[0::4] = monomials[:operator_rows[0::4].size]
+            operator = np.einsum('k,nkj->nj', operator_rows, tables.out).reshape(
+                theta.size, -1, r + 1)
+            deflection = np.einsum('nor,nr->no', operator[..., :r], q) + operator[..., r]
+            peak = max(peak, float(np.max(np.abs(deflection))))
+        return peak
 
     def _evaluate(self, angle, speed, accel):
         """
@@ -761,9 +1059,16 @@ class StreamingEstimator:
                             flat[2 * r2:3 * r2 + self.model.size])
 
     def _set_state(self, angle, speed, accel, warm):
-        """Start from the periodic state at this speed (warm) or the static deflection."""
+        """
+        Start from the periodic state at this speed (warm) or the static deflection.
+
+        Returns the flags: WARM_START, COLD_START (the rate limit refused the shooting) or 0.
+        """
         r = self.model.size
+        flags = 0
         if warm and speed != 0.0:
+            flags = _WARM_START if self._may_warm_start(speed) else _COLD_START
+        if flags == _WARM_START:
             q0, v0 = self.periodic_state(angle, speed)
         else:
             _, _, stiffness, load = self.system_blocks(np.array([angle]), speed, accel)
@@ -773,6 +1078,27 @@ class StreamingEstimator:
         weights, _, k = self._evaluate(angle, speed, accel)
         self._tables.record(weights, k, self._z, self._record)
         self._previous[:] = (angle, speed, accel)
+        return flags
+
+    def _orbit_serves(self, speed):
+        """True if the kept periodic orbit serves a warm start at ``speed`` (no shooting)."""
+        orbit = self._orbit
+        return (orbit is not None
+                and abs(orbit[0] - speed) <= WARM_START_SPEED_TOLERANCE * abs(speed))
+
+    def _may_warm_start(self, speed):
+        """True if a warm start at ``speed`` is cheap or the rate limit allows a shooting."""
+        if self._orbit_serves(speed) or self.warm_start_limiter.take():
+            return True
+        self.cold_starts += 1
+        now = time.monotonic()
+        last = self._cold_warned_at
+        if last is None or now - last > WARNING_PERIOD_S:
+            self._cold_warned_at = now
+            LOGGER.warning('warm start skipped (at most %d at once, then %g per second): cold '
+                           'start from the static deflection (%d so far)', WARM_START_BURST,
+                           WARM_START_RATE_HZ, self.cold_starts)
+        return False
 
     def periodic_state(self, angle, speed):
         """
@@ -783,7 +1109,8 @@ class StreamingEstimator:
         the state from it by cubic Hermite interpolation in time (v is dq/dt) instead.
         """
         orbit = self._orbit
-        if orbit is None or abs(orbit[0] - speed) > WARM_START_SPEED_TOLERANCE * abs(speed):
+        if not self._orbit_serves(speed):
+            self.warm_starts += 1
             _, q, v = reduced.periodic_response(self.model, speed, start_angle=angle,
                                                 steps=WARM_START_STEPS,
                                                 blocks=self.system_blocks)
@@ -864,41 +1191,52 @@ class StreamingEstimator:
         crank_angle : float
             Crank angle [rad], any range (wrapped here).
         crank_speed : float or None
-            Measured crank speed [rad/s]; None (or non-finite) to derive it from angles.
+            Measured crank speed [rad/s]; None (or NaN) to derive it from angles.
 
         Returns
         -------
         Sample
+            Flagged OUT_OF_BOUND (deflections NaN, the state reset) when the estimate left
+            :attr:`deflection_bound_m` or went non-finite.
+
+        Raises
+        ------
+        OutlierSample
+            The sample is implausible (:class:`InputGate`); nothing of the state changed.
 
         """
         angle_in = float(crank_angle)
         if not math.isfinite(angle_in):
             raise ValueError(f'`crank_angle` must be finite, got {crank_angle!r}')
-        if crank_speed is not None and not math.isfinite(crank_speed):
-            crank_speed = None
-        flags = 0
-        message = ''
-        last = self._last
-        if last is not None:
-            dt_ns = stamp_ns - last.stamp_ns
-            dt = dt_ns * 1e-9
-            if dt == 0.0 and abs(wrap_angle(angle_in) - last.crank_angle) < 1e-12:
-                return dataclasses.replace(last, flags=last.flags | _REPEATED,
-                                           message='repeated sample ignored')
-            if dt <= 0.0 or dt > self.reset_gap_s:
-                message = (f'stamp went back by {-dt:.6g} s' if dt <= 0.0
-                           else f'gap of {dt:.6g} s')
+        if crank_speed is not None:
+            crank_speed = float(crank_speed)
+            if math.isnan(crank_speed):
+                crank_speed = None
+        stamp_ns = int(stamp_ns)
+        kind, flags, message = self._gate.decide(stamp_ns, angle_in, crank_speed)
+        if kind == InputGate.OUTLIER:
+            self.outliers += 1
+            raise OutlierSample(message)
+        if kind == InputGate.REPEATED:
+            return dataclasses.replace(self._last, flags=self._last.flags | _REPEATED,
+                                       message=message)
+        if kind == InputGate.START:
+            if message:
                 LOGGER.warning('estimator reset: %s', message)
-                self.reset()
-                last = None
-        if last is None:
-            return self._start(stamp_ns, angle_in, crank_speed, message)
+            self._restart()
+            return self._start(stamp_ns, angle_in, crank_speed, flags, message)
+        last = self._last
+        dt_ns = stamp_ns - last.stamp_ns
+        dt = dt_ns * 1e-9
         angle, speed, accel = self.rate_filter.update((stamp_ns - self._stamp0_ns) * 1e-9,
                                                       angle_in, crank_speed)
         if crank_speed is None:
             flags |= _SPEED_FROM_ANGLE
         if dt > self.large_step_s:
             flags |= _LARGE_STEP
+        if not (math.isfinite(angle) and math.isfinite(speed) and math.isfinite(accel)):
+            return self._out_of_bound(stamp_ns, angle, speed, accel, flags,
+                                      'non-finite crank filter state')
         model_speed, model_accel = speed, accel
         if abs(speed) > self._speed_max:
             model_speed = math.copysign(self._speed_max, speed)
@@ -906,31 +1244,52 @@ class StreamingEstimator:
         if abs(accel) > self.accel_limit:
             model_accel = math.copysign(self.accel_limit, accel)
             flags |= _CLIPPED_ACCEL
-        if self._pending_warm_start and self.rate_filter.count >= 3:
-            self._pending_warm_start = False
-            self._set_state(angle, model_speed, model_accel, True)
-            flags |= _WARM_START
-        else:
-            self._row[:] = (dt, -(-dt_ns // MAX_SUBSTEP_NS), angle, model_speed, model_accel,
-                            self.rate_filter.advance)
-            self._step_rows(self._row, self._no_states, self._record)
+        try:
+            if self._pending_warm_start and self.rate_filter.count >= 3:
+                self._pending_warm_start = False
+                flags |= self._set_state(angle, model_speed, model_accel, True)
+            else:
+                self._row[:] = (dt, -(-dt_ns // MAX_SUBSTEP_NS), angle, model_speed,
+                                model_accel, self.rate_filter.advance)
+                self._step_rows(self._row, self._no_states, self._record)
+        except (ValueError, FlexlinkError) as exc:    # singular or non-finite step
+            return self._out_of_bound(stamp_ns, angle, speed, accel, flags, str(exc))
         return self._finish(stamp_ns, angle, speed, accel, model_speed, flags, message)
 
-    def _start(self, stamp_ns, angle_in, crank_speed, message):
+    def _start(self, stamp_ns, angle_in, crank_speed, flags, message):
         self._stamp0_ns = int(stamp_ns)
         angle, speed, accel = self.rate_filter.update(0.0, angle_in, crank_speed)
-        flags = _RESET
         if crank_speed is None:
             flags |= _SPEED_FROM_ANGLE
         model_speed = max(-self._speed_max, min(self._speed_max, speed))
         if model_speed != speed:
             flags |= _CLIPPED_SPEED
         warm = self.warm_start and crank_speed is not None
-        self._set_state(angle, model_speed, 0.0, warm)
-        if warm and model_speed != 0.0:
-            flags |= _WARM_START
+        try:
+            flags |= self._set_state(angle, model_speed, 0.0, warm)
+        except (ValueError, FlexlinkError) as exc:    # singular K or a failed shooting
+            return self._out_of_bound(stamp_ns, angle, speed, accel, flags, str(exc))
         self._pending_warm_start = self.warm_start and crank_speed is None
         return self._finish(stamp_ns, angle, speed, accel, model_speed, flags, message)
+
+    def _out_of_bound(self, stamp_ns, angle, speed, accel, flags, message):
+        """A sample flagged OUT_OF_BOUND, not a number to publish; the next one restarts."""
+        self.out_of_bound += 1
+        now = time.monotonic()
+        if self._bound_warned_at is None or now - self._bound_warned_at > WARNING_PERIOD_S:
+            self._bound_warned_at = now
+            LOGGER.warning('estimate out of bound, state reset: %s (%d so far)', message,
+                           self.out_of_bound)
+        nan2, nan4 = (math.nan,) * 2, (math.nan,) * 4
+        sample = Sample(
+            stamp_ns=int(stamp_ns), crank_angle=angle, crank_speed=speed, crank_accel=accel,
+            lever_tip=nan2, coupler_mid=nan2, reaction_n=nan4, gamma_dot=nan4,
+            criterion=nan4, near_zero=(False,) * 4, error_indicator=math.nan,
+            flags=flags | _OUT_OF_BOUND | self._base_flags, message=message,
+            modal=(math.nan,) * self.model.size)
+        self.samples += 1
+        self.reset()
+        return sample
 
     def _step_rows(self, rows, states, records):
         """
@@ -1021,6 +1380,11 @@ class StreamingEstimator:
             criteria = self._criteria(values[2 * outputs:], model_speed)
         z = self._z
         r = self._tables.size
+        largest = max([abs(d) for d in deflection])
+        if not largest <= self.deflection_bound_m:     # also NaN
+            return self._out_of_bound(
+                stamp_ns, angle, speed, accel, flags,
+                f'deflection {largest:.6g} m beyond the bound {self.deflection_bound_m:.6g} m')
         size = math.sqrt(sum([d * d for d in deflection]))
         sample = Sample(
             stamp_ns=int(stamp_ns), crank_angle=angle, crank_speed=speed, crank_accel=accel,
@@ -1074,14 +1438,17 @@ class StreamingEstimator:
 def replay(model, stamps_ns, angles, speeds=None,
            fit_time_constant_s=DEFAULT_FIT_TIME_CONSTANT_S, warm_start=True,
            accel_limit=DEFAULT_ACCEL_LIMIT, compiled=True, orbit=None, on_rows=None,
-           tables=None):
+           tables=None, warm_start_limiter=None, resume=None):
     """
     Offline estimate of a recorded crank signal: the streaming step over the whole signal.
 
     Same numbers as feeding :meth:`StreamingEstimator.update` sample by sample (a test checks
-    this), for strictly increasing stamps without gaps: the crank filter runs over the signal
-    in one loop, then the compiled step advances through all samples in one call per chunk
-    (the numpy step, sample by sample, where the extension is not built).
+    this), for strictly increasing stamps without gaps or outliers (one segment of
+    :func:`plan_rows`): the crank filter runs over the signal in one loop, then the compiled
+    step advances through all samples in one call per chunk (the numpy step, sample by
+    sample, where the extension is not built). An estimate beyond the deflection bound, a
+    non-finite one or a failed step ends the replay at that sample ('stopped'): the streaming
+    estimator restarts at the next one, so the caller replays the rest as a new segment.
 
     Parameters
     ----------
@@ -1100,6 +1467,13 @@ def replay(model, stamps_ns, angles, speeds=None,
         and the segments restart exactly as one streaming estimator does.
     tables : object or None
         :func:`step_tables` of ``model``, when one caller replays many segments.
+    warm_start_limiter : WarmStartLimiter or None
+        Shared by the segments of one recording (a new one, wall clock, if None).
+    resume : tuple or None
+        The 'resume' of the previous call when these samples continue its segment (same
+        numbers as one call; the first call must hold at least 3 samples, or all of them).
+        A caller that replays a long segment in pieces wastes at most a piece when one
+        goes out of bound.
     on_rows : callable or None
         ``on_rows(result, done)`` after each chunk of rows: ``result`` is the returned dict
         (its arrays are being filled), final for the first ``done`` samples. Lets a caller
@@ -1111,7 +1485,8 @@ def replay(model, stamps_ns, angles, speeds=None,
         'crank_angle', 'crank_speed', 'crank_accel' (m,); 'lever_tip', 'coupler_mid' (m, 2)
         [m]; 'modal' (m, r); 'force', 'force_dot' (m, joints, 2) and 'rms2' (m, joints): the
         tabulated joint reactions at the model's (clipped) crank state; 'orbit' for the next
-        call.
+        call; 'stopped': the index of the sample that went out of bound (the rows after it
+        are not computed), or None; 'resume' for a call on the samples that follow.
 
     """
     stamps_ns = np.asarray(stamps_ns, dtype=np.int64)
@@ -1123,47 +1498,90 @@ def replay(model, stamps_ns, angles, speeds=None,
         speeds = np.asarray(speeds, dtype=float)
     if not fit_time_constant_s > 0.0:
         raise ValueError(f'`time_constant_s` must be positive, got {fit_time_constant_s!r}')
-    times = (stamps_ns - stamps_ns[0]) * 1e-9
-    estimator = StreamingEstimator(model, fit_time_constant_s, warm_start=warm_start,
-                                   accel_limit=accel_limit, compiled=compiled,
-                                   step_tables=tables)
-    estimator._orbit = orbit
-    # A fresh filter of the estimator's kind (compiled or not) over the whole signal.
-    motion = type(estimator.rate_filter)(fit_time_constant_s).signal(times, angles, speeds)
+    if resume is None:
+        estimator = StreamingEstimator(model, fit_time_constant_s, warm_start=warm_start,
+                                       accel_limit=accel_limit, compiled=compiled,
+                                       step_tables=tables,
+                                       warm_start_limiter=warm_start_limiter)
+        estimator._orbit = orbit
+        # A fresh filter of the estimator's kind (compiled or not) over the whole signal.
+        rate_filter = type(estimator.rate_filter)(fit_time_constant_s)
+        stamp0_ns, previous_ns = int(stamps_ns[0]), None
+    else:
+        estimator, rate_filter, stamp0_ns, previous_ns = resume
+        if not stamps_ns[0] > previous_ns:
+            raise ValueError('`stamps_ns` must continue after the resumed ones')
+    motion = rate_filter.signal((stamps_ns - stamp0_ns) * 1e-9, angles, speeds)
+    result = {'crank_angle': motion[:, 0], 'crank_speed': motion[:, 1],
+              'crank_accel': motion[:, 2], 'orbit': None, 'stopped': None}
+    _replay_rows(estimator, stamps_ns, angles, speeds, motion, result, on_rows, previous_ns)
+    result['orbit'] = estimator._orbit
+    result['resume'] = (estimator, rate_filter, stamp0_ns, int(stamps_ns[-1]))
+    return result
+
+
+def _replay_rows(estimator, stamps_ns, angles, speeds, motion, result, on_rows, previous_ns):
+    """The steps of :func:`replay` into ``result`` (its 'stopped' set where one failed)."""
+    model, count, r = estimator.model, stamps_ns.size, estimator.model.size
     wrapped, speed, accel, advance = motion.T
     model_speed = np.clip(speed, -model.speed_max, model.speed_max)
-    model_accel = np.clip(accel, -accel_limit, accel_limit)
-    r = model.size
-    modal = np.empty((count, r))
-    records = np.empty((count, RECORD_SIZE))
-    # The first samples (start and, without measured speeds, the deferred warm start) go
-    # through update() itself; the steps continue from its state.
-    prefix = min(3 if (warm_start and speeds is None) else 1, count)
-    for n in range(prefix):
-        estimator.update(int(stamps_ns[n]), float(angles[n]),
-                         None if speeds is None else float(speeds[n]))
-        modal[n] = estimator._z[:r]
-        records[n] = estimator._record
-    # Rows as update() builds them: step [s], sub-steps, crank state, advance.
-    dt_ns = np.diff(stamps_ns)[prefix - 1:]
-    rows = np.column_stack([dt_ns * 1e-9, -(-dt_ns // MAX_SUBSTEP_NS), wrapped[prefix:],
-                            model_speed[prefix:], model_accel[prefix:], advance[prefix:]])
-    states = np.empty((min(REPLAY_CHUNK, rows.shape[0]), 2 * r))
+    model_accel = np.clip(accel, -estimator.accel_limit, estimator.accel_limit)
+    modal = np.full((count, r), math.nan)
+    records = np.full((count, RECORD_SIZE), math.nan)
     outputs, joints = len(reduced.OUTPUT_NAMES), len(reduced.JOINTS)
     joint = records[:, 2 * outputs:]
-    result = {'crank_angle': wrapped, 'crank_speed': speed, 'crank_accel': accel,
-              'lever_tip': records[:, 0:2], 'coupler_mid': records[:, 2:4], 'modal': modal,
-              'force': joint[:, :2 * joints].reshape(count, joints, 2),
-              'force_dot': joint[:, 2 * joints:4 * joints].reshape(count, joints, 2),
-              'rms2': joint[:, 4 * joints:], 'orbit': None}
+    result.update({'lever_tip': records[:, 0:2], 'coupler_mid': records[:, 2:4],
+                   'modal': modal, 'force': joint[:, :2 * joints].reshape(count, joints, 2),
+                   'force_dot': joint[:, 2 * joints:4 * joints].reshape(count, joints, 2),
+                   'rms2': joint[:, 4 * joints:]})
+    # The first samples (start and, without measured speeds, the deferred warm start) go
+    # through update() itself; the steps continue from its state.
+    prefix = min(3 if (estimator.warm_start and speeds is None) else 1, count)
+    if previous_ns is not None:
+        prefix = 0              # a resumed segment: the estimator has its state
+    for n in range(prefix):
+        sample = estimator.update(int(stamps_ns[n]), float(angles[n]),
+                                  None if speeds is None else float(speeds[n]))
+        if sample.flags & _OUT_OF_BOUND:
+            return _stop(result, n, on_rows)
+        modal[n] = estimator._z[:r]
+        records[n] = estimator._record
+    # A non-finite filter output ends the steps before it (the stepper must not see it).
+    finite = np.all(np.isfinite(motion[prefix:]), axis=1)
+    last = prefix + (int(np.argmin(finite)) if not np.all(finite) else finite.size)
+    # Rows as update() builds them: step [s], sub-steps, crank state, advance.
+    before = stamps_ns[0] if previous_ns is None else previous_ns
+    dt_ns = np.diff(stamps_ns, prepend=before)[prefix:last]
+    rows = np.column_stack([dt_ns * 1e-9, -(-dt_ns // MAX_SUBSTEP_NS), wrapped[prefix:last],
+                            model_speed[prefix:last], model_accel[prefix:last],
+                            advance[prefix:last]])
+    states = np.empty((min(REPLAY_CHUNK, rows.shape[0]), 2 * r))
     if on_rows is not None:
         on_rows(result, prefix)
     for first in range(0, rows.shape[0], REPLAY_CHUNK):
         chunk = rows[first:first + REPLAY_CHUNK]
         done = slice(prefix + first, prefix + first + chunk.shape[0])
-        estimator._step_rows(chunk, states[:chunk.shape[0]], records[done])
+        states[:] = math.nan            # rows after a failed step stay NaN
+        try:
+            estimator._step_rows(chunk, states[:chunk.shape[0]], records[done])
+        except ValueError:              # singular or non-finite step: found below
+            pass
         modal[done] = states[:chunk.shape[0], :r]
+        good = np.all(np.isfinite(states[:chunk.shape[0]]), axis=1) & np.all(
+            np.abs(records[done, :outputs]) <= estimator.deflection_bound_m, axis=1)
+        if not np.all(good):
+            return _stop(result, done.start + int(np.argmin(good)), on_rows)
         if on_rows is not None:
             on_rows(result, done.stop)
-    result['orbit'] = estimator._orbit
-    return result
+    if last < count:
+        return _stop(result, last, on_rows)
+    return None
+
+
+def _stop(result, row, on_rows):
+    """Mark ``row`` out of bound (NaN) in a replay's result; the rows before it are final."""
+    for key in ('lever_tip', 'coupler_mid', 'modal', 'force', 'force_dot', 'rms2'):
+        result[key][row:] = math.nan
+    result['stopped'] = row
+    if on_rows is not None:
+        on_rows(result, row)
