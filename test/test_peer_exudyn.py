@@ -183,3 +183,14 @@ def test_bearing_springs_269rpm_against_the_linear_model(mech):
     assert p2p['lever_tip_dx'] > 1e-3
     for key in ('lever_tip_dx', 'coupler_mid_dx', 'coupler_mid_dy'):
         assert abs(table[key]['p2p_error']) < 0.05, (key, table[key])
+
+
+@needs_exudyn
+def test_main_prints_the_side_by_side_table(capsys):
+    assert peer.main(['--rpm', '269', '--elements', '2', '--revolutions', '1', '--steps', '120',
+                      '--json']) == 0
+    import json
+    records = json.loads(capsys.readouterr().out)
+    assert records[0]['rpm'] == 269.0
+    assert set(records[0]['linear_vs_peer']) == set(KEYS)
+    assert records[0]['info']['samples_per_revolution'] == 120

@@ -681,7 +681,65 @@ def compare(peer, linear):
     return out
 
 
+def main(argv=None):
+    """
+    Print peer and linear peak-to-peak side by side (the issue's table):
+    ``python -m flexlink_ros.studies.peer_exudyn --rpm 269 391 [--gravity] [--json]``.
+    """
+    import argparse
+    import json
+    parser = argparse.ArgumentParser(prog='python -m flexlink_ros.studies.peer_exudyn',
+                                     description=main.__doc__)
+    parser.add_argument('--mechanism', default='cho1992')
+    parser.add_argument('--rpm', type=float, nargs='+', default=[269.0, 391.0])
+    parser.add_argument('--elements', type=int, default=DEFAULT_ELEMENTS)
+    parser.add_argument('--bearings', choices=BEARINGS, default='rigid')
+    parser.add_argument('--mass-placement', choices=MASS_PLACEMENTS, default='coupler-end')
+    parser.add_argument('--gravity', action='store_true', help='apply gravity (default off, '
+                        'as in the issue\'s table)')
+    parser.add_argument('--beta', type=float, default=DEFAULT_BETA_S)
+    parser.add_argument('--steps', type=int, default=DEFAULT_STEPS)
+    parser.add_argument('--revolutions', type=int, default=None)
+    parser.add_argument('--json', action='store_true')
+    args = parser.parse_args(argv)
+    records = []
+    for rpm in args.rpm:
+        response = peer_response(args.mechanism, rpm, elements_per_link=args.elements,
+                                 bearings=args.bearings, gravity=args.gravity,
+                                 beta_s=args.beta, mass_placement=args.mass_placement,
+                                 revolutions=args.revolutions, steps_per_revolution=args.steps)
+        linear = linear_response(args.mechanism, rpm, elements_per_link=args.elements,
+                                 bearings=args.bearings, gravity=args.gravity)
+        p2p = peak_to_peak(response)
+        records.append({'rpm': rpm, 'peer_p2p_m': {k: p2p[k] for k in OUTPUT_KEYS},
+                        'periodicity': p2p['periodicity'], 'info': response['info'],
+                        'linear_vs_peer': compare(response, linear)})
+    if args.json:
+        print(json.dumps(records, indent=1, default=float))
+        return 0
+    for rec in records:
+        table = rec['linear_vs_peer']
+        info = rec['info']
+        print(f"{rec['rpm']:g} rpm, {info['bearings']} bearings, gravity {info['gravity']}, "
+              f"{info['elements_per_link']} elements per link, {info['revolutions']} "
+              f"revolutions, {info['cpu_s']:.1f} CPU s")
+        print('  ' + ' '.join(f'{k:>15s}' for k in OUTPUT_KEYS))
+        print('  peer p2p [um]  ' + ' '.join(f"{table[k]['peer_p2p'] * 1e6:15.2f}"
+                                             for k in OUTPUT_KEYS))
+        print('  linear p2p [um]' + ' '.join(f"{table[k]['other_p2p'] * 1e6:15.2f}"
+                                             for k in OUTPUT_KEYS))
+        print('  linear p2p err ' + ' '.join(f"{100 * table[k]['p2p_error']:14.1f}%"
+                                             for k in OUTPUT_KEYS))
+        print('  linear rel RMS ' + ' '.join(f"{100 * table[k]['rms_error']:14.1f}%"
+                                             for k in OUTPUT_KEYS))
+    return 0
+
+
 __all__ = ['BEARINGS', 'MASS_PLACEMENTS', 'OUTPUT_KEYS', 'EXUDYN_REQUIREMENT', 'PeerModel',
            'exudyn_available', 'lowest_bending_frequency', 'default_revolutions', 'build_peer',
            'peer_response', 'revolution_slice', 'peak_to_peak', 'peer_static', 'linear_model',
-           'linear_static', 'linear_response', 'compare']
+           'linear_static', 'linear_response', 'compare', 'main']
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
