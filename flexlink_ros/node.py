@@ -270,6 +270,8 @@ def parameter_descriptor(spec):
     descriptor = ParameterDescriptor(description=spec.description, read_only=spec.read_only)
     if spec.choices:
         descriptor.additional_constraints = 'one of: ' + ', '.join(spec.choices)
+    elif spec.max_bytes is not None:
+        descriptor.additional_constraints = f'at most {spec.max_bytes} bytes (UTF-8)'
     if spec.low is not None and isinstance(spec.default, float):
         descriptor.floating_point_range = [FloatingPointRange(from_value=float(spec.low),
                                                               to_value=float(spec.high))]
