@@ -77,6 +77,7 @@ if __name__ == '__main__':  # before the second or so of imports below
 
 import ctypes  # noqa: E402  (after the start-up signal handlers, see above)
 import dataclasses  # noqa: E402
+import warnings  # noqa: E402
 import gc  # noqa: E402
 import math  # noqa: E402
 import time  # noqa: E402
@@ -824,11 +825,20 @@ def main(args=None):
 def _make_node_at_start_up(managed):
     """make_node, or StartupInterrupted if a signal came first (rclpy errors it caused too)."""
     check_startup_signal()
+    # rclpy warns when a signal shuts the context down under a node being created; those
+    # warnings are held back, and shown only if no signal explains them.
     try:
-        node = make_node(managed=managed)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter('always')
+            node = make_node(managed=managed)
     except Exception:
-        check_startup_signal()      # a signal inside rclpy shut the context down: not an error
+        check_startup_signal()      # a signal inside rclpy shut the context down
         raise
+    finally:
+        if _STARTUP['signal'] is None:
+            for warning in caught:
+                warnings.warn_explicit(warning.message, warning.category,
+                                       warning.filename, warning.lineno)
     check_startup_signal()
     return node
 

@@ -460,3 +460,42 @@ def test_unwritable_recording_path_is_an_error_diagnostic_and_estimates_go_on(
     assert 'FAILED' in message and 'not_a_directory' in message
     assert node_process.stop(signal.SIGTERM) == 0
     assert blocker.read_text().startswith('a file')
+
+
+# -- signals at start-up ----------------------------------------------------------------------
+
+def _caught_signals(pid):
+    """Signals the process has a handler for (SigCgt of /proc/<pid>/status)."""
+    for line in pathlib.Path(f'/proc/{pid}/status').read_text().splitlines():
+        if line.startswith('SigCgt:'):
+            mask = int(line.split()[1], 16)
+            return {signum for signum in range(1, 64) if mask >> (signum - 1) & 1}
+    return set()
+
+
+def _thread_count(pid):
+    return len(list(pathlib.Path(f'/proc/{pid}/task').iterdir()))
+
+
+@pytest.mark.parametrize('stage', ['imports', 'model build'])
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
+def test_signal_during_start_up_exits_cleanly(tmp_path, processes, stage, sig):
+    """SIGINT/SIGTERM while importing or building the model: one line, exit 0, no traceback."""
+    # A fresh cache: the model is built (a few seconds) after rclpy has started.
+    node_process = NodeProcess(tmp_path, f'model.cache_dir:={tmp_path / "cache"}')
+    processes.append(node_process)
+    pid = node_process.process.pid
+    deadline = time.monotonic() + 60.0
+    # imports: the node's handlers are in place (before numpy, scipy and rclpy load);
+    # model build: rclpy has started its DDS threads, the model is being built.
+    while not (signal.SIGTERM in _caught_signals(pid) if stage == 'imports'
+               else _thread_count(pid) > 8):
+        assert node_process.process.poll() is None and time.monotonic() < deadline, \
+            node_process.log()
+        time.sleep(0.002)
+    node_process.process.send_signal(sig)
+    assert node_process.process.wait(timeout=60) == 0
+    log = node_process.log()
+    assert 'Traceback' not in log and flexlink_node.READY_MESSAGE not in log
+    expected = f'{flexlink_node.NODE_NAME}: {sig.name} during start-up: exiting'
+    assert [line for line in log.splitlines() if not line.startswith('[')] == [expected]
