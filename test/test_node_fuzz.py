@@ -254,3 +254,75 @@ def test_fuzz_through_a_running_node(tmp_path, processes, ros):  # noqa: F811
     assert all(math.isfinite(v) for m in lever for v in lever_values(m))
     assert 'Traceback' not in node_process.log()
     assert node_process.stop() == 0
+
+
+def estimator_statuses(diagnostics):
+    return [status for message in diagnostics for status in message.status
+            if status.name.endswith(': estimator')]
+
+
+def test_repeats_are_not_published_and_a_poison_speed_is_not_ok(tmp_path, processes,  # noqa: F811
+                                                                 ros):  # noqa: F811
+    """Exact repeats are counted, not published; 1e6 rad/s never passes as OK or as a number."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    from geometry_msgs.msg import Vector3Stamped
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+    from flexlink_ros.core.estimator import StreamingEstimator
+    from test_node import node_model
+
+    node_process = NodeProcess(tmp_path, 'diagnostics.period_s:=0.2')
+    processes.append(node_process)
+    bound_m = getattr(StreamingEstimator(node_model()), 'deflection_bound_m', None)
+    node_process.wait_for(flexlink_node.READY_MESSAGE, READY_TIMEOUT_S)
+    test_node, executor = ros
+    qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+    publisher = test_node.create_publisher(JointState, 'joint_states', qos)
+    lever, diagnostics = [], []
+    test_node.create_subscription(Vector3Stamped, OUTPUTS[0], lever.append, qos, raw=True)
+    test_node.create_subscription(DiagnosticArray, '/diagnostics', diagnostics.append, 100)
+    spin_until(executor, lambda: publisher.get_subscription_count() > 0
+               and test_node.count_publishers(OUTPUTS[0]) > 0 and diagnostics,
+               DISCOVERY_TIMEOUT_S, 'discovery')
+
+    count, repeated, poison = 400, range(50, 60), 200
+    sent = 0
+    for n in range(count):
+        data = valid_message(n, speed=1e6 if n == poison else SPEED)
+        publisher.publish(data)
+        sent += 1
+        if n in repeated:
+            publisher.publish(data)     # the same bytes again: an exact repeat
+            sent += 1
+        if n == 0:
+            spin_until(executor, lambda: lever, 30.0, 'the first output (warm start)')
+        if n == poison:
+            poison_wall = time.monotonic()
+        time.sleep(1e-3)
+        executor.spin_once(timeout_sec=0.0)
+    spin_until(executor, lambda: int(latest_input_status(diagnostics).get('received', 0))
+               == sent, 20.0, 'the counts', lambda: f': {latest_input_status(diagnostics)}')
+    spin_until(executor, lambda: time.monotonic() > poison_wall + 0.5, 5.0, 'a period more')
+    status = latest_input_status(diagnostics)
+    spin_until(executor, lambda: len(lever) >= int(status['published']), 10.0, 'outputs')
+
+    stamps = [struct.unpack_from('<iI', m, 4) for m in lever]
+    assert int(status['repeated']) == len(repeated)
+    assert len(stamps) == len(set(stamps)) == int(status['published'])   # none twice
+    values = np.array([lever_values(m) for m in lever])
+    assert np.all(np.isfinite(values))
+    if bound_m is not None:
+        assert np.max(np.abs(values)) <= bound_m
+    statuses = estimator_statuses(diagnostics)
+    not_ok = [s for s in statuses if s.level != DiagnosticStatus.OK]
+    assert not_ok, 'the estimator status stayed OK through the poison sample'
+    assert any(word in s.message for s in not_ok
+               for word in ('flagged', 'outlier', 'not published'))
+    normal = np.max(np.abs(values[:poison - 10]))
+    print(f'\npoison 1e6 rad/s: {len(lever)} of {count} samples published, '
+          f'{status["outlier"]} outliers, {status["out_of_bound"]} out of bound, '
+          f'{status["skipped"]} skipped, {status["repeated"]} repeats ignored; '
+          f'max |lever deflection| {normal:.3g} m before, {np.max(np.abs(values)):.3g} m '
+          f'overall (bound {bound_m}); estimator levels '
+          f'{sorted({s.level for s in statuses})}: {not_ok[0].message!r}')
+    assert node_process.stop() == 0
