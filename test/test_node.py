@@ -581,8 +581,8 @@ def test_run_time_parameters_take_effect(tmp_path, processes, ros):
     # markers.*: every sample, five points per link, the exaggeration scales the drawing.
     def drawn_deflection(message):
         rigid, deformed = message.markers[4], message.markers[5]     # the lever
-        return max(abs(a.x - b.x) + abs(a.y - b.y) for a, b in zip(rigid.points,
-                                                                  deformed.points))
+        pairs = zip(rigid.points, deformed.points)
+        return max(abs(a.x - b.x) + abs(a.y - b.y) for a, b in pairs)
     assert all(r.successful for r in set_parameters(markers__every_n=1,
                                                     markers__points_per_link=5))
     before = len(markers)

@@ -13,8 +13,8 @@ from sensor_msgs.msg import JointState
 from flexlink_ros import cdr
 from flexlink_ros import node as flexlink_node
 from flexlink_ros.ros_messages import InputRejected, ns_to_stamp
-from test_node import (DISCOVERY_TIMEOUT_S, OUTPUTS, READY_TIMEOUT_S, NodeProcess,
-                       processes, ros, spin_until)  # noqa: F401 (fixtures)
+from test_node import (DISCOVERY_TIMEOUT_S, OUTPUTS, READY_TIMEOUT_S, NodeProcess,  # noqa: F401
+                       processes, ros, spin_until)  # the fixtures processes and ros
 
 STAMP0_NS = 1_800_000_000 * 10**9
 SPEED = 30.0     # rad/s, about 290 rpm
@@ -261,8 +261,8 @@ def estimator_statuses(diagnostics):
             if status.name.endswith(': estimator')]
 
 
-def test_repeats_are_not_published_and_a_poison_speed_is_not_ok(tmp_path, processes,  # noqa: F811
-                                                                 ros):  # noqa: F811
+def test_repeats_are_not_published_and_a_poison_speed_is_not_ok(
+        tmp_path, processes, ros):  # noqa: F811
     """Exact repeats are counted, not published; 1e6 rad/s never passes as OK or as a number."""
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
     from geometry_msgs.msg import Vector3Stamped
