@@ -77,19 +77,19 @@ if __name__ == '__main__':  # before the second or so of imports below
 
 import ctypes  # noqa: E402  (after the start-up signal handlers, see above)
 import dataclasses  # noqa: E402
-import warnings  # noqa: E402
 import gc  # noqa: E402
 import math  # noqa: E402
 import time  # noqa: E402
+import warnings  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 from . import cdr, node_params  # noqa: E402
+from . import ros_messages as rm  # noqa: E402
 from .core import reduced  # noqa: E402
 from .core.errors import FlexlinkError, OutlierSample, RecorderError  # noqa: E402
 from .core.estimator import SampleFlag, StreamingEstimator  # noqa: E402
 from .core.mechanism import load_mechanism  # noqa: E402
-from . import ros_messages as rm  # noqa: E402
 
 # Topics relative to the node's namespace (~ = the node's private namespace).
 TOPICS = {'lever_tip': '~/lever_tip/deflection', 'coupler_mid': '~/coupler_mid/deflection',
@@ -508,8 +508,9 @@ def _make_node_class():
             self.period.counts[kind] = self.period.counts.get(kind, 0) + 1
 
         def _refuse(self, kind, reason):
-            """Count a message that gives no estimate, and warn (throttled per kind)."""
+            """Count a message that gives no estimate; warn (at most once a second per branch)."""
             self._count(kind)
+            reason = one_line(reason)
             if kind in SKIP_KINDS:
                 self.rejected += 1
                 self.period.rejected += 1
