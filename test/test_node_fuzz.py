@@ -263,7 +263,11 @@ def estimator_statuses(diagnostics):
 
 def test_repeats_are_not_published_and_a_poison_speed_is_not_ok(
         tmp_path, processes, ros):  # noqa: F811
-    """Exact repeats are counted, not published; 1e6 rad/s never passes as OK or as a number."""
+    """
+    Exact repeats are counted, not published; 1e6 rad/s never passes as OK or as a number.
+
+    One message beyond the 1 MiB bound goes in too: refused as malformed, unrecorded.
+    """
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
     from geometry_msgs.msg import Vector3Stamped
     from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -285,7 +289,7 @@ def test_repeats_are_not_published_and_a_poison_speed_is_not_ok(
                and test_node.count_publishers(OUTPUTS[0]) > 0 and diagnostics,
                DISCOVERY_TIMEOUT_S, 'discovery')
 
-    count, repeated, poison = 400, range(50, 60), 200
+    count, repeated, poison, oversized = 400, range(50, 60), 200, 100
     sent = 0
     for n in range(count):
         data = valid_message(n, speed=1e6 if n == poison else SPEED)
@@ -293,6 +297,9 @@ def test_repeats_are_not_published_and_a_poison_speed_is_not_ok(
         sent += 1
         if n in repeated:
             publisher.publish(data)     # the same bytes again: an exact repeat
+            sent += 1
+        if n == oversized:
+            publisher.publish(data + bytes(cdr.MAX_MESSAGE_BYTES))
             sent += 1
         if n == 0:
             spin_until(executor, lambda: lever, 30.0, 'the first output (warm start)')
@@ -308,6 +315,8 @@ def test_repeats_are_not_published_and_a_poison_speed_is_not_ok(
 
     stamps = [struct.unpack_from('<iI', m, 4) for m in lever]
     assert int(status['repeated']) == len(repeated)
+    assert int(status['skipped_malformed']) == 1 and 'beyond the bound' in status[
+        'last_skip_reason']
     assert len(stamps) == len(set(stamps)) == int(status['published'])   # none twice
     values = np.array([lever_values(m) for m in lever])
     assert np.all(np.isfinite(values))
