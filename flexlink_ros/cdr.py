@@ -17,24 +17,48 @@ from .core.reduced import JOINTS
 CDR_LE = b'\x00\x01\x00\x00'  # encapsulation header: plain CDR, little endian
 
 
+# Input bounds of a JointState (checked against the declared lengths before anything is
+# read or allocated, so crafted counts cannot size an allocation).
+MAX_MESSAGE_BYTES = 1 << 20   # 1 MiB: a JointState of MAX_JOINTS joints is under 300 kB
+MAX_JOINTS = 1024             # names and each of position, velocity, effort
+MAX_NAME_BYTES = 256          # frame_id and each joint name, UTF-8, without the NUL
+_ENCAPSULATIONS = {b'\x00\x00': '>', b'\x00\x01': '<'}   # plain CDR big / little endian
+
+
+class MalformedCdr(struct.error, ValueError):
+    """Raised if bytes are not a JointState within the input bounds; the message says why."""
+
+
 def _align(offset, size):
     # Alignment counts from the end of the 4-byte encapsulation header.
     return offset + (-(offset - 4)) % size
 
 
-def _read_string(data, offset, endian):
+def _read_count(data, offset, endian, what, limit):
+    """A uint32 length at ``offset`` (aligned to 4), checked against ``limit``."""
     offset = _align(offset, 4)
-    (length,) = struct.unpack_from(endian + 'I', data, offset)
-    offset += 4
-    return bytes(data[offset:offset + max(length - 1, 0)]), offset + length
-
-
-def _read_doubles(data, offset, endian):
-    offset = _align(offset, 4)
+    if offset + 4 > len(data):
+        raise MalformedCdr(f'{what}: length field beyond the end of the message')
     (count,) = struct.unpack_from(endian + 'I', data, offset)
-    offset += 4
+    if count > limit:
+        raise MalformedCdr(f'{what}: declared length {count} beyond the bound {limit}')
+    return count, offset + 4
+
+
+def _read_string(data, offset, endian, what='string'):
+    length, offset = _read_count(data, offset, endian, what, MAX_NAME_BYTES + 1)
+    end = offset + length
+    if end > len(data):
+        raise MalformedCdr(f'{what}: {length} bytes declared, {len(data) - offset} left')
+    return bytes(data[offset:offset + max(length - 1, 0)]), end
+
+
+def _read_doubles(data, offset, endian, what):
+    count, offset = _read_count(data, offset, endian, what, MAX_JOINTS)
     if count:
         offset = _align(offset, 8)
+    if offset + 8 * count > len(data):
+        raise MalformedCdr(f'{what}: {count} values declared, {len(data) - offset} bytes left')
     values = struct.unpack_from(f'{endian}{count}d', data, offset)
     return values, offset + 8 * count
 
@@ -42,6 +66,10 @@ def _read_doubles(data, offset, endian):
 def parse_joint_state(data, joint_name):
     """
     Stamp, position and velocity of one joint from JointState CDR bytes.
+
+    The whole message is checked against the input bounds (:data:`MAX_MESSAGE_BYTES`,
+    :data:`MAX_JOINTS`, :data:`MAX_NAME_BYTES`) and every declared length against the bytes
+    left, before it is read.
 
     Parameters
     ----------
@@ -58,20 +86,34 @@ def parse_joint_state(data, joint_name):
     velocity : float or None
         None if the message has no velocity for the joint.
 
+    Raises
+    ------
+    MalformedCdr
+        Not a JointState within the bounds (the message names the field).
+
     """
-    endian = '<' if data[1] == 1 else '>'
+    if len(data) > MAX_MESSAGE_BYTES:
+        raise MalformedCdr(f'{len(data)} bytes, beyond the bound of {MAX_MESSAGE_BYTES}')
+    if len(data) < 16:
+        raise MalformedCdr(f'{len(data)} bytes, too short for a JointState')
+    endian = _ENCAPSULATIONS.get(bytes(data[:2]))
+    if endian is None:
+        raise MalformedCdr(f'encapsulation {bytes(data[:2]).hex()} is not plain CDR')
     sec, nanosec = struct.unpack_from(endian + 'iI', data, 4)
-    _, offset = _read_string(data, 12, endian)
-    offset = _align(offset, 4)
-    (count,) = struct.unpack_from(endian + 'I', data, offset)
-    offset += 4
+    if nanosec >= 1_000_000_000:
+        raise MalformedCdr(f'stamp nanosec {nanosec} beyond 999999999')
+    _, offset = _read_string(data, 12, endian, 'frame_id')
+    count, offset = _read_count(data, offset, endian, 'name', MAX_JOINTS)
+    if offset + 4 * count > len(data):   # each name takes 4 bytes at least
+        raise MalformedCdr(f'name: {count} names declared, {len(data) - offset} bytes left')
     index = None
     for k in range(count):
-        name, offset = _read_string(data, offset, endian)
+        name, offset = _read_string(data, offset, endian, 'name')
         if index is None and name == joint_name:
             index = k
-    positions, offset = _read_doubles(data, offset, endian)
-    velocities, offset = _read_doubles(data, offset, endian)
+    positions, offset = _read_doubles(data, offset, endian, 'position')
+    velocities, offset = _read_doubles(data, offset, endian, 'velocity')
+    _, offset = _read_doubles(data, offset, endian, 'effort')
     stamp_ns = sec * 1_000_000_000 + nanosec
     if index is None or index >= len(positions):
         return stamp_ns, None, None

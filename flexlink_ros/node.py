@@ -11,27 +11,86 @@ input's stamp, in frame ``frame_id`` (SI units, see ros_messages.py):
 - ``/diagnostics``: ``diagnostic_msgs/DiagnosticArray`` every ``diagnostics.period_s``.
 
 Inputs and outputs are optionally recorded to MCAP (``record.*``). A message that cannot be
-used (NaN, missing joint, empty arrays) is counted, warned about at most once a second and
-skipped; core errors are logged and estimation goes on.
+used (malformed or oversized CDR, NaN, missing joint, empty arrays, an outlier) is counted by
+kind, warned about at most once a second and skipped; no single message can stop the node.
+Exact repeats are counted and not published again; an estimate beyond the model's bound (or
+non-finite) is counted and not published. SIGINT/SIGTERM during start-up exit with one line
+and code 0.
 """
 
-import ctypes
-import dataclasses
-import gc
-import math
-import struct
+import os
+import signal
 import sys
-import time
-
-import numpy as np
-
-from . import cdr, node_params
-from .core import reduced
-from .core.errors import FlexlinkError, RecorderError
-from .core.estimator import SampleFlag, StreamingEstimator
-from .core.mechanism import load_mechanism
 
 NODE_NAME = 'flexlink_node'
+
+
+class StartupInterrupted(SystemExit):
+    """SIGINT/SIGTERM before the node spins: exit code 0 (raised in the main thread)."""
+
+    def __init__(self, signal_name):
+        super().__init__(0)
+        self.signal_name = signal_name
+
+
+# Start-up state: 'active' until the node spins; 'signal' = a signal not acted on yet.
+_STARTUP = {'active': False, 'signal': None}
+
+
+def _in_rclpy(frame):
+    """Whether rclpy code is on the interrupted stack (an exception there can wedge it)."""
+    while frame is not None:
+        if f'{os.sep}rclpy{os.sep}' in frame.f_code.co_filename:
+            return True
+        frame = frame.f_back
+    return False
+
+
+def _on_startup_signal(signum, frame):
+    if not _STARTUP['active']:
+        if signum == signal.SIGINT:     # spinning: rclpy has shut the context down already
+            raise KeyboardInterrupt
+        return
+    _STARTUP['signal'] = signal.Signals(signum).name
+    if not _in_rclpy(frame):
+        check_startup_signal()
+
+
+def check_startup_signal():
+    """Exit (StartupInterrupted) if SIGINT/SIGTERM arrived during start-up; a safe point."""
+    name = _STARTUP['signal']
+    if _STARTUP['active'] and name is not None:
+        _STARTUP['active'] = False
+        os.write(2, f'{NODE_NAME}: {name} during start-up: exiting\n'.encode())
+        raise StartupInterrupted(name)
+
+
+def install_startup_signal_handlers():
+    """SIGINT/SIGTERM end the process cleanly until the node spins (rclpy chains to these)."""
+    _STARTUP['active'] = True
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, _on_startup_signal)
+
+
+if __name__ == '__main__':  # before the second or so of imports below
+    install_startup_signal_handlers()
+
+import ctypes  # noqa: E402  (after the start-up signal handlers, see above)
+import dataclasses  # noqa: E402
+import gc  # noqa: E402
+import math  # noqa: E402
+import time  # noqa: E402
+import warnings  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from . import cdr, node_params  # noqa: E402
+from . import ros_messages as rm  # noqa: E402
+from .core import reduced  # noqa: E402
+from .core.errors import FlexlinkError, OutlierSample, RecorderError  # noqa: E402
+from .core.estimator import SampleFlag, StreamingEstimator  # noqa: E402
+from .core.mechanism import load_mechanism  # noqa: E402
+
 # Topics relative to the node's namespace (~ = the node's private namespace).
 TOPICS = {'lever_tip': '~/lever_tip/deflection', 'coupler_mid': '~/coupler_mid/deflection',
           'criteria': '~/joint_criteria', 'markers': '~/markers', 'diagnostics': '/diagnostics'}
@@ -43,6 +102,88 @@ READY_MESSAGE = 'ready: listening on'  # logged once the node is subscribed (cli
 FIRST_INPUT_MESSAGE = 'first crank sample'
 # GIL switch interval of the node process [s] (see main).
 SWITCH_INTERVAL_S = 0.0005
+MAX_REASON_CHARS = 200   # a refusal's reason as logged and in /diagnostics
+# What happens to a received message (counted per kind, in total and per diagnostics period).
+SKIP_KINDS = ('malformed', 'content', 'estimator', 'internal')   # counted as 'skipped'
+OTHER_KINDS = ('outlier', 'repeated', 'out_of_bound')
+# Flags after which the estimate is not to be trusted blindly: the estimator status is WARN.
+WARN_FLAGS = (SampleFlag.CLIPPED_SPEED | SampleFlag.CLIPPED_ACCEL | SampleFlag.OUTLIER
+              | SampleFlag.COLD_START)
+
+
+def one_line(text):
+    """The first line of ``text``, cut to MAX_REASON_CHARS."""
+    lines = str(text).strip().splitlines()
+    line = lines[0] if lines else ''
+    return line if len(line) <= MAX_REASON_CHARS else line[:MAX_REASON_CHARS - 3] + '...'
+
+
+def crank_sample(data, joint_name, deserialize):
+    """
+    Stamp, angle and speed of the crank from JointState CDR; InputRejected says why not.
+
+    The fast parser (cdr.parse_joint_state) checks the bytes against the input bounds; only a
+    message without a usable sample is deserialised by rclpy, to name what is wrong, and an
+    error there (rclpy raises RMWError on truncated CDR) is a refusal too.
+
+    Parameters
+    ----------
+    data : bytes
+        CDR of a ``sensor_msgs/JointState``.
+    joint_name : str
+        Name of the crank joint.
+    deserialize : callable
+        bytes -> sensor_msgs.msg.JointState (rclpy's deserialize_message).
+
+    Returns
+    -------
+    stamp_ns : int
+    angle : float
+    speed : float or None
+
+    Raises
+    ------
+    ros_messages.InputRejected
+        With ``kind`` 'malformed' or 'content' and a one-line reason.
+
+    """
+    try:
+        stamp_ns, angle, speed = cdr.parse_joint_state(data, joint_name.encode())
+    except cdr.MalformedCdr as exc:
+        raise rm.InputRejected(f'malformed JointState: {one_line(exc)}', 'malformed') from None
+    if angle is None or not math.isfinite(angle) or (
+            speed is not None and not math.isfinite(speed)):
+        try:
+            message = deserialize(data)
+        except (RuntimeError, ValueError, TypeError, MemoryError) as exc:  # RMWError: Runtime
+            raise rm.InputRejected(f'malformed JointState ({type(exc).__name__}): '
+                                   f'{one_line(exc)}', 'malformed') from None
+        stamp_ns, angle, speed = rm.crank_from_joint_state(message, joint_name)
+    if stamp_ns <= 0:
+        raise rm.InputRejected('zero stamp (the publisher does not stamp its messages)'
+                               if stamp_ns == 0 else f'negative stamp {stamp_ns} ns')
+    return stamp_ns, angle, speed
+
+
+def publishable(sample, bound_m=None):
+    """
+    Whether a Sample's numbers may be published: finite, within ``bound_m``, not OUT_OF_BOUND.
+
+    Returns
+    -------
+    reason : str or None
+        Why not, or None if publishable.
+
+    """
+    if sample.flags & SampleFlag.OUT_OF_BOUND:
+        return sample.message or 'deflection beyond the model\'s bound'
+    deflections = (*sample.lever_tip, *sample.coupler_mid)
+    values = (*deflections, *sample.criterion, *sample.gamma_dot, *sample.reaction_n)
+    if not all(math.isfinite(v) for v in values):
+        return 'non-finite estimate'
+    if bound_m is not None and max(abs(v) for v in deflections) > bound_m:
+        return f'deflection {max(abs(v) for v in deflections):.3g} m beyond {bound_m:.3g} m'
+    return None
 
 
 def load_node_model(values, warn):
@@ -115,6 +256,8 @@ class PeriodStats:
 
     valid: int = 0
     rejected: int = 0
+    counts: dict = dataclasses.field(default_factory=dict)   # kind -> messages
+    last_out_of_bound: str = ''
     update_ns: list = dataclasses.field(default_factory=list)
     max_error_indicator: float = 0.0
     max_criterion: list = dataclasses.field(default_factory=lambda: [0.0] * 4)
@@ -128,6 +271,8 @@ def parameter_descriptor(spec):
     descriptor = ParameterDescriptor(description=spec.description, read_only=spec.read_only)
     if spec.choices:
         descriptor.additional_constraints = 'one of: ' + ', '.join(spec.choices)
+    elif spec.max_bytes is not None:
+        descriptor.additional_constraints = f'at most {spec.max_bytes} bytes (UTF-8)'
     if spec.low is not None and isinstance(spec.default, float):
         descriptor.floating_point_range = [FloatingPointRange(from_value=float(spec.low),
                                                               to_value=float(spec.high))]
@@ -151,7 +296,6 @@ def _make_node_class():
     from sensor_msgs.msg import JointState
     from visualization_msgs.msg import MarkerArray
 
-    from . import ros_messages as rm
     from .recorder import McapRecorder
 
     class Pipeline:
@@ -178,7 +322,9 @@ def _make_node_class():
             values = self.values
             log = self.get_logger()
             start = time.perf_counter()
+            check_startup_signal()
             self.model, self.options, self.notes = load_node_model(values, log.warning)
+            check_startup_signal()
             self.criteria_source = self.model.info.get('criteria', 'unknown')
             log.info(f'model: {self.model.size} coordinates, {self.model.grid_size} grid cells, '
                      f'{self.options} ({time.perf_counter() - start:.2f} s); '
@@ -203,8 +349,9 @@ def _make_node_class():
                                   for key, publisher in self.publishers_.items()}
             self.recorder = self._open_recorder(self.qos) if values['record.enabled'] else None
             self.received = self.rejected = self.published = 0
+            self.counts = dict.fromkeys(SKIP_KINDS + OTHER_KINDS, 0)
             self.last_valid_wall = None
-            self.last_rejection = ''
+            self.last_rejection = self.last_outlier = ''
 
         def _activate(self):
             """Subscribe and start the diagnostics timer: estimates flow from now on."""
@@ -214,8 +361,7 @@ def _make_node_class():
             self._period_start = time.monotonic()
             self.subscription = self.create_subscription(
                 JointState, values['input_topic'], self._on_joint_state, self.qos, raw=True)
-            self._timer = self.create_timer(values['diagnostics.period_s'],
-                                            self._publish_diagnostics)
+            self._start_diagnostics_timer()
             self.get_logger().info(
                 f'{READY_MESSAGE} {self.subscription.topic_name} (joint '
                 f'{values["crank_joint"]!r}), publishing under {self.get_name()}/'
@@ -225,6 +371,12 @@ def _make_node_class():
                     'the compiled estimator step (flexlink_ros.core._radau_step) is not built: '
                     'the numpy step runs, about twice as slow (build the package with '
                     'colcon build or pip install .)')
+
+        def _start_diagnostics_timer(self):
+            if self._timer is not None:
+                self.destroy_timer(self._timer)
+            self._timer = self.create_timer(self.values['diagnostics.period_s'],
+                                            self._publish_diagnostics)
 
         def _deactivate(self):
             """Stop receiving (the model, publishers and recording stay)."""
@@ -257,11 +409,16 @@ def _make_node_class():
             return SetParametersResult(successful=True)
 
         def _apply(self, parameters):
+            """Run-time changes take effect here (the others are read-only)."""
+            period_changed = any(p.name == 'diagnostics.period_s'
+                                 and p.value != self.values[p.name] for p in parameters)
             for parameter in parameters:
                 self.values[parameter.name] = parameter.value
             if self.estimator is not None:
                 self.estimator.warm_start = self.values['model.warm_start']
             self._frame = self.values['frame_id'].encode()
+            if period_changed and self._timer is not None:
+                self._start_diagnostics_timer()
 
         # -- recording ----------------------------------------------------------------
 
@@ -298,18 +455,46 @@ def _make_node_class():
         def _on_joint_state(self, data):
             receive_ns = self._clock.now().nanoseconds
             self.received += 1
+            if len(data) > cdr.MAX_MESSAGE_BYTES:   # not recorded either
+                self._refuse('malformed', f'{len(data)} bytes, beyond the bound of '
+                             f'{cdr.MAX_MESSAGE_BYTES}')
+                return
             if self.recorder is not None:
                 self._record(self.input_topic, data, receive_ns)
             try:
-                stamp_ns, angle, speed = self._crank(data)
+                self._estimate(data)
+            except Exception as exc:    # last resort: no message may stop the node
+                self.get_logger().error(f'unexpected {type(exc).__name__} on an input '
+                                        f'message: {one_line(exc)}',
+                                        throttle_duration_sec=WARN_THROTTLE_S)
+                self._refuse('internal', f'{type(exc).__name__}: {one_line(exc)}')
+
+        def _estimate(self, data):
+            try:
+                stamp_ns, angle, speed = crank_sample(data, self.values['crank_joint'],
+                                                      self._deserialize)
                 start = time.perf_counter_ns()
                 sample = self.estimator.update(stamp_ns, angle, speed)
                 self.period.update_ns.append(time.perf_counter_ns() - start)
-            except (rm.InputRejected, FlexlinkError, ValueError) as exc:
-                self.rejected += 1
-                self.period.rejected += 1
-                self.last_rejection = str(exc)
-                self.get_logger().warning(f'input skipped: {exc}',
+            except rm.InputRejected as exc:
+                self._refuse(exc.kind, str(exc))
+                return
+            except OutlierSample as exc:
+                self.period.flags |= SampleFlag.OUTLIER
+                self._refuse('outlier', str(exc))
+                return
+            except (FlexlinkError, ValueError) as exc:
+                self._refuse('estimator', one_line(exc))
+                return
+            if sample.flags & SampleFlag.REPEATED:
+                self._count('repeated')
+                return
+            reason = publishable(sample, getattr(self.estimator, 'deflection_bound_m', None))
+            if reason is not None:
+                self._count('out_of_bound')
+                self.period.flags |= sample.flags | SampleFlag.OUT_OF_BOUND
+                self.period.last_out_of_bound = reason
+                self.get_logger().warning(f'estimate not published: {reason}',
                                           throttle_duration_sec=WARN_THROTTLE_S)
                 return
             if self.last_valid_wall is None:
@@ -318,21 +503,24 @@ def _make_node_class():
             self.last_valid_wall = time.monotonic()
             self._publish_sample(stamp_ns, sample)
 
-        def _crank(self, data):
-            """Stamp, angle and speed of the crank joint; InputRejected says why not."""
-            joint = self.values['crank_joint']
-            try:
-                stamp_ns, angle, speed = cdr.parse_joint_state(data, joint.encode())
-            except (struct.error, IndexError, ValueError):
-                raise rm.InputRejected('malformed JointState CDR') from None
-            if angle is None or not math.isfinite(angle) or (
-                    speed is not None and not math.isfinite(speed)):
-                # The slow path only for bad messages: it names what is wrong.
-                stamp_ns, angle, speed = rm.crank_from_joint_state(self._deserialize(data),
-                                                                   joint)
-            if stamp_ns == 0:
-                raise rm.InputRejected('zero stamp (the publisher does not stamp its messages)')
-            return stamp_ns, angle, speed
+        def _count(self, kind):
+            self.counts[kind] += 1
+            self.period.counts[kind] = self.period.counts.get(kind, 0) + 1
+
+        def _refuse(self, kind, reason):
+            """Count a message that gives no estimate; warn (at most once a second per branch)."""
+            self._count(kind)
+            reason = one_line(reason)
+            if kind in SKIP_KINDS:
+                self.rejected += 1
+                self.period.rejected += 1
+                self.last_rejection = reason
+                self.get_logger().warning(f'input skipped: {reason}',
+                                          throttle_duration_sec=WARN_THROTTLE_S)
+            else:
+                self.last_outlier = reason
+                self.get_logger().warning(f'input skipped as {reason}',
+                                          throttle_duration_sec=WARN_THROTTLE_S)
 
         def _publish_sample(self, stamp_ns, sample):
             values = self.values
@@ -425,20 +613,17 @@ def _make_node_class():
             elif rate < values['diagnostics.min_rate_hz']:
                 level, message = rm.WARN, f'input rate {rate:.1f} Hz below ' \
                     f'{values["diagnostics.min_rate_hz"]:g} Hz'
-            elif period.rejected:
-                level, message = rm.WARN, f'{period.rejected} input messages skipped'
-            statuses = [rm.status(f'{NODE_NAME}: input', level, message, {
-                'topic': self.input_topic, 'rate_hz': rate,
-                'stale_s': stale, 'received': self.received, 'skipped': self.rejected,
-                'skipped_in_period': period.rejected, 'last_skip_reason': self.last_rejection})]
+            elif period.rejected or period.counts.get('outlier'):
+                level, message = rm.WARN, (f'{period.rejected} input messages skipped, '
+                                           f'{period.counts.get("outlier", 0)} outliers')
+            statuses = [rm.status(f'{NODE_NAME}: input', level, message, self._input_counts(
+                period, {'topic': self.input_topic, 'rate_hz': rate, 'stale_s': stale}))]
             durations = np.array(period.update_ns) / 1e3
             median = float(np.median(durations)) if durations.size else math.nan
             p99 = float(np.percentile(durations, 99)) if durations.size else math.nan
             flags = [flag.name for flag in SampleFlag if flag and period.flags & flag]
+            level, message = self._estimator_level(period)
             indicator = period.max_error_indicator
-            level, message = rm.OK, 'ok'
-            if indicator > values['diagnostics.error_indicator_warn']:
-                level, message = rm.WARN, f'error indicator {indicator:.3g}'
             statuses.append(rm.status(f'{NODE_NAME}: estimator', level, message, {
                 'error_indicator_max': indicator, 'update_us_median': median,
                 'update_us_p99': p99, 'samples_in_period': period.valid,
@@ -463,6 +648,36 @@ def _make_node_class():
                                            'near_zero': period.near_zero[j]}))
             statuses.append(self._recorder_status())
             return statuses
+
+        def _input_counts(self, period, values):
+            """Key values of the input status: what became of every received message."""
+            values.update({'received': self.received, 'published': self.published,
+                           'skipped': self.rejected, 'skipped_in_period': period.rejected,
+                           'last_skip_reason': self.last_rejection,
+                           'last_outlier': self.last_outlier})
+            for kind in SKIP_KINDS:
+                values[f'skipped_{kind}'] = self.counts[kind]
+            for kind in OTHER_KINDS:
+                values[kind] = self.counts[kind]
+                values[f'{kind}_in_period'] = period.counts.get(kind, 0)
+            return values
+
+        def _estimator_level(self, period):
+            """ERROR for estimates out of bound, WARN for flagged ones or a large indicator."""
+            if period.counts.get('out_of_bound'):
+                return rm.ERROR, (f'{period.counts["out_of_bound"]} estimates not published: '
+                                  f'{period.last_out_of_bound}')
+            reasons = []
+            flagged = SampleFlag(period.flags & WARN_FLAGS)
+            if flagged:
+                reasons.append('flagged ' + ' '.join(f.name for f in SampleFlag
+                                                     if f and f & flagged))
+            if period.counts.get('outlier'):
+                reasons.append(f'{period.counts["outlier"]} outliers skipped')
+            indicator = period.max_error_indicator
+            if indicator > self.values['diagnostics.error_indicator_warn']:
+                reasons.append(f'error indicator {indicator:.3g}')
+            return (rm.WARN, ', '.join(reasons)) if reasons else (rm.OK, 'ok')
 
         def _recorder_status(self):
             if self.recorder is None:
@@ -594,14 +809,49 @@ def build_parser():
 
 
 def main(args=None):
-    """Entry point of the ``flexlink_node`` executable."""
+    """
+    Entry point of the ``flexlink_node`` executable.
+
+    SIGINT or SIGTERM before the node spins (rclpy init, model build) end it with one line
+    on stderr and exit code 0, as the same signals do while it spins.
+    """
+    if not _STARTUP['active']:      # not started as `python -m flexlink_ros.node`
+        install_startup_signal_handlers()
+    try:
+        return _run(args)
+    finally:
+        _STARTUP['active'] = False
+
+
+def _make_node_at_start_up(managed):
+    """make_node, or StartupInterrupted if a signal came first (rclpy errors it caused too)."""
+    check_startup_signal()
+    # rclpy warns when a signal shuts the context down under a node being created; those
+    # warnings are held back, and shown only if no signal explains them.
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter('always')
+            node = make_node(managed=managed)
+    except Exception:
+        check_startup_signal()      # a signal inside rclpy shut the context down
+        raise
+    finally:
+        if _STARTUP['signal'] is None:
+            for warning in caught:
+                warnings.warn_explicit(warning.message, warning.category,
+                                       warning.filename, warning.lineno)
+    check_startup_signal()
+    return node
+
+
+def _run(args):
     import rclpy
-    from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+    from rclpy.exceptions import (InvalidParameterTypeException,
+                                  InvalidParameterValueException, NameValidationException)
     from rclpy.executors import ExternalShutdownException
+    from rclpy.utilities import remove_ros_args
 
     from .crank_driver import make_executor, spin_until_shutdown
-
-    from rclpy.utilities import remove_ros_args
 
     argv = sys.argv if args is None else [NODE_NAME, *args]
     options = build_parser().parse_args(remove_ros_args(argv)[1:])
@@ -609,13 +859,11 @@ def main(args=None):
     try:
         with rclpy.init(args=argv):
             try:
-                node = make_node(managed=options.managed)
+                node = _make_node_at_start_up(options.managed)
             except (FlexlinkError, ValueError, InvalidParameterValueException,
-                    InvalidParameterTypeException) as exc:
+                    InvalidParameterTypeException, NameValidationException) as exc:
                 print(f'{NODE_NAME}: error: {exc}', file=sys.stderr)
                 return 1
-            executor = make_executor()
-            executor.add_node(node)
             # The model, rclpy and numpy are loaded: move them out of the collector's reach,
             # so a full collection never scans them between two samples (p99 latency).
             gc.collect()
@@ -624,6 +872,10 @@ def main(args=None):
             # A background Python thread (the recorder's flusher) holds the GIL for up to
             # the switch interval when a message arrives: 5 ms by default, 0.5 ms here.
             sys.setswitchinterval(SWITCH_INTERVAL_S)
+            check_startup_signal()
+            _STARTUP['active'] = False      # from here on rclpy's shutdown ends the spin
+            executor = make_executor()
+            executor.add_node(node)
             spin_until_shutdown(executor)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass

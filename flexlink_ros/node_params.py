@@ -30,6 +30,8 @@ class ParameterSpec:
         Allowed values for strings.
     read_only : bool
         True if it can only be set at start-up (changing it needs a rebuilt model).
+    max_bytes : int or None
+        Longest accepted string (UTF-8 bytes); every string parameter has one.
 
     """
 
@@ -40,15 +42,19 @@ class ParameterSpec:
     high: Optional[float] = None
     choices: Optional[tuple] = None
     read_only: bool = False
+    max_bytes: Optional[int] = None
 
 
+NAME_MAX_BYTES = 256    # frame, joint and topic names
+PATH_MAX_BYTES = 4096   # file and directory paths (PATH_MAX on Linux)
 PARAMETERS = (
     ParameterSpec('mechanism', 'cho1992',
                   'Mechanism file path, or a name looked up in share/flexlink_ros/config',
-                  read_only=True),
-    ParameterSpec('crank_joint', 'crank', 'Name of the crank joint in the input JointState'),
+                  read_only=True, max_bytes=PATH_MAX_BYTES),
+    ParameterSpec('crank_joint', 'crank', 'Name of the crank joint in the input JointState',
+                  max_bytes=NAME_MAX_BYTES),
     ParameterSpec('input_topic', 'joint_states', 'JointState topic carrying the crank',
-                  read_only=True),
+                  read_only=True, max_bytes=NAME_MAX_BYTES),
     ParameterSpec('model.tolerance', 0.02,
                   'Relative RMS error the default sizes were planned for; a smaller value '
                   'warns that `flexlink plan` should choose the model.* sizes',
@@ -64,18 +70,18 @@ PARAMETERS = (
     ParameterSpec('model.rigid_crank', False, 'Treat the crank as rigid (its pin A fixed)',
                   read_only=True),
     ParameterSpec('model.bearings', 'flexible', 'Revolute bearings: flexible springs or rigid',
-                  choices=('flexible', 'rigid'), read_only=True),
+                  choices=('flexible', 'rigid'), read_only=True, max_bytes=NAME_MAX_BYTES),
     ParameterSpec('model.geometric_stiffness', True,
                   'Include geometric stiffness from the rigid-body axial forces',
                   read_only=True),
     ParameterSpec('model.cache_dir', '', 'Directory of precomputed-model cache files '
-                  '(empty: ~/.cache/flexlink_ros)', read_only=True),
+                  '(empty: ~/.cache/flexlink_ros)', read_only=True, max_bytes=PATH_MAX_BYTES),
     ParameterSpec('model.warm_start', True,
                   'Start from the periodic steady state at the first sample\'s speed'),
     ParameterSpec('damping_ratio', 0.02, 'Modal damping ratio of every frozen mode',
                   low=0.0, high=1.0, read_only=True),
     ParameterSpec('frame_id', 'linkage_ground', 'Frame of the ground (O2 at its origin, '
-                  'x towards O4) for deflections and markers'),
+                  'x towards O4) for deflections and markers', max_bytes=NAME_MAX_BYTES),
     ParameterSpec('markers.exaggeration', 10.0,
                   'Scale applied to elastic deflections in the deformed-linkage markers',
                   low=1.0, high=1e6),
@@ -102,7 +108,7 @@ PARAMETERS = (
     ParameterSpec('record.enabled', False, 'Record input and outputs to MCAP',
                   read_only=True),
     ParameterSpec('record.path', '', 'MCAP file or directory (empty: ./flexlink_<time>)',
-                  read_only=True),
+                  read_only=True, max_bytes=PATH_MAX_BYTES),
     ParameterSpec('record.max_bytes', 0, 'Split the recording at this size (0: never) [B]',
                   low=0, high=2 ** 62, read_only=True),
     ParameterSpec('record.max_duration_s', 0.0,
@@ -112,10 +118,26 @@ PARAMETERS = (
                   '(1 s at 1 kHz: room for the warm start\'s pause)',
                   low=1, high=100000, read_only=True),
     ParameterSpec('qos.reliability', 'reliable', 'Reliability of input and outputs',
-                  choices=('reliable', 'best_effort'), read_only=True),
+                  choices=('reliable', 'best_effort'), read_only=True,
+                  max_bytes=NAME_MAX_BYTES),
 )
 
 SPECS = {spec.name: spec for spec in PARAMETERS}
+# Every parameter that is not read-only, and how a run-time change takes effect in the node.
+RUN_TIME_EFFECT = {
+    'crank_joint': 'the next message is searched for the new name',
+    'model.warm_start': 'the next reset starts warm or static',
+    'frame_id': 'the next outputs carry the new frame',
+    'markers.exaggeration': 'the next markers',
+    'markers.points_per_link': 'the next markers (encoder rebuilt)',
+    'markers.every_n': 'the next markers',
+    'diagnostics.criterion_warn': 'the next /diagnostics and markers',
+    'diagnostics.criterion_error': 'the next /diagnostics and markers',
+    'diagnostics.stale_input_s': 'the next /diagnostics',
+    'diagnostics.min_rate_hz': 'the next /diagnostics',
+    'diagnostics.error_indicator_warn': 'the next /diagnostics',
+    'diagnostics.period_s': 'the diagnostics timer is restarted with the new period',
+}
 
 
 def validate_parameter(name, value, current=None):
@@ -146,6 +168,11 @@ def validate_parameter(name, value, current=None):
         return f'{name} must be >= {spec.low:g}, got {value}'
     if spec.high is not None and value > spec.high:
         return f'{name} must be <= {spec.high:g}, got {value}'
+    if spec.max_bytes is not None and len(value.encode('utf-8', 'replace')) > spec.max_bytes:
+        return (f'{name} must be at most {spec.max_bytes} bytes, got '
+                f'{len(value.encode("utf-8", "replace"))}')
+    if name == 'crank_joint' and not value:
+        return 'crank_joint must not be empty'
     if spec.choices is not None and value not in spec.choices:
         return f'{name} must be one of {", ".join(spec.choices)}, got {value!r}'
     if name in ('diagnostics.criterion_warn', 'diagnostics.criterion_error') and current:

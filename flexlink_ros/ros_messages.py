@@ -34,7 +34,22 @@ LINK_COLOURS = ((0.25, 0.45, 0.85), (0.85, 0.4, 0.1), (0.2, 0.6, 0.4))
 
 
 class InputRejected(ValueError):
-    """Raised if a JointState cannot be used; the message says why (counted and skipped)."""
+    """
+    Raised if a JointState cannot be used; the message says why (counted and skipped).
+
+    Parameters
+    ----------
+    reason : str
+        One line.
+    kind : str
+        ``'malformed'`` (not a JointState within the input bounds) or ``'content'`` (a
+        JointState without a usable crank sample); the node counts them apart.
+
+    """
+
+    def __init__(self, reason, kind='content'):
+        super().__init__(reason)
+        self.kind = kind
 
 
 def stamp_to_ns(stamp):

@@ -346,6 +346,7 @@ def test_driver_to_node_and_sigkill_leaves_a_recoverable_file(tmp_path, processe
     ('diagnostics.criterion_warn:=5000.0', 'must not exceed'),
     ('damping_ratio:=2.0', 'out of range'),         # refused by the descriptor's range
     ('qos.depth:=2.5', 'expecting type'),           # refused by the parameter's type
+    ('frame_id:=' + 'x' * 300, 'frame_id must be at most 256 bytes, got 300'),
 ])
 def test_bad_parameters_file_value_stops_the_node_with_a_reason(tmp_path, processes,
                                                                  parameter, reason):
@@ -460,3 +461,172 @@ def test_unwritable_recording_path_is_an_error_diagnostic_and_estimates_go_on(
     assert 'FAILED' in message and 'not_a_directory' in message
     assert node_process.stop(signal.SIGTERM) == 0
     assert blocker.read_text().startswith('a file')
+
+
+# -- signals at start-up ----------------------------------------------------------------------
+
+def _caught_signals(pid):
+    """Signals the process has a handler for (SigCgt of /proc/<pid>/status)."""
+    for line in pathlib.Path(f'/proc/{pid}/status').read_text().splitlines():
+        if line.startswith('SigCgt:'):
+            mask = int(line.split()[1], 16)
+            return {signum for signum in range(1, 64) if mask >> (signum - 1) & 1}
+    return set()
+
+
+def _thread_count(pid):
+    return len(list(pathlib.Path(f'/proc/{pid}/task').iterdir()))
+
+
+@pytest.mark.parametrize('stage', ['imports', 'model build'])
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
+def test_signal_during_start_up_exits_cleanly(tmp_path, processes, stage, sig):
+    """SIGINT/SIGTERM while importing or building the model: one line, exit 0, no traceback."""
+    # A fresh cache: the model is built (a few seconds) after rclpy has started.
+    node_process = NodeProcess(tmp_path, f'model.cache_dir:={tmp_path / "cache"}')
+    processes.append(node_process)
+    pid = node_process.process.pid
+    deadline = time.monotonic() + 60.0
+    # imports: the node's handlers are in place (before numpy, scipy and rclpy load);
+    # model build: rclpy has started its DDS threads, the model is being built.
+    while not (signal.SIGTERM in _caught_signals(pid) if stage == 'imports'
+               else _thread_count(pid) > 8):
+        assert node_process.process.poll() is None and time.monotonic() < deadline, \
+            node_process.log()
+        time.sleep(0.002)
+    node_process.process.send_signal(sig)
+    assert node_process.process.wait(timeout=60) == 0
+    log = node_process.log()
+    assert 'Traceback' not in log and flexlink_node.READY_MESSAGE not in log
+    expected = f'{flexlink_node.NODE_NAME}: {sig.name} during start-up: exiting'
+    assert [line for line in log.splitlines() if not line.startswith('[')] == [expected]
+
+
+# -- run-time parameters ------------------------------------------------------------------------
+
+def _status_of(diagnostics, suffix, since=0, until=None):
+    return [s for d in diagnostics[since:until] for s in d.status if s.name.endswith(suffix)]
+
+
+def test_run_time_parameters_take_effect(tmp_path, processes, ros):
+    """Each parameter that is not read-only, changed on a running node, changes its output."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    from geometry_msgs.msg import Vector3Stamped
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import JointState
+    from visualization_msgs.msg import MarkerArray
+
+    node_process = NodeProcess(tmp_path, 'diagnostics.period_s:=0.5')
+    processes.append(node_process)
+    node_process.wait_for(flexlink_node.READY_MESSAGE, READY_TIMEOUT_S)
+    test_node, executor = ros
+    qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+    publisher = test_node.create_publisher(JointState, 'joint_states', qos)
+    lever, markers, diagnostics = [], [], []
+    test_node.create_subscription(Vector3Stamped, OUTPUTS[0], lever.append, qos)
+    test_node.create_subscription(MarkerArray, OUTPUTS[3], markers.append, 1000)
+    test_node.create_subscription(DiagnosticArray, '/diagnostics', diagnostics.append, 1000)
+    client = AsyncParameterClient(test_node, 'flexlink_node')
+    spin_until(executor, lambda: publisher.get_subscription_count() > 0
+               and test_node.count_publishers(OUTPUTS[0]) > 0 and diagnostics
+               and client.services_are_ready(), DISCOVERY_TIMEOUT_S, 'discovery')
+
+    def set_parameters(**values):
+        future = client.set_parameters([Parameter(name.replace('__', '.'), value=value)
+                                        for name, value in values.items()])
+        spin_until(executor, future.done, 10.0, f'setting {values}')
+        return future.result().results
+
+    sample = [0]
+
+    def feed(count, joint='crank', stamp_step_ns=10**6):
+        """Publish ``count`` crank samples at 1 kHz; wait for their outputs."""
+        expected = len(lever) + (count if joint is not None else 0)
+        for _ in range(count):
+            n = sample[0] = sample[0] + 1
+            publisher.publish(joint_state(1_800_000_000 * 10**9 + n * stamp_step_ns,
+                                          [joint or 'nothing'], [30.0 * n * 1e-3], [30.0]))
+            time.sleep(1e-3)
+            executor.spin_once(timeout_sec=0.0)
+        spin_until(executor, lambda: len(lever) >= expected, 30.0, 'outputs')
+
+    feed(50)
+    # Strings are bounded: the 1 MB frame_id of the issue is refused with the reason.
+    result, = set_parameters(frame_id='x' * 10**6)
+    assert not result.successful and 'at most 256 bytes' in result.reason
+    assert not set_parameters(crank_joint='')[0].successful
+
+    # diagnostics.period_s: the timer is restarted with the new period.
+    assert set_parameters(diagnostics__period_s=0.05)[0].successful
+    since = len(diagnostics)
+    spin_until(executor, lambda: len(diagnostics) >= since + 12, 10.0, 'faster diagnostics')
+    stamps = [d.header.stamp.sec + d.header.stamp.nanosec * 1e-9 for d in diagnostics[since + 1:]]
+    assert np.median(np.diff(stamps)) < 0.25     # was 0.5 s
+
+    # crank_joint, frame_id: the next messages are read and stamped with the new values.
+    assert all(r.successful for r in set_parameters(crank_joint='motor',
+                                                    frame_id='machine_base'))
+    feed(20, joint='motor')
+    assert lever[-1].header.frame_id == 'machine_base'
+    skipped = int([kv.value for kv in _status_of(diagnostics, 'input')[-1].values
+                   if kv.key == 'skipped'][0])
+    feed(5, joint=None)      # 'crank' is no longer the crank: refused and counted
+    spin_until(executor, lambda: int([kv.value for kv in _status_of(diagnostics, 'input')[-1]
+                                      .values if kv.key == 'skipped'][0]) == skipped + 5,
+               10.0, 'five more skipped')
+    assert set_parameters(crank_joint='crank')[0].successful
+
+    # markers.*: every sample, five points per link, the exaggeration scales the drawing.
+    def drawn_deflection(message):
+        rigid, deformed = message.markers[4], message.markers[5]     # the lever
+        pairs = zip(rigid.points, deformed.points)
+        return max(abs(a.x - b.x) + abs(a.y - b.y) for a, b in pairs)
+    assert all(r.successful for r in set_parameters(markers__every_n=1,
+                                                    markers__points_per_link=5))
+    before = len(markers)
+    feed(20)
+    spin_until(executor, lambda: len(markers) >= before + 19, 10.0, 'markers on every sample')
+    assert len(markers[-1].markers[5].points) == 5
+    small = drawn_deflection(markers[-1])
+    assert set_parameters(markers__exaggeration=1000.0)[0].successful
+    feed(20)
+    spin_until(executor, lambda: len(markers) >= before + 39, 10.0, 'markers')
+    assert drawn_deflection(markers[-1]) > 10.0 * small
+
+    # diagnostics thresholds: each turns its status to WARN or ERROR.
+    assert all(r.successful for r in set_parameters(
+        diagnostics__criterion_warn=0.0, diagnostics__criterion_error=0.0,
+        diagnostics__min_rate_hz=1e6, diagnostics__error_indicator_warn=0.0))
+    since = len(diagnostics)
+    feed(100)
+    spin_until(executor, lambda: len(diagnostics) >= since + 3, 10.0, 'diagnostics')
+    assert not any(s.level == DiagnosticStatus.ERROR
+                   for s in _status_of(diagnostics, 'joint A', 0, since))
+    assert any(s.level == DiagnosticStatus.ERROR
+               for s in _status_of(diagnostics, 'joint A', since + 1))
+    assert any('below' in s.message for s in _status_of(diagnostics, 'input', since + 1))
+    assert any('error indicator' in s.message
+               for s in _status_of(diagnostics, 'estimator', since + 1))
+    assert set_parameters(diagnostics__stale_input_s=0.01)[0].successful
+    since = len(diagnostics)
+    spin_until(executor, lambda: any('no valid input for' in s.message and
+                                     s.level == DiagnosticStatus.ERROR
+                                     for s in _status_of(diagnostics, 'input', since)),
+               10.0, 'stale input')
+
+    # model.warm_start: after a reset (a 1 s gap) the start is static, not warm.
+    def flags_after(since):
+        return ' '.join(kv.value for s in _status_of(diagnostics, 'estimator', since)
+                        for kv in s.values if kv.key == 'flags')
+    assert set_parameters(model__warm_start=False)[0].successful
+    since = len(diagnostics)
+    feed(30, stamp_step_ns=2 * 10**9)   # every sample after a long gap: resets
+    spin_until(executor, lambda: 'RESET' in flags_after(since), 10.0, 'a reset')
+    assert 'WARM_START' not in flags_after(since)
+    assert set_parameters(model__warm_start=True)[0].successful
+    since = len(diagnostics)
+    feed(3, stamp_step_ns=2 * 10**9)
+    spin_until(executor, lambda: 'WARM_START' in flags_after(since), 10.0, 'a warm start')
+    assert node_process.stop() == 0

@@ -70,3 +70,33 @@ def test_markdown_table_escapes_pipes_inside_cells():
 def test_readme_parameter_table_is_current():
     readme = pathlib.Path(__file__).resolve().parents[1] / 'README.md'
     assert node_params.markdown_table() in readme.read_text()
+
+
+@pytest.mark.parametrize('name, limit', [
+    ('frame_id', node_params.NAME_MAX_BYTES), ('crank_joint', node_params.NAME_MAX_BYTES),
+    ('input_topic', node_params.NAME_MAX_BYTES), ('mechanism', node_params.PATH_MAX_BYTES),
+    ('record.path', node_params.PATH_MAX_BYTES), ('model.cache_dir', node_params.PATH_MAX_BYTES),
+])
+def test_string_parameters_have_a_length_bound(name, limit):
+    assert node_params.validate_parameter(name, 'x' * limit) is None
+    reason = node_params.validate_parameter(name, 'x' * (limit + 1))
+    assert reason == f'{name} must be at most {limit} bytes, got {limit + 1}'
+    # Bytes, not characters: a two-byte character counts twice.
+    assert 'at most' in node_params.validate_parameter(name, '\u00e9' * (limit // 2 + 1))
+
+
+def test_every_string_parameter_is_bounded():
+    for spec in node_params.PARAMETERS:
+        if isinstance(spec.default, str):
+            assert spec.max_bytes is not None, spec.name
+
+
+def test_every_run_time_parameter_says_how_it_takes_effect():
+    # test_node.py::test_run_time_parameters_take_effect changes each of these on a running
+    # node; a new parameter that is not read-only must join both lists.
+    writable = {spec.name for spec in node_params.PARAMETERS if not spec.read_only}
+    assert writable == set(node_params.RUN_TIME_EFFECT)
+
+
+def test_empty_crank_joint_is_refused():
+    assert 'must not be empty' in node_params.validate_parameter('crank_joint', '')
