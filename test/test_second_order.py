@@ -229,3 +229,13 @@ def test_269rpm_linear_plus_second_order_matches_the_peer(mech):
         assert after[key]['rms_error'] < 0.03, (key, after[key])
     # joint B moves inward along both links: the chords only shorten
     assert np.all(corrected['detail']['chord'][:, 1:] >= 0.0)
+
+
+@pytest.mark.skipif(not (__import__('shutil').which('cc') or __import__('shutil').which('gcc')),
+                    reason='no C compiler')
+def test_compiled_factored_kernel_agrees_and_is_timed(mech):
+    """The C kernel of studies/second_order_bench.py equals factored_second_order (checked
+    inside time_factored) and takes well under the issue's 2 us per sample (r = 26: 0.7 us)."""
+    from flexlink_ros.studies import second_order_bench
+    ns = second_order_bench.time_factored(mech, 'flexible', False, 26, samples=2000, repeat=5)
+    assert 0.0 < ns < 20000.0

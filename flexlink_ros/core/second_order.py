@@ -399,7 +399,8 @@ def gather_harmonics(linkage, link):
     """
     g = linkage.gather(link, np.array([0.0, 0.5 * np.pi, np.pi]))
     t0 = 0.5 * (g[0] + g[2])
-    return np.stack([t0, 0.5 * (g[0] - g[2]), g[1] - t0])
+    # entries are 0 and +-1: rounding drops the 1e-16 of sin(pi) and cos(pi / 2)
+    return np.round(np.stack([t0, 0.5 * (g[0] - g[2]), g[1] - t0]))
 
 
 def harmonic_matrices(linkage, basis, link, gmatrix):
