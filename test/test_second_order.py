@@ -204,6 +204,7 @@ def test_static_sag_second_order_matches_the_peer(mech, theta):
         tip, mid = complex(*(rest[:2] - second[:2])), complex(*(rest[2:] - second[2:]))
         misfit[factor] = (abs(tip) / abs(complex(*second[:2])),
                           abs(mid) / abs(complex(*second[2:])))
+    # measured at 2 g: 0.012-0.013 % (tip), 2.2-2.8 % (mid); at 4 g: 0.04 %, 4.3-5.6 %
     assert misfit[2.0][0] < 0.01 and misfit[2.0][1] < 0.04, misfit
     assert misfit[2.0][1] < 0.65 * misfit[4.0][1], misfit
 
