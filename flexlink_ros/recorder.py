@@ -8,9 +8,15 @@ topic with ``message_encoding='cdr'`` and metadata ``offered_qos_profiles`` and
 ns); a summary with Statistics, so ``ros2 bag play FILE.mcap`` opens a bare file.
 
 Layout. A ``path`` ending in ``.mcap`` is one bare file. Any other ``path`` is a rosbag2 bag
-directory (created; must be absent or empty) holding ``<name>_0.mcap``, ``<name>_1.mcap``, ...
+directory (created) holding ``<name>_0.mcap``, ``<name>_1.mcap``, ...
 (split by size and/or duration) and a ``metadata.yaml`` (rosbag2 version 9) written on close,
 which ``ros2 bag play DIR``, ``ros2 bag info DIR`` and ``rosbags`` need.
+
+Never overwrite. ``path`` must not exist in any form: an existing file, bare ``.mcap``,
+directory or symbolic link (even a dangling one) is refused with a :class:`RecorderError` saying
+which, and nothing is written. Files and the bag directory are created exclusively
+(``O_CREAT | O_EXCL | O_NOFOLLOW``, ``mkdir``), so a path that appears between the check and
+the creation is refused too, never clobbered or followed.
 
 Crash safety. Chunks are small (128 KiB before compression) and the open chunk is written and
 flushed to the OS whenever a flush period (0.5 s) of data has accumulated, and also by a
@@ -28,9 +34,11 @@ counts them, so the caller can report it (a diagnostic) and carry on.
 import collections
 import dataclasses
 import enum
+import errno
 import logging
 import os
 import pathlib
+import stat
 import threading
 import time
 from struct import pack as struct_pack
@@ -172,11 +180,10 @@ class McapRecorder:
             if self._state is not RecorderState.NEW:
                 raise RecorderError(f'recorder for {self.path} already opened')
             try:
+                refuse_existing(self.path)
+                self.path.parent.mkdir(parents=True, exist_ok=True)
                 if not self.bare:
-                    self.path.mkdir(parents=True, exist_ok=True)
-                    if any(self.path.iterdir()):
-                        raise FileExistsError(f'bag directory {self.path} exists and is not '
-                                              'empty')
+                    self.path.mkdir()   # not exist_ok: a directory made meanwhile is refused
                 self._state = RecorderState.RECORDING
                 self._open_file()
             except OSError as exc:
@@ -550,7 +557,7 @@ class McapRecorder:
 
     def _open_file(self):
         path = self._file_path(len(self._closed_files))
-        stream = open(path, 'wb')
+        stream = create_exclusive(path)
         try:
             writer = Writer(stream, chunk_size=self.chunk_size_bytes,
                             compression=COMPRESSION[self.compression])
@@ -638,6 +645,48 @@ class McapRecorder:
                 if (self._state is RecorderState.RECORDING and self._unflushed
                         and time.monotonic() - self._last_flush_wall >= period_s):
                     self._flush_locked(self._last_flush_log_ns)
+
+
+# O_NOFOLLOW is POSIX; where it is missing O_EXCL alone still refuses a symlink.
+_EXCLUSIVE_FLAGS = (os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, 'O_NOFOLLOW', 0)
+                    | getattr(os, 'O_CLOEXEC', 0))
+
+
+def refuse_existing(path):
+    """
+    Raise FileExistsError naming what ``path`` is, if anything is there (links not followed).
+
+    Parameters
+    ----------
+    path : pathlib.Path
+
+    """
+    try:
+        info = os.lstat(path)
+    except FileNotFoundError:
+        return
+    if stat.S_ISLNK(info.st_mode):
+        target = os.readlink(path)
+        dangling = '' if os.path.exists(path) else ', dangling'
+        kind = f'a symbolic link to {target}{dangling}'
+    elif stat.S_ISDIR(info.st_mode):
+        kind = 'a directory'
+    elif stat.S_ISREG(info.st_mode):
+        kind = f'a file of {info.st_size} bytes'
+    else:
+        kind = 'a special file'
+    raise FileExistsError(errno.EEXIST, f'{path} exists ({kind}); the recorder never '
+                          'overwrites or follows links: choose a new path')
+
+
+def create_exclusive(path):
+    """Open a new file for writing; fail if anything (even a dangling link) is at ``path``."""
+    try:
+        descriptor = os.open(path, _EXCLUSIVE_FLAGS, 0o644)
+    except FileExistsError:
+        refuse_existing(path)   # says what is there
+        raise
+    return os.fdopen(descriptor, 'wb')
 
 
 _MESSAGE_HEADER = [('opcode', 'u1'), ('length', '<u8'), ('channel', '<u2'), ('sequence', '<u4'),
@@ -918,5 +967,8 @@ def write_bag_metadata(bag_dir, files, topics):
     temporary = bag_dir / 'metadata.yaml.tmp'
     text = yaml.dump({'rosbag2_bagfile_information': metadata}, Dumper=_PlainDumper,
                      sort_keys=False)
-    temporary.write_text(text, encoding='utf-8')
-    temporary.replace(bag_dir / 'metadata.yaml')
+    if os.path.lexists(temporary):   # left by an earlier close that failed half-way
+        os.unlink(temporary)
+    with create_exclusive(temporary) as stream:
+        stream.write(text.encode('utf-8'))
+    temporary.replace(bag_dir / 'metadata.yaml')   # replaces a link itself, never its target

@@ -217,12 +217,12 @@ def test_unwritable_and_full_device(tmp_path):
     recorder.close()  # already reported: no second exception
 
     full = tmp_path / 'full.mcap'
-    full.symlink_to('/dev/full')  # the kernel answers every write with ENOSPC
+    full.symlink_to('/dev/full')  # a link is never followed (a full disk: the tmpfs tests)
     recorder = McapRecorder(full)
-    with pytest.raises(RecorderError, match='No space left'):
+    with pytest.raises(RecorderError, match='symbolic link to /dev/full'):
         recorder.open()
     assert recorder.state is RecorderState.FAILED
-    assert recorder.status()['state'] == 'failed' and 'No space' in recorder.status()['error']
+    assert recorder.status()['state'] == 'failed' and 'exists' in recorder.status()['error']
     assert recorder.write('/joint_states', JointState(), T0_NS) is False
     assert recorder.status()['dropped_count'] == 1
     recorder.close()
@@ -279,7 +279,7 @@ def test_write_after_close_and_bad_arguments(tmp_path):
         recorder.write('/x', JointState(), T0_NS)
     with pytest.raises(ValueError, match='split_size_bytes'):
         McapRecorder(tmp_path / 'two.mcap', split_size_bytes=1000)
-    with pytest.raises(RecorderError, match='not empty'):
+    with pytest.raises(RecorderError, match='exists'):
         (tmp_path / 'busy').mkdir()
         (tmp_path / 'busy' / 'other').write_text('x')
         McapRecorder(tmp_path / 'busy').open()
@@ -537,3 +537,71 @@ def test_enqueue_reports_a_full_disk_once_and_estimation_can_go_on(tiny_tmpfs, t
     assert raised == 1 and status['state'] == 'failed' and status['dropped_count'] >= 10
     result = recover_mcap(status['files'][0], tmp_path / 'salvaged.mcap')
     assert result['message_count'] > 0
+
+
+# -- record.path never overwrites, never follows a link -------------------------------------
+
+def _existing_paths(tmp_path):
+    """Each kind of existing path, and the file whose bytes must survive (if any)."""
+    victim = tmp_path / 'victim.txt'
+    victim.write_bytes(b'precious bytes\n' * 100)
+    old_bag = tmp_path / 'old.mcap'
+    with McapRecorder(old_bag) as recorder:
+        record_samples(recorder, 20)
+    link = tmp_path / 'link.mcap'
+    link.symlink_to(victim)
+    dangling = tmp_path / 'dangling.mcap'
+    dangling.symlink_to(tmp_path / 'nowhere' / 'target.mcap')
+    dir_link = tmp_path / 'dir_link'
+    (tmp_path / 'real_dir').mkdir()
+    dir_link.symlink_to(tmp_path / 'real_dir')
+    empty_dir = tmp_path / 'empty_bag'
+    empty_dir.mkdir()
+    return {'bare_mcap': (old_bag, 'a file of'), 'file': (victim, 'a file of'),
+            'symlink_to_file': (link, 'symbolic link to'),
+            'dangling_symlink': (dangling, 'dangling'),
+            'symlink_to_directory': (dir_link, 'symbolic link to'),
+            'empty_directory': (empty_dir, 'a directory')}
+
+
+@pytest.mark.parametrize('kind', ['bare_mcap', 'file', 'symlink_to_file', 'dangling_symlink',
+                                  'symlink_to_directory', 'empty_directory'])
+def test_existing_path_of_any_kind_is_refused_and_left_untouched(tmp_path, kind):
+    cases = _existing_paths(tmp_path)
+    path, reason = cases[kind]
+    before = {p: (p.read_bytes() if p.is_file() and not p.is_symlink() else None)
+              for p in tmp_path.iterdir()}
+    listing = sorted(os.listdir(tmp_path)) + sorted(os.listdir(tmp_path / 'real_dir'))
+    recorder = McapRecorder(path)
+    with pytest.raises(RecorderError, match='never overwrites') as info:
+        recorder.open()
+    assert reason in str(info.value)
+    assert recorder.write('/joint_states', JointState(), T0_NS) is False
+    recorder.close()
+    after = {p: (p.read_bytes() if p.is_file() and not p.is_symlink() else None)
+             for p in tmp_path.iterdir()}
+    assert after == before     # bytes of the old bag and the link's target are the same
+    assert sorted(os.listdir(tmp_path)) + sorted(os.listdir(tmp_path / 'real_dir')) == listing
+    assert not (tmp_path / 'nowhere').exists()   # the dangling link was not created through
+    assert mcap_info(tmp_path / 'old.mcap')['message_count'] == 20 * len(sample_messages(0))
+
+
+def test_a_link_placed_between_check_and_create_is_not_followed(tmp_path, monkeypatch):
+    from flexlink_ros import recorder as recorder_module
+    victim = tmp_path / 'victim.txt'
+    victim.write_bytes(b'keep')
+    path = tmp_path / 'race.mcap'
+    real_check = recorder_module.refuse_existing
+    raced = []
+
+    def check_then_race(candidate):
+        real_check(candidate)
+        if not raced:   # the check saw nothing; a real link appears before the file is made
+            raced.append(candidate)
+            path.symlink_to(victim)
+
+    monkeypatch.setattr(recorder_module, 'refuse_existing', check_then_race)
+    with pytest.raises(RecorderError, match='symbolic link'):
+        McapRecorder(path).open()
+    assert raced == [path]
+    assert victim.read_bytes() == b'keep' and path.is_symlink()
