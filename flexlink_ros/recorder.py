@@ -26,6 +26,13 @@ chunk; the file lacks its summary but every complete chunk is readable by
 a streaming reader (``flexlink mcap-recover`` rewrites it with a summary). Data are not
 fsync'ed: a killed process loses nothing the kernel already has; power loss is out of scope.
 
+Memory. An mcap ``Writer`` keeps one ``ChunkIndex`` object per chunk for the summary (about
+740 B each; at the node's 4-5 topics at 1 kHz that is about 6 chunks a second, 16 MB an
+hour). The recorder keeps them as their encoded summary records instead (about 130 B each),
+at most :data:`INDEX_SPILL_BYTES` in memory and the rest in an unnamed temporary file in the
+recording's directory, so memory stays flat however long a file grows; only ``close`` reads
+them back to write the summary.
+
 Errors. An unwritable path or a full disk raises :class:`RecorderError` once (from ``open``,
 ``write`` or ``close``); afterwards the recorder is in state ``FAILED``, drops messages and
 counts them, so the caller can report it (a diagnostic) and carry on.
@@ -39,12 +46,14 @@ import logging
 import os
 import pathlib
 import stat
+import tempfile
 import threading
 import time
 from struct import pack as struct_pack
 from zlib import crc32 as zlib_crc32
 
 import yaml
+from mcap.data_stream import RecordBuilder
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
 from .core.errors import RecorderError
@@ -56,6 +65,9 @@ LOGGER = logging.getLogger(__name__)
 DEFAULT_CHUNK_SIZE = 128 * 1024  # bytes before compression; one chunk is the unit of loss
 DEFAULT_FLUSH_PERIOD_S = 0.5  # at most this much data (log time, or wall time) sits in memory
 QUEUE_PERIOD_S = 0.02  # the background thread writes enqueued messages this often
+# The summary's chunk indexes (one record per chunk, about 130 B with 5 topics) are held in
+# memory up to this size, then moved to an unnamed temporary file beside the recording.
+INDEX_SPILL_BYTES = 256 * 1024
 ROSBAG2_METADATA_VERSION = 9  # rosbag2 metadata.yaml version written (QoS policies as names)
 ROS_DISTRO = 'kilted'
 LIBRARY = f'flexlink_ros recorder; {LIBRARY_IDENTIFIER}'
@@ -98,6 +110,7 @@ class _OpenFile:
     first_log_ns: int = None
     last_log_ns: int = None
     message_count: int = 0
+    chunk_indexes: object = None    # _ChunkIndexRecords, if installed in the writer
 
 
 class McapRecorder:
@@ -547,6 +560,8 @@ class McapRecorder:
                     os.close(self._file.stream.fileno())
                 except (OSError, ValueError):
                     pass
+            if self._file.chunk_indexes is not None:
+                self._file.chunk_indexes.close()
             self._closed_files.append(self._file_entry(self._file, complete=False))
             self._file = None
 
@@ -562,7 +577,8 @@ class McapRecorder:
             writer = Writer(stream, chunk_size=self.chunk_size_bytes,
                             compression=COMPRESSION[self.compression])
             writer.start(profile='ros2', library=LIBRARY)
-            current = _OpenFile(path, stream, writer, {})
+            current = _OpenFile(path, stream, writer, {},
+                                chunk_indexes=_ChunkIndexRecords.install(writer, path.parent))
             for topic in self._topics.values():
                 self._register(current, topic)
             self._file = current
@@ -587,6 +603,8 @@ class McapRecorder:
         current = self._file
         current.writer.finish()
         current.stream.close()
+        if current.chunk_indexes is not None:
+            current.chunk_indexes.close()
         self._closed_files.append(self._file_entry(current, complete=True))
         self._file = None
 
@@ -687,6 +705,73 @@ def create_exclusive(path):
         refuse_existing(path)   # says what is there
         raise
     return os.fdopen(descriptor, 'wb')
+
+
+class _ChunkIndexRecords:
+    """
+    A writer's chunk indexes as encoded summary records, spilled to a temporary file.
+
+    Stands in for the list ``Writer`` keeps (``append`` on every chunk, iteration once in
+    ``finish``, each item's ``write(builder)``): it encodes each ``ChunkIndex`` as the record
+    the summary will hold, keeps at most :data:`INDEX_SPILL_BYTES` of them in memory and
+    moves the rest to an unnamed temporary file, so a long recording does not grow in memory.
+    """
+
+    def __init__(self, directory):
+        self._directory = directory
+        self._buffer = bytearray()
+        self._spill = None
+        self._count = 0
+
+    @classmethod
+    def install(cls, writer, directory):
+        """Replace ``writer``'s chunk index list (empty); None if its internals differ."""
+        name = '_Writer__chunk_indices'
+        if getattr(writer, name, None) != []:
+            return None
+        records = cls(directory)
+        setattr(writer, name, records)
+        return records
+
+    def append(self, index):
+        builder = RecordBuilder()
+        index.write(builder)
+        self._buffer += builder.end()
+        self._count += 1
+        if len(self._buffer) >= INDEX_SPILL_BYTES:
+            if self._spill is None:
+                self._spill = tempfile.TemporaryFile(dir=self._directory, prefix='.mcap-index-')
+            self._spill.write(self._buffer)
+            self._buffer = bytearray()   # a new buffer: the old one's memory is released
+
+    def __len__(self):
+        return self._count
+
+    def __iter__(self):
+        # Writer.finish writes each item; one item writes every record, in order.
+        return iter([self] if self._count else [])
+
+    @property
+    def memory_bytes(self):
+        """Bytes of records held in memory (the rest are in the temporary file)."""
+        return len(self._buffer)
+
+    def write(self, builder):
+        """Append every record to ``builder`` (the summary being written)."""
+        if self._spill is not None:
+            self._spill.flush()
+            self._spill.seek(0)
+            for block in iter(lambda: self._spill.read(1 << 20), b''):
+                builder.write(block)
+            self._spill.seek(0, os.SEEK_END)
+        builder.write(self._buffer)
+
+    def close(self):
+        """Drop the temporary file (the summary is written, or the file is abandoned)."""
+        if self._spill is not None:
+            self._spill.close()
+            self._spill = None
+        self._buffer = bytearray()
 
 
 _MESSAGE_HEADER = [('opcode', 'u1'), ('length', '<u8'), ('channel', '<u2'), ('sequence', '<u4'),

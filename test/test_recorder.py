@@ -9,6 +9,7 @@ import struct
 import subprocess
 import sys
 import time
+import tracemalloc
 
 import numpy as np
 import pytest
@@ -605,3 +606,55 @@ def test_a_link_placed_between_check_and_create_is_not_followed(tmp_path, monkey
         McapRecorder(path).open()
     assert raced == [path]
     assert victim.read_bytes() == b'keep' and path.is_symlink()
+
+
+# -- memory: the summary's chunk indexes do not accumulate in memory --------------------------
+
+def test_retained_memory_per_chunk_is_bounded(tmp_path):
+    from flexlink_ros import recorder as recorder_module
+    topics = ['/a', '/b', '/c', '/d', '/e']   # the node records 4-5 topics
+    payload = serialize_message(Vector3Stamped(header=stamp(T0_NS)))
+    recorder = McapRecorder(tmp_path / 'long.mcap', chunk_size_bytes=1024, flush_thread=False)
+    for topic in topics:
+        recorder.add_topic(topic, 'geometry_msgs/msg/Vector3Stamped')
+    recorder.open()
+    writer = recorder._file.writer
+
+    def record(first, samples):
+        for k in range(first, first + samples, 100):
+            times = np.repeat(T0_NS + STEP_NS * np.arange(k, k + 100), len(topics))
+            recorder.write_batch(topics * 100, [payload] * len(times), times)
+
+    def chunks():
+        return mcap_chunk_count(writer)
+
+    record(0, 1000)    # warm up: allocator pools, numpy caches, first spill of none
+    tracemalloc.start()
+    try:
+        before_chunks, before = chunks(), tracemalloc.get_traced_memory()[0]
+        record(1000, 8_000)
+        grown, added = tracemalloc.get_traced_memory()[0] - before, chunks() - before_chunks
+    finally:
+        tracemalloc.stop()
+    per_chunk_object = 700   # what mcap's Writer retains per ChunkIndex object (measured ~740)
+    # The records in memory are at most INDEX_SPILL_BYTES; the rest is a few fixed buffers.
+    bound = recorder_module.INDEX_SPILL_BYTES + 64 * 1024
+    assert added * per_chunk_object > 4 * bound    # enough chunks that a leak would show
+    assert grown < bound, f'{grown} B retained over {added} chunks'
+    status = recorder.close()
+    # Every chunk index, spilled or not, is in the summary an independent reader sees.
+    with open(status['files'][0], 'rb') as stream:
+        summary = make_reader(stream).get_summary()
+    assert len(summary.chunk_indexes) == summary.statistics.chunk_count
+    assert summary.statistics.chunk_count - 1 == added + before_chunks   # + the last, at close
+    assert summary.statistics.message_count == 9_000 * len(topics)
+    assert [i.chunk_start_offset for i in summary.chunk_indexes] == sorted(
+        i.chunk_start_offset for i in summary.chunk_indexes)
+    assert sorted(os.listdir(tmp_path)) == ['long.mcap']   # the temporary file is gone
+    with open(status['files'][0], 'rb') as stream:
+        assert sum(1 for _ in make_reader(stream).iter_messages()) == 9_000 * len(topics)
+
+
+def mcap_chunk_count(writer):
+    """Chunks the writer has finished so far (the length of its chunk index store)."""
+    return len(getattr(writer, '_Writer__chunk_indices'))
