@@ -2,10 +2,11 @@
 `flexlink demo`: crank_driver and flexlink_node as separate ROS 2 processes, recorded, summarised.
 
 The demo keeps all traffic on this machine (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and the
-loopback Fast DDS profile ``config/fastdds_localhost.xml``) in a domain of its own, starts the node (recording its input and outputs to a rosbag2 MCAP bag),
-waits until it is ready, starts the 1 kHz crank driver, lets them run for ``--seconds`` after
-the first sample reaches the node, stops both with SIGINT (the node closes the recording with
-its summary), reads the bag back and prints what it holds.
+loopback Fast DDS profile ``config/fastdds_localhost.xml``) in a domain of its own, starts the
+node (recording its input and outputs to a rosbag2 MCAP bag), waits until it is ready, starts
+the 1 kHz crank driver, lets them run for ``--seconds`` after the first sample reaches the node,
+stops both with SIGINT (the node closes the recording with its summary), reads the bag back and
+prints what it holds.
 """
 
 import os

@@ -8,15 +8,15 @@ A cache file is a NumPy ``.npz`` archive of plain numeric arrays plus one ``uint
      "arrays": {"name": {"dtype": "<f8", "shape": [..]}, ...},
      "sha256": "<hex of the arrays>", "meta": {...}}
 
-Loading never unpickles (it reads the zip and the .npy headers itself) and rejects anything
-that is not exactly what the header announces: another format or version, another key (stale:
-a different mechanism or model options), missing or extra arrays, object or non-numeric
-dtypes, other shapes, an array whose .npy header announces more (or fewer) bytes than its zip
-member stores or more than :data:`MAX_CACHE_BYTES` in all (checked before anything is
-allocated), compressed members, a checksum mismatch (corrupt bytes), or an unreadable archive
-(truncated, not a zip, a pickle renamed ``.npz``). Each raises :class:`CacheError`; :func:`load_or_build` then logs a warning and
-rebuilds. Writes go to a temporary file in the same directory and are moved into place with
-``os.replace``, so a reader never sees a half-written file.
+Loading never unpickles (it reads the zip and the .npy headers itself) and rejects anything that
+is not exactly what the header announces: another format or version, another key (stale: a
+different mechanism or model options), missing or extra arrays, object or non-numeric dtypes,
+other shapes, an array whose .npy header announces more (or fewer) bytes than its zip member
+stores or more than :data:`MAX_CACHE_BYTES` in all (checked before anything is allocated),
+compressed members, a checksum mismatch (corrupt bytes), or an unreadable archive (truncated,
+not a zip, a pickle renamed ``.npz``). Each raises :class:`CacheError`; :func:`load_or_build`
+then logs a warning and rebuilds. Writes go to a temporary file in the same directory and are
+moved into place with ``os.replace``, so a reader never sees a half-written file.
 """
 
 import hashlib
