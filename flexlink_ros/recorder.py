@@ -41,7 +41,6 @@ counts them, so the caller can report it (a diagnostic) and carry on.
 import collections
 import dataclasses
 import enum
-import errno
 import logging
 import os
 import pathlib
@@ -203,7 +202,8 @@ class McapRecorder:
                 # FAILED (not NEW): later writes are dropped quietly, not refused one by one.
                 self._fail(exc)
                 self._error_reported = True
-                raise RecorderError(f'cannot record to {self.path}: {exc}') from exc
+                where = '' if isinstance(exc, FileExistsError) else f' to {self.path}'
+                raise RecorderError(f'cannot record{where}: {exc}') from exc
         if self._use_flush_thread:
             self._flusher = threading.Thread(target=self._flush_loop, name='mcap-flush',
                                              daemon=True)
@@ -693,8 +693,8 @@ def refuse_existing(path):
         kind = f'a file of {info.st_size} bytes'
     else:
         kind = 'a special file'
-    raise FileExistsError(errno.EEXIST, f'{path} exists ({kind}); the recorder never '
-                          'overwrites or follows links: choose a new path')
+    raise FileExistsError(f'{path} exists ({kind}); the recorder never overwrites or follows '
+                          'links: choose a new path')
 
 
 def create_exclusive(path):
