@@ -8,9 +8,15 @@ topic with ``message_encoding='cdr'`` and metadata ``offered_qos_profiles`` and
 ns); a summary with Statistics, so ``ros2 bag play FILE.mcap`` opens a bare file.
 
 Layout. A ``path`` ending in ``.mcap`` is one bare file. Any other ``path`` is a rosbag2 bag
-directory (created; must be absent or empty) holding ``<name>_0.mcap``, ``<name>_1.mcap``, ...
+directory (created) holding ``<name>_0.mcap``, ``<name>_1.mcap``, ...
 (split by size and/or duration) and a ``metadata.yaml`` (rosbag2 version 9) written on close,
 which ``ros2 bag play DIR``, ``ros2 bag info DIR`` and ``rosbags`` need.
+
+Never overwrite. ``path`` must not exist in any form: an existing file, bare ``.mcap``,
+directory or symbolic link (even a dangling one) is refused with a :class:`RecorderError` saying
+which, and nothing is written. Files and the bag directory are created exclusively
+(``O_CREAT | O_EXCL | O_NOFOLLOW``, ``mkdir``), so a path that appears between the check and
+the creation is refused too, never clobbered or followed.
 
 Crash safety. Chunks are small (128 KiB before compression) and the open chunk is written and
 flushed to the OS whenever a flush period (0.5 s) of data has accumulated, and also by a
@@ -19,6 +25,13 @@ queued, every 20 ms). A SIGKILL therefore loses at most one flush period plus wh
 chunk; the file lacks its summary but every complete chunk is readable by
 a streaming reader (``flexlink mcap-recover`` rewrites it with a summary). Data are not
 fsync'ed: a killed process loses nothing the kernel already has; power loss is out of scope.
+
+Memory. An mcap ``Writer`` keeps one ``ChunkIndex`` object per chunk for the summary (about
+740 B each; at the node's 4-5 topics at 1 kHz that is about 6 chunks a second, 16 MB an
+hour). The recorder keeps them as their encoded summary records instead (about 130 B each),
+at most :data:`INDEX_SPILL_BYTES` in memory and the rest in an unnamed temporary file in the
+recording's directory, so memory stays flat however long a file grows; only ``close`` reads
+them back to write the summary.
 
 Errors. An unwritable path or a full disk raises :class:`RecorderError` once (from ``open``,
 ``write`` or ``close``); afterwards the recorder is in state ``FAILED``, drops messages and
@@ -31,12 +44,15 @@ import enum
 import logging
 import os
 import pathlib
+import stat
+import tempfile
 import threading
 import time
 from struct import pack as struct_pack
 from zlib import crc32 as zlib_crc32
 
 import yaml
+from mcap.data_stream import RecordBuilder
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
 from .core.errors import RecorderError
@@ -48,6 +64,9 @@ LOGGER = logging.getLogger(__name__)
 DEFAULT_CHUNK_SIZE = 128 * 1024  # bytes before compression; one chunk is the unit of loss
 DEFAULT_FLUSH_PERIOD_S = 0.5  # at most this much data (log time, or wall time) sits in memory
 QUEUE_PERIOD_S = 0.02  # the background thread writes enqueued messages this often
+# The summary's chunk indexes (one record per chunk, about 130 B with 5 topics) are held in
+# memory up to this size, then moved to an unnamed temporary file beside the recording.
+INDEX_SPILL_BYTES = 256 * 1024
 ROSBAG2_METADATA_VERSION = 9  # rosbag2 metadata.yaml version written (QoS policies as names)
 ROS_DISTRO = 'kilted'
 LIBRARY = f'flexlink_ros recorder; {LIBRARY_IDENTIFIER}'
@@ -90,6 +109,7 @@ class _OpenFile:
     first_log_ns: int = None
     last_log_ns: int = None
     message_count: int = 0
+    chunk_indexes: object = None    # _ChunkIndexRecords, if installed in the writer
 
 
 class McapRecorder:
@@ -172,18 +192,18 @@ class McapRecorder:
             if self._state is not RecorderState.NEW:
                 raise RecorderError(f'recorder for {self.path} already opened')
             try:
+                refuse_existing(self.path)
+                self.path.parent.mkdir(parents=True, exist_ok=True)
                 if not self.bare:
-                    self.path.mkdir(parents=True, exist_ok=True)
-                    if any(self.path.iterdir()):
-                        raise FileExistsError(f'bag directory {self.path} exists and is not '
-                                              'empty')
+                    self.path.mkdir()   # not exist_ok: a directory made meanwhile is refused
                 self._state = RecorderState.RECORDING
                 self._open_file()
             except OSError as exc:
                 # FAILED (not NEW): later writes are dropped quietly, not refused one by one.
                 self._fail(exc)
                 self._error_reported = True
-                raise RecorderError(f'cannot record to {self.path}: {exc}') from exc
+                where = '' if isinstance(exc, FileExistsError) else f' to {self.path}'
+                raise RecorderError(f'cannot record{where}: {exc}') from exc
         if self._use_flush_thread:
             self._flusher = threading.Thread(target=self._flush_loop, name='mcap-flush',
                                              daemon=True)
@@ -540,6 +560,8 @@ class McapRecorder:
                     os.close(self._file.stream.fileno())
                 except (OSError, ValueError):
                     pass
+            if self._file.chunk_indexes is not None:
+                self._file.chunk_indexes.close()
             self._closed_files.append(self._file_entry(self._file, complete=False))
             self._file = None
 
@@ -550,12 +572,13 @@ class McapRecorder:
 
     def _open_file(self):
         path = self._file_path(len(self._closed_files))
-        stream = open(path, 'wb')
+        stream = create_exclusive(path)
         try:
             writer = Writer(stream, chunk_size=self.chunk_size_bytes,
                             compression=COMPRESSION[self.compression])
             writer.start(profile='ros2', library=LIBRARY)
-            current = _OpenFile(path, stream, writer, {})
+            current = _OpenFile(path, stream, writer, {},
+                                chunk_indexes=_ChunkIndexRecords.install(writer, path.parent))
             for topic in self._topics.values():
                 self._register(current, topic)
             self._file = current
@@ -580,6 +603,8 @@ class McapRecorder:
         current = self._file
         current.writer.finish()
         current.stream.close()
+        if current.chunk_indexes is not None:
+            current.chunk_indexes.close()
         self._closed_files.append(self._file_entry(current, complete=True))
         self._file = None
 
@@ -638,6 +663,115 @@ class McapRecorder:
                 if (self._state is RecorderState.RECORDING and self._unflushed
                         and time.monotonic() - self._last_flush_wall >= period_s):
                     self._flush_locked(self._last_flush_log_ns)
+
+
+# O_NOFOLLOW is POSIX; where it is missing O_EXCL alone still refuses a symlink.
+_EXCLUSIVE_FLAGS = (os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, 'O_NOFOLLOW', 0)
+                    | getattr(os, 'O_CLOEXEC', 0))
+
+
+def refuse_existing(path):
+    """
+    Raise FileExistsError naming what ``path`` is, if anything is there (links not followed).
+
+    Parameters
+    ----------
+    path : pathlib.Path
+
+    """
+    try:
+        info = os.lstat(path)
+    except FileNotFoundError:
+        return
+    if stat.S_ISLNK(info.st_mode):
+        target = os.readlink(path)
+        dangling = '' if os.path.exists(path) else ', dangling'
+        kind = f'a symbolic link to {target}{dangling}'
+    elif stat.S_ISDIR(info.st_mode):
+        kind = 'a directory'
+    elif stat.S_ISREG(info.st_mode):
+        kind = f'a file of {info.st_size} bytes'
+    else:
+        kind = 'a special file'
+    raise FileExistsError(f'{path} exists ({kind}); the recorder never overwrites or follows '
+                          'links: choose a new path')
+
+
+def create_exclusive(path):
+    """Open a new file for writing; fail if anything (even a dangling link) is at ``path``."""
+    try:
+        descriptor = os.open(path, _EXCLUSIVE_FLAGS, 0o644)
+    except FileExistsError:
+        refuse_existing(path)   # says what is there
+        raise
+    return os.fdopen(descriptor, 'wb')
+
+
+class _ChunkIndexRecords:
+    """
+    A writer's chunk indexes as encoded summary records, spilled to a temporary file.
+
+    Stands in for the list ``Writer`` keeps (``append`` on every chunk, iteration once in
+    ``finish``, each item's ``write(builder)``): it encodes each ``ChunkIndex`` as the record
+    the summary will hold, keeps at most :data:`INDEX_SPILL_BYTES` of them in memory and
+    moves the rest to an unnamed temporary file, so a long recording does not grow in memory.
+    """
+
+    def __init__(self, directory):
+        self._directory = directory
+        self._buffer = bytearray()
+        self._spill = None
+        self._count = 0
+
+    @classmethod
+    def install(cls, writer, directory):
+        """Replace ``writer``'s chunk index list (empty); None if its internals differ."""
+        name = '_Writer__chunk_indices'
+        if getattr(writer, name, None) != []:
+            return None
+        records = cls(directory)
+        setattr(writer, name, records)
+        return records
+
+    def append(self, index):
+        builder = RecordBuilder()
+        index.write(builder)
+        self._buffer += builder.end()
+        self._count += 1
+        if len(self._buffer) >= INDEX_SPILL_BYTES:
+            if self._spill is None:
+                self._spill = tempfile.TemporaryFile(dir=self._directory, prefix='.mcap-index-')
+            self._spill.write(self._buffer)
+            self._buffer = bytearray()   # a new buffer: the old one's memory is released
+
+    def __len__(self):
+        return self._count
+
+    def __iter__(self):
+        # Writer.finish writes each item; one item writes every record, in order.
+        return iter([self] if self._count else [])
+
+    @property
+    def memory_bytes(self):
+        """Bytes of records held in memory (the rest are in the temporary file)."""
+        return len(self._buffer)
+
+    def write(self, builder):
+        """Append every record to ``builder`` (the summary being written)."""
+        if self._spill is not None:
+            self._spill.flush()
+            self._spill.seek(0)
+            for block in iter(lambda: self._spill.read(1 << 20), b''):
+                builder.write(block)
+            self._spill.seek(0, os.SEEK_END)
+        builder.write(self._buffer)
+
+    def close(self):
+        """Drop the temporary file (the summary is written, or the file is abandoned)."""
+        if self._spill is not None:
+            self._spill.close()
+            self._spill = None
+        self._buffer = bytearray()
 
 
 _MESSAGE_HEADER = [('opcode', 'u1'), ('length', '<u8'), ('channel', '<u2'), ('sequence', '<u4'),
@@ -918,5 +1052,8 @@ def write_bag_metadata(bag_dir, files, topics):
     temporary = bag_dir / 'metadata.yaml.tmp'
     text = yaml.dump({'rosbag2_bagfile_information': metadata}, Dumper=_PlainDumper,
                      sort_keys=False)
-    temporary.write_text(text, encoding='utf-8')
-    temporary.replace(bag_dir / 'metadata.yaml')
+    if os.path.lexists(temporary):   # left by an earlier close that failed half-way
+        os.unlink(temporary)
+    with create_exclusive(temporary) as stream:
+        stream.write(text.encode('utf-8'))
+    temporary.replace(bag_dir / 'metadata.yaml')   # replaces a link itself, never its target

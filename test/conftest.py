@@ -7,8 +7,10 @@ import pytest
 
 from flexlink_ros.cli_demo import isolate_ros_environment   # imports no rclpy
 
-# Before anything imports rclpy: discovery on this machine only, and a domain id unique to
-# this run (also when the shell has one set), inherited by every process a test starts.
+# Before anything imports rclpy: discovery on this machine only, Fast DDS listening on
+# 127.0.0.1 only (config/fastdds_localhost.xml; FLEXLINK_LOOPBACK_SOCKETS=1 puts its send
+# sockets there too), and a domain id unique to this run (also when the shell has one set),
+# inherited by every process a test starts.
 isolate_ros_environment()
 os.environ.setdefault('MPLBACKEND', 'Agg')
 

@@ -1,8 +1,11 @@
 """Model cache: round trip, and refusal (then rebuild) of every kind of bad file."""
 
+import io
 import json
 import logging
 import pickle
+import struct
+import tracemalloc
 import zipfile
 
 import numpy as np
@@ -191,3 +194,78 @@ def test_unwritable_directory_still_returns_content(tmp_path, caplog):
         arrays, _, from_cache = cache.load_or_build(blocker / 'model.npz', KEY, content)
     assert not from_cache and 'basis' in arrays
     assert 'could not write' in caplog.text
+
+
+# -- an array that announces 4 GiB: refused before allocation, then rebuilt ------------------
+
+FOUR_GIB = 4 << 30
+
+
+def _npy_header(dtype, shape):
+    stream = io.BytesIO()
+    np.lib.format.write_array_header_1_0(stream, {'descr': np.dtype(dtype).str,
+                                                  'fortran_order': False, 'shape': shape})
+    return stream.getvalue()
+
+
+def _announcing_cache(path, zip_sizes_lie):
+    """A cache with the right key and header whose 'basis' announces 4 GiB of float64."""
+    arrays, meta = content()
+    huge = (FOUR_GIB // 8,)
+    header = {'format': cache.FORMAT_NAME, 'version': cache.FORMAT_VERSION, 'key': KEY,
+              'arrays': {n: {'dtype': a.dtype.str, 'shape': list(huge if n == 'basis'
+                                                                 else a.shape)}
+                         for n, a in arrays.items()},
+              'sha256': cache._array_digest(arrays), 'meta': meta}
+    header_array = np.frombuffer(json.dumps(header).encode(), np.uint8)
+    basis = _npy_header('<f8', huge) + arrays['basis'].tobytes()
+    with zipfile.ZipFile(path, 'w', zipfile.ZIP_STORED) as archive:
+        for name, array in [('__header__', header_array)] + [
+                (n, a) for n, a in arrays.items() if n != 'basis']:
+            stream = io.BytesIO()
+            np.save(stream, array)
+            archive.writestr(name + '.npy', stream.getvalue())
+        archive.writestr('basis.npy', basis)
+    if zip_sizes_lie:   # the zip's own size fields (local and central) claim the 4 GiB too
+        data = bytearray(path.read_bytes())
+        claimed = len(_npy_header('<f8', huge)) + FOUR_GIB - 1
+        claimed = min(claimed, 0xFFFFFFFE)
+        name = b'basis.npy'
+        for signature, offset in ((b'PK\x03\x04', 18), (b'PK\x01\x02', 20)):
+            start = 0
+            while True:
+                start = data.index(signature, start)
+                name_at = start + (30 if signature == b'PK\x03\x04' else 46)
+                if data[name_at:name_at + len(name)] == name:
+                    break
+                start += 4
+            struct.pack_into('<II', data, start + offset, claimed, claimed)
+        path.write_bytes(bytes(data))
+    return header
+
+
+@pytest.mark.parametrize('zip_sizes_lie', [False, True])
+def test_array_announcing_4_gib_is_refused_before_allocation_and_rebuilt(tmp_path, caplog,
+                                                                         zip_sizes_lie):
+    path = tmp_path / 'model.npz'
+    _announcing_cache(path, zip_sizes_lie)
+    assert path.stat().st_size < 10_000
+    with zipfile.ZipFile(path) as archive:   # the file does announce 4 GiB
+        with archive.open('basis.npy') as member:
+            np.lib.format.read_magic(member)
+            shape, _, dtype = np.lib.format.read_array_header_1_0(member)
+        assert shape[0] * dtype.itemsize == FOUR_GIB
+        assert (archive.getinfo('basis.npy').file_size > FOUR_GIB - 1000) == zip_sizes_lie
+    tracemalloc.start()
+    try:
+        with pytest.raises(CacheError, match='announces 4294967296 bytes'):
+            cache.load_cache(path, KEY)
+        with caplog.at_level(logging.WARNING, logger='flexlink_ros.core.cache'):
+            loaded, _, from_cache = cache.load_or_build(path, KEY, content)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 10 << 20   # no 4 GiB buffer, not even briefly
+    assert not from_cache and 'rebuilding' in caplog.text
+    assert_same(loaded, content()[0])
+    assert cache.load_or_build(path, KEY, content)[2]   # the rebuilt file verifies

@@ -1,12 +1,19 @@
 """Mechanism files: the papers' data load, bad input is rejected naming the field."""
 
+import dataclasses
 import math
+import re
+import subprocess
+import sys
+import tracemalloc
 
 import pytest
 import yaml
 
 from flexlink_ros.core.errors import MechanismError
-from flexlink_ros.core.mechanism import load_mechanism, mechanism_from_dict
+from flexlink_ros.core.mechanism import (MAX_ELEMENTS_PER_LINK, MAX_FILE_BYTES, MAX_NAME_CHARS,
+                                         MAX_SOURCE_CHARS, MAX_YAML_DEPTH, load_mechanism,
+                                         mechanism_from_dict)
 
 
 def _cho(config_dir):
@@ -78,3 +85,102 @@ def test_key_changes_with_any_field():
     cho = load_mechanism('cho1992')
     assert cho.key() == load_mechanism('cho1992').key()
     assert cho.key() != dataclasses.replace(cho, damping_ratio=0.03).key()
+
+
+# -- hostile files: every bound refuses with the field, quickly, without allocating --------
+
+def _alias_bomb(levels=9, fan_out=9, indent=''):
+    """YAML of about 1.5 kB whose aliases expand to 9**9 (387 million) strings when walked."""
+    lines = [f'{indent}l0: &l0 ["{"lol" * 350}"]']
+    for level in range(1, levels + 1):
+        refs = ', '.join([f'*l{level - 1}'] * fan_out)
+        lines.append(f'{indent}l{level}: &l{level} [{refs}]')
+    return '\n'.join(lines) + '\n'
+
+
+def _write(tmp_path, text, name='mechanism.yaml'):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize('where', ['top', 'source'])
+def test_alias_bomb_is_refused_before_expansion(config_dir, tmp_path, where):
+    cho = (config_dir / 'cho1992.yaml').read_text()
+    if where == 'top':
+        text = _alias_bomb() + cho
+    else:   # the free-text field holds the bomb
+        text = cho.replace('source: "Cho, Park & Lee (1992), KSME Trans. 16(x), Table 1"',
+                           'source:\n' + _alias_bomb(indent='  '))
+    assert 'source: "Cho' not in text or where == 'top'
+    assert 1000 < len(_alias_bomb()) < 2000
+    tracemalloc.start()
+    try:
+        with pytest.raises(MechanismError, match='aliases are not allowed') as info:
+            load_mechanism(_write(tmp_path, text))
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert info.value.field == 'yaml'
+    assert peak < 10 * MAX_FILE_BYTES
+
+
+def test_oversized_file_is_refused_unread(config_dir, tmp_path):
+    cho = (config_dir / 'cho1992.yaml').read_text()
+    path = _write(tmp_path, cho + '#' * MAX_FILE_BYTES)
+    with pytest.raises(MechanismError, match=f'larger than {MAX_FILE_BYTES} bytes'):
+        load_mechanism(path)
+    assert load_mechanism(_write(tmp_path, cho, 'plain.yaml')).name == 'cho1992'
+
+
+def test_deep_nesting_is_refused(config_dir, tmp_path):
+    text = 'name: ' + '[' * 20000 + ']' * 20000 + '\n'
+    with pytest.raises(MechanismError, match=f'nested deeper than {MAX_YAML_DEPTH}'):
+        load_mechanism(_write(tmp_path, text))
+
+
+@pytest.mark.parametrize('edit, field, reason', [
+    (lambda d: d.update(elements_per_link=MAX_ELEMENTS_PER_LINK + 1), 'elements_per_link',
+     f'1..{MAX_ELEMENTS_PER_LINK}'),
+    (lambda d: d.update(elements_per_link=10 ** 6), 'elements_per_link', '1..'),
+    (lambda d: d.update(elements_per_link=2.5), 'elements_per_link', 'integer'),
+    (lambda d: d.update(source='x' * (MAX_SOURCE_CHARS + 1)), 'source',
+     f'at most {MAX_SOURCE_CHARS}'),
+    (lambda d: d.update(name='n' * (MAX_NAME_CHARS + 1)), 'name', f'at most {MAX_NAME_CHARS}'),
+    (lambda d: d.update(source=['a', 'b']), 'source', 'expected text'),
+    (lambda d: d.update(ground_length_m=10 ** 400), 'ground_length_m', 'out of range'),
+    (lambda d: d.update(gravity_m_s2=[10 ** 400, 0]), 'gravity_m_s2', 'out of range'),
+    (lambda d: d['bearings'].update(joints=['A', 'A']), 'bearings.joints', 'twice'),
+    (lambda d: d['bearings'].update(joints='A'), 'bearings.joints', 'list'),
+    (lambda d: d.update({7: 'seven'}), '7', 'unknown key'),
+])
+def test_sizes_and_strings_are_bounded(config_dir, edit, field, reason):
+    data = _cho(config_dir)
+    edit(data)
+    with pytest.raises(MechanismError, match=re.escape(reason)) as info:
+        mechanism_from_dict(data)
+    assert info.value.field == field
+
+
+def test_variants_are_bounded_too():
+    cho = load_mechanism('cho1992')
+    assert dataclasses.replace(cho, elements_per_link=MAX_ELEMENTS_PER_LINK).elements_per_link \
+        == MAX_ELEMENTS_PER_LINK
+    with pytest.raises(MechanismError, match='elements_per_link'):
+        dataclasses.replace(cho, elements_per_link=10 ** 6)
+
+
+def test_modes_cli_refuses_a_million_elements_in_one_line(config_dir, tmp_path):
+    cho = (config_dir / 'cho1992.yaml').read_text()
+    path = _write(tmp_path, cho.replace('elements_per_link: 3', 'elements_per_link: 1000000'))
+    assert 'elements_per_link: 1000000' in path.read_text()
+    for extra in ([], ['--elements', '1000000']):
+        mechanism = path if not extra else config_dir / 'cho1992.yaml'
+        done = subprocess.run(
+            [sys.executable, '-m', 'flexlink_ros.cli', 'modes', '--mechanism', str(mechanism),
+             '--crank-deg', '0'] + extra, capture_output=True, text=True, timeout=120)
+        assert done.returncode == 1, done.stderr
+        lines = done.stderr.strip().splitlines()
+        assert len(lines) == 1, done.stderr
+        assert 'elements_per_link' in lines[0] and f'1..{MAX_ELEMENTS_PER_LINK}' in lines[0]
+        assert 'MemoryError' not in done.stderr and done.stdout == ''

@@ -9,6 +9,7 @@ import struct
 import subprocess
 import sys
 import time
+import tracemalloc
 
 import numpy as np
 import pytest
@@ -217,12 +218,12 @@ def test_unwritable_and_full_device(tmp_path):
     recorder.close()  # already reported: no second exception
 
     full = tmp_path / 'full.mcap'
-    full.symlink_to('/dev/full')  # the kernel answers every write with ENOSPC
+    full.symlink_to('/dev/full')  # a link is never followed (a full disk: the tmpfs tests)
     recorder = McapRecorder(full)
-    with pytest.raises(RecorderError, match='No space left'):
+    with pytest.raises(RecorderError, match='symbolic link to /dev/full'):
         recorder.open()
     assert recorder.state is RecorderState.FAILED
-    assert recorder.status()['state'] == 'failed' and 'No space' in recorder.status()['error']
+    assert recorder.status()['state'] == 'failed' and 'exists' in recorder.status()['error']
     assert recorder.write('/joint_states', JointState(), T0_NS) is False
     assert recorder.status()['dropped_count'] == 1
     recorder.close()
@@ -279,7 +280,7 @@ def test_write_after_close_and_bad_arguments(tmp_path):
         recorder.write('/x', JointState(), T0_NS)
     with pytest.raises(ValueError, match='split_size_bytes'):
         McapRecorder(tmp_path / 'two.mcap', split_size_bytes=1000)
-    with pytest.raises(RecorderError, match='not empty'):
+    with pytest.raises(RecorderError, match='exists'):
         (tmp_path / 'busy').mkdir()
         (tmp_path / 'busy' / 'other').write_text('x')
         McapRecorder(tmp_path / 'busy').open()
@@ -537,3 +538,123 @@ def test_enqueue_reports_a_full_disk_once_and_estimation_can_go_on(tiny_tmpfs, t
     assert raised == 1 and status['state'] == 'failed' and status['dropped_count'] >= 10
     result = recover_mcap(status['files'][0], tmp_path / 'salvaged.mcap')
     assert result['message_count'] > 0
+
+
+# -- record.path never overwrites, never follows a link -------------------------------------
+
+def _existing_paths(tmp_path):
+    """Each kind of existing path, and the file whose bytes must survive (if any)."""
+    victim = tmp_path / 'victim.txt'
+    victim.write_bytes(b'precious bytes\n' * 100)
+    old_bag = tmp_path / 'old.mcap'
+    with McapRecorder(old_bag) as recorder:
+        record_samples(recorder, 20)
+    link = tmp_path / 'link.mcap'
+    link.symlink_to(victim)
+    dangling = tmp_path / 'dangling.mcap'
+    dangling.symlink_to(tmp_path / 'nowhere' / 'target.mcap')
+    dir_link = tmp_path / 'dir_link'
+    (tmp_path / 'real_dir').mkdir()
+    dir_link.symlink_to(tmp_path / 'real_dir')
+    empty_dir = tmp_path / 'empty_bag'
+    empty_dir.mkdir()
+    return {'bare_mcap': (old_bag, 'a file of'), 'file': (victim, 'a file of'),
+            'symlink_to_file': (link, 'symbolic link to'),
+            'dangling_symlink': (dangling, 'dangling'),
+            'symlink_to_directory': (dir_link, 'symbolic link to'),
+            'empty_directory': (empty_dir, 'a directory')}
+
+
+@pytest.mark.parametrize('kind', ['bare_mcap', 'file', 'symlink_to_file', 'dangling_symlink',
+                                  'symlink_to_directory', 'empty_directory'])
+def test_existing_path_of_any_kind_is_refused_and_left_untouched(tmp_path, kind):
+    cases = _existing_paths(tmp_path)
+    path, reason = cases[kind]
+    before = {p: (p.read_bytes() if p.is_file() and not p.is_symlink() else None)
+              for p in tmp_path.iterdir()}
+    listing = sorted(os.listdir(tmp_path)) + sorted(os.listdir(tmp_path / 'real_dir'))
+    recorder = McapRecorder(path)
+    with pytest.raises(RecorderError, match='never overwrites') as info:
+        recorder.open()
+    assert reason in str(info.value)
+    assert recorder.write('/joint_states', JointState(), T0_NS) is False
+    recorder.close()
+    after = {p: (p.read_bytes() if p.is_file() and not p.is_symlink() else None)
+             for p in tmp_path.iterdir()}
+    assert after == before     # bytes of the old bag and the link's target are the same
+    assert sorted(os.listdir(tmp_path)) + sorted(os.listdir(tmp_path / 'real_dir')) == listing
+    assert not (tmp_path / 'nowhere').exists()   # the dangling link was not created through
+    assert mcap_info(tmp_path / 'old.mcap')['message_count'] == 20 * len(sample_messages(0))
+
+
+def test_a_link_placed_between_check_and_create_is_not_followed(tmp_path, monkeypatch):
+    from flexlink_ros import recorder as recorder_module
+    victim = tmp_path / 'victim.txt'
+    victim.write_bytes(b'keep')
+    path = tmp_path / 'race.mcap'
+    real_check = recorder_module.refuse_existing
+    raced = []
+
+    def check_then_race(candidate):
+        real_check(candidate)
+        if not raced:   # the check saw nothing; a real link appears before the file is made
+            raced.append(candidate)
+            path.symlink_to(victim)
+
+    monkeypatch.setattr(recorder_module, 'refuse_existing', check_then_race)
+    with pytest.raises(RecorderError, match='symbolic link'):
+        McapRecorder(path).open()
+    assert raced == [path]
+    assert victim.read_bytes() == b'keep' and path.is_symlink()
+
+
+# -- memory: the summary's chunk indexes do not accumulate in memory --------------------------
+
+def test_retained_memory_per_chunk_is_bounded(tmp_path):
+    from flexlink_ros import recorder as recorder_module
+    topics = ['/a', '/b', '/c', '/d', '/e']   # the node records 4-5 topics
+    payload = serialize_message(Vector3Stamped(header=stamp(T0_NS)))
+    recorder = McapRecorder(tmp_path / 'long.mcap', chunk_size_bytes=1024, flush_thread=False)
+    for topic in topics:
+        recorder.add_topic(topic, 'geometry_msgs/msg/Vector3Stamped')
+    recorder.open()
+    writer = recorder._file.writer
+
+    def record(first, samples):
+        for k in range(first, first + samples, 100):
+            times = np.repeat(T0_NS + STEP_NS * np.arange(k, k + 100), len(topics))
+            recorder.write_batch(topics * 100, [payload] * len(times), times)
+
+    def chunks():
+        return mcap_chunk_count(writer)
+
+    record(0, 1000)    # warm up: allocator pools, numpy caches, first spill of none
+    tracemalloc.start()
+    try:
+        before_chunks, before = chunks(), tracemalloc.get_traced_memory()[0]
+        record(1000, 8_000)
+        grown, added = tracemalloc.get_traced_memory()[0] - before, chunks() - before_chunks
+    finally:
+        tracemalloc.stop()
+    per_chunk_object = 700   # what mcap's Writer retains per ChunkIndex object (measured ~740)
+    # The records in memory are at most INDEX_SPILL_BYTES; the rest is a few fixed buffers.
+    bound = recorder_module.INDEX_SPILL_BYTES + 64 * 1024
+    assert added * per_chunk_object > 4 * bound    # enough chunks that a leak would show
+    assert grown < bound, f'{grown} B retained over {added} chunks'
+    status = recorder.close()
+    # Every chunk index, spilled or not, is in the summary an independent reader sees.
+    with open(status['files'][0], 'rb') as stream:
+        summary = make_reader(stream).get_summary()
+    assert len(summary.chunk_indexes) == summary.statistics.chunk_count
+    assert summary.statistics.chunk_count - 1 == added + before_chunks   # + the last, at close
+    assert summary.statistics.message_count == 9_000 * len(topics)
+    assert [i.chunk_start_offset for i in summary.chunk_indexes] == sorted(
+        i.chunk_start_offset for i in summary.chunk_indexes)
+    assert sorted(os.listdir(tmp_path)) == ['long.mcap']   # the temporary file is gone
+    with open(status['files'][0], 'rb') as stream:
+        assert sum(1 for _ in make_reader(stream).iter_messages()) == 9_000 * len(topics)
+
+
+def mcap_chunk_count(writer):
+    """Chunks the writer has finished so far (the length of its chunk index store)."""
+    return len(getattr(writer, '_Writer__chunk_indices'))

@@ -8,13 +8,15 @@ A cache file is a NumPy ``.npz`` archive of plain numeric arrays plus one ``uint
      "arrays": {"name": {"dtype": "<f8", "shape": [..]}, ...},
      "sha256": "<hex of the arrays>", "meta": {...}}
 
-Loading uses ``allow_pickle=False`` and rejects anything that is not exactly what the header
-announces: another format or version, another key (stale: a different mechanism or model
-options), missing or extra arrays, object or non-numeric dtypes, other shapes, a checksum
-mismatch (corrupt bytes), or an unreadable archive (truncated, not a zip, a pickle renamed
-``.npz``). Each raises :class:`CacheError`; :func:`load_or_build` then logs a warning and
-rebuilds. Writes go to a temporary file in the same directory and are moved into place with
-``os.replace``, so a reader never sees a half-written file.
+Loading never unpickles (it reads the zip and the .npy headers itself) and rejects anything that
+is not exactly what the header announces: another format or version, another key (stale: a
+different mechanism or model options), missing or extra arrays, object or non-numeric dtypes,
+other shapes, an array whose .npy header announces more (or fewer) bytes than its zip member
+stores or more than :data:`MAX_CACHE_BYTES` in all (checked before anything is allocated),
+compressed members, a checksum mismatch (corrupt bytes), or an unreadable archive (truncated,
+not a zip, a pickle renamed ``.npz``). Each raises :class:`CacheError`; :func:`load_or_build`
+then logs a warning and rebuilds. Writes go to a temporary file in the same directory and are
+moved into place with ``os.replace``, so a reader never sees a half-written file.
 """
 
 import hashlib
@@ -39,6 +41,9 @@ HEADER_NAME = '__header__'
 ALLOWED_KINDS = 'biufc'
 # Refuse headers larger than this [bytes] (a foreign archive could announce anything).
 MAX_HEADER_BYTES = 1 << 20
+# Refuse caches whose arrays together exceed this [bytes]: the node's default model is about
+# 30 MB; nothing a build can make in reasonable time comes near it.
+MAX_CACHE_BYTES = 2 << 30
 
 
 def default_cache_dir():
@@ -131,9 +136,95 @@ def save_cache(path, key, arrays, meta=None):
         raise
 
 
+def _read_npy_header(member, name, path):
+    """Dtype, shape, Fortran order of one .npy member; the stream is left at the data."""
+    version = np.lib.format.read_magic(member)
+    if version == (1, 0):
+        shape, fortran_order, dtype = np.lib.format.read_array_header_1_0(member)
+    elif version == (2, 0):
+        shape, fortran_order, dtype = np.lib.format.read_array_header_2_0(member)
+    else:
+        raise CacheError(f'{path}: array {name!r} has .npy version {version}')
+    if dtype.kind not in ALLOWED_KINDS or dtype.hasobject:
+        raise CacheError(f'{path}: cache array {name!r} has dtype {dtype}, not a plain number')
+    return dtype, shape, fortran_order
+
+
+def _read_member(archive, info, name, path, budget):
+    """
+    Read one array after checking the size its header announces.
+
+    The .npy header announces dtype and shape; their product must be exactly the bytes the
+    zip member stores (uncompressed, as ``np.savez`` writes) and fit the remaining
+    ``budget``, so nothing larger than the file itself is ever allocated.
+    """
+    if info.compress_type != zipfile.ZIP_STORED or info.compress_size != info.file_size:
+        raise CacheError(f'{path}: array {name!r} is compressed (not written by this code)')
+    with archive.open(info) as member:
+        dtype, shape, fortran_order = _read_npy_header(member, name, path)
+        count = 1
+        for extent in shape:
+            count *= extent
+        announced = count * dtype.itemsize
+        stored = info.file_size - member.tell()
+        if announced != stored:
+            raise CacheError(f'{path}: array {name!r} announces {announced} bytes '
+                             f'({dtype.str} {list(shape)}), the file holds {stored}')
+        if announced > budget:
+            raise CacheError(f'{path}: array {name!r} announces {announced} bytes, more than '
+                             f'the file holds or {MAX_CACHE_BYTES} bytes in all')
+        array = np.empty(shape, dtype=dtype, order='F' if fortran_order else 'C')
+        view = memoryview(array.reshape(-1, order='A')).cast('B') if announced else b''
+        if announced and member.readinto(view) != announced:
+            raise CacheError(f'{path}: array {name!r} is truncated')
+    return array, announced
+
+
+def _read_header(archive, members, path):
+    info = members.get(HEADER_NAME)
+    if info is None:
+        raise CacheError(f'{path}: not a flexlink_ros cache (no header)')
+    if info.file_size > MAX_HEADER_BYTES + 1024:
+        raise CacheError(f'{path}: malformed header (larger than {MAX_HEADER_BYTES} bytes)')
+    raw, _ = _read_member(archive, info, HEADER_NAME, path,
+                          min(MAX_HEADER_BYTES, path.stat().st_size))
+    if raw.dtype != np.uint8 or raw.ndim != 1:
+        raise CacheError(f'{path}: malformed header')
+    header = json.loads(raw.tobytes().decode())
+    if not isinstance(header, dict):
+        raise CacheError(f'{path}: malformed header')
+    return header
+
+
+def _check_header(header, key, path):
+    if header.get('format') != FORMAT_NAME:
+        raise CacheError(f'{path}: not a flexlink_ros cache (format {header.get("format")!r})')
+    if header.get('version') != FORMAT_VERSION:
+        raise CacheError(f'{path}: cache format version {header.get("version")!r}, '
+                         f'this code reads {FORMAT_VERSION}')
+    if header.get('key') != key:
+        raise CacheError(f'{path}: stale cache (key {str(header.get("key"))[:12]}..., '
+                         f'need {key[:12]}...)')
+
+
+def _members(archive, path):
+    """Zip members by array name; refuses duplicates and anything but ``<name>.npy``."""
+    members = {}
+    for info in archive.infolist():
+        name = info.filename[:-4]
+        if not info.filename.endswith('.npy') or name in members:
+            raise CacheError(f'{path}: unexpected archive member {info.filename[:80]!r}')
+        members[name] = info
+    return members
+
+
 def load_cache(path, key):
     """
     Read and verify a cache file.
+
+    Every size is checked before anything is allocated: each array's .npy header (dtype,
+    shape) must match the cache header and the bytes its zip member stores, and all arrays
+    together stay below :data:`MAX_CACHE_BYTES`.
 
     Parameters
     ----------
@@ -152,48 +243,37 @@ def load_cache(path, key):
     Raises
     ------
     CacheError
-        If the file is missing, unreadable, foreign, of another version or key, or corrupt.
+        If the file is missing, unreadable, foreign, of another version or key, announces
+        more than it holds, or is corrupt.
 
     """
     path = pathlib.Path(path)
     if not path.is_file():
         raise CacheError(f'{path}: no cache file')
     try:
-        with np.load(path, allow_pickle=False) as archive:
-            names = set(archive.files)
-            if HEADER_NAME not in names:
-                raise CacheError(f'{path}: not a flexlink_ros cache (no header)')
-            raw = archive[HEADER_NAME]
-            if raw.dtype != np.uint8 or raw.ndim != 1 or raw.size > MAX_HEADER_BYTES:
-                raise CacheError(f'{path}: malformed header')
-            header = json.loads(raw.tobytes().decode())
-            if not isinstance(header, dict):
-                raise CacheError(f'{path}: malformed header')
-            if header.get('format') != FORMAT_NAME:
-                raise CacheError(f'{path}: not a flexlink_ros cache '
-                                 f'(format {header.get("format")!r})')
-            if header.get('version') != FORMAT_VERSION:
-                raise CacheError(f'{path}: cache format version {header.get("version")!r}, '
-                                 f'this code reads {FORMAT_VERSION}')
-            if header.get('key') != key:
-                raise CacheError(f'{path}: stale cache (key {str(header.get("key"))[:12]}..., '
-                                 f'need {key[:12]}...)')
+        with zipfile.ZipFile(path) as archive:
+            members = _members(archive, path)
+            header = _read_header(archive, members, path)
+            _check_header(header, key, path)
             announced = header.get('arrays')
-            if not isinstance(announced, dict) or set(announced) != names - {HEADER_NAME}:
+            if not isinstance(announced, dict) or set(announced) != set(members) - {HEADER_NAME}:
                 raise CacheError(f'{path}: arrays differ from the header')
-            arrays = {}
-            for name, spec in announced.items():
-                array = archive[name]
-                _check_array(name, array)
-                if array.dtype.str != spec.get('dtype') or list(array.shape) != spec.get('shape'):
+            # The arrays are stored uncompressed in this file: together they fit in it.
+            arrays, budget = {}, min(MAX_CACHE_BYTES, path.stat().st_size)
+            for name, spec in sorted(announced.items()):
+                array, size = _read_member(archive, members[name], name, path, budget)
+                budget -= size
+                if not isinstance(spec, dict) or (array.dtype.str, list(array.shape)) != (
+                        spec.get('dtype'), spec.get('shape')):
                     raise CacheError(f'{path}: array {name!r} is {array.dtype.str} '
-                                     f'{list(array.shape)}, header says {spec}')
+                                     f'{list(array.shape)}, header says {spec!r:.200}')
                 arrays[name] = array
     except CacheError:
         raise
-    except (OSError, EOFError, ValueError, KeyError, TypeError, AttributeError,
-            UnicodeDecodeError, zipfile.BadZipFile, zipfile.LargeZipFile) as exc:
-        # ValueError covers pickled/object arrays refused by allow_pickle=False and bad JSON.
+    except (OSError, EOFError, ValueError, KeyError, TypeError, AttributeError, RuntimeError,
+            NotImplementedError, UnicodeDecodeError, zipfile.BadZipFile,
+            zipfile.LargeZipFile) as exc:
+        # ValueError covers bad .npy headers and bad JSON; RuntimeError an encrypted member.
         raise CacheError(f'{path}: unreadable cache ({type(exc).__name__}: {exc})') from exc
     if _array_digest(arrays) != header.get('sha256'):
         raise CacheError(f'{path}: checksum mismatch (corrupt cache)')

@@ -5,6 +5,14 @@ A :class:`Mechanism` is a frozen dataclass built from a YAML file (SI units) by
 :func:`load_mechanism`, which rejects unknown keys, non-positive sizes and linkages that are
 not the crank-rocker the models assume. Variants are made with ``dataclasses.replace``.
 
+A mechanism file is small and plain, so the loader bounds what a hostile one could ask for:
+at most :data:`MAX_FILE_BYTES`, no YAML anchors or aliases (an alias bomb of 1.5 kB expands to
+gigabytes), nesting at most :data:`MAX_YAML_DEPTH` deep, strings at most
+:data:`MAX_NAME_CHARS` / :data:`MAX_SOURCE_CHARS` long, and ``elements_per_link`` within
+1..:data:`MAX_ELEMENTS_PER_LINK` (checked by the dataclass too, so ``dataclasses.replace`` and
+``--elements`` are bounded as well). Each refusal is a :class:`MechanismError` naming the
+field and the bound.
+
 Conventions (DEVELOPERS.md): O2 at the origin, O4 at (+ground length, 0); crank angle
 counter-clockwise from O2->O4; open branch = B to the left of A->O4 (above the ground line).
 Links are indexed 0 = crank (O2->A), 1 = coupler (A->B), 2 = lever (O4->B); each link's
@@ -29,6 +37,15 @@ JOINT_NAMES = ('O2', 'A', 'B', 'O4')
 # The two members of each joint, first then second (-1 is the ground).
 JOINT_MEMBERS = {'O2': (-1, 0), 'A': (0, 1), 'B': (1, 2), 'O4': (2, -1)}
 BRANCHES = ('open', 'crossed')
+
+# Bounds on what a mechanism file (or a variant) can set; the README states them.
+MAX_FILE_BYTES = 64 * 1024  # the shipped files are about 1.5 kB
+MAX_YAML_DEPTH = 8  # the schema nests 3 deep (links.crank.length_m)
+MAX_NAME_CHARS = 128
+MAX_SOURCE_CHARS = 4096
+# Beam elements per link: the node allows 0..40 and the estimator's reference model doubles
+# the file's count; 80 gives about 730 DOFs (4.3 MB per dense matrix), 10^6 asked 589 TiB.
+MAX_ELEMENTS_PER_LINK = 80
 
 
 @dataclasses.dataclass(frozen=True)
@@ -128,6 +145,10 @@ class Mechanism:
     crank_speed: Optional[float] = None
     source: str = ''
 
+    def __post_init__(self):
+        """Bound the sizes every model allocates from (also after ``dataclasses.replace``)."""
+        check_elements_per_link(self.elements_per_link)
+
     @property
     def lengths(self):
         """Ground, crank, coupler and lever lengths [m], in that order."""
@@ -144,6 +165,14 @@ class Mechanism:
         """Stable hash of every field, for cache keys (hex string)."""
         payload = json.dumps(dataclasses.asdict(self), sort_keys=True, default=repr)
         return hashlib.sha256(payload.encode()).hexdigest()
+
+
+def check_elements_per_link(elements):
+    """Raise MechanismError unless ``elements`` is an integer in 1..MAX_ELEMENTS_PER_LINK."""
+    if (isinstance(elements, bool) or not isinstance(elements, int)
+            or not 1 <= elements <= MAX_ELEMENTS_PER_LINK):
+        raise MechanismError('elements_per_link', f'expected an integer in '
+                             f'1..{MAX_ELEMENTS_PER_LINK}, got {elements!r:.40}')
 
 
 def check_crank_rocker(ground, crank, coupler, lever):
@@ -190,10 +219,29 @@ _SPRING_KEYS = {'stiffness_nm_rad', 'theta0_deg'}
 def _check_keys(mapping, allowed, where):
     if not isinstance(mapping, dict):
         raise MechanismError(where, f'expected a mapping, got {type(mapping).__name__}')
-    unknown = sorted(set(mapping) - allowed)
+    unknown = sorted((str(key) for key in set(mapping) - allowed), key=str)
     if unknown:
         raise MechanismError(f'{where}.{unknown[0]}' if where else unknown[0],
                              f'unknown key (allowed: {", ".join(sorted(allowed))})')
+
+
+def _as_float(value, field):
+    try:
+        return float(value)
+    except OverflowError:  # an integer of hundreds of digits
+        raise MechanismError(field, 'number out of range') from None
+
+
+def _text(data, key, default, limit):
+    value = data.get(key, default)
+    if value is None:
+        value = default
+    if isinstance(value, (dict, list)):
+        raise MechanismError(key, f'expected text, got a {type(value).__name__}')
+    value = str(value)
+    if len(value) > limit:
+        raise MechanismError(key, f'{len(value)} characters, at most {limit} allowed')
+    return value
 
 
 def _number(mapping, key, where, positive=True, required=True, default=None,
@@ -211,8 +259,8 @@ def _number(mapping, key, where, positive=True, required=True, default=None,
         except ValueError:
             pass
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise MechanismError(field, f'expected a number, got {value!r}')
-    value = float(value)
+        raise MechanismError(field, f'expected a number, got {value!r:.40}')
+    value = _as_float(value, field)
     if not math.isfinite(value):
         raise MechanismError(field, f'must be finite, got {value!r}')
     if positive and value <= 0.0:
@@ -236,7 +284,8 @@ def mechanism_from_dict(data):
 
     """
     _check_keys(data, _TOP_KEYS, '')
-    name = str(data.get('name', 'mechanism'))
+    name = _text(data, 'name', 'mechanism', MAX_NAME_CHARS)
+    source = _text(data, 'source', '', MAX_SOURCE_CHARS)
     ground = _number(data, 'ground_length_m', '')
 
     material = data.get('material') or {}
@@ -281,11 +330,17 @@ def mechanism_from_dict(data):
     bearings = data.get('bearings') or {}
     _check_keys(bearings, _BEARING_KEYS, 'bearings')
     bearing_k = _number(bearings, 'stiffness_n_m', 'bearings', required=False)
-    bearing_joints = tuple(bearings.get('joints', JOINT_NAMES))
+    bearing_joints = bearings.get('joints', JOINT_NAMES)
+    if not isinstance(bearing_joints, (list, tuple)):
+        raise MechanismError('bearings.joints', f'expected a list of joints, got '
+                             f'{type(bearing_joints).__name__}')
+    bearing_joints = tuple(bearing_joints)
     for joint in bearing_joints:
-        if joint not in JOINT_NAMES:
-            raise MechanismError('bearings.joints',
-                                 f'unknown joint {joint!r} (joints: {", ".join(JOINT_NAMES)})')
+        if not isinstance(joint, str) or joint not in JOINT_NAMES:
+            raise MechanismError('bearings.joints', f'unknown joint {joint!r:.40} '
+                                 f'(joints: {", ".join(JOINT_NAMES)})')
+    if len(set(bearing_joints)) != len(bearing_joints):
+        raise MechanismError('bearings.joints', 'a joint is listed twice')
     split = _number(bearings, 'mass_split', 'bearings', positive=False, required=False,
                     default=0.5, minimum=0.0, maximum=1.0)
 
@@ -296,17 +351,16 @@ def mechanism_from_dict(data):
     gravity = data.get('gravity_m_s2', [0.0, 0.0])
     if (not isinstance(gravity, (list, tuple)) or len(gravity) != 2
             or not all(isinstance(g, (int, float)) and not isinstance(g, bool)
-                       and math.isfinite(g) for g in gravity)):
-        raise MechanismError('gravity_m_s2', f'expected [gx, gy] in m/s^2, got {gravity!r}')
+                       and math.isfinite(_as_float(g, 'gravity_m_s2')) for g in gravity)):
+        raise MechanismError('gravity_m_s2', f'expected [gx, gy] in m/s^2, got {gravity!r:.60}')
 
     zeta = _number(data, 'damping_ratio', '', positive=False, required=False, default=0.02,
                    minimum=0.0, maximum=1.0)
     elements = data.get('elements_per_link', 3)
-    if isinstance(elements, bool) or not isinstance(elements, int) or elements < 1:
-        raise MechanismError('elements_per_link', f'expected an integer >= 1, got {elements!r}')
+    check_elements_per_link(elements)
     branch = data.get('branch', 'open')
-    if branch not in BRANCHES:
-        raise MechanismError('branch', f'expected one of {BRANCHES}, got {branch!r}')
+    if not isinstance(branch, str) or branch not in BRANCHES:
+        raise MechanismError('branch', f'expected one of {BRANCHES}, got {branch!r:.40}')
 
     spring = None
     if data.get('spring') is not None:
@@ -325,7 +379,7 @@ def mechanism_from_dict(data):
         gravity=(float(gravity[0]), float(gravity[1])), damping_ratio=zeta,
         elements_per_link=elements, branch=branch, spring=spring,
         crank_speed=None if rpm is None else rpm * 2.0 * math.pi / 60.0,
-        source=str(data.get('source', '')))
+        source=source)
 
 
 def find_config(name):
@@ -355,13 +409,61 @@ def find_config(name):
     raise MechanismError('mechanism', f'no such file: {name} (looked in {looked})')
 
 
+class _PlainLoader(yaml.SafeLoader):
+    """
+    SafeLoader for mechanism files: no anchors or aliases, nesting at most MAX_YAML_DEPTH.
+
+    Aliases are refused where they are parsed, before anything is expanded, so an alias
+    bomb costs its own size; the depth bound keeps the recursive composer off Python's
+    recursion limit.
+    """
+
+    def compose_node(self, parent, index):
+        event = self.peek_event()
+        if isinstance(event, yaml.AliasEvent) or getattr(event, 'anchor', None) is not None:
+            raise MechanismError('yaml', f'anchors and aliases are not allowed (line '
+                                 f'{event.start_mark.line + 1})')
+        self._depth = getattr(self, '_depth', 0) + 1
+        try:
+            if self._depth > MAX_YAML_DEPTH:
+                raise MechanismError('yaml', f'nested deeper than {MAX_YAML_DEPTH} levels '
+                                     f'(line {event.start_mark.line + 1})')
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+
+def read_yaml_bounded(path, limit=MAX_FILE_BYTES):
+    """
+    Parse a small YAML file: at most ``limit`` bytes, UTF-8, no aliases, bounded nesting.
+
+    Raises
+    ------
+    MechanismError
+        Naming the file (or ``yaml``) and the bound or the parse error.
+
+    """
+    path = pathlib.Path(path)
+    if not path.is_file():
+        raise MechanismError(str(path), 'not a regular file')
+    with open(path, 'rb') as stream:
+        raw = stream.read(limit + 1)
+    if len(raw) > limit:
+        raise MechanismError(str(path), f'larger than {limit} bytes (a mechanism file is '
+                             'a few kB)')
+    try:
+        return yaml.load(raw.decode('utf-8'), Loader=_PlainLoader)  # noqa: S506 - safe subclass
+    except UnicodeDecodeError as exc:
+        raise MechanismError(str(path), f'not UTF-8 text ({exc.reason})') from None
+    except yaml.YAMLError as exc:
+        reason = ' '.join(str(exc).split())[:200]
+        raise MechanismError(str(path), f'not valid YAML: {reason}') from None
+
+
 def load_mechanism(path_or_name):
     """Load and validate a mechanism YAML file (see :func:`mechanism_from_dict`)."""
     path = find_config(str(path_or_name))
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise MechanismError(str(path), f'not valid YAML: {exc}') from exc
+    data = read_yaml_bounded(path)
     if not isinstance(data, dict):
         raise MechanismError(str(path), 'expected a YAML mapping at the top level')
     return mechanism_from_dict(data)
