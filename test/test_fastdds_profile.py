@@ -126,14 +126,6 @@ def test_profile_is_found_and_says_loopback_only():
     assert strict['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'SYSTEM_DEFAULT'
 
 
-def test_with_the_profile_alone_every_socket_is_on_loopback():
-    env, _ = isolated_env(loopback_sockets=True)
-    sockets, reply = run_pair(env)
-    assert "received ['over loopback']" in reply     # the profile still lets them talk
-    assert len(sockets) >= 3, sockets                 # discovery, user data, sending
-    assert [s for s in sockets if not is_loopback(s[0])] == []
-
-
 def test_with_localhost_range_every_listening_socket_is_on_loopback():
     env, domain = isolated_env()
     sockets, reply = run_pair(env)
