@@ -27,11 +27,15 @@ end-node translation rows, where ``d(R^T)/dtheta = -S R^T`` (S the +90 degree ro
 ``D1^T U = -S u_end^L``: the apparent velocity, in the rotating link frame, of an end node that
 stays put in the ground frame. It is a real strain rate: a transverse end deflection v_e rotating
 relative to the frame changes the end element's length at the rate w_L v_e (the naive form's
-spurious axial force ``beta E A w_L v_e / l_e``). The rest of ``-S u_end^L`` (a transverse end
-rate -w_L u_e, and the part of any field that is a rigid translation or infinitesimal rotation of
-an element in its frame) produces no strain and is not damped: K_L annihilates every element
-rigid-body field, so ``K_L D1^T U = K_L P (D1^T U)`` with P the projection on strain-producing
-fields, and nothing more needs removing. Under a rigid rotation of the deformed linkage at any
+spurious axial force ``beta E A w_L v_e / l_e``). The transverse end rate -w_L u_e is, on the
+end element, mostly a rigid rotation of that element in the link frame (v = -w_L u_e x / l_e,
+phi = -w_L u_e / l_e): that part produces no strain and is not damped; what is left is the end
+rotation rate +w_L u_e / l_e against the element's chord, a bending rate. No explicit
+projection is needed: K_L annihilates every element rigid-body field (translations and the
+infinitesimal rotation), so ``K_L D1^T U = K_L P (D1^T U)`` with P the projection on
+strain-producing fields. Terms of order w_L d d' (the rotation of the deformed shape relative
+to the frame, and the change of the chord direction) are second order in the deflection d and
+dropped, as everywhere in the linear KED model. Under a rigid rotation of the deformed linkage at any
 constant rate (u^L constant in every link frame: ground-frame U' = W S U on the end translations,
 zero elsewhere) ``u^L' = 0`` and the element force is zero identically.
 
