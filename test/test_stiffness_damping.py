@@ -200,7 +200,7 @@ def test_naive_spurious_axial_force_in_coupler_end_element_at_391_rpm():
     """The issue's ~760 N: naive beta K U' minus objective, coupler's element at B, 8 elements.
 
     Measured 738 N (391 rpm, bearing springs, rigid crank, split masses, no gravity; 171 N at
-    269 rpm; 360 steps per revolution instead of 720 change it by 0.03 %). It is
+    269 rpm; 240 steps per revolution instead of 720 change it by 0.1 %). It is
     beta E A w_L v_e / l_e, so it halves with half the elements (mesh-dependent, unphysical):
     3 elements give 283 N.
     """
@@ -209,7 +209,7 @@ def test_naive_spurious_axial_force_in_coupler_end_element_at_391_rpm():
     forces = {}
     for elements in (8, 4):
         model = ds.matched_model('cho1992', elements, gravity=False)
-        run = ds.full_order_response(model, speed, BETA, 'objective', steps=360)
+        run = ds.full_order_response(model, speed, BETA, 'objective', steps=240)
         spurious = ds.spurious_axial_force(model, run, speed, BETA)
         forces[elements] = np.abs(spurious[1]).max(axis=0)
         assert np.argmax(forces[elements]) == elements - 1     # the end element at B
