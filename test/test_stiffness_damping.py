@@ -1,0 +1,241 @@
+"""Objective stiffness-proportional damping (core/stiffness_damping.py, issue 14 item 3)."""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+import scipy.linalg
+
+from flexlink_ros.core import stiffness_damping as sd
+from flexlink_ros.core.assembly import FlexibleLinkage, ModelOptions, link_matrices
+from flexlink_ros.core.mechanism import load_mechanism
+
+BETA = 1e-4
+
+
+def _model(elements=4, bearings='rigid', rigid_crank=True, gravity=True, geometric=True):
+    mech = dataclasses.replace(load_mechanism('cho1992'), elements_per_link=elements)
+    return FlexibleLinkage(mech, ModelOptions(rigid_crank=rigid_crank, bearings=bearings,
+                                              gravity=gravity, geometric_stiffness=geometric))
+
+
+def _static(model, theta=1.0):
+    system = model.assemble(np.array([theta]))
+    return np.linalg.solve(system.frozen_stiffness(0.0)[0], system.load_at(0.0)[0])[None]
+
+
+def _rotating_forces(model, theta, displacement, velocity, rate):
+    """Element damping forces (objective, naive) with every link frame turning at ``rate``."""
+    angle = model.kinematic_coefficients(np.array([theta]))[0]
+    right = np.zeros_like(displacement)
+    naive = np.zeros_like(displacement)
+    for link in model.links:
+        c, d = sd.link_damping_matrices(model, link, angle[link], rate, BETA)
+        naive += np.einsum('kij,kj->ki', c, velocity)
+        right += np.einsum('kij,kj->ki', c, velocity) + np.einsum('kij,kj->ki', d, displacement)
+    return right, naive
+
+
+@pytest.mark.parametrize('bearings', ['rigid', 'flexible'])
+def test_rigid_rotation_of_deformed_linkage_dissipates_nothing(bearings):
+    """u^L constant in every link frame: zero element force; naive beta K U' dissipates."""
+    model = _model(4, bearings, rigid_crank=False)
+    U = _static(model)
+    rate = 25.0
+    Ud = sd.rigid_rotation_velocity(model, U, rate)
+    right, naive = _rotating_forces(model, 1.0, U, Ud, rate)
+    scale = np.abs(naive).max()
+    assert scale > 0.0
+    assert np.abs(right).max() <= 1e-10 * scale
+    assert abs(float(np.sum(Ud * right))) <= 1e-12 * float(np.sum(Ud * naive))
+    assert float(np.sum(Ud * naive)) > 0.0
+    # bearings (peer convention, ground-frame Cartesian damper): beta k rate^2 |Delta|^2
+    bearing = sd.bearing_damping_matrix(model, BETA)
+    power = float(Ud[0] @ bearing @ Ud[0])
+    expected = rate ** 2 * BETA * float(U[0] @ model.bearing_stiffness @ U[0])
+    assert power == pytest.approx(expected, rel=1e-12, abs=1e-30)
+
+
+def test_naive_end_element_axial_force_closed_form():
+    """Naive minus objective axial force in an end element is beta E A w v_e / l_e."""
+    model = _model(4, 'flexible')
+    U = _static(model)
+    rate = 25.0
+    Ud = sd.rigid_rotation_velocity(model, U, rate)
+    angle = model.kinematic_coefficients(np.array([1.0]))[0]
+    link = 1
+    mats = model.link_matrices[link]
+    spec = model.mechanism.links[link]
+    naive = sd.link_local_rate(model, link, angle[link], 0.0, U, Ud)
+    right = sd.link_local_rate(model, link, angle[link], rate, U, Ud)
+    assert np.abs(right).max() < 1e-15
+    axial = sd.element_resultants(model, link, naive, BETA)['axial'][0]
+    local = np.einsum('kan,kn->ka', model.gather(link, angle[link]), U)[0]
+    ea_le = model.mechanism.youngs_modulus * spec.area / mats.element_length
+    # d(R^T U_g)/dt at fixed local u: naive rate = rate S u_end -> axial -rate v at each end
+    last = 3 * mats.elements
+    assert axial[-1] == pytest.approx(BETA * ea_le * (-rate * local[last + 1]), rel=1e-10)
+    assert axial[0] == pytest.approx(BETA * ea_le * rate * local[1], rel=1e-10)
+    assert np.allclose(axial[1:-1], 0.0)
+
+
+def test_uniform_stretch_and_curvature_rates_give_closed_forms():
+    """Uniform eps' -> N = beta E A eps'; uniform kappa' -> end moments beta E I kappa'."""
+    model = _model(4, 'flexible')
+    link, theta, rate = 1, 0.7, 12.0
+    angle = model.kinematic_coefficients(np.array([theta]))[0][link]
+    mats = model.link_matrices[link]
+    spec = model.mechanism.links[link]
+    E = model.mechanism.youngs_modulus
+    x = mats.nodes
+    eps_rate, kappa_rate = 3e-3, 0.05
+    target = np.zeros(3 * (mats.elements + 1))
+    target[0::3] = eps_rate * x
+    target[1::3] = 0.5 * kappa_rate * x ** 2
+    target[2::3] = kappa_rate * x
+    # a deformed link that also turns at `rate`: U' = rigid-rotation part + T u'_target
+    U = _static(model)
+    t0 = model.gather(link, angle)
+    Ud = sd.rigid_rotation_velocity(model, U, rate) + np.einsum('kan,ka->kn', t0, target[None])
+    local = sd.link_local_rate(model, link, angle, rate, U, Ud)
+    assert np.allclose(local[0], target, atol=1e-15)
+    res = sd.element_resultants(model, link, local, BETA)
+    assert np.allclose(res['axial'], BETA * E * spec.area * eps_rate, rtol=1e-12)
+    nodal = res['nodal'][0]
+    moment = BETA * E * spec.second_moment * kappa_rate
+    assert np.allclose(nodal[:, 2], -moment, rtol=1e-9)
+    assert np.allclose(nodal[:, 5], moment, rtol=1e-9)
+    assert np.allclose(nodal[:, [1, 4]], 0.0, atol=1e-9 * moment / mats.element_length)
+
+
+def test_pinned_pinned_beam_mode_decays_at_beta_omega_over_two():
+    """Damped frozen single link: zeta_1 = beta omega_1 / 2, omega_1 = (pi/L)^2 sqrt(EI/rhoA)."""
+    mech = load_mechanism('cho1992')
+    spec = mech.links[1]
+    E, rho = mech.youngs_modulus, mech.density
+    mats = link_matrices(E, spec.area, spec.second_moment, rho, spec.length, 8)
+    free = np.setdiff1d(np.arange(mats.stiffness.shape[0]), [0, 1, 3 * mats.elements + 1])
+    M = mats.mass[np.ix_(free, free)]
+    K = mats.stiffness[np.ix_(free, free)]
+    n = len(free)
+    Minv = np.linalg.inv(M)
+    state = np.block([[np.zeros((n, n)), np.eye(n)], [-Minv @ K, -BETA * Minv @ K]])
+    lam = np.linalg.eigvals(state)
+    lam = lam[lam.imag > 0]
+    first = lam[np.argmin(np.abs(lam))]
+    omega = abs(first)
+    zeta = -first.real / omega
+    exact = (math.pi / spec.length) ** 2 * math.sqrt(E * spec.second_moment / (rho * spec.area))
+    assert omega == pytest.approx(exact, rel=1e-4)
+    assert zeta == pytest.approx(0.5 * BETA * omega, rel=1e-9)
+    assert zeta == pytest.approx(0.5 * BETA * exact, rel=1e-4)
+
+
+def test_assembled_frozen_linkage_modes_have_zeta_beta_omega_over_two():
+    """At rest (no K_G) C_beta = beta K is classical: every mode zeta_i = beta omega_i / 2."""
+    model = _model(3, 'flexible', rigid_crank=False, gravity=False, geometric=False)
+    theta = np.array([0.4])
+    mass, damping, stiffness, _ = sd.system_matrices(model, theta, 0.0, BETA)
+    w2, phi = scipy.linalg.eigh(stiffness[0], mass[0])
+    modal = phi.T @ damping[0] @ phi
+    assert np.allclose(modal, np.diag(BETA * w2), atol=1e-9 * BETA * w2.max())
+
+
+def test_damping_matrix_symmetric_psd_with_link_rigid_modes_in_null_space():
+    model = _model(4, 'flexible')
+    theta = np.array([0.3, 2.0])
+    c_el, rotation = sd.element_damping_matrices(model, theta, BETA)
+    system = model.assemble(theta)
+    assert np.allclose(c_el, BETA * system.link_stiffness.sum(axis=1), rtol=1e-12, atol=1e-6)
+    c_all, _ = sd.stiffness_damping_terms(model, theta, 10.0, BETA)
+    assert np.allclose(c_all, BETA * system.stiffness, rtol=1e-12, atol=1e-6)
+    assert np.allclose(c_el, np.swapaxes(c_el, 1, 2))
+    for k in range(len(theta)):
+        values = np.linalg.eigvalsh(c_el[k])
+        assert values.min() >= -1e-12 * values.max()
+    angle = model.kinematic_coefficients(theta)[0]
+    for link in model.links:
+        x = model.link_matrices[link].nodes
+        rigid = np.zeros((3, 3 * len(x)))
+        rigid[0, 0::3] = 1.0                       # axial translation
+        rigid[1, 1::3] = 1.0                       # transverse translation
+        rigid[2, 1::3], rigid[2, 2::3] = x, 1.0    # infinitesimal rotation about node 0
+        t0 = model.gather(link, angle[link])
+        c_link, d_link = sd.link_damping_matrices(model, link, angle[link], 7.0, BETA)
+        for mode in rigid:
+            U = np.einsum('kan,a->kn', t0, mode)   # T u_rigid (every local DOF is free here)
+            assert np.allclose(np.einsum('kan,kn->ka', t0, U), mode)
+            force = np.einsum('kij,kj->ki', c_link, U)
+            assert np.abs(force).max() <= 1e-9 * np.abs(c_link).max() * np.abs(U).max()
+
+
+def test_rotation_term_is_the_time_derivative_of_the_gather():
+    """D_beta U = beta sum T K_L d(T^T U)/dt at fixed U, by central differences in time."""
+    model = _model(4, 'flexible')
+    theta, w, h = 1.3, 28.0, 1e-6
+    U = np.random.default_rng(1).normal(size=(1, model.size)) * 1e-4
+    _, d_beta = sd.stiffness_damping_terms(model, np.array([theta]), w, BETA)
+    expected = np.zeros(model.size)
+    for link in model.links:
+        angles = model.kinematic_coefficients(np.array([theta - w * h, theta + w * h]))[0][link]
+        local = np.einsum('kan,n->ka', model.gather(link, angles), U[0])
+        rate = (local[1] - local[0]) / (2 * h)
+        t0 = model.gather(link, model.kinematic_coefficients(np.array([theta]))[0][link])[0]
+        expected += BETA * t0.T @ model.link_matrices[link].stiffness @ rate
+    assert np.allclose(d_beta[0] @ U[0], expected, rtol=1e-6, atol=1e-8 * np.abs(expected).max())
+
+
+def test_system_matrices_add_beta_terms_to_evaluate():
+    model = _model(3, 'flexible')
+    theta, w = np.array([0.2, 1.9]), 30.0
+    mass, damping, stiffness, load = sd.system_matrices(model, theta, w, BETA)
+    m0, c0, k0, r0 = model.assemble(theta).evaluate(w, 0.0)
+    c_beta, d_beta = sd.stiffness_damping_terms(model, theta, w, BETA)
+    assert np.array_equal(mass, m0) and np.array_equal(load, r0)
+    assert np.allclose(damping, c0 + c_beta) and np.allclose(stiffness, k0 + d_beta)
+
+
+def test_naive_spurious_axial_force_in_coupler_end_element_at_391_rpm():
+    """The issue's ~760 N: naive beta K U' minus objective, coupler's element at B, 8 elements.
+
+    Measured 738 N (391 rpm, bearing springs, rigid crank, split masses, no gravity; 171 N at
+    269 rpm; 240 steps per revolution instead of 720 change it by 0.1 %). It is
+    beta E A w_L v_e / l_e, so it halves with half the elements (mesh-dependent, unphysical):
+    3 elements give 283 N.
+    """
+    from flexlink_ros.studies import damping_study as ds
+    speed = 391.0 * 2.0 * math.pi / 60.0
+    forces = {}
+    for elements in (8, 4):
+        model = ds.matched_model('cho1992', elements, gravity=False)
+        run = ds.full_order_response(model, speed, BETA, 'objective', steps=240)
+        spurious = ds.spurious_axial_force(model, run, speed, BETA)
+        forces[elements] = np.abs(spurious[1]).max(axis=0)
+        assert np.argmax(forces[elements]) == elements - 1     # the end element at B
+    assert 700.0 < forces[8][-1] < 780.0
+    assert forces[4][-1] == pytest.approx(0.5 * forces[8][-1], rel=0.05)
+
+
+def test_beta_damped_full_order_against_peer_at_four_elements():
+    """269 rpm, bearing springs, matched conventions: lever / coupler within 4.5 % RMS.
+
+    Measured 2.8 / 3.4 % at 4 elements and 2.8 / 3.3 % at 8 (the issue: 2.9 / 3.4 %). The
+    remainder is the second-order motion the linear model lacks (the issue's quasi-static
+    correction brings the lever to 1 %); 4.5 % leaves room for the peer's time step and
+    elements while staying inside the issue's 5 % target. Modal zeta = 0.02 is 4.5 % on the
+    coupler: the beta model must beat it there.
+    """
+    peer_exudyn = pytest.importorskip('flexlink_ros.studies.peer_exudyn')
+    if not peer_exudyn.exudyn_available():
+        pytest.skip('exudyn is not installed')
+    from flexlink_ros.studies import damping_study as ds
+    peer = peer_exudyn.peer_response('cho1992', 269.0, elements_per_link=4, bearings='springs',
+                                     gravity=False, beta_s=BETA, mass_placement='split',
+                                     steps_per_revolution=720, samples_per_revolution=120)
+    model = ds.matched_model('cho1992', 4, gravity=False)
+    speed = 269.0 * 2.0 * math.pi / 60.0
+    beta = ds.point_rms(peer, ds.full_order_response(model, speed, BETA, 'objective'))
+    modal = ds.point_rms(peer, ds.full_order_response(model, speed, BETA, 'modal', zeta=0.02))
+    assert beta['lever_tip'] < 0.045 and beta['coupler_mid'] < 0.045
+    assert beta['coupler_mid'] < modal['coupler_mid'] - 0.005
