@@ -406,24 +406,9 @@ class McapRecorder:
             As :meth:`write`.
 
         """
+        names, index, log, publish = self._batch_arguments(topics, messages, log_times_ns,
+                                                           publish_times_ns)
         count = len(messages)
-        if isinstance(topics, str):
-            names, index = [topics], np.zeros(count, dtype=np.intp)
-        else:
-            if len(topics) != count:
-                raise ValueError(f'`topics` has {len(topics)} entries for {count} messages')
-            names = list(dict.fromkeys(topics))
-            lookup = {name: k for k, name in enumerate(names)}
-            index = np.fromiter((lookup[t] for t in topics), dtype=np.intp, count=count)
-        for name in names:
-            if name not in self._topics:
-                raise ValueError(f'`topic` {name!r}: declare it with add_topic() before '
-                                 'writing serialised bytes')
-        log = np.asarray(log_times_ns, dtype=np.int64).reshape(-1)
-        publish = log if publish_times_ns is None else np.asarray(
-            publish_times_ns, dtype=np.int64).reshape(-1)
-        if log.size != count or publish.size != count:
-            raise ValueError('`log_times_ns` and `publish_times_ns` need one entry per message')
         if count == 0:
             return 0
         with self._lock:
@@ -450,25 +435,53 @@ class McapRecorder:
                 self._fail(exc)
                 self._refuse()
                 return 0
-            first, last = int(log.min()), int(log.max())
-            if current.first_log_ns is None:
-                current.first_log_ns, current.last_log_ns = first, last
-            else:
-                current.first_log_ns = min(current.first_log_ns, first)
-                current.last_log_ns = max(current.last_log_ns, last)
-            current.message_count += count
-            for k, number in enumerate(np.bincount(index, minlength=len(names)).tolist()):
-                self._topics[names[k]].message_count += number
-            self._message_count += count
-            if flushes:
-                self._last_flush_log_ns = flushes[-1][1]
-                self._unflushed = count - 1 - flushes[-1][0]
-                self._last_flush_wall = time.monotonic()
-            else:
-                if self._last_flush_log_ns is None:
-                    self._last_flush_log_ns = int(log[0])
-                self._unflushed += count
+            self._count_batch(names, index, log, flushes)
             return count
+
+    def _batch_arguments(self, topics, messages, log_times_ns, publish_times_ns):
+        """Check write_batch's arguments: (topic names, topic index per message, log, publish)."""
+        count = len(messages)
+        if isinstance(topics, str):
+            names, index = [topics], np.zeros(count, dtype=np.intp)
+        else:
+            if len(topics) != count:
+                raise ValueError(f'`topics` has {len(topics)} entries for {count} messages')
+            names = list(dict.fromkeys(topics))
+            lookup = {name: k for k, name in enumerate(names)}
+            index = np.fromiter((lookup[t] for t in topics), dtype=np.intp, count=count)
+        for name in names:
+            if name not in self._topics:
+                raise ValueError(f'`topic` {name!r}: declare it with add_topic() before '
+                                 'writing serialised bytes')
+        log = np.asarray(log_times_ns, dtype=np.int64).reshape(-1)
+        publish = log if publish_times_ns is None else np.asarray(
+            publish_times_ns, dtype=np.int64).reshape(-1)
+        if log.size != count or publish.size != count:
+            raise ValueError('`log_times_ns` and `publish_times_ns` need one entry per message')
+        return names, index, log, publish
+
+    def _count_batch(self, names, index, log, flushes):
+        """Counts, times and flush state after a written batch (as its write calls would)."""
+        current = self._file
+        count = len(log)
+        first, last = int(log.min()), int(log.max())
+        if current.first_log_ns is None:
+            current.first_log_ns, current.last_log_ns = first, last
+        else:
+            current.first_log_ns = min(current.first_log_ns, first)
+            current.last_log_ns = max(current.last_log_ns, last)
+        current.message_count += count
+        for k, number in enumerate(np.bincount(index, minlength=len(names)).tolist()):
+            self._topics[names[k]].message_count += number
+        self._message_count += count
+        if flushes:
+            self._last_flush_log_ns = flushes[-1][1]
+            self._unflushed = count - 1 - flushes[-1][0]
+            self._last_flush_wall = time.monotonic()
+        else:
+            if self._last_flush_log_ns is None:
+                self._last_flush_log_ns = int(log[0])
+            self._unflushed += count
 
     def flush(self):
         """Write the queue and the open chunk and flush them to the OS (no fsync)."""
