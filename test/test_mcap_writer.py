@@ -4,7 +4,6 @@ import ast
 import io
 import pathlib
 import re
-import zlib
 
 import numpy as np
 from geometry_msgs.msg import Vector3Stamped
