@@ -1,23 +1,18 @@
 """
 An MCAP file writer composed over the mcap library's public record classes.
 
-It writes the file ``mcap.writer.Writer`` writes (same records, same order, same chunking
-rule, same summary groups and offsets) with three differences the recorder needs, none of
-which the public ``Writer`` offers:
+Given the same calls it writes the bytes ``mcap.writer.Writer(enable_data_crcs=True)`` writes
+(same records and order, chunking rule, summary groups and offsets; test_mcap_writer checks it
+byte for byte), with what the recorder needs and the public ``Writer`` lacks:
 
-- the summary's chunk indexes are kept as encoded records, at most :data:`INDEX_SPILL_BYTES`
-  in memory and the rest in an unnamed temporary file (:class:`ChunkIndexStore`), so memory
-  stays flat however many chunks a file holds (the ``Writer`` keeps one ``ChunkIndex`` object,
-  about 740 B, per chunk);
-- :meth:`McapFileWriter.add_messages` writes many messages at once, building message records
-  and message indexes with numpy instead of one Python call per message (replay);
-- the data section's CRC is written in the Data End record.
+- the summary's chunk indexes are kept encoded, at most :data:`INDEX_SPILL_BYTES` in memory and
+  the rest in an unnamed temporary file (:class:`ChunkIndexStore`), so memory stays flat however
+  many chunks a file holds (the ``Writer`` keeps a ~740 B ``ChunkIndex`` object per chunk);
+- :meth:`McapFileWriter.add_messages` writes many messages at once, building Message and
+  Message Index records with numpy rather than one Python call per message (replay).
 
-Records are encoded by ``mcap.records`` (``Header``, ``Schema``, ``Channel``, ``Chunk``,
-``ChunkIndex``, ``Statistics``, ``SummaryOffset``, ``DataEnd``, ``Footer``) through
-``mcap.data_stream.RecordBuilder``; Message and Message Index records, the two written per
-message, are encoded in bulk here by the MCAP specification's layout (test_mcap_writer checks
-them against ``mcap.records.Message`` and ``MessageIndex``).
+Every other record is encoded by ``mcap.records`` through ``mcap.data_stream.RecordBuilder``;
+Message and Message Index records follow the MCAP specification's layout.
 """
 
 import os
@@ -222,10 +217,6 @@ class McapFileWriter:
         """Write the open chunk, if it holds a message, and flush the stream (no fsync)."""
         self._finish_chunk()
         self._stream.flush()
-
-    def tell(self):
-        """Bytes written to the stream so far."""
-        return self._offset
 
     def close(self):
         """Release the chunk index store without finishing (the file is abandoned)."""
