@@ -26,12 +26,13 @@ chunk; the file lacks its summary but every complete chunk is readable by
 a streaming reader (``flexlink mcap-recover`` rewrites it with a summary). Data are not
 fsync'ed: a killed process loses nothing the kernel already has; power loss is out of scope.
 
-Memory. An mcap ``Writer`` keeps one ``ChunkIndex`` object per chunk for the summary (about
-740 B each; at the node's 4-5 topics at 1 kHz that is about 6 chunks a second, 16 MB an
-hour). The recorder keeps them as their encoded summary records instead (about 130 B each),
-at most :data:`INDEX_SPILL_BYTES` in memory and the rest in an unnamed temporary file in the
-recording's directory, so memory stays flat however long a file grows; only ``close`` reads
-them back to write the summary.
+Memory. Files are written by :class:`~flexlink_ros.mcap_writer.McapFileWriter`, composed over
+the mcap library's public record classes. Where mcap's ``Writer`` keeps one ``ChunkIndex``
+object per chunk for the summary (about 740 B each; at the node's 4-5 topics at 1 kHz that is
+about 6 chunks a second, 16 MB an hour), it keeps them as their encoded summary records
+(about 130 B each), at most :data:`~flexlink_ros.mcap_writer.INDEX_SPILL_BYTES` in memory and
+the rest in an unnamed temporary file in the recording's directory, so memory stays flat however
+long a file grows; only ``close`` reads them back to write the summary.
 
 Errors. An unwritable path or a full disk raises :class:`RecorderError` once (from ``open``,
 ``write`` or ``close``); afterwards the recorder is in state ``FAILED``, drops messages and
@@ -45,17 +46,15 @@ import logging
 import os
 import pathlib
 import stat
-import tempfile
 import threading
 import time
-from struct import pack as struct_pack
-from zlib import crc32 as zlib_crc32
 
+import numpy as np
 import yaml
-from mcap.data_stream import RecordBuilder
-from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
+from mcap.writer import LIBRARY_IDENTIFIER
 
 from .core.errors import RecorderError
+from .mcap_writer import COMPRESSIONS, McapFileWriter
 from .rosbag_schema import (message_definition, message_type_name, offered_qos_yaml,
                             qos_profile_dict, serialize_exact, type_hash)
 
@@ -64,13 +63,9 @@ LOGGER = logging.getLogger(__name__)
 DEFAULT_CHUNK_SIZE = 128 * 1024  # bytes before compression; one chunk is the unit of loss
 DEFAULT_FLUSH_PERIOD_S = 0.5  # at most this much data (log time, or wall time) sits in memory
 QUEUE_PERIOD_S = 0.02  # the background thread writes enqueued messages this often
-# The summary's chunk indexes (one record per chunk, about 130 B with 5 topics) are held in
-# memory up to this size, then moved to an unnamed temporary file beside the recording.
-INDEX_SPILL_BYTES = 256 * 1024
 ROSBAG2_METADATA_VERSION = 9  # rosbag2 metadata.yaml version written (QoS policies as names)
 ROS_DISTRO = 'kilted'
 LIBRARY = f'flexlink_ros recorder; {LIBRARY_IDENTIFIER}'
-COMPRESSION = {'zstd': CompressionType.ZSTD, 'none': CompressionType.NONE}
 DEFAULT_QOS = {
     'history': 'keep_last', 'depth': 10, 'reliability': 'reliable', 'durability': 'volatile',
     'deadline': {'sec': 9223372036, 'nsec': 854775807},
@@ -103,13 +98,12 @@ class _Topic:
 class _OpenFile:
     path: pathlib.Path
     stream: object
-    writer: Writer
+    writer: McapFileWriter
     channel_ids: dict
     schema_ids: dict = dataclasses.field(default_factory=dict)
     first_log_ns: int = None
     last_log_ns: int = None
     message_count: int = 0
-    chunk_indexes: object = None    # _ChunkIndexRecords, if installed in the writer
 
 
 class McapRecorder:
@@ -151,8 +145,8 @@ class McapRecorder:
             raise ValueError(f'`chunk_size_bytes` must be >= 1024, got {chunk_size_bytes}')
         if not flush_period_s > 0:
             raise ValueError(f'`flush_period_s` must be > 0, got {flush_period_s}')
-        if compression not in COMPRESSION:
-            raise ValueError(f'`compression` must be one of {sorted(COMPRESSION)}, '
+        if compression not in COMPRESSIONS:
+            raise ValueError(f'`compression` must be one of {sorted(COMPRESSIONS)}, '
                              f'got {compression!r}')
         self.split_size_bytes = int(split_size_bytes)
         self.split_duration_ns = int(round(split_duration_s * 1e9))
@@ -412,7 +406,40 @@ class McapRecorder:
             As :meth:`write`.
 
         """
-        import numpy as np
+        names, index, log, publish = self._batch_arguments(topics, messages, log_times_ns,
+                                                           publish_times_ns)
+        count = len(messages)
+        if count == 0:
+            return 0
+        with self._lock:
+            if self._state is not RecorderState.RECORDING:
+                if self._state is RecorderState.FAILED:
+                    self._dropped += count - 1
+                self._refuse()
+                return 0
+            if self.split_size_bytes or self.split_duration_ns:   # a split may fall inside
+                topic_of = [names[k] for k in index.tolist()]
+                recorded = 0
+                for n, (log_ns, publish_ns) in enumerate(zip(log.tolist(), publish.tolist())):
+                    recorded += bool(self.write(topic_of[n], messages[n], log_ns, publish_ns))
+                return recorded
+            current = self._file
+            channel_of = np.array([current.channel_ids[name] for name in names],
+                                  dtype=np.uint16)[index]
+            try:
+                flushes = current.writer.add_messages(channel_of, messages, log, publish,
+                                                      self.flush_period_ns,
+                                                      self._last_flush_log_ns)
+            except OSError as exc:
+                self._dropped += count - 1
+                self._fail(exc)
+                self._refuse()
+                return 0
+            self._count_batch(names, index, log, flushes)
+            return count
+
+    def _batch_arguments(self, topics, messages, log_times_ns, publish_times_ns):
+        """Check write_batch's arguments: (topic names, topic index per message, log, publish)."""
         count = len(messages)
         if isinstance(topics, str):
             names, index = [topics], np.zeros(count, dtype=np.intp)
@@ -431,51 +458,30 @@ class McapRecorder:
             publish_times_ns, dtype=np.int64).reshape(-1)
         if log.size != count or publish.size != count:
             raise ValueError('`log_times_ns` and `publish_times_ns` need one entry per message')
-        if count == 0:
-            return 0
-        with self._lock:
-            if self._state is not RecorderState.RECORDING:
-                if self._state is RecorderState.FAILED:
-                    self._dropped += count - 1
-                self._refuse()
-                return 0
-            chunks = _BatchChunks.of(self._file.writer)
-            if chunks is None or self.split_size_bytes or self.split_duration_ns:
-                topic_of = [names[k] for k in index.tolist()]
-                recorded = 0
-                for n, (log_ns, publish_ns) in enumerate(zip(log.tolist(), publish.tolist())):
-                    recorded += bool(self.write(topic_of[n], messages[n], log_ns, publish_ns))
-                return recorded
-            current = self._file
-            channel_of = np.array([current.channel_ids[name] for name in names],
-                                  dtype=np.uint16)[index]
-            try:
-                flushes = chunks.add(channel_of, messages, log, publish, self.flush_period_ns,
-                                     self._last_flush_log_ns)
-            except OSError as exc:
-                self._dropped += count - 1
-                self._fail(exc)
-                self._refuse()
-                return 0
-            first, last = int(log.min()), int(log.max())
-            if current.first_log_ns is None:
-                current.first_log_ns, current.last_log_ns = first, last
-            else:
-                current.first_log_ns = min(current.first_log_ns, first)
-                current.last_log_ns = max(current.last_log_ns, last)
-            current.message_count += count
-            for k, number in enumerate(np.bincount(index, minlength=len(names)).tolist()):
-                self._topics[names[k]].message_count += number
-            self._message_count += count
-            if flushes:
-                self._last_flush_log_ns = flushes[-1][1]
-                self._unflushed = count - 1 - flushes[-1][0]
-                self._last_flush_wall = time.monotonic()
-            else:
-                if self._last_flush_log_ns is None:
-                    self._last_flush_log_ns = int(log[0])
-                self._unflushed += count
-            return count
+        return names, index, log, publish
+
+    def _count_batch(self, names, index, log, flushes):
+        """Counts, times and flush state after a written batch (as its write calls would)."""
+        current = self._file
+        count = len(log)
+        first, last = int(log.min()), int(log.max())
+        if current.first_log_ns is None:
+            current.first_log_ns, current.last_log_ns = first, last
+        else:
+            current.first_log_ns = min(current.first_log_ns, first)
+            current.last_log_ns = max(current.last_log_ns, last)
+        current.message_count += count
+        for k, number in enumerate(np.bincount(index, minlength=len(names)).tolist()):
+            self._topics[names[k]].message_count += number
+        self._message_count += count
+        if flushes:
+            self._last_flush_log_ns = flushes[-1][1]
+            self._unflushed = count - 1 - flushes[-1][0]
+            self._last_flush_wall = time.monotonic()
+        else:
+            if self._last_flush_log_ns is None:
+                self._last_flush_log_ns = int(log[0])
+            self._unflushed += count
 
     def flush(self):
         """Write the queue and the open chunk and flush them to the OS (no fsync)."""
@@ -560,8 +566,8 @@ class McapRecorder:
                     os.close(self._file.stream.fileno())
                 except (OSError, ValueError):
                     pass
-            if self._file.chunk_indexes is not None:
-                self._file.chunk_indexes.close()
+            if self._file.writer is not None:
+                self._file.writer.close()
             self._closed_files.append(self._file_entry(self._file, complete=False))
             self._file = None
 
@@ -574,11 +580,10 @@ class McapRecorder:
         path = self._file_path(len(self._closed_files))
         stream = create_exclusive(path)
         try:
-            writer = Writer(stream, chunk_size=self.chunk_size_bytes,
-                            compression=COMPRESSION[self.compression])
+            writer = McapFileWriter(stream, chunk_size=self.chunk_size_bytes,
+                                    compression=self.compression, spill_directory=path.parent)
             writer.start(profile='ros2', library=LIBRARY)
-            current = _OpenFile(path, stream, writer, {},
-                                chunk_indexes=_ChunkIndexRecords.install(writer, path.parent))
+            current = _OpenFile(path, stream, writer, {})
             for topic in self._topics.values():
                 self._register(current, topic)
             self._file = current
@@ -603,8 +608,6 @@ class McapRecorder:
         current = self._file
         current.writer.finish()
         current.stream.close()
-        if current.chunk_indexes is not None:
-            current.chunk_indexes.close()
         self._closed_files.append(self._file_entry(current, complete=True))
         self._file = None
 
@@ -705,294 +708,6 @@ def create_exclusive(path):
         refuse_existing(path)   # says what is there
         raise
     return os.fdopen(descriptor, 'wb')
-
-
-class _ChunkIndexRecords:
-    """
-    A writer's chunk indexes as encoded summary records, spilled to a temporary file.
-
-    Stands in for the list ``Writer`` keeps (``append`` on every chunk, iteration once in
-    ``finish``, each item's ``write(builder)``): it encodes each ``ChunkIndex`` as the record
-    the summary will hold, keeps at most :data:`INDEX_SPILL_BYTES` of them in memory and
-    moves the rest to an unnamed temporary file, so a long recording does not grow in memory.
-    """
-
-    def __init__(self, directory):
-        self._directory = directory
-        self._buffer = bytearray()
-        self._spill = None
-        self._count = 0
-
-    @classmethod
-    def install(cls, writer, directory):
-        """Replace ``writer``'s chunk index list (empty); None if its internals differ."""
-        name = '_Writer__chunk_indices'
-        if getattr(writer, name, None) != []:
-            return None
-        records = cls(directory)
-        setattr(writer, name, records)
-        return records
-
-    def append(self, index):
-        builder = RecordBuilder()
-        index.write(builder)
-        self._buffer += builder.end()
-        self._count += 1
-        if len(self._buffer) >= INDEX_SPILL_BYTES:
-            if self._spill is None:
-                self._spill = tempfile.TemporaryFile(dir=self._directory, prefix='.mcap-index-')
-            self._spill.write(self._buffer)
-            self._buffer = bytearray()   # a new buffer: the old one's memory is released
-
-    def __len__(self):
-        return self._count
-
-    def __iter__(self):
-        # Writer.finish writes each item; one item writes every record, in order.
-        return iter([self] if self._count else [])
-
-    @property
-    def memory_bytes(self):
-        """Bytes of records held in memory (the rest are in the temporary file)."""
-        return len(self._buffer)
-
-    def write(self, builder):
-        """Append every record to ``builder`` (the summary being written)."""
-        if self._spill is not None:
-            self._spill.flush()
-            self._spill.seek(0)
-            for block in iter(lambda: self._spill.read(1 << 20), b''):
-                builder.write(block)
-            self._spill.seek(0, os.SEEK_END)
-        builder.write(self._buffer)
-
-    def close(self):
-        """Drop the temporary file (the summary is written, or the file is abandoned)."""
-        if self._spill is not None:
-            self._spill.close()
-            self._spill = None
-        self._buffer = bytearray()
-
-
-_MESSAGE_HEADER = [('opcode', 'u1'), ('length', '<u8'), ('channel', '<u2'), ('sequence', '<u4'),
-                   ('log', '<u8'), ('publish', '<u8')]  # packed: 31 bytes
-_OPCODE_MESSAGE, _OPCODE_CHUNK, _OPCODE_MESSAGE_INDEX = 0x05, 0x06, 0x07
-
-
-class _BatchChunks:
-    """
-    Chunks of many messages written directly, with the bookkeeping of an mcap ``Writer``.
-
-    ``Writer.add_message`` costs tens of microseconds per message (records and message
-    indexes are written field by field). This writes the same records (message, chunk,
-    message index) with numpy and struct, and updates the writer's chunk builder, chunk
-    indexes and statistics as ``add_message`` would, so the writer finishes the file (summary,
-    footer) as usual. It uses the writer's private state: :meth:`of` returns None (callers
-    then use ``add_message``) if that state is not as expected (another mcap version).
-    """
-
-    def __init__(self, writer):
-        self.writer = writer
-        state = lambda name: getattr(writer, f'_Writer__{name}')  # noqa: E731
-        self.stream = state('stream')
-        self.builder = state('chunk_builder')
-        self.chunk_size = state('chunk_size')
-        self.compression = state('compression')
-        self.index_types = state('index_types')
-        self.statistics = state('statistics')
-        self.chunk_indices = state('chunk_indices')
-        self.enable_crcs = state('enable_crcs')
-        self.enable_data_crcs = state('enable_data_crcs')
-        self.record_builder = state('record_builder')
-        from mcap.writer import IndexType
-        self._message_index = bool(self.index_types & IndexType.MESSAGE)
-        for name in ('record_writer', 'message_indices', 'num_messages', 'message_start_time',
-                     'message_end_time'):
-            getattr(self.builder, name)
-        for name in ('message_count', 'channel_message_counts', 'message_start_time',
-                     'message_end_time', 'chunk_count'):
-            getattr(self.statistics, name)
-
-    @classmethod
-    def of(cls, writer):
-        """The batch writer of ``writer``, or None if its internals are unexpected."""
-        try:
-            chunks = cls(writer)
-        except AttributeError:
-            return None
-        if chunks.builder is None or chunks.record_builder.count != 0:
-            return None
-        return chunks
-
-    def _compress(self, data):
-        if self.compression == CompressionType.ZSTD:
-            import zstandard
-            return 'zstd', zstandard.compress(data)
-        if self.compression == CompressionType.LZ4:
-            import lz4.frame
-            return 'lz4', lz4.frame.compress(data)
-        return '', data
-
-    def add(self, channels, messages, log, publish, flush_period_ns, last_flush_ns):
-        """
-        Add messages as ``add_message`` plus the recorder's flush-by-log-time would.
-
-        Returns
-        -------
-        list of (index, log_ns)
-            The messages after which the recorder's flush period elapsed (the chunk was
-            written and the stream flushed).
-
-        """
-        import numpy as np
-        count = len(messages)
-        sizes = np.fromiter(map(len, messages), dtype=np.int64, count=count)
-        headers = np.zeros(count, dtype=np.dtype(_MESSAGE_HEADER))
-        headers['opcode'] = _OPCODE_MESSAGE
-        headers['length'] = sizes + 22
-        headers['channel'] = channels
-        headers['log'] = log
-        headers['publish'] = publish
-        head = headers.tobytes()
-        parts = [None] * (2 * count)
-        parts[0::2] = [head[k:k + 31] for k in range(0, 31 * count, 31)]
-        parts[1::2] = messages
-        ends = np.cumsum(sizes + 31)            # end of each record in the batch stream
-        starts = ends - (sizes + 31)
-        statistics = self.statistics
-        if statistics.message_count == 0:
-            statistics.message_start_time = int(log.min())
-        else:
-            statistics.message_start_time = min(statistics.message_start_time, int(log.min()))
-        statistics.message_end_time = max(statistics.message_end_time, int(log.max()))
-        statistics.message_count += count
-        unique, seen, counts = np.unique(channels, return_index=True, return_counts=True)
-        for k in np.argsort(seen, kind='stable').tolist():   # in order of first message
-            channel, number = int(unique[k]), int(counts[k])
-            statistics.channel_message_counts[channel] += number
-
-        # What the writer's chunk builder holds already (schemas, channels, messages).
-        builder = self.builder
-        held = builder.num_messages
-        prefix_times = (builder.message_start_time, builder.message_end_time)
-        prefix_index = {channel: list(index.records)
-                        for channel, index in builder.message_indices.items()}
-        prefix = builder.end()
-        builder.reset()
-
-        flushes = []
-        first = 0
-        while first < count:
-            # The chunk closes after the first message that takes it past chunk_size ...
-            limit = self.chunk_size - len(prefix) + int(starts[first])
-            stop = first + int(np.searchsorted(ends[first:], limit, side='right'))
-            stop = min(stop, count - 1) if stop < count else None
-            # ... or after which the flush period of log time has elapsed.
-            window_first = first
-            if last_flush_ns is None:
-                last_flush_ns = int(log[first])
-                window_first = first + 1
-            window_last = count - 1 if stop is None else stop
-            timed = None
-            if window_first <= window_last:
-                due = log[window_first:window_last + 1] - last_flush_ns >= flush_period_ns
-                if due.any():
-                    timed = window_first + int(np.argmax(due))
-            if timed is not None:
-                stop = timed
-            if stop is None:
-                self._hold(prefix, prefix_index, held, prefix_times, parts, first, count,
-                           channels, log, starts)
-                return flushes
-            self._write_chunk(prefix, prefix_index, held, prefix_times, parts, first, stop + 1,
-                              channels, log, starts)
-            if timed is not None:
-                self.stream.flush()
-                last_flush_ns = int(log[stop])
-                flushes.append((stop, last_flush_ns))
-            prefix, prefix_index, held, prefix_times = b'', {}, 0, (0, 0)
-            first = stop + 1
-        return flushes
-
-    def _hold(self, prefix, prefix_index, held, prefix_times, parts, first, stop, channels,
-              log, starts):
-        """Leave messages first..stop-1 in the writer's open chunk (as add_message would)."""
-        from mcap.records import MessageIndex
-        builder = self.builder
-        builder.record_writer.write(prefix)
-        base = len(prefix) - int(starts[first])
-        for channel, records in prefix_index.items():
-            builder.message_indices[channel] = MessageIndex(channel_id=channel,
-                                                            records=records)
-        for channel, log_ns, offset in zip(channels[first:stop].tolist(),
-                                           log[first:stop].tolist(),
-                                           (starts[first:stop] + base).tolist()):
-            index = builder.message_indices.get(channel)
-            if index is None:
-                index = builder.message_indices[channel] = MessageIndex(channel_id=channel,
-                                                                        records=[])
-            index.records.append((log_ns, offset))
-        builder.record_writer.write(b''.join(parts[2 * first:2 * stop]))
-        times = log[first:stop]
-        builder.message_start_time = (int(times.min()) if held == 0
-                                      else min(prefix_times[0], int(times.min())))
-        builder.message_end_time = max(prefix_times[1], int(times.max()))
-        builder.num_messages = held + stop - first
-
-    def _write_chunk(self, prefix, prefix_index, held, prefix_times, parts, first, stop,
-                     channels, log, starts):
-        import numpy as np
-        from mcap.records import ChunkIndex
-        data = prefix + b''.join(parts[2 * first:2 * stop])
-        times = log[first:stop]
-        start_time = int(times.min()) if held == 0 else min(prefix_times[0], int(times.min()))
-        end_time = max(prefix_times[1], int(times.max()))
-        compression, compressed = self._compress(data)
-        name = compression.encode()
-        body = struct_pack('<QQQII', start_time, end_time, len(data),
-                           zlib_crc32(data) if self.enable_crcs else 0, len(name)) + name
-        body += struct_pack('<Q', len(compressed))
-        record = struct_pack('<BQ', _OPCODE_CHUNK, len(body) + len(compressed)) + body
-        chunk_offset = self.stream.tell()
-        written = [record, compressed]
-        chunk_length = len(record) + len(compressed)
-        index_offset = chunk_offset + chunk_length
-        offsets = {}
-        if self._message_index:
-            batch_channels = channels[first:stop]
-            order = list(prefix_index)
-            unique, first_seen = np.unique(batch_channels, return_index=True)
-            order += [c for c in unique[np.argsort(first_seen)].tolist() if c not in order]
-            positions = starts[first:stop] - int(starts[first]) + len(prefix)
-            length = 0
-            for channel in order:
-                chosen = batch_channels == channel
-                entries = np.empty((int(chosen.sum()), 2), dtype='<u8')
-                entries[:, 0] = times[chosen]
-                entries[:, 1] = positions[chosen]
-                payload = np.asarray(prefix_index.get(channel, []), dtype='<u8').reshape(
-                    -1, 2).tobytes() + entries.tobytes()
-                offsets[channel] = index_offset + length
-                index_record = struct_pack('<BQHI', _OPCODE_MESSAGE_INDEX, 6 + len(payload),
-                                           channel, len(payload)) + payload
-                written.append(index_record)
-                length += len(index_record)
-        else:
-            length = 0
-        for piece in written:
-            self.stream.write(piece)
-        if self.enable_data_crcs:
-            crc = getattr(self.writer, '_Writer__data_section_crc')
-            for piece in written:
-                crc = zlib_crc32(piece, crc)
-            setattr(self.writer, '_Writer__data_section_crc', crc)
-        self.statistics.chunk_count += 1
-        self.chunk_indices.append(ChunkIndex(
-            message_start_time=start_time, message_end_time=end_time,
-            chunk_start_offset=chunk_offset, chunk_length=chunk_length,
-            message_index_offsets=offsets, message_index_length=length,
-            compression=compression, compressed_size=len(compressed),
-            uncompressed_size=len(data)))
 
 
 class _PlainDumper(yaml.SafeDumper):

@@ -611,7 +611,7 @@ def test_a_link_placed_between_check_and_create_is_not_followed(tmp_path, monkey
 # -- memory: the summary's chunk indexes do not accumulate in memory --------------------------
 
 def test_retained_memory_per_chunk_is_bounded(tmp_path):
-    from flexlink_ros import recorder as recorder_module
+    from flexlink_ros import mcap_writer
     topics = ['/a', '/b', '/c', '/d', '/e']   # the node records 4-5 topics
     payload = serialize_message(Vector3Stamped(header=stamp(T0_NS)))
     recorder = McapRecorder(tmp_path / 'long.mcap', chunk_size_bytes=1024, flush_thread=False)
@@ -626,7 +626,7 @@ def test_retained_memory_per_chunk_is_bounded(tmp_path):
             recorder.write_batch(topics * 100, [payload] * len(times), times)
 
     def chunks():
-        return mcap_chunk_count(writer)
+        return writer.chunk_count
 
     record(0, 1000)    # warm up: allocator pools, numpy caches, first spill of none
     tracemalloc.start()
@@ -638,7 +638,7 @@ def test_retained_memory_per_chunk_is_bounded(tmp_path):
         tracemalloc.stop()
     per_chunk_object = 700   # what mcap's Writer retains per ChunkIndex object (measured ~740)
     # The records in memory are at most INDEX_SPILL_BYTES; the rest is a few fixed buffers.
-    bound = recorder_module.INDEX_SPILL_BYTES + 64 * 1024
+    bound = mcap_writer.INDEX_SPILL_BYTES + 64 * 1024
     assert added * per_chunk_object > 4 * bound    # enough chunks that a leak would show
     assert grown < bound, f'{grown} B retained over {added} chunks'
     status = recorder.close()
@@ -654,7 +654,3 @@ def test_retained_memory_per_chunk_is_bounded(tmp_path):
     with open(status['files'][0], 'rb') as stream:
         assert sum(1 for _ in make_reader(stream).iter_messages()) == 9_000 * len(topics)
 
-
-def mcap_chunk_count(writer):
-    """Chunks the writer has finished so far (the length of its chunk index store)."""
-    return len(getattr(writer, '_Writer__chunk_indices'))

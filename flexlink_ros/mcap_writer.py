@@ -1,0 +1,428 @@
+"""
+An MCAP file writer composed over the mcap library's public record classes.
+
+Given the same calls it writes the bytes ``mcap.writer.Writer(enable_data_crcs=True)`` writes
+(same records and order, chunking rule, summary groups and offsets; test_mcap_writer checks it
+byte for byte), with what the recorder needs and the public ``Writer`` lacks:
+
+- the summary's chunk indexes are kept encoded, at most :data:`INDEX_SPILL_BYTES` in memory and
+  the rest in an unnamed temporary file (:class:`ChunkIndexStore`), so memory stays flat however
+  many chunks a file holds (the ``Writer`` keeps a ~740 B ``ChunkIndex`` object per chunk);
+- :meth:`McapFileWriter.add_messages` writes many messages at once, building Message and
+  Message Index records with numpy rather than one Python call per message (replay).
+
+Every other record is encoded by ``mcap.records`` through ``mcap.data_stream.RecordBuilder``;
+Message and Message Index records follow the MCAP specification's layout.
+"""
+
+import os
+import struct
+import tempfile
+import zlib
+
+import numpy as np
+import zstandard
+from mcap.data_stream import RecordBuilder
+from mcap.opcode import Opcode
+from mcap.records import (Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Schema,
+                          Statistics, SummaryOffset)
+
+MAGIC = b'\x89MCAP0\r\n'   # MCAP specification: starts and ends every file
+# The summary's chunk indexes (one record per chunk, about 130 B with 5 topics) are held in
+# memory up to this size, then moved to an unnamed temporary file beside the recording.
+INDEX_SPILL_BYTES = 256 * 1024
+COMPRESSIONS = ('zstd', 'none')
+# Message record: opcode, record length, channel id, sequence, log time, publish time, data.
+_MESSAGE_HEAD = struct.Struct('<BQHIQQ')
+_MESSAGE_FIELDS = [('opcode', 'u1'), ('length', '<u8'), ('channel', '<u2'),
+                   ('sequence', '<u4'), ('log', '<u8'), ('publish', '<u8')]
+_MESSAGE_FIXED = _MESSAGE_HEAD.size - 9   # record length counts the fields after the prefix
+
+
+class ChunkIndexStore:
+    """
+    Chunk Index records for the summary, spilled to an unnamed temporary file.
+
+    Each ``ChunkIndex`` is encoded when the chunk is written; at most
+    :data:`INDEX_SPILL_BYTES` of records stay in memory and the rest go to a temporary file in
+    ``directory`` (deleted by the OS when closed, even on a crash).
+    """
+
+    def __init__(self, directory):
+        self._directory = directory
+        self._buffer = bytearray()
+        self._spill = None
+        self._count = 0
+
+    def append(self, index):
+        """Encode one ``mcap.records.ChunkIndex``."""
+        builder = RecordBuilder()
+        index.write(builder)
+        self._buffer += builder.end()
+        self._count += 1
+        if len(self._buffer) >= INDEX_SPILL_BYTES:
+            if self._spill is None:
+                self._spill = tempfile.TemporaryFile(dir=self._directory, prefix='.mcap-index-')
+            self._spill.write(self._buffer)
+            self._buffer = bytearray()   # a new buffer: the old one's memory is released
+
+    def __len__(self):
+        return self._count
+
+    @property
+    def memory_bytes(self):
+        """Bytes of records held in memory (the rest are in the temporary file)."""
+        return len(self._buffer)
+
+    def write(self, builder):
+        """Append every record, in order, to ``builder`` (the summary being written)."""
+        if self._spill is not None:
+            self._spill.flush()
+            self._spill.seek(0)
+            for block in iter(lambda: self._spill.read(1 << 20), b''):
+                builder.write(block)
+            self._spill.seek(0, os.SEEK_END)
+        builder.write(self._buffer)
+
+    def close(self):
+        """Drop the temporary file (the summary is written, or the file is abandoned)."""
+        if self._spill is not None:
+            self._spill.close()
+            self._spill = None
+        self._buffer = bytearray()
+
+
+class McapFileWriter:
+    """
+    Write one chunked, indexed MCAP file to a binary stream.
+
+    Parameters
+    ----------
+    stream : binary file object
+        Opened for writing; not closed here.
+    chunk_size : int
+        A chunk is written after the first record that takes it past this many bytes
+        (uncompressed), as ``mcap.writer.Writer`` does.
+    compression : {'zstd', 'none'}
+    spill_directory : str or os.PathLike
+        Where the chunk index records beyond :data:`INDEX_SPILL_BYTES` are kept until
+        :meth:`finish`.
+
+    """
+
+    def __init__(self, stream, *, chunk_size, compression, spill_directory):
+        if compression not in COMPRESSIONS:
+            raise ValueError(f'`compression` must be one of {COMPRESSIONS}, got {compression!r}')
+        self._stream = stream
+        self._chunk_size = int(chunk_size)
+        self._compression = '' if compression == 'none' else compression
+        self._offset = 0          # bytes written to the stream
+        self._data_crc = 0        # CRC-32 of the data section so far
+        self._schemas = {}        # id -> Schema (the summary repeats them)
+        self._channels = {}       # id -> Channel
+        self._statistics = Statistics(
+            attachment_count=0, channel_count=0, channel_message_counts={}, chunk_count=0,
+            message_count=0, metadata_count=0, message_start_time=0, message_end_time=0,
+            schema_count=0)
+        self._chunk_indexes = ChunkIndexStore(spill_directory)
+        self._reset_chunk()
+
+    # -- the open chunk ---------------------------------------------------------------------
+
+    def _reset_chunk(self):
+        self._parts = []          # records of the open chunk, uncompressed
+        self._size = 0
+        self._segments = []       # (channels, log times, offsets) arrays of its messages
+        self._singles = ([], [], [])   # the same, for messages added one by one
+        self._messages = 0
+        self._start = self._end = 0
+
+    def _append(self, record):
+        self._parts.append(record)
+        self._size += len(record)
+
+    def _seal_singles(self):
+        if self._singles[0]:
+            channels, logs, offsets = self._singles
+            self._segments.append((np.array(channels, dtype=np.uint16),
+                                   np.array(logs, dtype=np.uint64),
+                                   np.array(offsets, dtype=np.uint64)))
+            self._singles = ([], [], [])
+
+    # -- public API -------------------------------------------------------------------------
+
+    @property
+    def chunk_count(self):
+        """Chunks written so far."""
+        return self._statistics.chunk_count
+
+    @property
+    def chunk_indexes(self):
+        """The :class:`ChunkIndexStore` of the chunks written so far."""
+        return self._chunk_indexes
+
+    def start(self, profile, library):
+        """Write the magic and the Header record."""
+        builder = RecordBuilder()
+        Header(profile=profile, library=library).write(builder)
+        self._write(MAGIC + builder.end())
+
+    def register_schema(self, name, encoding, data):
+        """Add a Schema (to the open chunk, and to the summary); return its id."""
+        schema = Schema(id=len(self._schemas) + 1, name=name, encoding=encoding, data=data)
+        self._schemas[schema.id] = schema
+        self._statistics.schema_count += 1
+        self._add_record(schema)
+        return schema.id
+
+    def register_channel(self, topic, message_encoding, schema_id, metadata):
+        """Add a Channel (to the open chunk, and to the summary); return its id."""
+        channel = Channel(id=len(self._channels) + 1, topic=topic, schema_id=schema_id,
+                          message_encoding=message_encoding, metadata=metadata)
+        self._channels[channel.id] = channel
+        self._statistics.channel_count += 1
+        self._add_record(channel)
+        return channel.id
+
+    def _add_record(self, record):
+        builder = RecordBuilder()
+        record.write(builder)
+        self._append(builder.end())
+        if self._size > self._chunk_size:
+            self._finish_chunk()
+
+    def add_message(self, channel_id, log_time, data, publish_time, sequence=0):
+        """Add one message to the open chunk (written once it exceeds the chunk size)."""
+        statistics = self._statistics
+        statistics.message_start_time = (log_time if statistics.message_count == 0
+                                         else min(log_time, statistics.message_start_time))
+        statistics.message_end_time = max(log_time, statistics.message_end_time)
+        counts = statistics.channel_message_counts
+        counts[channel_id] = counts.get(channel_id, 0) + 1
+        statistics.message_count += 1
+        self._start = log_time if self._messages == 0 else min(self._start, log_time)
+        self._end = max(self._end, log_time)
+        channels, logs, offsets = self._singles
+        channels.append(channel_id)
+        logs.append(log_time)
+        offsets.append(self._size)
+        self._messages += 1
+        self._append(_MESSAGE_HEAD.pack(Opcode.MESSAGE, _MESSAGE_FIXED + len(data), channel_id,
+                                        sequence, log_time, publish_time))
+        self._append(data)
+        if self._size > self._chunk_size:
+            self._finish_chunk()
+
+    def flush(self):
+        """Write the open chunk, if it holds a message, and flush the stream (no fsync)."""
+        self._finish_chunk()
+        self._stream.flush()
+
+    def close(self):
+        """Release the chunk index store without finishing (the file is abandoned)."""
+        self._chunk_indexes.close()
+
+    def _write(self, data):
+        self._stream.write(data)
+        self._offset += len(data)
+        self._data_crc = zlib.crc32(data, self._data_crc)
+
+    def _finish_chunk(self):
+        """Write the open chunk and its message indexes (a chunk without messages waits)."""
+        if self._messages == 0:
+            return
+        self._seal_singles()
+        channels, logs, offsets = (np.concatenate(column) for column in zip(*self._segments))
+        data = b''.join(self._parts)
+        compressed = zstandard.compress(data) if self._compression else data
+        chunk = Chunk(compression=self._compression, data=compressed,
+                      message_start_time=self._start, message_end_time=self._end,
+                      uncompressed_crc=zlib.crc32(data), uncompressed_size=len(data))
+        builder = RecordBuilder()
+        chunk.write(builder)
+        chunk_offset = self._offset
+        self._write(builder.end())
+        index_offsets, index_records = _message_indexes(channels, logs, offsets, self._offset)
+        self._write(index_records)
+        self._statistics.chunk_count += 1
+        self._chunk_indexes.append(ChunkIndex(
+            message_start_time=self._start, message_end_time=self._end,
+            chunk_start_offset=chunk_offset, chunk_length=self._offset - chunk_offset
+            - len(index_records), message_index_offsets=index_offsets,
+            message_index_length=len(index_records), compression=self._compression,
+            compressed_size=len(compressed), uncompressed_size=len(data)))
+        self._reset_chunk()
+
+    # -- many messages at once --------------------------------------------------------------
+
+    def add_messages(self, channels, messages, log, publish, flush_period_ns, last_flush_ns):
+        """
+        Add messages as :meth:`add_message` calls in order would, plus flushes by log time.
+
+        A flush (chunk written, stream flushed) happens after the first message whose log time
+        is ``flush_period_ns`` or more after the last flush's (``last_flush_ns``; None: the
+        first message starts the period), as the recorder does after each message.
+
+        Parameters
+        ----------
+        channels : numpy.ndarray of uint16, shape (n,)
+        messages : sequence of bytes, length n
+        log, publish : numpy.ndarray of int64, shape (n,)
+        flush_period_ns : int
+        last_flush_ns : int or None
+
+        Returns
+        -------
+        list of (index, log_ns)
+            The messages after which a flush happened, and their log times.
+
+        """
+        count = len(messages)
+        sizes = np.fromiter(map(len, messages), dtype=np.int64, count=count)
+        parts = _message_records(channels, messages, sizes, log, publish)
+        ends = np.cumsum(sizes + _MESSAGE_HEAD.size)   # end of each record in the batch
+        starts = ends - (sizes + _MESSAGE_HEAD.size)
+        self._count_batch(channels, log)
+        flushes = []
+        first = 0
+        while first < count:
+            # The chunk closes after the first message that takes it past chunk_size ...
+            limit = self._chunk_size - self._size + int(starts[first])
+            stop = first + int(np.searchsorted(ends[first:], limit, side='right'))
+            stop = stop if stop < count else None
+            # ... or after which the flush period of log time has elapsed.
+            window_first = first
+            if last_flush_ns is None:
+                last_flush_ns = int(log[first])
+                window_first = first + 1
+            window_last = count - 1 if stop is None else stop
+            timed = None
+            if window_first <= window_last:
+                due = log[window_first:window_last + 1] - last_flush_ns >= flush_period_ns
+                if due.any():
+                    timed = window_first + int(np.argmax(due))
+                    stop = timed
+            last = count if stop is None else stop + 1
+            self._hold(parts, channels, log, starts, first, last)
+            if stop is None:
+                return flushes
+            self._finish_chunk()
+            if timed is not None:
+                self._stream.flush()
+                last_flush_ns = int(log[stop])
+                flushes.append((stop, last_flush_ns))
+            first = stop + 1
+        return flushes
+
+    def _count_batch(self, channels, log):
+        statistics = self._statistics
+        low, high = int(log.min()), int(log.max())
+        statistics.message_start_time = (low if statistics.message_count == 0
+                                         else min(statistics.message_start_time, low))
+        statistics.message_end_time = max(statistics.message_end_time, high)
+        statistics.message_count += len(log)
+        counts = statistics.channel_message_counts
+        unique, seen, numbers = np.unique(channels, return_index=True, return_counts=True)
+        for k in np.argsort(seen, kind='stable').tolist():   # in order of first message
+            channel = int(unique[k])
+            counts[channel] = counts.get(channel, 0) + int(numbers[k])
+
+    def _hold(self, parts, channels, log, starts, first, stop):
+        """Put messages first..stop-1 of a batch in the open chunk."""
+        self._seal_singles()
+        times = log[first:stop]
+        low, high = int(times.min()), int(times.max())
+        self._start = low if self._messages == 0 else min(self._start, low)
+        self._end = max(self._end, high)
+        offsets = (starts[first:stop] - int(starts[first]) + self._size).astype(np.uint64)
+        self._segments.append((channels[first:stop], times.astype(np.uint64), offsets))
+        self._messages += stop - first
+        self._append(b''.join(parts[2 * first:2 * stop]))
+
+    # -- the end ----------------------------------------------------------------------------
+
+    def finish(self):
+        """Write the open chunk, Data End, the summary and the footer (stream left open)."""
+        self._finish_chunk()
+        builder = RecordBuilder()
+        DataEnd(data_section_crc=self._data_crc).write(builder)
+        self._write(builder.end())
+        summary_start = self._offset
+        summary = RecordBuilder()
+        offsets = []
+
+        def group(opcode, records):
+            group_start = summary.count
+            for record in records:
+                record.write(summary)
+            offsets.append(SummaryOffset(group_opcode=opcode,
+                                         group_start=summary_start + group_start,
+                                         group_length=summary.count - group_start))
+
+        group(Opcode.SCHEMA, self._schemas.values())
+        group(Opcode.CHANNEL, self._channels.values())
+        group(Opcode.STATISTICS, [self._statistics])
+        group(Opcode.CHUNK_INDEX, [self._chunk_indexes])
+        group(Opcode.ATTACHMENT_INDEX, [])
+        group(Opcode.METADATA_INDEX, [])
+        summary_offset_start = summary_start + summary.count
+        for offset in offsets:
+            offset.write(summary)
+        data = summary.end()
+        footer = Footer(summary_start=summary_start, summary_offset_start=summary_offset_start,
+                        summary_crc=0)
+        builder = RecordBuilder()
+        footer.write(builder)
+        footer_record = builder.end()
+        # The summary CRC covers the summary and the footer up to its own CRC field.
+        footer.summary_crc = zlib.crc32(footer_record[:-4], zlib.crc32(data))
+        footer.write(builder)
+        self._stream.write(data + builder.end() + MAGIC)
+        self._offset += len(data) + len(footer_record) + len(MAGIC)
+        self._chunk_indexes.close()
+
+
+def _message_records(channels, messages, sizes, log, publish):
+    """Message records of a batch, as a list alternating headers and data."""
+    count = len(messages)
+    head_size = _MESSAGE_HEAD.size
+    headers = np.zeros(count, dtype=np.dtype(_MESSAGE_FIELDS))
+    headers['opcode'] = Opcode.MESSAGE
+    headers['length'] = sizes + _MESSAGE_FIXED
+    headers['channel'] = channels
+    headers['log'] = log
+    headers['publish'] = publish
+    head = headers.tobytes()
+    parts = [None] * (2 * count)
+    parts[0::2] = [head[k:k + head_size] for k in range(0, head_size * count, head_size)]
+    parts[1::2] = messages
+    return parts
+
+
+def _message_indexes(channels, logs, offsets, start):
+    """
+    Message Index records of one chunk, a channel each in order of first message.
+
+    Returns
+    -------
+    (dict, bytes)
+        Channel id -> file offset of its record (records start at ``start``), and the
+        records.
+
+    """
+    unique, first_seen = np.unique(channels, return_index=True)
+    builder = RecordBuilder()
+    index_offsets = {}
+    for channel in unique[np.argsort(first_seen)].tolist():
+        chosen = channels == channel
+        entries = np.empty((int(chosen.sum()), 2), dtype='<u8')
+        entries[:, 0] = logs[chosen]
+        entries[:, 1] = offsets[chosen]
+        payload = entries.tobytes()
+        index_offsets[channel] = start + builder.count
+        builder.start_record(Opcode.MESSAGE_INDEX)
+        builder.write2(channel)
+        builder.write4(len(payload))
+        builder.write(payload)
+        builder.finish_record()
+    return index_offsets, builder.end()
