@@ -20,6 +20,8 @@ setup(
     ext_modules=[Extension('flexlink_ros.core._radau_step', ['flexlink_ros/core/_radau_step.c'],
                            extra_compile_args=['-O3'])],
     install_requires=['setuptools'],
+    # The geometrically nonlinear peer the linear model is checked against (studies/).
+    extras_require={'peer': ['exudyn==1.13.6']},
     zip_safe=False,
     maintainer='flexlink_ros developers',
     maintainer_email='flexlink@example.com',
