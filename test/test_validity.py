@@ -68,6 +68,21 @@ def test_buckling_load_against_fe_eigenvalue(mech, link):
     assert 1.0 / inverse.max() == pytest.approx(validity.buckling_loads(mech, [link])[link], rel=1e-4)
 
 
+@pytest.mark.parametrize('tension', [-5.0, 9.0])
+def test_frequency_shift_of_axial_force(mech, tension):
+    """Eq. 2: a uniform N shifts the first pinned-pinned mode by omega^2 (1 + N / P_cr)."""
+    spec, elements = mech.links[2], 12
+    mats = assembly.link_matrices(mech.youngs_modulus, spec.area, spec.second_moment,
+                                  mech.density, spec.length, elements)
+    gmat = so.unit_geometric_stiffness(mats.element_length, elements)
+    free = np.setdiff1d(np.arange(3 * (elements + 1)), [0, 1, 3 * elements + 1])
+    sub = np.ix_(free, free)
+    first = lambda k: scipy.linalg.eigh(k[sub], mats.mass[sub], eigvals_only=True)[0]  # noqa
+    ratio = first(mats.stiffness + tension * gmat) / first(mats.stiffness)
+    assert ratio == pytest.approx(1.0 + tension / validity.buckling_loads(mech, [2])[2],
+                                  rel=1e-3)
+
+
 def test_elastic_axial_force_static_gravity_is_zero(mech):
     """At rest under gravity the FE element forces equal the Newton-Euler axial forces."""
     model = peer.linear_model(mech, elements_per_link=ELEMENTS, gravity=True)
@@ -109,6 +124,28 @@ def test_indicator_flags_the_resonance_band(linkage, responses):
     assert flags[405.0]['valid'] is False
     assert flags[269.0]['indicator_max'] < 0.5 * validity.VALIDITY_THRESHOLD
     assert flags[405.0]['indicator_max'] > 1.5 * validity.VALIDITY_THRESHOLD
+
+
+def test_mode_reference_and_distance(linkage):
+    """The two reference modes are the coupler's and the lever's first bending modes."""
+    speed = 405.0 * math.pi / 30.0
+    ref = validity.mode_reference(linkage, speed)
+    hz = ref['omega'] / (2.0 * math.pi)
+    assert hz == pytest.approx([34.1, 41.7], abs=0.6)
+    assert ref['share'][0, 1] > 0.9 and ref['share'][1, 2] > 0.9
+    # nearest harmonic of 6.75 Hz: 5 (33.75 Hz) and 6 (40.5 Hz)
+    distance = validity.resonance_distance(ref, 0.02)
+    expected = np.hypot(ref['omega'] - np.array([5.0, 6.0]) * speed, 0.02 * ref['omega'])
+    np.testing.assert_allclose(distance, expected, rtol=1e-12)
+
+
+def test_candidate_load_ratio(linkage, responses):
+    """max |N_e| / P_cr: 0.5-1 % at 269 rpm, about 6 % at 405 rpm (the issue's 2-9 N / 36 N)."""
+    values = {rpm: validity.load_ratio_indicator(linkage, r.displacement, r.crank_angle,
+                                                 rpm * math.pi / 30.0).max()
+              for rpm, r in responses.items()}
+    assert 0.003 < values[269.0] < 0.012
+    assert 0.04 < values[405.0] < 0.09
 
 
 def test_is_valid_summary():

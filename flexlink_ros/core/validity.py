@@ -25,21 +25,37 @@ Gauss-averaged), so ::
 the link's first bending mode by Delta(omega^2) / omega^2 = N / P_cr exactly (pinned-pinned,
 sine shape), i.e. Delta omega / omega = N / (2 P_cr).
 
-Indicator (:func:`nonlinearity_indicator`). Per sample ::
+Indicator (:func:`nonlinearity_indicator`): the detuning ratio. Per sample and per reference
+mode j (each flexible link's first bending mode, :func:`mode_reference`: frozen frequency omega_j
+and strain-energy share s_jl of link l, revolution means at the crank speed) ::
 
-    I = max over the two flexible links of |N_e, link-mean| / P_cr,link                  (3)
+    Delta omega_j = omega_j / 2 * sum_l s_jl N_e,l / P_cr,l
+    I = max_j |Delta omega_j| / sqrt(d_j^2 + (zeta omega_j)^2)                           (3)
 
-the link-mean of N_e over its elements. Two other candidates were measured against the Exudyn
-peer over 250-450 rpm (rigid crank, rigid bearings, no gravity, 8 elements per link;
-``python -m flexlink_ros.studies.validity_study``): the detuning ratio
-:func:`detuning_ratio` (the frequency shift (3) causes in each frozen mode against that mode's
-distance from the nearest crank harmonic, with the half-power half-width zeta omega as a floor)
-and the second-order correction against the linear output. The second-order ratio does not
-separate (with rigid bearings the lever tip's second order is 10-70 times its linear motion at
-every speed). The detuning ratio and (3) both separate the resonance band; (3) is chosen
-because it needs nothing but the linear state (no frozen modes, no damping assumption, no
-harmonic bookkeeping), costs one dot product per link per sample, and separated the measured
-sweep at least as cleanly (see :data:`VALIDITY_THRESHOLD`).
+with N_e,l the link-mean of Eq. (1) and d_j the distance of omega_j from the nearest crank
+harmonic k |w| (:func:`resonance_distance`; the half-power half-width zeta omega_j is the floor
+at exact resonance). I is the amplitude-dependent frequency shift in units of the distance to
+resonance: where it is small the response amplitude hardly depends on the shift, so the linear
+state (and the second order computed from it) stands; where it approaches 1 the peer's resonance
+has moved by about its own width and one corrective pass cannot follow it.
+
+Choice, against the Exudyn peer (``python -m flexlink_ros.studies.validity_study``, rigid crank
+and bearings, no gravity, 8 elements per link, 250-450 rpm; README note for the tables). Three
+candidates were computed from the linear state:
+
+* the second-order correction against the linear output: it cannot separate for the lever tip
+  (its second order is 10-70 times its linear motion at every speed with rigid bearings), and
+  for the coupler mid-point it grows with speed like the response itself;
+* the load ratio max |N_e| / P_cr (:func:`load_ratio_indicator`): rises through the resonance
+  band (0.006 at 269 rpm, 0.07 at 405 rpm) but equally above it, where the amplitude is large
+  but off resonance and linear + second order is within its targets again (425-450 rpm), and it
+  is as large at the accurate 385-391 rpm as at the inaccurate 340 rpm: no threshold separates;
+* the detuning ratio (3): with the linear damping matched to the peer's (zeta = 0.012) it flags
+  every speed outside the targets (10 % lever tip, 3 % coupler mid-point p2p) at
+  :data:`VALIDITY_THRESHOLD` = 0.5 with one false alarm at the edge of the band. Chosen.
+
+Cost per sample: the link means of N_e (one row of T^T U per element end, two links) and a 2 x 2
+product; omega_j, s_jl and d_j are constants per speed.
 """
 
 import dataclasses
@@ -54,10 +70,14 @@ from .kinematics import solve_kinematics
 # Links that carry the indicator (the crank is short and stiff: P_cr = 4.7 kN for cho1992).
 INDICATOR_LINKS = (1, 2)
 
-# Threshold on I = max |N_e| / P_cr (Eq. 3) over a revolution. Justification (sweep of
-# studies/validity_study.py against the Exudyn peer, rigid crank and bearings, no gravity,
-# 8 elements per link): see the README note; filled in from the measured table.
-VALIDITY_THRESHOLD = 0.03
+# Threshold on the detuning ratio I (Eq. 3): the frequency shift of the elastic axial force at
+# half the distance to resonance. Against the peer (rigid crank and bearings, 8 elements, 250-450
+# rpm, linear zeta matched at 0.012): the largest I among the speeds outside the targets is 0.51
+# (395 rpm, lever -12 %), the largest among the speeds within them 0.63 (425 rpm, at the band's
+# upper edge: the one false alarm); 269 rpm gives 0.13, 405 rpm 1.9.
+VALIDITY_THRESHOLD = 0.5
+# Frozen modes of the detuning ratio (each flexible link's first bending mode, rigid crank).
+REFERENCE_MODES = 2
 
 
 def buckling_loads(mechanism, links=INDICATOR_LINKS):
@@ -152,12 +172,9 @@ def load_ratios(linkage, displacement, crank_angle, speed, accel=0.0):
     return {link: forces[link].mean(axis=1) / loads[link] for link in links}
 
 
-def nonlinearity_indicator(linkage, displacement, crank_angle, speed, accel=0.0):
+def load_ratio_indicator(linkage, displacement, crank_angle, speed, accel=0.0):
     """
-    Per-sample nonlinearity indicator I = max_link |N_e| / P_cr (Eq. 3), dimensionless.
-
-    The linear + second-order estimate is trusted where I stays below
-    :data:`VALIDITY_THRESHOLD` (:func:`is_valid`).
+    Candidate indicator (not the chosen one): max_link |N_e| / P_cr per sample (Eq. 3).
 
     Returns
     -------
@@ -166,6 +183,82 @@ def nonlinearity_indicator(linkage, displacement, crank_angle, speed, accel=0.0)
     """
     ratios = load_ratios(linkage, displacement, crank_angle, speed, accel)
     return np.max(np.abs(np.stack(list(ratios.values()))), axis=0)
+
+
+def mode_reference(linkage, speed, modes=REFERENCE_MODES, angles=12):
+    """
+    Frozen frequencies and per-link strain-energy shares at a crank speed, revolution means.
+
+    Parameters
+    ----------
+    linkage : FlexibleLinkage
+    speed : float
+        Crank speed [rad/s] (the rigid-body axial forces in K_G).
+    modes : int
+        Lowest frozen modes kept: each link's FIRST bending mode (Eq. 2 holds for it; the n-th
+        pinned-pinned mode shifts by N / (n^2 P_cr)); 2 for a rigid crank (cho1992: the 34.5 Hz
+        coupler and 41.7 Hz lever modes).
+    angles : int
+        Crank angles of the average.
+
+    Returns
+    -------
+    dict
+        'omega' (modes,) [rad/s], 'share' (modes, 3) strain-energy share of crank, coupler,
+        lever, 'speed' [rad/s].
+
+    """
+    from .modes import frozen_mode_sweep
+    grid = np.linspace(0.0, 2.0 * np.pi, angles, endpoint=False)
+    frozen = frozen_mode_sweep(linkage, grid, count=modes, speed=speed)
+    return {'omega': frozen.omega.mean(axis=0),
+            'share': frozen.strain_share[..., :3].mean(axis=0), 'speed': float(speed)}
+
+
+def resonance_distance(reference, zeta):
+    """
+    sqrt(d_j^2 + (zeta omega_j)^2) per reference mode [rad/s]: d_j the distance of omega_j from
+    the nearest crank harmonic k |speed| (k >= 1), zeta omega_j the half-power half-width.
+    """
+    omega, rate = reference['omega'], abs(reference['speed'])
+    harmonic = np.maximum(np.round(omega / rate), 1.0) * rate
+    return np.hypot(omega - harmonic, zeta * omega)
+
+
+def nonlinearity_indicator(linkage, displacement, crank_angle, speed, zeta=None,
+                           reference=None, accel=0.0):
+    """
+    Per-sample detuning ratio (Eq. 4), dimensionless: the chosen validity indicator.
+
+    For each reference mode j, the shift the elastic axial forces cause,
+    Delta omega_j = omega_j / 2 sum_l s_jl N_e,l / P_cr,l (Eq. 2 weighted by the link's
+    strain-energy share s_jl), against :func:`resonance_distance`; the maximum over j.
+
+    Parameters
+    ----------
+    linkage : FlexibleLinkage
+    displacement : ndarray, shape (N, n)
+        Linear nodal vectors U.
+    crank_angle : ndarray, shape (N,)
+    speed : float
+        Crank speed [rad/s].
+    zeta : float or None
+        Modal damping ratio of the model (None: ``mechanism.damping_ratio``).
+    reference : dict or None
+        :func:`mode_reference` at this speed (computed when None; precompute it per speed to
+        evaluate samples cheaply).
+
+    Returns
+    -------
+    ndarray, shape (N,)
+
+    """
+    zeta = linkage.mechanism.damping_ratio if zeta is None else float(zeta)
+    reference = mode_reference(linkage, speed) if reference is None else reference
+    ratios = load_ratios(linkage, displacement, crank_angle, speed, accel)
+    rel = sum(reference['share'][None, :, link] * ratios[link][:, None] for link in ratios)
+    shift = 0.5 * reference['omega'][None, :] * rel                      # (N, modes)
+    return np.max(np.abs(shift) / resonance_distance(reference, zeta)[None, :], axis=1)
 
 
 def is_valid(indicator, threshold=VALIDITY_THRESHOLD):
@@ -178,36 +271,7 @@ def is_valid(indicator, threshold=VALIDITY_THRESHOLD):
     return {'indicator_max': peak, 'valid': bool(peak <= threshold)}
 
 
-def detuning_ratio(linkage, displacement, crank_angle, speed, zeta, modes=4, angles=12):
-    """
-    Candidate indicator (not the chosen one): frequency shift against distance from resonance.
-
-    For each of the lowest ``modes`` frozen modes j (averaged over ``angles`` crank angles:
-    omega_j and its strain-energy share s_jl per link), the shift the elastic axial force
-    causes, Delta omega_j = omega_j / 2 sum_l s_jl N_e,l / P_cr,l (Eq. 2's pinned-pinned
-    result weighted by the link's share), against sqrt(d_j^2 + (zeta omega_j)^2), d_j the
-    distance of omega_j from the nearest crank harmonic k |speed| (k >= 1).
-
-    Returns
-    -------
-    ndarray, shape (N,)
-        max over j of |Delta omega_j| / sqrt(d_j^2 + (zeta omega_j)^2).
-
-    """
-    from .modes import frozen_mode_sweep
-    grid = np.linspace(0.0, 2.0 * np.pi, angles, endpoint=False)
-    frozen = frozen_mode_sweep(linkage, grid, count=modes, speed=speed)
-    omega = frozen.omega.mean(axis=0)
-    share = frozen.strain_share[..., :3].mean(axis=0)                  # (modes, 3)
-    ratios = load_ratios(linkage, displacement, crank_angle, speed)
-    rel = sum(share[None, :, link] * ratios[link][:, None] for link in ratios)   # (N, modes)
-    shift = 0.5 * omega[None, :] * rel
-    rate = abs(speed)
-    harmonic = np.maximum(np.round(omega / rate), 1.0) * rate
-    distance = np.hypot(omega - harmonic, zeta * omega)
-    return np.max(np.abs(shift) / distance[None, :], axis=1)
-
-
-__all__ = ['INDICATOR_LINKS', 'VALIDITY_THRESHOLD', 'buckling_loads',
+__all__ = ['INDICATOR_LINKS', 'REFERENCE_MODES', 'VALIDITY_THRESHOLD', 'buckling_loads',
            'rigid_element_axial_forces', 'elastic_axial_forces', 'load_ratios',
-           'nonlinearity_indicator', 'is_valid', 'detuning_ratio']
+           'load_ratio_indicator', 'mode_reference', 'resonance_distance',
+           'nonlinearity_indicator', 'is_valid']

@@ -9,10 +9,11 @@ error of the lever tip and the coupler mid-point against the peer (p2p and relat
 worse of the dX / dY channels), and computes from the linear state the candidate indicators of
 :mod:`core.validity`:
 
-* ``I``: max over a revolution of |N_e| / P_cr (the chosen indicator,
-  :func:`core.validity.nonlinearity_indicator`);
-* ``detune``: max of :func:`core.validity.detuning_ratio` (frequency shift against the
-  distance from the nearest harmonic, zeta omega as a floor);
+* ``I``: max over a revolution of the detuning ratio (the chosen indicator,
+  :func:`core.validity.nonlinearity_indicator`: the frequency shift the elastic axial force
+  causes in each link's first bending mode against that mode's distance from the nearest crank
+  harmonic, zeta omega as a floor);
+* ``N/Pcr``: max of |N_e| / P_cr (:func:`core.validity.load_ratio_indicator`);
 * ``2nd/lin``: the coupler mid-point's second-order p2p against its linear p2p (the lever
   tip's is 10-70 at every speed with rigid bearings, so it cannot separate).
 
@@ -86,8 +87,9 @@ def run_speed(mechanism, rpm, elements=peer.DEFAULT_ELEMENTS, bearings='rigid', 
     -------
     dict
         'rpm', 'errors' (per output point: 'p2p_error', 'rms_error', 'peer_p2p' [m] dX, dY),
-        'accurate', 'indicator' (max of I), 'detune', 'second_ratio', 'indicator_samples'
-        (I over the revolution), 'links' (max |N_e| / P_cr per link), 'peer_cpu_s'.
+        'accurate', 'indicator' (max of the detuning ratio I), 'load_ratio' (max |N_e| /
+        P_cr), 'second_ratio', 'indicator_samples' (I over the revolution), 'links' (max
+        |N_e| / P_cr per link), 'peer_cpu_s'.
 
     """
     from ..core.simulate import periodic_response
@@ -100,18 +102,17 @@ def run_speed(mechanism, rpm, elements=peer.DEFAULT_ELEMENTS, bearings='rigid', 
     total = {'crank_angle': linear.crank_angle}
     total.update(zip(peer.OUTPUT_KEYS, corrected['total'].T))
     errors = _errors(peer.compare(response, total))
-    samples = validity.nonlinearity_indicator(linkage, linear.displacement,
-                                              linear.crank_angle, speed)
-    ratios = validity.load_ratios(linkage, linear.displacement, linear.crank_angle, speed)
     used_zeta = linear.info['zeta']
-    detune = validity.detuning_ratio(linkage, linear.displacement, linear.crank_angle, speed,
-                                     used_zeta)
+    samples = validity.nonlinearity_indicator(linkage, linear.displacement,
+                                              linear.crank_angle, speed, zeta=used_zeta)
+    ratios = validity.load_ratios(linkage, linear.displacement, linear.crank_angle, speed)
+    load_ratio = np.max(np.abs(np.stack(list(ratios.values()))))
     p2p = lambda x: x.max(axis=0) - x.min(axis=0)  # noqa: E731
     second_ratio = float(np.max(p2p(corrected['second'][:, 2:]) / p2p(corrected['linear'][:, 2:])))
     accurate = all(abs(errors[k]['p2p_error']) <= TARGETS[k] for k in TARGETS)
     return {'rpm': float(rpm), 'bearings': bearings, 'elements': elements, 'zeta': used_zeta,
             'errors': errors, 'accurate': accurate, 'indicator': float(samples.max()),
-            'indicator_samples': samples, 'detune': float(detune.max()),
+            'indicator_samples': samples, 'load_ratio': float(load_ratio),
             'second_ratio': second_ratio,
             'links': {int(k): float(np.abs(v).max()) for k, v in ratios.items()},
             'peer_cpu_s': response['info']['cpu_s']}
@@ -131,7 +132,7 @@ def format_table(records, threshold=validity.VALIDITY_THRESHOLD):
     """The sweep table (text)."""
     head = (f"{'rpm':>5s} {'peer tip p2p um':>16s} {'peer mid p2p um':>16s} "
             f"{'tip err':>8s} {'mid err':>8s} {'tip rms':>8s} {'mid rms':>8s} "
-            f"{'I max':>7s} {'detune':>7s} {'2nd/lin':>7s} {'acc':>4s} {'valid':>5s}")
+            f"{'I max':>7s} {'N/Pcr':>7s} {'2nd/lin':>7s} {'acc':>4s} {'valid':>5s}")
     lines = [head]
     for r in records:
         e = r['errors']
@@ -141,10 +142,10 @@ def format_table(records, threshold=validity.VALIDITY_THRESHOLD):
             f"{mid[0] * 1e6:7.0f}/{mid[1] * 1e6:<8.0f} "
             f"{100 * e['lever_tip']['p2p_error']:7.1f}% {100 * e['coupler_mid']['p2p_error']:7.1f}% "
             f"{100 * e['lever_tip']['rms_error']:7.1f}% {100 * e['coupler_mid']['rms_error']:7.1f}% "
-            f"{r['indicator']:7.4f} {r['detune']:7.3f} {r['second_ratio']:7.3f} "
+            f"{r['indicator']:7.3f} {r['load_ratio']:7.4f} {r['second_ratio']:7.3f} "
             f"{'yes' if r['accurate'] else 'NO':>4s} "
             f"{'yes' if r['indicator'] <= threshold else 'NO':>5s}")
-    for key in ('indicator', 'detune', 'second_ratio'):
+    for key in ('indicator', 'load_ratio', 'second_ratio'):
         s = separation(records, key)
         fmt = lambda v: 'n/a' if v is None else f'{v:.4f}'  # noqa: E731
         lines.append(f"{key}: max over accurate speeds {fmt(s['accurate_max'])}, min over "
@@ -168,7 +169,10 @@ def plot_sweep(records, path, threshold=validity.VALIDITY_THRESHOLD):
         top.axhline(100 * TARGETS[key], ls=':', color=top.lines[-1].get_color())
     top.set_ylabel('linear + 2nd order vs peer [%]')
     top.legend(fontsize=8)
-    bottom.semilogy(rpm, [r['indicator'] for r in records], 'k.-', label='I = max |N_e| / P_cr')
+    bottom.semilogy(rpm, [r['indicator'] for r in records], 'k.-',
+                    label='I: detuning ratio (frequency shift / distance to resonance)')
+    bottom.semilogy(rpm, [r['load_ratio'] for r in records], '.:', color='0.4',
+                    label='candidate: max |N_e| / P_cr')
     bottom.axhline(threshold, color='r', ls='--', label=f'threshold {threshold:g}')
     bad = rpm[[not r['accurate'] for r in records]]
     for ax in (top, bottom):
