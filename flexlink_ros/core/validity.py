@@ -58,7 +58,6 @@ Cost per sample: the link means of N_e (one row of T^T U per element end, two li
 product; omega_j, s_jl and d_j are constants per speed.
 """
 
-import dataclasses
 import math
 
 import numpy as np

@@ -108,7 +108,8 @@ def run_speed(mechanism, rpm, elements=peer.DEFAULT_ELEMENTS, bearings='rigid', 
     ratios = validity.load_ratios(linkage, linear.displacement, linear.crank_angle, speed)
     load_ratio = np.max(np.abs(np.stack(list(ratios.values()))))
     p2p = lambda x: x.max(axis=0) - x.min(axis=0)  # noqa: E731
-    second_ratio = float(np.max(p2p(corrected['second'][:, 2:]) / p2p(corrected['linear'][:, 2:])))
+    second_ratio = float(np.max(p2p(corrected['second'][:, 2:])
+                                / p2p(corrected['linear'][:, 2:])))
     accurate = all(abs(errors[k]['p2p_error']) <= TARGETS[k] for k in TARGETS)
     return {'rpm': float(rpm), 'bearings': bearings, 'elements': elements, 'zeta': used_zeta,
             'errors': errors, 'accurate': accurate, 'indicator': float(samples.max()),
@@ -140,9 +141,9 @@ def format_table(records, threshold=validity.VALIDITY_THRESHOLD):
         lines.append(
             f"{r['rpm']:5.0f} {tip[0] * 1e6:7.1f}/{tip[1] * 1e6:<8.1f} "
             f"{mid[0] * 1e6:7.0f}/{mid[1] * 1e6:<8.0f} "
-            f"{100 * e['lever_tip']['p2p_error']:7.1f}% {100 * e['coupler_mid']['p2p_error']:7.1f}% "
-            f"{100 * e['lever_tip']['rms_error']:7.1f}% {100 * e['coupler_mid']['rms_error']:7.1f}% "
-            f"{r['indicator']:7.3f} {r['load_ratio']:7.4f} {r['second_ratio']:7.3f} "
+            + ''.join(f"{100 * e[point][kind]:7.1f}% " for kind in ('p2p_error', 'rms_error')
+                      for point in ('lever_tip', 'coupler_mid'))
+            + f"{r['indicator']:7.3f} {r['load_ratio']:7.4f} {r['second_ratio']:7.3f} "
             f"{'yes' if r['accurate'] else 'NO':>4s} "
             f"{'yes' if r['indicator'] <= threshold else 'NO':>5s}")
     for key in ('indicator', 'load_ratio', 'second_ratio'):
@@ -150,7 +151,8 @@ def format_table(records, threshold=validity.VALIDITY_THRESHOLD):
         fmt = lambda v: 'n/a' if v is None else f'{v:.4f}'  # noqa: E731
         lines.append(f"{key}: max over accurate speeds {fmt(s['accurate_max'])}, min over "
                      f"inaccurate {fmt(s['inaccurate_min'])}: "
-                     f"{'separates' if s['separates'] else 'does not separate'}")
+                     + ('n/a' if None in (s['accurate_max'], s['inaccurate_min'])
+                        else 'separates' if s['separates'] else 'does not separate'))
     return '\n'.join(lines)
 
 
