@@ -51,8 +51,14 @@ candidates were computed from the linear state:
   but off resonance and linear + second order is within its targets again (425-450 rpm), and it
   is as large at the accurate 385-391 rpm as at the inaccurate 340 rpm: no threshold separates;
 * the detuning ratio (3): with the linear damping matched to the peer's (zeta = 0.012) it flags
-  every speed outside the targets (10 % lever tip, 3 % coupler mid-point p2p) at
-  :data:`VALIDITY_THRESHOLD` = 0.5 with one false alarm at the edge of the band. Chosen.
+  every speed outside the targets (10 % lever tip, 3 % coupler mid-point p2p: 340-350 and
+  395-420 rpm) at :data:`VALIDITY_THRESHOLD` = 0.5, with one false alarm at the band's upper
+  edge (425 rpm, 0.63). Chosen. With the mechanism's default zeta = 0.02 (more damping than
+  the peer's beta = 1e-4 s gives) the flag turns false at 350 and 400-420 rpm (405 rpm: 1.11;
+  269 rpm: 0.10); the other speeds then off target (260, 310 rpm: weakly forced 8th-harmonic
+  resonances, lever tip p2p 20-80 um; 340, 380-395, 425-430 rpm) are off because of the
+  damping convention, not the nonlinearity: with zeta matched they are within the targets
+  (or flagged). The indicator does not, and should not, see a damping mismatch.
 
 Cost per sample: the link means of N_e (one row of T^T U per element end, two links) and a 2 x 2
 product; omega_j, s_jl and d_j are constants per speed.
@@ -71,9 +77,10 @@ INDICATOR_LINKS = (1, 2)
 
 # Threshold on the detuning ratio I (Eq. 3): the frequency shift of the elastic axial force at
 # half the distance to resonance. Against the peer (rigid crank and bearings, 8 elements, 250-450
-# rpm, linear zeta matched at 0.012): the largest I among the speeds outside the targets is 0.51
-# (395 rpm, lever -12 %), the largest among the speeds within them 0.63 (425 rpm, at the band's
-# upper edge: the one false alarm); 269 rpm gives 0.13, 405 rpm 1.9.
+# rpm, linear zeta matched at 0.012): the smallest I among the speeds outside the targets is
+# 0.51 (395 rpm, lever -12 %), the largest among the speeds within them 0.63 (425 rpm, at the
+# band's upper edge: the one false alarm), the next 0.39; 269 rpm gives 0.13, 405 rpm 1.9. With
+# the default zeta = 0.02: 269 rpm 0.10, 405 rpm 1.11, flagged 350 and 400-420 rpm.
 VALIDITY_THRESHOLD = 0.5
 # Frozen modes of the detuning ratio (each flexible link's first bending mode, rigid crank).
 REFERENCE_MODES = 2
