@@ -180,7 +180,7 @@ def load_ratios(linkage, displacement, crank_angle, speed, accel=0.0):
 
 def load_ratio_indicator(linkage, displacement, crank_angle, speed, accel=0.0):
     """
-    Candidate indicator (not the chosen one): max_link |N_e| / P_cr per sample (Eq. 3).
+    Candidate indicator (not the chosen one): max_link |N_e| / P_cr per sample.
 
     Returns
     -------
@@ -234,7 +234,7 @@ def resonance_distance(reference, zeta):
 def nonlinearity_indicator(linkage, displacement, crank_angle, speed, zeta=None,
                            reference=None, accel=0.0):
     """
-    Per-sample detuning ratio (Eq. 4), dimensionless: the chosen validity indicator.
+    Per-sample detuning ratio (Eq. 3), dimensionless: the chosen validity indicator.
 
     For each reference mode j, the shift the elastic axial forces cause,
     Delta omega_j = omega_j / 2 sum_l s_jl N_e,l / P_cr,l (Eq. 2 weighted by the link's
