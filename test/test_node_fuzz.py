@@ -176,12 +176,33 @@ def lever_values(data):
     return struct.unpack_from('<3d', data, len(data) - 24)[:2]
 
 
-def test_fuzz_through_a_running_node(tmp_path, processes, ros):  # noqa: F811
-    """10 000 mutated messages published raw to a node: it survives and counts each one."""
+def listen_to_node(ros, lever_depth):
+    """
+    A reliable JointState publisher and the node's raw lever outputs and /diagnostics.
+
+    Returns (publisher, lever CDR list, diagnostics list, executor) once discovery has matched
+    both ways and a first /diagnostics message has arrived.
+    """
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import Vector3Stamped
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
+    test_node, executor = ros
+    qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+    publisher = test_node.create_publisher(JointState, 'joint_states', qos)
+    lever, diagnostics = [], []
+    test_node.create_subscription(
+        Vector3Stamped, OUTPUTS[0], lever.append,
+        QoSProfile(depth=lever_depth, reliability=ReliabilityPolicy.RELIABLE), raw=True)
+    test_node.create_subscription(DiagnosticArray, '/diagnostics', diagnostics.append, 100)
+    spin_until(executor, lambda: publisher.get_subscription_count() > 0
+               and test_node.count_publishers(OUTPUTS[0]) > 0 and diagnostics,
+               DISCOVERY_TIMEOUT_S, 'discovery')
+    return publisher, lever, diagnostics, executor
+
+
+def test_fuzz_through_a_running_node(tmp_path, processes, ros):  # noqa: F811
+    """10 000 mutated messages published raw to a node: it survives and counts each one."""
     # Warm starts off: the resets the mutated stamps cause are the estimator's business
     # (item 4); here every message must reach the parse path quickly.
     node_process = NodeProcess(tmp_path, 'diagnostics.period_s:=0.1', 'model.warm_start:=false',
@@ -191,17 +212,7 @@ def test_fuzz_through_a_running_node(tmp_path, processes, ros):  # noqa: F811
     expected = collections.Counter(classify(data) for data, _ in messages)
     node_process.wait_for(flexlink_node.READY_MESSAGE, READY_TIMEOUT_S)
 
-    test_node, executor = ros
-    qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
-    publisher = test_node.create_publisher(JointState, 'joint_states', qos)
-    lever, diagnostics = [], []
-    test_node.create_subscription(Vector3Stamped, OUTPUTS[0], lever.append,
-                                  QoSProfile(depth=20_000, reliability=ReliabilityPolicy.RELIABLE),
-                                  raw=True)
-    test_node.create_subscription(DiagnosticArray, '/diagnostics', diagnostics.append, 100)
-    spin_until(executor, lambda: publisher.get_subscription_count() > 0
-               and test_node.count_publishers(OUTPUTS[0]) > 0 and diagnostics,
-               DISCOVERY_TIMEOUT_S, 'discovery')
+    publisher, lever, diagnostics, executor = listen_to_node(ros, lever_depth=20_000)
 
     def received():
         return int(latest_input_status(diagnostics).get('received', -1))
@@ -356,24 +367,10 @@ def test_reset_storm_does_not_stall_the_node(tmp_path, processes, ros):  # noqa:
     behind and dropped the valid input queued behind the storm. Warm starts are now
     rate-limited, so every message is taken and every valid sample after it is answered.
     """
-    from diagnostic_msgs.msg import DiagnosticArray
-    from geometry_msgs.msg import Vector3Stamped
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
-
     node_process = NodeProcess(tmp_path, 'diagnostics.period_s:=0.2')
     processes.append(node_process)
     node_process.wait_for(flexlink_node.READY_MESSAGE, READY_TIMEOUT_S)
-    test_node, executor = ros
-    qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
-    publisher = test_node.create_publisher(JointState, 'joint_states', qos)
-    lever, diagnostics = [], []
-    test_node.create_subscription(Vector3Stamped, OUTPUTS[0], lever.append,
-                                  QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE),
-                                  raw=True)
-    test_node.create_subscription(DiagnosticArray, '/diagnostics', diagnostics.append, 100)
-    spin_until(executor, lambda: publisher.get_subscription_count() > 0
-               and test_node.count_publishers(OUTPUTS[0]) > 0 and diagnostics,
-               DISCOVERY_TIMEOUT_S, 'discovery')
+    publisher, lever, diagnostics, executor = listen_to_node(ros, lever_depth=5000)
 
     for k in range(STORM_COUNT):
         publisher.publish(storm_message(k, 20.0 + 0.04 * k))
