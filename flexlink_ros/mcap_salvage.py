@@ -191,6 +191,22 @@ def _data_section_ends(buffer, offset, opcode, length):
         offset + _PREFIX.size + length + len(MCAP_MAGIC) == len(buffer)
 
 
+def records_in(buffer, start, stop):
+    """(opcode, body start, end) of each record in ``buffer[start:stop]``, lengths checked.
+
+    Raises DamagedRecord where a record's prefix or body does not fit in ``stop``.
+    """
+    position = start
+    while position < stop:
+        if position + _PREFIX.size > stop:
+            raise DamagedRecord(f'record prefix cut at {position}')
+        code, length = _PREFIX.unpack_from(buffer, position)
+        body, position = position + _PREFIX.size, position + _PREFIX.size + length
+        if position > stop:
+            raise DamagedRecord(f'{opcode_name(code)} of {length} bytes overruns its container')
+        yield code, body, position
+
+
 def _records(buffer, offset, end, opcode, salvage):
     # The messages of one top-level record (a chunk's after checking all of it).
     if opcode == CHUNK:
@@ -201,14 +217,8 @@ def _records(buffer, offset, end, opcode, salvage):
     messages = []
     schemas, channels = {}, {}
     header = None
-    position = start
-    while position < stop:
-        if position + _PREFIX.size > stop:
-            raise DamagedRecord(f'record prefix cut at {position}')
-        code, length = _PREFIX.unpack_from(records, position)
-        body, position = position + _PREFIX.size, position + _PREFIX.size + length
-        if position > stop:
-            raise DamagedRecord(f'{opcode_name(code)} of {length} bytes overruns its container')
+    for code, body, position in records_in(records, start, stop):
+        length = position - body
         if code == MESSAGE:
             if length < MESSAGE_HEAD_SIZE:
                 raise DamagedRecord(f'message of {length} bytes')
@@ -425,13 +435,9 @@ def _read_summary(buffer, salvage):
     if crc and zlib.crc32(buffer[summary_start:footer + _PREFIX.size + 16]) != crc:
         return
     schemas, channels, statistics = {}, {}, None
-    offset = summary_start
     try:
-        while offset < footer:
-            code, length = _PREFIX.unpack_from(buffer, offset)
-            body, offset = offset + _PREFIX.size, offset + _PREFIX.size + length
-            if offset > footer:
-                return
+        for code, body, offset in records_in(buffer, summary_start, footer):
+            length = offset - body
             if code == SCHEMA:
                 schema = parse_schema(buffer, body, offset)
                 schemas[schema.id] = schema
