@@ -125,7 +125,7 @@ def _check(model, speed, method, modes, steps, points):
 
 def periodic_response(model, speed, method='full', modes=None, static_correction=False,
                       steps=DEFAULT_STEPS, points=DEFAULT_POINTS, stages=DEFAULT_STAGES,
-                      zeta=None, start_angle=0.0):
+                      zeta=None, start_angle=0.0, matrices=None):
     """
     Periodic steady state over one revolution at constant crank speed.
 
@@ -150,6 +150,9 @@ def periodic_response(model, speed, method='full', modes=None, static_correction
         Modal damping ratio; None for ``mechanism.damping_ratio``.
     start_angle : float
         Crank angle of the first output [rad].
+    matrices : callable or None
+        ``matrices(angles) -> (M, C, K, R)`` at an array of crank angles, in place of the
+        model's own (modal damping ``zeta``) for the 'full' method: another damping model.
 
     Returns
     -------
@@ -157,6 +160,8 @@ def periodic_response(model, speed, method='full', modes=None, static_correction
 
     """
     _check(model, speed, method, modes, steps, points)
+    if matrices is not None and method != 'full':
+        raise ValueError('`matrices` replaces the full-order matrices: method must be full')
     started = time.perf_counter()
     zeta = model.mechanism.damping_ratio if zeta is None else float(zeta)
     integrator = RadauIIA(stages)
@@ -176,13 +181,13 @@ def periodic_response(model, speed, method='full', modes=None, static_correction
     for begin in range(0, steps, CHUNK_STEPS):
         chunk = np.arange(begin, min(begin + CHUNK_STEPS, steps))
         angles = start_angle + speed * h * (chunk[:, None] + integrator.c[None, :])
-        mass, damping, stiffness, load, values, shapes = (
-            x.reshape((len(chunk), stages) + x.shape[1:])
-            for x in _stage_matrices(model, angles.ravel(), speed, zeta,
-                                     size if modal else None))
+        stage = (_stage_matrices(model, angles.ravel(), speed, zeta, size if modal else None)
+                 if matrices is None else matrices(angles.ravel()))
+        mass, damping, stiffness, load, *eigen = (
+            x.reshape((len(chunk), stages) + x.shape[1:]) for x in stage)
         for i, k in enumerate(chunk):
             if modal:
-                new_basis = shapes[i, 0][:, :size]
+                new_basis = eigen[1][i, 0][:, :size]
                 if k == 0:
                     basis = basis0 = new_basis
                 else:
@@ -223,7 +228,8 @@ def periodic_response(model, speed, method='full', modes=None, static_correction
     multipliers = multipliers[np.argsort(-np.abs(multipliers))]
     info = {'method': method, 'modes': size if modal else None,
             'static_correction': bool(modal and static_correction and size < n),
-            'steps': steps, 'points': points, 'stages': stages, 'zeta': zeta,
+            'steps': steps, 'points': points, 'stages': stages,
+            'zeta': zeta if matrices is None else None,
             'speed_rad_s': float(speed), 'dofs': n,
             'spectral_radius': float(np.abs(multipliers[0])),
             'wall_s': time.perf_counter() - started}

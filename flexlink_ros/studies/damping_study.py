@@ -11,11 +11,8 @@ fixed point, the O2 bearing spring drops out; the peer prescribes the crank), be
 A, B, O4 with c = beta k, joint masses split 50/50 (``mass_placement='split'``; the package's
 ``joint_mass_split`` 0.5: the crank's share at A and the ground's at O4 are inert in both).
 
-The integration loop :func:`full_order_response` is the study's own copy of the full-order
-shooting of :func:`core.simulate.periodic_response` (Radau IIA, exact coefficient matrices at
-every stage, the one-revolution affine map and its fixed point), with the coefficient matrices
-of :func:`core.stiffness_damping.system_matrices`; ``simulate`` would take a ``beta`` argument
-instead (see the module notes of core/stiffness_damping.py).
+The full-order response is :func:`core.simulate.periodic_response` with the stage matrices of
+:func:`core.stiffness_damping.system_matrices` passed in (``matrices``).
 
 Run: ``python -m flexlink_ros.studies.damping_study [--elements 8] [--gravity] [--rpm 269]``.
 
@@ -46,14 +43,13 @@ import math
 import numpy as np
 
 from ..core.assembly import FlexibleLinkage, ModelOptions
-from ..core.integrators import RadauIIA
 from ..core.mechanism import Mechanism, load_mechanism
+from ..core.simulate import periodic_response
 from ..core.stiffness_damping import (element_resultants, link_local_rate,
                                       stiffness_damping_terms, system_matrices)
 
 DAMPING = ('objective', 'naive', 'modal')
 OUTPUT_KEYS = ('lever_tip_dx', 'lever_tip_dy', 'coupler_mid_dx', 'coupler_mid_dy')
-CHUNK = 48
 
 
 def matched_model(mechanism='cho1992', elements=8, gravity=False, bearings='flexible'):
@@ -78,11 +74,9 @@ def _matrices(model, angles, speed, beta, damping, zeta):
 def full_order_response(model, speed, beta=1e-4, damping='objective', zeta=0.02, steps=720,
                         points=120, stages=2, start_angle=0.0):
     """
-    Periodic full-order response with beta (or modal) damping: the study's own shooting loop.
+    Periodic full-order response with beta (or modal) damping.
 
-    Copy of the 'full' branch of :func:`core.simulate.periodic_response`: propagate the 2n unit
-    states and the loaded zero state over one revolution with Radau IIA, solve
-    ``z_0 = (I - P)^-1 g``.
+    :func:`core.simulate.periodic_response` ('full') with this study's stage matrices.
 
     Returns
     -------
@@ -93,37 +87,13 @@ def full_order_response(model, speed, beta=1e-4, damping='objective', zeta=0.02,
     """
     if damping not in DAMPING:
         raise ValueError(f'`damping` must be one of {DAMPING}, got {damping!r}')
-    integrator = RadauIIA(stages)
-    n = model.size
-    h = 2.0 * np.pi / abs(speed) / steps
-    stride = steps // points
-    q = np.zeros((n, 2 * n + 1))
-    v = np.zeros((n, 2 * n + 1))
-    q[:, :n] = np.eye(n)
-    v[:, n:2 * n] = np.eye(n)
-    saved = []
-    for begin in range(0, steps, CHUNK):
-        chunk = np.arange(begin, min(begin + CHUNK, steps))
-        angles = start_angle + speed * h * (chunk[:, None] + integrator.c[None, :])
-        mats = [x.reshape((len(chunk), stages) + x.shape[1:])
-                for x in _matrices(model, angles.ravel(), speed, beta, damping, zeta)]
-        mass, damp, stiff, load = mats
-        for i, k in enumerate(chunk):
-            if k % stride == 0:
-                saved.append((q.copy(), v.copy()))
-            loads = np.zeros((stages, n, 2 * n + 1))
-            loads[..., -1] = load[i]
-            q, v, _ = integrator.step(q, v, h, mass[i], damp[i], stiff[i], loads)
-    monodromy = np.vstack([q[:, :-1], v[:, :-1]])
-    offset = np.concatenate([q[:, -1], v[:, -1]])
-    state = np.concatenate([np.linalg.solve(np.eye(2 * n) - monodromy, offset), [1.0]])
-    out_angles = start_angle + speed * h * stride * np.arange(points)
-    disp = np.array([sq @ state for sq, _ in saved])
-    vel = np.array([sv @ state for _, sv in saved])
-    outputs = np.einsum('kon,kn->ko', model.output_operator(out_angles), disp)
-    out = {'crank_angle': out_angles, 'displacement': disp, 'velocity': vel,
-           'spectral_radius': float(np.abs(np.linalg.eigvals(monodromy)).max())}
-    out.update(zip(OUTPUT_KEYS, outputs.T))
+    response = periodic_response(
+        model, speed, method='full', steps=steps, points=points, stages=stages,
+        start_angle=start_angle,
+        matrices=lambda angles: _matrices(model, angles, speed, beta, damping, zeta))
+    out = {'crank_angle': response.crank_angle, 'displacement': response.displacement,
+           'velocity': response.velocity, 'spectral_radius': response.info['spectral_radius']}
+    out.update(zip(OUTPUT_KEYS, response.outputs.T))
     return out
 
 
