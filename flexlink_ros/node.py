@@ -165,24 +165,15 @@ def crank_sample(data, joint_name, deserialize):
     return stamp_ns, angle, speed
 
 
-def publishable(sample, bound_m=None):
+def publishable(sample):
     """
-    Whether a Sample's numbers may be published: finite, within ``bound_m``, not OUT_OF_BOUND.
+    Why a Sample's numbers may not be published (None if they may).
 
-    Returns
-    -------
-    reason : str or None
-        Why not, or None if publishable.
-
+    The estimator flags OUT_OF_BOUND every estimate beyond its deflection bound or not finite
+    (a non-finite state makes the deflections non-finite), so the flag is the one test.
     """
     if sample.flags & SampleFlag.OUT_OF_BOUND:
         return sample.message or 'deflection beyond the model\'s bound'
-    deflections = (*sample.lever_tip, *sample.coupler_mid)
-    values = (*deflections, *sample.criterion, *sample.gamma_dot, *sample.reaction_n)
-    if not all(math.isfinite(v) for v in values):
-        return 'non-finite estimate'
-    if bound_m is not None and max(abs(v) for v in deflections) > bound_m:
-        return f'deflection {max(abs(v) for v in deflections):.3g} m beyond {bound_m:.3g} m'
     return None
 
 
@@ -489,7 +480,7 @@ def _make_node_class():
             if sample.flags & SampleFlag.REPEATED:
                 self._count('repeated')
                 return
-            reason = publishable(sample, getattr(self.estimator, 'deflection_bound_m', None))
+            reason = publishable(sample)
             if reason is not None:
                 self._count('out_of_bound')
                 self.period.flags |= sample.flags | SampleFlag.OUT_OF_BOUND
