@@ -35,8 +35,8 @@ from .cdr import parse_joint_state
 from .core import estimator as core_estimator
 from .core.mechanism import load_mechanism
 from .core.reduced import JOINTS
-from .mcap_salvage import (MESSAGE_HEAD_SIZE, McapFileError, Salvage, iter_messages, map_file,
-                           message_fields)
+from .mcap_salvage import (MESSAGE_HEAD, MESSAGE_HEAD_SIZE, McapFileError, Salvage, iter_messages,
+                           map_file, message_fields)
 
 JOINT_STATE = 'sensor_msgs/msg/JointState'
 VECTOR3_STAMPED = 'geometry_msgs/msg/Vector3Stamped'
@@ -154,10 +154,9 @@ def _file_messages(file, wanted, keep_rest=None, damaged=None):
     buffer = _map_or_report(file, damaged)
     if buffer is None:
         return counts, kept
-    head = struct.Struct('<HIQQ').unpack_from
     try:
         for records, body, stop in iter_messages(buffer, salvage):
-            channel_id, _, log_time, publish_time = head(records, body)
+            channel_id, _, log_time, publish_time = MESSAGE_HEAD.unpack_from(records, body)
             channel = salvage.channels.get(channel_id)
             state = states.get(channel_id)
             if state is None or state[0] is not channel:
