@@ -35,6 +35,7 @@ from .cdr import parse_joint_state
 from .core import estimator as core_estimator
 from .core.mechanism import load_mechanism
 from .core.reduced import JOINTS
+from .recorder import McapRecorder, refuse_existing
 from .mcap_salvage import (MESSAGE_HEAD, MESSAGE_HEAD_SIZE, McapFileError, Salvage, iter_messages,
                            map_file, message_fields)
 
@@ -820,7 +821,6 @@ def write_replay(out_path, samples, estimate, input_topic, topics, frame_id, mod
 
     """
     from .cdr import criteria_rows, rows_to_bytes, vector3_stamped_rows
-    from .recorder import McapRecorder
     recorder = McapRecorder(out_path)
     recorder.open()
     try:
@@ -1093,8 +1093,11 @@ def run_replay(args):
 def _replay_command(args):
     if not args.out and not args.publish:
         raise ValueError('give `--out` and/or `--publish`')
-    if args.out and pathlib.Path(args.out).exists():
-        raise ValueError(f'`--out` {args.out} exists; choose a new path')
+    if args.out:
+        try:    # before the estimate, with the recorder's own test (links not followed)
+            refuse_existing(pathlib.Path(args.out))
+        except FileExistsError as exc:
+            raise ValueError(f'`--out` {exc}') from None
     if not args.publish_speed > 0:
         raise ValueError(f'`--publish-speed` must be positive, got {args.publish_speed}')
     if args.markers_every_n < 0:

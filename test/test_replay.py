@@ -319,3 +319,16 @@ def test_offline_estimate_equals_streaming_through_outliers_and_out_of_bound(
                                    atol=1e-12)
         np.testing.assert_allclose(result['coupler_mid'][n], sample.coupler_mid, rtol=1e-7,
                                    atol=1e-12)
+
+
+def test_replay_refuses_an_existing_out_path_before_estimating(tmp_path):
+    """A dangling link at --out is refused at once with what is there; nothing is created."""
+    link = tmp_path / 'out.mcap'
+    link.symlink_to(tmp_path / 'target.mcap')
+    result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'replay',
+                             str(tmp_path / 'no_such_bag'), '--out', str(link)],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 1
+    assert '`--out`' in result.stderr and 'dangling' in result.stderr
+    assert 'Traceback' not in result.stderr
+    assert not (tmp_path / 'target.mcap').exists() and link.is_symlink()
