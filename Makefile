@@ -35,4 +35,4 @@ report: install
 	$(VENV)/bin/flexlink report --out out/report
 
 clean:
-	rm -rf build install log out demo_out *.egg-info flexlink_ros/core/*.so
+	rm -rf build install log out demo_out *.egg-info flexlink_ros/core/estimation/*.so

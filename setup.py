@@ -17,7 +17,8 @@ setup(
     ],
     # The streaming estimator's per-sample step in C (plain C API, no numpy headers); the
     # package falls back to its numpy step when the extension is not built.
-    ext_modules=[Extension('flexlink_ros.core._radau_step', ['flexlink_ros/core/_radau_step.c'],
+    ext_modules=[Extension('flexlink_ros.core.estimation._radau_step',
+                           ['flexlink_ros/core/estimation/_radau_step.c'],
                            extra_compile_args=['-O3'])],
     install_requires=['setuptools'],
     # The geometrically nonlinear peer the linear model is checked against (studies/).
@@ -30,9 +31,9 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
-            'flexlink = flexlink_ros.cli:main',
-            'crank_driver = flexlink_ros.crank_driver:main',
-            'flexlink_node = flexlink_ros.node:main',
+            'flexlink = flexlink_ros.cli.main:main',
+            'crank_driver = flexlink_ros.ros.crank_driver:main',
+            'flexlink_node = flexlink_ros.ros.node:main',
         ],
     },
 )

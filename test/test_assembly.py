@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from flexlink_ros.core import beam
-from flexlink_ros.core.assembly import (FlexibleLinkage, ModelOptions, element_geometric_stiffness,
+from flexlink_ros.core.fe import beam
+from flexlink_ros.core.fe.linkage import (FlexibleLinkage, ModelOptions, element_geometric_stiffness,
                                         gauss_points, link_matrices)
 from flexlink_ros.core.kinematics import solve_kinematics
 from flexlink_ros.core.mechanism import load_mechanism
@@ -296,7 +296,7 @@ def test_geometric_stiffness_with_constant_force_is_a4():
     x8, w8 = np.polynomial.legendre.leggauss(8)
     length = 0.09
     x8, w8 = 0.5 * length * (x8 + 1), 0.5 * length * w8
-    from flexlink_ros.core.assembly import transverse_slopes
+    from flexlink_ros.core.fe.linkage import transverse_slopes
     force = lambda x: 10.0 - 300.0 * x + 900.0 * x ** 2  # noqa: E731
     dense = np.einsum('g,g,gi,gj->ij', force(x8), w8, transverse_slopes(x8, length),
                       transverse_slopes(x8, length))

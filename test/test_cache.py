@@ -11,8 +11,8 @@ import zipfile
 import numpy as np
 import pytest
 
-from flexlink_ros.core import cache
-from flexlink_ros.core.errors import CacheError
+from flexlink_ros.core.reduction import store as cache
+from flexlink_ros.errors import CacheError
 from flexlink_ros.core.mechanism import load_mechanism
 
 KEY = cache.cache_key('mechanism-key', {'modes': 6})
@@ -156,7 +156,7 @@ def test_bad_file_is_refused_and_rebuilt(tmp_path, caplog, name):
         calls.append(1)
         return content()
 
-    with caplog.at_level(logging.WARNING, logger='flexlink_ros.core.cache'):
+    with caplog.at_level(logging.WARNING, logger='flexlink_ros.core.reduction.store'):
         loaded, loaded_meta, from_cache = cache.load_or_build(path, KEY, build)
     assert calls == [1] and not from_cache
     assert 'rebuilding' in caplog.text
@@ -190,7 +190,7 @@ def test_refuses_to_save_non_numeric_arrays(tmp_path):
 def test_unwritable_directory_still_returns_content(tmp_path, caplog):
     blocker = tmp_path / 'file'
     blocker.write_text('not a directory')
-    with caplog.at_level(logging.WARNING, logger='flexlink_ros.core.cache'):
+    with caplog.at_level(logging.WARNING, logger='flexlink_ros.core.reduction.store'):
         arrays, _, from_cache = cache.load_or_build(blocker / 'model.npz', KEY, content)
     assert not from_cache and 'basis' in arrays
     assert 'could not write' in caplog.text
@@ -260,7 +260,7 @@ def test_array_announcing_4_gib_is_refused_before_allocation_and_rebuilt(tmp_pat
     try:
         with pytest.raises(CacheError, match='announces 4294967296 bytes'):
             cache.load_cache(path, KEY)
-        with caplog.at_level(logging.WARNING, logger='flexlink_ros.core.cache'):
+        with caplog.at_level(logging.WARNING, logger='flexlink_ros.core.reduction.store'):
             loaded, _, from_cache = cache.load_or_build(path, KEY, content)
         peak = tracemalloc.get_traced_memory()[1]
     finally:

@@ -1,12 +1,13 @@
-"""CDR codecs of flexlink_ros.cdr against rclpy's serialisation."""
+"""CDR codecs of flexlink_ros.io.cdr against rclpy's serialisation."""
 
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 
-from flexlink_ros import cdr, ros_messages
-from flexlink_ros.rosbag_schema import serialize_exact
+from flexlink_ros.io import cdr
+from flexlink_ros.ros import messages as ros_messages
+from flexlink_ros.io.msg_schema import serialize_exact
 
 
 def joint_state(stamp_ns, names, positions, velocities=()):

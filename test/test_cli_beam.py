@@ -4,8 +4,8 @@ import json
 
 import pytest
 
-from flexlink_ros import cli
-from flexlink_ros.core import tmm
+from flexlink_ros.cli import main as cli
+from flexlink_ros.core.tmm import transfer as tmm
 
 
 def _run(capsys, *argv):

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from test_reduced import ZETA, toy_samples
 
-from flexlink_ros import cli, cli_estimate
-from flexlink_ros.core import reduced
+from flexlink_ros.cli import main as cli, estimate as cli_estimate
+from flexlink_ros.core.reduction import model as reduced
 from flexlink_ros.core.mechanism import load_mechanism
-from flexlink_ros.plots.estimator import plot_error_vs_cost, plot_estimate
+from flexlink_ros.report.estimator import plot_error_vs_cost, plot_estimate
 
 TOY_CACHE = {}
 

@@ -2,7 +2,7 @@
 
 import json
 
-from flexlink_ros import cli, cli_report
+from flexlink_ros.cli import main as cli, report as cli_report
 
 
 def test_report_index_lists_every_section(tmp_path, capsys):

@@ -5,7 +5,7 @@ import math
 
 import pytest
 
-from flexlink_ros import cli
+from flexlink_ros.cli import main as cli
 
 
 def _run(capsys, *argv):

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from flexlink_ros.crank_driver import RPM, SpeedProfile, build_parser, wrap_angle
+from flexlink_ros.ros.crank_driver import RPM, SpeedProfile, build_parser, wrap_angle
 
 REPO_CONFIG = 'config/crank_driver.yaml'
 
@@ -69,7 +69,7 @@ def receive_joint_states(extra_parameters, seconds):
                                        list(m.name))), 2000)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
-        command = [sys.executable, '-m', 'flexlink_ros.crank_driver', '--ros-args',
+        command = [sys.executable, '-m', 'flexlink_ros.ros.crank_driver', '--ros-args',
                    '--params-file', REPO_CONFIG, '-p', f'duration_s:={seconds}']
         for item in extra_parameters:
             command += ['-p', item]
@@ -132,7 +132,7 @@ def test_driver_publishes_the_profile_at_rate(config_dir, monkeypatch):
     ('speed_rpm:=fast', 'expecting type'),
 ])
 def test_bad_parameter_is_a_one_line_error(parameter, reason):
-    result = subprocess.run([sys.executable, '-m', 'flexlink_ros.crank_driver', '--ros-args',
+    result = subprocess.run([sys.executable, '-m', 'flexlink_ros.ros.crank_driver', '--ros-args',
                              '-p', parameter], capture_output=True, text=True, timeout=60)
     assert result.returncode == 1
     assert result.stderr.startswith('crank_driver: error:') and reason in result.stderr
@@ -144,7 +144,7 @@ def test_shutdown_errors_are_told_from_failures():
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
 
-    from flexlink_ros.crank_driver import is_shutdown_error, spin_until_shutdown
+    from flexlink_ros.ros.crank_driver import is_shutdown_error, spin_until_shutdown
 
     live = rclpy.Context()
     rclpy.init(context=live)

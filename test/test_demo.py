@@ -8,12 +8,13 @@ import sys
 import numpy as np
 import pytest
 
-from flexlink_ros import cli_demo
+from flexlink_ros.cli import demo as cli_demo
+from flexlink_ros.ros import runtime
 
 
 def test_isolate_ros_environment_sets_loopback_and_a_valid_domain():
     env = {'ROS_LOCALHOST_ONLY': '1'}
-    domain = cli_demo.isolate_ros_environment(env)
+    domain = runtime.isolate_ros_environment(env)
     assert env['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'LOCALHOST'
     assert 'ROS_LOCALHOST_ONLY' not in env
     assert 0 <= domain <= 101 and env['ROS_DOMAIN_ID'] == str(domain)
@@ -22,7 +23,7 @@ def test_isolate_ros_environment_sets_loopback_and_a_valid_domain():
 def test_demo_runs_records_and_summarises(tmp_path):
     # The whole command as `make demo` runs it, short, with --json for the checks.
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
-    result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'demo', '--seconds', '3',
+    result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'demo', '--seconds', '3',
                              '--out', str(tmp_path / 'out'), '--json'],
                             capture_output=True, text=True, timeout=400, env=env, cwd=tmp_path)
     assert result.returncode == 0, result.stderr[-3000:]
@@ -58,7 +59,7 @@ def test_demo_runs_records_and_summarises(tmp_path):
 
 @pytest.mark.parametrize('bad', [['--seconds', '0'], ['--rate-hz', '-5']])
 def test_demo_rejects_bad_arguments(tmp_path, bad):
-    result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'demo', *bad,
+    result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'demo', *bad,
                              '--out', str(tmp_path)], capture_output=True, text=True,
                             timeout=60)
     assert result.returncode == 1 and 'must be positive' in result.stderr

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from flexlink_ros.core.estimator import CrankRateFilter, wrap_angle
+from flexlink_ros.core.estimation.streaming import CrankRateFilter, wrap_angle
 
 
 def sample_times(rate_hz, seconds, jitter, drop, seed):
@@ -118,8 +118,8 @@ import logging  # noqa: E402
 
 from test_reduced import ZETA, toy_samples  # noqa: E402
 
-from flexlink_ros.core import reduced  # noqa: E402
-from flexlink_ros.core.estimator import (  # noqa: E402
+from flexlink_ros.core.reduction import model as reduced  # noqa: E402
+from flexlink_ros.core.estimation.streaming import (  # noqa: E402
     MAX_SUBSTEP_NS, SampleFlag, StreamingEstimator)
 from flexlink_ros.core.integrators import RadauIIA  # noqa: E402
 
@@ -254,7 +254,7 @@ def test_repeated_and_backward_stamps(toy_model, caplog):
     repeated = est.update(2_000_000, 0.54, 40.0)
     assert repeated.flags & SampleFlag.REPEATED
     assert repeated.lever_tip == second.lever_tip
-    with caplog.at_level(logging.WARNING, logger='flexlink_ros.core.estimator'):
+    with caplog.at_level(logging.WARNING, logger='flexlink_ros.core.estimation.streaming'):
         back = est.update(1_500_000, 0.52, 40.0)
         gap = est.update(1_500_000 + 2_000_000_000, 0.6, 40.0)
     assert back.flags & SampleFlag.RESET and 'back' in back.message
@@ -403,7 +403,7 @@ def test_rejects_bad_arguments(toy_model):
 
 @pytest.mark.parametrize('with_speed', [True, False])
 def test_replay_equals_streaming(toy_model, with_speed):
-    from flexlink_ros.core.estimator import replay
+    from flexlink_ros.core.estimation.streaming import replay
     times = sample_times(1000.0, 0.5, 0.3, 0.05, seed=15)
     stamps = np.round(times * 1e9).astype(np.int64)
     speed = lambda t: 30.0 + 40.0 * t  # noqa: E731
@@ -423,7 +423,7 @@ def test_replay_equals_streaming(toy_model, with_speed):
 def test_warm_start_reuses_the_periodic_orbit(toy_model, speed):
     # A second warm start at the same speed interpolates the kept orbit: the same state as
     # shooting afresh from that angle, to the interpolation's accuracy; another speed shoots.
-    from flexlink_ros.core import estimator as estimator_module
+    from flexlink_ros.core.estimation import streaming as estimator_module
     kept = StreamingEstimator(toy_model)
     kept.periodic_state(0.4, speed)
     scale_q = scale_v = 0.0
@@ -444,14 +444,14 @@ def test_warm_start_reuses_the_periodic_orbit(toy_model, speed):
 
 def test_compiled_step_is_built():
     """The package's compiled step is built (make install and colcon build build it)."""
-    from flexlink_ros.core import estimator
-    assert estimator._radau_step is not None, 'flexlink_ros.core._radau_step is not built'
+    from flexlink_ros.core.estimation import streaming as estimator
+    assert estimator._radau_step is not None, 'flexlink_ros.core.estimation._radau_step is not built'
     import inspect
     assert inspect.signature(StreamingEstimator).parameters['compiled'].default is True
 
 
 def compiled_or_skip():
-    from flexlink_ros.core import estimator
+    from flexlink_ros.core.estimation import streaming as estimator
     if estimator._radau_step is None:
         pytest.skip('the compiled step is not built (test_compiled_step_is_built fails)')
 
@@ -492,7 +492,7 @@ def test_compiled_step_equals_numpy_step(toy_model, with_speed):
 @pytest.mark.parametrize('modes, static', [(4, 2), (1, 0)])
 def test_compiled_replay_equals_numpy_replay(modes, static):
     # r = 1 too: the compiled step's scratch sizes hold for the smallest model.
-    from flexlink_ros.core.estimator import replay
+    from flexlink_ros.core.estimation.streaming import replay
     compiled_or_skip()
     forces, _ = toy_forces(32)
     toy_model = reduced.reduce_samples(toy_samples(grid=32), modes=modes, static=static,
@@ -513,7 +513,7 @@ def test_compiled_replay_equals_numpy_replay(modes, static):
 @pytest.mark.parametrize('n', [1, 2, 3, 4, 5, 8, 12, 13, 52, 61])
 def test_compiled_lu_solve_with_pivoting(n):
     # Small diagonals force row swaps in every panel; sizes around the panel width of 4.
-    from flexlink_ros.core import estimator
+    from flexlink_ros.core.estimation import streaming as estimator
     compiled_or_skip()
     rng = np.random.default_rng(n)
     a = rng.standard_normal((n, n))
@@ -556,7 +556,7 @@ def test_non_finite_step_is_flagged_and_the_next_sample_restarts(toy_model, comp
 
 
 def test_compiled_step_rejects_bad_buffers(toy_model):
-    from flexlink_ros.core import estimator
+    from flexlink_ros.core.estimation import streaming as estimator
     compiled_or_skip()
     est = StreamingEstimator(toy_model)
     est.update(0, 0.0, 30.0)
@@ -604,7 +604,7 @@ def test_compiled_step_rejects_bad_buffers(toy_model):
 
 @pytest.fixture(scope='module')
 def cho():
-    pytest.importorskip('flexlink_ros.core.assembly')
+    pytest.importorskip('flexlink_ros.core.fe.linkage')
     from flexlink_ros.core.mechanism import load_mechanism
     from test_reduced import CONFIG
     return load_mechanism(CONFIG / 'cho1992.yaml')
@@ -616,7 +616,7 @@ TARGETS = {0.0: (0.01, 0.05), 0.3: (0.02, 0.07)}
 
 @pytest.mark.parametrize('bearings', ['rigid', 'flexible'])
 def test_cho1992_streaming_accuracy_at_269_and_391_rpm(cho, bearings):
-    from flexlink_ros import cli_estimate
+    from flexlink_ros.cli import estimate as cli_estimate
     # The default model: geometric stiffness of the rigid-body axial forces included.
     options = reduced.ModelOptions(bearings=bearings)
     model = reduced.model_for_mechanism(cho, options, use_cache=False)
@@ -682,7 +682,7 @@ def test_criterion_is_finite_and_flagged_at_a_zero_reaction():
 @pytest.mark.parametrize('kind', ['speed', 'angle', 'mixed', 'steps'])
 def test_compiled_crank_filter_gives_the_python_filter_bit_for_bit(kind):
     """The C filter (streaming and over a signal) returns the Python filter's doubles."""
-    from flexlink_ros.core.estimator import (CompiledCrankRateFilter, CrankRateFilter,
+    from flexlink_ros.core.estimation.streaming import (CompiledCrankRateFilter, CrankRateFilter,
                                              compiled_step_available)
     if not compiled_step_available():
         pytest.skip('compiled step not built')
@@ -718,8 +718,9 @@ def test_compiled_crank_filter_gives_the_python_filter_bit_for_bit(kind):
 
 def test_node_default_model_meets_its_budget_against_the_scene_reference(cho):
     """The node's default (flexible crank, 4 elements, 24 + 2) against the 6-element scene."""
-    from flexlink_ros import cli_estimate, node, node_params
-    from flexlink_ros.core.estimator import replay
+    from flexlink_ros.cli import estimate as cli_estimate
+    from flexlink_ros.ros import node, parameters as node_params
+    from flexlink_ros.core.estimation.streaming import replay
     options = node_params.default_model_options()
     assert not options.rigid_crank and options.geometric_stiffness
     model = reduced.model_for_mechanism(cho, options)
@@ -743,7 +744,7 @@ def test_node_default_model_meets_its_budget_against_the_scene_reference(cho):
 
 def test_replay_equals_streaming_across_long_steps(toy_model):
     """Steps of 0.5-40 ms (sub-stepped alike in both paths)."""
-    from flexlink_ros.core.estimator import replay
+    from flexlink_ros.core.estimation.streaming import replay
     rng = np.random.default_rng(8)
     steps_ns = (10 ** rng.uniform(5.7, 7.6, 300)).astype(np.int64)
     assert steps_ns.max() > 10 * MAX_SUBSTEP_NS
@@ -762,7 +763,7 @@ def test_replay_equals_streaming_across_long_steps(toy_model):
 @pytest.mark.parametrize('gap_s', [0.015, 0.1])
 def test_gap_in_the_input_costs_no_accuracy(cho, gap_s):
     """391 rpm at 1 kHz with the input missing for gap_s: sub-steps keep the state."""
-    from flexlink_ros import node_params
+    from flexlink_ros.ros import parameters as node_params
     options = node_params.default_model_options()
     model = reduced.model_for_mechanism(cho, options)
     speed = 391.0 * np.pi / 30.0
@@ -807,11 +808,11 @@ def test_released_model_table_changes_nothing_streamed(toy_model):
 
 def test_compiled_criteria_give_the_python_criteria_bit_for_bit(toy_model):
     """The C criteria (the node's path) equal StreamingEstimator._criteria, zeros included."""
-    from flexlink_ros.core.estimator import (RECORD_SIZE, REACTION_FLOOR_FRACTION,
+    from flexlink_ros.core.estimation.streaming import (RECORD_SIZE, REACTION_FLOOR_FRACTION,
                                              StreamingEstimator, compiled_step_available)
     if not compiled_step_available():
         pytest.skip('compiled step not built')
-    from flexlink_ros.core import _radau_step
+    from flexlink_ros.core.estimation import _radau_step
     estimator = StreamingEstimator(toy_model, compiled=False)
     rng = np.random.default_rng(5)
     for n in range(2000):

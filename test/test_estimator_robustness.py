@@ -9,10 +9,10 @@ import pytest
 from test_estimator import SPEED_MAX, sample_times, toy_forces
 from test_reduced import ZETA, toy_samples
 
-from flexlink_ros.core import estimator as core_estimator
-from flexlink_ros.core import reduced
-from flexlink_ros.core.errors import OutlierSample
-from flexlink_ros.core.estimator import InputGate, SampleFlag, StreamingEstimator
+from flexlink_ros.core.estimation import streaming as core_estimator
+from flexlink_ros.core.reduction import model as reduced
+from flexlink_ros.errors import OutlierSample
+from flexlink_ros.core.estimation.streaming import InputGate, SampleFlag, StreamingEstimator
 
 SPEED = 41.0            # rad/s (391 rpm)
 RATE_HZ = 1000.0
@@ -220,7 +220,7 @@ def test_reset_storm_degrades_to_cold_starts_and_valid_input_behind_it_goes_on(
     storm = [(end - 1000 * (k + 1), SPEED * (end - 1000 * (k + 1) - 10**9) * 1e-9 + 0.3,
               20.0 + 0.02 * k) for k in range(1000)]
     start = time.monotonic()
-    with caplog.at_level(logging.WARNING, logger='flexlink_ros.core.estimator'):
+    with caplog.at_level(logging.WARNING, logger='flexlink_ros.core.estimation.streaming'):
         stormed, refused = feed(estimator, storm)
     elapsed = time.monotonic() - start
     assert not refused and len(stormed) == 1000

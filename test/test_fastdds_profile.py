@@ -8,7 +8,7 @@ import subprocess
 import sys
 import xml.etree.ElementTree as ElementTree
 
-from flexlink_ros import cli_demo
+from flexlink_ros.ros import runtime
 
 READY_TIMEOUT_S = 30.0
 RECEIVE_TIMEOUT_S = 20.0   # discovery on loopback takes 0-3 s; a loaded CI machine more
@@ -96,7 +96,7 @@ def run_pair(env):
 def isolated_env(**changes):
     env = dict(os.environ)
     env.pop('FLEXLINK_LOOPBACK_SOCKETS', None)
-    domain = cli_demo.isolate_ros_environment(env, **changes)
+    domain = runtime.isolate_ros_environment(env, **changes)
     return env, domain
 
 
@@ -109,7 +109,7 @@ def rtps_ports(domain):
 def test_profile_is_found_and_says_loopback_only():
     env, _ = isolated_env()
     profile = pathlib.Path(env['FASTDDS_DEFAULT_PROFILES_FILE'])
-    assert profile == cli_demo.fastdds_profile_path() and profile.is_file()
+    assert profile == runtime.fastdds_profile_path() and profile.is_file()
     assert env['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'LOCALHOST'
     namespace = {'dds': 'http://www.eprosima.com'}
     root = ElementTree.parse(profile).getroot()

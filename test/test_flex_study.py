@@ -1,18 +1,16 @@
 """Studies of the flexible four-bar (core/flex_study.py): mode events, truncation, measures."""
 
 import dataclasses
-import sys
-import types
 
 import numpy as np
 import pytest
 import scipy.linalg
 
-from flexlink_ros.core import flex_study as fs
-from flexlink_ros.core.assembly import FlexibleLinkage, ModelOptions
+from flexlink_ros.studies import flex_study as fs
+from flexlink_ros.core.fe.linkage import FlexibleLinkage, ModelOptions
 from flexlink_ros.core.mechanism import load_mechanism
-from flexlink_ros.core.modes import solve_frozen_modes
-from flexlink_ros.core.simulate import periodic_response
+from flexlink_ros.core.fe.modes import solve_frozen_modes
+from flexlink_ros.core.fe.simulate import periodic_response
 
 
 def _family(matrices):
@@ -129,8 +127,9 @@ def test_truncation_error_falls_with_modes_and_vanishes_with_all(small_mechanism
 
 
 def test_sweep_case_shapes_and_status(small_mechanism):
-    available, reason = fs.geometric_stiffness_status(small_mechanism)
-    assert available == (reason == '')
+    system = FlexibleLinkage(small_mechanism, ModelOptions(geometric_stiffness=True)).assemble(0.3)
+    assert np.all(np.isfinite(system.geometric['w2']))
+    available = True
     cases = fs.paper_frequency_cases(available)
     assert {'flex', 'rigid_crank', 'rigid_crank_bearings'} <= set(cases)
     assert any('_kg_' in key for key in cases) == available
@@ -140,13 +139,10 @@ def test_sweep_case_shapes_and_status(small_mechanism):
     assert all(max(e.modes) < 3 for e in sweep.events)
 
 
-def test_sharp_veering_between_samples_is_refined_to_a_small_nonzero_gap(small_mechanism,
-                                                                          monkeypatch):
+def test_sharp_veering_between_samples_is_refined_to_a_small_nonzero_gap(small_mechanism):
     """Rigid crank with K_G at 45 rad/s: coupler and lever modes veer within a sample step."""
-    module = types.ModuleType('flexlink_ros.core.dynamics')
-    module.axial_force = fs.quasi_static_axial_force
-    monkeypatch.setitem(sys.modules, module.__name__, module)
-    assert fs.geometric_stiffness_status(small_mechanism) == (True, '')
+    system = FlexibleLinkage(small_mechanism, ModelOptions(geometric_stiffness=True)).assemble(0.3)
+    assert np.all(np.isfinite(system.geometric['w2']))
     case = fs.paper_frequency_cases(True)['rigid_crank_kg_45']
     sweep = fs.sweep_case(small_mechanism, case, np.arange(0.0, 360.0, 2.0), 3)
     assert sweep.events

@@ -16,9 +16,10 @@ import zlib
 import pytest
 import zstandard
 
-from flexlink_ros import cli_replay, mcap_salvage
-from flexlink_ros.cli_mcap import mcap_info, recover_mcap
-from flexlink_ros.core.errors import FlexlinkError
+from flexlink_ros.cli import replay as cli_replay
+from flexlink_ros.io import mcap_reader as mcap_salvage
+from flexlink_ros.cli.mcap import mcap_info, recover_mcap
+from flexlink_ros.errors import FlexlinkError
 
 from test_mcap_salvage import chunks_of, read_messages, write_crank_recording
 
@@ -181,7 +182,7 @@ def test_mutated_files_through_the_flexlink_script(tmp_path, kind):
     mutated = next(m for k, m, _ in mutations(data, chunks_of(original_path), rng) if k == kind)
     path = tmp_path / 'mutated.mcap'
     path.write_bytes(mutated)
-    flexlink = [sys.executable, '-m', 'flexlink_ros.cli']
+    flexlink = [sys.executable, '-m', 'flexlink_ros.cli.main']
     for args in (['mcap-info', str(path)], ['mcap-recover', str(path), '--out',
                                             str(tmp_path / 'out.mcap')],
                  ['replay', str(path), '--out', str(tmp_path / 'replay.mcap'),

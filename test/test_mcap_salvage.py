@@ -14,9 +14,11 @@ from mcap.reader import make_reader
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 
-from flexlink_ros import cli, cli_replay, mcap_salvage, ros_messages
-from flexlink_ros.cli_mcap import mcap_info, recover_mcap
-from flexlink_ros.recorder import McapRecorder
+from flexlink_ros.cli import main as cli, replay as cli_replay
+from flexlink_ros.io import mcap_reader as mcap_salvage
+from flexlink_ros.ros import messages as ros_messages
+from flexlink_ros.cli.mcap import mcap_info, recover_mcap
+from flexlink_ros.io.recorder import McapRecorder
 
 T0_NS = 1_700_000_000_000_000_000
 STEP_NS = 1_000_000
@@ -133,7 +135,7 @@ def test_corrupt_zstd_and_a_foreign_payload_do_not_stop_replay(tmp_path):
         data[middle:middle + 16] = bytes(range(16))
     bad = damaged_copy(path, tmp_path, garble)
     out = tmp_path / 'replay.mcap'
-    run = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'replay', str(bad),
+    run = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'replay', str(bad),
                           '--out', str(out), '--no-geometric-stiffness', '--json',
                           '--markers-every-n', '0'],
                          capture_output=True, text=True, timeout=300)
@@ -144,7 +146,7 @@ def test_corrupt_zstd_and_a_foreign_payload_do_not_stop_replay(tmp_path):
     assert summary['skipped_reasons'] == {
         'not a readable JointState (cut short or malformed)': 1}
     assert [d['offset'] for d in summary['damaged']] == [offset]
-    text = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'replay', str(bad),
+    text = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'replay', str(bad),
                            '--out', str(tmp_path / 'again.mcap'), '--no-geometric-stiffness',
                            '--markers-every-n', '0'],
                           capture_output=True, text=True, timeout=300)
@@ -161,7 +163,7 @@ def test_replay_with_nothing_usable_is_a_one_line_error(tmp_path):
         for offset, _, _ in chunks:
             data[offset + 9 + 24] ^= 0xff
     bad = damaged_copy(path, tmp_path, break_every_crc)
-    run = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'replay', str(bad),
+    run = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'replay', str(bad),
                           '--out', str(tmp_path / 'x.mcap'), '--no-geometric-stiffness'],
                          capture_output=True, text=True, timeout=300)
     assert run.returncode == 1 and len(run.stderr.strip().splitlines()) == 1
@@ -236,7 +238,7 @@ def test_decompression_bombs_are_refused_with_a_bound(tmp_path, declared, expect
     path, offset = bomb_file(tmp_path, 'bomb.mcap', declared)
     bomb_size = len(zstd_zeros(declared))
     assert abs(bomb_size / 1000 - expected_kb) < 0.3 * expected_kb      # the files
-    flexlink = [sys.executable, '-m', 'flexlink_ros.cli']
+    flexlink = [sys.executable, '-m', 'flexlink_ros.cli.main']
     code, out, err, peak = peak_rss_of(flexlink + ['mcap-info', str(path), '--json'])
     assert code == 0 and 'Traceback' not in err, err
     info = json.loads(out)
@@ -251,7 +253,7 @@ def test_decompression_bombs_are_refused_with_a_bound(tmp_path, declared, expect
     assert code == 0 and 'declares' in out and peak < 200, (err, peak)
     assert len(read_messages(recovered)) == 50
 
-    reader = ('import sys; from flexlink_ros import cli_replay; damaged = []\n'
+    reader = ('import sys; from flexlink_ros.cli import replay as cli_replay; damaged = []\n'
               'counts, kept = cli_replay.scan_recording(sys.argv[1], joint_name="crank", '
               'damaged=damaged)\n'
               'print(len(kept["/joint_states"]), damaged[0][1], damaged[0][2])\n')
@@ -318,7 +320,7 @@ def test_unreadable_files_are_refused_in_one_line_without_output(tmp_path, conte
     path = tmp_path / 'in.mcap'
     path.write_bytes(content)
     out = tmp_path / 'out.mcap'
-    run = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'mcap-recover', str(path),
+    run = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'mcap-recover', str(path),
                           '--out', str(out)], capture_output=True, text=True, timeout=60)
     assert run.returncode == 1 and len(run.stderr.strip().splitlines()) == 1, run.stderr
     expected = 'nothing readable' if content.startswith(mcap_salvage.MCAP_MAGIC) else 'bad magic'

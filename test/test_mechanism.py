@@ -10,7 +10,7 @@ import tracemalloc
 import pytest
 import yaml
 
-from flexlink_ros.core.errors import MechanismError
+from flexlink_ros.errors import MechanismError
 from flexlink_ros.core.mechanism import (MAX_ELEMENTS_PER_LINK, MAX_FILE_BYTES, MAX_NAME_CHARS,
                                          MAX_SOURCE_CHARS, MAX_YAML_DEPTH, load_mechanism,
                                          mechanism_from_dict)
@@ -177,7 +177,7 @@ def test_modes_cli_refuses_a_million_elements_in_one_line(config_dir, tmp_path):
     for extra in ([], ['--elements', '1000000']):
         mechanism = path if not extra else config_dir / 'cho1992.yaml'
         done = subprocess.run(
-            [sys.executable, '-m', 'flexlink_ros.cli', 'modes', '--mechanism', str(mechanism),
+            [sys.executable, '-m', 'flexlink_ros.cli.main', 'modes', '--mechanism', str(mechanism),
              '--crank-deg', '0'] + extra, capture_output=True, text=True, timeout=120)
         assert done.returncode == 1, done.stderr
         lines = done.stderr.strip().splitlines()

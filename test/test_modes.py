@@ -6,9 +6,9 @@ import pathlib
 import numpy as np
 import pytest
 
-from flexlink_ros.core.assembly import FlexibleLinkage, ModelOptions
+from flexlink_ros.core.fe.linkage import FlexibleLinkage, ModelOptions
 from flexlink_ros.core.mechanism import load_mechanism
-from flexlink_ros.core.modes import frozen_mode_sweep, modal_damping, solve_frozen_modes
+from flexlink_ros.core.fe.modes import frozen_mode_sweep, modal_damping, solve_frozen_modes
 
 CONFIG = pathlib.Path(__file__).resolve().parents[1] / 'config'
 NO_KG = dict(geometric_stiffness=False)

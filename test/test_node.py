@@ -11,10 +11,10 @@ import time
 import numpy as np
 import pytest
 
-from flexlink_ros import node as flexlink_node
-from flexlink_ros import node_params
-from flexlink_ros.core import reduced
-from flexlink_ros.core.errors import FlexlinkError
+from flexlink_ros.ros import node as flexlink_node
+from flexlink_ros.ros import parameters as node_params
+from flexlink_ros.core.reduction import model as reduced
+from flexlink_ros.errors import FlexlinkError
 
 READY_TIMEOUT_S = 240.0     # node start-up incl. a first model build on a loaded machine
 DISCOVERY_TIMEOUT_S = 20.0
@@ -70,7 +70,7 @@ class NodeProcess:
 
     def __init__(self, tmp_path, *parameters, flags=()):
         self.log_path = tmp_path / f'node_{time.monotonic_ns()}.log'
-        command = [sys.executable, '-m', 'flexlink_ros.node', *flags, '--ros-args',
+        command = [sys.executable, '-m', 'flexlink_ros.ros.node', *flags, '--ros-args',
                    '--params-file', str(PARAMS_FILE)]
         for item in parameters:
             command += ['-p', item]
@@ -149,7 +149,7 @@ def spin_until(executor, condition, timeout_s, what, detail=lambda: ''):
 def joint_state(stamp_ns, names, positions, velocities):
     from sensor_msgs.msg import JointState
 
-    from flexlink_ros.ros_messages import ns_to_stamp
+    from flexlink_ros.ros.messages import ns_to_stamp
     message = JointState(name=list(names), position=[float(p) for p in positions],
                          velocity=[float(v) for v in velocities])
     message.header.stamp = ns_to_stamp(stamp_ns)
@@ -246,8 +246,8 @@ def test_node_end_to_end(tmp_path, processes, ros):
                lambda: f": {({k: len(v) for k, v in received.items()})}\n{node_process.log()}")
 
     # Outputs carry the input stamps and equal the library's estimate of the same samples.
-    from flexlink_ros.core.estimator import StreamingEstimator
-    from flexlink_ros.ros_messages import stamp_to_ns
+    from flexlink_ros.core.estimation.streaming import StreamingEstimator
+    from flexlink_ros.ros.messages import stamp_to_ns
     estimator = StreamingEstimator(model)
     reference = [estimator.update(s, a, speed) for s, a in zip(stamps, angles)]
     lever = [(stamp_to_ns(m.header.stamp), m.vector.x, m.vector.y) for m in received['lever']]
@@ -295,7 +295,7 @@ def test_node_end_to_end(tmp_path, processes, ros):
 
     # SIGTERM closes the recording completely; two independent readers agree on it.
     assert node_process.stop(signal.SIGTERM) == 0
-    from flexlink_ros.cli_mcap import mcap_info
+    from flexlink_ros.cli.mcap import mcap_info
     info = mcap_info(bag)
     assert info['complete'] and (bag / 'metadata.yaml').exists()
     inputs = len(stamps) + len(bad) + 1
@@ -311,14 +311,14 @@ def test_node_end_to_end(tmp_path, processes, ros):
 
 def test_driver_to_node_and_sigkill_leaves_a_recoverable_file(tmp_path, processes):
     """crank_driver -> node in separate processes; SIGKILL mid-recording loses < 1 s."""
-    from flexlink_ros.cli_mcap import mcap_info, recover_mcap
+    from flexlink_ros.cli.mcap import mcap_info, recover_mcap
 
     bag = tmp_path / 'bag'
     node_process = NodeProcess(tmp_path, 'record.enabled:=true', f'record.path:={bag}')
     processes.append(node_process)
     node_process.wait_for(flexlink_node.READY_MESSAGE, READY_TIMEOUT_S)
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
-    driver = subprocess.Popen([sys.executable, '-m', 'flexlink_ros.crank_driver', '--ros-args',
+    driver = subprocess.Popen([sys.executable, '-m', 'flexlink_ros.ros.crank_driver', '--ros-args',
                                '-p', 'speed_rpm:=269.0'], env=env,
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     processes.append(driver)
@@ -410,7 +410,7 @@ def test_managed_node_streams_only_while_active(tmp_path, processes, ros):
                'the subscription to go')
     assert transition(Transition.TRANSITION_CLEANUP)          # closes the recording
     assert state() == State.PRIMARY_STATE_UNCONFIGURED
-    from flexlink_ros.cli_mcap import mcap_info
+    from flexlink_ros.cli.mcap import mcap_info
     info = mcap_info(bag)
     assert info['complete'] and {t['topic']: t['count'] for t in info['topics']}[
         '/joint_states'] == 1

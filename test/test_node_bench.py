@@ -9,7 +9,7 @@ import sys
 def test_node_bench_measures_every_target(tmp_path):
     # Not a timed test: one slow rate, checked for what the figures are made of.
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
-    result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'node-bench',
+    result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'node-bench',
                              '--rate-hz', '200', '--max-rate-hz', '200', '--seconds', '1',
                              '--out', str(tmp_path / 'bench'), '--json'],
                             capture_output=True, text=True, timeout=400, env=env, cwd=tmp_path)

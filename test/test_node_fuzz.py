@@ -10,9 +10,9 @@ import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 
-from flexlink_ros import cdr
-from flexlink_ros import node as flexlink_node
-from flexlink_ros.ros_messages import InputRejected, ns_to_stamp
+from flexlink_ros.io import cdr
+from flexlink_ros.ros import node as flexlink_node
+from flexlink_ros.ros.messages import InputRejected, ns_to_stamp
 from test_node import (DISCOVERY_TIMEOUT_S, OUTPUTS, READY_TIMEOUT_S, NodeProcess,  # noqa: F401
                        processes, ros, spin_until)  # the fixtures processes and ros
 
@@ -283,7 +283,7 @@ def test_repeats_are_not_published_and_a_poison_speed_is_not_ok(
     from geometry_msgs.msg import Vector3Stamped
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-    from flexlink_ros.core.estimator import StreamingEstimator
+    from flexlink_ros.core.estimation.streaming import StreamingEstimator
     from test_node import node_model
 
     node_process = NodeProcess(tmp_path, 'diagnostics.period_s:=0.2')

@@ -5,7 +5,7 @@ import pathlib
 import pytest
 import yaml
 
-from flexlink_ros import node_params
+from flexlink_ros.ros import parameters as node_params
 
 
 def test_defaults_are_valid():

@@ -13,7 +13,7 @@ import sys
 import numpy as np
 import pytest
 
-from flexlink_ros.core.errors import FlexlinkError
+from flexlink_ros.errors import FlexlinkError
 from flexlink_ros.core.kinematics import solve_kinematics
 from flexlink_ros.core.mechanism import load_mechanism
 from flexlink_ros.studies import peer_exudyn as peer
@@ -46,7 +46,7 @@ def test_module_imports_without_exudyn_rclpy_or_matplotlib():
             'assert not p.exudyn_available()\n'
             'bad = [m for m in ("rclpy", "matplotlib") if m in sys.modules]\n'
             'assert not bad, bad\n'
-            'from flexlink_ros.core.errors import FlexlinkError\n'
+            'from flexlink_ros.errors import FlexlinkError\n'
             'try:\n'
             '    p.peer_response("cho1992", 269.0)\n'
             'except FlexlinkError as exc:\n'

@@ -25,11 +25,11 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray
 
-from flexlink_ros import cli
-from flexlink_ros.cli_mcap import mcap_info, recover_mcap, scan_mcap
-from flexlink_ros.core.errors import RecorderError
-from flexlink_ros.recorder import McapRecorder, RecorderState
-from flexlink_ros.rosbag_schema import (message_definition, serialize_exact, share_directory,
+from flexlink_ros.cli import main as cli
+from flexlink_ros.cli.mcap import mcap_info, recover_mcap, scan_mcap
+from flexlink_ros.errors import RecorderError
+from flexlink_ros.io.recorder import McapRecorder, RecorderState
+from flexlink_ros.io.msg_schema import (message_definition, serialize_exact, share_directory,
                                         type_hash)
 
 T0_NS = 1_700_000_000_000_000_000
@@ -339,10 +339,10 @@ def record_live_stream(tmp_path, stop_signal, record_s=2.5):
     """
     repo = pathlib.Path(__file__).resolve().parents[1]
     out = tmp_path / 'live.mcap'
-    driver = subprocess.Popen([sys.executable, '-m', 'flexlink_ros.crank_driver', '--ros-args',
+    driver = subprocess.Popen([sys.executable, '-m', 'flexlink_ros.ros.crank_driver', '--ros-args',
                                '-p', 'duration_s:=30.0'], cwd=repo)
     recorder = subprocess.Popen(
-        [sys.executable, '-m', 'flexlink_ros.cli', 'mcap-record', str(out),
+        [sys.executable, '-m', 'flexlink_ros.cli.main', 'mcap-record', str(out),
          '--topic', 'joint_states:sensor_msgs/msg/JointState', '--json'],
         cwd=repo, stdout=subprocess.PIPE)
     try:
@@ -468,7 +468,7 @@ def test_mcap_info_on_a_missing_or_foreign_file_is_a_one_line_error(tmp_path, co
     path = tmp_path / 'input.mcap'
     if content is not None:
         path.write_bytes(content)
-    result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'mcap-info', str(path)],
+    result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'mcap-info', str(path)],
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 1
     assert result.stderr.startswith('flexlink mcap-info: error:')
@@ -479,7 +479,7 @@ def test_mcap_info_on_a_missing_or_foreign_file_is_a_one_line_error(tmp_path, co
 def test_enqueued_messages_are_written_in_order_by_the_background_thread(tmp_path,
                                                                         monkeypatch):
     """enqueue: nothing written in the caller; every message on disk, in order, exact bytes."""
-    from flexlink_ros import recorder as recorder_module
+    from flexlink_ros.io import recorder as recorder_module
     # The thread first wakes after a second, long after the enqueuing below (a few ms): what
     # is on disk before then was written by enqueue itself, which must be nothing.
     monkeypatch.setattr(recorder_module, 'QUEUE_PERIOD_S', 1.0)
@@ -588,7 +588,7 @@ def test_existing_path_of_any_kind_is_refused_and_left_untouched(tmp_path, kind)
 
 
 def test_a_link_placed_between_check_and_create_is_not_followed(tmp_path, monkeypatch):
-    from flexlink_ros import recorder as recorder_module
+    from flexlink_ros.io import recorder as recorder_module
     victim = tmp_path / 'victim.txt'
     victim.write_bytes(b'keep')
     path = tmp_path / 'race.mcap'
@@ -611,7 +611,7 @@ def test_a_link_placed_between_check_and_create_is_not_followed(tmp_path, monkey
 # -- memory: the summary's chunk indexes do not accumulate in memory --------------------------
 
 def test_retained_memory_per_chunk_is_bounded(tmp_path):
-    from flexlink_ros import mcap_writer
+    from flexlink_ros.io import mcap_writer
     topics = ['/a', '/b', '/c', '/d', '/e']   # the node records 4-5 topics
     payload = serialize_message(Vector3Stamped(header=stamp(T0_NS)))
     recorder = McapRecorder(tmp_path / 'long.mcap', chunk_size_bytes=1024, flush_thread=False)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from flexlink_ros.core import reduced
+from flexlink_ros.core.reduction import model as reduced
 from flexlink_ros.core.integrators import RadauIIA
 
 ZETA = 0.02
@@ -200,7 +200,7 @@ def test_shapes_interpolate_positions_and_deflections():
 
 
 def test_fe_pieces_of_cho1992():
-    pytest.importorskip('flexlink_ros.core.assembly')
+    pytest.importorskip('flexlink_ros.core.fe.linkage')
     from flexlink_ros.core.mechanism import load_mechanism
     mechanism = load_mechanism(CONFIG / 'cho1992.yaml')
     options = reduced.ModelOptions(bearings='rigid', geometric_stiffness=False, grid_size=16)
@@ -226,7 +226,7 @@ def test_fe_pieces_of_cho1992():
 def test_unreduced_tables_agree_with_core_simulate(bearings, monkeypatch):
     # Two independent full-order solutions: core/simulate.py (assembly at every stage) and
     # this module's tables with every DOF kept.
-    pytest.importorskip('flexlink_ros.core.simulate')
+    pytest.importorskip('flexlink_ros.core.fe.simulate')
     from flexlink_ros.core.mechanism import load_mechanism
     mechanism = load_mechanism(CONFIG / 'cho1992.yaml')
     options = reduced.ModelOptions(bearings=bearings, geometric_stiffness=False)
@@ -257,10 +257,10 @@ def test_constant_basis_resolves_the_veering_where_per_angle_mode_interpolation_
     """Cho 1992 at 391 rpm (rigid bearings): where the coupler and lever modes swap order,
     sorted frozen modes interpolated over a grid cell miss; the constant basis V does not."""
     pytest.importorskip('flexlink_ros.core.dynamics')      # geometric stiffness
-    fs = pytest.importorskip('flexlink_ros.core.flex_study')
-    from flexlink_ros.core.assembly import FlexibleLinkage
+    fs = pytest.importorskip('flexlink_ros.studies.flex_study')
+    from flexlink_ros.core.fe.linkage import FlexibleLinkage
     from flexlink_ros.core.mechanism import load_mechanism
-    from flexlink_ros.core.modes import solve_frozen_modes
+    from flexlink_ros.core.fe.modes import solve_frozen_modes
     mechanism = load_mechanism(CONFIG / 'cho1992.yaml')
     speed = 391 * np.pi / 30
     # Node defaults but rigid bearings: with the default flexible bearings the two modes only

@@ -10,11 +10,12 @@ import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 
-from flexlink_ros import cli_replay, node_params, ros_messages
-from flexlink_ros.core import reduced
-from flexlink_ros.core.estimator import StreamingEstimator
+from flexlink_ros.cli import replay as cli_replay
+from flexlink_ros.ros import parameters as node_params, messages as ros_messages
+from flexlink_ros.core.reduction import model as reduced
+from flexlink_ros.core.estimation.streaming import StreamingEstimator
 from flexlink_ros.core.mechanism import load_mechanism
-from flexlink_ros.recorder import McapRecorder
+from flexlink_ros.io.recorder import McapRecorder
 
 RPM = 2.0 * math.pi / 60.0
 
@@ -67,7 +68,7 @@ def test_replay_equals_the_streaming_estimator(tmp_path, model):
     bag = tmp_path / 'bag'
     write_recording(bag, stamps, angles, np.full(stamps.size, speed), bad)
     out = tmp_path / 'replay.mcap'
-    result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'replay', str(bag),
+    result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'replay', str(bag),
                              '--out', str(out), '--no-geometric-stiffness', '--json',
                              '--markers-every-n', '50'],
                             capture_output=True, text=True, timeout=300)
@@ -112,7 +113,7 @@ def test_replay_refuses_missing_topic_and_existing_output(tmp_path):
     bag = tmp_path / 'bag'
     write_recording(bag, [10**9, 10**9 + 10**6], [0.0, 0.04], [40.0, 40.0])
     run = lambda *extra: subprocess.run(  # noqa: E731
-        [sys.executable, '-m', 'flexlink_ros.cli', 'replay', str(bag), *extra],
+        [sys.executable, '-m', 'flexlink_ros.cli.main', 'replay', str(bag), *extra],
         capture_output=True, text=True, timeout=120)
     result = run('--out', str(tmp_path / 'x.mcap'), '--joint', 'wheel')
     assert result.returncode == 1 and "joint 'wheel'" in result.stderr
@@ -168,7 +169,7 @@ def test_crank_states_of_rclpy_messages_are_read_in_bulk(monkeypatch):
 
 def test_estimate_reports_only_final_samples_to_the_writer(model, monkeypatch):
     """progress(n) comes only once the first n samples are final, through gaps and repeats."""
-    from flexlink_ros.core import estimator as core_estimator
+    from flexlink_ros.core.estimation import streaming as core_estimator
     monkeypatch.setattr(core_estimator, 'REPLAY_CHUNK', 64)     # many chunks per segment
     stamps = np.arange(700) * 1_000_000
     stamps[400:] += 800_000_000                                 # a gap: two segments
@@ -206,7 +207,7 @@ def test_replay_writer_gets_the_estimate_error():
 
 def test_segments_share_one_set_of_step_tables(model, monkeypatch):
     """A recording with many gaps builds the step tables once, not per segment."""
-    from flexlink_ros.core import estimator as core_estimator
+    from flexlink_ros.core.estimation import streaming as core_estimator
     built = []
     original = core_estimator._StepTables.__init__
 
@@ -255,7 +256,7 @@ def test_replay_skips_poisoned_speeds_and_matches_a_clean_replay(tmp_path):
         bag = tmp_path / name
         write_recording(bag, stamps, angles, np.full(stamps.size, speed), extra)
         out = tmp_path / f'{name}.mcap'
-        result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'replay', str(bag),
+        result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'replay', str(bag),
                                  '--out', str(out), '--no-geometric-stiffness',
                                  '--markers-every-n', '0'],
                                 capture_output=True, text=True, timeout=300)
@@ -275,9 +276,9 @@ def test_offline_estimate_equals_streaming_through_outliers_and_out_of_bound(
         model, monkeypatch, window):
     """Outliers, a jump and out-of-bound resets: replay's rows are the node's samples."""
     monkeypatch.setattr(cli_replay, 'PLAN_WINDOW', window)     # planned in windows or not
-    from flexlink_ros.core import estimator as core_estimator
-    from flexlink_ros.core.errors import OutlierSample
-    from flexlink_ros.core.estimator import SampleFlag
+    from flexlink_ros.core.estimation import streaming as core_estimator
+    from flexlink_ros.errors import OutlierSample
+    from flexlink_ros.core.estimation.streaming import SampleFlag
     stamps = 10**9 + np.arange(1500, dtype=np.int64) * 1_000_000
     speed = np.full(stamps.size, 391.0 * RPM)
     speed[1000:] = -100.0            # a jump: outliers until it is plausible over their dt
@@ -325,7 +326,7 @@ def test_replay_refuses_an_existing_out_path_before_estimating(tmp_path):
     """A dangling link at --out is refused at once with what is there; nothing is created."""
     link = tmp_path / 'out.mcap'
     link.symlink_to(tmp_path / 'target.mcap')
-    result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'replay',
+    result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'replay',
                              str(tmp_path / 'no_such_bag'), '--out', str(link)],
                             capture_output=True, text=True, timeout=120)
     assert result.returncode == 1

@@ -8,7 +8,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
-from flexlink_ros import ros_messages as rm
+from flexlink_ros.ros import messages as rm
 
 
 def _state(names, position, velocity=(), sec=3, nanosec=5):

@@ -1,5 +1,5 @@
 """
-Second-order outputs (flexlink_ros/core/second_order.py, issue 14 item 1), independent checks:
+Second-order outputs (flexlink_ros/core/fe/second_order.py, issue 14 item 1), independent checks:
 
 * the FE bending integral against closed forms (half-sine, parabola on part of a link);
 * the loop closure against the exact intersection of two circles (third-order agreement);
@@ -14,8 +14,9 @@ import math
 import numpy as np
 import pytest
 
-from flexlink_ros.core import assembly, reduced
-from flexlink_ros.core import second_order as so
+from flexlink_ros.core.fe import linkage as assembly
+from flexlink_ros.core.reduction import model as reduced
+from flexlink_ros.core.fe import second_order as so
 from flexlink_ros.core.kinematics import solve_kinematics
 from flexlink_ros.core.mechanism import load_mechanism
 from flexlink_ros.studies import peer_exudyn as peer
@@ -212,7 +213,7 @@ def test_static_sag_second_order_matches_the_peer(mech, theta):
 @needs_exudyn
 def test_269rpm_linear_plus_second_order_matches_the_peer(mech):
     """Rigid crank and bearings, no gravity, 4 elements: lever tip 10 %, mid-point 3 % p2p."""
-    from flexlink_ros.core.simulate import periodic_response
+    from flexlink_ros.core.fe.simulate import periodic_response
     response = peer.peer_response(mech, 269.0, elements_per_link=ELEMENTS, gravity=False)
     linkage = peer.linear_model(mech, elements_per_link=ELEMENTS, gravity=False)
     linear = periodic_response(linkage, 269.0 * math.pi / 30.0, method='full', points=360)
@@ -245,7 +246,7 @@ def test_compiled_factored_kernel_agrees_and_is_timed(mech):
 def test_reduced_model_second_order_follows_the_full_order(mech):
     """The default reduced basis (r = 6, rigid bearings) as the estimator streams it: linear +
     second order within 1 % of the full order's p2p (measured 0.1-0.2 % at 8 elements)."""
-    from flexlink_ros.core.simulate import periodic_response
+    from flexlink_ros.core.fe.simulate import periodic_response
     from flexlink_ros.studies import second_order_study
     angles, streamed, size = second_order_study.reduced_response(
         mech, 269.0, True, ELEMENTS, points=120, grid=64)

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 import scipy.integrate
 
-from flexlink_ros.core.assembly import FlexibleLinkage, ModelOptions
+from flexlink_ros.core.fe.linkage import FlexibleLinkage, ModelOptions
 from flexlink_ros.core.mechanism import load_mechanism
-from flexlink_ros.core.modes import modal_damping
-from flexlink_ros.core.simulate import frozen_eigen, periodic_response, step_convergence
+from flexlink_ros.core.fe.modes import modal_damping
+from flexlink_ros.core.fe.simulate import frozen_eigen, periodic_response, step_convergence
 
 CONFIG = pathlib.Path(__file__).resolve().parents[1] / 'config'
 NO_KG = dict(geometric_stiffness=False)

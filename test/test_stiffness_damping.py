@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from flexlink_ros.core import stiffness_damping as sd
-from flexlink_ros.core.assembly import FlexibleLinkage, ModelOptions, link_matrices
+from flexlink_ros.core.fe import stiffness_damping as sd
+from flexlink_ros.core.fe.linkage import FlexibleLinkage, ModelOptions, link_matrices
 from flexlink_ros.core.mechanism import load_mechanism
 
 BETA = 1e-4

@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from flexlink_ros.core import tmm
-from flexlink_ros.core.errors import FlexlinkError
+from flexlink_ros.core.tmm import transfer as tmm
+from flexlink_ros.errors import FlexlinkError
 
 BEAM = tmm.UniformBeam.kim_moon()
 BCS = tmm.BOUNDARY_CONDITIONS

@@ -18,10 +18,11 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from flexlink_ros.core import assembly, validity
-from flexlink_ros.core import second_order as so
+from flexlink_ros.core.fe import linkage as assembly
+from flexlink_ros.core import validity
+from flexlink_ros.core.fe import second_order as so
 from flexlink_ros.core.mechanism import load_mechanism
-from flexlink_ros.core.simulate import periodic_response
+from flexlink_ros.core.fe.simulate import periodic_response
 from flexlink_ros.studies import peer_exudyn as peer
 
 ELEMENTS = 4

@@ -14,7 +14,7 @@ import dataclasses
 
 import numpy as np
 
-from .errors import LoopClosureError
+from ..errors import LoopClosureError
 from .mechanism import JOINT_NAMES
 
 # sin(transmission angle) below this is treated as a locked (singular) linkage.

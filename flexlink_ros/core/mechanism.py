@@ -30,7 +30,7 @@ from typing import Optional
 
 import yaml
 
-from .errors import MechanismError
+from ..errors import MechanismError
 
 LINK_NAMES = ('crank', 'coupler', 'lever')
 JOINT_NAMES = ('O2', 'A', 'B', 'O4')

@@ -42,11 +42,12 @@ import math
 
 import numpy as np
 
-from ..core.assembly import FlexibleLinkage, ModelOptions
+from ..core.fe.linkage import FlexibleLinkage, ModelOptions
 from ..core.mechanism import Mechanism, load_mechanism
-from ..core.simulate import periodic_response
-from ..core.stiffness_damping import (element_resultants, link_local_rate,
-                                      stiffness_damping_terms, system_matrices)
+from ..core.fe.simulate import periodic_response
+from ..core.fe.stiffness_damping import (
+    element_resultants, link_local_rate, stiffness_damping_terms, system_matrices,
+)
 
 DAMPING = ('objective', 'naive', 'modal')
 OUTPUT_KEYS = ('lever_tip_dx', 'lever_tip_dy', 'coupler_mid_dx', 'coupler_mid_dy')

@@ -60,7 +60,7 @@ import time
 
 import numpy as np
 
-from ..core.errors import FlexlinkError
+from ..errors import FlexlinkError
 from ..core.kinematics import solve_kinematics
 from ..core.mechanism import Mechanism, load_mechanism
 
@@ -583,7 +583,7 @@ def peer_static(mechanism, crank_angle=0.0, *, elements_per_link=DEFAULT_ELEMENT
 def linear_model(mechanism, *, elements_per_link=DEFAULT_ELEMENTS, bearings='rigid',
                  gravity=True):
     """The package's FE model (rigid crank) matching the peer's settings."""
-    from ..core.assembly import FlexibleLinkage, ModelOptions
+    from ..core.fe.linkage import FlexibleLinkage, ModelOptions
     mech = dataclasses.replace(_mechanism(mechanism), elements_per_link=elements_per_link)
     options = ModelOptions(rigid_crank=True,
                            bearings={'rigid': 'rigid', 'springs': 'flexible'}[bearings],
@@ -624,7 +624,7 @@ def linear_response(mechanism, rpm, *, elements_per_link=DEFAULT_ELEMENTS, beari
         'info' of :func:`core.simulate.periodic_response`.
 
     """
-    from ..core.simulate import periodic_response
+    from ..core.fe.simulate import periodic_response
     model = linear_model(mechanism, elements_per_link=elements_per_link, bearings=bearings,
                          gravity=gravity)
     response = periodic_response(model, rpm * 2.0 * math.pi / 60.0, method='full',

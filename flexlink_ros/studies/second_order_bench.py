@@ -18,8 +18,9 @@ import tempfile
 
 import numpy as np
 
-from ..core import assembly, reduced
-from ..core import second_order as so
+from ..core.fe import linkage as assembly
+from ..core.reduction import model as reduced
+from ..core.fe import second_order as so
 from ..core.kinematics import solve_kinematics
 
 SCALARS = 22    # cos, sin of the three link angles, then kappa (4 x 4), per grid node

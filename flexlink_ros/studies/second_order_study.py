@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from ..core import second_order as so
+from ..core.fe import second_order as so
 from . import peer_exudyn as peer
 
 TARGETS = {'lever_tip': 0.10, 'coupler_mid': 0.03}
@@ -40,7 +40,7 @@ def run_case(mechanism, rpm, gravity, elements, points=720, zeta=None, revolutio
         'max_sums' (largest S per :data:`core.second_order.FORMS`, m), 'info'.
 
     """
-    from ..core.simulate import periodic_response
+    from ..core.fe.simulate import periodic_response
     response = peer.peer_response(mechanism, rpm, elements_per_link=elements, gravity=gravity,
                                   revolutions=revolutions)
     linkage = peer.linear_model(mechanism, elements_per_link=elements, gravity=gravity)
@@ -89,7 +89,8 @@ def reduced_response(mechanism, rpm, gravity, elements, points=720, sizes=None, 
 
     """
     import dataclasses
-    from ..core import assembly, reduced
+    from ..core.fe import linkage as assembly
+    from ..core.reduction import model as reduced
     mech = peer._mechanism(mechanism)
     if not gravity:
         mech = dataclasses.replace(mech, gravity=(0.0, 0.0))
@@ -142,7 +143,8 @@ def reduced_costs(mechanism):
     Multiply-adds per sample (:func:`core.second_order.step_cost`) for the reduced models'
     default sizes (core.reduced.DEFAULT_SIZES) with the mechanism's elements per link.
     """
-    from ..core import assembly, reduced
+    from ..core.fe import linkage as assembly
+    from ..core.reduction import model as reduced
     out = []
     for (bearings, rigid_crank), (modes, static) in reduced.DEFAULT_SIZES.items():
         options = reduced.ModelOptions(bearings=bearings, rigid_crank=rigid_crank, grid_size=8)

@@ -37,7 +37,7 @@ import os
 
 import numpy as np
 
-from ..core import second_order as so
+from ..core.fe import second_order as so
 from ..core import validity
 from . import peer_exudyn as peer
 
@@ -92,7 +92,7 @@ def run_speed(mechanism, rpm, elements=peer.DEFAULT_ELEMENTS, bearings='rigid', 
         |N_e| / P_cr per link), 'peer_cpu_s'.
 
     """
-    from ..core.simulate import periodic_response
+    from ..core.fe.simulate import periodic_response
     response = _peer(mechanism, rpm, elements, bearings, cache)
     linkage = peer.linear_model(mechanism, elements_per_link=elements, bearings=bearings,
                                 gravity=False)

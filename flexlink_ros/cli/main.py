@@ -1,0 +1,130 @@
+"""
+The `flexlink` command-line tool: one script, one small module per group of subcommands.
+
+Every subcommand prints human-readable text, or one JSON object on stdout with ``--json``,
+and exits non-zero with a one-line reason on bad input. ``main(argv=None)`` only parses.
+"""
+
+import argparse
+import importlib
+import json
+import math
+import os
+import sys
+
+from ..errors import FlexlinkError
+
+
+# Each subcommand and the module that registers it (``register(subparsers)``). Only the chosen
+# command's module is imported: importing every group costs about a second (beam and FE).
+COMMANDS = {
+    'beam': 'flexlink_ros.cli.beam',
+    'demo': 'flexlink_ros.cli.demo',
+    'estimate': 'flexlink_ros.cli.estimate',
+    'plan': 'flexlink_ros.cli.estimate',
+    'bench': 'flexlink_ros.cli.estimate',
+    'modes': 'flexlink_ros.cli.flex',
+    'simulate': 'flexlink_ros.cli.flex',
+    'mcap-info': 'flexlink_ros.cli.mcap',
+    'mcap-recover': 'flexlink_ros.cli.mcap',
+    'mcap-record': 'flexlink_ros.cli.mcap',
+    'node-bench': 'flexlink_ros.cli.node_bench',
+    'replay': 'flexlink_ros.cli.replay',
+    'report': 'flexlink_ros.cli.report',
+    'kinematics': 'flexlink_ros.cli.rigid',
+    'criteria': 'flexlink_ros.cli.rigid',
+    'design-spring': 'flexlink_ros.cli.rigid',
+}
+# A subcommand's function takes the parsed args and returns an exit code.
+COMMAND_MODULES = tuple(dict.fromkeys(COMMANDS.values()))
+
+
+def emit(result, text, as_json):
+    """Print a result as one JSON object or as text; returns exit code 0."""
+    if as_json:
+        print(json.dumps(_jsonable(result)))
+    else:
+        print(text)
+    return 0
+
+
+def _jsonable(value):
+    """Convert numpy scalars/arrays and non-finite floats to JSON-safe values."""
+    if hasattr(value, 'tolist'):
+        value = value.tolist()
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def degree_range(text):
+    """Parse 'START:STOP:STEP' (degrees, STOP excluded) or a comma list into a list of floats."""
+    try:
+        if ':' in text:
+            start, stop, step = (float(part) for part in text.split(':'))
+            if step <= 0:
+                raise ValueError
+            count = int(math.floor((stop - start) / step + 1e-9))
+            values = [start + k * step for k in range(max(count, 0))]
+            if not values:
+                raise ValueError
+            return values
+        return [float(part) for part in text.split(',')]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f'expected START:STOP:STEP in degrees or a comma list, got {text!r}') from None
+
+
+def _command_module(argv):
+    """The module that registers the command in ``argv``, or None (an option or unknown)."""
+    if not argv or argv[0].startswith('-'):
+        return None
+    return COMMANDS.get(argv[0])
+
+
+def build_parser(argv=None):
+    """
+    The argument parser with every registered subcommand.
+
+    With ``argv``, only the module of its subcommand is imported and registered when it can
+    be told (the parse of ``argv`` is the same).
+    """
+    parser = argparse.ArgumentParser(
+        prog='flexlink',
+        description='Flexible four-bar linkage: kinematics, joint criteria, beam and FE '
+                    'models, streaming estimator, ROS 2 node and MCAP tools.')
+    subparsers = parser.add_subparsers(dest='command', metavar='COMMAND')
+    subparsers.required = True
+    only = _command_module(argv) if argv is not None else None
+    for name in (COMMAND_MODULES if only is None else (only,)):
+        importlib.import_module(name).register(subparsers)
+    return parser
+
+
+def main(argv=None):
+    """Entry point of the `flexlink` script."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(argv)
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except BrokenPipeError:
+        # The reader went away (`flexlink ... | head`): stop quietly, as Unix tools do.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
+    except (FlexlinkError, ValueError) as exc:
+        print(f'flexlink {args.command}: error: {exc}', file=sys.stderr)
+        return 1
+    except OSError as exc:   # a missing or unreadable file, a full disk: said in one line
+        print(f'flexlink {args.command}: error: {exc}', file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,313 @@
+"""
+`flexlink node-bench`: end-to-end latency, loss and footprint of flexlink_node.
+
+Prints figures (it is not a timed test). One run measures, on loopback in a domain of its own,
+a bare rclpy echo node (JointState in, the same bytes out: the floor any Python node pays) and
+flexlink_node without and with recording, each in its own process with the same executor:
+
+- latency JointState -> output (the output carries the input's stamp, which is the send time):
+  p50 and p99 at each rate;
+- loss: inputs sent minus outputs received at each rate; the highest rate without loss;
+- RSS of the node process; recording throughput (messages and bytes per second written).
+
+The source publishes at rates doubling from ``--rate-hz`` until messages are lost or
+``--max-rate-hz`` is reached, for ``--seconds`` each.
+"""
+
+import math
+import os
+import pathlib
+import struct
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+from .main import emit
+
+INPUT_TOPIC = '/bench/joint_states'
+ECHO_TOPIC = '/bench/echo'
+NODE_OUTPUT = '/flexlink_node/lever_tip/deflection'
+SPEED = 391.0 * 2.0 * math.pi / 60.0   # rad/s
+WARMUP_MESSAGES = 500      # before measuring (the node's warm start happens here)
+DRAIN_S = 1.0              # wait for the last outputs after a rate step [s]
+START_TIMEOUT_S = 300.0
+WARMUP_TIMEOUT_S = 60.0
+SPIN_LEAD_S = 1e-4        # wake this early before a due publication [s]
+KEEPALIVE_HZ = 50.0        # input rate between measured rate steps [Hz]
+
+
+def _stamp_of(data):
+    """Stamp [ns] of a CDR message whose first field is a std_msgs/Header."""
+    sec, nanosec = struct.unpack_from('<iI', data, 4)
+    return sec * 1_000_000_000 + nanosec
+
+
+def _rss_mb(pid):
+    try:
+        for line in pathlib.Path(f'/proc/{pid}/status').read_text().splitlines():
+            if line.startswith('VmRSS:'):
+                return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    return None
+
+
+def echo_main():
+    """The bare echo node: republish every JointState unchanged (raw bytes)."""
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import JointState
+
+    from ..ros.crank_driver import make_executor, spin_until_shutdown
+
+    try:
+        with rclpy.init():
+            node = rclpy.create_node('bench_echo')
+            qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+            publisher = node.create_publisher(JointState, ECHO_TOPIC, qos)
+            node.create_subscription(JointState, INPUT_TOPIC, publisher.publish, qos, raw=True)
+            executor = make_executor()
+            executor.add_node(node)
+            spin_until_shutdown(executor)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+
+
+class Source:
+    """Publishes crank JointStates and collects the target's outputs (one thread)."""
+
+    def __init__(self):
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
+        from sensor_msgs.msg import JointState
+
+        from ..io.cdr import CDR_LE
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node('bench_source', context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+        self.publisher = self.node.create_publisher(JointState, INPUT_TOPIC, self.qos)
+        self.received = []
+        self._subscriptions = {}
+        self._prefix = CDR_LE
+        self._types = {'echo': JointState}
+
+    def listen(self, topic, msg_type):
+        """Subscribe to a target's output (raw; only the stamp is read)."""
+        if topic not in self._subscriptions:
+            self._subscriptions[topic] = self.node.create_subscription(
+                msg_type, topic, lambda data: self.received.append(
+                    (time.time_ns(), _stamp_of(data))), self.qos, raw=True)
+
+    def message(self, stamp_ns):
+        """CDR of a one-joint JointState at a stamp (angle of the constant-speed crank)."""
+        sec, nanosec = divmod(stamp_ns, 1_000_000_000)
+        angle = math.fmod(SPEED * stamp_ns * 1e-9, 2.0 * math.pi)
+        data = self._prefix + struct.pack('<iII', sec, nanosec, 1) + b'\x00'
+        data += b'\x00' * 3 + struct.pack('<I', 1) + struct.pack('<I', 6) + b'crank\x00'
+        data += b'\x00' * ((-(len(data) - 4)) % 4) + struct.pack('<I', 1)
+        data += b'\x00' * ((-(len(data) - 4)) % 8) + struct.pack('<d', angle)
+        data += struct.pack('<I', 1) + b'\x00' * ((-(len(data) + 4 - 4)) % 8)
+        data += struct.pack('<d', SPEED) + struct.pack('<I', 0)
+        return data
+
+    def wait_for(self, condition, timeout_s, what):
+        deadline = time.monotonic() + timeout_s
+        while not condition():
+            if time.monotonic() > deadline:
+                raise RuntimeError(f'timed out waiting for {what}')
+            self.executor.spin_once(timeout_sec=0.02)
+
+    def stream(self, rate_hz, seconds):
+        """Publish at a rate; returns the stamps sent."""
+        period_ns = int(1e9 / rate_hz)
+        sent = []
+        start = time.time_ns()
+        due = start
+        end = start + int(seconds * 1e9)
+        while due < end:
+            now = time.time_ns()
+            if now >= due:
+                self.publisher.publish(self.message(now))
+                sent.append(now)
+                due += period_ns
+            else:
+                # Wait in the executor (outputs are received meanwhile) rather than spin
+                # busily: on two cores a busy source takes the CPU the target needs.
+                self.executor.spin_once(timeout_sec=max(0.0, (due - now) * 1e-9 - SPIN_LEAD_S))
+        return sent
+
+    def drain(self, seconds=DRAIN_S):
+        """Collect late outputs while a slow keep-alive stream goes on (not measured).
+
+        A pause longer than the estimator's reset gap (0.5 s) would restart it, and the
+        warm start of the restart would be measured as latency of the next rate step.
+        """
+        self.stream(KEEPALIVE_HZ, seconds)
+
+    def close(self):
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.context.try_shutdown()
+
+
+def measure_target(source, name, argv, output_topic, output_type, rates, seconds, env):
+    """Start a target, step through the rates, stop it; returns its rows and footprint."""
+    process = subprocess.Popen(argv, env=env, stdout=subprocess.DEVNULL,
+                               stderr=subprocess.DEVNULL)
+    try:
+        source.listen(output_topic, output_type)
+        source.wait_for(lambda: source.publisher.get_subscription_count() > 0
+                        and source.node.count_publishers(output_topic) > 0
+                        or process.poll() is not None, START_TIMEOUT_S, f'{name} to start')
+        if process.poll() is not None:
+            raise RuntimeError(f'{name} exited with code {process.returncode}')
+        # Warm up in batches until outputs flow: outputs published before discovery has
+        # matched the listener both ways are lost, so one fixed batch may never be answered.
+        source.received.clear()
+        deadline = time.monotonic() + WARMUP_TIMEOUT_S
+        last = None
+        while len(source.received) < WARMUP_MESSAGES:
+            if time.monotonic() > deadline or process.poll() is not None:
+                raise RuntimeError(f'timed out waiting for {name} warm-up outputs '
+                                   f'({len(source.received)} of {WARMUP_MESSAGES})')
+            last = max(source.stream(1000.0, 0.1))
+            source.drain(0.05)
+        # Measure the steady state: the target's first sample (the node's warm start, 0.2 s)
+        # leaves a backlog, which must be answered before the first rate step starts. The
+        # target answers in order, so the backlog is gone once the last warm-up message is
+        # answered (the messages sent before discovery matched are never answered, and a
+        # full input queue drops the oldest, never the last).
+        answered = lambda: any(stamp == last for _, stamp in source.received)  # noqa: E731
+        while not answered() and time.monotonic() < deadline and process.poll() is None:
+            source.drain(0.1)
+        if not answered():
+            raise RuntimeError(f'{name} did not answer its last warm-up message in time')
+        rows = []
+        for rate in rates:
+            source.drain(0.2)
+            source.received.clear()
+            sent = source.stream(rate, seconds)
+            source.drain()
+            wanted = set(sent)
+            latency = np.array([recv - stamp for recv, stamp in source.received
+                                if stamp in wanted]) / 1e3
+            rows.append({'rate_hz': len(sent) / seconds, 'sent': len(sent),
+                         'received': int(latency.size), 'lost': len(sent) - int(latency.size),
+                         'latency_us_p50': float(np.median(latency)) if latency.size else None,
+                         'latency_us_p99': (float(np.percentile(latency, 99))
+                                            if latency.size else None)})
+            if rows[-1]['lost'] > 0:
+                break
+        rss = _rss_mb(process.pid)
+    finally:
+        process.send_signal(2)   # SIGINT: the node closes its recording
+        try:
+            process.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+    lossless = [row['rate_hz'] for row in rows if row['lost'] == 0]
+    return {'name': name, 'rows': rows, 'rss_mb': rss,
+            'max_rate_without_loss_hz': max(lossless) if lossless else 0.0}
+
+
+def run_node_bench(rate_hz=1000.0, max_rate_hz=8000.0, seconds=3.0, work_dir=None):
+    """
+    The benchmark (see module docstring).
+
+    Returns
+    -------
+    dict
+        'targets': list of {name, rows, rss_mb, max_rate_without_loss_hz}, 'recording':
+        {messages_per_s, bytes_per_s, path}.
+
+    """
+    from geometry_msgs.msg import Vector3Stamped
+    from sensor_msgs.msg import JointState
+
+    from ..ros.runtime import isolate_ros_environment
+    from .mcap import mcap_info
+
+    if not 0 < rate_hz <= max_rate_hz or not seconds > 0:
+        raise ValueError('need 0 < `--rate-hz` <= `--max-rate-hz` and `--seconds` > 0')
+    domain = isolate_ros_environment()
+    env = dict(os.environ)
+    rates = []
+    rate = rate_hz
+    while rate <= max_rate_hz:
+        rates.append(rate)
+        rate *= 2.0
+    work_dir = pathlib.Path(work_dir or tempfile.mkdtemp(prefix='flexlink_node_bench_'))
+    bag = work_dir / 'bench_bag'
+    node = [sys.executable, '-m', 'flexlink_ros.ros.node', '--ros-args',
+            '-p', f'input_topic:={INPUT_TOPIC}', '-p', 'qos.depth:=1000']
+    targets = [
+        ('echo (bare rclpy)', [sys.executable, '-m', 'flexlink_ros.cli.node_bench'],
+         ECHO_TOPIC, JointState),
+        ('flexlink_node', node, NODE_OUTPUT, Vector3Stamped),
+        ('flexlink_node + recording', node + ['-p', 'record.enabled:=true',
+                                              '-p', f'record.path:={bag}'],
+         NODE_OUTPUT, Vector3Stamped),
+    ]
+    source = Source()
+    try:
+        results = [measure_target(source, *target, rates, seconds, env) for target in targets]
+    finally:
+        source.close()
+    info = mcap_info(bag)
+    duration = info['duration_s'] or math.nan
+    size = sum(p.stat().st_size for p in bag.glob('*.mcap'))
+    return {'domain_id': domain, 'seconds_per_rate': seconds, 'targets': results,
+            'recording': {'path': str(bag), 'messages': info['message_count'],
+                          'messages_per_s': info['message_count'] / duration,
+                          'bytes_per_s': size / duration, 'complete': info['complete']}}
+
+
+def _text(result):
+    lines = [f'{"target":<27} {"rate Hz":>8} {"sent":>6} {"lost":>5} {"p50 us":>7} '
+             f'{"p99 us":>7}']
+    for target in result['targets']:
+        for row in target['rows']:
+            p50 = '-' if row['latency_us_p50'] is None else f'{row["latency_us_p50"]:.0f}'
+            p99 = '-' if row['latency_us_p99'] is None else f'{row["latency_us_p99"]:.0f}'
+            lines.append(f'{target["name"]:<27} {row["rate_hz"]:>8.0f} {row["sent"]:>6} '
+                         f'{row["lost"]:>5} {p50:>7} {p99:>7}')
+    for target in result['targets']:
+        rss = '?' if target['rss_mb'] is None else f'{target["rss_mb"]:.0f} MB'
+        lines.append(f'{target["name"]}: highest rate without loss '
+                     f'{target["max_rate_without_loss_hz"]:.0f} Hz, RSS {rss}')
+    rec = result['recording']
+    lines.append(f'recording: {rec["messages_per_s"]:.0f} messages/s, '
+                 f'{rec["bytes_per_s"] / 1e3:.0f} kB/s ({rec["path"]})')
+    return '\n'.join(lines)
+
+
+def _node_bench_command(args):
+    result = run_node_bench(args.rate_hz, args.max_rate_hz, args.seconds, args.out)
+    return emit(result, _text(result), args.json)
+
+
+def register(subparsers):
+    """Add the node-bench subcommand."""
+    parser = subparsers.add_parser('node-bench', help='latency, loss and footprint of '
+                                   'flexlink_node next to a bare rclpy echo node')
+    parser.add_argument('--rate-hz', type=float, default=1000.0, help='first rate [Hz]')
+    parser.add_argument('--max-rate-hz', type=float, default=8000.0,
+                        help='stop doubling the rate here [Hz]')
+    parser.add_argument('--seconds', type=float, default=3.0, help='time per rate [s]')
+    parser.add_argument('--out', default=None, help='directory of the bench recording '
+                        '(default: a new temporary directory)')
+    parser.add_argument('--json', action='store_true', help='print one JSON object')
+    parser.set_defaults(func=_node_bench_command)
+
+
+if __name__ == '__main__':
+    echo_main()

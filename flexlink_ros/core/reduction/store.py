@@ -1,0 +1,320 @@
+"""
+Versioned, verified cache files for precomputed models (no pickle anywhere).
+
+A cache file is a NumPy ``.npz`` archive of plain numeric arrays plus one ``uint8`` array,
+``__header__``, holding a UTF-8 JSON header::
+
+    {"format": "flexlink_ros.model_cache", "version": FORMAT_VERSION, "key": "<hex>",
+     "arrays": {"name": {"dtype": "<f8", "shape": [..]}, ...},
+     "sha256": "<hex of the arrays>", "meta": {...}}
+
+Loading never unpickles (it reads the zip and the .npy headers itself) and rejects anything that
+is not exactly what the header announces: another format or version, another key (stale: a
+different mechanism or model options), missing or extra arrays, object or non-numeric dtypes,
+other shapes, an array whose .npy header announces more (or fewer) bytes than its zip member
+stores or more than :data:`MAX_CACHE_BYTES` in all (checked before anything is allocated),
+compressed members, a checksum mismatch (corrupt bytes), or an unreadable archive (truncated,
+not a zip, a pickle renamed ``.npz``). Each raises :class:`CacheError`; :func:`load_or_build`
+then logs a warning and rebuilds. Writes go to a temporary file in the same directory and are
+moved into place with ``os.replace``, so a reader never sees a half-written file.
+"""
+
+import hashlib
+import json
+import logging
+import os
+import pathlib
+import tempfile
+import zipfile
+
+import numpy as np
+
+from ...errors import CacheError
+
+LOGGER = logging.getLogger(__name__)
+
+FORMAT_NAME = 'flexlink_ros.model_cache'
+# Bump when the file layout changes; files of another version are rebuilt.
+FORMAT_VERSION = 1
+HEADER_NAME = '__header__'
+# dtype kinds a cache may hold: bool, signed/unsigned integer, float, complex.
+ALLOWED_KINDS = 'biufc'
+# Refuse headers larger than this [bytes] (a foreign archive could announce anything).
+MAX_HEADER_BYTES = 1 << 20
+# Refuse caches whose arrays together exceed this [bytes]: the node's default model is about
+# 30 MB; nothing a build can make in reasonable time comes near it.
+MAX_CACHE_BYTES = 2 << 30
+
+
+def default_cache_dir():
+    """``$XDG_CACHE_HOME/flexlink_ros`` or ``~/.cache/flexlink_ros``."""
+    base = os.environ.get('XDG_CACHE_HOME') or os.path.join(os.path.expanduser('~'), '.cache')
+    return pathlib.Path(base) / 'flexlink_ros'
+
+
+def cache_key(*parts):
+    """
+    SHA-256 hex digest of the JSON form of ``parts`` (mechanism key, options, versions).
+
+    Parameters
+    ----------
+    *parts : JSON-serialisable values
+        Everything the cached content depends on.
+
+    """
+    payload = json.dumps(parts, sort_keys=True, default=repr, separators=(',', ':'))
+    return hashlib.sha256(payload.encode()).hexdigest()
+
+
+def _array_digest(arrays):
+    """SHA-256 over names, dtypes, shapes and bytes of the arrays, in name order."""
+    digest = hashlib.sha256()
+    for name in sorted(arrays):
+        array = np.ascontiguousarray(arrays[name])
+        digest.update(name.encode())
+        digest.update(array.dtype.str.encode())
+        digest.update(repr(tuple(array.shape)).encode())
+        digest.update(array.tobytes())
+    return digest.hexdigest()
+
+
+def _check_array(name, array):
+    if not isinstance(array, np.ndarray):
+        raise CacheError(f'cache array {name!r} is a {type(array).__name__}, not an ndarray')
+    if array.dtype.kind not in ALLOWED_KINDS or array.dtype.hasobject:
+        raise CacheError(f'cache array {name!r} has dtype {array.dtype}, not a plain number')
+
+
+def save_cache(path, key, arrays, meta=None):
+    """
+    Write arrays and metadata to ``path`` atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+        Destination file (parent directories are created).
+    key : str
+        Cache key the content belongs to (see :func:`cache_key`).
+    arrays : dict of str to ndarray
+        Numeric arrays (bool, int, float, complex); names must not start with ``__``.
+    meta : dict or None
+        JSON-serialisable metadata stored in the header.
+
+    Raises
+    ------
+    CacheError
+        If an array is not a plain numeric array or a name is reserved.
+
+    """
+    path = pathlib.Path(path)
+    arrays = {name: np.ascontiguousarray(array) for name, array in arrays.items()}
+    for name, array in arrays.items():
+        if name.startswith('__'):
+            raise CacheError(f'cache array name {name!r} is reserved')
+        _check_array(name, array)
+    header = {
+        'format': FORMAT_NAME, 'version': FORMAT_VERSION, 'key': key,
+        'arrays': {name: {'dtype': a.dtype.str, 'shape': list(a.shape)}
+                   for name, a in sorted(arrays.items())},
+        'sha256': _array_digest(arrays), 'meta': meta or {},
+    }
+    header_bytes = np.frombuffer(json.dumps(header, sort_keys=True).encode(), dtype=np.uint8)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle, temp_name = tempfile.mkstemp(prefix=path.name + '.', suffix='.tmp',
+                                         dir=path.parent)
+    try:
+        with os.fdopen(handle, 'wb') as stream:
+            np.savez(stream, **{HEADER_NAME: header_bytes}, **arrays)
+            stream.flush()
+            os.fsync(stream.fileno())
+        os.replace(temp_name, path)
+    except BaseException:
+        try:
+            os.unlink(temp_name)
+        except FileNotFoundError:
+            pass
+        raise
+
+
+def _read_npy_header(member, name, path):
+    """Dtype, shape, Fortran order of one .npy member; the stream is left at the data."""
+    version = np.lib.format.read_magic(member)
+    if version == (1, 0):
+        shape, fortran_order, dtype = np.lib.format.read_array_header_1_0(member)
+    elif version == (2, 0):
+        shape, fortran_order, dtype = np.lib.format.read_array_header_2_0(member)
+    else:
+        raise CacheError(f'{path}: array {name!r} has .npy version {version}')
+    if dtype.kind not in ALLOWED_KINDS or dtype.hasobject:
+        raise CacheError(f'{path}: cache array {name!r} has dtype {dtype}, not a plain number')
+    return dtype, shape, fortran_order
+
+
+def _read_member(archive, info, name, path, budget):
+    """
+    Read one array after checking the size its header announces.
+
+    The .npy header announces dtype and shape; their product must be exactly the bytes the
+    zip member stores (uncompressed, as ``np.savez`` writes) and fit the remaining
+    ``budget``, so nothing larger than the file itself is ever allocated.
+    """
+    if info.compress_type != zipfile.ZIP_STORED or info.compress_size != info.file_size:
+        raise CacheError(f'{path}: array {name!r} is compressed (not written by this code)')
+    with archive.open(info) as member:
+        dtype, shape, fortran_order = _read_npy_header(member, name, path)
+        count = 1
+        for extent in shape:
+            count *= extent
+        announced = count * dtype.itemsize
+        stored = info.file_size - member.tell()
+        if announced != stored:
+            raise CacheError(f'{path}: array {name!r} announces {announced} bytes '
+                             f'({dtype.str} {list(shape)}), the file holds {stored}')
+        if announced > budget:
+            raise CacheError(f'{path}: array {name!r} announces {announced} bytes, more than '
+                             f'the file holds or {MAX_CACHE_BYTES} bytes in all')
+        array = np.empty(shape, dtype=dtype, order='F' if fortran_order else 'C')
+        view = memoryview(array.reshape(-1, order='A')).cast('B') if announced else b''
+        if announced and member.readinto(view) != announced:
+            raise CacheError(f'{path}: array {name!r} is truncated')
+    return array, announced
+
+
+def _read_header(archive, members, path):
+    info = members.get(HEADER_NAME)
+    if info is None:
+        raise CacheError(f'{path}: not a flexlink_ros cache (no header)')
+    if info.file_size > MAX_HEADER_BYTES + 1024:
+        raise CacheError(f'{path}: malformed header (larger than {MAX_HEADER_BYTES} bytes)')
+    raw, _ = _read_member(archive, info, HEADER_NAME, path,
+                          min(MAX_HEADER_BYTES, path.stat().st_size))
+    if raw.dtype != np.uint8 or raw.ndim != 1:
+        raise CacheError(f'{path}: malformed header')
+    header = json.loads(raw.tobytes().decode())
+    if not isinstance(header, dict):
+        raise CacheError(f'{path}: malformed header')
+    return header
+
+
+def _check_header(header, key, path):
+    if header.get('format') != FORMAT_NAME:
+        raise CacheError(f'{path}: not a flexlink_ros cache (format {header.get("format")!r})')
+    if header.get('version') != FORMAT_VERSION:
+        raise CacheError(f'{path}: cache format version {header.get("version")!r}, '
+                         f'this code reads {FORMAT_VERSION}')
+    if header.get('key') != key:
+        raise CacheError(f'{path}: stale cache (key {str(header.get("key"))[:12]}..., '
+                         f'need {key[:12]}...)')
+
+
+def _members(archive, path):
+    """Zip members by array name; refuses duplicates and anything but ``<name>.npy``."""
+    members = {}
+    for info in archive.infolist():
+        name = info.filename[:-4]
+        if not info.filename.endswith('.npy') or name in members:
+            raise CacheError(f'{path}: unexpected archive member {info.filename[:80]!r}')
+        members[name] = info
+    return members
+
+
+def load_cache(path, key):
+    """
+    Read and verify a cache file.
+
+    Every size is checked before anything is allocated: each array's .npy header (dtype,
+    shape) must match the cache header and the bytes its zip member stores, and all arrays
+    together stay below :data:`MAX_CACHE_BYTES`.
+
+    Parameters
+    ----------
+    path : str or Path
+        Cache file.
+    key : str
+        The key the caller needs; another key means the file is stale.
+
+    Returns
+    -------
+    arrays : dict of str to ndarray
+        The stored arrays.
+    meta : dict
+        The stored metadata.
+
+    Raises
+    ------
+    CacheError
+        If the file is missing, unreadable, foreign, of another version or key, announces
+        more than it holds, or is corrupt.
+
+    """
+    path = pathlib.Path(path)
+    if not path.is_file():
+        raise CacheError(f'{path}: no cache file')
+    try:
+        with zipfile.ZipFile(path) as archive:
+            members = _members(archive, path)
+            header = _read_header(archive, members, path)
+            _check_header(header, key, path)
+            announced = header.get('arrays')
+            if not isinstance(announced, dict) or set(announced) != set(members) - {HEADER_NAME}:
+                raise CacheError(f'{path}: arrays differ from the header')
+            # The arrays are stored uncompressed in this file: together they fit in it.
+            arrays, budget = {}, min(MAX_CACHE_BYTES, path.stat().st_size)
+            for name, spec in sorted(announced.items()):
+                array, size = _read_member(archive, members[name], name, path, budget)
+                budget -= size
+                if not isinstance(spec, dict) or (array.dtype.str, list(array.shape)) != (
+                        spec.get('dtype'), spec.get('shape')):
+                    raise CacheError(f'{path}: array {name!r} is {array.dtype.str} '
+                                     f'{list(array.shape)}, header says {spec!r:.200}')
+                arrays[name] = array
+    except CacheError:
+        raise
+    except (OSError, EOFError, ValueError, KeyError, TypeError, AttributeError, RuntimeError,
+            NotImplementedError, UnicodeDecodeError, zipfile.BadZipFile,
+            zipfile.LargeZipFile) as exc:
+        # ValueError covers bad .npy headers and bad JSON; RuntimeError an encrypted member.
+        raise CacheError(f'{path}: unreadable cache ({type(exc).__name__}: {exc})') from exc
+    if _array_digest(arrays) != header.get('sha256'):
+        raise CacheError(f'{path}: checksum mismatch (corrupt cache)')
+    meta = header.get('meta')
+    return arrays, meta if isinstance(meta, dict) else {}
+
+
+def load_or_build(path, key, build):
+    """
+    Load a verified cache, or build the content, save it and return it.
+
+    Parameters
+    ----------
+    path : str, Path or None
+        Cache file; None disables caching (always build, never write).
+    key : str
+        Key of the wanted content.
+    build : callable
+        ``build() -> (arrays, meta)``, called when the cache is missing or refused.
+
+    Returns
+    -------
+    arrays : dict of str to ndarray
+    meta : dict
+    from_cache : bool
+        True if the content came from a verified file.
+
+    """
+    if path is None:
+        arrays, meta = build()
+        return arrays, meta, False
+    path = pathlib.Path(path)
+    if path.exists():
+        try:
+            arrays, meta = load_cache(path, key)
+            return arrays, meta, True
+        except CacheError as exc:
+            LOGGER.warning('rebuilding the precomputed model: %s', exc)
+    arrays, meta = build()
+    try:
+        save_cache(path, key, arrays, meta)
+    except OSError as exc:  # a read-only cache directory must not stop the estimator
+        LOGGER.warning('could not write the model cache %s: %s', path, exc)
+    return arrays, meta, False

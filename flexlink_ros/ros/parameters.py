@@ -1,0 +1,256 @@
+"""
+Parameters of flexlink_node: one table for declaration, documentation and validation.
+
+The table is plain data so tests and the README generator use it without rclpy. The node turns
+each entry into a declared parameter with a descriptor (description, range, read-only flag) and
+validates runtime changes with :func:`validate_parameter`.
+"""
+
+import dataclasses
+import math
+from typing import Optional
+
+
+@dataclasses.dataclass(frozen=True)
+class ParameterSpec:
+    """
+    One node parameter.
+
+    Parameters
+    ----------
+    name : str
+        Parameter name (dots group them in YAML).
+    default : bool, int, float or str
+        Default value; its Python type is the parameter's type.
+    description : str
+        What it does, with its unit.
+    low, high : float or None
+        Inclusive range for numbers.
+    choices : tuple of str or None
+        Allowed values for strings.
+    read_only : bool
+        True if it can only be set at start-up (changing it needs a rebuilt model).
+    max_bytes : int or None
+        Longest accepted string (UTF-8 bytes); every string parameter has one.
+
+    """
+
+    name: str
+    default: object
+    description: str
+    low: Optional[float] = None
+    high: Optional[float] = None
+    choices: Optional[tuple] = None
+    read_only: bool = False
+    max_bytes: Optional[int] = None
+
+
+NAME_MAX_BYTES = 256    # frame, joint and topic names
+PATH_MAX_BYTES = 4096   # file and directory paths (PATH_MAX on Linux)
+PARAMETERS = (
+    ParameterSpec('mechanism', 'cho1992',
+                  'Mechanism file path, or a name looked up in share/flexlink_ros/config',
+                  read_only=True, max_bytes=PATH_MAX_BYTES),
+    ParameterSpec('crank_joint', 'crank', 'Name of the crank joint in the input JointState',
+                  max_bytes=NAME_MAX_BYTES),
+    ParameterSpec('input_topic', 'joint_states', 'JointState topic carrying the crank',
+                  read_only=True, max_bytes=NAME_MAX_BYTES),
+    ParameterSpec('model.tolerance', 0.02,
+                  'Relative RMS error the default sizes were planned for; a smaller value '
+                  'warns that `flexlink plan` should choose the model.* sizes',
+                  low=1e-4, high=0.5, read_only=True),
+    ParameterSpec('model.modes', 0, 'Basis directions from frozen modes; 0 = the planned '
+                  'default for the bearing model', low=0, high=80, read_only=True),
+    ParameterSpec('model.static', -1, 'Basis directions from static load responses; -1 = the '
+                  'planned default', low=-1, high=20, read_only=True),
+    ParameterSpec('model.grid_size', 128, 'Crank-angle grid points of the precomputed tables',
+                  low=8, high=4096, read_only=True),
+    ParameterSpec('model.elements_per_link', 4, 'Beam elements per link; 0 = the mechanism '
+                  'file\'s value', low=0, high=40, read_only=True),
+    ParameterSpec('model.rigid_crank', False, 'Treat the crank as rigid (its pin A fixed)',
+                  read_only=True),
+    ParameterSpec('model.bearings', 'flexible', 'Revolute bearings: flexible springs or rigid',
+                  choices=('flexible', 'rigid'), read_only=True, max_bytes=NAME_MAX_BYTES),
+    ParameterSpec('model.geometric_stiffness', True,
+                  'Include geometric stiffness from the rigid-body axial forces',
+                  read_only=True),
+    ParameterSpec('model.cache_dir', '', 'Directory of precomputed-model cache files '
+                  '(empty: ~/.cache/flexlink_ros)', read_only=True, max_bytes=PATH_MAX_BYTES),
+    ParameterSpec('model.warm_start', True,
+                  'Start from the periodic steady state at the first sample\'s speed'),
+    ParameterSpec('damping_ratio', 0.02, 'Modal damping ratio of every frozen mode',
+                  low=0.0, high=1.0, read_only=True),
+    ParameterSpec('frame_id', 'linkage_ground', 'Frame of the ground (O2 at its origin, '
+                  'x towards O4) for deflections and markers', max_bytes=NAME_MAX_BYTES),
+    ParameterSpec('markers.exaggeration', 10.0,
+                  'Scale applied to elastic deflections in the deformed-linkage markers',
+                  low=1.0, high=1e6),
+    ParameterSpec('markers.points_per_link', 9, 'Points drawn along each deformed link',
+                  low=2, high=200),
+    ParameterSpec('markers.every_n', 10,
+                  'Publish markers on every n-th sample (RViz/Foxglove need far less than 1 kHz)',
+                  low=1, high=100000),
+    ParameterSpec('diagnostics.criterion_warn', 100.0,
+                  'WARN when |dgamma/dt|/R of a joint exceeds this [rad/(s N)]',
+                  low=0.0, high=1e9),
+    ParameterSpec('diagnostics.criterion_error', 1000.0,
+                  'ERROR when |dgamma/dt|/R of a joint exceeds this [rad/(s N)]',
+                  low=0.0, high=1e9),
+    ParameterSpec('diagnostics.stale_input_s', 0.5,
+                  'ERROR when no valid input arrived for this long [s]', low=0.001, high=3600.0),
+    ParameterSpec('diagnostics.min_rate_hz', 50.0,
+                  'WARN when the input rate falls below this [Hz]', low=0.0, high=1e6),
+    ParameterSpec('diagnostics.error_indicator_warn', 0.05,
+                  'WARN when the estimator\'s error indicator exceeds this (relative)',
+                  low=0.0, high=10.0),
+    ParameterSpec('diagnostics.period_s', 1.0, 'Period of /diagnostics [s]',
+                  low=0.01, high=60.0),
+    ParameterSpec('record.enabled', False, 'Record input and outputs to MCAP',
+                  read_only=True),
+    ParameterSpec('record.path', '', 'MCAP file or directory (empty: ./flexlink_<time>)',
+                  read_only=True, max_bytes=PATH_MAX_BYTES),
+    ParameterSpec('record.max_bytes', 0, 'Split the recording at this size (0: never) [B]',
+                  low=0, high=2 ** 62, read_only=True),
+    ParameterSpec('record.max_duration_s', 0.0,
+                  'Split the recording after this duration (0: never) [s]',
+                  low=0.0, high=1e7, read_only=True),
+    ParameterSpec('qos.depth', 1000, 'History depth of the input subscription and outputs '
+                  '(1 s at 1 kHz: room for the warm start\'s pause)',
+                  low=1, high=100000, read_only=True),
+    ParameterSpec('qos.reliability', 'reliable', 'Reliability of input and outputs',
+                  choices=('reliable', 'best_effort'), read_only=True,
+                  max_bytes=NAME_MAX_BYTES),
+)
+
+SPECS = {spec.name: spec for spec in PARAMETERS}
+# Every parameter that is not read-only, and how a run-time change takes effect in the node.
+RUN_TIME_EFFECT = {
+    'crank_joint': 'the next message is searched for the new name',
+    'model.warm_start': 'the next reset starts warm or static',
+    'frame_id': 'the next outputs carry the new frame',
+    'markers.exaggeration': 'the next markers',
+    'markers.points_per_link': 'the next markers (encoder rebuilt)',
+    'markers.every_n': 'the next markers',
+    'diagnostics.criterion_warn': 'the next /diagnostics and markers',
+    'diagnostics.criterion_error': 'the next /diagnostics and markers',
+    'diagnostics.stale_input_s': 'the next /diagnostics',
+    'diagnostics.min_rate_hz': 'the next /diagnostics',
+    'diagnostics.error_indicator_warn': 'the next /diagnostics',
+    'diagnostics.period_s': 'the diagnostics timer is restarted with the new period',
+}
+
+
+def validate_parameter(name, value, current=None):
+    """
+    Check one parameter value; return None if acceptable, else the reason as a sentence.
+
+    Parameters
+    ----------
+    name : str
+        Parameter name.
+    value : object
+        Proposed value.
+    current : dict or None
+        Current values of all parameters, for checks that relate two of them.
+
+    """
+    spec = SPECS.get(name)
+    if spec is None:
+        return f'unknown parameter {name!r}'
+    expected = type(spec.default)
+    if expected is float and isinstance(value, int) and not isinstance(value, bool):
+        value = float(value)
+    if not isinstance(value, expected) or (expected is int and isinstance(value, bool)):
+        return f'{name} must be of type {expected.__name__}, got {type(value).__name__}'
+    if isinstance(value, float) and not math.isfinite(value):
+        return f'{name} must be finite, got {value}'
+    if spec.low is not None and value < spec.low:
+        return f'{name} must be >= {spec.low:g}, got {value}'
+    if spec.high is not None and value > spec.high:
+        return f'{name} must be <= {spec.high:g}, got {value}'
+    if spec.max_bytes is not None and len(value.encode('utf-8', 'replace')) > spec.max_bytes:
+        return (f'{name} must be at most {spec.max_bytes} bytes, got '
+                f'{len(value.encode("utf-8", "replace"))}')
+    if name == 'crank_joint' and not value:
+        return 'crank_joint must not be empty'
+    if spec.choices is not None and value not in spec.choices:
+        return f'{name} must be one of {", ".join(spec.choices)}, got {value!r}'
+    if name in ('diagnostics.criterion_warn', 'diagnostics.criterion_error') and current:
+        warn = value if name.endswith('warn') else current.get('diagnostics.criterion_warn')
+        error = value if name.endswith('error') else current.get('diagnostics.criterion_error')
+        if warn is not None and error is not None and warn > error:
+            return (f'diagnostics.criterion_warn ({warn:g}) must not exceed '
+                    f'diagnostics.criterion_error ({error:g})')
+    return None
+
+
+def validate_all(values):
+    """Validate a full mapping of parameter values; raise ValueError with every reason."""
+    reasons = [reason for name, value in values.items()
+               if (reason := validate_parameter(name, value, values)) is not None]
+    if reasons:
+        raise ValueError('; '.join(reasons))
+    return values
+
+
+def defaults():
+    """Mapping of every parameter name to its default value."""
+    return {spec.name: spec.default for spec in PARAMETERS}
+
+
+def markdown_table():
+    """The parameters as a markdown table (README)."""
+    rows = ['| parameter | default | range / choices | description |', '|---|---|---|---|']
+    for spec in PARAMETERS:
+        if spec.choices:
+            allowed = ', '.join(spec.choices)
+        elif spec.low is not None:
+            allowed = f'{spec.low:g} … {spec.high:g}'
+        else:
+            allowed = ''
+        ro = ' (start-up only)' if spec.read_only else ''
+        description = spec.description.replace('|', '\\|')   # a bare | splits the cell
+        rows.append(f'| `{spec.name}` | `{spec.default!r}` | {allowed} | '
+                    f'{description}{ro} |')
+    return '\n'.join(rows)
+
+
+def model_options(values):
+    """
+    The reduced-model options selected by parameter values.
+
+    Parameters
+    ----------
+    values : dict
+        Parameter name -> value (:data:`PARAMETERS`).
+
+    Returns
+    -------
+    core.reduced.ModelOptions
+
+    """
+    from ..core.reduction import model as reduced
+    modes = values['model.modes'] or None   # 0: the planned default for the bearing model
+    static = None if values['model.static'] < 0 else values['model.static']
+    return reduced.ModelOptions(modes=modes, static=static,
+                                grid_size=values['model.grid_size'],
+                                elements_per_link=values['model.elements_per_link'] or None,
+                                rigid_crank=values['model.rigid_crank'],
+                                bearings=values['model.bearings'],
+                                geometric_stiffness=values['model.geometric_stiffness'])
+
+
+def default_model_options(**overrides):
+    """
+    The node's default reduced model, with ``model.*`` parameters overridden by keyword.
+
+    Also the default of `flexlink estimate / bench / replay`. Sizes left at their defaults are
+    resolved for the overridden bearing and crank models (core.reduced.DEFAULT_SIZES).
+    """
+    values = defaults()
+    for name, value in overrides.items():
+        key = f'model.{name}'
+        if key not in values:
+            raise ValueError(f'unknown model option {name!r}')
+        values[key] = value
+    return model_options(values)
