@@ -6,6 +6,9 @@ keeps running; the CLI prints it on one line and exits 1. Bad arguments raise ``
 naming the argument.
 """
 
+import math
+import struct
+
 
 class FlexlinkError(Exception):
     """Root of the errors raised by flexlink_ros."""
@@ -26,7 +29,6 @@ class LoopClosureError(FlexlinkError):
     def __init__(self, crank_angle_rad, reason):
         self.crank_angle_rad = crank_angle_rad
         self.reason = reason
-        import math
         super().__init__(
             f'linkage cannot assemble at crank angle {math.degrees(crank_angle_rad):.3f} deg: '
             f'{reason}')
@@ -62,3 +64,43 @@ class OutlierSample(FlexlinkError):
     def __init__(self, reason):
         self.reason = reason
         super().__init__(f'outlier: {reason}')
+
+
+class McapFileError(FlexlinkError):
+    """Raised if a file is not an MCAP file at all (its reason names why)."""
+
+
+class DamagedRecord(FlexlinkError):
+    """Raised if a record cannot be used; the message is the one-line reason (always caught)."""
+
+
+class MalformedCdr(FlexlinkError, struct.error, ValueError):
+    """Raised if bytes are not a JointState within the input bounds; the message says why."""
+
+
+class InputRejected(FlexlinkError, ValueError):
+    """
+    Raised if a JointState cannot be used; the message says why (counted and skipped).
+
+    Parameters
+    ----------
+    reason : str
+        One line.
+    kind : str
+        ``'malformed'`` (not a JointState within the input bounds) or ``'content'`` (a
+        JointState without a usable crank sample); the node counts them apart.
+
+    """
+
+    def __init__(self, reason, kind='content'):
+        super().__init__(reason)
+        self.kind = kind
+
+
+# Not an error: the node's orderly exit on SIGINT/SIGTERM before it spins.
+class StartupInterrupted(SystemExit):
+    """SIGINT/SIGTERM before the node spins: exit code 0 (raised in the main thread)."""
+
+    def __init__(self, signal_name):
+        super().__init__(0)
+        self.signal_name = signal_name

@@ -8,7 +8,8 @@ import pytest
 import scipy.linalg
 
 from flexlink_ros.core.fe import beam
-from flexlink_ros.core.fe.linkage import (FlexibleLinkage, ModelOptions, element_geometric_stiffness,
+from flexlink_ros.core.options import ModelOptions
+from flexlink_ros.core.fe.linkage import (FlexibleLinkage, element_geometric_stiffness,
                                         gauss_points, link_matrices)
 from flexlink_ros.core.kinematics import solve_kinematics
 from flexlink_ros.core.mechanism import load_mechanism
@@ -17,10 +18,10 @@ CONFIG = pathlib.Path(__file__).resolve().parents[1] / 'config'
 
 NO_KG = dict(geometric_stiffness=False)
 CASES = {
-    'all flexible, pins': ModelOptions(**NO_KG),
-    'flexible bearings, shaft spring': ModelOptions(bearings='flexible', **NO_KG),
-    'rigid crank, flexible bearings': ModelOptions(rigid_crank=True, bearings='flexible', **NO_KG),
-    'rigid crank, pins': ModelOptions(rigid_crank=True, **NO_KG),
+    'all flexible, pins': ModelOptions.full_model(**NO_KG),
+    'flexible bearings, shaft spring': ModelOptions.full_model(bearings='flexible', **NO_KG),
+    'rigid crank, flexible bearings': ModelOptions.full_model(rigid_crank=True, bearings='flexible', **NO_KG),
+    'rigid crank, pins': ModelOptions.full_model(rigid_crank=True, **NO_KG),
 }
 
 
@@ -130,8 +131,8 @@ def test_load_vector_is_consistent_load_of_rigid_accelerations_and_gravity(cho, 
 
 
 def test_joint_masses_are_conserved_and_split(cho):
-    pins = FlexibleLinkage(cho, ModelOptions(**NO_KG))
-    springs = FlexibleLinkage(cho, ModelOptions(bearings='flexible', **NO_KG))
+    pins = FlexibleLinkage(cho, ModelOptions.full_model(**NO_KG))
+    springs = FlexibleLinkage(cho, ModelOptions.full_model(bearings='flexible', **NO_KG))
     total = sum(cho.joint_masses.values())
     assert sum(sum(pins.end_masses(link)) for link in pins.links) == pytest.approx(total)
     # flexible bearings: the ground's shares at O2 and O4 stay on the ground
@@ -145,7 +146,7 @@ def test_joint_masses_are_conserved_and_split(cho):
 
 
 def test_gather_derivatives_match_finite_differences(cho):
-    model = FlexibleLinkage(cho, ModelOptions(bearings='flexible', **NO_KG))
+    model = FlexibleLinkage(cho, ModelOptions.full_model(bearings='flexible', **NO_KG))
     angle, h = np.array([0.7]), 1e-5
     for link in model.links:
         t = [model.gather(link, angle + k * h) for k in (-1, 0, 1)]
@@ -181,16 +182,16 @@ def test_stiff_bearings_approach_exact_pins(cho):
         return np.sqrt(scipy.linalg.eigh(system.stiffness[0], system.mass[0],
                                          eigvals_only=True, subset_by_index=[0, 3]))
 
-    pins = lowest(cho, ModelOptions(**NO_KG))
+    pins = lowest(cho, ModelOptions.full_model(**NO_KG))
     stiff = lowest(dataclasses.replace(cho, bearing_stiffness=cho.bearing_stiffness * 1e5),
-                   ModelOptions(bearings='flexible', **NO_KG))
-    soft = lowest(cho, ModelOptions(bearings='flexible', **NO_KG))
+                   ModelOptions.full_model(bearings='flexible', **NO_KG))
+    soft = lowest(cho, ModelOptions.full_model(bearings='flexible', **NO_KG))
     np.testing.assert_allclose(stiff, pins, rtol=2e-4)
     assert np.all(soft < pins)          # bearing compliance lowers every frequency
 
 
 def test_output_operators(cho):
-    model = FlexibleLinkage(cho, ModelOptions(bearings='flexible', **NO_KG))
+    model = FlexibleLinkage(cho, ModelOptions.full_model(bearings='flexible', **NO_KG))
     theta = np.radians([10.0, 250.0])
     out = model.output_operator(theta)
     # lever tip = the lever-side node of bearing B, already in the ground frame
@@ -307,10 +308,10 @@ def test_geometric_stiffness_with_constant_force_is_a4():
 
 def test_bad_options_are_refused(cho):
     with pytest.raises(ValueError, match='bearings'):
-        FlexibleLinkage(cho, ModelOptions(bearings='elastic'))
+        FlexibleLinkage(cho, ModelOptions.full_model(bearings='elastic'))
     with pytest.raises(ValueError, match='bearing_stiffness'):
         FlexibleLinkage(dataclasses.replace(cho, bearing_stiffness=None),
-                        ModelOptions(bearings='flexible'))
+                        ModelOptions.full_model(bearings='flexible'))
 
 
 # -- geometric stiffness from the rigid-body analysis (core/dynamics.py) ------------------
@@ -347,7 +348,7 @@ def test_quasi_static_axial_forces_under_gravity_equal_hand_statics(cho, bearing
     (joint mass m_B). Each bar's transverse end force is half its transverse weight; the two
     axial end forces at B follow from the pin's equilibrium; the tension then varies linearly
     with the axial weight component. FE element forces (K U = R) equal its element means."""
-    model = FlexibleLinkage(cho, ModelOptions(rigid_crank=True, bearings=bearings, **NO_KG))
+    model = FlexibleLinkage(cho, ModelOptions.full_model(rigid_crank=True, bearings=bearings, **NO_KG))
     theta = np.radians([33.0, 250.0])
     system = model.assemble(theta)
     displacement = np.linalg.solve(system.stiffness, system.load_at(0.0)[..., None])[..., 0]

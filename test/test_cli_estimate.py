@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from test_reduced import ZETA, toy_samples
 
+from flexlink_ros.core.numerics import relative_rms
 from flexlink_ros.cli import main as cli, estimate as cli_estimate
 from flexlink_ros.core.reduction import model as reduced
 from flexlink_ros.core.mechanism import load_mechanism
@@ -79,7 +80,7 @@ def test_estimate_matches_the_reference_over_the_last_revolution(toy):
         ref = toy_reference(None, None, 391.0 * cli_estimate.RPM, angles)
         for key in ('lever_tip', 'coupler_mid'):
             estimate = np.column_stack([result[key]['dx_m'], result[key]['dy_m']])
-            assert cli_estimate.relative_rms(estimate, ref[key]) < 0.01
+            assert relative_rms(estimate, ref[key]) < 0.01
 
 
 def test_plan_picks_the_first_candidate_within_tolerance(toy, monkeypatch):

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from flexlink_ros.ros.crank_driver import RPM, SpeedProfile, build_parser, wrap_angle
+from flexlink_ros.core.numerics import RPM, wrap_to_pi
+from flexlink_ros.ros.crank_driver import SpeedProfile, build_parser
 
 REPO_CONFIG = 'config/crank_driver.yaml'
 
@@ -35,9 +36,9 @@ def test_profile_shapes():
     assert [sweep.speed(t) / RPM for t in (0.0, 0.5, 1.0, 1.5, 2.0)] == \
         pytest.approx([0.0, 60.0, 120.0, 60.0, 0.0], abs=1e-9)
     assert sweep.angle(4.0) == pytest.approx(2 * 0.5 * 120.0 * RPM * 2.0)
-    assert wrap_angle(math.pi) == pytest.approx(-math.pi)
-    assert wrap_angle(-math.pi) == pytest.approx(-math.pi)
-    assert wrap_angle(7.0) == pytest.approx(7.0 - 2 * math.pi)
+    assert wrap_to_pi(math.pi) == pytest.approx(-math.pi)
+    assert wrap_to_pi(-math.pi) == pytest.approx(-math.pi)
+    assert wrap_to_pi(7.0) == pytest.approx(7.0 - 2 * math.pi)
     with pytest.raises(ValueError, match='profile'):
         SpeedProfile('sine')
 

@@ -6,8 +6,10 @@ import numpy as np
 import pytest
 import scipy.linalg
 
+from flexlink_ros.core.numerics import RPM, relative_rms
 from flexlink_ros.studies import flex_study as fs
-from flexlink_ros.core.fe.linkage import FlexibleLinkage, ModelOptions
+from flexlink_ros.core.options import ModelOptions
+from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.mechanism import load_mechanism
 from flexlink_ros.core.fe.modes import solve_frozen_modes
 from flexlink_ros.core.fe.simulate import periodic_response
@@ -76,7 +78,7 @@ def test_periodic_sweep_finds_the_veering_across_the_wrap():
 
 def test_relative_rms_and_modes_needed():
     reference = np.column_stack([np.cos(np.linspace(0, 6, 50)), np.sin(np.linspace(0, 6, 50))])
-    assert fs.relative_rms(1.1 * reference, reference) == pytest.approx(0.1)
+    assert relative_rms(1.1 * reference, reference) == pytest.approx(0.1)
     counts = np.array([1, 2, 3, 4, 6])
     errors = np.array([0.5, 0.008, 0.02, 0.004, 1e-9])
     assert fs.modes_needed(counts, errors, 0.01) == 4      # N = 2 passes but 3 fails again
@@ -96,7 +98,7 @@ def test_harmonic_shares_and_signed_area():
 
 
 def test_pinned_coupler_mode_bends_like_a_simply_supported_beam(small_mechanism):
-    model = FlexibleLinkage(small_mechanism, ModelOptions(rigid_crank=True,
+    model = FlexibleLinkage(small_mechanism, ModelOptions.full_model(rigid_crank=True,
                                                           geometric_stiffness=False))
     theta = np.radians([40.0])
     frozen = solve_frozen_modes(model.assemble(theta), 2)
@@ -110,24 +112,24 @@ def test_pinned_coupler_mode_bends_like_a_simply_supported_beam(small_mechanism)
 
 
 def test_truncation_error_falls_with_modes_and_vanishes_with_all(small_mechanism):
-    model = FlexibleLinkage(small_mechanism, ModelOptions(rigid_crank=True,
+    model = FlexibleLinkage(small_mechanism, ModelOptions.full_model(rigid_crank=True,
                                                           geometric_stiffness=False))
     counts = [1, 2, 5, 9, model.size]
-    study = fs.truncation_study(model, 391.0 * fs.RPM_TO_RAD_S, counts, steps=120, points=30)
+    study = fs.truncation_study(model, 391.0 * RPM, counts, steps=120, points=30)
     plain, static = study['plain'], study['static']
     assert np.all(np.diff(plain, axis=0) <= 1e-3 * plain[:-1])   # non-increasing in N
     assert np.all(plain[-1] < 1e-9) and np.all(static[-1] < 1e-9)
     assert np.all(static[0] < 0.1 * plain[0])   # the static correction pays at N = 1
     assert fs.modes_needed(study['modes'], static[:, 1], 0.01) == 1
     # the post-processed static correction is the one periodic_response applies
-    run = periodic_response(model, 391.0 * fs.RPM_TO_RAD_S, 'modal', modes=2,
+    run = periodic_response(model, 391.0 * RPM, 'modal', modes=2,
                             static_correction=True, steps=120, points=30)
     assert fs.output_errors(run.outputs, study['reference'].outputs) == pytest.approx(
         static[1], rel=1e-9)
 
 
 def test_sweep_case_shapes_and_status(small_mechanism):
-    system = FlexibleLinkage(small_mechanism, ModelOptions(geometric_stiffness=True)).assemble(0.3)
+    system = FlexibleLinkage(small_mechanism, ModelOptions.full_model(geometric_stiffness=True)).assemble(0.3)
     assert np.all(np.isfinite(system.geometric['w2']))
     available = True
     cases = fs.paper_frequency_cases(available)
@@ -141,7 +143,7 @@ def test_sweep_case_shapes_and_status(small_mechanism):
 
 def test_sharp_veering_between_samples_is_refined_to_a_small_nonzero_gap(small_mechanism):
     """Rigid crank with K_G at 45 rad/s: coupler and lever modes veer within a sample step."""
-    system = FlexibleLinkage(small_mechanism, ModelOptions(geometric_stiffness=True)).assemble(0.3)
+    system = FlexibleLinkage(small_mechanism, ModelOptions.full_model(geometric_stiffness=True)).assemble(0.3)
     assert np.all(np.isfinite(system.geometric['w2']))
     case = fs.paper_frequency_cases(True)['rigid_crank_kg_45']
     sweep = fs.sweep_case(small_mechanism, case, np.arange(0.0, 360.0, 2.0), 3)

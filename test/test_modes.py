@@ -6,7 +6,8 @@ import pathlib
 import numpy as np
 import pytest
 
-from flexlink_ros.core.fe.linkage import FlexibleLinkage, ModelOptions
+from flexlink_ros.core.options import ModelOptions
+from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.mechanism import load_mechanism
 from flexlink_ros.core.fe.modes import frozen_mode_sweep, modal_damping, solve_frozen_modes
 
@@ -26,7 +27,7 @@ def _pinned_frequency_hz(mech, link):
 
 
 def test_modes_are_mass_normalised_and_damping_is_modal(cho):
-    model = FlexibleLinkage(cho, ModelOptions(bearings='flexible', **NO_KG))
+    model = FlexibleLinkage(cho, ModelOptions.full_model(bearings='flexible', **NO_KG))
     system = model.assemble(np.radians([27.0, 123.0]))
     modes = solve_frozen_modes(system)
     eye = np.broadcast_to(np.eye(model.size), system.mass.shape)
@@ -46,7 +47,7 @@ def test_modes_are_mass_normalised_and_damping_is_modal(cho):
 def test_rigid_crank_modes_are_pinned_coupler_and_lever(cho):
     """Rigid crank, exact pins: the lowest modes are the coupler's and the lever's first
     pinned-pinned bending modes (B hardly moves), the paper's 'near 34 Hz and 41 Hz'."""
-    model = FlexibleLinkage(cho, ModelOptions(rigid_crank=True, **NO_KG))
+    model = FlexibleLinkage(cho, ModelOptions.full_model(rigid_crank=True, **NO_KG))
     modes = frozen_mode_sweep(model, np.radians(np.arange(0.0, 360.0, 30.0)), count=2)
     np.testing.assert_allclose(modes.frequencies_hz[:, 0], _pinned_frequency_hz(cho, 1),
                                rtol=1e-3)
@@ -58,7 +59,7 @@ def test_rigid_crank_modes_are_pinned_coupler_and_lever(cho):
 
 def test_crank_mode_varies_over_the_cycle(cho):
     """Fig. 7: modes 1-2 nearly constant, mode 3 (crank) varies strongly; no K_G, no speed."""
-    model = FlexibleLinkage(cho, ModelOptions(**NO_KG))
+    model = FlexibleLinkage(cho, ModelOptions.full_model(**NO_KG))
     modes = frozen_mode_sweep(model, np.radians(np.arange(0.0, 360.0, 10.0)), count=3)
     f = modes.frequencies_hz
     spread = (f.max(0) - f.min(0)) / f.mean(0)
@@ -67,7 +68,7 @@ def test_crank_mode_varies_over_the_cycle(cho):
 
 
 def test_frequencies_without_geometric_stiffness_do_not_depend_on_speed(cho):
-    model = FlexibleLinkage(cho, ModelOptions(**NO_KG))
+    model = FlexibleLinkage(cho, ModelOptions.full_model(**NO_KG))
     system = model.assemble(np.radians([27.0, 200.0]))
     still = solve_frozen_modes(system, 3)
     fast = solve_frozen_modes(system, 3, speed=45.0, accel=100.0)
@@ -79,14 +80,14 @@ def test_frequencies_without_geometric_stiffness_do_not_depend_on_speed(cho):
 
 def test_flexible_bearings_lower_frequencies(cho):
     theta = np.radians(np.arange(0.0, 360.0, 45.0))
-    pins = frozen_mode_sweep(FlexibleLinkage(cho, ModelOptions(**NO_KG)), theta, 3)
-    springs = frozen_mode_sweep(FlexibleLinkage(cho, ModelOptions(bearings='flexible', **NO_KG)),
+    pins = frozen_mode_sweep(FlexibleLinkage(cho, ModelOptions.full_model(**NO_KG)), theta, 3)
+    springs = frozen_mode_sweep(FlexibleLinkage(cho, ModelOptions.full_model(bearings='flexible', **NO_KG)),
                                 theta, 3)
     assert np.all(springs.eigenvalues < pins.eigenvalues)
 
 
 def test_count_is_checked(cho):
-    system = FlexibleLinkage(cho, ModelOptions(**NO_KG)).assemble(0.0)
+    system = FlexibleLinkage(cho, ModelOptions.full_model(**NO_KG)).assemble(0.0)
     with pytest.raises(ValueError, match='count'):
         solve_frozen_modes(system, 0)
     with pytest.raises(ValueError, match='count'):
@@ -99,7 +100,7 @@ def test_more_elements_converge(cho):
     freqs = []
     for elements in (2, 4, 8, 16):
         mech = dataclasses.replace(cho, elements_per_link=elements)
-        freqs.append(frozen_mode_sweep(FlexibleLinkage(mech, ModelOptions(**NO_KG)), theta,
+        freqs.append(frozen_mode_sweep(FlexibleLinkage(mech, ModelOptions.full_model(**NO_KG)), theta,
                                        3).frequencies_hz[0])
     freqs = np.array(freqs)
     errors = np.abs(freqs[:-1] - freqs[-1])
@@ -124,7 +125,7 @@ def test_geometric_stiffness_pieces_with_constant_tension(cho, monkeypatch):
     fake.axial_force = axial_force
     monkeypatch.setitem(sys.modules, 'flexlink_ros.core.dynamics', fake)
     mech = dataclasses.replace(cho, elements_per_link=8)
-    model = FlexibleLinkage(mech, ModelOptions(rigid_crank=True))
+    model = FlexibleLinkage(mech, ModelOptions.full_model(rigid_crank=True))
     system = model.assemble(np.radians([27.0, 200.0]))
     spec = cho.links[1]
     euler = np.pi ** 2 * cho.youngs_modulus * spec.second_moment / spec.length ** 2

@@ -165,7 +165,7 @@ def test_quadratic_form_equals_the_full_order_on_v_q(mech, options):
     basis, _ = reduced.build_basis(samples, options.modes, options.static,
                                    np.linspace(0.0, 60.0, 2))
     linkage = assembly.FlexibleLinkage(reduced.fe_mechanism(mech, options),
-                                       reduced.fe_options(options))
+                                       options)
     theta = np.linspace(0.0, 2.0 * np.pi, 9, endpoint=False) + 0.2
     q = np.random.default_rng(3).standard_normal((theta.size, basis.shape[1])) * 1e-4
     full = so.second_order_outputs(linkage, q @ basis.T, theta)['outputs']

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 import scipy.integrate
 
-from flexlink_ros.core.fe.linkage import FlexibleLinkage, ModelOptions
+from flexlink_ros.core.options import ModelOptions
+from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.mechanism import load_mechanism
 from flexlink_ros.core.fe.modes import modal_damping
 from flexlink_ros.core.fe.simulate import frozen_eigen, periodic_response, step_convergence
@@ -37,7 +38,7 @@ def test_periodic_state_matches_independent_integration(cho):
         bearing_stiffness=cho.bearing_stiffness / 4,
         links=tuple(dataclasses.replace(link, second_moment=link.second_moment * 1e4)
                     for link in cho.links))
-    model = FlexibleLinkage(soft, ModelOptions(rigid_crank=True, bearings='flexible', **NO_KG))
+    model = FlexibleLinkage(soft, ModelOptions.full_model(rigid_crank=True, bearings='flexible', **NO_KG))
     speed = 391 * RPM
     response = periodic_response(model, speed, steps=720, points=24, stages=3)
     n = model.size
@@ -63,15 +64,15 @@ def test_periodic_state_matches_independent_integration(cho):
 
 @pytest.mark.parametrize('stages, order', [(2, 3.0), (3, 5.0)])
 def test_time_step_convergence_order(cho, stages, order):
-    model = FlexibleLinkage(_small(cho), ModelOptions(rigid_crank=True, **NO_KG))
+    model = FlexibleLinkage(_small(cho), ModelOptions.full_model(rigid_crank=True, **NO_KG))
     check = step_convergence(model, 391 * RPM, steps=(120, 240, 480), reference_steps=1920,
                              points=24, stages=stages)
     assert check['observed_order'][-1] == pytest.approx(order, abs=0.3), check
     assert check['max_error_m'][-1] < 1e-4 * check['scale_m']
 
 
-@pytest.mark.parametrize('options', [ModelOptions(**NO_KG),
-                                     ModelOptions(rigid_crank=True, bearings='flexible',
+@pytest.mark.parametrize('options', [ModelOptions.full_model(**NO_KG),
+                                     ModelOptions.full_model(rigid_crank=True, bearings='flexible',
                                                   **NO_KG)])
 def test_modal_response_with_all_modes_equals_full_order(cho, options):
     model = FlexibleLinkage(_small(cho), options)
@@ -87,7 +88,7 @@ def test_modal_response_with_all_modes_equals_full_order(cho, options):
 def test_static_correction_recovers_truncated_axial_response(cho):
     """Rigid bearings: with 3 modes the lever tip (axial) deflection is missed; the
     residual-flexibility correction restores it, and the coupler mid-point too."""
-    model = FlexibleLinkage(_small(cho), ModelOptions(rigid_crank=True, **NO_KG))
+    model = FlexibleLinkage(_small(cho), ModelOptions.full_model(rigid_crank=True, **NO_KG))
     kwargs = dict(steps=240, points=24)
     full = periodic_response(model, 391 * RPM, **kwargs)
     plain = periodic_response(model, 391 * RPM, method='modal', modes=3, **kwargs)
@@ -101,7 +102,7 @@ def test_static_correction_recovers_truncated_axial_response(cho):
 
 def test_slow_rotation_is_quasi_static(cho):
     """At 1 rad/s inertia is negligible: U = (K + K_G + K_c)^-1 R at every angle."""
-    model = FlexibleLinkage(_small(cho), ModelOptions(**NO_KG))
+    model = FlexibleLinkage(_small(cho), ModelOptions.full_model(**NO_KG))
     response = periodic_response(model, 1.0, steps=240, points=12)
     system = model.assemble(response.crank_angle)
     _, _, stiffness, load = system.evaluate(1.0)
@@ -114,9 +115,9 @@ def test_rigid_bearings_keep_lever_tip_deflection_tiny(cho):
     """Paper, Fig. 20: with rigid bearings and a rigid crank the lever tip moves only by
     axial strain, far less than the coupler mid-point; flexible bearings move it much more."""
     options = dict(rigid_crank=True, **NO_KG)
-    pins = periodic_response(FlexibleLinkage(cho, ModelOptions(**options)), 391 * RPM,
+    pins = periodic_response(FlexibleLinkage(cho, ModelOptions.full_model(**options)), 391 * RPM,
                              steps=240, points=24).peak_to_peak
-    springs = periodic_response(FlexibleLinkage(cho, ModelOptions(bearings='flexible',
+    springs = periodic_response(FlexibleLinkage(cho, ModelOptions.full_model(bearings='flexible',
                                                                   **options)),
                                 391 * RPM, steps=240, points=24).peak_to_peak
     assert pins[:2].max() < 1e-2 * pins[2:].max()
@@ -124,7 +125,7 @@ def test_rigid_bearings_keep_lever_tip_deflection_tiny(cho):
 
 
 def test_bad_arguments(cho):
-    model = FlexibleLinkage(_small(cho, 1), ModelOptions(rigid_crank=True, **NO_KG))
+    model = FlexibleLinkage(_small(cho, 1), ModelOptions.full_model(rigid_crank=True, **NO_KG))
     with pytest.raises(ValueError, match='method'):
         periodic_response(model, 10.0, method='fourier')
     with pytest.raises(ValueError, match='modes'):

@@ -8,7 +8,8 @@ import pytest
 import scipy.linalg
 
 from flexlink_ros.core.fe import stiffness_damping as sd
-from flexlink_ros.core.fe.linkage import FlexibleLinkage, ModelOptions, link_matrices
+from flexlink_ros.core.options import ModelOptions
+from flexlink_ros.core.fe.linkage import FlexibleLinkage, link_matrices
 from flexlink_ros.core.mechanism import load_mechanism
 
 BETA = 1e-4
@@ -16,7 +17,7 @@ BETA = 1e-4
 
 def _model(elements=4, bearings='rigid', rigid_crank=True, gravity=True, geometric=True):
     mech = dataclasses.replace(load_mechanism('cho1992'), elements_per_link=elements)
-    return FlexibleLinkage(mech, ModelOptions(rigid_crank=rigid_crank, bearings=bearings,
+    return FlexibleLinkage(mech, ModelOptions.full_model(rigid_crank=rigid_crank, bearings=bearings,
                                               gravity=gravity, geometric_stiffness=geometric))
 
 

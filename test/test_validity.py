@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 
+from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.fe import linkage as assembly
 from flexlink_ros.core import validity
 from flexlink_ros.core.fe import second_order as so
@@ -159,7 +160,7 @@ def test_is_valid_summary():
 def test_rigid_crank_only_flexible_links(mech):
     """The crank is not an indicator link; a model with a flexible crank still works."""
     model = assembly.FlexibleLinkage(dataclasses.replace(mech, elements_per_link=2),
-                                     assembly.ModelOptions(gravity=False))
+                                     ModelOptions.full_model(gravity=False))
     theta = np.array([0.0, 1.0])
     u = np.zeros((2, model.size))
     ratios = validity.load_ratios(model, u, theta, 10.0)

@@ -19,13 +19,13 @@ import time
 
 import numpy as np
 
+from ..core.numerics import RPM, relative_rms
 from ..ros import parameters as node_params
 from .main import emit
 from ..core.reduction import model as reduced
 from ..core.estimation.streaming import StreamingEstimator, compiled_step_available, replay
 from ..core.mechanism import load_mechanism
 
-RPM = 2.0 * math.pi / 60.0   # rad/s per rpm
 # Speeds of Cho 1992's deflection plots [rpm]: the accuracy checks use them.
 PAPER_RPM = (269.0, 391.0)
 # Samples whose update time is measured after a warm-up (median and p99 are reported).
@@ -139,13 +139,6 @@ def run_estimate(model, rpm, seconds=3.0, rate_hz=1000.0, jitter=0.0, warm_start
     }
 
 
-def relative_rms(estimate, reference):
-    """Relative RMS error over both components, sqrt(mean |e - r|^2 / mean |r|^2)."""
-    estimate, reference = np.asarray(estimate), np.asarray(reference)
-    scale = np.mean(np.sum(reference ** 2, axis=-1))
-    return float(np.sqrt(np.mean(np.sum((estimate - reference) ** 2, axis=-1)) / scale))
-
-
 def configuration_error(mechanism, model, options, rpm, rate_hz=1000.0, jitter=0.0,
                         seconds=None, seed=0):
     """
@@ -183,7 +176,7 @@ def full_order_cpu_per_second(mechanism, options, rpm, rate_hz=1000.0, steps=40)
     from ..core.fe import linkage as assembly
     from ..core.integrators import RadauIIA
     mech = reduced.fe_mechanism(mechanism, options)
-    linkage = assembly.FlexibleLinkage(mech, reduced.fe_options(options))
+    linkage = assembly.FlexibleLinkage(mech, options)
     method = RadauIIA(2)
     speed, h = rpm * RPM, 1.0 / rate_hz
     q = np.zeros(linkage.size)
@@ -295,7 +288,7 @@ def full_order_dofs(mechanism, options):
     try:
         from ..core.fe import linkage as assembly
         return assembly.FlexibleLinkage(reduced.fe_mechanism(mechanism, options),
-                                        reduced.fe_options(options)).size
+                                        options).size
     except Exception:   # noqa: BLE001 -- no FE model (toy systems, stripped checkouts)
         return None
 

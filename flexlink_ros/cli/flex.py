@@ -22,6 +22,7 @@ import time
 import numpy as np
 
 from .main import degree_range, emit
+from ..core.options import ModelOptions
 from ..core.fe import linkage as assembly, modes, simulate
 from ..errors import FlexlinkError
 from ..core.mechanism import load_mechanism
@@ -104,7 +105,7 @@ def build_model(args):
     if args.bearings not in assembly.BEARING_MODELS:
         raise ValueError(f'`--bearings` must be one of {", ".join(assembly.BEARING_MODELS)}, '
                          f'got {args.bearings!r}')
-    options = assembly.ModelOptions(rigid_crank=args.rigid_crank, bearings=args.bearings,
+    options = ModelOptions.full_model(rigid_crank=args.rigid_crank, bearings=args.bearings,
                                     geometric_stiffness=not args.no_geometric_stiffness,
                                     gravity=not args.no_gravity)
     return mech, assembly.FlexibleLinkage(mech, options)

@@ -29,6 +29,7 @@ import time
 
 import numpy as np
 
+from ..names import JOINT_STATE, MARKER_ARRAY, VECTOR3_STAMPED, output_topics
 from .main import emit
 from .estimate import _common, load_model, model_options
 from ..io.cdr import parse_joint_state
@@ -41,9 +42,6 @@ from ..io.mcap_reader import (
     message_fields,
 )
 
-JOINT_STATE = 'sensor_msgs/msg/JointState'
-VECTOR3_STAMPED = 'geometry_msgs/msg/Vector3Stamped'
-MARKER_ARRAY = 'visualization_msgs/msg/MarkerArray'
 PROGRESS_PERIOD_S = 0.5  # seconds between progress-bar updates
 
 
@@ -768,14 +766,6 @@ def _damage_note(damaged):
     file, offset, reason = damaged[0]
     where = '' if offset is None else f' at offset {offset}'
     return f' ({len(damaged)} damaged places skipped; first in {file}{where}: {reason})'
-
-
-def output_topics(node_name):
-    """Output topic names of a node called ``node_name`` (as flexlink_node publishes them)."""
-    base = '/' + node_name.strip('/')
-    return {'lever_tip': f'{base}/lever_tip/deflection',
-            'coupler_mid': f'{base}/coupler_mid/deflection',
-            'criteria': f'{base}/joint_criteria', 'markers': f'{base}/markers'}
 
 
 class _Progress:

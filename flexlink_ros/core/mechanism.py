@@ -30,10 +30,9 @@ from typing import Optional
 
 import yaml
 
+from ..names import JOINT_NAMES, LINK_NAMES
 from ..errors import MechanismError
 
-LINK_NAMES = ('crank', 'coupler', 'lever')
-JOINT_NAMES = ('O2', 'A', 'B', 'O4')
 # The two members of each joint, first then second (-1 is the ground).
 JOINT_MEMBERS = {'O2': (-1, 0), 'A': (0, 1), 'B': (1, 2), 'O4': (2, -1)}
 BRANCHES = ('open', 'crossed')

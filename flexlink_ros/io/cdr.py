@@ -12,7 +12,8 @@ Alignment counts from the end of the 4-byte encapsulation header.
 import functools
 import struct
 
-from ..core.reduction.model import JOINTS
+from ..errors import MalformedCdr
+from ..names import JOINT_NAMES as JOINTS
 
 CDR_LE = b'\x00\x01\x00\x00'  # encapsulation header: plain CDR, little endian
 
@@ -23,10 +24,6 @@ MAX_MESSAGE_BYTES = 1 << 20   # 1 MiB: a JointState of MAX_JOINTS joints is unde
 MAX_JOINTS = 1024             # names and each of position, velocity, effort
 MAX_NAME_BYTES = 256          # frame_id and each joint name, UTF-8, without the NUL
 _ENCAPSULATIONS = {b'\x00\x00': '>', b'\x00\x01': '<'}   # plain CDR big / little endian
-
-
-class MalformedCdr(struct.error, ValueError):
-    """Raised if bytes are not a JointState within the input bounds; the message says why."""
 
 
 def _align(offset, size):

@@ -28,7 +28,7 @@ import mmap
 import struct
 import zlib
 
-from ..errors import FlexlinkError
+from ..errors import DamagedRecord, FlexlinkError, McapFileError
 
 MCAP_MAGIC = b'\x89MCAP0\r\n'
 MAX_CHUNK_BYTES = 64 * 2**20  # largest uncompressed chunk read (the recorder writes 128 KiB)
@@ -52,14 +52,6 @@ OPCODE_NAMES = {HEADER: 'header', FOOTER: 'footer', SCHEMA: 'schema', CHANNEL: '
                 0x08: 'chunk index', 0x09: 'attachment', 0x0A: 'attachment index',
                 STATISTICS: 'statistics', 0x0C: 'metadata', 0x0D: 'metadata index',
                 0x0E: 'summary offset', DATA_END: 'data end'}
-
-
-class McapFileError(FlexlinkError):
-    """Raised if a file is not an MCAP file at all (its reason names why)."""
-
-
-class DamagedRecord(Exception):
-    """Raised if a record cannot be used; the message is the one-line reason (always caught)."""
 
 
 @dataclasses.dataclass

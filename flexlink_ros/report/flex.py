@@ -34,8 +34,10 @@ from matplotlib import colormaps
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
+from ..core.numerics import RPM
 from ..studies import flex_study as fs
-from ..core.fe.linkage import FlexibleLinkage, ModelOptions
+from ..core.options import ModelOptions
+from ..core.fe.linkage import FlexibleLinkage
 from ..core.kinematics import solve_kinematics
 from ..core.mechanism import LINK_NAMES, load_mechanism
 from ..core.fe.modes import solve_frozen_modes
@@ -77,7 +79,7 @@ def _mode_counts(size, quick, dense=True):
 
 
 def _rigid_crank_options(bearings, geometric):
-    return ModelOptions(rigid_crank=True, bearings=bearings, geometric_stiffness=geometric)
+    return ModelOptions.full_model(rigid_crank=True, bearings=bearings, geometric_stiffness=geometric)
 
 
 def compute_flex(mechanism=None, quick=False):
@@ -125,7 +127,7 @@ def compute_flex(mechanism=None, quick=False):
     for bearings in BEARINGS:
         model = FlexibleLinkage(mechanism, _rigid_crank_options(bearings, geometric))
         for rpm in fs.PAPER_RPM:
-            speed = rpm * fs.RPM_TO_RAD_S
+            speed = rpm * RPM
             reference = periodic_response(model, speed, 'full', steps=REFERENCE_STEPS[q],
                                           points=OUTPUT_POINTS[q])
             data['responses'][bearings, rpm] = reference
@@ -147,7 +149,7 @@ def compute_flex(mechanism=None, quick=False):
     started = time.perf_counter()
     only_b = dataclasses.replace(mechanism, bearing_joints=('B',))
     model = FlexibleLinkage(only_b, _rigid_crank_options('flexible', geometric))
-    data['b_only_responses'] = {rpm: periodic_response(model, rpm * fs.RPM_TO_RAD_S, 'full',
+    data['b_only_responses'] = {rpm: periodic_response(model, rpm * RPM, 'full',
                                                        steps=REFERENCE_STEPS[q],
                                                        points=OUTPUT_POINTS[q])
                                 for rpm in fs.PAPER_RPM}
@@ -160,7 +162,7 @@ def compute_flex(mechanism=None, quick=False):
             model = FlexibleLinkage(mechanism, _rigid_crank_options(bearings, False))
             for rpm in fs.PAPER_RPM:
                 data['no_kg_responses'][bearings, rpm] = periodic_response(
-                    model, rpm * fs.RPM_TO_RAD_S, 'full', steps=REFERENCE_STEPS[q],
+                    model, rpm * RPM, 'full', steps=REFERENCE_STEPS[q],
                     points=OUTPUT_POINTS[q])
         seconds['responses without K_G'] = time.perf_counter() - started
     data['claims'] = compare_claims(data)
@@ -172,7 +174,7 @@ def _mode_shapes(mechanism, deg, geometric):
     theta = np.radians([deg])
     out = {}
     for key, rigid_crank in (('flex', False), ('rigid_crank', True)):
-        model = FlexibleLinkage(mechanism, ModelOptions(rigid_crank=rigid_crank,
+        model = FlexibleLinkage(mechanism, ModelOptions.full_model(rigid_crank=rigid_crank,
                                                         geometric_stiffness=geometric))
         frozen = solve_frozen_modes(model.assemble(theta), 3,
                                     SHAPE_SPEED_RAD_S if geometric else 0.0)
@@ -194,7 +196,7 @@ def _mode_shapes(mechanism, deg, geometric):
 
 def _deflected_linkage(mechanism, geometric, q):
     """Periodic response at 30 rad/s, all links flexible, pins (Figs. 16-19), for drawing."""
-    model = FlexibleLinkage(mechanism, ModelOptions(geometric_stiffness=geometric))
+    model = FlexibleLinkage(mechanism, ModelOptions.full_model(geometric_stiffness=geometric))
     response = periodic_response(model, SHAPE_SPEED_RAD_S, 'full', steps=REFERENCE_STEPS[q],
                                  points=OUTPUT_POINTS[q])
     positions, operator = model.shape_operator(response.crank_angle)

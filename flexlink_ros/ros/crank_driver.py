@@ -21,9 +21,9 @@ import random
 import sys
 import time
 
+from ..core.numerics import RPM, wrap_to_pi
 from .parameters import ParameterSpec
 
-RPM = 2.0 * math.pi / 60.0  # rad/s per rpm
 PROFILES = ('constant', 'ramp', 'sweep')
 
 PARAMETERS = (
@@ -122,11 +122,6 @@ class SpeedProfile:
         return cycles * 0.5 * self.omega_max * P + partial
 
 
-def wrap_angle(angle):
-    """Angle wrapped to [-pi, pi) [rad]."""
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
-
-
 def _parameter_help():
     lines = ['parameters (--ros-args -p name:=value, or --params-file FILE):']
     for spec in PARAMETERS:
@@ -218,7 +213,7 @@ def _make_node_class():
             elapsed_s = (now.nanoseconds - self._origin_ns) * 1e-9
             message = self._message
             message.header.stamp = now.to_msg()
-            message.position = [wrap_angle(self._angle_at(now.nanoseconds))]
+            message.position = [wrap_to_pi(self._angle_at(now.nanoseconds))]
             message.velocity = [self._profile.speed(elapsed_s)]
             self._publisher.publish(message)
             self.published += 1

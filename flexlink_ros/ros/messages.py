@@ -22,8 +22,9 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
-JOINT_NAMES = ('O2', 'A', 'B', 'O4')
-LINK_NAMES = ('crank', 'coupler', 'lever')
+from ..errors import InputRejected
+from ..names import JOINT_NAMES, LINK_NAMES
+
 
 OK, WARN, ERROR, STALE = (DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR,
                           DiagnosticStatus.STALE)
@@ -31,25 +32,6 @@ LEVEL_NAMES = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR', STALE: 'STALE'}
 LEVEL_COLOURS = {OK: (0.2, 0.7, 0.3), WARN: (1.0, 0.7, 0.0), ERROR: (0.9, 0.1, 0.1),
                  STALE: (0.5, 0.5, 0.5)}
 LINK_COLOURS = ((0.25, 0.45, 0.85), (0.85, 0.4, 0.1), (0.2, 0.6, 0.4))
-
-
-class InputRejected(ValueError):
-    """
-    Raised if a JointState cannot be used; the message says why (counted and skipped).
-
-    Parameters
-    ----------
-    reason : str
-        One line.
-    kind : str
-        ``'malformed'`` (not a JointState within the input bounds) or ``'content'`` (a
-        JointState without a usable crank sample); the node counts them apart.
-
-    """
-
-    def __init__(self, reason, kind='content'):
-        super().__init__(reason)
-        self.kind = kind
 
 
 def stamp_to_ns(stamp):

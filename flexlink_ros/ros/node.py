@@ -22,15 +22,9 @@ import os
 import signal
 import sys
 
-NODE_NAME = 'flexlink_node'
+from ..errors import StartupInterrupted
+from ..names import NODE_NAME, TOPICS
 
-
-class StartupInterrupted(SystemExit):
-    """SIGINT/SIGTERM before the node spins: exit code 0 (raised in the main thread)."""
-
-    def __init__(self, signal_name):
-        super().__init__(0)
-        self.signal_name = signal_name
 
 
 # Start-up state: 'active' until the node spins; 'signal' = a signal not acted on yet.
@@ -92,9 +86,6 @@ from ..errors import FlexlinkError, OutlierSample, RecorderError  # noqa: E402
 from ..core.estimation.streaming import SampleFlag, StreamingEstimator  # noqa: E402
 from ..core.mechanism import load_mechanism  # noqa: E402
 
-# Topics relative to the node's namespace (~ = the node's private namespace).
-TOPICS = {'lever_tip': '~/lever_tip/deflection', 'coupler_mid': '~/coupler_mid/deflection',
-          'criteria': '~/joint_criteria', 'markers': '~/markers', 'diagnostics': '/diagnostics'}
 WARN_THROTTLE_S = 1.0  # at most one warning per second per kind of bad input
 # The default model (node parameters, core.reduced.DEFAULT_SIZES) meets this relative RMS
 # error on Cho 1992 against flexlink plan's scene reference (1.3 % coupler, 0.9 % lever).

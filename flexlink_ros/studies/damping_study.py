@@ -42,7 +42,9 @@ import math
 
 import numpy as np
 
-from ..core.fe.linkage import FlexibleLinkage, ModelOptions
+from ..core.numerics import relative_rms
+from ..core.options import ModelOptions
+from ..core.fe.linkage import FlexibleLinkage
 from ..core.mechanism import Mechanism, load_mechanism
 from ..core.fe.simulate import periodic_response
 from ..core.fe.stiffness_damping import (
@@ -57,7 +59,7 @@ def matched_model(mechanism='cho1992', elements=8, gravity=False, bearings='flex
     """The package's model in the peer's matched conventions (rigid crank, split masses)."""
     mech = mechanism if isinstance(mechanism, Mechanism) else load_mechanism(mechanism)
     mech = dataclasses.replace(mech, elements_per_link=elements, joint_mass_split=0.5)
-    return FlexibleLinkage(mech, ModelOptions(rigid_crank=True, bearings=bearings,
+    return FlexibleLinkage(mech, ModelOptions.full_model(rigid_crank=True, bearings=bearings,
                                               geometric_stiffness=True, gravity=gravity))
 
 
@@ -120,12 +122,6 @@ def spurious_axial_force(model, response, speed, beta):
         out[link] = (element_resultants(model, link, naive, beta)['axial']
                      - element_resultants(model, link, right, beta)['axial'])
     return out
-
-
-def relative_rms(mine, peer):
-    """RMS of (mine - peer) relative to the RMS of peer (means included)."""
-    mine, peer = np.asarray(mine), np.asarray(peer)
-    return float(np.sqrt(np.mean((mine - peer) ** 2) / np.mean(peer ** 2)))
 
 
 def compare_with_peer(peer, linear):
@@ -202,7 +198,7 @@ def main(argv=None):
 
 
 __all__ = ['DAMPING', 'matched_model', 'full_order_response', 'spurious_axial_force',
-           'relative_rms', 'compare_with_peer', 'point_rms', 'main']
+           'compare_with_peer', 'point_rms', 'main']
 
 
 if __name__ == '__main__':

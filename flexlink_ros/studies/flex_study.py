@@ -23,7 +23,9 @@ import dataclasses
 import numpy as np
 import scipy.optimize
 
-from ..core.fe.linkage import FlexibleLinkage, ModelOptions
+from ..core.numerics import RPM, relative_rms
+from ..core.options import ModelOptions
+from ..core.fe.linkage import FlexibleLinkage
 from ..core.kinematics import solve_kinematics
 from ..core.fe.modes import solve_frozen_modes
 from ..core.fe.simulate import DEFAULT_POINTS, DEFAULT_STEPS, periodic_response
@@ -32,7 +34,6 @@ from ..core.fe.simulate import _residual_flexibility  # same correction as perio
 # Crank speeds of the paper's frequency plots [rad/s] (Figs. 8-13) and deflection plots [rpm].
 PAPER_SPEEDS_RAD_S = (30.0, 45.0)
 PAPER_RPM = (269.0, 391.0)
-RPM_TO_RAD_S = 2.0 * np.pi / 60.0
 # Relative RMS error targets of the modes-needed study.
 TOLERANCES = (0.01, 0.05)
 # Output points of :attr:`PeriodicResponse.outputs` grouped per physical point.
@@ -63,7 +64,7 @@ def quasi_static_axial_force(mechanism, state, link, x):
     ndarray, shape (N, m)
 
     """
-    model = FlexibleLinkage(mechanism, ModelOptions(geometric_stiffness=False))
+    model = FlexibleLinkage(mechanism, ModelOptions.full_model(geometric_stiffness=False))
     theta = np.atleast_1d(state.angle[0])
     system = model.assemble(theta)
     speed = np.broadcast_to(np.asarray(state.omega[0], dtype=float), theta.shape)
@@ -118,11 +119,11 @@ def paper_frequency_cases(geometric):
 
     """
     cases = [
-        FrequencyCase('flex', 'all flexible, no K_G', ModelOptions(geometric_stiffness=False)),
+        FrequencyCase('flex', 'all flexible, no K_G', ModelOptions.full_model(geometric_stiffness=False)),
         FrequencyCase('rigid_crank', 'rigid crank, no K_G',
-                      ModelOptions(rigid_crank=True, geometric_stiffness=False)),
+                      ModelOptions.full_model(rigid_crank=True, geometric_stiffness=False)),
         FrequencyCase('rigid_crank_bearings', 'rigid crank, flexible bearings, no K_G',
-                      ModelOptions(rigid_crank=True, bearings='flexible',
+                      ModelOptions.full_model(rigid_crank=True, bearings='flexible',
                                    geometric_stiffness=False)),
     ]
     if geometric:
@@ -130,12 +131,12 @@ def paper_frequency_cases(geometric):
             tag = f'{speed:g} rad/s'
             cases += [
                 FrequencyCase(f'flex_kg_{speed:g}', f'all flexible, K_G at {tag}',
-                              ModelOptions(), speed),
+                              ModelOptions.full_model(), speed),
                 FrequencyCase(f'rigid_crank_kg_{speed:g}', f'rigid crank, K_G at {tag}',
-                              ModelOptions(rigid_crank=True), speed),
+                              ModelOptions.full_model(rigid_crank=True), speed),
                 FrequencyCase(f'rigid_crank_bearings_kg_{speed:g}',
                               f'rigid crank, flexible bearings, K_G at {tag}',
-                              ModelOptions(rigid_crank=True, bearings='flexible'), speed),
+                              ModelOptions.full_model(rigid_crank=True, bearings='flexible'), speed),
             ]
     return {case.key: case for case in cases}
 
@@ -439,27 +440,6 @@ def _between(left, right, count):
 # -- modal truncation --------------------------------------------------------------------------
 
 
-def relative_rms(estimate, reference):
-    """
-    Relative RMS error over both components, ``sqrt(mean |e - r|^2 / mean |r|^2)``.
-
-    Parameters
-    ----------
-    estimate, reference : ndarray, shape (P, 2)
-
-    Returns
-    -------
-    float
-
-    """
-    estimate = np.asarray(estimate, dtype=float)
-    reference = np.asarray(reference, dtype=float)
-    scale = np.mean(np.sum(reference ** 2, axis=-1))
-    if scale == 0.0:
-        return 0.0 if np.allclose(estimate, 0.0) else float('inf')
-    return float(np.sqrt(np.mean(np.sum((estimate - reference) ** 2, axis=-1)) / scale))
-
-
 def output_errors(outputs, reference):
     """Relative RMS error of the lever tip and the coupler mid-point, ndarray shape (2,)."""
     return np.array([relative_rms(outputs[:, cols], reference[:, cols])
@@ -642,9 +622,9 @@ def shape_correlation(values, template):
         return np.where(norms > 0.0, values @ template / norms, 0.0)
 
 
-__all__ = ['PAPER_SPEEDS_RAD_S', 'PAPER_RPM', 'RPM_TO_RAD_S', 'TOLERANCES', 'OUTPUT_POINTS',
+__all__ = ['PAPER_SPEEDS_RAD_S', 'PAPER_RPM', 'TOLERANCES', 'OUTPUT_POINTS',
            'quasi_static_axial_force', 'FrequencyCase',
            'paper_frequency_cases', 'Sweep', 'sweep_case', 'refine_mode_event', 'ModeEvent',
-           'mac', 'detect_mode_events', 'relative_rms', 'output_errors', 'truncation_study',
+           'mac', 'detect_mode_events', 'output_errors', 'truncation_study',
            'modes_needed', 'harmonic_shares', 'signed_area', 'uniform_load_shape',
            'bending_deflection', 'shape_correlation']

@@ -583,9 +583,10 @@ def peer_static(mechanism, crank_angle=0.0, *, elements_per_link=DEFAULT_ELEMENT
 def linear_model(mechanism, *, elements_per_link=DEFAULT_ELEMENTS, bearings='rigid',
                  gravity=True):
     """The package's FE model (rigid crank) matching the peer's settings."""
-    from ..core.fe.linkage import FlexibleLinkage, ModelOptions
+    from ..core.options import ModelOptions
+    from ..core.fe.linkage import FlexibleLinkage
     mech = dataclasses.replace(_mechanism(mechanism), elements_per_link=elements_per_link)
-    options = ModelOptions(rigid_crank=True,
+    options = ModelOptions.full_model(rigid_crank=True,
                            bearings={'rigid': 'rigid', 'springs': 'flexible'}[bearings],
                            geometric_stiffness=True, gravity=gravity)
     return FlexibleLinkage(mech, options)

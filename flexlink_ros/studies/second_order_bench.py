@@ -205,7 +205,7 @@ def time_factored(mechanism, bearings, rigid_crank, size, samples=20000, repeat=
     """
     options = reduced.ModelOptions(bearings=bearings, rigid_crank=rigid_crank, grid_size=8)
     linkage = assembly.FlexibleLinkage(reduced.fe_mechanism(mechanism, options),
-                                       reduced.fe_options(options))
+                                       options)
     rng = np.random.default_rng(1)
     basis = np.linalg.qr(rng.standard_normal((linkage.size, size)))[0]
     data = kernel_data(linkage, basis)

@@ -99,7 +99,7 @@ def reduced_response(mechanism, rpm, gravity, elements, points=720, sizes=None, 
                                    elements_per_link=elements, bearings='rigid')
     model = reduced.build_model(mech, options)
     linkage = assembly.FlexibleLinkage(reduced.fe_mechanism(mech, options),
-                                       reduced.fe_options(options))
+                                       options)
     speed = rpm * math.pi / 30.0
     angles, q, _ = reduced.periodic_response(model, speed, steps=720)
     stride = 720 // points
@@ -149,7 +149,7 @@ def reduced_costs(mechanism):
     for (bearings, rigid_crank), (modes, static) in reduced.DEFAULT_SIZES.items():
         options = reduced.ModelOptions(bearings=bearings, rigid_crank=rigid_crank, grid_size=8)
         linkage = assembly.FlexibleLinkage(reduced.fe_mechanism(mechanism, options),
-                                           reduced.fe_options(options))
+                                           options)
         size = modes + static
         basis = np.eye(linkage.size)[:, :size] if size <= linkage.size else None
         if basis is None:

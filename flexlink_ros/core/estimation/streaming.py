@@ -36,6 +36,7 @@ import time
 import numpy as np
 from scipy.linalg import lapack
 
+from ..numerics import TWO_PI, wrap_to_2pi, wrap_to_pi
 from ..reduction import model as reduced
 from ...errors import FlexlinkError, OutlierSample
 from ..integrators import RADAU_TABLEAUX
@@ -52,20 +53,11 @@ LOGGER = logging.getLogger(__name__)
 DEFAULT_FIT_TIME_CONSTANT_S = 0.02
 # The fit always spans at least this many recent samples, whatever the sample rate.
 MIN_FIT_SAMPLES = 4.0
-TWO_PI = 2.0 * math.pi
 
 
 def compiled_step_available():
     """True when the compiled step (core/estimation/_radau_step.c) is built and estimators use it."""
     return _radau_step is not None
-
-
-def wrap_angle(angle):
-    """Angle wrapped to [0, 2 pi)."""
-    wrapped = math.fmod(angle, TWO_PI)
-    if wrapped < 0.0:
-        wrapped += TWO_PI
-    return wrapped if wrapped < TWO_PI else 0.0
 
 
 def _hermite_basis(t):
@@ -74,11 +66,6 @@ def _hermite_basis(t):
     t3 = t2 * t
     h01 = t2 * (3.0 - 2.0 * t)
     return 1.0 - h01, t - 2.0 * t2 + t3, h01, t3 - t2
-
-
-def _wrap_pi(angle):
-    """Angle wrapped to [-pi, pi)."""
-    return (angle + math.pi) % TWO_PI - math.pi
 
 
 def _shift_quadratic_moments(s, t, d, f, dy):
@@ -263,7 +250,7 @@ class CrankRateFilter:
                 self._speed_fit.add(0.0, 1.0, 0.0, 0.0)
             else:
                 self._angle_fit.add(0.0, 1.0, 0.0, 0.0)
-            return wrap_angle(self._angle), self.speed, self.accel
+            return wrap_to_2pi(self._angle), self.speed, self.accel
         dt = time_s - self._time
         self._mean_dt = dt if self._mean_dt is None else 0.9 * self._mean_dt + 0.1 * dt
         tau = max(self.time_constant_s, MIN_FIT_SAMPLES * self._mean_dt)
@@ -273,7 +260,7 @@ class CrankRateFilter:
             predicted = 0.5 * (self.speed + speed) * dt
         else:
             predicted = self.speed * dt + 0.5 * self.accel * dt * dt
-        advance = predicted + _wrap_pi(angle - self._angle - predicted)
+        advance = predicted + wrap_to_pi(angle - self._angle - predicted)
         self._angle += advance
         self.advance = advance
         self._time = time_s
@@ -295,7 +282,7 @@ class CrankRateFilter:
             else:
                 self.speed = c1 / self.time_constant_s
                 self.accel = 2.0 * c2 / self.time_constant_s ** 2
-        return wrap_angle(self._angle), self.speed, self.accel
+        return wrap_to_2pi(self._angle), self.speed, self.accel
 
     def signal(self, times, angles, speeds=None):
         """update() over arrays: rows of (wrapped angle, speed, accel, advance).
@@ -565,7 +552,7 @@ class InputGate:
             jump = abs(speed - reference[2])
             if jump > self.jump_accel * dt + self.jump_allowance:
                 return f'speed jumped by {jump:.6g} rad/s in {dt:.6g} s'
-        advance = abs(_wrap_pi(angle - reference[1]))
+        advance = abs(wrap_to_pi(angle - reference[1]))
         if advance > self.speed_bound * dt + ANGLE_ALLOWANCE_RAD:
             return f'angle moved by {advance:.6g} rad in {dt:.6g} s'
         return ''
@@ -587,7 +574,7 @@ class InputGate:
             kind = self.START
         else:
             dt = (stamp_ns - last[0]) * 1e-9
-            if dt == 0.0 and abs(wrap_angle(angle) - wrap_angle(last[1])) < 1e-12:
+            if dt == 0.0 and abs(wrap_to_2pi(angle) - wrap_to_2pi(last[1])) < 1e-12:
                 return self.REPEATED, 0, 'repeated sample ignored'
             if dt <= 0.0 or dt > self.reset_gap_s:
                 kind = self.START

@@ -50,42 +50,19 @@ import dataclasses
 
 import numpy as np
 
+from ...names import OUTPUT_NAMES
 from . import beam
 from ..kinematics import solve_kinematics
+from ..options import ModelOptions
 from ..mechanism import JOINT_MEMBERS, JOINT_NAMES, LINK_NAMES
 
 BEARING_MODELS = ('rigid', 'flexible')
 # Gauss-Legendre points per element for the geometric stiffness: exact for F(x) v'^2 of degree 6.
 GAUSS_POINTS = 4
 # Output channels of :meth:`FlexibleLinkage.output_operator`, in order.
-OUTPUT_NAMES = ('lever_tip_dx', 'lever_tip_dy', 'coupler_mid_dx', 'coupler_mid_dy')
 # Load and geometric-stiffness pieces: gravity, crank acceleration, crank speed squared.
 PIECES = ('1', 'a', 'w2')
 _GAUSS_X, _GAUSS_W = np.polynomial.legendre.leggauss(GAUSS_POINTS)
-
-
-@dataclasses.dataclass(frozen=True)
-class ModelOptions:
-    """
-    Modelling choices of the frozen structure.
-
-    Parameters
-    ----------
-    rigid_crank : bool
-        Treat the crank as rigid: crank pin A is a fixed point of the frozen structure.
-    bearings : str
-        'rigid' (exact pins) or 'flexible' (Eq. 23 springs at ``mechanism.bearing_joints``).
-    geometric_stiffness : bool
-        Include A.4 with the quasi-static axial forces of the rigid-body analysis.
-    gravity : bool
-        Include gravity (``mechanism.gravity``) in loads and axial forces.
-
-    """
-
-    rigid_crank: bool = False
-    bearings: str = 'rigid'
-    geometric_stiffness: bool = True
-    gravity: bool = True
 
 
 @dataclasses.dataclass(frozen=True)
@@ -330,7 +307,8 @@ class FlexibleLinkage:
 
     """
 
-    def __init__(self, mechanism, options=ModelOptions()):
+    def __init__(self, mechanism, options=None):
+        options = ModelOptions.full_model() if options is None else options
         if options.bearings not in BEARING_MODELS:
             raise ValueError(f'`bearings` must be one of {BEARING_MODELS}, '
                              f'got {options.bearings!r}')

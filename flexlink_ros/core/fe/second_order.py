@@ -64,6 +64,7 @@ import dataclasses
 
 import numpy as np
 
+from ...names import OUTPUT_NAMES
 from . import beam
 from .linkage import transverse_slopes
 from ..kinematics import solve_kinematics
@@ -72,7 +73,6 @@ from ..kinematics import solve_kinematics
 # coupler's S(L/2) for the mid-point.
 FORMS = ('crank', 'coupler', 'lever', 'coupler_half')
 # Output channels (as core.assembly.OUTPUT_NAMES).
-OUTPUT_NAMES = ('lever_tip_dx', 'lever_tip_dy', 'coupler_mid_dx', 'coupler_mid_dy')
 # Gauss points for a partial element: v'^2 is a quartic, 3 points integrate it exactly.
 _PARTIAL_GAUSS = 3
 
@@ -470,7 +470,7 @@ def quadratic_tables(linkage, basis, crank_angle, forms=None):
     Parameters
     ----------
     linkage : FlexibleLinkage
-        The full model the basis belongs to (core.reduced.fe_mechanism / fe_options).
+        The full model the basis belongs to (core.reduction.model.fe_mechanism, the same options).
     basis : ndarray, shape (n, r)
     crank_angle : ndarray, shape (N,)
         E.g. the reduced model's grid, 2 pi k / N.

@@ -33,10 +33,17 @@ that product by block to read only the monomial rows each block uses.
 """
 
 import dataclasses
-import importlib
 
 import numpy as np
 import scipy.linalg
+
+from . import store
+from ..integrators import RadauIIA, compose_affine, step_maps
+from .. import dynamics
+from ..fe import linkage as assembly
+from ..fe import simulate
+from ..options import DEFAULT_SIZES, MODEL_VERSION, ModelOptions
+from ...names import JOINT_NAMES as JOINTS, OUTPUT_NAMES
 
 # Monomials of (w, a) that multiply the tabulated pieces, in table-row order ('w4': damping
 # fit; 'wa', 'w3': time derivative of the joint reactions).
@@ -50,9 +57,7 @@ MODE_WEIGHT_POWER = 2.0
 # Static snapshots per angle and speed: the load at that speed ('w') and the acceleration piece.
 STATIC_PIECES = ('w', 'a')
 # Output channels of the deflection operator, in order.
-OUTPUT_NAMES = ('lever_tip_dx', 'lever_tip_dy', 'coupler_mid_dx', 'coupler_mid_dy')
 # Joints of the criteria data (see core/criteria.py).
-JOINTS = ('O2', 'A', 'B', 'O4')
 
 
 def monomial_values(w, a):
@@ -639,7 +644,6 @@ def periodic_response(model, speed, start_angle=0.0, steps=720, stages=2, blocks
         Reduced coordinates and velocities.
 
     """
-    from ..integrators import RadauIIA, compose_affine, step_maps
     size = model.size
     if blocks is None:
         blocks = lambda theta, w, a: system_blocks(model, model.evaluate(theta, w, a))  # noqa
@@ -677,17 +681,6 @@ def periodic_response(model, speed, start_angle=0.0, steps=720, stages=2, blocks
 # Models of a mechanism: options, cache, and the full-order pieces from core/assembly.py
 
 # Bump when the precompute changes what it stores; older cache files are then rebuilt.
-MODEL_VERSION = 3
-# Default (modes, static) per (bearing model, rigid crank), from flexlink plan on Cho 1992
-# with geometric stiffness, 269 and 391 rpm. Rigid crank: the smallest sizes meeting 1 % on
-# the coupler mid-point against that model's own full order (flexible bearings put the
-# 5th-7th crank harmonics on the first two modes, which a constant basis must resolve to a
-# fraction of zeta; 12 + 4 gave 1.7 % at 391 rpm, 14 + 4 1.1 %, 16 + 2 0.4 %). Flexible
-# crank: the crank-dominated mode (72-127 Hz over the cycle) needs far more directions;
-# 24 + 2 at grid 128 and 4 elements gives 1.3 % / 0.9 % (coupler / lever) against a
-# 6-element reference, 16 + 4 gave 16 %; with rigid bearings 8 + 4 at grid 256 gives 0.9 %.
-DEFAULT_SIZES = {('rigid', True): (4, 2), ('flexible', True): (16, 2),
-                 ('rigid', False): (8, 4), ('flexible', False): (24, 2)}
 # Points per beam element where link shapes are tabulated (3 elements: 10 points per link).
 SHAPE_POINTS_PER_ELEMENT = 3
 # Grid points and steps per revolution of the full-order reference.
@@ -697,63 +690,11 @@ REFERENCE_POINT_STRIDE = 4
 _REFERENCE_CACHE = {}
 
 
-@dataclasses.dataclass(frozen=True)
-class ModelOptions:
-    """
-    Options of the precomputed reduced model (all part of the cache key).
-
-    Parameters
-    ----------
-    modes : int or None
-        Basis directions from the frozen modes (None: :data:`DEFAULT_SIZES` for the bearings
-        and the crank model).
-    static : int or None
-        Further basis directions from static load responses (None: as ``modes``).
-    grid_size : int
-        Crank-angle grid points per revolution.
-    elements_per_link : int or None
-        Beam elements per link of the full model (None: the mechanism's value).
-    rigid_crank : bool
-        Treat the crank as rigid.
-    bearings : str
-        'flexible' (springs of the mechanism file) or 'rigid'.
-    geometric_stiffness : bool
-        Include the geometric stiffness of the rigid-body axial forces.
-    speed_max : float
-        Largest |crank speed| served [rad/s].
-
-    """
-
-    modes: object = None
-    static: object = None
-    grid_size: int = 128
-    elements_per_link: object = None
-    rigid_crank: bool = True
-    bearings: str = 'flexible'
-    geometric_stiffness: bool = True
-    speed_max: float = 65.0
-
-    def __post_init__(self):
-        if self.bearings not in ('flexible', 'rigid'):
-            raise ValueError(f"`bearings` must be 'flexible' or 'rigid', got {self.bearings!r}")
-        modes, static = DEFAULT_SIZES[self.bearings, bool(self.rigid_crank)]
-        object.__setattr__(self, 'modes', modes if self.modes is None else int(self.modes))
-        object.__setattr__(self, 'static', static if self.static is None else int(self.static))
-        if self.modes < 1 or self.static < 0:
-            raise ValueError(f'`modes` must be >= 1 and `static` >= 0, got {self.modes}, '
-                             f'{self.static}')
-        if self.grid_size < 8:
-            raise ValueError(f'`grid_size` must be >= 8, got {self.grid_size}')
-        if not self.speed_max > 0.0:
-            raise ValueError(f'`speed_max` must be positive, got {self.speed_max}')
-
-
 def model_key(mechanism, options):
     """Cache key of a mechanism's reduced model (hex)."""
-    from .store import cache_key
-    # A model cached before the reactions were available must not be reused once they are.
-    return cache_key('reduced-model', MODEL_VERSION, mechanism.key(),
-                     dataclasses.asdict(options), {'criteria': criteria_available()})
+    # {'criteria': True} keeps the keys of models cached when the reactions were optional.
+    return store.cache_key('reduced-model', MODEL_VERSION, mechanism.key(),
+                           options.cache_fields(), {'criteria': True})
 
 
 def model_for_mechanism(mechanism, options=None, cache_dir=None, use_cache=True):
@@ -765,7 +706,7 @@ def model_for_mechanism(mechanism, options=None, cache_dir=None, use_cache=True)
     mechanism : Mechanism
     options : ModelOptions or None
     cache_dir : str, Path or None
-        Cache directory (None: core.cache.default_cache_dir()).
+        Cache directory (None: core.store.default_cache_dir()).
     use_cache : bool
         False builds without reading or writing a cache.
 
@@ -774,18 +715,17 @@ def model_for_mechanism(mechanism, options=None, cache_dir=None, use_cache=True)
     ReducedModel
 
     """
-    from . import store as cache
     options = options or ModelOptions()
     key = model_key(mechanism, options)
     path = None
     if use_cache:
-        directory = cache.default_cache_dir() if cache_dir in (None, '') else cache_dir
+        directory = store.default_cache_dir() if cache_dir in (None, '') else cache_dir
         path = f'{directory}/{mechanism.name}-{key[:16]}.npz'
 
     def build():
         return build_model(mechanism, options).to_arrays()
 
-    arrays, meta, _ = cache.load_or_build(path, key, build)
+    arrays, meta, _ = store.load_or_build(path, key, build)
     return ReducedModel.from_arrays(arrays, meta)
 
 
@@ -796,15 +736,8 @@ def build_model(mechanism, options):
     forces, criteria_source = reaction_pieces(mechanism, angles)
     return reduce_samples(samples, options.modes, options.static, options.speed_max,
                           mechanism.damping_ratio, forces=forces,
-                          info={'options': dataclasses.asdict(options),
+                          info={'options': options.cache_fields(),
                                 'mechanism': mechanism.name, 'criteria': criteria_source})
-
-
-def fe_options(options):
-    """core.assembly.ModelOptions for the physical choices of ``options``."""
-    from ..fe import linkage as assembly
-    return assembly.ModelOptions(rigid_crank=options.rigid_crank, bearings=options.bearings,
-                                 geometric_stiffness=options.geometric_stiffness)
 
 
 def fe_mechanism(mechanism, options):
@@ -842,26 +775,11 @@ def frozen_samples_for(mechanism, options, points_per_element=SHAPE_POINTS_PER_E
     The frozen eigenproblem and the modal damping use ``K + K_G(w, a)`` as core/modes.py does
     (no centrifugal term); the equations of motion add the rotating-frame terms K_c.
 
-    Raises
-    ------
-    FlexlinkError
-        If the flexible FE model (core/assembly.py) is not in this checkout.
-
     """
-    from ...errors import FlexlinkError
-    try:
-        from ..fe import linkage as assembly
-    except ImportError as exc:
-        raise FlexlinkError('the flexible FE model (core/assembly.py) is not in this '
-                            f'checkout: {exc}') from exc
     mechanism = fe_mechanism(mechanism, options)
-    linkage = assembly.FlexibleLinkage(mechanism, fe_options(options))
+    linkage = assembly.FlexibleLinkage(mechanism, options)
     angles = 2.0 * np.pi * np.arange(options.grid_size) / options.grid_size
-    try:
-        system = linkage.assemble(angles)
-    except ImportError as exc:   # geometric stiffness needs core/dynamics.py
-        raise FlexlinkError(f'the flexible FE model needs a module not in this checkout: '
-                            f'{exc}') from exc
+    system = linkage.assemble(angles)
     frozen = {'1': system.stiffness + system.geometric['1'], 'a': system.geometric['a'],
               'w2': system.geometric['w2']}
     stiffness = {'1': frozen['1'], 'a': system.coupling['a'] + system.geometric['a'],
@@ -888,28 +806,15 @@ def reaction_pieces(mechanism, angles):
 
     Returns
     -------
-    forces : dict or None
-        As :func:`reduce_samples` takes them; None if core/dynamics.py is not available.
+    forces : dict
+        As :func:`reduce_samples` takes them.
     source : str
         Where the reactions come from.
 
     """
-    try:
-        from .. import dynamics
-    except ImportError:
-        return None, 'unavailable (core/dynamics.py not in this checkout)'
     pieces = dynamics.reaction_pieces(mechanism, angles)
     forces = {'force': pieces['force'], 'force_rate': pieces['force_rate']}
     return forces, 'rigid-body Newton-Euler reactions (core/dynamics.py)'
-
-
-def criteria_available():
-    """Whether this checkout can tabulate joint reactions (part of the cache key)."""
-    try:
-        importlib.import_module('.dynamics', __package__)
-    except ImportError:
-        return False
-    return True
 
 
 def reference_response(mechanism, options, speed, angles, steps=REFERENCE_STEPS):
@@ -958,21 +863,23 @@ def reference_response(mechanism, options, speed, angles, steps=REFERENCE_STEPS)
 
 def _reference_revolution(mechanism, options, speed, steps):
     """Outputs (points, 4) over one revolution from crank angle 0, and their source."""
-    try:
-        from ..fe import simulate
-    except ImportError:
-        simulate = None
-    if simulate is not None:
-        from ..fe import linkage as assembly
-        linkage = assembly.FlexibleLinkage(fe_mechanism(mechanism, options),
-                                           fe_options(options))
-        result = simulate.periodic_response(linkage, speed, method='full', steps=steps,
-                                            points=steps // REFERENCE_POINT_STRIDE)
-        return result.outputs, 'core.simulate full order'
+    linkage = assembly.FlexibleLinkage(fe_mechanism(mechanism, options), options)
+    result = simulate.periodic_response(linkage, speed, method='full', steps=steps,
+                                        points=steps // REFERENCE_POINT_STRIDE)
+    return result.outputs, 'core.simulate full order'
+
+
+def unreduced_revolution(mechanism, options, speed, steps=REFERENCE_STEPS):
+    """
+    Outputs (points, 4) over one revolution from the unreduced tables, and their source.
+
+    The tables of :func:`reduce_samples` with every DOF kept, integrated as the reduced model
+    is: a check of the tables and the integrator against core.simulate's full order.
+    """
     full_options = dataclasses.replace(options, grid_size=REFERENCE_GRID, modes=1, static=0)
     samples = frozen_samples_for(mechanism, full_options)
     model = reduce_samples(samples, samples.dofs, 0, max(abs(speed), options.speed_max),
                            mechanism.damping_ratio)
     grid, q, _ = periodic_response(model, speed, start_angle=0.0, steps=steps)
     outputs = output_values(model, model.evaluate(grid, speed, 0.0), q)[:-1]
-    return outputs[::REFERENCE_POINT_STRIDE], 'unreduced tables (core.simulate absent)'
+    return outputs[::REFERENCE_POINT_STRIDE], 'unreduced tables'

@@ -1,0 +1,85 @@
+"""Modelling options shared by the FE assembly, the reduced model, the node and the CLI."""
+
+import dataclasses
+
+MODEL_VERSION = 3
+# Default (modes, static) per (bearing model, rigid crank), from flexlink plan on Cho 1992
+# with geometric stiffness, 269 and 391 rpm. Rigid crank: the smallest sizes meeting 1 % on
+# the coupler mid-point against that model's own full order (flexible bearings put the
+# 5th-7th crank harmonics on the first two modes, which a constant basis must resolve to a
+# fraction of zeta; 12 + 4 gave 1.7 % at 391 rpm, 14 + 4 1.1 %, 16 + 2 0.4 %). Flexible
+# crank: the crank-dominated mode (72-127 Hz over the cycle) needs far more directions;
+# 24 + 2 at grid 128 and 4 elements gives 1.3 % / 0.9 % (coupler / lever) against a
+# 6-element reference, 16 + 4 gave 16 %; with rigid bearings 8 + 4 at grid 256 gives 0.9 %.
+DEFAULT_SIZES = {('rigid', True): (4, 2), ('flexible', True): (16, 2),
+                 ('rigid', False): (8, 4), ('flexible', False): (24, 2)}
+
+
+@dataclasses.dataclass(frozen=True)
+class ModelOptions:
+    """
+    Modelling choices: the frozen structure (FE) and the reduced model built from it.
+
+    One set of options from the node's parameters or the CLI's flags down to the assembly.
+    The defaults are the node's (rigid crank, flexible bearings); :meth:`full_model` gives
+    the full-order studies' defaults (flexible crank, pinned bearings). Every field but
+    ``gravity`` is part of the reduced model's cache key (:meth:`cache_fields`).
+
+    Parameters
+    ----------
+    modes : int or None
+        Basis directions from the frozen modes (None: :data:`DEFAULT_SIZES` for the bearings
+        and the crank model).
+    static : int or None
+        Further basis directions from static load responses (None: as ``modes``).
+    grid_size : int
+        Crank-angle grid points per revolution.
+    elements_per_link : int or None
+        Beam elements per link of the full model (None: the mechanism's value).
+    rigid_crank : bool
+        Treat the crank as rigid.
+    bearings : str
+        'flexible' (springs of the mechanism file) or 'rigid'.
+    geometric_stiffness : bool
+        Include the geometric stiffness of the rigid-body axial forces.
+    speed_max : float
+        Largest |crank speed| served [rad/s].
+    gravity : bool
+        Include gravity (``mechanism.gravity``) in loads and axial forces.
+
+    """
+
+    modes: object = None
+    static: object = None
+    grid_size: int = 128
+    elements_per_link: object = None
+    rigid_crank: bool = True
+    bearings: str = 'flexible'
+    geometric_stiffness: bool = True
+    speed_max: float = 65.0
+    gravity: bool = True
+
+    def __post_init__(self):
+        if self.bearings not in ('flexible', 'rigid'):
+            raise ValueError(f"`bearings` must be 'flexible' or 'rigid', got {self.bearings!r}")
+        modes, static = DEFAULT_SIZES[self.bearings, bool(self.rigid_crank)]
+        object.__setattr__(self, 'modes', modes if self.modes is None else int(self.modes))
+        object.__setattr__(self, 'static', static if self.static is None else int(self.static))
+        if self.modes < 1 or self.static < 0:
+            raise ValueError(f'`modes` must be >= 1 and `static` >= 0, got {self.modes}, '
+                             f'{self.static}')
+        if self.grid_size < 8:
+            raise ValueError(f'`grid_size` must be >= 8, got {self.grid_size}')
+        if not self.speed_max > 0.0:
+            raise ValueError(f'`speed_max` must be positive, got {self.speed_max}')
+
+    @classmethod
+    def full_model(cls, **changes):
+        """Options with the full-order studies' defaults: flexible crank, pinned bearings."""
+        return cls(**{'rigid_crank': False, 'bearings': 'rigid', **changes})
+
+    def cache_fields(self):
+        """The fields that identify a reduced model, in declaration order (no ``gravity``)."""
+        fields = dataclasses.asdict(self)
+        del fields['gravity']
+        return fields
