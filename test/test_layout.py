@@ -1,0 +1,209 @@
+"""
+The package's shape, checked from its source with ast (no imports, under a second).
+
+Modules up to 400 lines, functions up to 60 lines of code (docstrings not counted), imports
+that go one way between layers and form no cycle, no imports hidden inside functions except
+the optional heavy ones in command handlers, and a core free of ROS, MCAP and matplotlib.
+"""
+
+import ast
+import pathlib
+
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / 'flexlink_ros'
+MODULE_LINES = 400
+FUNCTION_LINES = 60
+# Which layers each layer may import (names and errors are importable from everywhere).
+LAYERS = {
+    'core': {'core'},
+    'studies': {'core', 'studies'},
+    'report': {'core', 'studies', 'report'},
+    'io': {'core', 'io'},
+    'ros': {'core', 'io', 'ros'},
+    'cli': {'core', 'studies', 'report', 'io', 'ros', 'cli'},
+    'names': set(),
+    'errors': set(),
+    '__init__': set(),
+}
+# Inside the core: the FE model knows nothing of reductions, a reduction nothing of estimators.
+CORE_FORBIDDEN = {'fe': {'reduction', 'estimation'}, 'tmm': {'reduction', 'estimation'},
+                  'reduction': {'estimation'}}
+NOT_IN_CORE = ('rclpy', 'rosidl', 'ament_index_python', 'mcap', 'matplotlib', 'builtin_interfaces',
+               'std_msgs', 'sensor_msgs', 'geometry_msgs', 'visualization_msgs',
+               'diagnostic_msgs', 'rcl_interfaces', 'lifecycle_msgs')
+# Optional heavy dependencies a command handler may import when it runs.
+LATE_IMPORTS = ('rclpy', 'matplotlib', 'exudyn')
+LATE_IMPORT_LAYERS = ('cli', 'ros', 'studies', 'report')
+
+
+def modules():
+    return sorted(p for p in PACKAGE.rglob('*.py'))
+
+
+def module_name(path):
+    parts = path.relative_to(ROOT).with_suffix('').parts
+    return '.'.join(parts[:-1] if parts[-1] == '__init__' else parts)
+
+
+def layer_of(name):
+    parts = name.split('.')
+    return parts[1] if len(parts) > 1 else '__init__'
+
+
+def imported_modules(path):
+    """(absolute module, line, inside a function) of every import in ``path``."""
+    tree = ast.parse(path.read_text('utf-8'))
+    package = module_name(path).split('.')
+    if path.name != '__init__.py':
+        package = package[:-1]
+    found = []
+
+    def visit(node, in_function):
+        for child in ast.iter_child_nodes(node):
+            inner = in_function or isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef))
+            if isinstance(child, ast.Import):
+                found.extend((alias.name, child.lineno, in_function) for alias in child.names)
+            elif isinstance(child, ast.ImportFrom):
+                base = child.module or ''
+                if child.level:
+                    base = '.'.join(package[:len(package) - child.level + 1]
+                                    + ([base] if base else []))
+                found.append((base, child.lineno, in_function))
+                for alias in child.names:   # `from . import module`
+                    if (PACKAGE.parent / (base + '.' + alias.name).replace('.', '/')).with_suffix(
+                            '.py').exists():
+                        found.append((f'{base}.{alias.name}', child.lineno, in_function))
+            visit(child, inner)
+
+    visit(tree, False)
+    return found
+
+
+def function_sizes(path):
+    """(qualified name, lines of code without the docstring) of every function."""
+    tree = ast.parse(path.read_text('utf-8'))
+    sizes = []
+
+    def visit(node, prefix):
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                lines = child.end_lineno - child.lineno + 1
+                body = child.body
+                if body and isinstance(body[0], ast.Expr) and isinstance(
+                        getattr(body[0], 'value', None), ast.Constant) and isinstance(
+                        body[0].value.value, str):
+                    lines -= body[0].end_lineno - body[0].lineno + 1
+                sizes.append((prefix + child.name, lines))
+                visit(child, prefix + child.name + '.')
+            elif isinstance(child, ast.ClassDef):
+                visit(child, prefix + child.name + '.')
+
+    visit(tree, '')
+    return sizes
+
+
+MODULES = modules()
+IDS = [str(p.relative_to(PACKAGE)) for p in MODULES]
+
+
+@pytest.mark.parametrize('path', MODULES, ids=IDS)
+def test_module_size(path):
+    lines = len(path.read_text('utf-8').splitlines())
+    assert lines <= MODULE_LINES, f'{path.name}: {lines} lines'
+
+
+@pytest.mark.parametrize('path', MODULES, ids=IDS)
+def test_function_sizes(path):
+    long = [(name, lines) for name, lines in function_sizes(path) if lines > FUNCTION_LINES]
+    assert long == []
+
+
+@pytest.mark.parametrize('path', MODULES, ids=IDS)
+def test_imports_go_one_way(path):
+    name = module_name(path)
+    layer = layer_of(name)
+    allowed = LAYERS[layer] | {'names', 'errors'} | ({'__init__'} if layer == '__init__' else set())
+    wrong = []
+    for target, line, _ in imported_modules(path):
+        if target == 'flexlink_ros' or not target.startswith('flexlink_ros.'):
+            continue
+        target_layer = layer_of(target)
+        if target_layer not in allowed:
+            wrong.append(f'{line}: {layer} imports {target}')
+        if layer == 'core' and target_layer == 'core':
+            mine, theirs = name.split('.')[2:3], target.split('.')[2:3]
+            if mine and theirs and theirs[0] in CORE_FORBIDDEN.get(mine[0], ()):
+                wrong.append(f'{line}: core.{mine[0]} imports {target}')
+    assert wrong == []
+
+
+@pytest.mark.parametrize('path', MODULES, ids=IDS)
+def test_no_imports_inside_functions(path):
+    layer = layer_of(module_name(path))
+    hidden = [f'{line}: {target}' for target, line, inside in imported_modules(path)
+              if inside and not (layer in LATE_IMPORT_LAYERS
+                                 and target.split('.')[0] in LATE_IMPORTS)]
+    assert hidden == []
+
+
+@pytest.mark.parametrize('path', [p for p in MODULES if layer_of(module_name(p)) == 'core'],
+                         ids=[i for p, i in zip(MODULES, IDS) if layer_of(module_name(p)) == 'core'])
+def test_core_imports_no_ros(path):
+    ros = [f'{line}: {target}' for target, line, _ in imported_modules(path)
+           if target.split('.')[0] in NOT_IN_CORE or target.split('.')[0].endswith('_msgs')]
+    assert ros == []
+
+
+def test_no_import_cycles():
+    graph = {module_name(p): {t for t, _, inside in imported_modules(p)
+                              if not inside and t.startswith('flexlink_ros.')}
+             for p in MODULES}
+    graph = {m: {t for t in targets if t in graph and t != m} for m, targets in graph.items()}
+    cycles = strongly_connected(graph)
+    assert [sorted(c) for c in cycles if len(c) > 1] == []
+
+
+def strongly_connected(graph):
+    """Tarjan's strongly connected components of ``graph`` (dict: node -> set of nodes)."""
+    index, low, stack, on_stack, out = {}, {}, [], set(), []
+
+    def connect(node):
+        index[node] = low[node] = len(index)
+        stack.append(node)
+        on_stack.add(node)
+        for succ in graph[node]:
+            if succ not in index:
+                connect(succ)
+                low[node] = min(low[node], low[succ])
+            elif succ in on_stack:
+                low[node] = min(low[node], index[succ])
+        if low[node] == index[node]:
+            component = set()
+            while True:
+                member = stack.pop()
+                on_stack.discard(member)
+                component.add(member)
+                if member == node:
+                    break
+            out.append(component)
+
+    for node in graph:
+        if node not in index:
+            connect(node)
+    return out
+
+
+def test_the_checks_see_what_they_forbid(tmp_path):
+    sample = PACKAGE / 'core' / '_layout_probe.py'
+    sample.write_text('import rclpy\n\n\ndef f():\n    from ..ros import node\n'
+                      + '    x = 1\n' * 70)
+    try:
+        assert any(t == 'rclpy' for t, _, _ in imported_modules(sample))
+        assert ('flexlink_ros.ros', 5, True) in imported_modules(sample)
+        assert function_sizes(sample) == [('f', 72)]   # def, import and 70 lines
+    finally:
+        sample.unlink()
+    assert strongly_connected({'a': {'b'}, 'b': {'a'}, 'c': set()}) in (
+        [{'a', 'b'}, {'c'}], [{'c'}, {'a', 'b'}])
