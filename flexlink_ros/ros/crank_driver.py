@@ -21,8 +21,21 @@ import random
 import sys
 import time
 
-from ..core.numerics import RPM, wrap_to_pi
+from rcl_interfaces.msg import SetParametersResult
+import rclpy
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.task import Future
+from rclpy.utilities import remove_ros_args
+from sensor_msgs.msg import JointState
+
+from . import runtime
+from .messages import parameter_descriptor
 from .parameters import ParameterSpec
+from .runtime import INVALID_CONTEXT_TEXTS, is_shutdown_error  # noqa: F401  SHIM
+from .runtime import make_executor, spin_until_shutdown  # noqa: F401  SHIM
+from ..core.numerics import RPM, wrap_to_pi
 
 PROFILES = ('constant', 'ramp', 'sweep')
 
@@ -140,156 +153,92 @@ def build_parser():
         epilog=_parameter_help())
 
 
-def _make_node_class():
-    """The rclpy node class (built lazily so --help and tests of the profile need no rclpy)."""
-    from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
-                                    SetParametersResult)
-    from rclpy.node import Node
-    from rclpy.task import Future
-    from sensor_msgs.msg import JointState
+class CrankDriver(Node):
+    """Publishes the crank JointState on a timer; see the module docstring."""
 
-    def descriptor(spec):
-        result = ParameterDescriptor(description=spec.description, read_only=spec.read_only)
-        if spec.choices:
-            result.additional_constraints = 'one of: ' + ', '.join(spec.choices)
-        if spec.low is not None and isinstance(spec.default, float):
-            result.floating_point_range = [FloatingPointRange(
-                from_value=float(spec.low), to_value=float(spec.high))]
-        elif spec.low is not None:
-            result.integer_range = [IntegerRange(from_value=int(spec.low),
-                                                 to_value=int(spec.high), step=1)]
-        return result
+    def __init__(self):
+        super().__init__('crank_driver')
+        for spec in PARAMETERS:
+            self.declare_parameter(spec.name, spec.default, parameter_descriptor(spec))
+        self.add_on_set_parameters_callback(self._validate)
+        self.add_post_set_parameters_callback(self._restart_profile)
+        values = self._values()
+        self.finished = Future()
+        self._rng = random.Random(values['seed'])
+        self._profile = SpeedProfile.from_parameters(values)
+        self._origin_ns = self.get_clock().now().nanoseconds
+        self._origin_angle = math.radians(values['initial_angle_deg'])
+        self._start_ns = self._origin_ns
+        self._message = JointState(name=[values['joint_name']])
+        self._publisher = self.create_publisher(JointState, values['topic'], 10)
+        timer_period = 1.0 / values['rate_hz']  # seconds
+        self.create_timer(timer_period, self._publish)
+        self.published = 0
 
-    class CrankDriver(Node):
-        """Publishes the crank JointState on a timer; see the module docstring."""
+    def _values(self):
+        return {spec.name: self.get_parameter(spec.name).value for spec in PARAMETERS}
 
-        def __init__(self):
-            super().__init__('crank_driver')
-            for spec in PARAMETERS:
-                self.declare_parameter(spec.name, spec.default, descriptor(spec))
-            self.add_on_set_parameters_callback(self._validate)
-            self.add_post_set_parameters_callback(self._restart_profile)
-            values = self._values()
-            self.finished = Future()
-            self._rng = random.Random(values['seed'])
-            self._profile = SpeedProfile.from_parameters(values)
-            self._origin_ns = self.get_clock().now().nanoseconds
-            self._origin_angle = math.radians(values['initial_angle_deg'])
-            self._start_ns = self._origin_ns
-            self._message = JointState(name=[values['joint_name']])
-            self._publisher = self.create_publisher(JointState, values['topic'], 10)
-            timer_period = 1.0 / values['rate_hz']  # seconds
-            self.create_timer(timer_period, self._publish)
-            self.published = 0
+    def _validate(self, parameters):
+        for parameter in parameters:
+            spec = next((s for s in PARAMETERS if s.name == parameter.name), None)
+            if spec is not None and spec.choices and parameter.value not in spec.choices:
+                return SetParametersResult(
+                    successful=False,
+                    reason=f'{spec.name} must be one of {", ".join(spec.choices)}')
+        return SetParametersResult(successful=True)
 
-        def _values(self):
-            return {spec.name: self.get_parameter(spec.name).value for spec in PARAMETERS}
+    def _restart_profile(self, parameters):
+        now_ns = self.get_clock().now().nanoseconds
+        self._origin_angle = self._angle_at(now_ns)
+        self._origin_ns = now_ns
+        values = self._values()
+        self._profile = SpeedProfile.from_parameters(values)
+        self._message.name = [values['joint_name']]
 
-        def _validate(self, parameters):
-            for parameter in parameters:
-                spec = next((s for s in PARAMETERS if s.name == parameter.name), None)
-                if spec is not None and spec.choices and parameter.value not in spec.choices:
-                    return SetParametersResult(
-                        successful=False,
-                        reason=f'{spec.name} must be one of {", ".join(spec.choices)}')
-            return SetParametersResult(successful=True)
+    def _angle_at(self, now_ns):
+        return self._origin_angle + self._profile.angle((now_ns - self._origin_ns) * 1e-9)
 
-        def _restart_profile(self, parameters):
-            now_ns = self.get_clock().now().nanoseconds
-            self._origin_angle = self._angle_at(now_ns)
-            self._origin_ns = now_ns
-            values = self._values()
-            self._profile = SpeedProfile.from_parameters(values)
-            self._message.name = [values['joint_name']]
-
-        def _angle_at(self, now_ns):
-            return self._origin_angle + self._profile.angle((now_ns - self._origin_ns) * 1e-9)
-
-        def _publish(self):
-            jitter_us = self.get_parameter('jitter_us').value
-            if jitter_us > 0:
-                time.sleep(self._rng.uniform(0.0, jitter_us) * 1e-6)
-            now = self.get_clock().now()
-            elapsed_s = (now.nanoseconds - self._origin_ns) * 1e-9
-            message = self._message
-            message.header.stamp = now.to_msg()
-            message.position = [wrap_to_pi(self._angle_at(now.nanoseconds))]
-            message.velocity = [self._profile.speed(elapsed_s)]
-            self._publisher.publish(message)
-            self.published += 1
-            duration_s = self.get_parameter('duration_s').value
-            if duration_s > 0 and (now.nanoseconds - self._start_ns) * 1e-9 >= duration_s:
-                if not self.finished.done():
-                    self.finished.set_result(self.published)
-
-    return CrankDriver
-
-
-def make_executor():
-    """EventsExecutor where this rclpy has it (a 1 kHz timer needs its low overhead)."""
-    try:
-        from rclpy.experimental.events_executor import EventsExecutor
-        return EventsExecutor()
-    except ImportError:
-        from rclpy.executors import SingleThreadedExecutor
-        return SingleThreadedExecutor()
-
-
-# rcl invalidates a context before rclpy's Context.ok() turns False: an rcl call in between
-# fails with one of these (publish; spin_once building its wait set) while ok() says True.
-INVALID_CONTEXT_TEXTS = ("context is invalid", "context is not valid")
-
-
-def is_shutdown_error(exc, context=None):
-    """
-    Whether ``exc`` is SIGINT/SIGTERM shutting ``context`` (default: rclpy's) down.
-
-    True when the context is no longer ok, or when rcl already refused it as invalid (the
-    race above); such an error is the shutdown asked for, not a failure to report.
-    """
-    import rclpy
-    ok = context.ok() if context is not None else rclpy.ok()
-    return not ok or any(text in str(exc) for text in INVALID_CONTEXT_TEXTS)
-
-
-def spin_until_shutdown(executor, done=None, period_s=0.1):
-    """
-    ``spin_once`` until SIGINT/SIGTERM shuts the executor's context down (or ``done()``).
-
-    A signal landing between the ``ok()`` check and the wait set that ``spin_once`` builds
-    makes it raise (RCLError: the context is not valid): that is the shutdown asked for, not a
-    failure. Any other error is raised.
-    """
-    context = executor.context
-    while context.ok() and not (done is not None and done()):
-        try:
-            executor.spin_once(timeout_sec=period_s)
-        except Exception as exc:
-            if not is_shutdown_error(exc, context):
-                raise
-            return
+    def _publish(self):
+        jitter_us = self.get_parameter('jitter_us').value
+        if jitter_us > 0:
+            time.sleep(self._rng.uniform(0.0, jitter_us) * 1e-6)
+        now = self.get_clock().now()
+        elapsed_s = (now.nanoseconds - self._origin_ns) * 1e-9
+        message = self._message
+        message.header.stamp = now.to_msg()
+        message.position = [wrap_to_pi(self._angle_at(now.nanoseconds))]
+        message.velocity = [self._profile.speed(elapsed_s)]
+        self._publisher.publish(message)
+        self.published += 1
+        duration_s = self.get_parameter('duration_s').value
+        if duration_s > 0 and (now.nanoseconds - self._start_ns) * 1e-9 >= duration_s:
+            if not self.finished.done():
+                self.finished.set_result(self.published)
 
 
 def main(args=None):
-    """Entry point of the ``crank_driver`` executable."""
-    import rclpy
-    from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
-    from rclpy.executors import ExternalShutdownException
-    from rclpy.utilities import remove_ros_args
+    """
+    Run the ``crank_driver`` executable.
 
+    Parameters
+    ----------
+    args : list of str or None
+        Command-line arguments (None: ``sys.argv``).
+
+    """
     argv = sys.argv if args is None else ['crank_driver', *args]
     build_parser().parse_args(remove_ros_args(argv)[1:])
     try:
         with rclpy.init(args=argv):
             try:
-                node = _make_node_class()()
+                node = CrankDriver()
             except (ValueError, InvalidParameterValueException,
                     InvalidParameterTypeException) as exc:
                 print(f'crank_driver: error: {exc}', file=sys.stderr)
                 return 1
-            executor = make_executor()
+            executor = runtime.make_executor()
             executor.add_node(node)
-            spin_until_shutdown(executor, node.finished.done)
+            runtime.spin_until_shutdown(executor, node.finished.done)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     return 0

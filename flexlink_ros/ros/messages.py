@@ -10,21 +10,23 @@ stamped with the input's stamp, frame = the ground frame, SI units):
   [rad/s], effort = R [N] (reaction force magnitude);
 - the deformed linkage: ``visualization_msgs/MarkerArray``;
 - health and per-joint levels: ``diagnostic_msgs/DiagnosticArray``.
+
+Also the ``rcl_interfaces/ParameterDescriptor`` of a parameter table's entry.
 """
 
 import math
 
-import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point, Vector3Stamped
+import numpy as np
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ..errors import InputRejected
-from ..names import JOINT_NAMES, LINK_NAMES
-
+from ..names import JOINT_NAMES
 
 OK, WARN, ERROR, STALE = (DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR,
                           DiagnosticStatus.STALE)
@@ -35,23 +37,24 @@ LINK_COLOURS = ((0.25, 0.45, 0.85), (0.85, 0.4, 0.1), (0.2, 0.6, 0.4))
 
 
 def stamp_to_ns(stamp):
-    """Integer nanoseconds of a builtin_interfaces/Time."""
+    """Return the integer nanoseconds of a builtin_interfaces/Time."""
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
 def ns_to_stamp(stamp_ns):
-    """builtin_interfaces/Time of integer nanoseconds."""
+    """Return the builtin_interfaces/Time of integer nanoseconds."""
     sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
     return Time(sec=sec, nanosec=nanosec)
 
 
 def crank_from_joint_state(msg, joint_name):
     """
-    Crank angle and speed from a JointState.
+    Read the crank angle and speed from a JointState.
 
     Parameters
     ----------
     msg : sensor_msgs.msg.JointState
+        The message.
     joint_name : str
         Name of the crank joint.
 
@@ -92,7 +95,7 @@ def crank_from_joint_state(msg, joint_name):
 
 
 def deflection_message(stamp, frame_id, dx, dy):
-    """Vector3Stamped of an elastic deflection [m] in the ground frame."""
+    """Return the Vector3Stamped of an elastic deflection [m] in the ground frame."""
     msg = Vector3Stamped()
     msg.header = Header(stamp=stamp, frame_id=frame_id)
     msg.vector.x, msg.vector.y, msg.vector.z = float(dx), float(dy), 0.0
@@ -101,10 +104,14 @@ def deflection_message(stamp, frame_id, dx, dy):
 
 def criteria_message(stamp, frame_id, ratio, gamma_dot, force):
     """
-    JointState carrying the Earles-Wu criterion per joint (see the module docstring).
+    Return a JointState carrying the Earles-Wu criterion per joint (see the module docstring).
 
     Parameters
     ----------
+    stamp : builtin_interfaces.msg.Time
+        Stamp of the input.
+    frame_id : str
+        Ground frame.
     ratio, gamma_dot, force : sequence of float, length 4
         |dgamma/dt|/R [rad/(s N)], dgamma/dt [rad/s], R [N] for O2, A, B, O4.
 
@@ -125,10 +132,14 @@ def _colour(rgb, alpha=1.0):
 def linkage_markers(stamp, frame_id, link_points, link_deflections, exaggeration,
                     joint_positions, joint_levels, namespace='flexlink'):
     """
-    The rigid and the deformed linkage as markers for RViz and Foxglove.
+    Draw the rigid and the deformed linkage as markers for RViz and Foxglove.
 
     Parameters
     ----------
+    stamp : builtin_interfaces.msg.Time
+        Stamp of the input.
+    frame_id : str
+        Ground frame.
     link_points : sequence of ndarray, shape (n_k, 2)
         Rigid-body positions [m] of points along each link (crank, coupler, lever).
     link_deflections : sequence of ndarray, shape (n_k, 2)
@@ -139,6 +150,8 @@ def linkage_markers(stamp, frame_id, link_points, link_deflections, exaggeration
         O2, A, B, O4 [m].
     joint_levels : sequence of int, length 4
         Diagnostic level per joint (colours the joint spheres).
+    namespace : str
+        Prefix of the markers' namespaces.
 
     Returns
     -------
@@ -171,7 +184,7 @@ def linkage_markers(stamp, frame_id, link_points, link_deflections, exaggeration
 
 
 def joint_level(ratio, flagged, warn, error):
-    """Diagnostic level of one joint from its criterion value and near-zero-force flag."""
+    """Grade one joint by its criterion value and near-zero-force flag (a diagnostic level)."""
     if flagged or not math.isfinite(ratio) or ratio > error:
         return ERROR
     if ratio > warn:
@@ -180,7 +193,7 @@ def joint_level(ratio, flagged, warn, error):
 
 
 def status(name, level, message, values, hardware_id='flexlink'):
-    """A DiagnosticStatus with key-value pairs (values formatted as strings)."""
+    """Build a DiagnosticStatus with key-value pairs (values formatted as strings)."""
     return DiagnosticStatus(
         level=level, name=name, message=message, hardware_id=hardware_id,
         values=[KeyValue(key=str(k), value=(f'{v:.6g}' if isinstance(v, float) else str(v)))
@@ -188,8 +201,36 @@ def status(name, level, message, values, hardware_id='flexlink'):
 
 
 def diagnostics_message(stamp, statuses):
-    """DiagnosticArray of statuses."""
+    """Build the DiagnosticArray of statuses."""
     msg = DiagnosticArray()
     msg.header = Header(stamp=stamp)
     msg.status = list(statuses)
     return msg
+
+
+def parameter_descriptor(spec):
+    """
+    Describe a parameter to ROS: description, read-only flag, range or allowed values.
+
+    Parameters
+    ----------
+    spec : parameters.ParameterSpec
+        The parameter's table entry.
+
+    Returns
+    -------
+    rcl_interfaces.msg.ParameterDescriptor
+
+    """
+    descriptor = ParameterDescriptor(description=spec.description, read_only=spec.read_only)
+    if spec.choices:
+        descriptor.additional_constraints = 'one of: ' + ', '.join(spec.choices)
+    elif spec.max_bytes is not None:
+        descriptor.additional_constraints = f'at most {spec.max_bytes} bytes (UTF-8)'
+    if spec.low is not None and isinstance(spec.default, float):
+        descriptor.floating_point_range = [FloatingPointRange(from_value=float(spec.low),
+                                                              to_value=float(spec.high))]
+    elif spec.low is not None and not isinstance(spec.default, bool):
+        descriptor.integer_range = [IntegerRange(from_value=int(spec.low),
+                                                 to_value=int(spec.high), step=1)]
+    return descriptor

@@ -10,6 +10,8 @@ import dataclasses
 import math
 from typing import Optional
 
+from ..core.options import ModelOptions
+
 
 @dataclasses.dataclass(frozen=True)
 class ParameterSpec:
@@ -66,7 +68,7 @@ PARAMETERS = (
     ParameterSpec('model.grid_size', 128, 'Crank-angle grid points of the precomputed tables',
                   low=8, high=4096, read_only=True),
     ParameterSpec('model.elements_per_link', 4, 'Beam elements per link; 0 = the mechanism '
-                  'file\'s value', low=0, high=40, read_only=True),
+                  "file's value", low=0, high=40, read_only=True),
     ParameterSpec('model.rigid_crank', False, 'Treat the crank as rigid (its pin A fixed)',
                   read_only=True),
     ParameterSpec('model.bearings', 'flexible', 'Revolute bearings: flexible springs or rigid',
@@ -77,7 +79,7 @@ PARAMETERS = (
     ParameterSpec('model.cache_dir', '', 'Directory of precomputed-model cache files '
                   '(empty: ~/.cache/flexlink_ros)', read_only=True, max_bytes=PATH_MAX_BYTES),
     ParameterSpec('model.warm_start', True,
-                  'Start from the periodic steady state at the first sample\'s speed'),
+                  "Start from the periodic steady state at the first sample's speed"),
     ParameterSpec('damping_ratio', 0.02, 'Modal damping ratio of every frozen mode',
                   low=0.0, high=1.0, read_only=True),
     ParameterSpec('frame_id', 'linkage_ground', 'Frame of the ground (O2 at its origin, '
@@ -101,7 +103,7 @@ PARAMETERS = (
     ParameterSpec('diagnostics.min_rate_hz', 50.0,
                   'WARN when the input rate falls below this [Hz]', low=0.0, high=1e6),
     ParameterSpec('diagnostics.error_indicator_warn', 0.05,
-                  'WARN when the estimator\'s error indicator exceeds this (relative)',
+                  "WARN when the estimator's error indicator exceeds this (relative)",
                   low=0.0, high=10.0),
     ParameterSpec('diagnostics.period_s', 1.0, 'Period of /diagnostics [s]',
                   low=0.01, high=60.0),
@@ -115,7 +117,7 @@ PARAMETERS = (
                   'Split the recording after this duration (0: never) [s]',
                   low=0.0, high=1e7, read_only=True),
     ParameterSpec('qos.depth', 1000, 'History depth of the input subscription and outputs '
-                  '(1 s at 1 kHz: room for the warm start\'s pause)',
+                  "(1 s at 1 kHz: room for the warm start's pause)",
                   low=1, high=100000, read_only=True),
     ParameterSpec('qos.reliability', 'reliable', 'Reliability of input and outputs',
                   choices=('reliable', 'best_effort'), read_only=True,
@@ -194,12 +196,12 @@ def validate_all(values):
 
 
 def defaults():
-    """Mapping of every parameter name to its default value."""
+    """Map every parameter name to its default value."""
     return {spec.name: spec.default for spec in PARAMETERS}
 
 
 def markdown_table():
-    """The parameters as a markdown table (README)."""
+    """Write the parameters as a markdown table (README)."""
     rows = ['| parameter | default | range / choices | description |', '|---|---|---|---|']
     for spec in PARAMETERS:
         if spec.choices:
@@ -217,7 +219,7 @@ def markdown_table():
 
 def model_options(values):
     """
-    The reduced-model options selected by parameter values.
+    Select the modelling options by parameter values.
 
     Parameters
     ----------
@@ -226,26 +228,24 @@ def model_options(values):
 
     Returns
     -------
-    core.reduced.ModelOptions
+    core.options.ModelOptions
 
     """
-    from ..core.reduction import model as reduced
     modes = values['model.modes'] or None   # 0: the planned default for the bearing model
     static = None if values['model.static'] < 0 else values['model.static']
-    return reduced.ModelOptions(modes=modes, static=static,
-                                grid_size=values['model.grid_size'],
-                                elements_per_link=values['model.elements_per_link'] or None,
-                                rigid_crank=values['model.rigid_crank'],
-                                bearings=values['model.bearings'],
-                                geometric_stiffness=values['model.geometric_stiffness'])
+    return ModelOptions(modes=modes, static=static, grid_size=values['model.grid_size'],
+                        elements_per_link=values['model.elements_per_link'] or None,
+                        rigid_crank=values['model.rigid_crank'],
+                        bearings=values['model.bearings'],
+                        geometric_stiffness=values['model.geometric_stiffness'])
 
 
 def default_model_options(**overrides):
     """
-    The node's default reduced model, with ``model.*`` parameters overridden by keyword.
+    Give the node's default model options, with ``model.*`` parameters overridden by keyword.
 
     Also the default of `flexlink estimate / bench / replay`. Sizes left at their defaults are
-    resolved for the overridden bearing and crank models (core.reduced.DEFAULT_SIZES).
+    resolved for the overridden bearing and crank models (core.options.DEFAULT_SIZES).
     """
     values = defaults()
     for name, value in overrides.items():

@@ -3,8 +3,13 @@ Process set-up shared by the node, the driver, the tools and the tests; imports 
 
 Keeps ROS 2 traffic on this machine: the LOCALHOST discovery range, the shipped loopback
 Fast DDS profile and a ROS domain unique to the run, set before anything initialises rclpy.
+Also the executor and the spin that end cleanly on SIGINT/SIGTERM, and the heap trim after a
+model build. The functions that need rclpy import it when called, so the tools and tests
+that only isolate the environment (and the CLI, which imports this module at start) do not
+load rclpy.
 """
 
+import ctypes
 import os
 import pathlib
 import sys
@@ -18,7 +23,7 @@ FASTDDS_PROFILE = 'fastdds_localhost.xml'   # config/: every Fast DDS socket on 
 
 def fastdds_profile_path():
     """
-    The shipped Fast DDS loopback profile: installed share directory, else the source tree.
+    Find the shipped Fast DDS loopback profile: installed share directory, else source tree.
 
     Returns
     -------
@@ -79,3 +84,80 @@ def isolate_ros_environment(env=None, loopback_sockets=None):
     domain = 1 + (os.getpid() + time.time_ns() // 1_000_000) % DOMAIN_ID_RANGE
     env['ROS_DOMAIN_ID'] = str(domain)
     return domain
+
+
+def make_executor():
+    """Return an EventsExecutor where this rclpy has it (a 1 kHz timer needs its low overhead)."""
+    try:
+        from rclpy.experimental.events_executor import EventsExecutor
+        return EventsExecutor()
+    except ImportError:
+        from rclpy.executors import SingleThreadedExecutor
+        return SingleThreadedExecutor()
+
+
+# rcl invalidates a context before rclpy's Context.ok() turns False: an rcl call in between
+# fails with one of these (publish; spin_once building its wait set) while ok() says True.
+INVALID_CONTEXT_TEXTS = ('context is invalid', 'context is not valid')
+
+
+def is_shutdown_error(exc, context=None):
+    """
+    Tell whether ``exc`` is SIGINT/SIGTERM shutting ``context`` (default: rclpy's) down.
+
+    True when the context is no longer ok, or when rcl already refused it as invalid (the
+    race above); such an error is the shutdown asked for, not a failure to report.
+
+    Parameters
+    ----------
+    exc : Exception
+        The error an rcl call raised.
+    context : rclpy.context.Context or None
+        The context the call used (None: rclpy's default context).
+
+    """
+    import rclpy
+    ok = context.ok() if context is not None else rclpy.ok()
+    return not ok or any(text in str(exc) for text in INVALID_CONTEXT_TEXTS)
+
+
+def spin_until_shutdown(executor, done=None, period_s=0.1):
+    """
+    Call ``spin_once`` until SIGINT/SIGTERM shuts the executor's context down (or ``done()``).
+
+    A signal landing between the ``ok()`` check and the wait set that ``spin_once`` builds
+    makes it raise (RCLError: the context is not valid): that is the shutdown asked for, not a
+    failure. Any other error is raised.
+
+    Parameters
+    ----------
+    executor : rclpy.executors.Executor
+        With its nodes added.
+    done : callable or None
+        Returns True when spinning should end.
+    period_s : float
+        Longest wait of one ``spin_once`` [s].
+
+    """
+    context = executor.context
+    while context.ok() and not (done is not None and done()):
+        try:
+            executor.spin_once(timeout_sec=period_s)
+        except Exception as exc:
+            if not is_shutdown_error(exc, context):
+                raise
+            return
+
+
+def release_free_heap():
+    """
+    Give the heap freed after the precompute back to the OS (glibc; else nothing).
+
+    Building the model allocates several times its size in temporaries; glibc keeps freed
+    heap pages mapped, so without this the node's resident size stays at its build peak.
+    """
+    try:
+        libc = ctypes.CDLL('libc.so.6')
+        libc.malloc_trim(0)
+    except (OSError, AttributeError):
+        pass

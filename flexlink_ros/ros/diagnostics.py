@@ -1,0 +1,203 @@
+"""
+The statuses of flexlink_node's ``/diagnostics``: plain functions of the node's counts.
+
+One status for the input, one for the estimator, one per joint (O2, A, B, O4) and one for the
+recorder, each from the totals (:class:`node_model.Totals`), the period's counts
+(:class:`node_model.PeriodStats`) and the node's parameter values.
+"""
+
+import math
+
+import numpy as np
+
+from .messages import ERROR, joint_level, OK, STALE, status, WARN
+from .node_model import OTHER_KINDS, SKIP_KINDS, WARN_FLAGS
+from ..core.estimation.streaming import SampleFlag
+from ..names import JOINT_NAMES, NODE_NAME
+
+
+def input_status(totals, period, values, topic, rate_hz, stale_s):
+    """
+    Say whether valid input arrives, and what became of every received message.
+
+    Parameters
+    ----------
+    totals : node_model.Totals
+        Counts since the start.
+    period : node_model.PeriodStats
+        Counts of the period.
+    values : dict
+        Parameter name -> value.
+    topic : str
+        The input topic.
+    rate_hz : float
+        Valid samples per second in the period.
+    stale_s : float
+        Time since the last valid sample [s] (inf if none yet).
+
+    Returns
+    -------
+    diagnostic_msgs.msg.DiagnosticStatus
+
+    """
+    level, message = OK, 'receiving'
+    if stale_s > values['diagnostics.stale_input_s']:
+        level = ERROR
+        message = ('no valid input yet' if math.isinf(stale_s)
+                   else f'no valid input for {stale_s:.2f} s')
+    elif rate_hz < values['diagnostics.min_rate_hz']:
+        level, message = WARN, f'input rate {rate_hz:.1f} Hz below ' \
+            f'{values["diagnostics.min_rate_hz"]:g} Hz'
+    elif period.rejected or period.counts.get('outlier'):
+        level, message = WARN, (f'{period.rejected} input messages skipped, '
+                                f'{period.counts.get("outlier", 0)} outliers')
+    return status(f'{NODE_NAME}: input', level, message, input_counts(
+        totals, period, {'topic': topic, 'rate_hz': rate_hz, 'stale_s': stale_s}))
+
+
+def input_counts(totals, period, values):
+    """
+    Add to ``values`` the input status's key values: what became of every received message.
+
+    Parameters
+    ----------
+    totals : node_model.Totals
+        Counts since the start.
+    period : node_model.PeriodStats
+        Counts of the period.
+    values : dict
+        Key values so far (changed in place and returned).
+
+    """
+    values.update({'received': totals.received, 'published': totals.published,
+                   'skipped': totals.rejected, 'skipped_in_period': period.rejected,
+                   'last_skip_reason': totals.last_rejection,
+                   'last_outlier': totals.last_outlier})
+    for kind in SKIP_KINDS:
+        values[f'skipped_{kind}'] = totals.counts[kind]
+    for kind in OTHER_KINDS:
+        values[kind] = totals.counts[kind]
+        values[f'{kind}_in_period'] = period.counts.get(kind, 0)
+    return values
+
+
+def estimator_level(period, error_indicator_warn):
+    """
+    Grade the estimates: ERROR if out of bound, WARN if flagged or a large indicator.
+
+    Parameters
+    ----------
+    period : node_model.PeriodStats
+        Counts of the period.
+    error_indicator_warn : float
+        WARN above this error indicator.
+
+    Returns
+    -------
+    level : int
+    message : str
+
+    """
+    if period.counts.get('out_of_bound'):
+        return ERROR, (f'{period.counts["out_of_bound"]} estimates not published: '
+                       f'{period.last_out_of_bound}')
+    reasons = []
+    flagged = SampleFlag(period.flags & WARN_FLAGS)
+    if flagged:
+        reasons.append('flagged ' + ' '.join(f.name for f in SampleFlag if f and f & flagged))
+    if period.counts.get('outlier'):
+        reasons.append(f'{period.counts["outlier"]} outliers skipped')
+    indicator = period.max_error_indicator
+    if indicator > error_indicator_warn:
+        reasons.append(f'error indicator {indicator:.3g}')
+    return (WARN, ', '.join(reasons)) if reasons else (OK, 'ok')
+
+
+def estimator_status(period, values, model_facts):
+    """
+    Report the estimator: update times, flags and error indicator of the period, and its model.
+
+    Parameters
+    ----------
+    period : node_model.PeriodStats
+        Counts of the period.
+    values : dict
+        Parameter name -> value.
+    model_facts : dict
+        Key values describing the model (size, grid, options, criteria source, notes).
+
+    Returns
+    -------
+    diagnostic_msgs.msg.DiagnosticStatus
+
+    """
+    durations = np.array(period.update_ns) / 1e3
+    median = float(np.median(durations)) if durations.size else math.nan
+    p99 = float(np.percentile(durations, 99)) if durations.size else math.nan
+    flags = [flag.name for flag in SampleFlag if flag and period.flags & flag]
+    level, message = estimator_level(period, values['diagnostics.error_indicator_warn'])
+    return status(f'{NODE_NAME}: estimator', level, message, {
+        'error_indicator_max': period.max_error_indicator, 'update_us_median': median,
+        'update_us_p99': p99, 'samples_in_period': period.valid, 'flags': ' '.join(flags),
+        **model_facts})
+
+
+def joint_statuses(period, values, criteria_source):
+    """
+    Grade each joint by the largest criterion of the period.
+
+    Parameters
+    ----------
+    period : node_model.PeriodStats
+        Counts of the period.
+    values : dict
+        Parameter name -> value.
+    criteria_source : str
+        Where the model's joint criteria come from (named when they are unavailable).
+
+    Returns
+    -------
+    list of diagnostic_msgs.msg.DiagnosticStatus
+        O2, A, B, O4.
+
+    """
+    statuses = []
+    no_criteria = period.flags & SampleFlag.NO_CRITERIA
+    for j, name in enumerate(JOINT_NAMES):
+        ratio = period.max_criterion[j]
+        if no_criteria:
+            level, message = STALE, f'criteria unavailable: {criteria_source}'
+        elif not period.valid:
+            level, message = STALE, 'no samples'
+        else:
+            level = joint_level(ratio, period.near_zero[j], values['diagnostics.criterion_warn'],
+                                values['diagnostics.criterion_error'])
+            message = f'max |dgamma/dt|/R {ratio:.4g} rad/(s N)' + (
+                ', reaction near zero' if period.near_zero[j] else '')
+        statuses.append(status(f'{NODE_NAME}: joint {name}', level, message,
+                               {'criterion_max': ratio, 'near_zero': period.near_zero[j]}))
+    return statuses
+
+
+def recorder_status(state):
+    """
+    Report the recording.
+
+    Parameters
+    ----------
+    state : dict or None
+        ``McapRecorder.status()``; None when not recording.
+
+    Returns
+    -------
+    diagnostic_msgs.msg.DiagnosticStatus
+
+    """
+    if state is None:
+        return status(f'{NODE_NAME}: recorder', OK, 'disabled', {})
+    failed = state['state'] == 'failed'
+    return status(f'{NODE_NAME}: recorder', ERROR if failed else OK,
+                  (f'FAILED: {state["error"]}' if failed else state['state']), {
+                      'path': state['path'], 'messages': state['message_count'],
+                      'dropped': state['dropped_count'], 'bytes': state['bytes_written'],
+                      'files': len(state['files'])})

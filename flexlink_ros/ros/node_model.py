@@ -1,0 +1,186 @@
+"""
+What flexlink_node does with a message and its model, without rclpy.
+
+The crank sample of a JointState's CDR, whether an estimate may be published, the counts the
+node keeps (in total and per diagnostics period) and the model the node loads; the node's log
+lines that tools wait for.
+"""
+
+import dataclasses
+import math
+
+from . import parameters
+from .messages import crank_from_joint_state
+from ..core.estimation.streaming import SampleFlag
+from ..core.mechanism import load_mechanism
+from ..core.reduction.model import model_for_mechanism
+from ..errors import InputRejected, MalformedCdr
+from ..io import cdr
+
+# The default model (node parameters, core.options.DEFAULT_SIZES) meets this relative RMS
+# error on Cho 1992 against flexlink plan's scene reference (1.3 % coupler, 0.9 % lever).
+DEFAULT_MODEL_TOLERANCE = 0.02
+READY_MESSAGE = 'ready: listening on'  # logged once the node is subscribed (cli demo waits)
+FIRST_INPUT_MESSAGE = 'first crank sample'
+MAX_REASON_CHARS = 200   # a refusal's reason as logged and in /diagnostics
+# What happens to a received message (counted per kind, in total and per diagnostics period).
+SKIP_KINDS = ('malformed', 'content', 'estimator', 'internal')   # counted as 'skipped'
+OTHER_KINDS = ('outlier', 'repeated', 'out_of_bound')
+# Flags after which the estimate is not to be trusted blindly: the estimator status is WARN.
+WARN_FLAGS = (SampleFlag.CLIPPED_SPEED | SampleFlag.CLIPPED_ACCEL | SampleFlag.OUTLIER
+              | SampleFlag.COLD_START)
+
+
+def one_line(text):
+    """Return the first line of ``text``, cut to MAX_REASON_CHARS."""
+    lines = str(text).strip().splitlines()
+    line = lines[0] if lines else ''
+    return line if len(line) <= MAX_REASON_CHARS else line[:MAX_REASON_CHARS - 3] + '...'
+
+
+def crank_sample(data, joint_name, deserialize):
+    """
+    Read stamp, angle and speed of the crank from JointState CDR; InputRejected says why not.
+
+    The fast parser (cdr.parse_joint_state) checks the bytes against the input bounds; only a
+    message without a usable sample is deserialised by rclpy, to name what is wrong, and an
+    error there (rclpy raises RMWError on truncated CDR) is a refusal too.
+
+    Parameters
+    ----------
+    data : bytes
+        CDR of a ``sensor_msgs/JointState``.
+    joint_name : str
+        Name of the crank joint.
+    deserialize : callable
+        bytes -> sensor_msgs.msg.JointState (rclpy's deserialize_message).
+
+    Returns
+    -------
+    stamp_ns : int
+    angle : float
+    speed : float or None
+
+    Raises
+    ------
+    errors.InputRejected
+        With ``kind`` 'malformed' or 'content' and a one-line reason.
+
+    """
+    try:
+        stamp_ns, angle, speed = cdr.parse_joint_state(data, joint_name.encode())
+    except MalformedCdr as exc:
+        raise InputRejected(f'malformed JointState: {one_line(exc)}', 'malformed') from None
+    if angle is None or not math.isfinite(angle) or (
+            speed is not None and not math.isfinite(speed)):
+        try:
+            message = deserialize(data)
+        except (RuntimeError, ValueError, TypeError, MemoryError) as exc:  # RMWError: Runtime
+            raise InputRejected(f'malformed JointState ({type(exc).__name__}): '
+                                f'{one_line(exc)}', 'malformed') from None
+        stamp_ns, angle, speed = crank_from_joint_state(message, joint_name)
+    if stamp_ns <= 0:
+        raise InputRejected('zero stamp (the publisher does not stamp its messages)'
+                            if stamp_ns == 0 else f'negative stamp {stamp_ns} ns')
+    return stamp_ns, angle, speed
+
+
+def publishable(sample):
+    """
+    Say why a Sample's numbers may not be published (None if they may).
+
+    The estimator flags OUT_OF_BOUND every estimate beyond its deflection bound or not finite
+    (a non-finite state makes the deflections non-finite), so the flag is the one test.
+
+    Parameters
+    ----------
+    sample : core.estimation.streaming.Sample
+        One estimate.
+
+    """
+    if sample.flags & SampleFlag.OUT_OF_BOUND:
+        return sample.message or "deflection beyond the model's bound"
+    return None
+
+
+def load_node_model(values, warn):
+    """
+    Load the mechanism and its reduced model (cached, else built).
+
+    A model that cannot be built raises its FlexlinkError.
+
+    Parameters
+    ----------
+    values : dict
+        Parameter name -> value.
+    warn : callable
+        Called with a warning sentence.
+
+    Returns
+    -------
+    model : core.reduction.model.ReducedModel
+    options : core.options.ModelOptions
+        The options used.
+    notes : list of str
+        Warnings given (empty if none).
+
+    """
+    mechanism = load_mechanism(values['mechanism'])
+    if values['damping_ratio'] != mechanism.damping_ratio:
+        mechanism = dataclasses.replace(mechanism, damping_ratio=values['damping_ratio'])
+    options = parameters.model_options(values)
+    notes = []
+    if values['model.modes'] == 0 and values['model.tolerance'] < DEFAULT_MODEL_TOLERANCE:
+        notes.append(f'the default model was planned for {DEFAULT_MODEL_TOLERANCE:g} relative '
+                     f'error; for {values["model.tolerance"]:g} run `flexlink plan --tolerance '
+                     f'{values["model.tolerance"]:g}` and set model.modes')
+        warn(notes[-1])
+    cache_dir = values['model.cache_dir'] or None
+    model = model_for_mechanism(mechanism, options, cache_dir=cache_dir)
+    return model, options, notes
+
+
+@dataclasses.dataclass
+class Totals:
+    """What became of every received message since the node started."""
+
+    received: int = 0
+    rejected: int = 0       # skipped (SKIP_KINDS)
+    published: int = 0
+    counts: dict = dataclasses.field(
+        default_factory=lambda: dict.fromkeys(SKIP_KINDS + OTHER_KINDS, 0))   # kind -> messages
+    last_rejection: str = ''
+    last_outlier: str = ''
+
+
+@dataclasses.dataclass
+class PeriodStats:
+    """What happened since the last /diagnostics message."""
+
+    valid: int = 0
+    rejected: int = 0
+    counts: dict = dataclasses.field(default_factory=dict)   # kind -> messages
+    last_out_of_bound: str = ''
+    update_ns: list = dataclasses.field(default_factory=list)
+    max_error_indicator: float = 0.0
+    max_criterion: list = dataclasses.field(default_factory=lambda: [0.0] * 4)
+    near_zero: list = dataclasses.field(default_factory=lambda: [False] * 4)
+    flags: int = 0
+
+    def add_sample(self, sample):
+        """
+        Count a published sample: its flags, error indicator and joint criteria.
+
+        Parameters
+        ----------
+        sample : core.estimation.streaming.Sample
+            The estimate published.
+
+        """
+        self.valid += 1
+        self.flags |= sample.flags
+        self.max_error_indicator = max(self.max_error_indicator, sample.error_indicator)
+        for j, value in enumerate(sample.criterion):
+            if value > self.max_criterion[j]:
+                self.max_criterion[j] = value
+            self.near_zero[j] = self.near_zero[j] or sample.near_zero[j]

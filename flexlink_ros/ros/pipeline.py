@@ -1,0 +1,371 @@
+"""
+The work of flexlink_node, shared by the plain and the managed (lifecycle) node.
+
+:class:`EstimatorPipeline` declares the parameters, loads the model, creates the publishers,
+subscribes to the crank's JointState, runs the estimator on every message, publishes (and
+records) the outputs as CDR and publishes ``/diagnostics`` on a timer. It is a mixin: the node
+classes in :mod:`.node` combine it with rclpy's ``Node`` or ``LifecycleNode``.
+"""
+
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import Vector3Stamped
+import numpy as np
+from rcl_interfaces.msg import SetParametersResult
+from rclpy import logging as rclpy_logging
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message, serialize_message
+from rclpy.subscription import RCLError
+from sensor_msgs.msg import JointState
+from visualization_msgs.msg import MarkerArray
+
+from . import diagnostics
+from . import parameters
+from .messages import diagnostics_message, joint_level, parameter_descriptor
+from .node_model import (crank_sample, FIRST_INPUT_MESSAGE, load_node_model, one_line,
+                         PeriodStats, publishable, READY_MESSAGE, SKIP_KINDS, Totals)
+from .runtime import is_shutdown_error
+from .startup import check_startup_signal
+from ..core.estimation.streaming import SampleFlag, StreamingEstimator
+from ..errors import FlexlinkError, InputRejected, OutlierSample, RecorderError
+from ..io import cdr
+from ..io.recorder import McapRecorder
+from ..names import NODE_NAME, TOPICS
+
+WARN_THROTTLE_S = 1.0  # at most one warning per second per kind of bad input
+# Message type of each output (keys of names.TOPICS).
+OUTPUT_TYPES = {'lever_tip': Vector3Stamped, 'coupler_mid': Vector3Stamped,
+                'criteria': JointState, 'markers': MarkerArray, 'diagnostics': DiagnosticArray}
+PER_SAMPLE_OUTPUTS = ('lever_tip', 'coupler_mid', 'criteria')   # with the input's QoS
+OTHER_OUTPUT_DEPTH = 10   # history depth of markers and /diagnostics
+
+
+class EstimatorPipeline:
+    """The node's work, shared by the plain and the managed (lifecycle) node."""
+
+    def _declare(self):
+        for spec in parameters.PARAMETERS:
+            self.declare_parameter(spec.name, spec.default, parameter_descriptor(spec))
+        self.values = parameters.validate_all(
+            {spec.name: self.get_parameter(spec.name).value for spec in parameters.PARAMETERS})
+        self.add_on_set_parameters_callback(self._validate)
+        self.add_post_set_parameters_callback(self._apply)
+        self.estimator = self.recorder = self.subscription = self._timer = None
+        self.publishers_ = {}
+        self._clock = self.get_clock()
+        self._deserialize = lambda data: deserialize_message(data, JointState)
+        self._serialize = serialize_message
+        self._frame = self.values['frame_id'].encode()
+        self._marker_encoder = None
+
+    # -- lifecycle ------------------------------------------------------------------------
+
+    def _configure(self, make_publisher):
+        """Load or build the model, create the publishers, open the recording."""
+        values = self.values
+        log = self.get_logger()
+        start = time.perf_counter()
+        check_startup_signal()
+        self.model, self.options, self.notes = load_node_model(values, log.warning)
+        check_startup_signal()
+        self.criteria_source = self.model.info.get('criteria', 'unknown')
+        log.info(f'model: {self.model.size} coordinates, {self.model.grid_size} grid cells, '
+                 f'{self.options} ({time.perf_counter() - start:.2f} s); '
+                 f'criteria: {self.criteria_source}')
+        self.estimator = StreamingEstimator(self.model, warm_start=values['model.warm_start'])
+        # The node only streams: the step tables serve it, the full table can go.
+        self.model = self.estimator.release_model_table()
+        self.model_facts = {'model_size': self.model.size, 'model_grid': self.model.grid_size,
+                            'model_options': str(self.options),
+                            'criteria_source': self.criteria_source,
+                            'notes': '; '.join(self.notes)}
+        self._create_publishers(make_publisher)
+        self.recorder = self._open_recorder(self.qos) if values['record.enabled'] else None
+        self.totals = Totals()
+        self.last_valid_wall = None
+
+    def _create_publishers(self, make_publisher):
+        """Create the output publishers with the QoS the parameters select."""
+        values = self.values
+        reliability = (ReliabilityPolicy.RELIABLE if values['qos.reliability'] == 'reliable'
+                       else ReliabilityPolicy.BEST_EFFORT)
+        self.qos = QoSProfile(depth=values['qos.depth'], reliability=reliability)
+        self.publishers_ = {
+            key: make_publisher(message_type, TOPICS[key],
+                                self.qos if key in PER_SAMPLE_OUTPUTS else OTHER_OUTPUT_DEPTH)
+            for key, message_type in OUTPUT_TYPES.items()}
+        self.input_topic = self.resolve_topic_name(values['input_topic'])
+        self.output_topics = {key: publisher.topic_name
+                              for key, publisher in self.publishers_.items()}
+
+    def _activate(self):
+        """Subscribe and start the diagnostics timer: estimates flow from now on."""
+        values = self.values
+        self.estimator.reset()
+        self.period = PeriodStats()
+        self._period_start = time.monotonic()
+        self.subscription = self.create_subscription(
+            JointState, values['input_topic'], self._on_joint_state, self.qos, raw=True)
+        self._start_diagnostics_timer()
+        self.get_logger().info(
+            f'{READY_MESSAGE} {self.subscription.topic_name} (joint '
+            f'{values["crank_joint"]!r}), publishing under {self.get_name()}/'
+            + ('' if self.recorder is None else f'; recording to {self.recorder.path}'))
+        if not self.estimator.compiled:
+            self.get_logger().warning(
+                'the compiled estimator step (flexlink_ros.core.estimation._radau_step) is '
+                'not built: the numpy step runs, about twice as slow (build the package with '
+                'colcon build or pip install .)')
+
+    def _start_diagnostics_timer(self):
+        if self._timer is not None:
+            self.destroy_timer(self._timer)
+        self._timer = self.create_timer(self.values['diagnostics.period_s'],
+                                        self._publish_diagnostics)
+
+    def _deactivate(self):
+        """Stop receiving (the model, publishers and recording stay)."""
+        if self.subscription is not None:
+            self.destroy_subscription(self.subscription)
+            self.subscription = None
+        if self._timer is not None:
+            self.destroy_timer(self._timer)
+            self._timer = None
+
+    def _cleanup(self):
+        """Close the recording and drop publishers and model."""
+        self._deactivate()
+        self.close()
+        for publisher in self.publishers_.values():
+            self.destroy_publisher(publisher)
+        self.publishers_ = {}
+        self.estimator = self.recorder = None
+
+    # -- parameters -----------------------------------------------------------------------
+
+    def _validate(self, changes):
+        current = dict(self.values)
+        current.update({p.name: p.value for p in changes})
+        for parameter in changes:
+            reason = parameters.validate_parameter(parameter.name, parameter.value, current)
+            if reason is not None:
+                return SetParametersResult(successful=False, reason=reason)
+        return SetParametersResult(successful=True)
+
+    def _apply(self, changes):
+        """Run-time changes take effect here (the others are read-only)."""
+        period_changed = any(p.name == 'diagnostics.period_s'
+                             and p.value != self.values[p.name] for p in changes)
+        for parameter in changes:
+            self.values[parameter.name] = parameter.value
+        if self.estimator is not None:
+            self.estimator.warm_start = self.values['model.warm_start']
+        self._frame = self.values['frame_id'].encode()
+        if period_changed and self._timer is not None:
+            self._start_diagnostics_timer()
+
+    # -- recording ------------------------------------------------------------------------
+
+    def _open_recorder(self, qos):
+        values = self.values
+        path = values['record.path'] or time.strftime('flexlink_%Y%m%d_%H%M%S')
+        recorder = McapRecorder(path, split_size_bytes=values['record.max_bytes'],
+                                split_duration_s=values['record.max_duration_s'])
+        # Topics first: if opening fails, writes to them are then dropped as failed,
+        # not refused as undeclared.
+        recorder.add_topic(self.resolve_topic_name(values['input_topic']), JointState, [qos])
+        for publisher in self.publishers_.values():
+            recorder.add_topic(publisher.topic_name, publisher.msg_type,
+                               [publisher.qos_profile])
+        try:
+            recorder.open()
+        except RecorderError as exc:
+            self.get_logger().error(f'recording disabled: {exc}')
+        return recorder
+
+    def _record(self, topic, message, log_time_ns):
+        if self.recorder is None:
+            return
+        try:
+            # rclpy's bytes are exact here: none of the types has a float64[] (which can
+            # be empty); only the input and the per-sample outputs are exact CDR anyway.
+            self.recorder.enqueue(topic, message if isinstance(message, bytes)
+                                  else self._serialize(message), log_time_ns)
+        except RecorderError as exc:
+            self.get_logger().error(f'recording stopped, estimation goes on: {exc}')
+
+    def close(self):
+        """Close the recording (idempotent); returns its status or None."""
+        if self.recorder is None or self.recorder.state.value == 'closed':
+            return None
+        # Not the node's logger: after shutdown its /rosout publisher is gone.
+        log = rclpy_logging.get_logger(f'{NODE_NAME}.recorder')
+        try:
+            status = self.recorder.close()
+        except RecorderError as exc:
+            log.error(str(exc))
+            status = self.recorder.status()
+        log.info(f'recording closed: {status["message_count"]} messages in '
+                 f'{status["path"]} ({status["state"]})')
+        return status
+
+    # -- the per-message path -------------------------------------------------------------
+
+    def _on_joint_state(self, data):
+        receive_ns = self._clock.now().nanoseconds
+        self.totals.received += 1
+        if len(data) > cdr.MAX_MESSAGE_BYTES:   # not recorded either
+            self._refuse('malformed', f'{len(data)} bytes, beyond the bound of '
+                         f'{cdr.MAX_MESSAGE_BYTES}')
+            return
+        if self.recorder is not None:
+            self._record(self.input_topic, data, receive_ns)
+        try:
+            self._estimate(data)
+        except Exception as exc:    # last resort: no message may stop the node
+            self.get_logger().error(f'unexpected {type(exc).__name__} on an input '
+                                    f'message: {one_line(exc)}',
+                                    throttle_duration_sec=WARN_THROTTLE_S)
+            self._refuse('internal', f'{type(exc).__name__}: {one_line(exc)}')
+
+    def _estimate(self, data):
+        try:
+            stamp_ns, angle, speed = crank_sample(data, self.values['crank_joint'],
+                                                  self._deserialize)
+            start = time.perf_counter_ns()
+            sample = self.estimator.update(stamp_ns, angle, speed)
+            self.period.update_ns.append(time.perf_counter_ns() - start)
+        except InputRejected as exc:
+            self._refuse(exc.kind, str(exc))
+            return
+        except OutlierSample as exc:
+            self.period.flags |= SampleFlag.OUTLIER
+            self._refuse('outlier', str(exc))
+            return
+        except (FlexlinkError, ValueError) as exc:
+            self._refuse('estimator', one_line(exc))
+            return
+        if sample.flags & SampleFlag.REPEATED:
+            self._count('repeated')
+            return
+        reason = publishable(sample)
+        if reason is not None:
+            self._count('out_of_bound')
+            self.period.flags |= sample.flags | SampleFlag.OUT_OF_BOUND
+            self.period.last_out_of_bound = reason
+            self.get_logger().warning(f'estimate not published: {reason}',
+                                      throttle_duration_sec=WARN_THROTTLE_S)
+            return
+        if self.last_valid_wall is None:
+            self.get_logger().info(f'{FIRST_INPUT_MESSAGE}: angle {angle:.4f} rad, '
+                                   f'speed {speed} rad/s')
+        self.last_valid_wall = time.monotonic()
+        self._publish_sample(stamp_ns, sample)
+
+    def _count(self, kind):
+        self.totals.counts[kind] += 1
+        self.period.counts[kind] = self.period.counts.get(kind, 0) + 1
+
+    def _refuse(self, kind, reason):
+        """Count a message that gives no estimate; warn (at most once a second per branch)."""
+        self._count(kind)
+        reason = one_line(reason)
+        if kind in SKIP_KINDS:
+            self.totals.rejected += 1
+            self.period.rejected += 1
+            self.totals.last_rejection = reason
+            self.get_logger().warning(f'input skipped: {reason}',
+                                      throttle_duration_sec=WARN_THROTTLE_S)
+        else:
+            self.totals.last_outlier = reason
+            self.get_logger().warning(f'input skipped as {reason}',
+                                      throttle_duration_sec=WARN_THROTTLE_S)
+
+    def _publish_sample(self, stamp_ns, sample):
+        self.period.add_sample(sample)
+        if sample.message:
+            self.get_logger().warning(f'estimator: {sample.message}',
+                                      throttle_duration_sec=WARN_THROTTLE_S)
+        # Serialised once (exact CDR), published raw and recorded as the same bytes. The
+        # per-sample outputs go out first; the markers (every n-th sample: link shapes
+        # and a MarkerArray) after them, so they do not delay this sample's deflection.
+        sec, nanosec = divmod(stamp_ns, 1_000_000_000)
+        frame = self._frame
+        outputs = [
+            ('lever_tip', cdr.vector3_stamped_cdr(sec, nanosec, frame, *sample.lever_tip)),
+            ('coupler_mid', cdr.vector3_stamped_cdr(sec, nanosec, frame, *sample.coupler_mid)),
+            ('criteria', cdr.criteria_cdr(sec, nanosec, frame, sample.criterion,
+                                          sample.gamma_dot, sample.reaction_n))]
+        published = self._publish(outputs)
+        if published and self.totals.published % self.values['markers.every_n'] == 0:
+            markers = [('markers', self._markers(stamp_ns, sample))]
+            self._publish(markers)
+            outputs += markers
+        self.totals.published += 1
+        if self.recorder is not None:   # recorded even if shut down meanwhile: the input was
+            log_ns = self._clock.now().nanoseconds
+            for key, data in outputs:
+                self._record(self.output_topics[key], data, log_ns)
+
+    def _publish(self, outputs):
+        """Publish (key, CDR) pairs; False if SIGINT/SIGTERM shut the context down."""
+        for key, data in outputs:
+            try:
+                self.publishers_[key].publish(data)
+            except RCLError as exc:
+                if not is_shutdown_error(exc, self.context):
+                    raise
+                return False
+        return True
+
+    def _markers(self, stamp_ns, sample):
+        """CDR of the deformed-linkage markers (template encoder, rebuilt on changes)."""
+        values = self.values
+        count = values['markers.points_per_link']
+        encoder = self._marker_encoder
+        if encoder is None or (encoder.frame_id, encoder.count) != (values['frame_id'], count):
+            encoder = self._marker_encoder = cdr.MarkerEncoder(values['frame_id'], count)
+        positions, deflections = self.estimator.link_shapes(sample)
+        source = np.linspace(0.0, 1.0, positions.shape[1])
+        target = np.linspace(0.0, 1.0, count)
+
+        def resample(a):
+            return np.stack([np.interp(target, source, a[:, i]) for i in range(2)], axis=1)
+
+        joints = (positions[0, 0], positions[0, -1], positions[1, -1], positions[2, 0])
+        levels = [joint_level(c, False, values['diagnostics.criterion_warn'],
+                              values['diagnostics.criterion_error'])
+                  for c in sample.criterion]
+        return encoder.encode(stamp_ns, [resample(p) for p in positions],
+                              [resample(d) for d in deflections],
+                              values['markers.exaggeration'], joints, levels)
+
+    # -- diagnostics ----------------------------------------------------------------------
+
+    def diagnostic_statuses(self):
+        """Return the statuses of one /diagnostics message (and restart the period)."""
+        now = time.monotonic()
+        elapsed = max(now - self._period_start, 1e-9)
+        period, self.period, self._period_start = self.period, PeriodStats(), now
+        rate = period.valid / elapsed
+        stale = float('inf') if self.last_valid_wall is None else now - self.last_valid_wall
+        values = self.values
+        return [diagnostics.input_status(self.totals, period, values, self.input_topic,
+                                         rate, stale),
+                diagnostics.estimator_status(period, values, self.model_facts),
+                *diagnostics.joint_statuses(period, values, self.criteria_source),
+                diagnostics.recorder_status(None if self.recorder is None
+                                            else self.recorder.status())]
+
+    def _publish_diagnostics(self):
+        now = self._clock.now()
+        message = diagnostics_message(now.to_msg(), self.diagnostic_statuses())
+        publisher = self.publishers_['diagnostics']
+        try:
+            publisher.publish(message)
+        except RCLError as exc:
+            if not is_shutdown_error(exc, self.context):
+                raise
+            return
+        self._record(publisher.topic_name, message, now.nanoseconds)
