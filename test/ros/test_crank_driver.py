@@ -5,12 +5,11 @@ import subprocess
 import sys
 import time
 
+from flexlink_ros.core.numerics import RPM, wrap_to_pi
+from flexlink_ros.ros.crank_driver import build_parser, SpeedProfile
 import numpy as np
 import pytest
 from scipy.integrate import quad
-
-from flexlink_ros.core.numerics import RPM, wrap_to_pi
-from flexlink_ros.ros.crank_driver import SpeedProfile, build_parser
 
 REPO_CONFIG = 'config/crank_driver.yaml'
 
@@ -141,11 +140,11 @@ def test_bad_parameter_is_a_one_line_error(parameter, reason):
 
 
 def test_shutdown_errors_are_told_from_failures():
-    """rcl's invalid-context errors mean shutdown even while Context.ok() still says True."""
+    """Invalid-context errors of rcl mean shutdown even while Context.ok() still says True."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
 
-    from flexlink_ros.ros.crank_driver import is_shutdown_error, spin_until_shutdown
+    from flexlink_ros.ros.runtime import is_shutdown_error, spin_until_shutdown
 
     live = rclpy.Context()
     rclpy.init(context=live)

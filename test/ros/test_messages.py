@@ -2,13 +2,12 @@
 
 import math
 
+from flexlink_ros.ros import messages as rm
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
-
-from flexlink_ros.ros import messages as rm
 
 
 def _state(names, position, velocity=(), sec=3, nanosec=5):

@@ -8,17 +8,16 @@ import subprocess
 import sys
 import time
 
+from flexlink_ros.core.options import DEFAULT_SIZES, ModelOptions
+from flexlink_ros.names import NODE_NAME
+from flexlink_ros.ros import parameters as node_params
+from flexlink_ros.ros.node_model import FIRST_INPUT_MESSAGE, load_node_model, READY_MESSAGE
 import numpy as np
 import pytest
 
-from flexlink_ros.ros import node as flexlink_node
-from flexlink_ros.ros import parameters as node_params
-from flexlink_ros.core.reduction import model as reduced
-from flexlink_ros.errors import FlexlinkError
-
 READY_TIMEOUT_S = 240.0     # node start-up incl. a first model build on a loaded machine
 DISCOVERY_TIMEOUT_S = 20.0
-PARAMS_FILE = pathlib.Path(__file__).resolve().parents[1] / 'config' / 'flexlink_node.yaml'
+PARAMS_FILE = pathlib.Path(__file__).resolve().parents[2] / 'config' / 'flexlink_node.yaml'
 OUTPUTS = ('/flexlink_node/lever_tip/deflection', '/flexlink_node/coupler_mid/deflection',
            '/flexlink_node/joint_criteria', '/flexlink_node/markers', '/diagnostics')
 
@@ -29,8 +28,8 @@ def test_model_options_follow_the_parameters():
     values = node_params.defaults()
     options = node_params.model_options(values)
     # 0 modes: the planned default, for the flexible crank of the node's default scene.
-    assert options == reduced.ModelOptions(rigid_crank=False, elements_per_link=4)
-    assert (options.modes, options.static) == reduced.DEFAULT_SIZES['flexible', False]
+    assert options == ModelOptions(rigid_crank=False, elements_per_link=4)
+    assert (options.modes, options.static) == DEFAULT_SIZES['flexible', False]
     values.update({'model.modes': 6, 'model.bearings': 'rigid', 'model.rigid_crank': False,
                    'model.geometric_stiffness': False, 'model.static': 0,
                    'model.grid_size': 256, 'model.elements_per_link': 4})
@@ -38,29 +37,6 @@ def test_model_options_follow_the_parameters():
     assert (options.modes, options.bearings, options.rigid_crank,
             options.geometric_stiffness) == (6, 'rigid', False, False)
     assert (options.static, options.grid_size, options.elements_per_link) == (0, 256, 4)
-
-
-def test_build_falls_back_only_for_geometric_stiffness():
-    calls, notes = [], []
-
-    def build(options):
-        calls.append(options.geometric_stiffness)
-        if options.geometric_stiffness:
-            raise FlexlinkError('needs core/dynamics.py')
-        return 'model'
-
-    model, options = flexlink_node.build_with_fallback(build, reduced.ModelOptions(),
-                                                       notes.append)
-    assert (model, options.geometric_stiffness, calls) == ('model', False, [True, False])
-    assert 'geometric stiffness left out' in notes[0] and 'dynamics' in notes[0]
-
-    def failing(options):
-        raise FlexlinkError('something else')
-
-    # Without geometric stiffness requested there is nothing to leave out: the error stands.
-    with pytest.raises(FlexlinkError, match='something else'):
-        flexlink_node.build_with_fallback(failing, reduced.ModelOptions(
-            geometric_stiffness=False), notes.append)
 
 
 # -- processes ------------------------------------------------------------------------------
@@ -122,7 +98,7 @@ def processes():
 
 @pytest.fixture
 def ros():
-    """An rclpy context, a test node and its executor (shut down at the end)."""
+    """Give an rclpy context, a test node and its executor (shut down at the end)."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
 
@@ -157,8 +133,8 @@ def joint_state(stamp_ns, names, positions, velocities):
 
 
 def node_model():
-    """The model the node builds with default parameters (same fallback, same cache)."""
-    model, _, _ = flexlink_node.load_node_model(node_params.defaults(), lambda note: None)
+    """Load the model the node builds with default parameters (same cache)."""
+    model, _, _ = load_node_model(node_params.defaults(), lambda note: None)
     return model
 
 
@@ -202,7 +178,7 @@ def test_node_end_to_end(tmp_path, processes, ros):
                                'diagnostics.period_s:=0.2', 'markers.every_n:=25')
     processes.append(node_process)
     model = node_model()              # meanwhile: the reference's model, from the cache
-    node_process.wait_for(flexlink_node.READY_MESSAGE, READY_TIMEOUT_S)
+    node_process.wait_for(READY_MESSAGE, READY_TIMEOUT_S)
 
     test_node, executor = ros
     qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
@@ -243,7 +219,7 @@ def test_node_end_to_end(tmp_path, processes, ros):
             executor.spin_once(timeout_sec=0.0)
     spin_until(executor, lambda: len(received['lever']) >= len(stamps)
                and len(received['criteria']) >= len(stamps), 30.0, 'all outputs',
-               lambda: f": {({k: len(v) for k, v in received.items()})}\n{node_process.log()}")
+               lambda: f': {({k: len(v) for k, v in received.items()})}\n{node_process.log()}')
 
     # Outputs carry the input stamps and equal the library's estimate of the same samples.
     from flexlink_ros.core.estimation.streaming import StreamingEstimator
@@ -316,13 +292,13 @@ def test_driver_to_node_and_sigkill_leaves_a_recoverable_file(tmp_path, processe
     bag = tmp_path / 'bag'
     node_process = NodeProcess(tmp_path, 'record.enabled:=true', f'record.path:={bag}')
     processes.append(node_process)
-    node_process.wait_for(flexlink_node.READY_MESSAGE, READY_TIMEOUT_S)
+    node_process.wait_for(READY_MESSAGE, READY_TIMEOUT_S)
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
     driver = subprocess.Popen([sys.executable, '-m', 'flexlink_ros.ros.crank_driver', '--ros-args',
                                '-p', 'speed_rpm:=269.0'], env=env,
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     processes.append(driver)
-    node_process.wait_for(flexlink_node.FIRST_INPUT_MESSAGE, DISCOVERY_TIMEOUT_S)
+    node_process.wait_for(FIRST_INPUT_MESSAGE, DISCOVERY_TIMEOUT_S)
     time.sleep(2.5)    # recording time, not synchronisation
     killed_ns = time.time_ns()
     node_process.stop(signal.SIGKILL)
@@ -348,14 +324,14 @@ def test_driver_to_node_and_sigkill_leaves_a_recoverable_file(tmp_path, processe
     ('qos.depth:=2.5', 'expecting type'),           # refused by the parameter's type
     ('frame_id:=' + 'x' * 300, 'frame_id must be at most 256 bytes, got 300'),
 ])
-def test_bad_parameters_file_value_stops_the_node_with_a_reason(tmp_path, processes,
-                                                                 parameter, reason):
+def test_bad_parameters_file_value_stops_the_node_with_a_reason(tmp_path, processes, parameter,
+                                                                reason):
     node_process = NodeProcess(tmp_path, parameter)
     processes.append(node_process)
     assert node_process.process.wait(timeout=READY_TIMEOUT_S) == 1
     log = node_process.log()
     assert reason in log and 'Traceback' not in log
-    assert log.strip().startswith(f'{flexlink_node.NODE_NAME}: error:')
+    assert log.strip().startswith(f'{NODE_NAME}: error:')
 
 
 def test_managed_node_streams_only_while_active(tmp_path, processes, ros):
@@ -430,7 +406,7 @@ def test_unwritable_recording_path_is_an_error_diagnostic_and_estimates_go_on(
     node_process = NodeProcess(tmp_path, 'record.enabled:=true',
                                f'record.path:={blocker / "bag"}', 'diagnostics.period_s:=0.2')
     processes.append(node_process)
-    node_process.wait_for(flexlink_node.READY_MESSAGE, READY_TIMEOUT_S)
+    node_process.wait_for(READY_MESSAGE, READY_TIMEOUT_S)
     assert 'recording disabled' in node_process.log()
 
     test_node, executor = ros
@@ -497,8 +473,8 @@ def test_signal_during_start_up_exits_cleanly(tmp_path, processes, stage, sig):
     node_process.process.send_signal(sig)
     assert node_process.process.wait(timeout=60) == 0
     log = node_process.log()
-    assert 'Traceback' not in log and flexlink_node.READY_MESSAGE not in log
-    expected = f'{flexlink_node.NODE_NAME}: {sig.name} during start-up: exiting'
+    assert 'Traceback' not in log and READY_MESSAGE not in log
+    expected = f'{NODE_NAME}: {sig.name} during start-up: exiting'
     assert [line for line in log.splitlines() if not line.startswith('[')] == [expected]
 
 
@@ -520,7 +496,7 @@ def test_run_time_parameters_take_effect(tmp_path, processes, ros):
 
     node_process = NodeProcess(tmp_path, 'diagnostics.period_s:=0.5')
     processes.append(node_process)
-    node_process.wait_for(flexlink_node.READY_MESSAGE, READY_TIMEOUT_S)
+    node_process.wait_for(READY_MESSAGE, READY_TIMEOUT_S)
     test_node, executor = ros
     qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
     publisher = test_node.create_publisher(JointState, 'joint_states', qos)

@@ -5,16 +5,20 @@ import math
 import struct
 import time
 
+from flexlink_ros.errors import InputRejected
+from flexlink_ros.io import cdr
+from flexlink_ros.ros.messages import ns_to_stamp
+from flexlink_ros.ros.node_model import crank_sample, READY_MESSAGE, SKIP_KINDS
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
+import test_node
+from test_node import (DISCOVERY_TIMEOUT_S, NodeProcess, OUTPUTS, READY_TIMEOUT_S,
+                       spin_until)
 
-from flexlink_ros.io import cdr
-from flexlink_ros.ros import node as flexlink_node
-from flexlink_ros.ros.messages import InputRejected, ns_to_stamp
-from test_node import (DISCOVERY_TIMEOUT_S, OUTPUTS, READY_TIMEOUT_S, NodeProcess,  # noqa: F401
-                       processes, ros, spin_until)  # the fixtures processes and ros
+processes = test_node.processes   # fixtures of test_node, used here by name
+ros = test_node.ros
 
 STAMP0_NS = 1_800_000_000 * 10**9
 SPEED = 30.0     # rad/s, about 290 rpm
@@ -57,7 +61,7 @@ def mutate(data, rng):
         data[offset:offset + 4] = struct.pack('<I', HUGE_COUNTS[rng.integers(len(HUGE_COUNTS))])
         return bytes(data), 'huge count'
     if kind == 5:                                       # NaN, inf, huge in the doubles
-        offsets = [k for k in range(len(data) - 8, 12, -8)][:6]
+        offsets = list(range(len(data) - 8, 12, -8))[:6]
         for offset in rng.choice(offsets, size=int(rng.integers(1, 3)), replace=False):
             value = SPECIAL_DOUBLES[rng.integers(len(SPECIAL_DOUBLES))]
             data[offset:offset + 8] = struct.pack('<d', value)
@@ -82,9 +86,9 @@ def fuzzed_messages(count, seed):
 
 
 def classify(data):
-    """What the node's parse path makes of CDR: 'ok' or the refusal's kind."""
+    """Classify CDR as the node's parse path does: 'ok' or the refusal's kind."""
     try:
-        flexlink_node.crank_sample(data, 'crank', lambda b: deserialize_message(b, JointState))
+        crank_sample(data, 'crank', lambda b: deserialize_message(b, JointState))
     except InputRejected as exc:
         return exc.kind
     return 'ok'
@@ -98,8 +102,7 @@ def test_parse_path_refuses_every_mutation_with_a_reason():
     reasons = set()
     for data, mutation in fuzzed_messages(100_000, seed=12):
         try:
-            flexlink_node.crank_sample(data, 'crank',
-                                       lambda b: deserialize_message(b, JointState))
+            crank_sample(data, 'crank', lambda b: deserialize_message(b, JointState))
             outcomes['ok', mutation] += 1
         except InputRejected as exc:
             outcomes[exc.kind, mutation] += 1
@@ -123,7 +126,7 @@ def test_truncated_effort_is_refused_not_raised():
     with pytest.raises(RMWError):
         deserialize_message(data, JointState)
     with pytest.raises(InputRejected, match='effort') as caught:
-        flexlink_node.crank_sample(data, 'crank', lambda b: deserialize_message(b, JointState))
+        crank_sample(data, 'crank', lambda b: deserialize_message(b, JointState))
     assert caught.value.kind == 'malformed'
 
 
@@ -133,7 +136,7 @@ def test_rclpy_deserialisation_error_is_a_refusal():
         return deserialize_message(data[:20], JointState)
     data = valid_message(1, joints=('base',))    # no crank: the slow path names why
     with pytest.raises(InputRejected, match='RMWError') as caught:
-        flexlink_node.crank_sample(data, 'crank', deserialize)
+        crank_sample(data, 'crank', deserialize)
     assert caught.value.kind == 'malformed'
 
 
@@ -178,7 +181,7 @@ def lever_values(data):
 
 def listen_to_node(ros, lever_depth):
     """
-    A reliable JointState publisher and the node's raw lever outputs and /diagnostics.
+    Create a reliable JointState publisher, listen to the node's lever outputs, /diagnostics.
 
     Returns (publisher, lever CDR list, diagnostics list, executor) once discovery has matched
     both ways and a first /diagnostics message has arrived.
@@ -210,7 +213,7 @@ def test_fuzz_through_a_running_node(tmp_path, processes, ros):  # noqa: F811
     processes.append(node_process)
     messages = fuzzed_messages(FUZZ_COUNT, seed=2026)
     expected = collections.Counter(classify(data) for data, _ in messages)
-    node_process.wait_for(flexlink_node.READY_MESSAGE, READY_TIMEOUT_S)
+    node_process.wait_for(READY_MESSAGE, READY_TIMEOUT_S)
 
     publisher, lever, diagnostics, executor = listen_to_node(ros, lever_depth=20_000)
 
@@ -259,7 +262,7 @@ def test_fuzz_through_a_running_node(tmp_path, processes, ros):  # noqa: F811
     # encapsulation options: a cut message can become whole or the reverse).
     for kind in ('malformed', 'content'):
         assert abs(counts[f'skipped_{kind}'] - expected[kind]) <= 0.01 * FUZZ_COUNT
-    assert counts['skipped'] == sum(counts[f'skipped_{k}'] for k in flexlink_node.SKIP_KINDS)
+    assert counts['skipped'] == sum(counts[f'skipped_{k}'] for k in SKIP_KINDS)
     spin_until(executor, lambda: len(lever) >= counts['published'], 10.0, 'every output')
     assert len(lever) == counts['published']
     assert all(math.isfinite(v) for m in lever for v in lever_values(m))
@@ -289,7 +292,7 @@ def test_repeats_are_not_published_and_a_poison_speed_is_not_ok(
     node_process = NodeProcess(tmp_path, 'diagnostics.period_s:=0.2')
     processes.append(node_process)
     bound_m = getattr(StreamingEstimator(node_model()), 'deflection_bound_m', None)
-    node_process.wait_for(flexlink_node.READY_MESSAGE, READY_TIMEOUT_S)
+    node_process.wait_for(READY_MESSAGE, READY_TIMEOUT_S)
     test_node, executor = ros
     qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
     publisher = test_node.create_publisher(JointState, 'joint_states', qos)
@@ -369,7 +372,7 @@ def test_reset_storm_does_not_stall_the_node(tmp_path, processes, ros):  # noqa:
     """
     node_process = NodeProcess(tmp_path, 'diagnostics.period_s:=0.2')
     processes.append(node_process)
-    node_process.wait_for(flexlink_node.READY_MESSAGE, READY_TIMEOUT_S)
+    node_process.wait_for(READY_MESSAGE, READY_TIMEOUT_S)
     publisher, lever, diagnostics, executor = listen_to_node(ros, lever_depth=5000)
 
     for k in range(STORM_COUNT):

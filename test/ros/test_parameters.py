@@ -2,10 +2,9 @@
 
 import pathlib
 
+from flexlink_ros.ros import parameters as node_params
 import pytest
 import yaml
-
-from flexlink_ros.ros import parameters as node_params
 
 
 def test_defaults_are_valid():
@@ -57,7 +56,7 @@ def _flatten(tree, prefix=''):
 
 def test_params_file_equals_the_code_defaults():
     # `ros2 run` without --params-file must behave as with config/flexlink_node.yaml.
-    path = pathlib.Path(__file__).resolve().parents[1] / 'config' / 'flexlink_node.yaml'
+    path = pathlib.Path(__file__).resolve().parents[2] / 'config' / 'flexlink_node.yaml'
     shipped = dict(_flatten(yaml.safe_load(path.read_text())['flexlink_node']['ros__parameters']))
     assert shipped == node_params.defaults()
 
@@ -68,7 +67,7 @@ def test_markdown_table_escapes_pipes_inside_cells():
 
 
 def test_readme_parameter_table_is_current():
-    readme = pathlib.Path(__file__).resolve().parents[1] / 'README.md'
+    readme = pathlib.Path(__file__).resolve().parents[2] / 'README.md'
     assert node_params.markdown_table() in readme.read_text()
 
 

@@ -15,7 +15,7 @@ RECEIVE_TIMEOUT_S = 20.0   # discovery on loopback takes 0-3 s; a loaded CI mach
 RTPS_PORT_BASE, RTPS_DOMAIN_GAIN, RTPS_DOMAIN_PORTS = 7400, 250, 250   # RTPS 9.6.1.1
 
 # A publisher and a subscriber in one process would talk in-process: use two processes.
-TALKER = '''
+TALKER = """
 import sys, time, rclpy
 from std_msgs.msg import String
 rclpy.init()
@@ -27,8 +27,8 @@ while time.monotonic() < end:
     publisher.publish(String(data='over loopback'))
     rclpy.spin_once(node, timeout_sec=0.05)
 rclpy.shutdown()
-'''
-LISTENER = '''
+"""
+LISTENER = """
 import sys, time, rclpy
 from std_msgs.msg import String
 rclpy.init()
@@ -40,7 +40,7 @@ while time.monotonic() < end and not received:
     rclpy.spin_once(node, timeout_sec=0.05)
 print('received', received[:1], flush=True)
 rclpy.shutdown()
-'''
+"""
 
 
 def _address(hex_text):
@@ -101,7 +101,7 @@ def isolated_env(**changes):
 
 
 def rtps_ports(domain):
-    """The ports RTPS derives from the domain: where a participant listens."""
+    """Give the ports RTPS derives from the domain: where a participant listens."""
     first = RTPS_PORT_BASE + RTPS_DOMAIN_GAIN * domain
     return range(first, first + RTPS_DOMAIN_PORTS)
 
@@ -137,4 +137,3 @@ def test_with_localhost_range_every_listening_socket_is_on_loopback():
     del env['FASTDDS_DEFAULT_PROFILES_FILE']
     sockets, _ = run_pair(env)
     assert any(s[1] in rtps_ports(domain) and s[0] == '0.0.0.0' for s in sockets), sockets
-
