@@ -12,6 +12,9 @@ OUTPUT_NAMES = ('lever_tip_dx', 'lever_tip_dy', 'coupler_mid_dx', 'coupler_mid_d
 OUTPUT_POINTS = ('lever_tip', 'coupler_mid')
 
 NODE_NAME = 'flexlink_node'
+# Log lines of the node that tools wait for: subscribed and ready; the first input arrived.
+READY_MESSAGE = 'ready: listening on'
+FIRST_INPUT_MESSAGE = 'first crank sample'
 DEFAULT_FRAME_ID = 'linkage_ground'
 # Output topics relative to the node's namespace (~ = the node's private namespace).
 TOPICS = {'lever_tip': '~/lever_tip/deflection', 'coupler_mid': '~/coupler_mid/deflection',
@@ -23,7 +26,20 @@ MARKER_ARRAY = 'visualization_msgs/msg/MarkerArray'
 
 
 def output_topics(node_name):
-    """Output topic names of a node called ``node_name`` (as flexlink_node publishes them)."""
+    """
+    Return the output topic names of a node called ``node_name``, as flexlink_node publishes them.
+
+    Parameters
+    ----------
+    node_name : str
+        The node's name, with or without a leading slash.
+
+    Returns
+    -------
+    dict
+        ``lever_tip``, ``coupler_mid``, ``criteria``, ``markers`` -> absolute topic name.
+
+    """
     base = '/' + node_name.strip('/')
-    return {key: base + TOPICS[key][1:] for key in ('lever_tip', 'coupler_mid', 'criteria',
-                                                     'markers')}
+    keys = ('lever_tip', 'coupler_mid', 'criteria', 'markers')
+    return {key: base + TOPICS[key][1:] for key in keys}

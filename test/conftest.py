@@ -3,9 +3,8 @@
 import os
 import pathlib
 
-import pytest
-
 from flexlink_ros.ros.runtime import isolate_ros_environment   # imports no rclpy
+import pytest
 
 # Before anything imports rclpy: discovery on this machine only, Fast DDS listening on
 # 127.0.0.1 only (config/fastdds_localhost.xml; FLEXLINK_LOOPBACK_SOCKETS=1 puts its send

@@ -2,9 +2,9 @@
 
 import pathlib
 
-import pytest
 from ament_flake8.main import main_with_errors
 from ament_pep257.main import main as pep257_main
+import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 # Explicit paths: with none, the linters walk the working directory (.venv/ and build/ too).

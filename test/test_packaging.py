@@ -1,4 +1,4 @@
-"""Packaging: a colcon workspace build resolves like `ros2 run`; `pip install .` installs share/."""
+"""Packaging: a colcon build resolves like `ros2 run`; `pip install .` installs share/."""
 
 import os
 import pathlib
@@ -16,7 +16,7 @@ SOURCES = ('package.xml', 'setup.py', 'setup.cfg', 'resource', 'config', 'flexli
 
 
 def copy_source(destination):
-    """The package sources (what a clone holds) without caches."""
+    """Copy the package sources (what a clone holds) without caches to ``destination``."""
     destination.mkdir(parents=True)
     for name in SOURCES:
         source = REPO / name
@@ -75,8 +75,9 @@ def test_colcon_build_resolves_like_ros2_run(tmp_path):
         name, code, usage = line.split(' ', 2)
         assert (name, code) == (exe, '0') and usage.startswith('usage:')
     # The installed modules are the ones imported, not the repository's.
-    where = subprocess.run([sys.executable, '-c', 'import flexlink_ros; print(flexlink_ros.__file__)'],
-                           cwd=tmp_path, env=env, capture_output=True, text=True)
+    where = subprocess.run(
+        [sys.executable, '-c', 'import flexlink_ros; print(flexlink_ros.__file__)'],
+        cwd=tmp_path, env=env, capture_output=True, text=True)
     assert pathlib.Path(where.stdout.strip()).is_relative_to(install)
 
 

@@ -18,11 +18,11 @@ import sys
 import threading
 import time
 
-import numpy as np
-
+from .demo_summary import summarise_recording
 from .main import emit
 from ..core.mechanism import find_config
-from ..ros.runtime import fastdds_profile_path, isolate_ros_environment
+from ..names import FIRST_INPUT_MESSAGE, READY_MESSAGE
+from ..ros.runtime import isolate_ros_environment
 
 READY_TIMEOUT_S = 300.0    # node start-up, including a first model build on a slow machine
 FIRST_SAMPLE_TIMEOUT_S = 30.0  # discovery between driver and node (0-3 s on loopback)
@@ -51,7 +51,22 @@ class ManagedProcess:
         self._queue.put(None)
 
     def wait_for_line(self, fragment, timeout_s):
-        """True once a line containing ``fragment`` arrived; False on timeout or exit."""
+        """
+        Wait until a line containing ``fragment`` arrived.
+
+        Parameters
+        ----------
+        fragment : str
+            Text the line contains.
+        timeout_s : float
+            How long to wait [s].
+
+        Returns
+        -------
+        bool
+            True once such a line arrived; False on timeout or when the process ended.
+
+        """
         if any(fragment in line for line in self.lines):
             return True
         deadline = time.monotonic() + timeout_s
@@ -69,11 +84,19 @@ class ManagedProcess:
                 return True
 
     def alive(self):
-        """True while the process runs."""
+        """Return True while the process runs."""
         return self.process.poll() is None
 
     def stop(self, timeout_s=STOP_TIMEOUT_S):
-        """SIGINT, then SIGTERM, then SIGKILL; returns the exit code."""
+        """
+        Stop the process: SIGINT, then SIGTERM, then SIGKILL; return its exit code.
+
+        Parameters
+        ----------
+        timeout_s : float
+            How long to wait after each signal [s].
+
+        """
         for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
             if self.process.poll() is not None:
                 break
@@ -87,7 +110,15 @@ class ManagedProcess:
         return code
 
     def output(self, last=40):
-        """The last lines the process printed."""
+        """
+        Return the last lines the process printed, each marked with its name.
+
+        Parameters
+        ----------
+        last : int
+            How many lines.
+
+        """
         return '\n'.join(f'  [{self.name}] {line}' for line in self.lines[-last:])
 
 
@@ -119,7 +150,7 @@ def run_demo(seconds=6.0, rpm=391.0, out='demo_out', rate_hz=1000.0, extra_node_
     Returns
     -------
     dict
-        :func:`summarise_recording` plus the run's settings.
+        :func:`.demo_summary.summarise_recording` plus the run's settings.
 
     """
     if not seconds > 0 or not rate_hz > 0:
@@ -127,13 +158,7 @@ def run_demo(seconds=6.0, rpm=391.0, out='demo_out', rate_hz=1000.0, extra_node_
     domain = isolate_ros_environment()
     env = dict(os.environ, PYTHONUNBUFFERED='1', RCUTILS_LOGGING_BUFFERED_STREAM='0',
                RCUTILS_COLORIZED_OUTPUT='0')
-    out = pathlib.Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    bag = out / time.strftime('flexlink_demo_%Y%m%d_%H%M%S')
-    suffix = 1
-    while bag.exists():
-        bag = out / f'{bag.name.split("-")[0]}-{suffix}'
-        suffix += 1
+    bag = _new_bag_path(pathlib.Path(out))
     node_argv = [sys.executable, '-m', 'flexlink_ros.ros.node', '--ros-args',
                  '--params-file', str(find_config('flexlink_node')),
                  '-p', 'record.enabled:=true', '-p', f'record.path:={bag.resolve()}',
@@ -144,30 +169,16 @@ def run_demo(seconds=6.0, rpm=391.0, out='demo_out', rate_hz=1000.0, extra_node_
                    '-p', f'rate_hz:={_float(rate_hz)}']
     log(f'flexlink demo: ROS_DOMAIN_ID={domain}, discovery on localhost only; '
         f'recording to {bag}')
-    from ..ros.node import FIRST_INPUT_MESSAGE, READY_MESSAGE
-    node = driver = None
+    processes = {}
     try:
-        node = ManagedProcess('flexlink_node', node_argv, env)
-        log('starting flexlink_node (loads or builds the precomputed model) ...')
-        if not node.wait_for_line(READY_MESSAGE, READY_TIMEOUT_S):
-            raise RuntimeError('flexlink_node did not become ready:\n' + node.output())
-        log(f'starting crank_driver at {rpm:g} rpm, {rate_hz:g} Hz ...')
-        driver = ManagedProcess('crank_driver', driver_argv, env)
-        if not node.wait_for_line(FIRST_INPUT_MESSAGE, FIRST_SAMPLE_TIMEOUT_S):
-            raise RuntimeError('no crank sample reached flexlink_node:\n' + node.output()
-                               + '\n' + driver.output())
-        log(f'streaming for {seconds:g} s ...')
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            if not (node.alive() and driver.alive()):
-                raise RuntimeError('a process ended early:\n' + node.output() + '\n'
-                                   + driver.output())
-            time.sleep(0.1)
+        _stream(processes, node_argv, driver_argv, env, seconds, log,
+                f'{rpm:g} rpm, {rate_hz:g} Hz')
     finally:
         codes = {}
-        for process in (driver, node):
-            if process is not None:
-                codes[process.name] = process.stop()
+        for name in ('crank_driver', 'flexlink_node'):
+            if name in processes:
+                codes[name] = processes[name].stop()
+    node = processes['flexlink_node']
     log('stopped; reading the recording back ...')
     if not (bag / 'metadata.yaml').exists():
         raise RuntimeError(f'the node did not close the recording {bag} (exit codes {codes}):\n'
@@ -179,96 +190,52 @@ def run_demo(seconds=6.0, rpm=391.0, out='demo_out', rate_hz=1000.0, extra_node_
     return result
 
 
-def _decode(type_name, data):
-    from rclpy.serialization import deserialize_message
+def _new_bag_path(out):
+    """Return a bag directory path in ``out`` (created) that does not exist yet."""
+    out.mkdir(parents=True, exist_ok=True)
+    bag = out / time.strftime('flexlink_demo_%Y%m%d_%H%M%S')
+    suffix = 1
+    while bag.exists():
+        bag = out / f'{bag.name.split("-")[0]}-{suffix}'
+        suffix += 1
+    return bag
 
-    from ..io.msg_schema import message_class
-    return deserialize_message(data, message_class(type_name))
 
-
-def summarise_recording(bag):
+def _stream(processes, node_argv, driver_argv, env, seconds, log, driver_settings):
     """
-    What a flexlink_node recording holds.
+    Start the node, then the driver once it is ready, and let them run for ``seconds``.
 
-    Returns
-    -------
-    dict
-        path, files, bytes, complete, topics (name -> count), input_rate_hz, input_span_s,
-        samples, outputs, peak_to_peak_um {lever_tip, coupler_mid: [dx, dy]},
-        criteria_max (joint -> value) or None, criteria_reason, latency_us {median, p99},
-        update_us {median, p99}.
-
+    ``processes`` receives each :class:`ManagedProcess` by name as it starts (the caller
+    stops them, also when this raises ``RuntimeError``).
     """
-    from .mcap import mcap_info
-    from .replay import iter_recording
-    info = mcap_info(bag)
-    topics = {t['topic']: t['count'] for t in info['topics']}
-    input_log, output_log, deflections, criteria = {}, {}, {'lever_tip': [], 'coupler_mid': []}, []
-    input_stamps = []
-    diagnostics = []
-    for topic, type_name, log_ns, _, data in iter_recording(bag):
-        if topic.endswith('/markers'):
-            continue
-        message = _decode(type_name, data)
-        if topic == '/diagnostics':
-            diagnostics.append(message)
-            continue
-        stamp = message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
-        if topic.endswith('/lever_tip/deflection'):
-            deflections['lever_tip'].append((message.vector.x, message.vector.y))
-            output_log.setdefault(stamp, log_ns)
-        elif topic.endswith('/coupler_mid/deflection'):
-            deflections['coupler_mid'].append((message.vector.x, message.vector.y))
-        elif topic.endswith('/joint_criteria'):
-            criteria.append(list(message.position) + list(message.effort))
-        elif type_name == 'sensor_msgs/msg/JointState':
-            input_stamps.append(stamp)
-            input_log.setdefault(stamp, log_ns)
-    samples = len(input_stamps)
-    span = (max(input_stamps) - min(input_stamps)) * 1e-9 if samples > 1 else 0.0
-    latency = np.array([output_log[s] - input_log[s] for s in output_log if s in input_log])
-    peak = {key: (1e6 * (np.ptp(np.array(values), axis=0))).tolist() if values else None
-            for key, values in deflections.items()}
-    criteria = np.array(criteria)
-    estimator = [s for d in diagnostics for s in d.status if s.name.endswith('estimator')]
-    source = next((kv.value for s in estimator for kv in s.values
-                   if kv.key == 'criteria_source'), 'unknown')
-    update = {}
-    for key in ('update_us_median', 'update_us_p99'):
-        values = [float(kv.value) for s in estimator for kv in s.values
-                  if kv.key == key and kv.value != 'nan']
-        update[key] = values
-    available = criteria.size > 0 and bool(np.any(criteria[:, :4] != 0.0))
-    from ..ros.messages import JOINT_NAMES
-    return {
-        'path': str(bag), 'files': [f['path'] for f in info.get('files', [info])],
-        'bytes': sum(p.stat().st_size for p in pathlib.Path(bag).glob('*.mcap')),
-        'complete': info['complete'], 'topics': topics, 'samples': samples,
-        'input_span_s': span, 'input_rate_hz': (samples - 1) / span if span > 0 else 0.0,
-        'outputs': len(deflections['lever_tip']),
-        'peak_to_peak_um': peak,
-        'criteria_max': (dict(zip(JOINT_NAMES, criteria[:, :4].max(axis=0).tolist()))
-                         if available else None),
-        # Reaction at the worst sample and the median reaction per joint [N]: a criterion
-        # peak where R nearly vanishes reads differently from one at full load.
-        'reaction_at_max_n': (dict(zip(JOINT_NAMES, criteria[
-            np.argmax(criteria[:, :4], axis=0), 4 + np.arange(4)].tolist()))
-            if available else None),
-        'reaction_median_n': (dict(zip(JOINT_NAMES, np.median(criteria[:, 4:], axis=0)
-                                       .tolist())) if available else None),
-        'criteria_reason': None if available else source,
-        'latency_us': ({'median': float(np.median(latency) / 1e3),
-                        'p99': float(np.percentile(latency, 99) / 1e3)}
-                       if latency.size else None),
-        # Per diagnostics period: the median of the period medians and the worst p99.
-        'update_us': ({'median': float(np.median(update['update_us_median'])),
-                       'p99': float(np.max(update['update_us_p99']))}
-                      if update['update_us_median'] else None),
-    }
+    node = processes['flexlink_node'] = ManagedProcess('flexlink_node', node_argv, env)
+    log('starting flexlink_node (loads or builds the precomputed model) ...')
+    if not node.wait_for_line(READY_MESSAGE, READY_TIMEOUT_S):
+        raise RuntimeError('flexlink_node did not become ready:\n' + node.output())
+    log(f'starting crank_driver at {driver_settings} ...')
+    driver = processes['crank_driver'] = ManagedProcess('crank_driver', driver_argv, env)
+    if not node.wait_for_line(FIRST_INPUT_MESSAGE, FIRST_SAMPLE_TIMEOUT_S):
+        raise RuntimeError('no crank sample reached flexlink_node:\n' + node.output()
+                           + '\n' + driver.output())
+    log(f'streaming for {seconds:g} s ...')
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        if not (node.alive() and driver.alive()):
+            raise RuntimeError('a process ended early:\n' + node.output() + '\n'
+                               + driver.output())
+        time.sleep(0.1)
 
 
 def summary_text(result):
-    """The printed summary of :func:`run_demo`."""
+    """
+    Return the printed summary of :func:`run_demo`.
+
+    Parameters
+    ----------
+    result : dict
+        What :func:`run_demo` returned.
+
+    """
     lines = [f"flexlink demo: crank_driver ({result['rpm']:g} rpm, {result['rate_hz']:g} Hz) "
              f"-> flexlink_node for {result['seconds']:g} s "
              f"(ROS_DOMAIN_ID={result['domain_id']}, localhost only)"]
@@ -299,14 +266,14 @@ def summary_text(result):
         reason = result['criteria_reason'].removeprefix('unavailable').strip(' ()')
         lines.append(f'criteria unavailable: {reason}')
     if result['latency_us']:
-        lines.append(f"node receive -> publish (recorded log times): median "
+        lines.append('node receive -> publish (recorded log times): median '
                      f"{result['latency_us']['median']:.0f} us, p99 "
                      f"{result['latency_us']['p99']:.0f} us")
     if result['update_us']:
         lines.append(f"estimator update per sample: median {result['update_us']['median']:.0f}"
                      f" us, p99 {result['update_us']['p99']:.0f} us (node diagnostics)")
     first = result['files'][0] if result['files'] else result['path']
-    lines += [f"open it: Foxglove ({FOXGLOVE_URL}, Open local file) -> {first}",
+    lines += [f'open it: Foxglove ({FOXGLOVE_URL}, Open local file) -> {first}',
               f"         ros2 bag info {result['path']}   (with a ROS 2 distro)",
               f"         flexlink mcap-info {result['path']}",
               f"         flexlink replay {result['path']} --out replay.mcap"]

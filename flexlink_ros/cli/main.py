@@ -27,7 +27,7 @@ COMMANDS = {
     'simulate': 'flexlink_ros.cli.flex',
     'mcap-info': 'flexlink_ros.cli.mcap',
     'mcap-recover': 'flexlink_ros.cli.mcap',
-    'mcap-record': 'flexlink_ros.cli.mcap',
+    'mcap-record': 'flexlink_ros.cli.mcap_record',
     'node-bench': 'flexlink_ros.cli.node_bench',
     'replay': 'flexlink_ros.cli.replay',
     'report': 'flexlink_ros.cli.report',
@@ -40,7 +40,19 @@ COMMAND_MODULES = tuple(dict.fromkeys(COMMANDS.values()))
 
 
 def emit(result, text, as_json):
-    """Print a result as one JSON object or as text; returns exit code 0."""
+    """
+    Print a result as one JSON object or as text; return exit code 0.
+
+    Parameters
+    ----------
+    result : dict
+        What ``--json`` prints (numpy values and non-finite floats made JSON-safe).
+    text : str
+        What is printed otherwise.
+    as_json : bool
+        Whether to print ``result`` as JSON.
+
+    """
     if as_json:
         print(json.dumps(_jsonable(result)))
     else:
@@ -62,7 +74,15 @@ def _jsonable(value):
 
 
 def degree_range(text):
-    """Parse 'START:STOP:STEP' (degrees, STOP excluded) or a comma list into a list of floats."""
+    """
+    Parse 'START:STOP:STEP' (degrees, STOP excluded) or a comma list into a list of floats.
+
+    Parameters
+    ----------
+    text : str
+        The argument as given.
+
+    """
     try:
         if ':' in text:
             start, stop, step = (float(part) for part in text.split(':'))
@@ -80,7 +100,7 @@ def degree_range(text):
 
 
 def _command_module(argv):
-    """The module that registers the command in ``argv``, or None (an option or unknown)."""
+    """Return the module that registers the command in ``argv``, or None (option or unknown)."""
     if not argv or argv[0].startswith('-'):
         return None
     return COMMANDS.get(argv[0])
@@ -88,10 +108,18 @@ def _command_module(argv):
 
 def build_parser(argv=None):
     """
-    The argument parser with every registered subcommand.
+    Build the argument parser with every registered subcommand.
 
-    With ``argv``, only the module of its subcommand is imported and registered when it can
-    be told (the parse of ``argv`` is the same).
+    Parameters
+    ----------
+    argv : list of str, optional
+        With it, only the module of its subcommand is imported and registered when it can be
+        told (the parse of ``argv`` is the same).
+
+    Returns
+    -------
+    argparse.ArgumentParser
+
     """
     parser = argparse.ArgumentParser(
         prog='flexlink',
@@ -106,7 +134,20 @@ def build_parser(argv=None):
 
 
 def main(argv=None):
-    """Entry point of the `flexlink` script."""
+    """
+    Run the `flexlink` script: parse ``argv`` and run the chosen command.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments (default: ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        The exit code.
+
+    """
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(argv)
     args = parser.parse_args(argv)

@@ -26,6 +26,12 @@ import time
 import numpy as np
 
 from .main import emit
+from .mcap import mcap_info
+from ..io.cdr import CDR_LE
+from ..io.msg_schema import message_class
+from ..names import JOINT_STATE, VECTOR3_STAMPED
+from ..ros.crank_driver import make_executor, spin_until_shutdown
+from ..ros.runtime import isolate_ros_environment
 
 INPUT_TOPIC = '/bench/joint_states'
 ECHO_TOPIC = '/bench/echo'
@@ -56,20 +62,18 @@ def _rss_mb(pid):
 
 
 def echo_main():
-    """The bare echo node: republish every JointState unchanged (raw bytes)."""
+    """Run the bare echo node: republish every JointState unchanged (raw bytes)."""
     import rclpy
     from rclpy.executors import ExternalShutdownException
     from rclpy.qos import QoSProfile, ReliabilityPolicy
-    from sensor_msgs.msg import JointState
 
-    from ..ros.crank_driver import make_executor, spin_until_shutdown
-
+    joint_state = message_class(JOINT_STATE)
     try:
         with rclpy.init():
             node = rclpy.create_node('bench_echo')
             qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
-            publisher = node.create_publisher(JointState, ECHO_TOPIC, qos)
-            node.create_subscription(JointState, INPUT_TOPIC, publisher.publish, qos, raw=True)
+            publisher = node.create_publisher(joint_state, ECHO_TOPIC, qos)
+            node.create_subscription(joint_state, INPUT_TOPIC, publisher.publish, qos, raw=True)
             executor = make_executor()
             executor.add_node(node)
             spin_until_shutdown(executor)
@@ -84,20 +88,19 @@ class Source:
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import QoSProfile, ReliabilityPolicy
-        from sensor_msgs.msg import JointState
 
-        from ..io.cdr import CDR_LE
+        joint_state = message_class(JOINT_STATE)
         self.context = rclpy.Context()
         rclpy.init(context=self.context)
         self.node = rclpy.create_node('bench_source', context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
-        self.publisher = self.node.create_publisher(JointState, INPUT_TOPIC, self.qos)
+        self.publisher = self.node.create_publisher(joint_state, INPUT_TOPIC, self.qos)
         self.received = []
         self._subscriptions = {}
         self._prefix = CDR_LE
-        self._types = {'echo': JointState}
+        self._types = {'echo': joint_state}
 
     def listen(self, topic, msg_type):
         """Subscribe to a target's output (raw; only the stamp is read)."""
@@ -145,7 +148,8 @@ class Source:
         return sent
 
     def drain(self, seconds=DRAIN_S):
-        """Collect late outputs while a slow keep-alive stream goes on (not measured).
+        """
+        Collect late outputs while a slow keep-alive stream goes on (not measured).
 
         A pause longer than the estimator's reset gap (0.5 s) would restart it, and the
         warm start of the restart would be measured as latency of the next rate step.
@@ -169,43 +173,8 @@ def measure_target(source, name, argv, output_topic, output_type, rates, seconds
                         or process.poll() is not None, START_TIMEOUT_S, f'{name} to start')
         if process.poll() is not None:
             raise RuntimeError(f'{name} exited with code {process.returncode}')
-        # Warm up in batches until outputs flow: outputs published before discovery has
-        # matched the listener both ways are lost, so one fixed batch may never be answered.
-        source.received.clear()
-        deadline = time.monotonic() + WARMUP_TIMEOUT_S
-        last = None
-        while len(source.received) < WARMUP_MESSAGES:
-            if time.monotonic() > deadline or process.poll() is not None:
-                raise RuntimeError(f'timed out waiting for {name} warm-up outputs '
-                                   f'({len(source.received)} of {WARMUP_MESSAGES})')
-            last = max(source.stream(1000.0, 0.1))
-            source.drain(0.05)
-        # Measure the steady state: the target's first sample (the node's warm start, 0.2 s)
-        # leaves a backlog, which must be answered before the first rate step starts. The
-        # target answers in order, so the backlog is gone once the last warm-up message is
-        # answered (the messages sent before discovery matched are never answered, and a
-        # full input queue drops the oldest, never the last).
-        answered = lambda: any(stamp == last for _, stamp in source.received)  # noqa: E731
-        while not answered() and time.monotonic() < deadline and process.poll() is None:
-            source.drain(0.1)
-        if not answered():
-            raise RuntimeError(f'{name} did not answer its last warm-up message in time')
-        rows = []
-        for rate in rates:
-            source.drain(0.2)
-            source.received.clear()
-            sent = source.stream(rate, seconds)
-            source.drain()
-            wanted = set(sent)
-            latency = np.array([recv - stamp for recv, stamp in source.received
-                                if stamp in wanted]) / 1e3
-            rows.append({'rate_hz': len(sent) / seconds, 'sent': len(sent),
-                         'received': int(latency.size), 'lost': len(sent) - int(latency.size),
-                         'latency_us_p50': float(np.median(latency)) if latency.size else None,
-                         'latency_us_p99': (float(np.percentile(latency, 99))
-                                            if latency.size else None)})
-            if rows[-1]['lost'] > 0:
-                break
+        _warm_up(source, name, process)
+        rows = _step_rates(source, rates, seconds)
         rss = _rss_mb(process.pid)
     finally:
         process.send_signal(2)   # SIGINT: the node closes its recording
@@ -219,9 +188,69 @@ def measure_target(source, name, argv, output_topic, output_type, rates, seconds
             'max_rate_without_loss_hz': max(lossless) if lossless else 0.0}
 
 
+def _warm_up(source, name, process):
+    """Stream until the target answers, then until its start-up backlog is answered."""
+    # Warm up in batches until outputs flow: outputs published before discovery has
+    # matched the listener both ways are lost, so one fixed batch may never be answered.
+    source.received.clear()
+    deadline = time.monotonic() + WARMUP_TIMEOUT_S
+    last = None
+    while len(source.received) < WARMUP_MESSAGES:
+        if time.monotonic() > deadline or process.poll() is not None:
+            raise RuntimeError(f'timed out waiting for {name} warm-up outputs '
+                               f'({len(source.received)} of {WARMUP_MESSAGES})')
+        last = max(source.stream(1000.0, 0.1))
+        source.drain(0.05)
+
+    # Measure the steady state: the target's first sample (the node's warm start, 0.2 s)
+    # leaves a backlog, which must be answered before the first rate step starts. The
+    # target answers in order, so the backlog is gone once the last warm-up message is
+    # answered (the messages sent before discovery matched are never answered, and a
+    # full input queue drops the oldest, never the last).
+    def answered():
+        return any(stamp == last for _, stamp in source.received)
+
+    while not answered() and time.monotonic() < deadline and process.poll() is None:
+        source.drain(0.1)
+    if not answered():
+        raise RuntimeError(f'{name} did not answer its last warm-up message in time')
+
+
+def _step_rates(source, rates, seconds):
+    """Stream at each rate in turn until one loses messages; return a row per rate."""
+    rows = []
+    for rate in rates:
+        source.drain(0.2)
+        source.received.clear()
+        sent = source.stream(rate, seconds)
+        source.drain()
+        wanted = set(sent)
+        latency = np.array([recv - stamp for recv, stamp in source.received
+                            if stamp in wanted]) / 1e3
+        rows.append({'rate_hz': len(sent) / seconds, 'sent': len(sent),
+                     'received': int(latency.size), 'lost': len(sent) - int(latency.size),
+                     'latency_us_p50': float(np.median(latency)) if latency.size else None,
+                     'latency_us_p99': (float(np.percentile(latency, 99))
+                                        if latency.size else None)})
+        if rows[-1]['lost'] > 0:
+            break
+    return rows
+
+
 def run_node_bench(rate_hz=1000.0, max_rate_hz=8000.0, seconds=3.0, work_dir=None):
     """
-    The benchmark (see module docstring).
+    Run the benchmark (see the module docstring).
+
+    Parameters
+    ----------
+    rate_hz : float
+        First input rate [Hz]; doubled until ``max_rate_hz`` or a loss.
+    max_rate_hz : float
+        Highest input rate [Hz].
+    seconds : float
+        Time per rate [s].
+    work_dir : str or os.PathLike, optional
+        Directory of the bench recording (default: a new temporary directory).
 
     Returns
     -------
@@ -230,12 +259,6 @@ def run_node_bench(rate_hz=1000.0, max_rate_hz=8000.0, seconds=3.0, work_dir=Non
         {messages_per_s, bytes_per_s, path}.
 
     """
-    from geometry_msgs.msg import Vector3Stamped
-    from sensor_msgs.msg import JointState
-
-    from ..ros.runtime import isolate_ros_environment
-    from .mcap import mcap_info
-
     if not 0 < rate_hz <= max_rate_hz or not seconds > 0:
         raise ValueError('need 0 < `--rate-hz` <= `--max-rate-hz` and `--seconds` > 0')
     domain = isolate_ros_environment()
@@ -249,13 +272,14 @@ def run_node_bench(rate_hz=1000.0, max_rate_hz=8000.0, seconds=3.0, work_dir=Non
     bag = work_dir / 'bench_bag'
     node = [sys.executable, '-m', 'flexlink_ros.ros.node', '--ros-args',
             '-p', f'input_topic:={INPUT_TOPIC}', '-p', 'qos.depth:=1000']
+    joint_state, vector3_stamped = message_class(JOINT_STATE), message_class(VECTOR3_STAMPED)
     targets = [
         ('echo (bare rclpy)', [sys.executable, '-m', 'flexlink_ros.cli.node_bench'],
-         ECHO_TOPIC, JointState),
-        ('flexlink_node', node, NODE_OUTPUT, Vector3Stamped),
+         ECHO_TOPIC, joint_state),
+        ('flexlink_node', node, NODE_OUTPUT, vector3_stamped),
         ('flexlink_node + recording', node + ['-p', 'record.enabled:=true',
                                               '-p', f'record.path:={bag}'],
-         NODE_OUTPUT, Vector3Stamped),
+         NODE_OUTPUT, vector3_stamped),
     ]
     source = Source()
     try:

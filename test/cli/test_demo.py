@@ -5,11 +5,10 @@ import os
 import subprocess
 import sys
 
-import numpy as np
-import pytest
-
 from flexlink_ros.cli import demo as cli_demo
 from flexlink_ros.ros import runtime
+import numpy as np
+import pytest
 
 
 def test_isolate_ros_environment_sets_loopback_and_a_valid_domain():
@@ -23,8 +22,8 @@ def test_isolate_ros_environment_sets_loopback_and_a_valid_domain():
 def test_demo_runs_records_and_summarises(tmp_path):
     # The whole command as `make demo` runs it, short, with --json for the checks.
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
-    result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'demo', '--seconds', '3',
-                             '--out', str(tmp_path / 'out'), '--json'],
+    result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'demo',
+                             '--seconds', '3', '--out', str(tmp_path / 'out'), '--json'],
                             capture_output=True, text=True, timeout=400, env=env, cwd=tmp_path)
     assert result.returncode == 0, result.stderr[-3000:]
     summary = json.loads(result.stdout)
@@ -60,6 +59,13 @@ def test_demo_runs_records_and_summarises(tmp_path):
 @pytest.mark.parametrize('bad', [['--seconds', '0'], ['--rate-hz', '-5']])
 def test_demo_rejects_bad_arguments(tmp_path, bad):
     result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'demo', *bad,
+                             '--out', str(tmp_path)], capture_output=True, text=True,
+                            timeout=60)
+    assert result.returncode == 1 and 'must be positive' in result.stderr
+
+
+def test_python_m_flexlink_ros_cli_runs_the_same_command_line(tmp_path):
+    result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'demo', '--seconds', '0',
                              '--out', str(tmp_path)], capture_output=True, text=True,
                             timeout=60)
     assert result.returncode == 1 and 'must be positive' in result.stderr
