@@ -16,12 +16,11 @@ from ..core.mechanism import load_mechanism
 from ..core.reduction.model import model_for_mechanism
 from ..errors import InputRejected, MalformedCdr
 from ..io import cdr
+from ..names import FIRST_INPUT_MESSAGE, READY_MESSAGE  # noqa: F401  SHIM
 
 # The default model (node parameters, core.options.DEFAULT_SIZES) meets this relative RMS
 # error on Cho 1992 against flexlink plan's scene reference (1.3 % coupler, 0.9 % lever).
 DEFAULT_MODEL_TOLERANCE = 0.02
-READY_MESSAGE = 'ready: listening on'  # logged once the node is subscribed (cli demo waits)
-FIRST_INPUT_MESSAGE = 'first crank sample'
 MAX_REASON_CHARS = 200   # a refusal's reason as logged and in /diagnostics
 # What happens to a received message (counted per kind, in total and per diagnostics period).
 SKIP_KINDS = ('malformed', 'content', 'estimator', 'internal')   # counted as 'skipped'
