@@ -30,7 +30,7 @@ Memory. Files are written by :class:`~flexlink_ros.io.mcap_writer.McapFileWriter
 the mcap library's public record classes. Where mcap's ``Writer`` keeps one ``ChunkIndex``
 object per chunk for the summary (about 740 B each; at the node's 4-5 topics at 1 kHz that is
 about 6 chunks a second, 16 MB an hour), it keeps them as their encoded summary records
-(about 130 B each), at most :data:`~flexlink_ros.io.mcap_writer.INDEX_SPILL_BYTES` in memory and
+(about 130 B each), at most :data:`~flexlink_ros.io.chunk_index.INDEX_SPILL_BYTES` in memory and
 the rest in an unnamed temporary file in the recording's directory, so memory stays flat however
 long a file grows; only ``close`` reads them back to write the summary.
 
