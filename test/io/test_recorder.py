@@ -28,7 +28,9 @@ from visualization_msgs.msg import Marker, MarkerArray
 from flexlink_ros.cli import main as cli
 from flexlink_ros.cli.mcap import mcap_info, recover_mcap, scan_mcap
 from flexlink_ros.errors import RecorderError
-from flexlink_ros.io.recorder import McapRecorder, RecorderState
+from flexlink_ros.io import chunk_index, recorder_queue
+from flexlink_ros.io.recorder import McapRecorder
+from flexlink_ros.io.recorder_queue import RecorderState
 from flexlink_ros.io.msg_schema import (message_definition, serialize_exact, share_directory,
                                         type_hash)
 
@@ -337,7 +339,7 @@ def record_live_stream(tmp_path, stop_signal, record_s=2.5):
 
     Returns the output path and the wall time [ns] at which the signal was sent.
     """
-    repo = pathlib.Path(__file__).resolve().parents[1]
+    repo = pathlib.Path(__file__).resolve().parents[2]
     out = tmp_path / 'live.mcap'
     driver = subprocess.Popen([sys.executable, '-m', 'flexlink_ros.ros.crank_driver', '--ros-args',
                                '-p', 'duration_s:=30.0'], cwd=repo)
@@ -479,10 +481,9 @@ def test_mcap_info_on_a_missing_or_foreign_file_is_a_one_line_error(tmp_path, co
 def test_enqueued_messages_are_written_in_order_by_the_background_thread(tmp_path,
                                                                         monkeypatch):
     """enqueue: nothing written in the caller; every message on disk, in order, exact bytes."""
-    from flexlink_ros.io import recorder as recorder_module
     # The thread first wakes after a second, long after the enqueuing below (a few ms): what
     # is on disk before then was written by enqueue itself, which must be nothing.
-    monkeypatch.setattr(recorder_module, 'QUEUE_PERIOD_S', 1.0)
+    monkeypatch.setattr(recorder_queue, 'QUEUE_PERIOD_S', 1.0)
     path = tmp_path / 'queued.mcap'
     recorder = McapRecorder(path, chunk_size_bytes=4096).open()
     recorder.add_topic('/a', 'sensor_msgs/msg/JointState')
@@ -611,7 +612,6 @@ def test_a_link_placed_between_check_and_create_is_not_followed(tmp_path, monkey
 # -- memory: the summary's chunk indexes do not accumulate in memory --------------------------
 
 def test_retained_memory_per_chunk_is_bounded(tmp_path):
-    from flexlink_ros.io import mcap_writer
     topics = ['/a', '/b', '/c', '/d', '/e']   # the node records 4-5 topics
     payload = serialize_message(Vector3Stamped(header=stamp(T0_NS)))
     recorder = McapRecorder(tmp_path / 'long.mcap', chunk_size_bytes=1024, flush_thread=False)
@@ -638,7 +638,7 @@ def test_retained_memory_per_chunk_is_bounded(tmp_path):
         tracemalloc.stop()
     per_chunk_object = 700   # what mcap's Writer retains per ChunkIndex object (measured ~740)
     # The records in memory are at most INDEX_SPILL_BYTES; the rest is a few fixed buffers.
-    bound = mcap_writer.INDEX_SPILL_BYTES + 64 * 1024
+    bound = chunk_index.INDEX_SPILL_BYTES + 64 * 1024
     assert added * per_chunk_object > 4 * bound    # enough chunks that a leak would show
     assert grown < bound, f'{grown} B retained over {added} chunks'
     status = recorder.close()

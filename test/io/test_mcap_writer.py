@@ -13,7 +13,7 @@ from rclpy.serialization import serialize_message
 from rosbags.highlevel import AnyReader
 
 import flexlink_ros
-from flexlink_ros.io import mcap_writer
+from flexlink_ros.io import chunk_index
 from flexlink_ros.io.mcap_writer import McapFileWriter
 from flexlink_ros.io.recorder import McapRecorder
 
@@ -91,8 +91,8 @@ def test_long_spilled_recording_is_read_by_index_and_by_rosbags(tmp_path):
                                             for _ in topics], times)
     store = recorder._file.writer.chunk_indexes
     assert len(store) >= 3000
-    assert 0 < store.memory_bytes < mcap_writer.INDEX_SPILL_BYTES   # the rest was spilled
-    assert len(store) * 120 > mcap_writer.INDEX_SPILL_BYTES   # 5-channel records: 127 B
+    assert 0 < store.memory_bytes < chunk_index.INDEX_SPILL_BYTES   # the rest was spilled
+    assert len(store) * 120 > chunk_index.INDEX_SPILL_BYTES   # 5-channel records: 127 B
     written = len(store)
     recorder.close()
     assert sorted(p.name for p in tmp_path.iterdir()) == ['long.mcap']
@@ -149,7 +149,7 @@ def write_schedule(writer, schedule):
 
 def test_file_equals_mcap_public_writers_byte_for_byte(tmp_path, monkeypatch):
     """Single and bulk messages, spilled chunk indexes, both compressions: mcap's own file."""
-    monkeypatch.setattr(mcap_writer, 'INDEX_SPILL_BYTES', 4096)
+    monkeypatch.setattr(chunk_index, 'INDEX_SPILL_BYTES', 4096)
     rng = np.random.default_rng(3)
     schedule = []
     for n in range(30):

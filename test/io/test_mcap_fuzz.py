@@ -17,11 +17,11 @@ import pytest
 import zstandard
 
 from flexlink_ros.cli import replay as cli_replay
-from flexlink_ros.io import mcap_reader as mcap_salvage
+from flexlink_ros.io import mcap_reader, mcap_records
 from flexlink_ros.cli.mcap import mcap_info, recover_mcap
 from flexlink_ros.errors import FlexlinkError
 
-from test_mcap_salvage import chunks_of, read_messages, write_crank_recording
+from test_mcap_reader import chunks_of, read_messages, write_crank_recording
 
 MESSAGES = 1000
 PEAK_BOUND = 16 * 2**20  # bytes traced per file: far below any declared size fuzzed
@@ -41,7 +41,7 @@ def inner_record_edit(data, chunk_offset, opcode, field, value):
     Copy of a file whose first chunk is re-encoded (valid CRC) with one field of its first
     ``opcode`` record set to ``value``: the bounds inside a chunk, behind a valid CRC.
     """
-    payload = mcap_salvage.decode_chunk(data, chunk_offset + 9,
+    payload = mcap_records.decode_chunk(data, chunk_offset + 9,
                                         chunk_offset + 9 + struct.unpack_from(
                                             '<Q', data, chunk_offset + 1)[0])
     payload = bytearray(payload)
