@@ -154,10 +154,7 @@ class McapRecorder(QueuedWriting):
                 self._error_reported = True
                 where = '' if isinstance(exc, FileExistsError) else f' to {self.path}'
                 raise RecorderError(f'cannot record{where}: {exc}') from exc
-        if self._use_flush_thread:
-            self._flusher = threading.Thread(target=self._flush_loop, name='mcap-flush',
-                                             daemon=True)
-            self._flusher.start()
+        self._start_flusher()
         return self
 
     def close(self):
@@ -175,10 +172,7 @@ class McapRecorder(QueuedWriting):
             Finishing failed (full disk) and no error had been raised before.
 
         """
-        self._stop_flusher.set()
-        if self._flusher is not None and self._flusher is not threading.current_thread():
-            self._flusher.join()
-        self._write_queue()
+        self._stop_flushing()
         with self._lock:
             if self._state is RecorderState.RECORDING:
                 try:
@@ -302,13 +296,6 @@ class McapRecorder(QueuedWriting):
             self.add_topic(topic, message_type_name(message))
         return serialize_exact(message)
 
-    def flush(self):
-        """Write the queue and the open chunk and flush them to the OS (no fsync)."""
-        self._write_queue()
-        with self._lock:
-            if self._state is RecorderState.RECORDING:
-                self._flush_locked(self._last_flush_log_ns)
-
     # -- state ------------------------------------------------------------------------------
 
     @property
@@ -397,15 +384,3 @@ class McapRecorder(QueuedWriting):
         if split_due(self._file, self.split_size_bytes, self.split_duration_ns, log_time_ns):
             self._finish_file()
             self._open_file()
-
-    def _flush_locked(self, log_time_ns):
-        if self._file is None or not self._unflushed:
-            return
-        try:
-            self._file.writer.flush()
-        except OSError as exc:
-            self._fail(exc)
-            return
-        self._unflushed = 0
-        self._last_flush_log_ns = log_time_ns
-        self._last_flush_wall = time.monotonic()

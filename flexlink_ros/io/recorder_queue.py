@@ -9,6 +9,7 @@ once a flush period of wall time has passed without a message.
 """
 
 import enum
+import threading
 import time
 
 import numpy as np
@@ -75,6 +76,27 @@ def batch_arguments(topics, messages, log_times_ns, publish_times_ns, known_topi
 
 class QueuedWriting:
     """Batch writing, the enqueue queue and the flush thread of the recorder (a mixin)."""
+
+    def flush(self):
+        """Write the queue and the open chunk and flush them to the OS (no fsync)."""
+        self._write_queue()
+        with self._lock:
+            if self._state is RecorderState.RECORDING:
+                self._flush_locked(self._last_flush_log_ns)
+
+    def _start_flusher(self):
+        if self._use_flush_thread:
+            self._flusher = threading.Thread(target=self._flush_loop, name='mcap-flush',
+                                             daemon=True)
+            self._flusher.start()
+
+    def _stop_flushing(self):
+        """Stop the flush thread and write what is left in the queue."""
+        self._stop_flusher.set()
+        if self._flusher is not None and self._flusher is not threading.current_thread():
+            self._flusher.join()
+        self._write_queue()
+
 
     def enqueue(self, topic, message, log_time_ns):
         """
@@ -214,3 +236,15 @@ class QueuedWriting:
                 if (self._state is RecorderState.RECORDING and self._unflushed
                         and time.monotonic() - self._last_flush_wall >= period_s):
                     self._flush_locked(self._last_flush_log_ns)
+
+    def _flush_locked(self, log_time_ns):
+        if self._file is None or not self._unflushed:
+            return
+        try:
+            self._file.writer.flush()
+        except OSError as exc:
+            self._fail(exc)
+            return
+        self._unflushed = 0
+        self._last_flush_log_ns = log_time_ns
+        self._last_flush_wall = time.monotonic()
