@@ -53,7 +53,7 @@ def align(offset, size):
 
 
 def _read_count(data, offset, endian, what, limit):
-    """A uint32 length at ``offset`` (aligned to 4), checked against ``limit``."""
+    """Read a uint32 length at ``offset`` (aligned to 4), checked against ``limit``."""
     offset = align(offset, 4)
     if offset + 4 > len(data):
         raise MalformedCdr(f'{what}: length field beyond the end of the message')
@@ -165,7 +165,7 @@ def criteria_cdr(sec, nanosec, frame, ratio, gamma_dot, force):
 
 @functools.lru_cache(maxsize=16)
 def criteria_template(frame):
-    """Serialised criteria message of a frame and the offsets of its three arrays."""
+    """Serialise the criteria message of a frame; return it and its three arrays' offsets."""
     joints = len(JOINTS)
     sentinels = [[1.0e300 + k * 1e285 + j * 1e284 for j in range(joints)] for k in range(3)]
     template = _criteria_cdr_plain(0, 0, frame, *sentinels)

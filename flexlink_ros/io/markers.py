@@ -35,10 +35,14 @@ def _colour(rgb, alpha=1.0):
 def linkage_markers(stamp, frame_id, link_points, link_deflections, exaggeration,
                     joint_positions, joint_levels, namespace='flexlink'):
     """
-    The rigid and the deformed linkage as markers for RViz and Foxglove.
+    Build the rigid and the deformed linkage as markers for RViz and Foxglove.
 
     Parameters
     ----------
+    stamp : builtin_interfaces.msg.Time
+        Stamp of every marker.
+    frame_id : str
+        Frame of every marker (the ground frame).
     link_points : sequence of ndarray, shape (n_k, 2)
         Rigid-body positions [m] of points along each link (crank, coupler, lever).
     link_deflections : sequence of ndarray, shape (n_k, 2)
@@ -49,6 +53,8 @@ def linkage_markers(stamp, frame_id, link_points, link_deflections, exaggeration
         O2, A, B, O4 [m].
     joint_levels : sequence of int, length 4
         Diagnostic level per joint (colours the joint spheres).
+    namespace : str
+        Prefix of the markers' namespaces (``<namespace>/rigid`` etc.).
 
     Returns
     -------
@@ -133,15 +139,22 @@ class MarkerEncoder:
     def encode(self, stamp_ns, link_points, link_deflections, exaggeration, joint_positions,
                joint_levels):
         """
-        CDR bytes of the marker array (arguments as :func:`linkage_markers`).
+        Return the CDR bytes of the marker array (arguments as :func:`linkage_markers`).
 
         Parameters
         ----------
         stamp_ns : int
-        link_points, link_deflections : sequence of ndarray, shape (points_per_link, 2)
+            Stamp [ns].
+        link_points : sequence of ndarray, shape (points_per_link, 2)
+            Rigid-body positions [m] of the points of each link.
+        link_deflections : sequence of ndarray, shape (points_per_link, 2)
+            Elastic deflections [m] at those points.
         exaggeration : float
+            Factor applied to the deflections in the drawing.
         joint_positions : ndarray, shape (4, 2)
+            O2, A, B, O4 [m].
         joint_levels : sequence of diagnostic levels, length 4
+            Colours of the joint spheres.
 
         """
         out = bytearray(self.template)
@@ -166,15 +179,22 @@ class MarkerEncoder:
     def encode_rows(self, stamps_ns, link_points, link_deflections, exaggeration,
                     joint_positions, joint_levels):
         """
-        CDR of many marker arrays at once (as :meth:`encode`, one row per message).
+        Return the CDR of many marker arrays at once (as :meth:`encode`, a row per message).
 
         Parameters
         ----------
         stamps_ns : ndarray of int, shape (m,)
-        link_points, link_deflections : ndarray, shape (m, links, points_per_link, 2)
+            Stamps [ns].
+        link_points : ndarray, shape (m, links, points_per_link, 2)
+            Rigid-body positions [m] of the points of each link.
+        link_deflections : ndarray, shape (m, links, points_per_link, 2)
+            Elastic deflections [m] at those points.
         exaggeration : float
+            Factor applied to the deflections in the drawing.
         joint_positions : ndarray, shape (m, 4, 2)
-        joint_levels : sequence of diagnostic levels, length 4 (the same for every message)
+            O2, A, B, O4 [m].
+        joint_levels : sequence of diagnostic levels, length 4
+            Colours of the joint spheres (the same for every message).
 
         Returns
         -------
@@ -226,7 +246,7 @@ def _put_doubles(rows, offset, values):
 
 
 def rows_to_bytes(rows):
-    """The rows of a (m, length) uint8 array as a list of m bytes objects."""
+    """Split the rows of a (m, length) uint8 array into a list of m bytes objects."""
     blob = rows.tobytes()
     width = rows.shape[1]
     return [blob[k:k + width] for k in range(0, len(blob), width)]
@@ -234,12 +254,14 @@ def rows_to_bytes(rows):
 
 def vector3_stamped_rows(stamps_ns, frame, values):
     """
-    CDR of many ``geometry_msgs/Vector3Stamped`` (as :func:`vector3_stamped_cdr`).
+    Return the CDR of many ``geometry_msgs/Vector3Stamped`` (as :func:`.cdr.vector3_stamped_cdr`).
 
     Parameters
     ----------
     stamps_ns : ndarray of int, shape (m,)
+        Stamps [ns].
     frame : bytes
+        Frame id, UTF-8.
     values : ndarray, shape (m, 2) or (m, 3)
         x, y[, z] (z = 0 if absent).
 
@@ -258,13 +280,20 @@ def vector3_stamped_rows(stamps_ns, frame, values):
 
 def criteria_rows(stamps_ns, frame, ratio, gamma_dot, force):
     """
-    CDR of many criteria ``sensor_msgs/JointState`` (as :func:`criteria_cdr`).
+    Return the CDR of many criteria ``sensor_msgs/JointState`` (as :func:`.cdr.criteria_cdr`).
 
     Parameters
     ----------
     stamps_ns : ndarray of int, shape (m,)
+        Stamps [ns].
     frame : bytes
-    ratio, gamma_dot, force : ndarray, shape (m, joints)
+        Frame id, UTF-8.
+    ratio : ndarray, shape (m, joints)
+        Criterion |dgamma/dt| / R per joint (positions).
+    gamma_dot : ndarray, shape (m, joints)
+        dgamma/dt per joint (velocities).
+    force : ndarray, shape (m, joints)
+        Reaction force magnitude R per joint (efforts).
 
     Returns
     -------

@@ -39,11 +39,12 @@ _PRIMITIVE_TYPES = frozenset((
 
 def message_type_name(message):
     """
-    The ``pkg/msg/Type`` name of a message instance or class.
+    Return the ``pkg/msg/Type`` name of a message instance or class.
 
     Parameters
     ----------
     message : ROS 2 message instance or class
+        Of a generated ``<pkg>.msg`` module.
 
     """
     cls = message if isinstance(message, type) else type(message)
@@ -53,11 +54,12 @@ def message_type_name(message):
 
 def message_class(type_name):
     """
-    The Python class of ``pkg/msg/Type`` (``pkg/Type`` is accepted too).
+    Import the Python class of ``pkg/msg/Type`` (``pkg/Type`` is accepted too).
 
     Parameters
     ----------
     type_name : str
+        The type's full name.
 
     Raises
     ------
@@ -85,7 +87,7 @@ def _split_type_name(type_name):
 @functools.lru_cache(maxsize=None)
 def share_directory(package):
     """
-    The ``share/<package>`` directory of an installed ROS package.
+    Find the ``share/<package>`` directory of an installed ROS package.
 
     ament_index first (``AMENT_PREFIX_PATH``); otherwise the prefix the package's Python module
     was installed under (``<prefix>/lib/pythonX.Y/site-packages/<package>`` ->
@@ -94,6 +96,7 @@ def share_directory(package):
     Parameters
     ----------
     package : str
+        The ROS package's name.
 
     Raises
     ------
@@ -141,7 +144,7 @@ def _msg_dependencies(text, package):
 @functools.lru_cache(maxsize=None)
 def message_definition(type_name):
     """
-    The full ``ros2msg`` definition rosbag2 stores as the MCAP schema of ``type_name``.
+    Return the full ``ros2msg`` definition rosbag2 stores as the MCAP schema of ``type_name``.
 
     Parameters
     ----------
@@ -174,11 +177,12 @@ def message_definition(type_name):
 @functools.lru_cache(maxsize=None)
 def type_hash(type_name):
     """
-    The ``RIHS01_<sha256>`` type-description hash of ``pkg/msg/Type``, '' if not shipped.
+    Return the ``RIHS01_<sha256>`` type-description hash of ``pkg/msg/Type``, '' if absent.
 
     Parameters
     ----------
     type_name : str
+        The type's full name.
 
     """
     package, interface, name = _split_type_name(type_name)
@@ -240,7 +244,7 @@ def qos_profile_dict(profile):
 
 def offered_qos_yaml(profiles):
     """
-    The ``offered_qos_profiles`` text rosbag2 puts in MCAP channel metadata (yaml-cpp block style).
+    Write the ``offered_qos_profiles`` text of MCAP channel metadata as rosbag2 does (yaml-cpp).
 
     Parameters
     ----------

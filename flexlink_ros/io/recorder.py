@@ -128,7 +128,7 @@ class McapRecorder(QueuedWriting):
 
     # -- life cycle -------------------------------------------------------------------------
 
-    def open(self):
+    def open(self):   # noqa: A003  the public API (open/close, as a file)
         """
         Create the output and write the first file's header.
 
@@ -207,6 +207,7 @@ class McapRecorder(QueuedWriting):
         Parameters
         ----------
         topic : str
+            The topic's name.
         type_name : str or message class
             ``pkg/msg/Type`` or the message class.
         qos_profiles : sequence of rclpy.qos.QoSProfile or dict, optional
@@ -240,6 +241,7 @@ class McapRecorder(QueuedWriting):
         Parameters
         ----------
         topic : str
+            The topic's name.
         message : bytes-like or ROS 2 message
             CDR bytes (e.g. from a ``raw=True`` subscription; the topic must be declared with
             :meth:`add_topic`) or a message object (serialised exactly; declares the topic).
@@ -248,6 +250,7 @@ class McapRecorder(QueuedWriting):
         publish_time_ns : int, optional
             Send time [ns]; defaults to ``log_time_ns``.
         sequence : int
+            The message's sequence number in the file.
 
         Returns
         -------
@@ -300,12 +303,12 @@ class McapRecorder(QueuedWriting):
 
     @property
     def state(self):
-        """The :class:`RecorderState`."""
+        """Return the :class:`RecorderState`."""
         return self._state
 
     @property
     def error(self):
-        """The OS error that stopped recording (None if none)."""
+        """Return the OS error that stopped recording (None if none)."""
         return self._error
 
     @property

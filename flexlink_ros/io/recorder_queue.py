@@ -97,7 +97,6 @@ class QueuedWriting:
             self._flusher.join()
         self._write_queue()
 
-
     def enqueue(self, topic, message, log_time_ns):
         """
         Record one message without writing it in the calling thread.
@@ -153,8 +152,8 @@ class QueuedWriting:
             As :meth:`write`.
 
         """
-        names, index, log, publish = batch_arguments(topics, messages, log_times_ns,
-                                                      publish_times_ns, self._topics)
+        names, index, log, publish = batch_arguments(
+            topics, messages, log_times_ns, publish_times_ns, self._topics)
         count = len(messages)
         if count == 0:
             return 0
@@ -195,7 +194,7 @@ class QueuedWriting:
         return count
 
     def _count_batch(self, names, index, log, flushes):
-        """Counts, times and flush state after a written batch (as its write calls would)."""
+        """Update counts, times and flush state after a batch (as its write calls would)."""
         count = len(log)
         self._file.note(int(log.min()), int(log.max()), count)
         for k, number in enumerate(np.bincount(index, minlength=len(names)).tolist()):

@@ -3,16 +3,15 @@
 import struct
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from flexlink_ros.io import cdr
+from flexlink_ros.io import markers
+from flexlink_ros.io.msg_schema import cdr_layout, serialize_exact
+from flexlink_ros.ros import messages as ros_messages
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import Marker
-
-from flexlink_ros.io import cdr
-from flexlink_ros.io import markers
-from flexlink_ros.io.msg_schema import cdr_layout, serialize_exact
-from flexlink_ros.ros import messages as ros_messages
 
 
 def rclpy_exact(message):
@@ -51,11 +50,11 @@ def test_parse_joint_state_matches_rclpy(names, positions, velocities, expected)
 def test_output_cdr_decodes_with_rclpy_and_equals_the_node_messages():
     stamp = ros_messages.ns_to_stamp(1_234_567_890_123)
     vector = cdr.vector3_stamped_cdr(stamp.sec, stamp.nanosec, b'linkage_ground',
-                                            1.5e-3, -2e-4)
+                                     1.5e-3, -2e-4)
     node_vector = ros_messages.deflection_message(stamp, 'linkage_ground', 1.5e-3, -2e-4)
     assert vector == rclpy_exact(node_vector)   # rclpy leaves padding uninitialised
     criteria = cdr.criteria_cdr(stamp.sec, stamp.nanosec, b'g', [1.0, 2.0, 3.0, 4.0],
-                                       [0.1, 0.2, 0.3, 0.4], [10.0, 20.0, 30.0, 40.0])
+                                [0.1, 0.2, 0.3, 0.4], [10.0, 20.0, 30.0, 40.0])
     node_criteria = ros_messages.criteria_message(stamp, 'g', [1.0, 2.0, 3.0, 4.0],
                                                   [0.1, 0.2, 0.3, 0.4],
                                                   [10.0, 20.0, 30.0, 40.0])
@@ -111,15 +110,15 @@ def test_row_encoders_equal_the_one_message_encoders(frame):
     deflections = 1e-3 * rng.normal(size=(count, 3, 5, 2))
     joints = rng.normal(size=(count, 4, 2))
     levels = [ros_messages.OK, ros_messages.WARN, ros_messages.ERROR, ros_messages.OK]
-    marker_rows = markers.rows_to_bytes(encoder.encode_rows(stamps, points, deflections, 11.0, joints,
-                                                    levels))
+    marker_rows = markers.rows_to_bytes(encoder.encode_rows(stamps, points, deflections, 11.0,
+                                                            joints, levels))
     for n, stamp in enumerate(stamps.tolist()):
         sec, nanosec = divmod(stamp, 10**9)
         assert vectors[n] == cdr.vector3_stamped_cdr(sec, nanosec, encoded, *values[n])
         assert criteria[n] == cdr.criteria_cdr(sec, nanosec, encoded, ratio[n], rate[n],
                                                force[n])
-        assert marker_rows[n] == encoder.encode(stamp, list(points[n]), list(deflections[n]), 11.0,
-                                            joints[n], levels)
+        assert marker_rows[n] == encoder.encode(stamp, list(points[n]), list(deflections[n]),
+                                                11.0, joints[n], levels)
 
 
 @pytest.mark.parametrize('frame', ['g', 'linkage_ground', 'abc', 'machine_base_frame'])

@@ -8,17 +8,16 @@ import subprocess
 import sys
 import zlib
 
-import pytest
-import zstandard
+from flexlink_ros.cli import main as cli, replay as cli_replay
+from flexlink_ros.cli.mcap import mcap_info, recover_mcap
+from flexlink_ros.io import mcap_reader, mcap_records
+from flexlink_ros.io.recorder import McapRecorder
+from flexlink_ros.ros import messages as ros_messages
 from mcap.reader import make_reader
+import pytest
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
-
-from flexlink_ros.cli import main as cli, replay as cli_replay
-from flexlink_ros.io import mcap_reader, mcap_records
-from flexlink_ros.ros import messages as ros_messages
-from flexlink_ros.cli.mcap import mcap_info, recover_mcap
-from flexlink_ros.io.recorder import McapRecorder
+import zstandard
 
 T0_NS = 1_700_000_000_000_000_000
 STEP_NS = 1_000_000
@@ -34,7 +33,7 @@ def crank_state(k, names=('crank',)):
 
 
 def write_crank_recording(path, count, chunk_size_bytes=16384, payload=crank_state):
-    """A real recording: ``count`` JointStates on /joint_states, log time = stamp + 200 us."""
+    """Record ``count`` JointStates on /joint_states, log time = stamp + 200 us."""
     with McapRecorder(path, chunk_size_bytes=chunk_size_bytes, flush_thread=False) as recorder:
         recorder.add_topic('/joint_states', JointState)
         for k in range(count):
@@ -188,14 +187,14 @@ def test_joint_detection_looks_past_the_first_messages(tmp_path):
                                       else ('crank',)))
     scan = cli_replay.scan_recording(late, joint_name='crank')
     assert len(scan[1]['/joint_states']) == cli_replay.JOINT_PROBE_MESSAGES
-    with pytest.raises(ValueError, match="no sensor_msgs/msg/JointState topic with joint"):
+    with pytest.raises(ValueError, match='no sensor_msgs/msg/JointState topic with joint'):
         cli_replay.choose_input_topic(late, 'crank', scan=scan)
 
 
 # -- decompression bombs -------------------------------------------------------------------
 
 def zstd_zeros(size):
-    """A zstd frame of ``size`` zero bytes (content size in its header), made by streaming."""
+    """Compress ``size`` zero bytes into a zstd frame (content size in its header), streaming."""
     compressor = zstandard.ZstdCompressor(level=1).compressobj(size=size)
     block = bytes(1 << 20)
     parts = [compressor.compress(block) for _ in range(size >> 20)]
@@ -209,7 +208,7 @@ def chunk_record(records_compressed, uncompressed_size, crc=0, compression=b'zst
 
 
 def bomb_file(tmp_path, name, declared):
-    """A real 50-message recording with a chunk of ``declared`` zeros after its header."""
+    """Write a real 50-message recording with a chunk of ``declared`` zeros after its header."""
     path = write_crank_recording(tmp_path / 'base.mcap', 50)
     data = path.read_bytes()
     (header_length,) = struct.unpack_from('<Q', data, 9)
@@ -293,9 +292,11 @@ def test_a_bomb_within_the_size_bound_but_beyond_the_ratio_is_refused(tmp_path):
 
 def test_overlapping_bomb_candidates_share_one_decompression_budget(tmp_path):
     """
+    Stop the search for the next chunk at the file's decompression budget.
+
     Chunk records nested in each other's data, each claiming the rest of the file and 64 MiB
-    of zeros, behind a broken record: the search for the next chunk stops at the file's
-    decompression budget instead of decompressing 64 MiB per candidate.
+    of zeros, behind a broken record: the search stops at the budget instead of decompressing
+    64 MiB per candidate.
     """
     frame = zstd_zeros(mcap_records.MAX_CHUNK_BYTES)
     tail = b''
