@@ -5,9 +5,10 @@ Given the same calls it writes the bytes ``mcap.writer.Writer(enable_data_crcs=T
 (same records and order, chunking rule, summary groups and offsets; test_mcap_writer checks it
 byte for byte), with what the recorder needs and the public ``Writer`` lacks:
 
-- the summary's chunk indexes are kept encoded, at most :data:`INDEX_SPILL_BYTES` in memory and
-  the rest in an unnamed temporary file (:class:`ChunkIndexStore`), so memory stays flat however
-  many chunks a file holds (the ``Writer`` keeps a ~740 B ``ChunkIndex`` object per chunk);
+- the summary's chunk indexes are kept encoded, at most ``chunk_index.INDEX_SPILL_BYTES`` in
+  memory and the rest in an unnamed temporary file (:class:`.chunk_index.ChunkIndexStore`), so
+  memory stays flat however many chunks a file holds (the ``Writer`` keeps a ~740 B
+  ``ChunkIndex`` object per chunk);
 - :meth:`McapFileWriter.add_messages` writes many messages at once, building Message and
   Message Index records with numpy rather than one Python call per message (replay).
 
@@ -15,81 +16,25 @@ Every other record is encoded by ``mcap.records`` through ``mcap.data_stream.Rec
 Message and Message Index records follow the MCAP specification's layout.
 """
 
-import os
 import struct
-import tempfile
 import zlib
 
-import numpy as np
-import zstandard
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
 from mcap.records import (Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Schema,
                           Statistics, SummaryOffset)
+import numpy as np
+import zstandard
+
+from .chunk_index import ChunkIndexStore
 
 MAGIC = b'\x89MCAP0\r\n'   # MCAP specification: starts and ends every file
-# The summary's chunk indexes (one record per chunk, about 130 B with 5 topics) are held in
-# memory up to this size, then moved to an unnamed temporary file beside the recording.
-INDEX_SPILL_BYTES = 256 * 1024
 COMPRESSIONS = ('zstd', 'none')
 # Message record: opcode, record length, channel id, sequence, log time, publish time, data.
 _MESSAGE_HEAD = struct.Struct('<BQHIQQ')
 _MESSAGE_FIELDS = [('opcode', 'u1'), ('length', '<u8'), ('channel', '<u2'),
                    ('sequence', '<u4'), ('log', '<u8'), ('publish', '<u8')]
 _MESSAGE_FIXED = _MESSAGE_HEAD.size - 9   # record length counts the fields after the prefix
-
-
-class ChunkIndexStore:
-    """
-    Chunk Index records for the summary, spilled to an unnamed temporary file.
-
-    Each ``ChunkIndex`` is encoded when the chunk is written; at most
-    :data:`INDEX_SPILL_BYTES` of records stay in memory and the rest go to a temporary file in
-    ``directory`` (deleted by the OS when closed, even on a crash).
-    """
-
-    def __init__(self, directory):
-        self._directory = directory
-        self._buffer = bytearray()
-        self._spill = None
-        self._count = 0
-
-    def append(self, index):
-        """Encode one ``mcap.records.ChunkIndex``."""
-        builder = RecordBuilder()
-        index.write(builder)
-        self._buffer += builder.end()
-        self._count += 1
-        if len(self._buffer) >= INDEX_SPILL_BYTES:
-            if self._spill is None:
-                self._spill = tempfile.TemporaryFile(dir=self._directory, prefix='.mcap-index-')
-            self._spill.write(self._buffer)
-            self._buffer = bytearray()   # a new buffer: the old one's memory is released
-
-    def __len__(self):
-        return self._count
-
-    @property
-    def memory_bytes(self):
-        """Bytes of records held in memory (the rest are in the temporary file)."""
-        return len(self._buffer)
-
-    def write(self, builder):
-        """Append every record, in order, to ``builder`` (the summary being written)."""
-        if self._spill is not None:
-            self._spill.flush()
-            self._spill.seek(0)
-            for block in iter(lambda: self._spill.read(1 << 20), b''):
-                builder.write(block)
-            self._spill.seek(0, os.SEEK_END)
-        builder.write(self._buffer)
-
-    def close(self):
-        """Drop the temporary file (the summary is written, or the file is abandoned)."""
-        if self._spill is not None:
-            self._spill.close()
-            self._spill = None
-        self._buffer = bytearray()
 
 
 class McapFileWriter:
@@ -105,7 +50,7 @@ class McapFileWriter:
         (uncompressed), as ``mcap.writer.Writer`` does.
     compression : {'zstd', 'none'}
     spill_directory : str or os.PathLike
-        Where the chunk index records beyond :data:`INDEX_SPILL_BYTES` are kept until
+        Where the chunk index records beyond ``chunk_index.INDEX_SPILL_BYTES`` are kept until
         :meth:`finish`.
 
     """
@@ -158,7 +103,7 @@ class McapFileWriter:
 
     @property
     def chunk_indexes(self):
-        """The :class:`ChunkIndexStore` of the chunks written so far."""
+        """Return the :class:`ChunkIndexStore` of the chunks written so far."""
         return self._chunk_indexes
 
     def start(self, profile, library):
@@ -266,10 +211,17 @@ class McapFileWriter:
         Parameters
         ----------
         channels : numpy.ndarray of uint16, shape (n,)
+            Channel id of each message.
         messages : sequence of bytes, length n
-        log, publish : numpy.ndarray of int64, shape (n,)
+            CDR bytes of each message.
+        log : numpy.ndarray of int64, shape (n,)
+            Log (receive) times [ns].
+        publish : numpy.ndarray of int64, shape (n,)
+            Publish (send) times [ns].
         flush_period_ns : int
+            Log time between flushes [ns].
         last_flush_ns : int or None
+            Log time of the last flush [ns].
 
         Returns
         -------

@@ -8,11 +8,12 @@ What rosbag2 stores about a ROS 2 message type, rebuilt from the installed inter
 - :func:`type_hash`: the ``RIHS01_...`` type-description hash from ``share/<pkg>/msg/<Type>.json``.
 - :func:`offered_qos_yaml`: the ``offered_qos_profiles`` channel metadata (rosbag2 metadata
   version 9 spelling: policy names, not numbers).
-- :func:`serialize_exact`: CDR bytes identical in length to what a ``raw=True`` subscription
-  receives. ``rclpy.serialization.serialize_message`` returns the rmw's estimated buffer size,
-  which can carry trailing uninitialised bytes (an empty ``float64[]`` makes rosbags reject the
-  record); the exact end is computed by walking the message's ``SLOT_TYPES`` with XCDR1
-  alignment, and alignment padding is zeroed as the DDS payload has it.
+- :func:`serialize_exact`: CDR bytes identical to what a ``raw=True`` subscription receives.
+  ``rclpy.serialization.serialize_message`` returns the rmw's estimated buffer size, which can
+  carry trailing uninitialised bytes (an empty ``float64[]`` makes rosbags reject the record);
+  here the message's ``SLOT_TYPES`` are walked with XCDR1 alignment (:mod:`.cdr`) and
+  alignment padding is zeroed as the DDS payload has it; :func:`cdr_layout` gives the exact
+  length and the padding's place.
 """
 
 import functools
@@ -22,11 +23,12 @@ import pathlib
 import re
 import sys
 
-from rosidl_parser import definition
+from ament_index_python.packages import get_package_share_directory
+
+from .cdr import CdrSizer, serialize_message, walk_message
 
 ROS2MSG_DELIMITER = '=' * 80 + '\n'
 RMW_DURATION_INFINITE = (9223372036, 854775807)  # sec, nsec as rmw reports "infinite"
-ENCAPSULATION_SIZE = 4  # CDR representation header in front of the payload
 
 # rosbag2's MSG_FIELD_TYPE_REGEX and primitive list (local_message_definition_source.cpp).
 _MSG_FIELD_TYPE = re.compile(r'(?:^|\n)\s*([a-zA-Z0-9_/]+)(?:\[[^\]]*\])?\s+')
@@ -34,22 +36,15 @@ _PRIMITIVE_TYPES = frozenset((
     'bool', 'byte', 'char', 'float32', 'float64', 'int8', 'uint8', 'int16', 'uint16', 'int32',
     'uint32', 'int64', 'uint64', 'string'))
 
-# XCDR1 sizes of IDL basic types (alignment = size, at most 8).
-_BASIC_SIZES = {
-    'boolean': 1, 'octet': 1, 'char': 1, 'int8': 1, 'uint8': 1,
-    'int16': 2, 'uint16': 2, 'wchar': 2,
-    'int32': 4, 'uint32': 4, 'float': 4,
-    'int64': 8, 'uint64': 8, 'double': 8, 'long double': 16,
-}
-
 
 def message_type_name(message):
     """
-    The ``pkg/msg/Type`` name of a message instance or class.
+    Return the ``pkg/msg/Type`` name of a message instance or class.
 
     Parameters
     ----------
     message : ROS 2 message instance or class
+        Of a generated ``<pkg>.msg`` module.
 
     """
     cls = message if isinstance(message, type) else type(message)
@@ -59,11 +54,12 @@ def message_type_name(message):
 
 def message_class(type_name):
     """
-    The Python class of ``pkg/msg/Type`` (``pkg/Type`` is accepted too).
+    Import the Python class of ``pkg/msg/Type`` (``pkg/Type`` is accepted too).
 
     Parameters
     ----------
     type_name : str
+        The type's full name.
 
     Raises
     ------
@@ -91,7 +87,7 @@ def _split_type_name(type_name):
 @functools.lru_cache(maxsize=None)
 def share_directory(package):
     """
-    The ``share/<package>`` directory of an installed ROS package.
+    Find the ``share/<package>`` directory of an installed ROS package.
 
     ament_index first (``AMENT_PREFIX_PATH``); otherwise the prefix the package's Python module
     was installed under (``<prefix>/lib/pythonX.Y/site-packages/<package>`` ->
@@ -100,6 +96,7 @@ def share_directory(package):
     Parameters
     ----------
     package : str
+        The ROS package's name.
 
     Raises
     ------
@@ -108,9 +105,8 @@ def share_directory(package):
 
     """
     try:
-        from ament_index_python.packages import get_package_share_directory
         return pathlib.Path(get_package_share_directory(package))
-    except (ImportError, LookupError, ValueError, OSError):  # OSError: AMENT_PREFIX_PATH unset
+    except (LookupError, ValueError, OSError):  # OSError: AMENT_PREFIX_PATH unset
         pass
     candidates = [pathlib.Path(sys.prefix) / 'share' / package]
     try:
@@ -148,7 +144,7 @@ def _msg_dependencies(text, package):
 @functools.lru_cache(maxsize=None)
 def message_definition(type_name):
     """
-    The full ``ros2msg`` definition rosbag2 stores as the MCAP schema of ``type_name``.
+    Return the full ``ros2msg`` definition rosbag2 stores as the MCAP schema of ``type_name``.
 
     Parameters
     ----------
@@ -181,11 +177,12 @@ def message_definition(type_name):
 @functools.lru_cache(maxsize=None)
 def type_hash(type_name):
     """
-    The ``RIHS01_<sha256>`` type-description hash of ``pkg/msg/Type``, '' if not shipped.
+    Return the ``RIHS01_<sha256>`` type-description hash of ``pkg/msg/Type``, '' if absent.
 
     Parameters
     ----------
     type_name : str
+        The type's full name.
 
     """
     package, interface, name = _split_type_name(type_name)
@@ -247,7 +244,7 @@ def qos_profile_dict(profile):
 
 def offered_qos_yaml(profiles):
     """
-    The ``offered_qos_profiles`` text rosbag2 puts in MCAP channel metadata (yaml-cpp block style).
+    Write the ``offered_qos_profiles`` text of MCAP channel metadata as rosbag2 does (yaml-cpp).
 
     Parameters
     ----------
@@ -276,72 +273,14 @@ def offered_qos_yaml(profiles):
     return '\n'.join(lines) if lines else '[]'
 
 
-# ---------------------------------------------------------------------------------------------
-# Exact CDR length
-
-def _align(position, alignment, padding):
-    """Advance to a multiple of ``alignment``, noting the padding range."""
-    remainder = position % alignment
-    if remainder:
-        advanced = position + alignment - remainder
-        padding.append((position, advanced))
-        return advanced
-    return position
-
-
-def _basic_size(member_type):
-    try:
-        return _BASIC_SIZES[member_type.typename]
-    except KeyError:
-        raise ValueError(f'CDR size of {member_type.typename!r} not supported') from None
-
-
-def _string_end(position, text, padding):
-    position = _align(position, 4, padding)
-    size = len(text) if text.isascii() else len(text.encode('utf-8'))
-    return position + 4 + size + 1
-
-
-def _walk_value(position, member_type, value, padding):
-    if isinstance(member_type, definition.BasicType):
-        size = _basic_size(member_type)
-        return _align(position, min(size, 8), padding) + size
-    if isinstance(member_type, definition.AbstractString):
-        if isinstance(member_type, definition.AbstractWString):
-            raise ValueError('CDR size of wstring not supported')
-        return _string_end(position, value, padding)
-    if isinstance(member_type, definition.NamespacedType):
-        return _walk_message(position, value, padding)
-    if isinstance(member_type, definition.AbstractNestedType):
-        if isinstance(member_type, definition.AbstractSequence):
-            position = _align(position, 4, padding) + 4
-        count = len(value)
-        if count == 0:
-            return position
-        element_type = member_type.value_type
-        if isinstance(element_type, definition.BasicType):
-            size = _basic_size(element_type)
-            return _align(position, min(size, 8), padding) + size * count
-        for element in value:
-            position = _walk_value(position, element_type, element, padding)
-        return position
-    raise ValueError(f'CDR size of {type(member_type).__name__} not supported')
-
-
-def _walk_message(position, message, padding):
-    cls = type(message)
-    for slot, member_type in zip(cls.__slots__, cls.SLOT_TYPES):
-        position = _walk_value(position, member_type, getattr(message, slot), padding)
-    return position
-
-
 def cdr_layout(message):
     """
-    Exact CDR length of a message and where its alignment padding lies.
+    Return the exact CDR length of a message and where its alignment padding lies.
 
     Parameters
     ----------
     message : ROS 2 message instance
+        Walked by :func:`flexlink_ros.io.cdr.walk_message`.
 
     Returns
     -------
@@ -351,38 +290,28 @@ def cdr_layout(message):
         Half-open byte ranges of alignment padding, offsets into the whole buffer.
 
     """
-    padding = []
-    end = _walk_message(0, message, padding)
-    shift = ENCAPSULATION_SIZE
-    return end + shift, [(start + shift, stop + shift) for start, stop in padding]
+    sizer = CdrSizer()
+    walk_message(sizer, message)
+    return sizer.position, sizer.padding
 
 
 def serialize_exact(message):
     """
-    CDR bytes of a message, exactly as long as the DDS payload and with zeroed padding.
+    Return the CDR bytes of a message, exactly as long as the DDS payload, zeroed padding.
+
+    The bytes of a ``raw=True`` subscription, padding zeroed; rclpy's ``serialize_message``
+    gives the same bytes up to its estimated buffer size (trailing bytes that make rosbags
+    reject an empty ``float64[]``) and uninitialised padding (tested). Written by the one CDR
+    walker (:func:`flexlink_ros.io.cdr.serialize_message`), without importing rclpy.
 
     Parameters
     ----------
     message : ROS 2 message instance
+        Of a type without ``wstring`` fields.
 
     Returns
     -------
     bytes
 
-    Raises
-    ------
-    ValueError
-        If rclpy's buffer is shorter than the computed length (a layout this walker gets wrong).
-
     """
-    from rclpy.serialization import serialize_message
-
-    data = bytearray(serialize_message(message))
-    length, padding = cdr_layout(message)
-    if length > len(data):
-        raise ValueError(f'CDR length {length} computed for {message_type_name(message)} '
-                         f'exceeds the {len(data)} bytes rclpy serialised')
-    for start, stop in padding:
-        data[start:stop] = bytes(stop - start)
-    del data[length:]
-    return bytes(data)
+    return serialize_message(message)

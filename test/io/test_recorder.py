@@ -1,4 +1,4 @@
-"""MCAP recorder: rosbag2 layout read back by two independent readers, crash and full-disk paths."""
+"""MCAP recorder: rosbag2 layout read back by two readers, crash and full-disk paths."""
 
 import json
 import os
@@ -11,26 +11,27 @@ import sys
 import time
 import tracemalloc
 
-import numpy as np
-import pytest
-import yaml
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from flexlink_ros.cli import main as cli
+from flexlink_ros.cli.mcap import mcap_info, recover_mcap, scan_mcap
+from flexlink_ros.errors import RecorderError
+from flexlink_ros.io import chunk_index, recorder_queue
+from flexlink_ros.io.msg_schema import (message_definition, serialize_exact, share_directory,
+                                        type_hash)
+from flexlink_ros.io.recorder import McapRecorder
+from flexlink_ros.io.recorder_queue import RecorderState
 from geometry_msgs.msg import Point, PointStamped, Vector3Stamped
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
+import numpy as np
+import pytest
 from rclpy.serialization import serialize_message
 from rosbags.highlevel import AnyReader
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray
-
-from flexlink_ros.cli import main as cli
-from flexlink_ros.cli.mcap import mcap_info, recover_mcap, scan_mcap
-from flexlink_ros.errors import RecorderError
-from flexlink_ros.io.recorder import McapRecorder, RecorderState
-from flexlink_ros.io.msg_schema import (message_definition, serialize_exact, share_directory,
-                                        type_hash)
+import yaml
 
 T0_NS = 1_700_000_000_000_000_000
 STEP_NS = 1_000_000  # 1 kHz
@@ -41,16 +42,16 @@ def stamp(ns):
 
 
 def sample_messages(k):
-    """The four output types (and an empty-array JointState) at sample k."""
+    """Build the four output types (and an empty-array JointState) at sample k."""
     t = T0_NS + k * STEP_NS
     joint = JointState(header=stamp(t), name=['crank'], position=[0.001 * k],
                        velocity=[] if k % 3 == 0 else [2.0 + k])
     diag = DiagnosticArray(header=stamp(t), status=[DiagnosticStatus(
         level=DiagnosticStatus.WARN if k % 2 else DiagnosticStatus.OK, name='joint A',
         message=f'sample {k}', values=[KeyValue(key='criterion', value=f'{0.5 * k:.3f}')])])
-    markers = MarkerArray(markers=[Marker(header=stamp(t), ns='links', id=k % 5,
-                                          type=Marker.LINE_STRIP,
-                                          points=[Point(x=float(j), y=0.1 * k) for j in range(4)])])
+    markers = MarkerArray(markers=[Marker(
+        header=stamp(t), ns='links', id=k % 5, type=Marker.LINE_STRIP,
+        points=[Point(x=float(j), y=0.1 * k) for j in range(4)])])
     deflection = Vector3Stamped(header=stamp(t))
     deflection.vector.x = 1e-4 * k
     point = PointStamped(header=stamp(t), point=Point(x=k * 1.0, y=-1.0, z=0.5))
@@ -99,7 +100,8 @@ def read_with_mcap_ros2(path):
         reader = make_reader(stream, decoder_factories=[DecoderFactory()])
         header, summary = reader.get_header(), reader.get_summary()
         decoded = [(channel.topic, message.log_time, message.publish_time, msg)
-                   for _, channel, message, msg in reader.iter_decoded_messages(log_time_order=False)]
+                   for _, channel, message, msg
+                   in reader.iter_decoded_messages(log_time_order=False)]
     return header, summary, decoded
 
 
@@ -231,7 +233,7 @@ def test_unwritable_and_full_device(tmp_path):
 
 @pytest.fixture
 def tiny_tmpfs(tmp_path):
-    """A 256 KiB tmpfs (needs mount rights; skipped without them)."""
+    """Mount a 256 KiB tmpfs (needs mount rights; skipped without them)."""
     mount_point = tmp_path / 'tiny'
     mount_point.mkdir()
     if shutil.which('mount') is None or os.geteuid() != 0:
@@ -337,7 +339,7 @@ def record_live_stream(tmp_path, stop_signal, record_s=2.5):
 
     Returns the output path and the wall time [ns] at which the signal was sent.
     """
-    repo = pathlib.Path(__file__).resolve().parents[1]
+    repo = pathlib.Path(__file__).resolve().parents[2]
     out = tmp_path / 'live.mcap'
     driver = subprocess.Popen([sys.executable, '-m', 'flexlink_ros.ros.crank_driver', '--ros-args',
                                '-p', 'duration_s:=30.0'], cwd=repo)
@@ -468,21 +470,21 @@ def test_mcap_info_on_a_missing_or_foreign_file_is_a_one_line_error(tmp_path, co
     path = tmp_path / 'input.mcap'
     if content is not None:
         path.write_bytes(content)
-    result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'mcap-info', str(path)],
-                            capture_output=True, text=True, timeout=60)
+    result = subprocess.run(
+        [sys.executable, '-m', 'flexlink_ros.cli.main', 'mcap-info', str(path)],
+        capture_output=True, text=True, timeout=60)
     assert result.returncode == 1
     assert result.stderr.startswith('flexlink mcap-info: error:')
     assert len(result.stderr.strip().splitlines()) == 1
     assert ('bad magic' if content else 'No such file') in result.stderr
 
 
-def test_enqueued_messages_are_written_in_order_by_the_background_thread(tmp_path,
-                                                                        monkeypatch):
+def test_enqueued_messages_are_written_in_order_by_the_background_thread(
+        tmp_path, monkeypatch):
     """enqueue: nothing written in the caller; every message on disk, in order, exact bytes."""
-    from flexlink_ros.io import recorder as recorder_module
     # The thread first wakes after a second, long after the enqueuing below (a few ms): what
     # is on disk before then was written by enqueue itself, which must be nothing.
-    monkeypatch.setattr(recorder_module, 'QUEUE_PERIOD_S', 1.0)
+    monkeypatch.setattr(recorder_queue, 'QUEUE_PERIOD_S', 1.0)
     path = tmp_path / 'queued.mcap'
     recorder = McapRecorder(path, chunk_size_bytes=4096).open()
     recorder.add_topic('/a', 'sensor_msgs/msg/JointState')
@@ -611,7 +613,6 @@ def test_a_link_placed_between_check_and_create_is_not_followed(tmp_path, monkey
 # -- memory: the summary's chunk indexes do not accumulate in memory --------------------------
 
 def test_retained_memory_per_chunk_is_bounded(tmp_path):
-    from flexlink_ros.io import mcap_writer
     topics = ['/a', '/b', '/c', '/d', '/e']   # the node records 4-5 topics
     payload = serialize_message(Vector3Stamped(header=stamp(T0_NS)))
     recorder = McapRecorder(tmp_path / 'long.mcap', chunk_size_bytes=1024, flush_thread=False)
@@ -638,7 +639,7 @@ def test_retained_memory_per_chunk_is_bounded(tmp_path):
         tracemalloc.stop()
     per_chunk_object = 700   # what mcap's Writer retains per ChunkIndex object (measured ~740)
     # The records in memory are at most INDEX_SPILL_BYTES; the rest is a few fixed buffers.
-    bound = mcap_writer.INDEX_SPILL_BYTES + 64 * 1024
+    bound = chunk_index.INDEX_SPILL_BYTES + 64 * 1024
     assert added * per_chunk_object > 4 * bound    # enough chunks that a leak would show
     assert grown < bound, f'{grown} B retained over {added} chunks'
     status = recorder.close()
@@ -653,4 +654,3 @@ def test_retained_memory_per_chunk_is_bounded(tmp_path):
     assert sorted(os.listdir(tmp_path)) == ['long.mcap']   # the temporary file is gone
     with open(status['files'][0], 'rb') as stream:
         assert sum(1 for _ in make_reader(stream).iter_messages()) == 9_000 * len(topics)
-

@@ -8,17 +8,16 @@ import subprocess
 import sys
 import zlib
 
-import pytest
-import zstandard
+from flexlink_ros.cli import main as cli, replay as cli_replay
+from flexlink_ros.cli.mcap import mcap_info, recover_mcap
+from flexlink_ros.io import mcap_reader, mcap_records
+from flexlink_ros.io.recorder import McapRecorder
+from flexlink_ros.ros import messages as ros_messages
 from mcap.reader import make_reader
+import pytest
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
-
-from flexlink_ros.cli import main as cli, replay as cli_replay
-from flexlink_ros.io import mcap_reader as mcap_salvage
-from flexlink_ros.ros import messages as ros_messages
-from flexlink_ros.cli.mcap import mcap_info, recover_mcap
-from flexlink_ros.io.recorder import McapRecorder
+import zstandard
 
 T0_NS = 1_700_000_000_000_000_000
 STEP_NS = 1_000_000
@@ -34,7 +33,7 @@ def crank_state(k, names=('crank',)):
 
 
 def write_crank_recording(path, count, chunk_size_bytes=16384, payload=crank_state):
-    """A real recording: ``count`` JointStates on /joint_states, log time = stamp + 200 us."""
+    """Record ``count`` JointStates on /joint_states, log time = stamp + 200 us."""
     with McapRecorder(path, chunk_size_bytes=chunk_size_bytes, flush_thread=False) as recorder:
         recorder.add_topic('/joint_states', JointState)
         for k in range(count):
@@ -188,14 +187,14 @@ def test_joint_detection_looks_past_the_first_messages(tmp_path):
                                       else ('crank',)))
     scan = cli_replay.scan_recording(late, joint_name='crank')
     assert len(scan[1]['/joint_states']) == cli_replay.JOINT_PROBE_MESSAGES
-    with pytest.raises(ValueError, match="no sensor_msgs/msg/JointState topic with joint"):
+    with pytest.raises(ValueError, match='no sensor_msgs/msg/JointState topic with joint'):
         cli_replay.choose_input_topic(late, 'crank', scan=scan)
 
 
 # -- decompression bombs -------------------------------------------------------------------
 
 def zstd_zeros(size):
-    """A zstd frame of ``size`` zero bytes (content size in its header), made by streaming."""
+    """Compress ``size`` zero bytes into a zstd frame (content size in its header), streaming."""
     compressor = zstandard.ZstdCompressor(level=1).compressobj(size=size)
     block = bytes(1 << 20)
     parts = [compressor.compress(block) for _ in range(size >> 20)]
@@ -205,11 +204,11 @@ def zstd_zeros(size):
 def chunk_record(records_compressed, uncompressed_size, crc=0, compression=b'zstd'):
     body = struct.pack('<QQQII', T0_NS, T0_NS, uncompressed_size, crc, len(compression)) + \
         compression + struct.pack('<Q', len(records_compressed)) + records_compressed
-    return struct.pack('<BQ', mcap_salvage.CHUNK, len(body)) + body
+    return struct.pack('<BQ', mcap_records.CHUNK, len(body)) + body
 
 
 def bomb_file(tmp_path, name, declared):
-    """A real 50-message recording with a chunk of ``declared`` zeros after its header."""
+    """Write a real 50-message recording with a chunk of ``declared`` zeros after its header."""
     path = write_crank_recording(tmp_path / 'base.mcap', 50)
     data = path.read_bytes()
     (header_length,) = struct.unpack_from('<Q', data, 9)
@@ -271,51 +270,53 @@ def test_decompression_bombs_are_refused_with_a_bound(tmp_path, declared, expect
 def test_a_bomb_within_the_size_bound_but_beyond_the_ratio_is_refused(tmp_path):
     declared = 32 * 2**20      # under 64 MiB, but about 3000 times its compressed size
     frame = zstd_zeros(declared)
-    assert declared > mcap_salvage.MAX_CHUNK_RATIO * len(frame)
-    with pytest.raises(mcap_salvage.DamagedRecord, match='bound'):
-        mcap_salvage.decode_chunk(chunk_record(frame, declared), 9,
+    assert declared > mcap_records.MAX_CHUNK_RATIO * len(frame)
+    with pytest.raises(mcap_records.DamagedRecord, match='bound'):
+        mcap_records.decode_chunk(chunk_record(frame, declared), 9,
                                   len(chunk_record(frame, declared)))
     # A frame that claims less than the chunk, or more, is refused before decompressing.
     noise = random.Random(1).randbytes(2**16)
     frame = zstandard.ZstdCompressor().compress(noise)
     for claimed in (2**16 - 1, 2**16 + 1):
         record = chunk_record(frame, claimed)
-        with pytest.raises(mcap_salvage.DamagedRecord, match='zstd frame declares 65536 bytes'):
-            mcap_salvage.decode_chunk(record, 9, len(record))
+        with pytest.raises(mcap_records.DamagedRecord, match='zstd frame declares 65536 bytes'):
+            mcap_records.decode_chunk(record, 9, len(record))
     record = chunk_record(frame, 2**16, zlib.crc32(noise))
-    assert mcap_salvage.decode_chunk(record, 9, len(record)) == noise
-    records = b''.join(bytes([mcap_salvage.MESSAGE]) + struct.pack('<Q', 30) + bytes(30)
+    assert mcap_records.decode_chunk(record, 9, len(record)) == noise
+    records = b''.join(bytes([mcap_records.MESSAGE]) + struct.pack('<Q', 30) + bytes(30)
                        for _ in range(10))
     record = chunk_record(records, len(records), zlib.crc32(records), b'')
-    assert mcap_salvage.decode_chunk(record, 9, len(record)) == records
-    assert math.isclose(mcap_salvage.chunk_bound(10), mcap_salvage.CHUNK_RATIO_FLOOR)
+    assert mcap_records.decode_chunk(record, 9, len(record)) == records
+    assert math.isclose(mcap_records.chunk_bound(10), mcap_records.CHUNK_RATIO_FLOOR)
 
 
 def test_overlapping_bomb_candidates_share_one_decompression_budget(tmp_path):
     """
+    Stop the search for the next chunk at the file's decompression budget.
+
     Chunk records nested in each other's data, each claiming the rest of the file and 64 MiB
-    of zeros, behind a broken record: the search for the next chunk stops at the file's
-    decompression budget instead of decompressing 64 MiB per candidate.
+    of zeros, behind a broken record: the search stops at the budget instead of decompressing
+    64 MiB per candidate.
     """
-    frame = zstd_zeros(mcap_salvage.MAX_CHUNK_BYTES)
+    frame = zstd_zeros(mcap_records.MAX_CHUNK_BYTES)
     tail = b''
     for _ in range(100):
-        tail = chunk_record(frame + tail, mcap_salvage.MAX_CHUNK_BYTES, crc=1)
-    broken = struct.pack('<BQ', mcap_salvage.CHUNK, 2**40)
-    buffer = mcap_salvage.MCAP_MAGIC + broken + tail
-    budget = mcap_salvage.decompression_budget(len(buffer))
+        tail = chunk_record(frame + tail, mcap_records.MAX_CHUNK_BYTES, crc=1)
+    broken = struct.pack('<BQ', mcap_records.CHUNK, 2**40)
+    buffer = mcap_records.MCAP_MAGIC + broken + tail
+    budget = mcap_records.decompression_budget(len(buffer))
     # Candidates whose ratio bound lets them decompress 64 MiB: many more than the budget.
-    eligible = sum(mcap_salvage.chunk_bound(len(buffer) - offset) == mcap_salvage.MAX_CHUNK_BYTES
-                   for offset in range(len(buffer)) if buffer[offset] == mcap_salvage.CHUNK)
-    assert eligible * mcap_salvage.MAX_CHUNK_BYTES > 5 * budget
-    salvage = mcap_salvage.Salvage()
-    assert list(mcap_salvage.iter_messages(buffer, salvage)) == []
+    eligible = sum(mcap_records.chunk_bound(len(buffer) - offset) == mcap_records.MAX_CHUNK_BYTES
+                   for offset in range(len(buffer)) if buffer[offset] == mcap_records.CHUNK)
+    assert eligible * mcap_records.MAX_CHUNK_BYTES > 5 * budget
+    salvage = mcap_reader.Salvage()
+    assert list(mcap_reader.iter_messages(buffer, salvage)) == []
     assert salvage.end_reason == 'truncated inside a chunk record at offset 8'
-    assert 0 <= salvage.budget[0] < mcap_salvage.MAX_CHUNK_BYTES     # spent, not exceeded
+    assert 0 <= salvage.budget[0] < mcap_records.MAX_CHUNK_BYTES     # spent, not exceeded
 
 
 @pytest.mark.parametrize('content', [b'', b'\x89MCAP0\r', b'not an mcap file' * 10,
-                                     mcap_salvage.MCAP_MAGIC + b'\x00' * 100])
+                                     mcap_records.MCAP_MAGIC + b'\x00' * 100])
 def test_unreadable_files_are_refused_in_one_line_without_output(tmp_path, content):
     path = tmp_path / 'in.mcap'
     path.write_bytes(content)
@@ -323,25 +324,25 @@ def test_unreadable_files_are_refused_in_one_line_without_output(tmp_path, conte
     run = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'mcap-recover', str(path),
                           '--out', str(out)], capture_output=True, text=True, timeout=60)
     assert run.returncode == 1 and len(run.stderr.strip().splitlines()) == 1, run.stderr
-    expected = 'nothing readable' if content.startswith(mcap_salvage.MCAP_MAGIC) else 'bad magic'
+    expected = 'nothing readable' if content.startswith(mcap_records.MCAP_MAGIC) else 'bad magic'
     assert expected in run.stderr
     assert not out.exists()
 
 
 def test_lz4_chunks_are_decompressed_within_their_declared_size():
     import lz4.frame
-    records = b''.join(bytes([mcap_salvage.MESSAGE]) + struct.pack('<Q', 30) + bytes(30)
+    records = b''.join(bytes([mcap_records.MESSAGE]) + struct.pack('<Q', 30) + bytes(30)
                        for _ in range(100))
     frame = lz4.frame.compress(records)
     record = chunk_record(frame, len(records), zlib.crc32(records), b'lz4')
-    assert mcap_salvage.decode_chunk(record, 9, len(record)) == records
+    assert mcap_records.decode_chunk(record, 9, len(record)) == records
     # The same frame under a smaller declared size: refused after at most that many bytes.
     record = chunk_record(frame, len(records) // 2, 0, b'lz4')
-    with pytest.raises(mcap_salvage.DamagedRecord, match='does not end after the 1950 bytes'):
-        mcap_salvage.decode_chunk(record, 9, len(record))
+    with pytest.raises(mcap_records.DamagedRecord, match='does not end after the 1950 bytes'):
+        mcap_records.decode_chunk(record, 9, len(record))
     record = chunk_record(frame[:-4], len(records), 0, b'lz4')
-    with pytest.raises(mcap_salvage.DamagedRecord, match='does not end after the 3900 bytes'):
-        mcap_salvage.decode_chunk(record, 9, len(record))
+    with pytest.raises(mcap_records.DamagedRecord, match='does not end after the 3900 bytes'):
+        mcap_records.decode_chunk(record, 9, len(record))
     record = chunk_record(frame[:12] + b'\xff' * 8 + frame[20:], len(records), 0, b'lz4')
-    with pytest.raises(mcap_salvage.DamagedRecord, match='lz4'):
-        mcap_salvage.decode_chunk(record, 9, len(record))
+    with pytest.raises(mcap_records.DamagedRecord, match='lz4'):
+        mcap_records.decode_chunk(record, 9, len(record))

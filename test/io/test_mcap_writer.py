@@ -5,17 +5,16 @@ import io
 import pathlib
 import re
 
-import numpy as np
-from geometry_msgs.msg import Vector3Stamped
-from mcap.reader import NonSeekingReader, SeekingReader, make_reader
-from mcap.writer import CompressionType, Writer
-from rclpy.serialization import serialize_message
-from rosbags.highlevel import AnyReader
-
 import flexlink_ros
-from flexlink_ros.io import mcap_writer
+from flexlink_ros.io import chunk_index
 from flexlink_ros.io.mcap_writer import McapFileWriter
 from flexlink_ros.io.recorder import McapRecorder
+from geometry_msgs.msg import Vector3Stamped
+from mcap.reader import make_reader, NonSeekingReader, SeekingReader
+from mcap.writer import CompressionType, Writer
+import numpy as np
+from rclpy.serialization import serialize_message
+from rosbags.highlevel import AnyReader
 
 T0_NS = 1_700_000_000_000_000_000
 PACKAGE = pathlib.Path(flexlink_ros.__file__).parent
@@ -59,8 +58,8 @@ def test_no_module_touches_private_state_of_another_library(tmp_path):
     sample = tmp_path / 'private_sample.py'
     sample.write_text("state = getattr(writer, f'_Writer__{name}')\n"
                       "setattr(writer, '_Writer__data_section_crc', 0)\n"
-                      "stream = writer._Writer__stream\n"
-                      "from mcap.writer import _private_helper\n"
+                      'stream = writer._Writer__stream\n'
+                      'from mcap.writer import _private_helper\n'
                       "crc = getattr(self, '_own_crc')\n")
     lines = {int(use.split(':')[1].split()[0]) for use in foreign_private_uses(sample)}
     assert lines == {1, 2, 3, 4}
@@ -91,8 +90,8 @@ def test_long_spilled_recording_is_read_by_index_and_by_rosbags(tmp_path):
                                             for _ in topics], times)
     store = recorder._file.writer.chunk_indexes
     assert len(store) >= 3000
-    assert 0 < store.memory_bytes < mcap_writer.INDEX_SPILL_BYTES   # the rest was spilled
-    assert len(store) * 120 > mcap_writer.INDEX_SPILL_BYTES   # 5-channel records: 127 B
+    assert 0 < store.memory_bytes < chunk_index.INDEX_SPILL_BYTES   # the rest was spilled
+    assert len(store) * 120 > chunk_index.INDEX_SPILL_BYTES   # 5-channel records: 127 B
     written = len(store)
     recorder.close()
     assert sorted(p.name for p in tmp_path.iterdir()) == ['long.mcap']
@@ -149,7 +148,7 @@ def write_schedule(writer, schedule):
 
 def test_file_equals_mcap_public_writers_byte_for_byte(tmp_path, monkeypatch):
     """Single and bulk messages, spilled chunk indexes, both compressions: mcap's own file."""
-    monkeypatch.setattr(mcap_writer, 'INDEX_SPILL_BYTES', 4096)
+    monkeypatch.setattr(chunk_index, 'INDEX_SPILL_BYTES', 4096)
     rng = np.random.default_rng(3)
     schedule = []
     for n in range(30):

@@ -13,15 +13,13 @@ import sys
 import tracemalloc
 import zlib
 
-import pytest
-import zstandard
-
 from flexlink_ros.cli import replay as cli_replay
-from flexlink_ros.io import mcap_reader as mcap_salvage
 from flexlink_ros.cli.mcap import mcap_info, recover_mcap
 from flexlink_ros.errors import FlexlinkError
-
-from test_mcap_salvage import chunks_of, read_messages, write_crank_recording
+from flexlink_ros.io import mcap_records
+import pytest
+from test_mcap_reader import chunks_of, read_messages, write_crank_recording
+import zstandard
 
 MESSAGES = 1000
 PEAK_BOUND = 16 * 2**20  # bytes traced per file: far below any declared size fuzzed
@@ -38,10 +36,12 @@ def record_boundaries(data):
 
 def inner_record_edit(data, chunk_offset, opcode, field, value):
     """
-    Copy of a file whose first chunk is re-encoded (valid CRC) with one field of its first
-    ``opcode`` record set to ``value``: the bounds inside a chunk, behind a valid CRC.
+    Copy a file, its first chunk re-encoded (valid CRC) with one field edited.
+
+    One field of the chunk's first ``opcode`` record is set to ``value``: the bounds inside a
+    chunk, behind a valid CRC.
     """
-    payload = mcap_salvage.decode_chunk(data, chunk_offset + 9,
+    payload = mcap_records.decode_chunk(data, chunk_offset + 9,
                                         chunk_offset + 9 + struct.unpack_from(
                                             '<Q', data, chunk_offset + 1)[0])
     payload = bytearray(payload)

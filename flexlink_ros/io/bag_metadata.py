@@ -1,0 +1,111 @@
+"""
+The ``metadata.yaml`` of a rosbag2 bag directory (version 9), as ``ros2 bag record`` writes it.
+
+``ros2 bag play DIR``, ``ros2 bag info DIR`` and ``rosbags`` read a bag directory through it:
+the files in order, their time spans and message counts, and every topic with its type, QoS
+offered by its publishers and type-description hash.
+"""
+
+import os
+import pathlib
+
+import yaml
+
+from .msg_schema import type_hash
+from .recorder_files import create_exclusive
+
+ROSBAG2_METADATA_VERSION = 9  # rosbag2 metadata.yaml version written (QoS policies as names)
+ROS_DISTRO = 'kilted'
+DEFAULT_QOS = {
+    'history': 'keep_last', 'depth': 10, 'reliability': 'reliable', 'durability': 'volatile',
+    'deadline': {'sec': 9223372036, 'nsec': 854775807},
+    'lifespan': {'sec': 9223372036, 'nsec': 854775807},
+    'liveliness': 'automatic',
+    'liveliness_lease_duration': {'sec': 9223372036, 'nsec': 854775807},
+    'avoid_ros_namespace_conventions': False,
+}
+
+
+class _PlainDumper(yaml.SafeDumper):
+    """YAML without anchors/aliases (shared QoS dicts are written out each time)."""
+
+    def ignore_aliases(self, data):
+        """Write every object out, never as an alias of an earlier one."""
+        return True
+
+
+def _since_epoch(nanoseconds):
+    return {'nanoseconds_since_epoch': int(nanoseconds)}
+
+
+def bag_metadata(files, topics):
+    """
+    Return the rosbag2 (version 9) bag information of MCAP files and their topics.
+
+    Parameters
+    ----------
+    files : list of dict
+        Per file: ``path``, ``message_count``, ``first_log_ns``, ``last_log_ns``.
+    topics : dict
+        Topic name -> object with ``name``, ``type_name``, ``qos_profiles``, ``message_count``.
+
+    Returns
+    -------
+    dict
+
+    """
+    starts = [f['first_log_ns'] for f in files if f['first_log_ns'] is not None]
+    ends = [f['last_log_ns'] for f in files if f['last_log_ns'] is not None]
+    start = min(starts) if starts else 0
+    duration = max(ends) - start if ends else 0
+    return {
+        'version': ROSBAG2_METADATA_VERSION,
+        'storage_identifier': 'mcap',
+        'relative_file_paths': [pathlib.Path(f['path']).name for f in files],
+        'duration': {'nanoseconds': duration},
+        'starting_time': _since_epoch(start),
+        'message_count': sum(f['message_count'] for f in files),
+        'topics_with_message_count': [
+            {'topic_metadata': {'name': t.name, 'type': t.type_name,
+                                'serialization_format': 'cdr',
+                                'offered_qos_profiles': list(t.qos_profiles),
+                                'type_description_hash': type_hash(t.type_name)},
+             'message_count': t.message_count}
+            for t in topics.values()],
+        'compression_format': '',
+        'compression_mode': '',
+        'files': [
+            {'path': pathlib.Path(f['path']).name,
+             'starting_time': _since_epoch(f['first_log_ns'] or 0),
+             'duration': {'nanoseconds': (f['last_log_ns'] or 0) - (f['first_log_ns'] or 0)},
+             'message_count': f['message_count']}
+            for f in files],
+        'custom_data': {},
+        'ros_distro': ROS_DISTRO,
+    }
+
+
+def write_bag_metadata(bag_dir, files, topics):
+    """
+    Write a rosbag2 (version 9) ``metadata.yaml`` for MCAP files in a bag directory.
+
+    Parameters
+    ----------
+    bag_dir : pathlib.Path
+        The bag directory.
+    files : list of dict
+        Per file: ``path``, ``message_count``, ``first_log_ns``, ``last_log_ns``.
+    topics : dict
+        Topic name -> object with ``name``, ``type_name``, ``qos_profiles``, ``message_count``.
+
+    """
+    metadata = bag_metadata(files, topics)
+    bag_dir = pathlib.Path(bag_dir)
+    temporary = bag_dir / 'metadata.yaml.tmp'
+    text = yaml.dump({'rosbag2_bagfile_information': metadata}, Dumper=_PlainDumper,
+                     sort_keys=False)
+    if os.path.lexists(temporary):   # left by an earlier close that failed half-way
+        os.unlink(temporary)
+    with create_exclusive(temporary) as stream:
+        stream.write(text.encode('utf-8'))
+    temporary.replace(bag_dir / 'metadata.yaml')   # replaces a link itself, never its target

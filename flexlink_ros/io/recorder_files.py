@@ -1,0 +1,230 @@
+"""
+The files of a recording: created exclusively, started as rosbag2 starts them, split, finished.
+
+Layout. A recording ``path`` ending in ``.mcap`` is one bare file. Any other ``path`` is a
+rosbag2 bag directory holding ``<name>_0.mcap``, ``<name>_1.mcap``, ... (split by size and/or
+duration) and a ``metadata.yaml`` (:mod:`flexlink_ros.io.bag_metadata`).
+
+Never overwrite. ``path`` must not exist in any form: an existing file, bare ``.mcap``,
+directory or symbolic link (even a dangling one) is refused, saying which. Files are created
+exclusively (``O_CREAT | O_EXCL | O_NOFOLLOW``), so a path that appears between the check and
+the creation is refused too, never clobbered or followed.
+"""
+
+import dataclasses
+import os
+import pathlib
+import stat
+
+from mcap.writer import LIBRARY_IDENTIFIER
+
+from .mcap_writer import McapFileWriter
+from .msg_schema import message_definition, offered_qos_yaml, type_hash
+
+LIBRARY = f'flexlink_ros recorder; {LIBRARY_IDENTIFIER}'
+# O_NOFOLLOW is POSIX; where it is missing O_EXCL alone still refuses a symlink.
+_EXCLUSIVE_FLAGS = (os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, 'O_NOFOLLOW', 0)
+                    | getattr(os, 'O_CLOEXEC', 0))
+
+
+def refuse_existing(path):
+    """
+    Raise FileExistsError naming what ``path`` is, if anything is there (links not followed).
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        Where a file or directory is to be created.
+
+    """
+    try:
+        info = os.lstat(path)
+    except FileNotFoundError:
+        return
+    if stat.S_ISLNK(info.st_mode):
+        target = os.readlink(path)
+        dangling = '' if os.path.exists(path) else ', dangling'
+        kind = f'a symbolic link to {target}{dangling}'
+    elif stat.S_ISDIR(info.st_mode):
+        kind = 'a directory'
+    elif stat.S_ISREG(info.st_mode):
+        kind = f'a file of {info.st_size} bytes'
+    else:
+        kind = 'a special file'
+    raise FileExistsError(f'{path} exists ({kind}); the recorder never overwrites or follows '
+                          'links: choose a new path')
+
+
+def create_exclusive(path):
+    """
+    Open a new file for writing; fail if anything (even a dangling link) is at ``path``.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        The file to create.
+
+    Returns
+    -------
+    binary file object
+
+    """
+    try:
+        descriptor = os.open(path, _EXCLUSIVE_FLAGS, 0o644)
+    except FileExistsError:
+        refuse_existing(path)   # says what is there
+        raise
+    return os.fdopen(descriptor, 'wb')
+
+
+@dataclasses.dataclass
+class OpenFile:
+    """The file being written: its stream, writer, ids and the log times of its messages."""
+
+    path: pathlib.Path
+    stream: object
+    writer: McapFileWriter
+    channel_ids: dict
+    schema_ids: dict = dataclasses.field(default_factory=dict)
+    first_log_ns: int = None
+    last_log_ns: int = None
+    message_count: int = 0
+
+    def note(self, first_log_ns, last_log_ns, count):
+        """Count ``count`` messages written with log times from first to last [ns]."""
+        if self.first_log_ns is None:
+            self.first_log_ns, self.last_log_ns = first_log_ns, last_log_ns
+        else:
+            self.first_log_ns = min(self.first_log_ns, first_log_ns)
+            self.last_log_ns = max(self.last_log_ns, last_log_ns)
+        self.message_count += count
+
+    def entry(self, complete):
+        """Describe the file for the bag metadata and status (``complete``: finished)."""
+        return {'path': self.path, 'message_count': self.message_count,
+                'first_log_ns': self.first_log_ns, 'last_log_ns': self.last_log_ns,
+                'complete': complete}
+
+
+def file_path(path, bare, index):
+    """
+    Return the path of a recording's file number ``index``.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        The recording's path.
+    bare : bool
+        ``path`` is the one bare ``.mcap`` file.
+    index : int
+        Files before this one.
+
+    Returns
+    -------
+    pathlib.Path
+
+    """
+    if bare:
+        return path
+    return path / f'{path.name}_{index}.mcap'
+
+
+def start_file(current, chunk_size, compression, topics):
+    """
+    Write a new file's header, schemas and channels and flush them; set its writer last.
+
+    Parameters
+    ----------
+    current : OpenFile
+        The file, its stream open and no writer yet (left so if this fails).
+    chunk_size : int
+        Uncompressed chunk size [bytes].
+    compression : {'zstd', 'none'}
+        Chunk compression.
+    topics : iterable of topic records
+        Each with ``name``, ``type_name``, ``qos_profiles``.
+
+    """
+    writer = McapFileWriter(current.stream, chunk_size=chunk_size, compression=compression,
+                            spill_directory=current.path.parent)
+    writer.start(profile='ros2', library=LIBRARY)
+    for topic in topics:
+        register_topic(writer, current, topic)
+    writer.flush()
+    current.writer = writer
+
+
+def register_topic(writer, current, topic):
+    """
+    Add a topic's schema (once per type) and channel to a file, as rosbag2 writes them.
+
+    Parameters
+    ----------
+    writer : McapFileWriter
+        The file's writer.
+    current : OpenFile
+        The file (its schema and channel ids are noted).
+    topic : topic record
+        With ``name``, ``type_name``, ``qos_profiles``.
+
+    """
+    schema_id = current.schema_ids.get(topic.type_name)
+    if schema_id is None:
+        schema_id = writer.register_schema(
+            name=topic.type_name, encoding='ros2msg',
+            data=message_definition(topic.type_name).encode('utf-8'))
+        current.schema_ids[topic.type_name] = schema_id
+    current.channel_ids[topic.name] = writer.register_channel(
+        topic=topic.name, message_encoding='cdr', schema_id=schema_id,
+        metadata={'offered_qos_profiles': offered_qos_yaml(topic.qos_profiles),
+                  'topic_type_hash': type_hash(topic.type_name)})
+
+
+def split_due(current, split_size_bytes, split_duration_ns, log_time_ns):
+    """
+    Tell whether a message logged at ``log_time_ns`` goes to a new file.
+
+    Parameters
+    ----------
+    current : OpenFile
+        The file being written.
+    split_size_bytes : int
+        Size that ends a file (0: never).
+    split_duration_ns : int
+        Span of log time that ends a file (0: never).
+    log_time_ns : int
+        The next message's log time.
+
+    Returns
+    -------
+    bool
+
+    """
+    if current.message_count == 0:
+        return False
+    too_big = split_size_bytes and current.stream.tell() >= split_size_bytes
+    too_long = (split_duration_ns
+                and log_time_ns - current.first_log_ns >= split_duration_ns)
+    return bool(too_big or too_long)
+
+
+def abandon(current):
+    """
+    Close a file that failed, as far as the OS lets (its buffered tail may be lost).
+
+    Parameters
+    ----------
+    current : OpenFile
+        The file; its writer's temporary index file is dropped too.
+
+    """
+    try:
+        current.stream.close()
+    except (OSError, ValueError):
+        # The buffered tail cannot be written; drop the descriptor regardless.
+        try:
+            os.close(current.stream.fileno())
+        except (OSError, ValueError):
+            pass
+    if current.writer is not None:
+        current.writer.close()
