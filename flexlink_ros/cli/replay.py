@@ -812,7 +812,7 @@ def write_replay(out_path, samples, estimate, input_topic, topics, frame_id, mod
         The recorder's final status.
 
     """
-    from ..io.cdr import criteria_rows, rows_to_bytes, vector3_stamped_rows
+    from ..io.markers import criteria_rows, rows_to_bytes, vector3_stamped_rows
     recorder = McapRecorder(out_path)
     recorder.open()
     try:
@@ -882,7 +882,7 @@ class _MarkerSource:
     """MarkerArray bytes of the deformed linkage at replayed samples."""
 
     def __init__(self, model, frame_id, exaggeration, points_per_link):
-        from ..io.cdr import MarkerEncoder
+        from ..io.markers import MarkerEncoder
         from ..ros.messages import OK
         self.model, self.exaggeration = model, exaggeration
         self.encoder = MarkerEncoder(frame_id, points_per_link)

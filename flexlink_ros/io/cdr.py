@@ -336,8 +336,3 @@ def serialize_message(message):
     writer = CdrWriter()
     walk_message(writer, message)
     return bytes(writer.out)
-
-
-# Moved to .markers; re-exported for the importers of the old names until they import them there.
-from .markers import (  # noqa: E402, F401, I100  SHIM
-    criteria_rows, MarkerEncoder, rows_to_bytes, vector3_stamped_rows)  # SHIM

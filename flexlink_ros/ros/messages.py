@@ -18,22 +18,18 @@ import math
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import Point, Vector3Stamped
-import numpy as np
+from geometry_msgs.msg import Vector3Stamped
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from sensor_msgs.msg import JointState
-from std_msgs.msg import ColorRGBA, Header
-from visualization_msgs.msg import Marker, MarkerArray
+from std_msgs.msg import Header
 
 from ..errors import InputRejected
+from ..io.markers import linkage_markers  # noqa: F401  SHIM
 from ..names import JOINT_NAMES
 
 OK, WARN, ERROR, STALE = (DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR,
                           DiagnosticStatus.STALE)
 LEVEL_NAMES = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR', STALE: 'STALE'}
-LEVEL_COLOURS = {OK: (0.2, 0.7, 0.3), WARN: (1.0, 0.7, 0.0), ERROR: (0.9, 0.1, 0.1),
-                 STALE: (0.5, 0.5, 0.5)}
-LINK_COLOURS = ((0.25, 0.45, 0.85), (0.85, 0.4, 0.1), (0.2, 0.6, 0.4))
 
 
 def stamp_to_ns(stamp):
@@ -123,64 +119,6 @@ def criteria_message(stamp, frame_id, ratio, gamma_dot, force):
     msg.velocity = [float(v) for v in gamma_dot]
     msg.effort = [float(v) for v in force]
     return msg
-
-
-def _colour(rgb, alpha=1.0):
-    return ColorRGBA(r=float(rgb[0]), g=float(rgb[1]), b=float(rgb[2]), a=float(alpha))
-
-
-def linkage_markers(stamp, frame_id, link_points, link_deflections, exaggeration,
-                    joint_positions, joint_levels, namespace='flexlink'):
-    """
-    Draw the rigid and the deformed linkage as markers for RViz and Foxglove.
-
-    Parameters
-    ----------
-    stamp : builtin_interfaces.msg.Time
-        Stamp of the input.
-    frame_id : str
-        Ground frame.
-    link_points : sequence of ndarray, shape (n_k, 2)
-        Rigid-body positions [m] of points along each link (crank, coupler, lever).
-    link_deflections : sequence of ndarray, shape (n_k, 2)
-        Elastic deflections [m] at those points, ground frame.
-    exaggeration : float
-        Factor applied to the deflections in the drawing.
-    joint_positions : ndarray, shape (4, 2)
-        O2, A, B, O4 [m].
-    joint_levels : sequence of int, length 4
-        Diagnostic level per joint (colours the joint spheres).
-    namespace : str
-        Prefix of the markers' namespaces.
-
-    Returns
-    -------
-    visualization_msgs.msg.MarkerArray
-
-    """
-    header = Header(stamp=stamp, frame_id=frame_id)
-    markers = []
-    for k, (points, deflection) in enumerate(zip(link_points, link_deflections)):
-        for kind, offset, rgb, alpha, width in (
-                ('rigid', 0.0, (0.6, 0.6, 0.6), 0.5, 0.002),
-                ('deformed', exaggeration, LINK_COLOURS[k], 1.0, 0.004)):
-            marker = Marker(header=header, ns=f'{namespace}/{kind}', id=k,
-                            type=Marker.LINE_STRIP, action=Marker.ADD)
-            marker.pose.orientation.w = 1.0
-            marker.scale.x = width
-            marker.color = _colour(rgb, alpha)
-            shown = np.asarray(points) + offset * np.asarray(deflection)
-            marker.points = [Point(x=float(x), y=float(y), z=0.0) for x, y in shown]
-            markers.append(marker)
-    for j, (position, level) in enumerate(zip(joint_positions, joint_levels)):
-        marker = Marker(header=header, ns=f'{namespace}/joints', id=j, type=Marker.SPHERE,
-                        action=Marker.ADD)
-        marker.pose.position = Point(x=float(position[0]), y=float(position[1]), z=0.0)
-        marker.pose.orientation.w = 1.0
-        marker.scale.x = marker.scale.y = marker.scale.z = 0.012
-        marker.color = _colour(LEVEL_COLOURS[level])
-        markers.append(marker)
-    return MarkerArray(markers=markers)
 
 
 def joint_level(ratio, flagged, warn, error):

@@ -30,6 +30,7 @@ from .startup import check_startup_signal
 from ..core.estimation.streaming import SampleFlag, StreamingEstimator
 from ..errors import FlexlinkError, InputRejected, OutlierSample, RecorderError
 from ..io import cdr
+from ..io.markers import MarkerEncoder
 from ..io.recorder import McapRecorder
 from ..names import NODE_NAME, TOPICS
 
@@ -325,7 +326,7 @@ class EstimatorPipeline:
         count = values['markers.points_per_link']
         encoder = self._marker_encoder
         if encoder is None or (encoder.frame_id, encoder.count) != (values['frame_id'], count):
-            encoder = self._marker_encoder = cdr.MarkerEncoder(values['frame_id'], count)
+            encoder = self._marker_encoder = MarkerEncoder(values['frame_id'], count)
         positions, deflections = self.estimator.link_shapes(sample)
         source = np.linspace(0.0, 1.0, positions.shape[1])
         target = np.linspace(0.0, 1.0, count)
