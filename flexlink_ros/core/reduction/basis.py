@@ -59,12 +59,12 @@ class FrozenSamples:
 
     @property
     def grid_size(self):
-        """Number of grid angles N."""
+        """Return the number of grid angles N."""
         return self.mass.shape[0]
 
     @property
     def dofs(self):
-        """Full-order size n."""
+        """Return the full-order size n."""
         return self.mass.shape[1]
 
     def stiffness_at(self, k, w, a=0.0):
@@ -212,4 +212,3 @@ def fit_in_w2(values_by_speed, speeds):
     flat = values_by_speed.reshape(len(speeds), -1)
     coef, *_ = np.linalg.lstsq(design, flat, rcond=None)
     return coef.reshape((3,) + values_by_speed.shape[1:])
-

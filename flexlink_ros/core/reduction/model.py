@@ -16,8 +16,8 @@ from .periodic import PERIODIC_CHUNK, periodic_response  # noqa: F401  SHIM
 from .pipeline import (build_model, fe_mechanism, frozen_samples_for,  # noqa: F401
                        modal_damping_matrix, model_for_mechanism, model_key,
                        reaction_pieces, SHAPE_POINTS_PER_ELEMENT)  # SHIM
-from .reference import (reference_response, REFERENCE_GRID,  # noqa: F401
-                        REFERENCE_POINT_STRIDE, REFERENCE_STEPS,
+from .reference import (REFERENCE_GRID, REFERENCE_POINT_STRIDE,  # noqa: F401
+                        reference_response, REFERENCE_STEPS,
                         unreduced_revolution)  # SHIM
 from .tables import (cell_groups, output_values, ReducedModel, system_blocks,  # noqa: F401
                      TableLayout)  # SHIM

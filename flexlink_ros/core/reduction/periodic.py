@@ -25,6 +25,7 @@ def periodic_response(model, speed, start_angle=0.0, steps=720, stages=2, blocks
     Parameters
     ----------
     model : ReducedModel
+        The model to integrate.
     speed : float
         Crank speed [rad/s] (either sign).
     start_angle : float

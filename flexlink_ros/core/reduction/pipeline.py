@@ -32,12 +32,14 @@ def model_key(mechanism, options):
 
 def model_for_mechanism(mechanism, options=None, cache_dir=None, use_cache=True):
     """
-    The reduced model of a mechanism: from a verified cache file, or built (and cached).
+    Return the reduced model of a mechanism: from a verified cache file, or built (and cached).
 
     Parameters
     ----------
     mechanism : Mechanism
+        The linkage.
     options : ModelOptions or None
+        Model options (None: the defaults).
     cache_dir : str, Path or None
         Cache directory (None: core.store.default_cache_dir()).
     use_cache : bool
@@ -74,7 +76,7 @@ def build_model(mechanism, options):
 
 
 def fe_mechanism(mechanism, options):
-    """The mechanism with the element count of ``options`` (if set)."""
+    """Return the mechanism with the element count of ``options`` (if set)."""
     if options.elements_per_link is None:
         return mechanism
     return dataclasses.replace(mechanism, elements_per_link=int(options.elements_per_link))

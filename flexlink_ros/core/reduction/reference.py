@@ -12,9 +12,9 @@ import numpy as np
 
 from .build import reduce_samples
 from .cells import CELL_POWERS, periodic_cell_coefficients
-from .tables import output_values
 from .periodic import periodic_response
 from .pipeline import fe_mechanism, frozen_samples_for
+from .tables import output_values
 from ..fe import linkage as assembly
 from ..fe import simulate
 
@@ -39,6 +39,7 @@ def reference_response(mechanism, options, speed, angles, steps=REFERENCE_STEPS)
     Parameters
     ----------
     mechanism : Mechanism
+        The linkage.
     options : ModelOptions
         Only the physical options (elements, rigid crank, bearings, geometric stiffness).
     speed : float
@@ -70,7 +71,7 @@ def reference_response(mechanism, options, speed, angles, steps=REFERENCE_STEPS)
 
 
 def _reference_revolution(mechanism, options, speed, steps):
-    """Outputs (points, 4) over one revolution from crank angle 0, and their source."""
+    """Return the outputs (points, 4) over one revolution from crank angle 0, and their source."""
     linkage = assembly.FlexibleLinkage(fe_mechanism(mechanism, options), options)
     result = simulate.periodic_response(linkage, speed, method='full', steps=steps,
                                         points=steps // REFERENCE_POINT_STRIDE)
@@ -79,7 +80,7 @@ def _reference_revolution(mechanism, options, speed, steps):
 
 def unreduced_revolution(mechanism, options, speed, steps=REFERENCE_STEPS):
     """
-    Outputs (points, 4) over one revolution from the unreduced tables, and their source.
+    Return the outputs (points, 4) over one revolution of the unreduced tables, and their source.
 
     The tables of :func:`reduce_samples` with every DOF kept, integrated as the reduced model
     is: a check of the tables and the integrator against core.simulate's full order.

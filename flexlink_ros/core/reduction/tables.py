@@ -124,22 +124,22 @@ class ReducedModel:
 
     @property
     def grid_size(self):
-        """Number of grid cells N."""
+        """Return the number of grid cells N."""
         return self.table.shape[0]
 
     @property
     def size(self):
-        """Reduced size r."""
+        """Return the reduced size r."""
         return self.basis.shape[1]
 
     @property
     def layout(self):
-        """TableLayout of ``table``."""
+        """Return the column layout of ``table``."""
         return TableLayout(self.size)
 
     @property
     def nbytes(self):
-        """Memory of the arrays [bytes]."""
+        """Return the memory of the arrays [bytes]."""
         return (self.table.nbytes + self.shape_table.nbytes + self.basis.nbytes
                 + self.force_moments.nbytes)
 
@@ -241,12 +241,16 @@ def output_values(model, rows, q):
     Parameters
     ----------
     model : ReducedModel
+        The model the rows were evaluated from.
     rows : ndarray, shape (m, L)
+        Rows of ``model.evaluate``.
     q : ndarray, shape (m, r)
+        Reduced coordinates at the same samples.
 
     Returns
     -------
     ndarray, shape (m, len(OUTPUT_NAMES))
+        Ground-frame deflections of the output points [m].
 
     """
     layout = model.layout
