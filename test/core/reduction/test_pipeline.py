@@ -7,7 +7,7 @@ import scipy.linalg
 
 from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.fe.modes import solve_frozen_modes
-from flexlink_ros.core.mechanism import load_mechanism
+from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction.basis import frozen_modes
 from flexlink_ros.core.reduction.build import reduce_samples
