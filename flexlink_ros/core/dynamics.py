@@ -42,7 +42,8 @@ import dataclasses
 import numpy as np
 
 from .kinematics import solve_kinematics
-from .mechanism import JOINT_MEMBERS, JOINT_NAMES
+from .mechanism import JOINT_MEMBERS
+from ..names import JOINT_NAMES
 
 # Unknowns: (Fx, Fy) of O2, A, B, O4, then the input torque.
 UNKNOWNS = 9

@@ -15,7 +15,7 @@ import dataclasses
 import numpy as np
 
 from ..errors import LoopClosureError
-from .mechanism import JOINT_NAMES
+from ..names import JOINT_NAMES
 
 # sin(transmission angle) below this is treated as a locked (singular) linkage.
 SINGULAR_SIN = 1e-9

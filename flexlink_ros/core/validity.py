@@ -69,6 +69,7 @@ import math
 import numpy as np
 
 from .fe.linkage import gauss_points
+from .fe.modes import frozen_mode_sweep
 from .dynamics import axial_force
 from .kinematics import solve_kinematics
 
@@ -214,7 +215,6 @@ def mode_reference(linkage, speed, modes=REFERENCE_MODES, angles=12):
         lever, 'speed' [rad/s].
 
     """
-    from .fe.modes import frozen_mode_sweep
     grid = np.linspace(0.0, 2.0 * np.pi, angles, endpoint=False)
     frozen = frozen_mode_sweep(linkage, grid, count=modes, speed=speed)
     return {'omega': frozen.omega.mean(axis=0),
