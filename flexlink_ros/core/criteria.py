@@ -156,11 +156,12 @@ def criterion_ratio(force, force_rate, floor=0.0):
 
 def reaction_evaluator(mechanism, crank_speed, crank_accel=0.0):
     """
-    A function theta -> (force, force_rate), complex arrays (4, n), at a steady crank motion.
+    Make a function theta -> (force, force_rate), complex arrays (4, n), at a steady motion.
 
     Parameters
     ----------
     mechanism : Mechanism
+        The linkage (with its optional spring).
     crank_speed, crank_accel : float
         Crank speed [rad/s] and acceleration [rad/s^2] (constant; the paper's case is a = 0).
 
@@ -181,7 +182,7 @@ def crank_grid(step_deg):
 
 
 def _local_extrema(values, sign, fraction, limit):
-    """Indices of periodic local maxima of sign*values worth refining, largest first."""
+    """Return the indices of periodic local maxima of sign*values worth refining, largest first."""
     v = sign * values
     peaks = np.flatnonzero((v >= np.roll(v, 1)) & (v >= np.roll(v, -1)))
     if peaks.size == 0:
@@ -204,7 +205,7 @@ def _refine(function, theta, index, step, sign):
 
 def revolution_extremes(evaluate, joints=JOINT_NAMES, grid=None, scan_points=SCAN_POINTS):
     """
-    True maxima of |gamma_dot / R| and minima of R over a revolution, per joint.
+    Find the true maxima of |gamma_dot / R| and minima of R over a revolution, per joint.
 
     Parameters
     ----------
@@ -357,6 +358,7 @@ def criterion_curves(mechanism, crank_angle, crank_speed=None):
     Parameters
     ----------
     mechanism : Mechanism
+        The linkage (with its optional spring).
     crank_angle : ndarray, shape (n,)
         [rad].
     crank_speed : float or None

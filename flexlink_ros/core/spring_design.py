@@ -32,7 +32,7 @@ import math
 import numpy as np
 import scipy.optimize
 
-from .criteria import NEAR_ZERO_ABS, NEAR_ZERO_FRACTION, criterion_ratio, revolution_extremes
+from .criteria import criterion_ratio, NEAR_ZERO_ABS, NEAR_ZERO_FRACTION, revolution_extremes
 from .dynamics import solve_dynamics, spring_angle
 from .kinematics import solve_kinematics
 from .mechanism import Spring
@@ -191,7 +191,7 @@ class SpringProblem:
 
     def evaluate(self, stiffness, theta0, scan_points=3600, bounds=None):
         """
-        A design with refined true maxima of the criterion, forces and torque.
+        Evaluate a design with refined true maxima of the criterion, forces and torque.
 
         Parameters
         ----------
@@ -265,8 +265,11 @@ def _active_bounds(constraints, stiffness, theta0, bounds):
 
 
 def _parabolic_max(values):
-    """Maximum of periodic samples refined by the parabola through the top sample and its
-    neighbours (exact for a quadratic peak)."""
+    """
+    Maximum of periodic samples refined by a parabola (exact for a quadratic peak).
+
+    The parabola goes through the top sample and its neighbours.
+    """
     k = int(np.argmax(values))
     left, mid, right = values[k - 1], values[k], values[(k + 1) % values.size]
     curvature = left - 2.0 * mid + right
