@@ -2,12 +2,11 @@
 
 import dataclasses
 
-import pytest
-
 from flexlink_ros.core.mechanism import (check_crank_rocker, MAX_ELEMENTS_PER_LINK,
                                          Mechanism)
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.errors import MechanismError
+import pytest
 
 
 def test_key_changes_with_any_field():

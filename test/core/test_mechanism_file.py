@@ -1,6 +1,5 @@
 """Mechanism files: the papers' data load, bad input is rejected naming the field."""
 
-import dataclasses
 import math
 import os
 import pathlib
@@ -9,15 +8,14 @@ import subprocess
 import sys
 import tracemalloc
 
-import pytest
-import yaml
-
 from flexlink_ros.core.mechanism import MAX_ELEMENTS_PER_LINK
 from flexlink_ros.core.mechanism_file import (ament_share_directory, find_config,
                                               load_mechanism, MAX_FILE_BYTES, MAX_NAME_CHARS,
                                               MAX_SOURCE_CHARS, MAX_YAML_DEPTH,
                                               mechanism_from_dict)
 from flexlink_ros.errors import MechanismError
+import pytest
+import yaml
 
 
 def _cho(config_dir):
@@ -178,7 +176,7 @@ def test_modes_cli_refuses_a_million_elements_in_one_line(config_dir, tmp_path):
 # -- finding a bare name: ament prefixes, this Python's prefix, the source tree --------------
 
 def _ament_prefix(root, name, with_marker=True, with_file=True):
-    """An install prefix as colcon makes it: the package marker and share/<pkg>/config."""
+    """Make an install prefix as colcon does: the package marker and share/<pkg>/config."""
     prefix = root / name
     if with_marker:
         marker = prefix / 'share' / 'ament_index' / 'resource_index' / 'packages'

@@ -1,8 +1,7 @@
 """Constant POD basis of the frozen system."""
 
-import numpy as np
-
 from flexlink_ros.core.reduction.basis import build_basis, frozen_modes
+import numpy as np
 from toy_system import toy_samples
 
 

@@ -1,10 +1,9 @@
 """Reduced model built from full-order samples: tables, residual flexibility."""
 
-import numpy as np
-
 from flexlink_ros.core.reduction.build import reduce_samples
 from flexlink_ros.core.reduction.periodic import periodic_response
 from flexlink_ros.core.reduction.tables import output_values, system_blocks
+import numpy as np
 from toy_system import full_periodic_outputs, toy_samples, ZETA
 
 
@@ -52,8 +51,7 @@ def test_truncated_model_approaches_the_full_response():
     _, exact = full_periodic_outputs(samples, speed, steps=360)
     errors = []
     for modes in (2, 4, 6):
-        model = reduce_samples(samples, modes=modes, static=1, speed_max=40.0,
-                                       zeta=ZETA)
+        model = reduce_samples(samples, modes=modes, static=1, speed_max=40.0, zeta=ZETA)
         angles, q, _ = periodic_response(model, speed, steps=360)
         out = output_values(model, model.evaluate(angles, speed, 0.0), q)
         errors.append(np.sqrt(np.mean((out - exact) ** 2) / np.mean(exact ** 2)))

@@ -1,11 +1,10 @@
 """Monomials and periodic cubic splines over the grid cells."""
 
+from flexlink_ros.core.reduction.cells import monomial_values, MONOMIALS
+from flexlink_ros.core.reduction.cells import periodic_cell_coefficients
 import numpy as np
 import pytest
 import scipy.interpolate
-
-from flexlink_ros.core.reduction.cells import monomial_values, MONOMIALS
-from flexlink_ros.core.reduction.cells import periodic_cell_coefficients
 
 
 def test_periodic_cubic_spline_is_accurate_and_smooth():

@@ -2,9 +2,6 @@
 
 import pathlib
 
-import numpy as np
-import scipy.linalg
-
 from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.fe.modes import solve_frozen_modes
 from flexlink_ros.core.mechanism_file import load_mechanism
@@ -15,6 +12,8 @@ from flexlink_ros.core.reduction.pipeline import (fe_mechanism, frozen_samples_f
                                                   model_for_mechanism, model_key)
 from flexlink_ros.core.reduction.tables import system_blocks
 from flexlink_ros.studies import flex_study as fs
+import numpy as np
+import scipy.linalg
 
 CONFIG = pathlib.Path(__file__).resolve().parents[3] / 'config'
 
@@ -28,12 +27,10 @@ def test_fe_pieces_of_cho1992():
     np.testing.assert_allclose(omega / (2 * np.pi), [34.5, 41.1], rtol=0.02)
     # The modal damping gives zeta on every frozen mode.
     damping = samples.damping(3, 30.0)
-    omega, shapes = frozen_modes(samples.frozen_at(3, 30.0), samples.mass[3],
-                                         samples.dofs)
+    omega, shapes = frozen_modes(samples.frozen_at(3, 30.0), samples.mass[3], samples.dofs)
     np.testing.assert_allclose(np.diag(shapes.T @ damping @ shapes),
                                2 * mechanism.damping_ratio * omega, rtol=1e-8)
-    model = reduce_samples(samples, 4, 2, speed_max=60.0,
-                                   zeta=mechanism.damping_ratio)
+    model = reduce_samples(samples, 4, 2, speed_max=60.0, zeta=mechanism.damping_ratio)
     rows = model.evaluate(2 * np.pi * 5 / 16, 40.0, 3.0)
     stiffness = system_blocks(model, rows)[2][0]
     expected = model.basis.T @ samples.stiffness_at(5, 40.0, 3.0) @ model.basis
@@ -41,8 +38,8 @@ def test_fe_pieces_of_cho1992():
 
 
 def test_constant_basis_resolves_the_veering_where_per_angle_mode_interpolation_fails():
-    """Cho 1992 at 391 rpm (rigid bearings): where the coupler and lever modes swap order,
-    sorted frozen modes interpolated over a grid cell miss; the constant basis V does not."""
+    # Cho 1992 at 391 rpm (rigid bearings): where the coupler and lever modes swap order,
+    # sorted frozen modes interpolated over a grid cell miss; the constant basis V does not.
     mechanism = load_mechanism(CONFIG / 'cho1992.yaml')
     speed = 391 * np.pi / 30
     # Node defaults but rigid bearings: with the default flexible bearings the two modes only
@@ -87,14 +84,12 @@ def test_constant_basis_resolves_the_veering_where_per_angle_mode_interpolation_
         # frequencies. Its K holds the rotating-frame terms, so the like-for-like full problem
         # is the frozen one with the centrifugal part (the paper's omits it: 0.35 % apart).
         full = solve_frozen_modes(system, 2, speed, centrifugal=True).frequencies_hz
-        mass_r, _, stiffness_r, _ = system_blocks(model,
-                                                          model.evaluate(angles, speed, 0.0))
+        mass_r, _, stiffness_r, _ = system_blocks(model, model.evaluate(angles, speed, 0.0))
         for j in range(3):
             values = scipy.linalg.eigh(0.5 * (stiffness_r[j] + stiffness_r[j].T), mass_r[j],
                                        eigvals_only=True)[:2]
             error = np.abs(np.sqrt(values) / (2 * np.pi) / full[j] - 1.0)
             assert error.max() < 1e-3, error             # measured <= 2.3e-5
-
 
 
 # model_key(cho1992, options) computed before the reduced model was split into modules: a

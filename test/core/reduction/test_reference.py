@@ -2,12 +2,11 @@
 
 import pathlib
 
-import numpy as np
-import pytest
-
 from flexlink_ros.core.mechanism import load_mechanism
 from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction.reference import reference_response, unreduced_revolution
+import numpy as np
+import pytest
 
 CONFIG = pathlib.Path(__file__).resolve().parents[3] / 'config'
 

@@ -1,9 +1,8 @@
 """The reduced model's tables: arrays round trip, link shapes."""
 
-import numpy as np
-
 from flexlink_ros.core.reduction.build import reduce_samples
 from flexlink_ros.core.reduction.tables import ReducedModel
+import numpy as np
 from toy_system import toy_samples, ZETA
 
 

@@ -1,11 +1,10 @@
 """Synthetic full-order frozen system shared by the reduced-model tests."""
 
-import numpy as np
-
-from flexlink_ros.core.reduction.basis import FrozenSamples, frozen_modes
+from flexlink_ros.core.reduction.basis import frozen_modes, FrozenSamples
 from flexlink_ros.core.reduction.build import reduce_samples
 from flexlink_ros.core.reduction.periodic import periodic_response
 from flexlink_ros.core.reduction.tables import output_values
+import numpy as np
 
 ZETA = 0.02
 
@@ -17,7 +16,7 @@ def _sym(rng, n, scale):
 
 def toy_samples(grid=48, dofs=10, seed=0):
     """
-    A synthetic full-order frozen system with the structure of Cho's model.
+    Make a synthetic full-order frozen system with the structure of Cho's model.
 
     Angle-dependent mass and stiffness, Coriolis (skew) terms, centrifugal softening, loads
     with several crank harmonics, and modal damping zeta on the frozen modes; the lowest
@@ -59,10 +58,9 @@ def toy_samples(grid=48, dofs=10, seed=0):
         modal = mass[k] @ shapes
         return modal @ np.diag(2 * ZETA * omega) @ modal.T
 
-    return FrozenSamples(mass=mass, gyroscopic=gyroscopic, stiffness=stiffness,
-                                 load=load, outputs=outputs, damping=damping,
-                                 shape_operator=shape_operator,
-                                 shape_positions=shape_positions)
+    return FrozenSamples(mass=mass, gyroscopic=gyroscopic, stiffness=stiffness, load=load,
+                         outputs=outputs, damping=damping, shape_operator=shape_operator,
+                         shape_positions=shape_positions)
 
 
 def full_periodic_outputs(samples, speed, steps=720):
