@@ -1,4 +1,6 @@
-"""Synthetic full-order frozen system shared by the reduced-model tests."""
+"""Synthetic full-order frozen system shared by the reduced-model and estimator tests."""
+
+import pathlib
 
 from flexlink_ros.core.reduction.basis import frozen_modes, FrozenSamples
 from flexlink_ros.core.reduction.build import reduce_samples
@@ -7,6 +9,7 @@ from flexlink_ros.core.reduction.tables import output_values
 import numpy as np
 
 ZETA = 0.02
+CONFIG = pathlib.Path(__file__).resolve().parents[1] / 'config'
 
 
 def _sym(rng, n, scale):
