@@ -28,7 +28,7 @@ import scipy.optimize
 
 from .dynamics import solve_dynamics
 from .kinematics import solve_kinematics
-from .mechanism import JOINT_NAMES
+from ..names import JOINT_NAMES
 
 # Uniform scan of the revolution before refinement (0.05 degree): peaks here are >= ~1 deg wide.
 SCAN_POINTS = 7200
@@ -156,11 +156,12 @@ def criterion_ratio(force, force_rate, floor=0.0):
 
 def reaction_evaluator(mechanism, crank_speed, crank_accel=0.0):
     """
-    A function theta -> (force, force_rate), complex arrays (4, n), at a steady crank motion.
+    Make a function theta -> (force, force_rate), complex arrays (4, n), at a steady motion.
 
     Parameters
     ----------
     mechanism : Mechanism
+        The linkage (with its optional spring).
     crank_speed, crank_accel : float
         Crank speed [rad/s] and acceleration [rad/s^2] (constant; the paper's case is a = 0).
 
@@ -181,7 +182,7 @@ def crank_grid(step_deg):
 
 
 def _local_extrema(values, sign, fraction, limit):
-    """Indices of periodic local maxima of sign*values worth refining, largest first."""
+    """Return the indices of periodic local maxima of sign*values worth refining, largest first."""
     v = sign * values
     peaks = np.flatnonzero((v >= np.roll(v, 1)) & (v >= np.roll(v, -1)))
     if peaks.size == 0:
@@ -204,7 +205,7 @@ def _refine(function, theta, index, step, sign):
 
 def revolution_extremes(evaluate, joints=JOINT_NAMES, grid=None, scan_points=SCAN_POINTS):
     """
-    True maxima of |gamma_dot / R| and minima of R over a revolution, per joint.
+    Find the true maxima of |gamma_dot / R| and minima of R over a revolution, per joint.
 
     Parameters
     ----------
@@ -227,50 +228,92 @@ def revolution_extremes(evaluate, joints=JOINT_NAMES, grid=None, scan_points=SCA
         raise ValueError(f'`scan_points` must be >= 36, got {scan_points!r}')
     grid = crank_grid(1.0) if grid is None else np.asarray(grid, dtype=float)
     scan = 2.0 * np.pi * np.arange(scan_points) / scan_points
-    step = scan[1]
     force, force_rate = evaluate(scan)
     grid_force, grid_rate = evaluate(grid)
     out = {}
     for joint in joints:
         j = JOINT_NAMES.index(joint)
-        magnitude = np.abs(force[j])
-        rms = float(np.sqrt(np.mean(magnitude ** 2)))
-        floor = max(NEAR_ZERO_FRACTION * rms, NEAR_ZERO_ABS)
-        ratio = criterion_ratio(force[j], force_rate[j], floor)
-
-        def ratio_at(t, j=j, floor=floor):
-            f, fr = evaluate(np.array([t]))
-            return criterion_ratio(f[j], fr[j], floor)[0]
-
-        def force_at(t, j=j):
-            return np.abs(evaluate(np.array([t]))[0][j])[0]
-
-        best = (float(scan[np.argmax(ratio)]), float(ratio.max()))
-        peaks = _local_extrema(ratio, 1.0, CANDIDATE_FRACTION, MAX_CANDIDATES)
-        for index in peaks if best[1] > 0.0 else ():  # nothing to refine on a zero curve
-            candidate = _refine(ratio_at, scan, index, step, 1.0)
-            if candidate[1] > best[1]:
-                best = candidate
-        lowest = (float(scan[np.argmin(magnitude)]), float(magnitude.min()))
-        dips = _local_extrema(magnitude, -1.0, 1.0, 3)
-        for index in dips if lowest[1] > 0.0 else ():
-            candidate = _refine(force_at, scan, index, step, -1.0)
-            if candidate[1] < lowest[1]:
-                lowest = candidate
-        largest = float(magnitude.max())
-        if largest > 0.0:
-            largest = max(largest, _refine(force_at, scan, int(np.argmax(magnitude)), step,
-                                           1.0)[1])
-        on_grid = criterion_ratio(grid_force[j], grid_rate[j], floor)
-        k = int(np.argmax(on_grid)) if on_grid.size else 0
-        out[joint] = JointCriterion(
-            joint=joint, max_ratio=best[1], at_crank_angle=float(np.mod(best[0], 2 * np.pi)),
-            max_ratio_on_grid=float(on_grid[k]) if on_grid.size else float('nan'),
-            at_grid_angle=float(grid[k]) if on_grid.size else float('nan'),
-            min_force=lowest[1], at_min_force_angle=float(np.mod(lowest[0], 2 * np.pi)),
-            max_force=largest, rms_force=rms, force_floor=floor,
-            near_zero_force=bool(lowest[1] < floor))
+        out[joint] = _joint_extremes(evaluate, joint, scan, (force[j], force_rate[j]),
+                                     grid, (grid_force[j], grid_rate[j]))
     return out
+
+
+def _largest_ratio(evaluate, j, scan, ratio, floor):
+    """Scan the ratio's peaks and refine them: (crank angle, largest |gamma_dot / R|)."""
+    def ratio_at(t):
+        f, fr = evaluate(np.array([t]))
+        return criterion_ratio(f[j], fr[j], floor)[0]
+
+    best = (float(scan[np.argmax(ratio)]), float(ratio.max()))
+    peaks = _local_extrema(ratio, 1.0, CANDIDATE_FRACTION, MAX_CANDIDATES)
+    for index in peaks if best[1] > 0.0 else ():  # nothing to refine on a zero curve
+        candidate = _refine(ratio_at, scan, index, scan[1], 1.0)
+        if candidate[1] > best[1]:
+            best = candidate
+    return best
+
+
+def _force_range(evaluate, j, scan, magnitude):
+    """Scan and refine |R|: (crank angle, smallest |R|) and the largest |R|."""
+    def force_at(t):
+        return np.abs(evaluate(np.array([t]))[0][j])[0]
+
+    step = scan[1]
+    lowest = (float(scan[np.argmin(magnitude)]), float(magnitude.min()))
+    dips = _local_extrema(magnitude, -1.0, 1.0, 3)
+    for index in dips if lowest[1] > 0.0 else ():
+        candidate = _refine(force_at, scan, index, step, -1.0)
+        if candidate[1] < lowest[1]:
+            lowest = candidate
+    largest = float(magnitude.max())
+    if largest > 0.0:
+        largest = max(largest, _refine(force_at, scan, int(np.argmax(magnitude)), step,
+                                       1.0)[1])
+    return lowest, largest
+
+
+def _joint_extremes(evaluate, joint, scan, scanned, grid, on_grid_values):
+    """
+    Collect one joint's criterion: refined extremes over the scan, the maximum on the grid.
+
+    Parameters
+    ----------
+    evaluate : callable
+        As :func:`revolution_extremes` takes it.
+    joint : str
+        The joint's name.
+    scan : ndarray, shape (S,)
+        Uniform scan of crank angles [rad] from 0.
+    scanned : tuple of ndarray, shape (S,)
+        The joint's force and force rate on the scan.
+    grid : ndarray, shape (G,)
+        User grid of crank angles [rad].
+    on_grid_values : tuple of ndarray, shape (G,)
+        The joint's force and force rate on the grid.
+
+    Returns
+    -------
+    JointCriterion
+        The joint's extremes.
+
+    """
+    j = JOINT_NAMES.index(joint)
+    force, force_rate = scanned
+    magnitude = np.abs(force)
+    rms = float(np.sqrt(np.mean(magnitude ** 2)))
+    floor = max(NEAR_ZERO_FRACTION * rms, NEAR_ZERO_ABS)
+    ratio = criterion_ratio(force, force_rate, floor)
+    best = _largest_ratio(evaluate, j, scan, ratio, floor)
+    lowest, largest = _force_range(evaluate, j, scan, magnitude)
+    on_grid = criterion_ratio(on_grid_values[0], on_grid_values[1], floor)
+    k = int(np.argmax(on_grid)) if on_grid.size else 0
+    return JointCriterion(
+        joint=joint, max_ratio=best[1], at_crank_angle=float(np.mod(best[0], 2 * np.pi)),
+        max_ratio_on_grid=float(on_grid[k]) if on_grid.size else float('nan'),
+        at_grid_angle=float(grid[k]) if on_grid.size else float('nan'),
+        min_force=lowest[1], at_min_force_angle=float(np.mod(lowest[0], 2 * np.pi)),
+        max_force=largest, rms_force=rms, force_floor=floor,
+        near_zero_force=bool(lowest[1] < floor))
 
 
 def evaluate_criteria(mechanism, crank_speed=None, grid_deg=1.0, joints=JOINT_NAMES,
@@ -315,6 +358,7 @@ def criterion_curves(mechanism, crank_angle, crank_speed=None):
     Parameters
     ----------
     mechanism : Mechanism
+        The linkage (with its optional spring).
     crank_angle : ndarray, shape (n,)
         [rad].
     crank_speed : float or None

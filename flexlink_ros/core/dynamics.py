@@ -42,7 +42,8 @@ import dataclasses
 import numpy as np
 
 from .kinematics import solve_kinematics
-from .mechanism import JOINT_MEMBERS, JOINT_NAMES
+from .mechanism import JOINT_MEMBERS
+from ..names import JOINT_NAMES
 
 # Unknowns: (Fx, Fy) of O2, A, B, O4, then the input torque.
 UNKNOWNS = 9
@@ -108,6 +109,7 @@ def joint_motion(state, joint):
     Parameters
     ----------
     state : LinkageState
+        Kinematics at n crank angles.
     joint : str
         'O2', 'A', 'B' or 'O4'.
 
@@ -139,12 +141,12 @@ def _shares(mechanism, joint, body):
 
 
 def _cross(r, f):
-    """z component of r x f for complex r, f."""
+    """Return the z component of r x f for complex r, f."""
     return r.real * f.imag - r.imag * f.real
 
 
 def _system(mechanism, state, gravity, spring_torque, spring_torque_rate):
-    """A, A', b, b' of the Newton-Euler equations, shapes (n, 9, 9), (n, 9, 9), (n, 9), (n, 9)."""
+    """Assemble A, A', b, b' of the Newton-Euler equations (n, 9, 9) x 2 and (n, 9) x 2."""
     n = state.angle.shape[1]
     g = complex(*gravity)
     matrix = np.zeros((n, UNKNOWNS, UNKNOWNS))
@@ -196,7 +198,7 @@ def _spring_torques(mechanism, state):
 
 
 def _solve_pair(matrix, matrix_rate, rhs, rhs_rate):
-    """x and x' from A x = b and A x' = b' - A' x, shapes (n, 9)."""
+    """Solve A x = b and A x' = b' - A' x for x and x', shapes (n, 9)."""
     x = np.linalg.solve(matrix, rhs[..., None])[..., 0]
     known = rhs_rate - np.einsum('nij,nj->ni', matrix_rate, x)
     x_rate = np.linalg.solve(matrix, known[..., None])
@@ -256,6 +258,7 @@ def axial_force(mechanism, state, link, x, result=None):
     Parameters
     ----------
     mechanism : Mechanism
+        The linkage.
     state : LinkageState
         Kinematics at n crank angles.
     link : int
@@ -306,6 +309,7 @@ def reaction_pieces(mechanism, angles):
     Parameters
     ----------
     mechanism : Mechanism
+        The linkage (with its optional spring).
     angles : ndarray, shape (N,)
         Crank angles [rad].
 
@@ -347,7 +351,9 @@ def mechanical_energy(mechanism, state):
     Parameters
     ----------
     mechanism : Mechanism
+        The linkage (with its optional spring).
     state : LinkageState
+        Kinematics at n crank angles.
 
     Returns
     -------

@@ -29,6 +29,7 @@ B. L. Ehle (1969), "On Pade approximations to the exponential function and A-sta
 for the numerical solution of initial value problems", Univ. Waterloo report CSRR 2010.
 E. Hairer, G. Wanner (1996), Solving Ordinary Differential Equations II, 2nd ed., Springer,
 Sec. IV.5 (tableaux) and IV.12 (algebraic stability, B-stability).
+
 """
 
 import dataclasses
@@ -97,7 +98,7 @@ class RadauIIA:
 
     def step_matrix(self, h, mass, damping, stiffness):
         """
-        The ``s n x s n`` matrix of one step.
+        Assemble the ``s n x s n`` matrix of one step.
 
         Block (i, j) is ``M_i d_ij + h a_ij C_i + h^2 (aa)_ij K_i``.
 
@@ -220,6 +221,7 @@ def step_maps(method, h, mass, damping, stiffness, load):
     Parameters
     ----------
     method : RadauIIA
+        The collocation method.
     h : ndarray, shape (N,)
         Step lengths [s].
     mass, damping, stiffness : ndarray, shape (N, s, n, n)

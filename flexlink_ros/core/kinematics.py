@@ -15,7 +15,7 @@ import dataclasses
 import numpy as np
 
 from ..errors import LoopClosureError
-from .mechanism import JOINT_NAMES
+from ..names import JOINT_NAMES
 
 # sin(transmission angle) below this is treated as a locked (singular) linkage.
 SINGULAR_SIN = 1e-9
@@ -61,7 +61,7 @@ class LinkageState:
 
     def point(self, link, x, y=0.0):
         """
-        Motion of the material point (x, y) in a link's frame, as a complex Taylor tuple.
+        Motion of a link's material point at x, y in its frame, as a complex Taylor tuple.
 
         Parameters
         ----------

@@ -31,6 +31,7 @@ def relative_rms(estimate, reference):
     Parameters
     ----------
     estimate, reference : array_like of equal shape
+        The values compared and the values they should be.
 
     Returns
     -------

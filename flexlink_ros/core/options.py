@@ -79,7 +79,7 @@ class ModelOptions:
         return cls(**{'rigid_crank': False, 'bearings': 'rigid', **changes})
 
     def cache_fields(self):
-        """The fields that identify a reduced model, in declaration order (no ``gravity``)."""
+        """Return the fields identifying a reduced model, in declaration order (no ``gravity``)."""
         fields = dataclasses.asdict(self)
         del fields['gravity']
         return fields

@@ -32,10 +32,11 @@ import math
 import numpy as np
 import scipy.optimize
 
-from .criteria import NEAR_ZERO_ABS, NEAR_ZERO_FRACTION, criterion_ratio, revolution_extremes
+from .criteria import criterion_ratio, NEAR_ZERO_ABS, NEAR_ZERO_FRACTION, revolution_extremes
 from .dynamics import solve_dynamics, spring_angle
 from .kinematics import solve_kinematics
-from .mechanism import JOINT_NAMES, Spring
+from .mechanism import Spring
+from ..names import JOINT_NAMES
 
 # Clearance joints of the objective (Kang 1990: joints 1, 2, 3).
 DESIGN_JOINTS = ('A', 'B', 'O4')
@@ -190,7 +191,7 @@ class SpringProblem:
 
     def evaluate(self, stiffness, theta0, scan_points=3600, bounds=None):
         """
-        A design with refined true maxima of the criterion, forces and torque.
+        Evaluate a design with refined true maxima of the criterion, forces and torque.
 
         Parameters
         ----------
@@ -214,6 +215,17 @@ class SpringProblem:
                                                  stiffness, theta0)
             return force, force_rate
         found = revolution_extremes(evaluate, scan_points=scan_points)
+        constraints = self._refined_constraints(stiffness, theta0, scan_points)
+        bounds = bounds or {'stiffness': (0.0, STIFFNESS_MAX), 'theta0_deg': THETA0_BOUNDS_DEG}
+        return DesignEvaluation(
+            stiffness=float(stiffness), theta0=float(theta0),
+            objective=float(sum(found[j].max_ratio for j in DESIGN_JOINTS)),
+            max_ratio={j: c.max_ratio for j, c in found.items()}, constraints=constraints,
+            feasible=all(c['margin'] >= -FEASIBILITY_TOL for c in constraints.values()),
+            active=_active_bounds(constraints, stiffness, theta0, bounds))
+
+    def _refined_constraints(self, stiffness, theta0, scan_points):
+        """Force and torque limits of a design with the maxima refined (Brent)."""
         theta = 2.0 * np.pi * np.arange(scan_points) / scan_points
         force, _, torque = self._combine(self.tables(theta), stiffness, theta0)
         torque_of = lambda t: self._combine(self.tables(np.atleast_1d(t)),  # noqa: E731
@@ -232,30 +244,32 @@ class SpringProblem:
         low = -_refined_max(lambda t: -torque_of(t), theta, -torque)
         constraints['torque_min'] = _limit(low, TORQUE_FACTOR * self.reference['torque_min'],
                                            upper=False)
-        bounds = bounds or {'stiffness': (0.0, STIFFNESS_MAX), 'theta0_deg': THETA0_BOUNDS_DEG}
-        active = [name for name, c in constraints.items() if c['margin'] < ACTIVE_MARGIN]
-        k_low, k_high = bounds['stiffness']
-        if stiffness >= k_high - ACTIVE_MARGIN * k_high:
-            active.append('k_max')
-        if stiffness <= k_low + ACTIVE_MARGIN * k_high:
-            active.append('k_min')
-        degrees = math.degrees(theta0)
-        t_low, t_high = bounds['theta0_deg']
-        if degrees <= t_low + 0.5:
-            active.append('theta0_min')
-        if degrees >= t_high - 0.5:
-            active.append('theta0_max')
-        return DesignEvaluation(
-            stiffness=float(stiffness), theta0=float(theta0),
-            objective=float(sum(found[j].max_ratio for j in DESIGN_JOINTS)),
-            max_ratio={j: c.max_ratio for j, c in found.items()}, constraints=constraints,
-            feasible=all(c['margin'] >= -FEASIBILITY_TOL for c in constraints.values()),
-            active=active)
+        return constraints
+
+
+def _active_bounds(constraints, stiffness, theta0, bounds):
+    """Names of the constraints and search bounds a design sits on."""
+    active = [name for name, c in constraints.items() if c['margin'] < ACTIVE_MARGIN]
+    k_low, k_high = bounds['stiffness']
+    if stiffness >= k_high - ACTIVE_MARGIN * k_high:
+        active.append('k_max')
+    if stiffness <= k_low + ACTIVE_MARGIN * k_high:
+        active.append('k_min')
+    degrees = math.degrees(theta0)
+    t_low, t_high = bounds['theta0_deg']
+    if degrees <= t_low + 0.5:
+        active.append('theta0_min')
+    if degrees >= t_high - 0.5:
+        active.append('theta0_max')
+    return active
 
 
 def _parabolic_max(values):
-    """Maximum of periodic samples refined by the parabola through the top sample and its
-    neighbours (exact for a quadratic peak)."""
+    """
+    Maximum of periodic samples refined by a parabola (exact for a quadratic peak).
+
+    The parabola goes through the top sample and its neighbours.
+    """
     k = int(np.argmax(values))
     left, mid, right = values[k - 1], values[k], values[(k + 1) % values.size]
     curvature = left - 2.0 * mid + right
@@ -310,38 +324,12 @@ def design_spring(mechanism, crank_speed=None, seed=0, maxiter=60, popsize=15,
         (evaluations, fast objective, message); 'reference': the original extremes.
 
     """
-    low, high = (float(b) for b in theta0_bounds_deg)
-    if not (math.isfinite(low) and math.isfinite(high) and low < high):
-        raise ValueError(f'`theta0_bounds_deg` must be finite and increasing, got '
-                         f'{theta0_bounds_deg!r}')
-    if not (math.isfinite(stiffness_max) and stiffness_max > 0.0):
-        raise ValueError(f'`stiffness_max` must be positive, got {stiffness_max!r}')
+    low, high = _checked_bounds(theta0_bounds_deg, stiffness_max)
     problem = SpringProblem(mechanism, crank_speed, scan_points)
-    calls = {'n': 0}
-    cache = {}
-
-    def fast(x):
-        key = (float(x[0]), float(x[1]))
-        if key not in cache:
-            calls['n'] += 1
-            cache.clear()
-            cache[key] = problem.fast(x)
-        return cache[key]
-
-    bounds = [(0.0, stiffness_max), (low, high)]
-    constraint = scipy.optimize.NonlinearConstraint(lambda x: fast(x)[1], -np.inf, 0.0)
-    found = scipy.optimize.differential_evolution(
-        lambda x: fast(x)[0], bounds, constraints=(constraint,), seed=seed, maxiter=maxiter,
-        popsize=popsize, tol=1e-8, polish=False, init='sobol')
+    fast = _CachedObjective(problem)
+    found = _global_search(fast, [(0.0, stiffness_max), (low, high)], seed, maxiter, popsize)
     start = found.x
-    cons = [{'type': 'ineq', 'fun': lambda x, i=i: -fast(x)[1][i]} for i in range(5)]
-    cons += [{'type': 'ineq', 'fun': lambda x: x[0]},
-             {'type': 'ineq', 'fun': lambda x: stiffness_max - x[0]},
-             {'type': 'ineq', 'fun': lambda x: x[1] - low},
-             {'type': 'ineq', 'fun': lambda x: high - x[1]}]
-    polished = scipy.optimize.minimize(lambda x: fast(x)[0], start, method='COBYLA',
-                                       constraints=cons,
-                                       options={'rhobeg': 0.5, 'tol': 1e-7, 'maxiter': 400})
+    polished = _polish(fast, start, stiffness_max, (low, high))
     best = polished.x if (polished.fun <= found.fun
                           and np.all(fast(polished.x)[1] <= 1e-9)) else start
     best = np.clip(best, [0.0, low], [stiffness_max, high])
@@ -349,11 +337,60 @@ def design_spring(mechanism, crank_speed=None, seed=0, maxiter=60, popsize=15,
     design = problem.evaluate(float(best[0]), math.radians(float(best[1])), bounds=bounds)
     paper = problem.evaluate(PAPER_DESIGN[0], math.radians(PAPER_DESIGN[1]))
     return {'design': design, 'paper': paper, 'reference': problem.reference,
-            'search': {'evaluations': calls['n'], 'fast_objective': float(fast(best)[0]),
+            'search': {'evaluations': fast.calls, 'fast_objective': float(fast(best)[0]),
                        'global_stage': {'k': float(start[0]), 'theta0_deg': float(start[1]),
                                         'objective': float(found.fun),
                                         'message': str(found.message)},
                        'polish_message': str(polished.message)}}
+
+
+def _checked_bounds(theta0_bounds_deg, stiffness_max):
+    """Return the theta0 search range (low, high) [deg] after checking both bounds."""
+    low, high = (float(b) for b in theta0_bounds_deg)
+    if not (math.isfinite(low) and math.isfinite(high) and low < high):
+        raise ValueError(f'`theta0_bounds_deg` must be finite and increasing, got '
+                         f'{theta0_bounds_deg!r}')
+    if not (math.isfinite(stiffness_max) and stiffness_max > 0.0):
+        raise ValueError(f'`stiffness_max` must be positive, got {stiffness_max!r}')
+    return low, high
+
+
+class _CachedObjective:
+    """``SpringProblem.fast`` of the last design asked for, and a count of evaluations."""
+
+    def __init__(self, problem):
+        self.problem = problem
+        self.calls = 0
+        self.cache = {}
+
+    def __call__(self, x):
+        key = (float(x[0]), float(x[1]))
+        if key not in self.cache:
+            self.calls += 1
+            self.cache.clear()
+            self.cache[key] = self.problem.fast(x)
+        return self.cache[key]
+
+
+def _global_search(fast, bounds, seed, maxiter, popsize):
+    """Differential evolution over (K, theta0) with the constraints of ``fast``."""
+    constraint = scipy.optimize.NonlinearConstraint(lambda x: fast(x)[1], -np.inf, 0.0)
+    return scipy.optimize.differential_evolution(
+        lambda x: fast(x)[0], bounds, constraints=(constraint,), seed=seed, maxiter=maxiter,
+        popsize=popsize, tol=1e-8, polish=False, init='sobol')
+
+
+def _polish(fast, start, stiffness_max, theta0_range):
+    """COBYLA from the global stage's design, inside the constraints and bounds."""
+    low, high = theta0_range
+    cons = [{'type': 'ineq', 'fun': lambda x, i=i: -fast(x)[1][i]} for i in range(5)]
+    cons += [{'type': 'ineq', 'fun': lambda x: x[0]},
+             {'type': 'ineq', 'fun': lambda x: stiffness_max - x[0]},
+             {'type': 'ineq', 'fun': lambda x: x[1] - low},
+             {'type': 'ineq', 'fun': lambda x: high - x[1]}]
+    return scipy.optimize.minimize(lambda x: fast(x)[0], start, method='COBYLA',
+                                   constraints=cons,
+                                   options={'rhobeg': 0.5, 'tol': 1e-7, 'maxiter': 400})
 
 
 __all__ = ['SpringProblem', 'DesignEvaluation', 'design_spring', 'DESIGN_JOINTS',

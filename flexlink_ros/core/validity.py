@@ -68,8 +68,9 @@ import math
 
 import numpy as np
 
-from .fe.linkage import gauss_points
 from .dynamics import axial_force
+from .fe.linkage import gauss_points
+from .fe.modes import frozen_mode_sweep
 from .kinematics import solve_kinematics
 
 # Links that carry the indicator (the crank is short and stiff: P_cr = 4.7 kN for cho1992).
@@ -149,6 +150,7 @@ def elastic_axial_forces(linkage, displacement, crank_angle, speed, accel=0.0):
     displacement : ndarray, shape (N, n)
         Linear nodal vectors U (e.g. ``PeriodicResponse.displacement``).
     crank_angle : ndarray, shape (N,)
+        Crank angles [rad] of the samples.
     speed, accel : float
         Crank speed [rad/s] and acceleration [rad/s^2] of the rigid-body motion.
 
@@ -198,6 +200,7 @@ def mode_reference(linkage, speed, modes=REFERENCE_MODES, angles=12):
     Parameters
     ----------
     linkage : FlexibleLinkage
+        The flexible model.
     speed : float
         Crank speed [rad/s] (the rigid-body axial forces in K_G).
     modes : int
@@ -214,7 +217,6 @@ def mode_reference(linkage, speed, modes=REFERENCE_MODES, angles=12):
         lever, 'speed' [rad/s].
 
     """
-    from .fe.modes import frozen_mode_sweep
     grid = np.linspace(0.0, 2.0 * np.pi, angles, endpoint=False)
     frozen = frozen_mode_sweep(linkage, grid, count=modes, speed=speed)
     return {'omega': frozen.omega.mean(axis=0),
@@ -223,8 +225,23 @@ def mode_reference(linkage, speed, modes=REFERENCE_MODES, angles=12):
 
 def resonance_distance(reference, zeta):
     """
-    sqrt(d_j^2 + (zeta omega_j)^2) per reference mode [rad/s]: d_j the distance of omega_j from
-    the nearest crank harmonic k |speed| (k >= 1), zeta omega_j the half-power half-width.
+    Distance of each reference mode from resonance, sqrt(d_j^2 + (zeta omega_j)^2) [rad/s].
+
+    d_j is the distance of omega_j from the nearest crank harmonic k |speed| (k >= 1),
+    zeta omega_j the half-power half-width.
+
+    Parameters
+    ----------
+    reference : dict
+        :func:`mode_reference` at the speed.
+    zeta : float
+        Modal damping ratio.
+
+    Returns
+    -------
+    ndarray, shape (modes,)
+        The distances.
+
     """
     omega, rate = reference['omega'], abs(reference['speed'])
     harmonic = np.maximum(np.round(omega / rate), 1.0) * rate
@@ -243,9 +260,11 @@ def nonlinearity_indicator(linkage, displacement, crank_angle, speed, zeta=None,
     Parameters
     ----------
     linkage : FlexibleLinkage
+        The flexible model.
     displacement : ndarray, shape (N, n)
         Linear nodal vectors U.
     crank_angle : ndarray, shape (N,)
+        Crank angles [rad] of the samples.
     speed : float
         Crank speed [rad/s].
     zeta : float or None
@@ -253,6 +272,9 @@ def nonlinearity_indicator(linkage, displacement, crank_angle, speed, zeta=None,
     reference : dict or None
         :func:`mode_reference` at this speed (computed when None; precompute it per speed to
         evaluate samples cheaply).
+
+    accel : float
+        Crank acceleration [rad/s^2] of the rigid-body motion.
 
     Returns
     -------

@@ -252,22 +252,7 @@ def load_cache(path, key):
         raise CacheError(f'{path}: no cache file')
     try:
         with zipfile.ZipFile(path) as archive:
-            members = _members(archive, path)
-            header = _read_header(archive, members, path)
-            _check_header(header, key, path)
-            announced = header.get('arrays')
-            if not isinstance(announced, dict) or set(announced) != set(members) - {HEADER_NAME}:
-                raise CacheError(f'{path}: arrays differ from the header')
-            # The arrays are stored uncompressed in this file: together they fit in it.
-            arrays, budget = {}, min(MAX_CACHE_BYTES, path.stat().st_size)
-            for name, spec in sorted(announced.items()):
-                array, size = _read_member(archive, members[name], name, path, budget)
-                budget -= size
-                if not isinstance(spec, dict) or (array.dtype.str, list(array.shape)) != (
-                        spec.get('dtype'), spec.get('shape')):
-                    raise CacheError(f'{path}: array {name!r} is {array.dtype.str} '
-                                     f'{list(array.shape)}, header says {spec!r:.200}')
-                arrays[name] = array
+            header, arrays = _read_archive(archive, path, key)
     except CacheError:
         raise
     except (OSError, EOFError, ValueError, KeyError, TypeError, AttributeError, RuntimeError,
@@ -279,6 +264,27 @@ def load_cache(path, key):
         raise CacheError(f'{path}: checksum mismatch (corrupt cache)')
     meta = header.get('meta')
     return arrays, meta if isinstance(meta, dict) else {}
+
+
+def _read_archive(archive, path, key):
+    """Header and arrays of an open cache archive, each checked against the header."""
+    members = _members(archive, path)
+    header = _read_header(archive, members, path)
+    _check_header(header, key, path)
+    announced = header.get('arrays')
+    if not isinstance(announced, dict) or set(announced) != set(members) - {HEADER_NAME}:
+        raise CacheError(f'{path}: arrays differ from the header')
+    # The arrays are stored uncompressed in this file: together they fit in it.
+    arrays, budget = {}, min(MAX_CACHE_BYTES, path.stat().st_size)
+    for name, spec in sorted(announced.items()):
+        array, size = _read_member(archive, members[name], name, path, budget)
+        budget -= size
+        if not isinstance(spec, dict) or (array.dtype.str, list(array.shape)) != (
+                spec.get('dtype'), spec.get('shape')):
+            raise CacheError(f'{path}: array {name!r} is {array.dtype.str} '
+                             f'{list(array.shape)}, header says {spec!r:.200}')
+        arrays[name] = array
+    return header, arrays
 
 
 def load_or_build(path, key, build):

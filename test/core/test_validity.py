@@ -1,5 +1,5 @@
 """
-Validity indicator (flexlink_ros/core/validity.py, issue 14 item 4), independent checks:
+Validity indicator (flexlink_ros/core/validity.py, issue 14 item 4): independent checks.
 
 * the Euler load pi^2 E I / L^2 against the FE buckling eigenvalue of a pinned-pinned link
   (K u = P G u with the unit geometric stiffness);
@@ -14,17 +14,16 @@ Validity indicator (flexlink_ros/core/validity.py, issue 14 item 4), independent
 import dataclasses
 import math
 
+from flexlink_ros.core import validity
+from flexlink_ros.core.fe import linkage as assembly
+from flexlink_ros.core.fe import second_order as so
+from flexlink_ros.core.fe.simulate import periodic_response
+from flexlink_ros.core.mechanism_file import load_mechanism
+from flexlink_ros.core.options import ModelOptions
+from flexlink_ros.studies import peer_exudyn as peer
 import numpy as np
 import pytest
 import scipy.linalg
-
-from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.core.fe import linkage as assembly
-from flexlink_ros.core import validity
-from flexlink_ros.core.fe import second_order as so
-from flexlink_ros.core.mechanism import load_mechanism
-from flexlink_ros.core.fe.simulate import periodic_response
-from flexlink_ros.studies import peer_exudyn as peer
 
 ELEMENTS = 4
 
@@ -143,7 +142,7 @@ def test_mode_reference_and_distance(linkage):
 
 
 def test_candidate_load_ratio(linkage, responses):
-    """max |N_e| / P_cr: 0.5-1 % at 269 rpm, about 6 % at 405 rpm (the issue's 2-9 N / 36 N)."""
+    """Max |N_e| / P_cr: 0.5-1 % at 269 rpm, about 6 % at 405 rpm (the issue's 2-9 N / 36 N)."""
     values = {rpm: validity.load_ratio_indicator(linkage, r.displacement, r.crank_angle,
                                                  rpm * math.pi / 30.0).max()
               for rpm, r in responses.items()}

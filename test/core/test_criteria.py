@@ -3,13 +3,12 @@
 import dataclasses
 import math
 
+from flexlink_ros.core.criteria import (criterion_ratio, direction_rate, evaluate_criteria,
+                                        NEAR_ZERO_ABS, reaction_evaluator, revolution_extremes)
+from flexlink_ros.core.mechanism import Spring
+from flexlink_ros.core.mechanism_file import load_mechanism
 import numpy as np
 import pytest
-
-from flexlink_ros.core.criteria import (NEAR_ZERO_ABS, criterion_ratio, direction_rate,
-                                        evaluate_criteria, reaction_evaluator,
-                                        revolution_extremes)
-from flexlink_ros.core.mechanism import Spring, load_mechanism
 
 # Kang, Lee & Yoon (1990), Table 2: max |gamma_dot / R| [rad/(s N)] on the 1-degree grid at
 # joints 1, 2, 3 = A (crank-coupler), B (coupler-rocker), O4 (rocker-ground).
@@ -38,8 +37,8 @@ def test_table_2_on_the_one_degree_grid(results, case):
 
 @pytest.mark.parametrize('case', ['original', 'spring'])
 def test_true_maximum_bounds_dense_sampling_around_it(kang, results, case):
-    """The refined maximum is >= every sample of a 0.0001-degree grid around it and within
-    0.1 % of the best sample; the user-grid maximum never exceeds it."""
+    # The refined maximum is >= every sample of a 0.0001-degree grid around it and within
+    # 0.1 % of the best sample; the user-grid maximum never exceeds it.
     mech = kang if case == 'original' else dataclasses.replace(kang, spring=PAPER_SPRING)
     evaluate = reaction_evaluator(mech, mech.crank_speed)
     for index, joint in enumerate(('O2', 'A', 'B', 'O4')):
@@ -71,8 +70,8 @@ def test_true_maxima_are_scan_independent_and_exceed_the_grid_at_b(kang, results
 
 @pytest.mark.parametrize('spring', [None, PAPER_SPRING])
 def test_analytic_direction_rate_matches_central_difference_of_direction(kang, spring):
-    """gamma_dot from the analytic dF/dt against d gamma/dt from the reactions alone at
-    theta +- w h, including angles at the narrow peaks."""
+    # gamma_dot from the analytic dF/dt against d gamma/dt from the reactions alone at
+    # theta +- w h, including angles at the narrow peaks.
     mech = dataclasses.replace(kang, spring=spring)
     w = mech.crank_speed
     evaluate = reaction_evaluator(mech, w)
@@ -88,8 +87,8 @@ def test_analytic_direction_rate_matches_central_difference_of_direction(kang, s
 
 
 def test_force_through_zero_gives_finite_flagged_ratio():
-    """F = (sin u, 1 - cos u), u = theta - 0.123: |F| = 2 |sin(u/2)|, gamma_dot = w/2, so the
-    ratio 1/(2 R) is unbounded at u = 0; the result is finite, flagged, at the floor."""
+    # F = (sin u, 1 - cos u), u = theta - 0.123: |F| = 2 |sin(u/2)|, gamma_dot = w/2, so the
+    # ratio 1/(2 R) is unbounded at u = 0; the result is finite, flagged, at the floor.
     def evaluate(theta):
         u = np.asarray(theta) - 0.123
         force = np.sin(u) + 1j * (1.0 - np.cos(u))

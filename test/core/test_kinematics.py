@@ -1,16 +1,15 @@
 """Rigid-body kinematics against loop closure and finite differences of itself."""
 
-import numpy as np
-import pytest
-
 from flexlink_ros.core.kinematics import dead_centres, solve_kinematics
 from flexlink_ros.core.mechanism import load_mechanism
+import numpy as np
+import pytest
 
 MECHANISMS = ['cho1992', 'kang1990']
 
 
 def _motion(t):
-    """A crank motion with non-zero speed, acceleration and jerk: theta(t) and derivatives."""
+    """Return a crank motion with non-zero speed, acceleration and jerk: theta(t), derivatives."""
     theta = 0.3 + 20.0 * t + 40.0 * t ** 2 + 30.0 * t ** 3
     return theta, 20.0 + 80.0 * t + 90.0 * t ** 2, 80.0 + 180.0 * t, 180.0 + 0 * t
 

@@ -1,19 +1,21 @@
 """Mechanism files: the papers' data load, bad input is rejected naming the field."""
 
-import dataclasses
 import math
+import os
+import pathlib
 import re
 import subprocess
 import sys
 import tracemalloc
 
+from flexlink_ros.core.mechanism import MAX_ELEMENTS_PER_LINK
+from flexlink_ros.core.mechanism_file import (ament_share_directory, find_config,
+                                              load_mechanism, MAX_FILE_BYTES, MAX_NAME_CHARS,
+                                              MAX_SOURCE_CHARS, MAX_YAML_DEPTH,
+                                              mechanism_from_dict)
+from flexlink_ros.errors import MechanismError
 import pytest
 import yaml
-
-from flexlink_ros.errors import MechanismError
-from flexlink_ros.core.mechanism import (MAX_ELEMENTS_PER_LINK, MAX_FILE_BYTES, MAX_NAME_CHARS,
-                                         MAX_SOURCE_CHARS, MAX_YAML_DEPTH, load_mechanism,
-                                         mechanism_from_dict)
 
 
 def _cho(config_dir):
@@ -78,13 +80,6 @@ def test_change_point_is_rejected(config_dir):
 def test_missing_file_is_a_clear_error():
     with pytest.raises(MechanismError, match='no such file'):
         load_mechanism('does_not_exist.yaml')
-
-
-def test_key_changes_with_any_field():
-    import dataclasses
-    cho = load_mechanism('cho1992')
-    assert cho.key() == load_mechanism('cho1992').key()
-    assert cho.key() != dataclasses.replace(cho, damping_ratio=0.03).key()
 
 
 # -- hostile files: every bound refuses with the field, quickly, without allocating --------
@@ -162,14 +157,6 @@ def test_sizes_and_strings_are_bounded(config_dir, edit, field, reason):
     assert info.value.field == field
 
 
-def test_variants_are_bounded_too():
-    cho = load_mechanism('cho1992')
-    assert dataclasses.replace(cho, elements_per_link=MAX_ELEMENTS_PER_LINK).elements_per_link \
-        == MAX_ELEMENTS_PER_LINK
-    with pytest.raises(MechanismError, match='elements_per_link'):
-        dataclasses.replace(cho, elements_per_link=10 ** 6)
-
-
 def test_modes_cli_refuses_a_million_elements_in_one_line(config_dir, tmp_path):
     cho = (config_dir / 'cho1992.yaml').read_text()
     path = _write(tmp_path, cho.replace('elements_per_link: 3', 'elements_per_link: 1000000'))
@@ -184,3 +171,57 @@ def test_modes_cli_refuses_a_million_elements_in_one_line(config_dir, tmp_path):
         assert len(lines) == 1, done.stderr
         assert 'elements_per_link' in lines[0] and f'1..{MAX_ELEMENTS_PER_LINK}' in lines[0]
         assert 'MemoryError' not in done.stderr and done.stdout == ''
+
+
+# -- finding a bare name: ament prefixes, this Python's prefix, the source tree --------------
+
+def _ament_prefix(root, name, with_marker=True, with_file=True):
+    """Make an install prefix as colcon does: the package marker and share/<pkg>/config."""
+    prefix = root / name
+    if with_marker:
+        marker = prefix / 'share' / 'ament_index' / 'resource_index' / 'packages'
+        marker.mkdir(parents=True)
+        (marker / 'flexlink_ros').write_text('')
+    config = prefix / 'share' / 'flexlink_ros' / 'config'
+    config.mkdir(parents=True)
+    if with_file:
+        (config / 'cho1992.yaml').write_text('name: installed\n')
+    return prefix
+
+
+def test_find_config_takes_the_first_ament_prefix_listing_the_package(tmp_path, monkeypatch):
+    unmarked = _ament_prefix(tmp_path, 'unmarked', with_marker=False)
+    first = _ament_prefix(tmp_path, 'first')
+    second = _ament_prefix(tmp_path, 'second')
+    paths = [str(tmp_path / 'missing'), str(unmarked), str(first), str(second)]
+    monkeypatch.setenv('AMENT_PREFIX_PATH', os.pathsep.join(paths))
+    assert ament_share_directory() == first / 'share' / 'flexlink_ros'
+    assert find_config('cho1992') == first / 'share' / 'flexlink_ros' / 'config' / 'cho1992.yaml'
+    # What the ament index itself answers (it is not imported by the core).
+    packages = pytest.importorskip('ament_index_python.packages')
+    assert pathlib.Path(packages.get_package_share_directory('flexlink_ros')) \
+        == ament_share_directory()
+
+
+def test_find_config_falls_back_to_the_prefix_and_the_source_tree(tmp_path, monkeypatch):
+    installed = pathlib.Path(sys.prefix) / 'share' / 'flexlink_ros' / 'config' / 'cho1992.yaml'
+    source = pathlib.Path(__file__).resolve().parents[2] / 'config' / 'cho1992.yaml'
+    expected = installed if installed.exists() else source
+    monkeypatch.delenv('AMENT_PREFIX_PATH', raising=False)
+    assert ament_share_directory() is None
+    assert find_config('cho1992') == expected
+    # A listed package without the file: the next places are tried, as before.
+    empty = _ament_prefix(tmp_path, 'empty', with_file=False)
+    monkeypatch.setenv('AMENT_PREFIX_PATH', str(empty))
+    assert find_config('cho1992.yaml') == expected
+    with pytest.raises(MechanismError, match='no such file') as info:
+        find_config('does_not_exist')
+    looked = str(info.value)
+    order = [str(empty / 'share' / 'flexlink_ros' / 'config'), str(installed.parent),
+             str(source.parent)]
+    assert [looked.index(place) for place in order] == sorted(looked.index(p) for p in order)
+
+
+def test_find_config_returns_an_existing_path_unchanged(config_dir):
+    path = config_dir / 'kang1990.yaml'
+    assert find_config(str(path)) == path

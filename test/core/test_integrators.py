@@ -1,10 +1,10 @@
 """Radau IIA for M(t) q'' + C(t) q' + K(t) q = f(t): exact solutions, order, stability."""
 
+from flexlink_ros.core.integrators import (compose_affine, integrate, RadauIIA, stability_function,
+                                           step_maps)
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
-
-from flexlink_ros.core.integrators import RadauIIA, integrate, stability_function
 
 OMEGA = 2.0 * np.pi * 3.0   # natural frequency [rad/s]
 ZETA = 0.05
@@ -18,12 +18,12 @@ def sdof(t):
 def sdof_exact(t, q0=1.0, v0=0.0):
     """Closed-form free response of the damped oscillator."""
     wd = OMEGA * np.sqrt(1.0 - ZETA ** 2)
-    return np.exp(-ZETA * OMEGA * t) * (q0 * np.cos(wd * t)
-                                         + (v0 + ZETA * OMEGA * q0) / wd * np.sin(wd * t))
+    return np.exp(-ZETA * OMEGA * t) * (
+        q0 * np.cos(wd * t) + (v0 + ZETA * OMEGA * q0) / wd * np.sin(wd * t))
 
 
 def jittered_times(h, end, jitter, seed):
-    """Times 0..end with steps h (1 + jitter U(-1, 1))."""
+    """Return times 0..end with steps h (1 + jitter U(-1, 1))."""
     rng = np.random.default_rng(seed)
     steps = h * (1.0 + jitter * rng.uniform(-1.0, 1.0, int(2 * end / h) + 10))
     times = np.concatenate([[0.0], np.cumsum(steps)])
@@ -155,7 +155,6 @@ def test_rejects_bad_arguments():
 
 
 def test_batched_step_maps_and_composition_match_sequential_steps():
-    from flexlink_ros.core.integrators import compose_affine, step_maps
     method = RadauIIA(2)
     rng = np.random.default_rng(3)
     steps = 37

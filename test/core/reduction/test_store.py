@@ -8,12 +8,11 @@ import struct
 import tracemalloc
 import zipfile
 
-import numpy as np
-import pytest
-
+from flexlink_ros.core.mechanism import load_mechanism
 from flexlink_ros.core.reduction import store as cache
 from flexlink_ros.errors import CacheError
-from flexlink_ros.core.mechanism import load_mechanism
+import numpy as np
+import pytest
 
 KEY = cache.cache_key('mechanism-key', {'modes': 6})
 
@@ -209,7 +208,7 @@ def _npy_header(dtype, shape):
 
 
 def _announcing_cache(path, zip_sizes_lie):
-    """A cache with the right key and header whose 'basis' announces 4 GiB of float64."""
+    """Write a cache with the right key and header whose 'basis' announces 4 GiB of float64."""
     arrays, meta = content()
     huge = (FOUR_GIB // 8,)
     header = {'format': cache.FORMAT_NAME, 'version': cache.FORMAT_VERSION, 'key': KEY,

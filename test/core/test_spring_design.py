@@ -3,15 +3,15 @@
 import dataclasses
 import math
 
-import numpy as np
-import pytest
-
 from flexlink_ros.core.criteria import evaluate_criteria
 from flexlink_ros.core.dynamics import solve_dynamics
 from flexlink_ros.core.kinematics import solve_kinematics
-from flexlink_ros.core.mechanism import Spring, load_mechanism
-from flexlink_ros.core.spring_design import (FORCE_FACTOR, PAPER_DESIGN, TORQUE_FACTOR,
-                                             SpringProblem, design_spring)
+from flexlink_ros.core.mechanism import Spring
+from flexlink_ros.core.mechanism_file import load_mechanism
+from flexlink_ros.core.spring_design import (design_spring, FORCE_FACTOR, PAPER_DESIGN,
+                                             SpringProblem, TORQUE_FACTOR)
+import numpy as np
+import pytest
 
 
 @pytest.fixture(scope='module')
@@ -25,8 +25,8 @@ def problem(kang):
 
 
 def test_spring_superposition_equals_direct_solution(kang, problem):
-    """F0 + T_s G (and its rate, and the torque) equal the Newton-Euler solution with the
-    spring in the mechanism."""
+    # F0 + T_s G (and its rate, and the torque) equal the Newton-Euler solution with the
+    # spring in the mechanism.
     theta = np.radians(np.arange(0.0, 360.0, 17.0))
     stiffness, theta0 = 13.0, math.radians(333.0)
     force, force_rate, torque = problem._combine(problem.tables(theta), stiffness, theta0)
@@ -39,9 +39,9 @@ def test_spring_superposition_equals_direct_solution(kang, problem):
 
 
 def test_paper_design_true_objective_and_its_limits(kang, problem):
-    """The paper's design evaluated with true maxima: the objective agrees with
-    core.criteria on the spring mechanism, and the torque limit (Eq. 16) is where the
-    paper's search stopped."""
+    # The paper's design evaluated with true maxima: the objective agrees with
+    # core.criteria on the spring mechanism, and the torque limit (Eq. 16) is where the
+    # paper's search stopped.
     paper = problem.evaluate(PAPER_DESIGN[0], math.radians(PAPER_DESIGN[1]), scan_points=1800)
     mech = dataclasses.replace(kang, spring=Spring(20.0, math.radians(279.14)))
     direct = evaluate_criteria(mech, scan_points=1800)

@@ -2,13 +2,14 @@
 
 import dataclasses
 
-import numpy as np
-import pytest
-
 from flexlink_ros.core.dynamics import (axial_force, mechanical_energy, reaction_pieces,
                                         solve_dynamics)
 from flexlink_ros.core.kinematics import solve_kinematics
-from flexlink_ros.core.mechanism import JOINT_NAMES, Spring, load_mechanism
+from flexlink_ros.core.mechanism import Spring
+from flexlink_ros.core.mechanism_file import load_mechanism
+from flexlink_ros.names import JOINT_NAMES
+import numpy as np
+import pytest
 
 
 @pytest.fixture(scope='module')
@@ -58,9 +59,9 @@ def test_every_link_body_balances_forces_and_moments(rich):
 
 
 def test_each_joint_particle_balances_and_split_moves_only_the_bearing_force(rich):
-    """The whole joint mass: forces of its members' bars on it, plus weight, give m a. The
-    pin-on-bar forces do not depend on how the mass is split; the bearing force shifts by
-    exactly the share moved across the bearing."""
+    # The whole joint mass: forces of its members' bars on it, plus weight, give m a. The
+    # pin-on-bar forces do not depend on how the mass is split; the bearing force shifts by
+    # exactly the share moved across the bearing.
     t = np.array([0.0, 0.07])
     state = _state(rich, t)
     results = {s: solve_dynamics(dataclasses.replace(rich, joint_mass_split=s), state)
@@ -85,8 +86,8 @@ def test_each_joint_particle_balances_and_split_moves_only_the_bearing_force(ric
 
 
 def test_whole_mechanism_balance_with_ground_reactions(rich):
-    """External forces on the moving system: ground on crank at O2, ground on lever at O4
-    (= -F_O4 in the first-on-second convention), weights; total force = sum m a."""
+    # External forces on the moving system: ground on crank at O2, ground on lever at O4
+    # (= -F_O4 in the first-on-second convention), weights; total force = sum m a.
     state = _state(rich, np.linspace(0.0, 0.1, 5))
     result = solve_dynamics(rich, state)
     g = complex(*rich.gravity)
@@ -122,8 +123,8 @@ def test_rates_match_central_differences_in_time(rich):
 
 
 def test_input_power_equals_rate_of_mechanical_energy(rich):
-    """T_in w = d/dt (kinetic + gravity + spring energy); the energy rate itself is checked
-    against a central difference of the energy."""
+    # T_in w = d/dt (kinetic + gravity + spring energy); the energy rate itself is checked
+    # against a central difference of the energy.
     t = np.linspace(0.0, 0.15, 31)
     state = _state(rich, t)
     result = solve_dynamics(rich, state)
@@ -137,8 +138,8 @@ def test_input_power_equals_rate_of_mechanical_energy(rich):
 
 
 def test_static_gravity_by_hand(kang):
-    """At rest under gravity (no joint masses): coupler and lever moments about A and O4 give
-    the pin force at B; force balances give the rest; the crank's moment gives T_in."""
+    # At rest under gravity (no joint masses): coupler and lever moments about A and O4 give
+    # the pin force at B; force balances give the rest; the crank's moment gives T_in.
     mech = dataclasses.replace(kang, gravity=(0.0, -9.81))
     theta = np.radians([0.0, 77.0, 200.0, 311.0])
     state = solve_kinematics(mech, theta)
@@ -198,8 +199,8 @@ def test_piece_angle_derivatives_match_central_differences(rich):
 
 
 def test_axial_force_meets_the_end_forces(rich):
-    """N(0) = -P_first . e and N(L) = +P_second . e: the integrated distributed inertia and
-    weight balance the axial end forces."""
+    # N(0) = -P_first . e and N(L) = +P_second . e: the integrated distributed inertia and
+    # weight balance the axial end forces.
     state = _state(rich, np.linspace(0.0, 0.1, 7))
     result = solve_dynamics(rich, state)
     for link, body in enumerate(rich.links):
@@ -216,8 +217,8 @@ def test_axial_force_meets_the_end_forces(rich):
 
 
 def test_spring_torque_sign_is_minus_gradient_of_its_energy(kang):
-    """At rest without gravity the motor holds the spring: T_in = dV/dtheta of V = K s^2 / 2
-    (central difference in the crank angle)."""
+    # At rest without gravity the motor holds the spring: T_in = dV/dtheta of V = K s^2 / 2
+    # (central difference in the crank angle).
     mech = dataclasses.replace(kang, spring=Spring(stiffness=20.0, theta0=np.radians(279.14)))
     theta = np.radians(np.arange(0.0, 360.0, 30.0))
     h = 1e-6
