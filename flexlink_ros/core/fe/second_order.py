@@ -66,7 +66,7 @@ import numpy as np
 
 from ...names import OUTPUT_NAMES
 from . import beam
-from .linkage import transverse_slopes
+from .link import transverse_slopes
 from ..kinematics import solve_kinematics
 
 # Sums S of :func:`link_bending_integrals`, in order: crank, coupler, lever (S(L) each), and the

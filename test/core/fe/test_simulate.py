@@ -13,7 +13,7 @@ from flexlink_ros.core.mechanism import load_mechanism
 from flexlink_ros.core.fe.modes import modal_damping
 from flexlink_ros.core.fe.simulate import frozen_eigen, periodic_response, step_convergence
 
-CONFIG = pathlib.Path(__file__).resolve().parents[1] / 'config'
+CONFIG = pathlib.Path(__file__).resolve().parents[3] / 'config'
 NO_KG = dict(geometric_stiffness=False)
 RPM = 2.0 * np.pi / 60.0
 

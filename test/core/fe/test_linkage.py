@@ -8,13 +8,14 @@ import pytest
 import scipy.linalg
 
 from flexlink_ros.core.fe import beam
-from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.core.fe.linkage import (FlexibleLinkage, element_geometric_stiffness,
-                                        gauss_points, link_matrices)
+from flexlink_ros.core.fe.link import (element_geometric_stiffness, gauss_points, link_matrices,
+                                       transverse_slopes)
+from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.kinematics import solve_kinematics
 from flexlink_ros.core.mechanism import load_mechanism
+from flexlink_ros.core.options import ModelOptions
 
-CONFIG = pathlib.Path(__file__).resolve().parents[1] / 'config'
+CONFIG = pathlib.Path(__file__).resolve().parents[3] / 'config'
 
 NO_KG = dict(geometric_stiffness=False)
 CASES = {
@@ -297,7 +298,6 @@ def test_geometric_stiffness_with_constant_force_is_a4():
     x8, w8 = np.polynomial.legendre.leggauss(8)
     length = 0.09
     x8, w8 = 0.5 * length * (x8 + 1), 0.5 * length * w8
-    from flexlink_ros.core.fe.linkage import transverse_slopes
     force = lambda x: 10.0 - 300.0 * x + 900.0 * x ** 2  # noqa: E731
     dense = np.einsum('g,g,gi,gj->ij', force(x8), w8, transverse_slopes(x8, length),
                       transverse_slopes(x8, length))

@@ -9,7 +9,8 @@ import scipy.linalg
 
 from flexlink_ros.core.fe import stiffness_damping as sd
 from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.core.fe.linkage import FlexibleLinkage, link_matrices
+from flexlink_ros.core.fe.link import link_matrices
+from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.mechanism import load_mechanism
 
 BETA = 1e-4

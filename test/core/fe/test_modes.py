@@ -7,11 +7,12 @@ import numpy as np
 import pytest
 
 from flexlink_ros.core.options import ModelOptions
+from flexlink_ros.core.fe import linkage
 from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.mechanism import load_mechanism
 from flexlink_ros.core.fe.modes import frozen_mode_sweep, modal_damping, solve_frozen_modes
 
-CONFIG = pathlib.Path(__file__).resolve().parents[1] / 'config'
+CONFIG = pathlib.Path(__file__).resolve().parents[3] / 'config'
 NO_KG = dict(geometric_stiffness=False)
 
 
@@ -112,8 +113,6 @@ def test_geometric_stiffness_pieces_with_constant_tension(cho, monkeypatch):
     """K_G assembly with a stand-in axial force: constant tension P on the coupler only.
     A pinned-pinned beam under tension P has w^2 = w0^2 (1 + P L^2 / (pi^2 EI)) exactly; the
     pieces (gravity, a, w^2) must combine linearly as P = P1 + a Pa + w^2 Pw2."""
-    import sys
-    import types
     pieces = {'1': 4.0, 'a': 0.01, 'w2': 0.002}
 
     def axial_force(mechanism, state, link, x):
@@ -121,9 +120,7 @@ def test_geometric_stiffness_pieces_with_constant_tension(cho, monkeypatch):
         value = gravity + pieces['a'] * state.alpha[0] + pieces['w2'] * state.omega[0] ** 2
         return np.outer(value, np.ones(len(x))) * (link == 1)
 
-    fake = types.ModuleType('flexlink_ros.core.dynamics')
-    fake.axial_force = axial_force
-    monkeypatch.setitem(sys.modules, 'flexlink_ros.core.dynamics', fake)
+    monkeypatch.setattr(linkage, 'axial_force', axial_force)
     mech = dataclasses.replace(cho, elements_per_link=8)
     model = FlexibleLinkage(mech, ModelOptions.full_model(rigid_crank=True))
     system = model.assemble(np.radians([27.0, 200.0]))
