@@ -15,8 +15,8 @@ import numpy as np
 
 from . import outputs, system
 from .dofs import gather_matrix, number_dofs
-from .link import gauss_positions, link_matrices
 from .link import gauss_points  # noqa: F401  SHIM
+from .link import gauss_positions, link_matrices
 from ..dynamics import axial_force
 from ..kinematics import solve_kinematics
 from ..options import ModelOptions
@@ -199,7 +199,7 @@ class FlexibleLinkage:
 
     def _axial_forces(self, theta, states):
         """
-        Axial forces at the Gauss points per link and piece: {link: {piece: (N, e, GAUSS_POINTS)}}.
+        Axial forces at the Gauss points: {link: {piece: array (N, e, GAUSS_POINTS)}}.
 
         From the rigid-body analysis, linear in (gravity, a, w^2): '1' = gravity at rest,
         'a' and 'w2' = unit crank acceleration and unit speed squared without gravity.

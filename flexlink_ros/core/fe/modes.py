@@ -76,7 +76,7 @@ def solve_frozen_modes(system, count=None, speed=0.0, accel=0.0, centrifugal=Fal
     Parameters
     ----------
     system : FrozenSystem
-        From :meth:`core.assembly.FlexibleLinkage.assemble`.
+        From :meth:`core.fe.linkage.FlexibleLinkage.assemble`.
     count : int or None
         Number of modes (all if None).
     speed, accel : float

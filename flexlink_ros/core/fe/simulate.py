@@ -66,7 +66,7 @@ class PeriodicResponse:
     displacement, velocity : ndarray, shape (P, n)
         U and U' (with the static correction in U when requested).
     outputs : ndarray, shape (P, 4)
-        Ground-frame deflections [m] in :data:`core.assembly.OUTPUT_NAMES` order.
+        Ground-frame deflections [m] in :data:`names.OUTPUT_NAMES` order.
     floquet_multipliers : ndarray, shape (2 n,) or (2 N,)
         Eigenvalues of the one-revolution map, largest modulus first.
     info : dict

@@ -4,7 +4,7 @@ Stiffness-proportional (Kelvin-Voigt) damping of the KED model, objective (issue
 The peer (:mod:`studies.peer_exudyn`) damps the material strain rates: axial force
 ``beta E A eps'`` and bending moment ``beta E I kappa'`` in every element, and ``c = beta k`` on
 the deflection rate of each bearing spring. This module gives the same damping to the linear
-KED model of :mod:`core.assembly`, where the elastic coordinates U are mixed: interior nodes in
+KED model of :mod:`core.fe.linkage`, where the elastic coordinates U are mixed: interior nodes in
 the moving link frames, joint (end) node translations in the ground frame.
 
 Derivation. For link L at rigid angle theta_L(t), rate w_L, the local element vector is
@@ -45,7 +45,7 @@ members (Exudyn's Cartesian spring-damper), ``beta K_b U'``; the input-shaft spr
 not under a change of observer: a bearing deflection Delta rotating at W dissipates
 ``beta k W^2 |Delta|^2`` (as in the peer).
 
-With ``M U'' + (w C1 + C_d) U' + (K + K_G + K_c) U = R`` (:class:`core.assembly.FrozenSystem`),
+With ``M U'' + (w C1 + C_d) U' + (K + K_G + K_c) U = R`` (:class:`core.fe.system.FrozenSystem`),
 beta damping adds C_beta to the damping and ``w Kb1`` (``Kb1 = beta sum g1_L T K_L D1^T``) to the
 stiffness; :func:`system_matrices` returns the four matrices in :meth:`FrozenSystem.evaluate`'s
 form. Modal damping is then usually off (zeta = 0): beta alone gives every frozen mode

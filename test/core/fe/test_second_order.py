@@ -1,5 +1,5 @@
 """
-Second-order outputs (flexlink_ros/core/fe/second_order.py, issue 14 item 1), independent checks:
+Second-order outputs (core/fe/second_order_*.py, issue 14 item 1), independent checks:
 
 * the FE bending integral against closed forms (half-sine, parabola on part of a link);
 * the loop closure against the exact intersection of two circles (third-order agreement);
@@ -15,10 +15,12 @@ import numpy as np
 import pytest
 
 from flexlink_ros.core.fe import linkage as assembly
-from flexlink_ros.core.reduction import model as reduced
-from flexlink_ros.core.fe import second_order as so
+from flexlink_ros.core.fe import second_order_full as so_full
+from flexlink_ros.core.fe import second_order_geometry as so_geometry
+from flexlink_ros.core.fe import second_order_reduced as so_reduced
 from flexlink_ros.core.kinematics import solve_kinematics
 from flexlink_ros.core.mechanism import load_mechanism
+from flexlink_ros.core.reduction import model as reduced
 from flexlink_ros.studies import peer_exudyn as peer
 
 needs_exudyn = pytest.mark.skipif(
@@ -49,10 +51,10 @@ def test_half_sine_converges_to_the_closed_form():
     exact = math.pi ** 2 * amp ** 2 / (4.0 * length)
     errors = []
     for elements in (2, 4, 8, 16):
-        g = so.unit_geometric_stiffness(length / elements, elements)
+        g = so_geometry.unit_geometric_stiffness(length / elements, elements)
         u = nodal(length, elements, lambda x: amp * np.sin(np.pi * x / length),
                   lambda x: amp * np.pi / length * np.cos(np.pi * x / length))
-        errors.append(abs(so.bending_integral(u, g) / exact - 1.0))
+        errors.append(abs(so_geometry.bending_integral(u, g) / exact - 1.0))
     assert errors[-1] < 1e-5    # measured: 1.5e-2, 1.0e-3, 6.6e-5, 4.1e-6
     orders = np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
     assert np.all(orders > 3.5), orders
@@ -61,18 +63,18 @@ def test_half_sine_converges_to_the_closed_form():
 def test_chord_shortening_removes_the_rigid_rotation():
     """A rigid rotation b and translation added: delta unchanged, S grows by (b L)^2 / (2 L)."""
     length, amp, elements, tilt = 0.24, 2e-3, 8, 3e-3
-    g = so.unit_geometric_stiffness(length / elements, elements)
+    g = so_geometry.unit_geometric_stiffness(length / elements, elements)
     bent = nodal(length, elements, lambda x: amp * np.sin(np.pi * x / length),
                  lambda x: amp * np.pi / length * np.cos(np.pi * x / length))
     moved = bent + nodal(length, elements, lambda x: 4e-4 + tilt * x,
                          lambda x: tilt + 0.0 * x)
-    delta = so.chord_shortening(bent, g, length)
-    assert so.chord_shortening(moved, g, length) == pytest.approx(delta, rel=1e-12)
-    assert so.bending_integral(moved, g) == pytest.approx(
+    delta = so_geometry.chord_shortening(bent, g, length)
+    assert so_geometry.chord_shortening(moved, g, length) == pytest.approx(delta, rel=1e-12)
+    assert so_geometry.bending_integral(moved, g) == pytest.approx(
         delta + (tilt * length) ** 2 / (2.0 * length), rel=1e-12)
     # a straight, rotated link is not shortened
     straight = nodal(length, elements, lambda x: tilt * x, lambda x: tilt + 0.0 * x)
-    assert abs(so.chord_shortening(straight, g, length)) < 1e-12 * delta
+    assert abs(so_geometry.chord_shortening(straight, g, length)) < 1e-12 * delta
 
 
 @pytest.mark.parametrize('elements', [3, 4, 5])
@@ -81,11 +83,11 @@ def test_partial_integral_is_exact_for_a_parabola(elements):
     length, amp = 0.262, 0.05
     u = nodal(length, elements, lambda x: amp * x ** 2, lambda x: 2.0 * amp * x)
     for upto in (0.5 * length, 0.3 * length, length):
-        g = so.unit_geometric_stiffness(length / elements, elements, upto)
-        assert so.bending_integral(u, g) == pytest.approx(2.0 * amp ** 2 * upto ** 3 / 3.0,
+        g = so_geometry.unit_geometric_stiffness(length / elements, elements, upto)
+        assert so_geometry.bending_integral(u, g) == pytest.approx(2.0 * amp ** 2 * upto ** 3 / 3.0,
                                                           rel=1e-12)
     with pytest.raises(ValueError):
-        so.unit_geometric_stiffness(length / elements, elements, 1.1 * length)
+        so_geometry.unit_geometric_stiffness(length / elements, elements, 1.1 * length)
 
 
 # -- loop closure against exact geometry ----------------------------------------------------
@@ -110,7 +112,7 @@ def loop_errors(mech, theta, scale, with_rotation=True):
     a1 = scale * lk * complex(*rng.standard_normal(2))          # linear motion of A
     s_c, s_l = scale * lc * rng.standard_normal(2)               # linear stretches
     # b1 from the linearised constraints e_c.(b1 - a1) = s_c, e_l.b1 = s_l
-    b1 = complex(so.loop_closure_second_order(
+    b1 = complex(so_geometry.loop_closure_second_order(
         np.array([ec]), np.array([el]), np.array([-(s_c + (np.conj(ec) * a1).real)]),
         np.array([-s_l]))[0])
     d_c, d_l, d_k = scale ** 2 * np.array([lc, ll, lk]) * (1.0 + rng.random(3))
@@ -118,7 +120,7 @@ def loop_errors(mech, theta, scale, with_rotation=True):
     exact = circle_intersection(a0 + a1 + a2, lc + s_c - d_c, o4, ll + s_l - d_l, b0)
     rot_c = ((np.conj(1j * ec) * (b1 - a1)).real) ** 2 / (2.0 * lc) if with_rotation else 0.0
     rot_l = ((np.conj(1j * el) * b1).real) ** 2 / (2.0 * ll) if with_rotation else 0.0
-    d_b = so.loop_closure_second_order(np.array([ec]), np.array([el]),
+    d_b = so_geometry.loop_closure_second_order(np.array([ec]), np.array([el]),
                                        np.array([d_c + rot_c]), np.array([d_l + rot_l]),
                                        np.array([a2]))[0]
     return abs(exact - (b0 + b1 + d_b)), abs(exact - (b0 + b1))
@@ -142,7 +144,7 @@ def test_loop_closure_is_third_order_against_the_circles(mech, theta):
 
 def test_output_coefficients_match_the_loop_closure(mech):
     theta = np.linspace(0.0, 2.0 * np.pi, 7)
-    kappa = so.output_coefficients(mech, theta)
+    kappa = so_geometry.output_coefficients(mech, theta)
     angle = solve_kinematics(mech, theta).angle
     ec, el = np.exp(1j * angle[1]), np.exp(1j * angle[2])
     tip = kappa[:, 0, :] + 1j * kappa[:, 1, :]
@@ -168,17 +170,17 @@ def test_quadratic_form_equals_the_full_order_on_v_q(mech, options):
                                        options)
     theta = np.linspace(0.0, 2.0 * np.pi, 9, endpoint=False) + 0.2
     q = np.random.default_rng(3).standard_normal((theta.size, basis.shape[1])) * 1e-4
-    full = so.second_order_outputs(linkage, q @ basis.T, theta)['outputs']
-    tables = so.quadratic_tables(linkage, basis, theta)
+    full = so_full.second_order_outputs(linkage, q @ basis.T, theta)['outputs']
+    tables = so_reduced.quadratic_tables(linkage, basis, theta)
     scale = np.abs(full).max()
     assert scale > 0.0
-    np.testing.assert_allclose(so.reduced_second_order(tables, q), full, rtol=0,
+    np.testing.assert_allclose(so_reduced.reduced_second_order(tables, q), full, rtol=0,
                                atol=1e-13 * scale)
     assert np.allclose(tables['Q'], np.swapaxes(tables['Q'], -1, -2))
-    factored = so.factored_forms(linkage, basis)
-    np.testing.assert_allclose(so.factored_second_order(factored, mech, theta, q), full,
+    factored = so_reduced.factored_forms(linkage, basis)
+    np.testing.assert_allclose(so_reduced.factored_second_order(factored, mech, theta, q), full,
                                rtol=0, atol=1e-13 * scale)
-    cost = so.step_cost(factored, basis.shape[1])
+    cost = so_reduced.step_cost(factored, basis.shape[1])
     assert cost['factored'] < cost['tables']
 
 
@@ -200,7 +202,7 @@ def test_static_sag_second_order_matches_the_peer(mech, theta):
         system = linkage.assemble(angle)
         u = np.linalg.solve(system.frozen_stiffness(0.0)[0], system.load_at(0.0)[0])[None]
         linear = linkage.output_operator(angle)[0] @ u[0]
-        second = so.second_order_outputs(linkage, u, angle)['outputs'][0]
+        second = so_full.second_order_outputs(linkage, u, angle)['outputs'][0]
         rest = np.array([exact[k] for k in peer.OUTPUT_KEYS]) - linear
         tip, mid = complex(*(rest[:2] - second[:2])), complex(*(rest[2:] - second[2:]))
         misfit[factor] = (abs(tip) / abs(complex(*second[:2])),
@@ -217,7 +219,7 @@ def test_269rpm_linear_plus_second_order_matches_the_peer(mech):
     response = peer.peer_response(mech, 269.0, elements_per_link=ELEMENTS, gravity=False)
     linkage = peer.linear_model(mech, elements_per_link=ELEMENTS, gravity=False)
     linear = periodic_response(linkage, 269.0 * math.pi / 30.0, method='full', points=360)
-    corrected = so.corrected_response(linkage, linear)
+    corrected = so_full.corrected_response(linkage, linear)
     assert np.allclose(corrected['total'], corrected['linear'] + corrected['second'])
     before = peer.compare(response, dict(crank_angle=linear.crank_angle,
                                          **dict(zip(peer.OUTPUT_KEYS, linear.outputs.T))))
@@ -252,7 +254,7 @@ def test_reduced_model_second_order_follows_the_full_order(mech):
         mech, 269.0, True, ELEMENTS, points=120, grid=64)
     assert size == 6
     linkage = peer.linear_model(mech, elements_per_link=ELEMENTS, gravity=True)
-    full = so.corrected_response(
+    full = so_full.corrected_response(
         linkage, periodic_response(linkage, 269.0 * math.pi / 30.0, method='full',
                                    points=120))
     assert np.allclose(full['crank_angle'], angles)
