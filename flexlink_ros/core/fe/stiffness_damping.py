@@ -54,7 +54,9 @@ form. Modal damping is then usually off (zeta = 0): beta alone gives every froze
 
 import numpy as np
 
-from .linkage import FlexibleLinkage  # noqa: F401  (documented type of ``model``)
+from .beam import beam_stiffness
+from .modes import modal_damping
+from .simulate import frozen_eigen
 
 # +90 degree rotation (I_s of Eq. 21).
 _S = np.array([[0.0, -1.0], [1.0, 0.0]])
@@ -199,8 +201,7 @@ def element_resultants(model, link, local_rate, beta):
 
 
 def _element_stiffness(model, link):
-    """The (6, 6) element stiffness A.3 of a link's elements (all equal)."""
-    from .beam import beam_stiffness
+    """Return the (6, 6) element stiffness A.3 of a link's elements (all equal)."""
     spec = model.mechanism.links[link]
     return beam_stiffness(model.mechanism.youngs_modulus, spec.area, spec.second_moment,
                           model.link_matrices[link].element_length)
@@ -258,8 +259,6 @@ def system_matrices(model, crank_angle, speed, beta, accel=0.0, zeta=0.0):
     c_beta, d_beta = stiffness_damping_terms(model, theta, speed, beta)
     damping = gyro + c_beta
     if zeta:
-        from .modes import modal_damping
-        from .simulate import frozen_eigen
         values, shapes = frozen_eigen(system, speed, accel)
         damping = damping + modal_damping(mass, values, shapes, zeta)
     return mass, damping, stiffness + d_beta, load
