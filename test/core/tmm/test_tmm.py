@@ -5,11 +5,11 @@ import math
 import numpy as np
 import pytest
 
-from flexlink_ros.core.tmm import transfer as tmm
+from flexlink_ros.core.tmm import beams, eigen, exact, matrices, roots, solve
 from flexlink_ros.errors import FlexlinkError
 
-BEAM = tmm.UniformBeam.kim_moon()
-BCS = tmm.BOUNDARY_CONDITIONS
+BEAM = beams.UniformBeam.kim_moon()
+BCS = beams.BOUNDARY_CONDITIONS
 
 # Table 5 of Kim & Moon [rad/s], as corrected in papers.md: the cantilever's exact value lost a
 # digit in print, the fixed-fixed iterate is taken to convergence, and the supported iterates
@@ -42,7 +42,7 @@ def test_kim_moon_beam_in_si():
 
 @pytest.mark.parametrize('bc', BCS)
 def test_exact_frequencies_reproduce_table5(bc):
-    precise = tmm.exact_frequencies(BEAM, bc, 1)[0]
+    precise = exact.exact_frequencies(BEAM, bc, 1)[0]
     quoted = PRINTED_BETA_L[bc] ** 2 * _scale()
     # the 7-digit beta L of the tables give Table 5 to 2e-7; the precise roots give three
     # of the four values to the printed digits and fixed-fixed to 7e-8
@@ -52,36 +52,36 @@ def test_exact_frequencies_reproduce_table5(bc):
 
 def test_characteristic_roots_satisfy_their_equations():
     for bc in BCS:
-        beta_l = tmm.exact_beta_l(bc, 5)
+        beta_l = exact.exact_beta_l(bc, 5)
         assert np.all(np.diff(beta_l) > 2.5)
-    ff = tmm.exact_beta_l('fixed-fixed', 5)
+    ff = exact.exact_beta_l('fixed-fixed', 5)
     np.testing.assert_allclose(np.cos(ff) * np.cosh(ff), 1.0, atol=1e-6)
-    cf = tmm.exact_beta_l('cantilever', 5)
+    cf = exact.exact_beta_l('cantilever', 5)
     np.testing.assert_allclose(np.cos(cf) * np.cosh(cf), -1.0, atol=1e-6)
-    fs = tmm.exact_beta_l('fixed-supported', 5)
+    fs = exact.exact_beta_l('fixed-supported', 5)
     np.testing.assert_allclose(np.tan(fs), np.tanh(fs), atol=1e-9)
-    np.testing.assert_allclose(tmm.exact_beta_l('supported', 5), np.pi * np.arange(1, 6))
+    np.testing.assert_allclose(exact.exact_beta_l('supported', 5), np.pi * np.arange(1, 6))
 
 
-@pytest.mark.parametrize('search', tmm.SEARCHES)
+@pytest.mark.parametrize('search', roots.SEARCHES)
 @pytest.mark.parametrize('bc', BCS)
 def test_method3_six_segments_reproduce_table5(bc, search):
-    result = tmm.tmm_frequencies(BEAM, bc, 6, method=3, modes=1, search=search, step=10.0)
+    result = solve.tmm_frequencies(BEAM, bc, 6, method=3, modes=1, search=search, step=10.0)
     assert round(result.frequencies_rad_s[0], 6) == pytest.approx(TABLE5_TMM3_6[bc], abs=1e-9)
 
 
 @pytest.mark.parametrize('bc', BCS)
 def test_determinant_matches_table4(bc):
-    model = tmm.lump_masses(BEAM, 6, 3, bc)
-    factor = tmm.determinant_to_kgf_mm(bc)
+    model = beams.lump_masses(BEAM, 6, 3, bc)
+    factor = matrices.determinant_to_kgf_mm(bc)
     for omega, printed in TABLE4[bc]:
-        value = tmm.frequency_determinant(model, bc, omega) * factor
+        value = matrices.frequency_determinant(model, bc, omega) * factor
         assert value == pytest.approx(printed, rel=6e-3)
 
 
 def test_first_false_position_iterate_is_the_printed_fixed_fixed_value():
-    model = tmm.lump_masses(BEAM, 6, 3, 'fixed-fixed')
-    root = tmm.refine_root(model, 'fixed-fixed', (1190.0, 1200.0), 'false-position')
+    model = beams.lump_masses(BEAM, 6, 3, 'fixed-fixed')
+    root = roots.refine_root(model, 'fixed-fixed', (1190.0, 1200.0), 'false-position')
     # Table 5 prints 1198.96312 after one iteration: the paper's |D| <= 1e-6 accepted it
     assert root.history[0] == pytest.approx(1198.96312, abs=1e-3)
     assert root.iterations_paper_criterion == 1
@@ -89,18 +89,18 @@ def test_first_false_position_iterate_is_the_printed_fixed_fixed_value():
 
 
 def test_transfer_by_entries_equals_matrix_product_and_batch():
-    model = tmm.lump_masses(BEAM, 5, 3, 'cantilever')
+    model = beams.lump_masses(BEAM, 5, 3, 'cantilever')
     omega = 700.0
     state = np.eye(4)[:, [2, 3]]
     x = 0.0
     for end, mass in zip(model.segment_ends, model.point_masses):
-        state = tmm.point_matrix(mass, omega) @ tmm.field_matrix(end - x,
+        state = matrices.point_matrix(mass, omega) @ matrices.field_matrix(end - x,
                                                                model.flexural_rigidity) @ state
         x = end
     expected = np.linalg.det(state[[2, 3]])
-    assert tmm.frequency_determinant(model, 'cantilever', omega) == pytest.approx(expected,
+    assert matrices.frequency_determinant(model, 'cantilever', omega) == pytest.approx(expected,
                                                                                  rel=1e-12)
-    batch = tmm.frequency_determinants(model, 'cantilever', np.array([0.0, omega, 2 * omega]))
+    batch = matrices.frequency_determinants(model, 'cantilever', np.array([0.0, omega, 2 * omega]))
     assert batch[1] == pytest.approx(expected, rel=1e-12)
     assert batch[0] == pytest.approx(1.0)  # static cantilever: M_n, V_n equal M_0, V_0
 
@@ -108,7 +108,7 @@ def test_transfer_by_entries_equals_matrix_product_and_batch():
 def test_field_matrix_is_the_static_beam_solution():
     # columns of the field matrix = deflection, slope, moment, shear of u'''' = 0
     ei, l = 2.5, 0.3
-    field = tmm.field_matrix(l, ei)
+    field = matrices.field_matrix(l, ei)
     x = np.linspace(0, l, 4)
     for moment0, shear0 in ((1.0, 0.0), (0.0, 1.0)):
         u = moment0 * x ** 2 / (2 * ei) + shear0 * x ** 3 / (6 * ei)
@@ -119,23 +119,23 @@ def test_field_matrix_is_the_static_beam_solution():
 
 @pytest.mark.parametrize('bc', BCS)
 def test_newton_derivative_matches_finite_difference(bc):
-    model = tmm.lump_masses(BEAM, 7, 1, bc)
+    model = beams.lump_masses(BEAM, 7, 1, bc)
     for omega in (150.0, 900.0, 2500.0):
-        value, slope = tmm.frequency_determinant(model, bc, omega, derivative=True)
+        value, slope = matrices.frequency_determinant(model, bc, omega, derivative=True)
         h = 1e-4 * omega
-        fd = (tmm.frequency_determinant(model, bc, omega + h)
-              - tmm.frequency_determinant(model, bc, omega - h)) / (2 * h)
-        assert value == tmm.frequency_determinant(model, bc, omega)
+        fd = (matrices.frequency_determinant(model, bc, omega + h)
+              - matrices.frequency_determinant(model, bc, omega - h)) / (2 * h)
+        assert value == matrices.frequency_determinant(model, bc, omega)
         assert slope == pytest.approx(fd, rel=1e-6)
 
 
 @pytest.mark.parametrize('bc', BCS)
 def test_searches_agree_and_equal_the_stiffness_eigenproblem(bc):
     for method, segments in ((1, 9), (2, 10), (3, 12)):
-        model = tmm.lump_masses(BEAM, segments, method, bc)
-        reference = tmm.lumped_frequencies(model, bc)[:4]
-        results = [tmm.tmm_frequencies(BEAM, bc, segments, method, 4, search, step=25.0)
-                   for search in tmm.SEARCHES]
+        model = beams.lump_masses(BEAM, segments, method, bc)
+        reference = eigen.lumped_frequencies(model, bc)[:4]
+        results = [solve.tmm_frequencies(BEAM, bc, segments, method, 4, search, step=25.0)
+                   for search in roots.SEARCHES]
         for result in results:
             np.testing.assert_allclose(result.frequencies_rad_s,
                                        results[0].frequencies_rad_s, rtol=1e-9)
@@ -145,8 +145,8 @@ def test_searches_agree_and_equal_the_stiffness_eigenproblem(bc):
 @pytest.mark.parametrize('bc', BCS)
 def test_bisection_needs_more_iterations(bc):
     counts = {}
-    for search in tmm.SEARCHES:
-        result = tmm.tmm_frequencies(BEAM, bc, 6, 3, 2, search, step=10.0)
+    for search in roots.SEARCHES:
+        result = solve.tmm_frequencies(BEAM, bc, 6, 3, 2, search, step=10.0)
         counts[search] = np.array(result.iterations)
         paper = [root.iterations_paper_criterion for root in result.roots]
         counts[search + '/paper'] = np.array(paper)
@@ -158,8 +158,8 @@ def test_bisection_needs_more_iterations(bc):
 
 def test_paper_criterion_counts_reproduce_table2_fixed_row():
     # Table 2, fixed-fixed, d_omega = 10: HIS 5, FPM 1, NRM 1 iterations to |D| <= 1e-6
-    counts = [tmm.tmm_frequencies(BEAM, 'fixed-fixed', 6, 3, 1, search).roots[0]
-              .iterations_paper_criterion for search in tmm.SEARCHES]
+    counts = [solve.tmm_frequencies(BEAM, 'fixed-fixed', 6, 3, 1, search).roots[0]
+              .iterations_paper_criterion for search in roots.SEARCHES]
     assert counts == [5, 1, 1]
 
 
@@ -172,16 +172,16 @@ CANTILEVER_RATES = {'tmm1': 2, 'tmm2': 1, 'tmm3': 3, 'fe': 4}
 
 def _frequencies(bc, segments, method):
     if method == 'fe':
-        return tmm.fe_frequencies(BEAM, bc, segments, 3)
-    return tmm.tmm_frequencies(BEAM, bc, segments, int(method[-1]), 3, 'newton',
+        return eigen.fe_frequencies(BEAM, bc, segments, 3)
+    return solve.tmm_frequencies(BEAM, bc, segments, int(method[-1]), 3, 'newton',
                                step=50.0).frequencies_rad_s
 
 
 @pytest.mark.parametrize('method', list(RATES))
 @pytest.mark.parametrize('bc', BCS)
 def test_convergence_to_euler_bernoulli(bc, method):
-    exact = tmm.exact_frequencies(BEAM, bc, 3)
-    coarse, fine = (np.abs(_frequencies(bc, n, method) / exact - 1) for n in (16, 32))
+    continuous = exact.exact_frequencies(BEAM, bc, 3)
+    coarse, fine = (np.abs(_frequencies(bc, n, method) / continuous - 1) for n in (16, 32))
     observed = np.log2(coarse / fine)
     expected = (CANTILEVER_RATES if bc == 'cantilever' else RATES)[method]
     np.testing.assert_allclose(observed, expected, atol=0.3)
@@ -190,20 +190,20 @@ def test_convergence_to_euler_bernoulli(bc, method):
 
 @pytest.mark.parametrize('bc', BCS)
 def test_consistent_mass_fe_bounds_from_above(bc):
-    exact = tmm.exact_frequencies(BEAM, bc, 3)
+    continuous = exact.exact_frequencies(BEAM, bc, 3)
     for elements in (3, 5, 11):
-        assert np.all(tmm.fe_frequencies(BEAM, bc, elements, 3) > exact)
+        assert np.all(eigen.fe_frequencies(BEAM, bc, elements, 3) > continuous)
 
 
 @pytest.mark.parametrize('bc', BCS)
 def test_lumping_conserves_mass_and_counts_modes(bc):
     n = 6
     for method, expected_modes in ((1, n), (2, n - 1), (3, n - (0 if bc == 'cantilever' else 1))):
-        model = tmm.lump_masses(BEAM, n, method, bc)
+        model = beams.lump_masses(BEAM, n, method, bc)
         assert model.masses.sum() == pytest.approx(BEAM.mass)
-        assert tmm.available_modes(model, bc) == expected_modes
-        assert tmm.lumped_frequencies(model, bc).size == expected_modes
-    tip = tmm.lump_masses(BEAM, n, 3, bc).positions[-1]
+        assert roots.available_modes(model, bc) == expected_modes
+        assert eigen.lumped_frequencies(model, bc).size == expected_modes
+    tip = beams.lump_masses(BEAM, n, 3, bc).positions[-1]
     assert tip == pytest.approx(BEAM.length * (1 - 1 / (6 * n)) if bc == 'cantilever'
                                 else BEAM.length)
 
@@ -211,24 +211,24 @@ def test_lumping_conserves_mass_and_counts_modes(bc):
 def test_skipped_root_is_reported():
     # roots 1199 and 3292 rad/s share the first step of 5000 rad/s and cancel
     with pytest.raises(FlexlinkError, match='smaller step'):
-        tmm.tmm_frequencies(BEAM, 'fixed-fixed', 6, 3, 1, step=5000.0)
+        solve.tmm_frequencies(BEAM, 'fixed-fixed', 6, 3, 1, step=5000.0)
 
 
 @pytest.mark.parametrize('call, argument', [
-    (lambda: tmm.tmm_frequencies(BEAM, 'clamped', 6), '`bc`'),
-    (lambda: tmm.tmm_frequencies(BEAM, 'cantilever', 0), '`segments`'),
-    (lambda: tmm.tmm_frequencies(BEAM, 'cantilever', 2.5), '`segments`'),
-    (lambda: tmm.tmm_frequencies(BEAM, 'cantilever', 1, method=2), '`segments`'),
-    (lambda: tmm.tmm_frequencies(BEAM, 'cantilever', 6, method=4), '`method`'),
-    (lambda: tmm.tmm_frequencies(BEAM, 'cantilever', 6, modes=7), '`modes`'),
-    (lambda: tmm.tmm_frequencies(BEAM, 'cantilever', 6, modes=0), '`modes`'),
-    (lambda: tmm.tmm_frequencies(BEAM, 'cantilever', 6, search='secant'), '`search`'),
-    (lambda: tmm.tmm_frequencies(BEAM, 'cantilever', 6, step=0.0), '`step`'),
-    (lambda: tmm.tmm_frequencies(BEAM, 'cantilever', 6, step=math.nan), '`step`'),
-    (lambda: tmm.fe_frequencies(BEAM, 'supported', 0), '`elements`'),
-    (lambda: tmm.fe_frequencies(BEAM, 'fixed-fixed', 1, modes=3), '`modes`'),
-    (lambda: tmm.UniformBeam(E=-1.0, I=1.0, mass_per_length=1.0, length=1.0), '`E`'),
-    (lambda: tmm.refine_root(tmm.lump_masses(BEAM, 6, 3, 'supported'), 'supported',
+    (lambda: solve.tmm_frequencies(BEAM, 'clamped', 6), '`bc`'),
+    (lambda: solve.tmm_frequencies(BEAM, 'cantilever', 0), '`segments`'),
+    (lambda: solve.tmm_frequencies(BEAM, 'cantilever', 2.5), '`segments`'),
+    (lambda: solve.tmm_frequencies(BEAM, 'cantilever', 1, method=2), '`segments`'),
+    (lambda: solve.tmm_frequencies(BEAM, 'cantilever', 6, method=4), '`method`'),
+    (lambda: solve.tmm_frequencies(BEAM, 'cantilever', 6, modes=7), '`modes`'),
+    (lambda: solve.tmm_frequencies(BEAM, 'cantilever', 6, modes=0), '`modes`'),
+    (lambda: solve.tmm_frequencies(BEAM, 'cantilever', 6, search='secant'), '`search`'),
+    (lambda: solve.tmm_frequencies(BEAM, 'cantilever', 6, step=0.0), '`step`'),
+    (lambda: solve.tmm_frequencies(BEAM, 'cantilever', 6, step=math.nan), '`step`'),
+    (lambda: eigen.fe_frequencies(BEAM, 'supported', 0), '`elements`'),
+    (lambda: eigen.fe_frequencies(BEAM, 'fixed-fixed', 1, modes=3), '`modes`'),
+    (lambda: beams.UniformBeam(E=-1.0, I=1.0, mass_per_length=1.0, length=1.0), '`E`'),
+    (lambda: roots.refine_root(beams.lump_masses(BEAM, 6, 3, 'supported'), 'supported',
                              (100.0, 200.0)), '`bracket`'),
 ])
 def test_bad_input_names_the_argument(call, argument):
@@ -239,13 +239,13 @@ def test_bad_input_names_the_argument(call, argument):
 @pytest.mark.parametrize('bc', BCS)
 def test_sparse_and_dense_eigen_paths_agree(bc, monkeypatch):
     # 1e-8: stiffness-based solves of 80 DOFs sit near their round-off floor, eps (L/h)^4
-    model = tmm.lump_masses(BEAM, 40, 3, bc)
-    sparse_fe = tmm.fe_frequencies(BEAM, bc, 40, 4)
-    sparse_lumped = tmm.lumped_frequencies(model, bc, 4)
-    monkeypatch.setattr(tmm, 'DENSE_EIGEN_LIMIT', 10_000)
-    np.testing.assert_allclose(sparse_fe, tmm.fe_frequencies(BEAM, bc, 40, 4), rtol=1e-8)
-    np.testing.assert_allclose(sparse_lumped, tmm.lumped_frequencies(model, bc, 4), rtol=1e-8)
-    np.testing.assert_allclose(sparse_lumped, tmm.tmm_frequencies(BEAM, bc, 40, 3, 4, 'newton',
+    model = beams.lump_masses(BEAM, 40, 3, bc)
+    sparse_fe = eigen.fe_frequencies(BEAM, bc, 40, 4)
+    sparse_lumped = eigen.lumped_frequencies(model, bc, 4)
+    monkeypatch.setattr(eigen, 'DENSE_EIGEN_LIMIT', 10_000)
+    np.testing.assert_allclose(sparse_fe, eigen.fe_frequencies(BEAM, bc, 40, 4), rtol=1e-8)
+    np.testing.assert_allclose(sparse_lumped, eigen.lumped_frequencies(model, bc, 4), rtol=1e-8)
+    np.testing.assert_allclose(sparse_lumped, solve.tmm_frequencies(BEAM, bc, 40, 3, 4, 'newton',
                                                                   50.0).frequencies_rad_s,
                                rtol=1e-8)
 
@@ -254,6 +254,6 @@ def test_supported_lumping_1_and_3_coincide():
     # observed: with both ends simply supported, masses m/n at segment centres (method 1)
     # and at division points plus inert end halves (method 3) share every lower frequency
     for n in (3, 6, 11):
-        centres = tmm.lumped_frequencies(tmm.lump_masses(BEAM, n, 1, 'supported'), 'supported')
-        nodes = tmm.lumped_frequencies(tmm.lump_masses(BEAM, n, 3, 'supported'), 'supported')
+        centres = eigen.lumped_frequencies(beams.lump_masses(BEAM, n, 1, 'supported'), 'supported')
+        nodes = eigen.lumped_frequencies(beams.lump_masses(BEAM, n, 3, 'supported'), 'supported')
         np.testing.assert_allclose(centres[:n - 1], nodes, rtol=1e-10)
