@@ -53,7 +53,7 @@ class DofMap:
 
     @property
     def size(self):
-        """Number of system DOFs n."""
+        """Return the number of system DOFs n."""
         return len(self.names)
 
     def index(self, name):
@@ -83,7 +83,7 @@ class _Numbering:
         return len(self.names) - 1
 
     def translations(self, joint, members, mechanism, flexible, grounded):
-        """Number the (X, Y) pair of every member at ``joint``; None where it is fixed."""
+        """Assign the (X, Y) pair of every member at ``joint``; None where it is fixed."""
         mass = mechanism.joint_masses.get(joint, 0.0)
         if not flexible:
             shared = None if grounded else (self.new(f'{joint}.X'), self.new(f'{joint}.Y'))
@@ -103,7 +103,7 @@ class _Numbering:
         return pairs
 
     def joint(self, joint, links, mechanism, options):
-        """Number the end-node DOFs of every modelled member at ``joint``."""
+        """Assign the end-node DOFs of every modelled member at ``joint``."""
         members = [m for m in JOINT_MEMBERS[joint] if m in links]
         grounded = -1 in JOINT_MEMBERS[joint] or (joint == 'A' and options.rigid_crank)
         flexible = options.bearings == 'flexible' and joint in mechanism.bearing_joints
@@ -118,7 +118,7 @@ class _Numbering:
                 self.gather[m][3 * node + 2] = self.new(f'{joint}.{LINK_NAMES[m]}.phi')
 
     def interior(self, link):
-        """Number the moving-frame (u, v, phi) DOFs of a link's interior nodes."""
+        """Assign the moving-frame (u, v, phi) DOFs of a link's interior nodes."""
         for node in range(1, self.elements):
             for c, label in enumerate(NODE_LABELS):
                 self.gather[link][3 * node + c] = self.new(f'{LINK_NAMES[link]}.n{node}.{label}')
@@ -160,7 +160,7 @@ def bearing_matrix(size, springs, stiffness, shaft=None):
 
 def number_dofs(mechanism, options, links):
     """
-    Number the system DOFs: joint end nodes first (in joint order), then interior nodes.
+    Assign the system DOFs: joint end nodes first (in joint order), then interior nodes.
 
     Parameters
     ----------
@@ -199,6 +199,7 @@ def gather_matrix(dofs, link, link_angle, order=0):
     Parameters
     ----------
     dofs : DofMap
+        The DOF layout (:func:`number_dofs`).
     link : int
         A modelled link.
     link_angle : ndarray, shape (N,)

@@ -221,19 +221,19 @@ class FlexibleLinkage:
     # -- outputs ----------------------------------------------------------------------------
 
     def point_operator(self, link, x, crank_angle):
-        """Deflection of the point x of a link per DOF, (N, 2, n): :func:`outputs.point_operator`."""
+        """Return the deflection of point x of a link per DOF: :func:`outputs.point_operator`."""
         return outputs.point_operator(self, link, x, crank_angle)
 
     def output_operator(self, crank_angle):
-        """Published output deflections per DOF, (N, 4, n): :func:`outputs.output_operator`."""
+        """Return the output deflections per DOF, (N, 4, n): :func:`outputs.output_operator`."""
         return outputs.output_operator(self, crank_angle)
 
     def shape_operator(self, crank_angle, points_per_element=8):
-        """Positions and deflection operators along every link: :func:`outputs.shape_operator`."""
+        """Return positions and deflection operators of links: :func:`outputs.shape_operator`."""
         return outputs.shape_operator(self, crank_angle, points_per_element)
 
     def element_axial_forces(self, displacement, crank_angle):
-        """Element axial forces of system vectors: :func:`outputs.element_axial_forces`."""
+        """Return element axial forces of system vectors: :func:`outputs.element_axial_forces`."""
         return outputs.element_axial_forces(self, displacement, crank_angle)
 
 

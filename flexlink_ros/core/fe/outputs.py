@@ -21,6 +21,7 @@ def points_operator(linkage, link, xs, link_angle):
     Parameters
     ----------
     linkage : FlexibleLinkage
+        The model (its link matrices and gathers).
     link : int
         A modelled link.
     xs : sequence of float
@@ -57,6 +58,7 @@ def point_operator(linkage, link, x, crank_angle):
     Parameters
     ----------
     linkage : FlexibleLinkage
+        The model (its mechanism, links and gathers).
     link : int
         Link index (0 crank, 1 coupler, 2 lever).
     x : float
@@ -84,6 +86,7 @@ def output_operator(linkage, crank_angle):
     Parameters
     ----------
     linkage : FlexibleLinkage
+        The model.
     crank_angle : ndarray, shape (N,)
         Crank angles [rad].
 
@@ -106,6 +109,7 @@ def shape_operator(linkage, crank_angle, points_per_element=8):
     Parameters
     ----------
     linkage : FlexibleLinkage
+        The model.
     crank_angle : ndarray, shape (N,)
         Crank angles [rad].
     points_per_element : int
@@ -141,6 +145,7 @@ def element_axial_forces(linkage, displacement, crank_angle):
     Parameters
     ----------
     linkage : FlexibleLinkage
+        The model.
     displacement : ndarray, shape (N, n)
         System vectors U.
     crank_angle : ndarray, shape (N,)

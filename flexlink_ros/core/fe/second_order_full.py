@@ -64,9 +64,11 @@ def link_local(linkage, displacement, crank_angle):
     Parameters
     ----------
     linkage : FlexibleLinkage
+        The FE model (:class:`core.fe.linkage.FlexibleLinkage`).
     displacement : ndarray, shape (N, n)
         System vectors U (e.g. ``PeriodicResponse.displacement``).
     crank_angle : ndarray, shape (N,)
+        Crank angles [rad].
 
     Returns
     -------
@@ -110,10 +112,14 @@ def second_order_outputs(linkage, displacement, crank_angle, forms=None):
     Parameters
     ----------
     linkage : FlexibleLinkage
+        The FE model (:class:`core.fe.linkage.FlexibleLinkage`).
     displacement : ndarray, shape (N, n)
         Linear system vectors U at the crank angles (static sag included when the model has
         gravity: the periodic response of a model with gravity carries it).
     crank_angle : ndarray, shape (N,)
+        Crank angles [rad].
+    forms : LinkForms or None
+        G matrices from :func:`link_forms` (built when None).
 
     Returns
     -------

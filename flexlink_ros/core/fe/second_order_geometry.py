@@ -97,8 +97,10 @@ def unit_geometric_stiffness(element_length, elements, upto=None):
 
 def bending_integral(local, gmatrix):
     """
-    Eq. (1): S = 1/2 int v'^2 dx = 1/2 u^T G u, the axial shortening of a link's end relative to
-    its first end in the nominal link frame (chord rotation included).
+    Eq. (1): S = 1/2 int v'^2 dx = 1/2 u^T G u, the axial shortening of a link's end.
+
+    S is measured relative to the link's first end in the nominal link frame (chord rotation
+    included).
 
     Parameters
     ----------
@@ -118,8 +120,10 @@ def bending_integral(local, gmatrix):
 
 def chord_shortening(local, gmatrix, length):
     """
-    Eq. (2): delta = 1/2 int (v' - c)^2 dx = 1/2 u^T G u - (v(L) - v(0))^2 / (2 L), c = (v(L) -
-    v(0)) / L: the chord shortening of the bent link, its rigid rotation removed.
+    Eq. (2): the chord shortening delta of the bent link, its rigid rotation removed.
+
+    ``delta = 1/2 int (v' - c)^2 dx = 1/2 u^T G u - (v(L) - v(0))^2 / (2 L)`` with the chord
+    rotation ``c = (v(L) - v(0)) / L``.
 
     Parameters
     ----------

@@ -2,9 +2,10 @@
 Second-order outputs on a reduced basis U = V q: quadratic forms in q (issue 14).
 
 Reduced basis (the estimator). With a constant basis V (U = V q, :mod:`core.reduction.model`)
-only the end-node translation rows of T^T rotate with the link angle theta_L, ``T^T = T0 + cos T_c +
-sin T_s``, so ``S = q^T A(theta_L) q`` with ``A = A0 + cos A1 + sin A2 + cos 2 A3 + sin 2 A4``
-(five constant r x r matrices per link, :func:`harmonic_matrices`), and every output is
+only the end-node translation rows of T^T rotate with the link angle theta_L,
+``T^T = T0 + cos T_c + sin T_s``, so ``S = q^T A(theta_L) q`` with
+``A = A0 + cos A1 + sin A2 + cos 2 A3 + sin 2 A4`` (five constant r x r matrices per link,
+:func:`harmonic_matrices`), and every output is
 ``sum_j kappa_j(theta) S_j`` with the scalar coefficients of (3)-(4)
 (:func:`output_coefficients`). The cheapest streaming form is factored: the link's transverse
 """
@@ -40,7 +41,9 @@ def gather_harmonics(linkage, link):
 
 def harmonic_matrices(linkage, basis, link, gmatrix):
     """
-    Eq. (1) on a constant basis: S = q^T A(theta_L) q with five constant r x r matrices,
+    Eq. (1) on a constant basis: S = q^T A(theta_L) q with five constant r x r matrices.
+
+    ::
 
         A = A0 + cos(th) A1 + sin(th) A2 + cos(2 th) A3 + sin(2 th) A4,   th = theta_L,
 
@@ -50,9 +53,11 @@ def harmonic_matrices(linkage, basis, link, gmatrix):
     Parameters
     ----------
     linkage : FlexibleLinkage
+        The FE model (:class:`core.fe.linkage.FlexibleLinkage`).
     basis : ndarray, shape (n, r)
         V (U = V q).
     link : int
+        Link index (0 crank, 1 coupler, 2 lever).
     gmatrix : ndarray
         G of the link or of part of it (:func:`unit_geometric_stiffness`).
 
@@ -107,8 +112,11 @@ def quadratic_tables(linkage, basis, crank_angle, forms=None):
     linkage : FlexibleLinkage
         The full model the basis belongs to (core.reduction.model.fe_mechanism, the same options).
     basis : ndarray, shape (n, r)
+        Reduced basis V (U = V q).
     crank_angle : ndarray, shape (N,)
         E.g. the reduced model's grid, 2 pi k / N.
+    forms : LinkForms or None
+        G matrices from :func:`link_forms` (built when None).
 
     Returns
     -------
@@ -132,6 +140,7 @@ def reduced_second_order(tables, q):
     tables : dict
         From :func:`quadratic_tables` at N angles.
     q : ndarray, shape (N, r)
+        Reduced states, one row per crank angle.
 
     Returns
     -------
@@ -194,15 +203,20 @@ def factored_forms(linkage, basis, forms=None):
 
 def factored_second_order(factored, mechanism, crank_angle, q):
     """
-    Second-order outputs from reduced states by the factored form (equal to
-    :func:`reduced_second_order` to rounding).
+    Second-order outputs from reduced states by the factored form.
+
+    Equal to :func:`reduced_second_order` to rounding.
 
     Parameters
     ----------
     factored : FactoredForms
+        From :func:`factored_forms`.
     mechanism : Mechanism
+        The mechanism (link angles from its kinematics).
     crank_angle : ndarray, shape (N,)
+        Crank angles [rad].
     q : ndarray, shape (N, r)
+        Reduced states, one row per crank angle.
 
     Returns
     -------
@@ -237,8 +251,11 @@ def step_cost(factored, size, spline_powers=4):
     Parameters
     ----------
     factored : FactoredForms
+        From :func:`factored_forms`.
     size : int
         Reduced size r (the basis the forms were built with has this many columns).
+    spline_powers : int
+        Multiply-adds per interpolated table entry (4 for a cubic).
 
     Returns
     -------

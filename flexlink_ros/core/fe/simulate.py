@@ -132,6 +132,7 @@ def periodic_response(model, speed, method='full', modes=None, static_correction
     Parameters
     ----------
     model : FlexibleLinkage
+        The FE model (:class:`core.fe.linkage.FlexibleLinkage`).
     speed : float
         Crank speed w [rad/s] (non-zero, either sign).
     method : str
@@ -204,7 +205,7 @@ class _Run:
 
 
 def _chunk_matrices(model, run, chunk, matrices):
-    """M, C, K, R (and the frozen eigenpairs) at the stages of a chunk of steps, (steps, stages, ...)."""
+    """Return M, C, K, R (and frozen eigenpairs) at a chunk's stages, (steps, stages, ...)."""
     angles = run.start_angle + run.speed * run.h * (chunk[:, None] + run.integrator.c[None, :])
     stages = run.integrator.c.shape[0]
     stage = (_stage_matrices(model, angles.ravel(), run.speed, run.zeta,
@@ -310,6 +311,7 @@ def step_convergence(model, speed, steps=(90, 180, 360, 720), reference_steps=28
     Parameters
     ----------
     model : FlexibleLinkage
+        The FE model (:class:`core.fe.linkage.FlexibleLinkage`).
     speed : float
         Crank speed [rad/s].
     steps : sequence of int

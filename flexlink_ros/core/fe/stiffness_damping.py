@@ -35,9 +35,9 @@ projection is needed: K_L annihilates every element rigid-body field (translatio
 infinitesimal rotation), so ``K_L D1^T U = K_L P (D1^T U)`` with P the projection on
 strain-producing fields. Terms of order w_L d d' (the rotation of the deformed shape relative
 to the frame, and the change of the chord direction) are second order in the deflection d and
-dropped, as everywhere in the linear KED model. Under a rigid rotation of the deformed linkage at any
-constant rate (u^L constant in every link frame: ground-frame U' = W S U on the end translations,
-zero elsewhere) ``u^L' = 0`` and the element force is zero identically.
+dropped, as everywhere in the linear KED model. Under a rigid rotation of the deformed linkage at
+any constant rate (u^L constant in every link frame: ground-frame U' = W S U on the end
+translations, zero elsewhere) ``u^L' = 0`` and the element force is zero identically.
 
 Bearings (peer convention): ``c = beta k`` on the ground-frame relative velocity of the two
 members (Exudyn's Cartesian spring-damper), ``beta K_b U'``; the input-shaft spring k_t gets
@@ -69,6 +69,7 @@ def link_local_rate(model, link, link_angle, link_rate, displacement, velocity):
     Parameters
     ----------
     model : FlexibleLinkage
+        The FE model (:class:`core.fe.linkage.FlexibleLinkage`).
     link : int
         A modelled link.
     link_angle, link_rate : ndarray, shape (N,)
@@ -108,7 +109,7 @@ def link_damping_matrices(model, link, link_angle, link_rate, beta):
     t1 = model.gather(link, angle, 1)
     damping = beta * np.einsum('kai,ab,kbj->kij', t0, k_local, t0, optimize=True)
     rotation = beta * rate[:, None, None] * np.einsum('kai,ab,kbj->kij', t0, k_local, t1,
-                                                       optimize=True)
+                                                      optimize=True)
     return damping, rotation
 
 
@@ -179,8 +180,14 @@ def element_resultants(model, link, local_rate, beta):
 
     Parameters
     ----------
+    model : FlexibleLinkage
+        The FE model (:class:`core.fe.linkage.FlexibleLinkage`).
+    link : int
+        A modelled link.
     local_rate : ndarray, shape (N, 3 (e + 1))
         From :func:`link_local_rate`.
+    beta : float
+        Stiffness-proportional damping [s].
 
     Returns
     -------
@@ -239,7 +246,9 @@ def system_matrices(model, crank_angle, speed, beta, accel=0.0, zeta=0.0):
     Parameters
     ----------
     model : FlexibleLinkage
+        The FE model (:class:`core.fe.linkage.FlexibleLinkage`).
     crank_angle : ndarray, shape (N,)
+        Crank angles [rad].
     speed, accel : float
         Crank speed w [rad/s] and acceleration a [rad/s^2].
     beta : float

@@ -65,6 +65,7 @@ class FrozenSystem:
     Attributes
     ----------
     crank_angle : ndarray, shape (N,)
+        Crank angles [rad].
     mass, stiffness, gyroscopic : ndarray, shape (N, n, n)
         M (Eq. 31), K (Eq. 32: elastic, bearings, shaft), C1 (Eq. 34 per unit w).
     coupling : dict of str to ndarray, shape (N, n, n)
@@ -90,7 +91,7 @@ class FrozenSystem:
 
     @property
     def size(self):
-        """Number of DOFs n."""
+        """Return the number of DOFs n."""
         return self.mass.shape[-1]
 
     def __len__(self):
@@ -195,6 +196,7 @@ def convective_stiffness(t0, t1, t2, matrices, p1, p2, transport, mass):
     t0, t1, t2 : ndarray, shape (N, 3 (e + 1), n)
         The link's gather T^T and its first and second derivatives in theta_L.
     matrices : LinkMatrices
+        The link's matrices (M and M_s are read).
     p1, p2 : ndarray, shape (N, 1, 1)
         g1 = dtheta_L/dtheta and g2 = d^2theta_L/dtheta^2.
     transport : ndarray, shape (N, n, n)
@@ -222,6 +224,7 @@ def system_load(t0, matrices, link_angle, gravity, accelerations):
     t0 : ndarray, shape (N, 3 (e + 1), n)
         The link's gather T^T.
     matrices : LinkMatrices
+        The link's matrices (M_r and the node count are read).
     link_angle : ndarray, shape (N,)
         theta_L [rad].
     gravity : complex
@@ -259,6 +262,7 @@ def geometric_stiffness(t0, matrices, forces):
     t0 : ndarray, shape (N, 3 (e + 1), n)
         The link's gather T^T.
     matrices : LinkMatrices
+        The link's matrices (element length and count are read).
     forces : dict of str to ndarray, shape (N, e, GAUSS_POINTS)
         Axial force (tension > 0) [N] at the link's Gauss points per piece '1', 'a', 'w2'.
 

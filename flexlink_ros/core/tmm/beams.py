@@ -80,7 +80,7 @@ class UniformBeam:
     @classmethod
     def kim_moon(cls):
         """
-        The uniform beam of Kim & Moon, Table 1, converted to SI.
+        Return the uniform beam of Kim & Moon, Table 1, converted to SI.
 
         E = 18582 kgf/mm^2 (times 9.80665 N/kgf), specific weight 7.43e-6 kgf/mm^3 turned into
         a density with g = 9.807 m/s^2 (the value the paper's exact frequencies imply),
@@ -149,6 +149,7 @@ def lump_masses(beam, segments, method, bc):
     Parameters
     ----------
     beam : UniformBeam
+        The uniform beam.
     segments : int
         Number of equal segments n (method 2 needs n >= 2).
     method : int

@@ -23,6 +23,7 @@ _BENDING = [1, 2, 4, 5]
 _CLAMPED_ENDS = {'fixed-fixed': (True, True), 'fixed-supported': (True, False),
                  'cantilever': (True, False), 'supported': (False, False)}
 
+
 def _assemble_bending(element_lengths, element_matrix):
     """
     Assemble 4x4 bending blocks (v1, phi1, v2, phi2) of consecutive elements.
@@ -42,7 +43,7 @@ def _assemble_bending(element_lengths, element_matrix):
 
 
 def _free_dofs(n_dof, bc):
-    """DOFs (v, phi per node) left free by the boundary condition, ndarray of int."""
+    """Return the DOFs (v, phi per node) left free by the boundary condition, ndarray of int."""
     clamp_left, clamp_right = _CLAMPED_ENDS[bc]
     fixed = [0] + ([1] if clamp_left else [])
     if bc != 'cantilever':
@@ -74,7 +75,9 @@ def lumped_frequencies(model, bc, modes=None):
     Parameters
     ----------
     model : LumpedBeam
+        The lumped-mass beam (:func:`core.tmm.beams.lump_masses`).
     bc : str
+        Boundary condition, one of :data:`BOUNDARY_CONDITIONS`.
     modes : int, optional
         How many (default: all, :func:`available_modes`).
 
@@ -126,7 +129,9 @@ def fe_frequencies(beam, bc, elements, modes=3):
     Parameters
     ----------
     beam : UniformBeam
+        The uniform beam.
     bc : str
+        Boundary condition, one of :data:`BOUNDARY_CONDITIONS`.
     elements : int
         Number of equal elements (>= 1).
     modes : int
@@ -144,14 +149,11 @@ def fe_frequencies(beam, bc, elements, modes=3):
         raise ValueError(f'`elements` must be a positive integer, got {elements!r}')
     n = int(elements)
     h = beam.length / n
+    bending = np.ix_(_BENDING, _BENDING)
     stiffness = _assemble_bending(
-        np.full(n, h),
-        lambda h: beam_element.beam_stiffness(beam.E, 1.0, beam.I, h)[np.ix_(_BENDING,
-                                                                             _BENDING)])
+        np.full(n, h), lambda h: beam_element.beam_stiffness(beam.E, 1.0, beam.I, h)[bending])
     mass = _assemble_bending(
-        np.full(n, h),
-        lambda h: beam_element.beam_mass(beam.mass_per_length, 1.0, h)[np.ix_(_BENDING,
-                                                                               _BENDING)])
+        np.full(n, h), lambda h: beam_element.beam_mass(beam.mass_per_length, 1.0, h)[bending])
     free = _free_dofs(2 * (n + 1), bc)
     if isinstance(modes, bool) or not isinstance(modes, (int, np.integer)) or modes < 1:
         raise ValueError(f'`modes` must be a positive integer, got {modes!r}')

@@ -1,6 +1,4 @@
-"""
-Exact natural frequencies of a uniform Euler-Bernoulli beam (Kim & Moon, Table 5).
-"""
+"""Exact natural frequencies of a uniform Euler-Bernoulli beam (Kim & Moon, Table 5)."""
 
 import math
 

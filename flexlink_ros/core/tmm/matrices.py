@@ -31,6 +31,7 @@ _ZERO_AT_RIGHT = {'fixed-fixed': (0, 1), 'fixed-supported': (0, 2), 'cantilever'
 # State components from SI (m, 1, N m, N) to the paper's units (mm, 1, kgf mm, kgf).
 _TO_KGF_MM = np.array([1e3, 1.0, 1e3 / STANDARD_GRAVITY, 1.0 / STANDARD_GRAVITY])
 
+
 def field_matrix(length, flexural_rigidity):
     """
     Field transfer matrix of a massless Euler-Bernoulli segment (Pestel & Leckie).
@@ -83,6 +84,7 @@ def frequency_determinant(model, bc, omega, derivative=False):
     Parameters
     ----------
     model : LumpedBeam
+        The lumped-mass beam (:func:`core.tmm.beams.lump_masses`).
     bc : str
         One of :data:`BOUNDARY_CONDITIONS`.
     omega : float
@@ -135,7 +137,9 @@ def frequency_determinants(model, bc, omegas):
     Parameters
     ----------
     model : LumpedBeam
+        The lumped-mass beam (:func:`core.tmm.beams.lump_masses`).
     bc : str
+        Boundary condition, one of :data:`BOUNDARY_CONDITIONS`.
     omegas : ndarray, shape (k,)
         Circular frequencies [rad/s].
 

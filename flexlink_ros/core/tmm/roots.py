@@ -77,7 +77,9 @@ def refine_root(model, bc, bracket, search='false-position', rtol=DEFAULT_RTOL,
     Parameters
     ----------
     model : LumpedBeam
+        The lumped-mass beam (:func:`core.tmm.beams.lump_masses`).
     bc : str
+        Boundary condition, one of :data:`BOUNDARY_CONDITIONS`.
     bracket : tuple of float
         (omega_1, omega_2) [rad/s] with |D| of opposite signs at the ends.
     search : str
@@ -87,6 +89,7 @@ def refine_root(model, bc, bracket, search='false-position', rtol=DEFAULT_RTOL,
     dtol : float
         Tolerance on |D| relative to the larger |D| at the bracket ends.
     max_iterations : int
+        Iterates allowed before ConvergenceError.
     paper_scale : float, optional
         SI-to-kgf-mm factor of |D| for the paper's criterion (default from `bc`).
     illinois : bool
@@ -253,7 +256,7 @@ def scan_brackets(model, bc, count, step=DEFAULT_STEP_RAD_S, start=0.0,
 
 def available_modes(model, bc):
     """
-    Number of natural frequencies of a lumped model: masses whose deflection is free.
+    Count the natural frequencies of a lumped model: masses whose deflection is free.
 
     Returns
     -------

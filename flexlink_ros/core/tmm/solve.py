@@ -55,6 +55,7 @@ def tmm_frequencies(beam, bc, segments, method=3, modes=3, search='false-positio
     Parameters
     ----------
     beam : UniformBeam
+        The uniform beam.
     bc : str
         One of :data:`BOUNDARY_CONDITIONS`.
     segments : int
