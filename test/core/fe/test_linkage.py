@@ -3,10 +3,6 @@
 import dataclasses
 import pathlib
 
-import numpy as np
-import pytest
-import scipy.linalg
-
 from flexlink_ros.core.fe import beam
 from flexlink_ros.core.fe.link import (element_geometric_stiffness, gauss_points, link_matrices,
                                        transverse_slopes)
@@ -14,14 +10,18 @@ from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.kinematics import solve_kinematics
 from flexlink_ros.core.mechanism import load_mechanism
 from flexlink_ros.core.options import ModelOptions
+import numpy as np
+import pytest
+import scipy.linalg
 
 CONFIG = pathlib.Path(__file__).resolve().parents[3] / 'config'
 
-NO_KG = dict(geometric_stiffness=False)
+NO_KG = {'geometric_stiffness': False}
 CASES = {
     'all flexible, pins': ModelOptions.full_model(**NO_KG),
     'flexible bearings, shaft spring': ModelOptions.full_model(bearings='flexible', **NO_KG),
-    'rigid crank, flexible bearings': ModelOptions.full_model(rigid_crank=True, bearings='flexible', **NO_KG),
+    'rigid crank, flexible bearings': ModelOptions.full_model(rigid_crank=True,
+                                                              bearings='flexible', **NO_KG),
     'rigid crank, pins': ModelOptions.full_model(rigid_crank=True, **NO_KG),
 }
 
@@ -54,7 +54,8 @@ def _angle_jets(angle, omega, alpha):
 
 @pytest.mark.parametrize('case', CASES)
 def test_coupling_terms_equal_inertia_of_exact_elastic_acceleration(cho, case):
-    """M U'' + C_c U' + K_c U = sum_L T int rho H^T R^T (a_abs - a_rigid) (+ joint masses).
+    """
+    M U'' + C_c U' + K_c U = sum_L T int rho H^T R^T (a_abs - a_rigid) (+ joint masses).
 
     The absolute position of a material point is r_rigid(x, t) + R(th_L(t)) H(x) u^L(t) with
     u^L = T^T(th_L) U(t); its elastic acceleration is differentiated exactly by second-order
@@ -318,10 +319,14 @@ def test_bad_options_are_refused(cho):
 
 @pytest.mark.parametrize('case', CASES)
 def test_rigid_body_axial_forces_equal_fe_quasi_static_element_forces(cho, case):
-    """The frozen structure (clamped crank or rigid crank) is statically determinate, so
+    """
+    FE element axial forces of K U = R equal the rigid-body axial forces.
+
+    The frozen structure (clamped crank or rigid crank) is statically determinate, so
     K U = R (no elastic inertia) gives element axial forces EA du/l equal to the mean over
     each element of the rigid-body axial force F(x) (dynamics.axial_force: distributed
-    inertia, gravity and joint masses); linear elements are nodally exact for bars."""
+    inertia, gravity and joint masses); linear elements are nodally exact for bars.
+    """
     axial_force = pytest.importorskip('flexlink_ros.core.dynamics').axial_force
     mech = _mechanism(cho, case)
     model = FlexibleLinkage(mech, CASES[case])
@@ -344,11 +349,16 @@ def test_rigid_body_axial_forces_equal_fe_quasi_static_element_forces(cho, case)
 
 @pytest.mark.parametrize('bearings', ['rigid', 'flexible'])
 def test_quasi_static_axial_forces_under_gravity_equal_hand_statics(cho, bearings):
-    """Rigid crank at rest: coupler and lever are pinned bars under their weight, joined at B
+    """
+    Rigid crank at rest under gravity: FE element forces equal hand statics.
+
+    Rigid crank at rest: coupler and lever are pinned bars under their weight, joined at B
     (joint mass m_B). Each bar's transverse end force is half its transverse weight; the two
     axial end forces at B follow from the pin's equilibrium; the tension then varies linearly
-    with the axial weight component. FE element forces (K U = R) equal its element means."""
-    model = FlexibleLinkage(cho, ModelOptions.full_model(rigid_crank=True, bearings=bearings, **NO_KG))
+    with the axial weight component. FE element forces (K U = R) equal its element means.
+    """
+    options = ModelOptions.full_model(rigid_crank=True, bearings=bearings, **NO_KG)
+    model = FlexibleLinkage(cho, options)
     theta = np.radians([33.0, 250.0])
     system = model.assemble(theta)
     displacement = np.linalg.solve(system.stiffness, system.load_at(0.0)[..., None])[..., 0]

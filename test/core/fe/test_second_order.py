@@ -1,5 +1,5 @@
 """
-Second-order outputs (core/fe/second_order_*.py, issue 14 item 1), independent checks:
+Second-order outputs (core/fe/second_order_*.py, issue 14 item 1), independent checks.
 
 * the FE bending integral against closed forms (half-sine, parabola on part of a link);
 * the loop closure against the exact intersection of two circles (third-order agreement);
@@ -11,9 +11,6 @@ Second-order outputs (core/fe/second_order_*.py, issue 14 item 1), independent c
 import dataclasses
 import math
 
-import numpy as np
-import pytest
-
 from flexlink_ros.core.fe import linkage as assembly
 from flexlink_ros.core.fe import second_order_full as so_full
 from flexlink_ros.core.fe import second_order_geometry as so_geometry
@@ -22,6 +19,8 @@ from flexlink_ros.core.kinematics import solve_kinematics
 from flexlink_ros.core.mechanism import load_mechanism
 from flexlink_ros.core.reduction import model as reduced
 from flexlink_ros.studies import peer_exudyn as peer
+import numpy as np
+import pytest
 
 needs_exudyn = pytest.mark.skipif(
     not peer.exudyn_available(),
@@ -79,13 +78,13 @@ def test_chord_shortening_removes_the_rigid_rotation():
 
 @pytest.mark.parametrize('elements', [3, 4, 5])
 def test_partial_integral_is_exact_for_a_parabola(elements):
-    """v = a x^2 is a cubic: G over [0, X] (X inside an element or on a node) is exact."""
+    """With v = a x^2 (a cubic) G over [0, X] (X inside an element or on a node) is exact."""
     length, amp = 0.262, 0.05
     u = nodal(length, elements, lambda x: amp * x ** 2, lambda x: 2.0 * amp * x)
     for upto in (0.5 * length, 0.3 * length, length):
         g = so_geometry.unit_geometric_stiffness(length / elements, elements, upto)
-        assert so_geometry.bending_integral(u, g) == pytest.approx(2.0 * amp ** 2 * upto ** 3 / 3.0,
-                                                          rel=1e-12)
+        assert so_geometry.bending_integral(u, g) == pytest.approx(
+            2.0 * amp ** 2 * upto ** 3 / 3.0, rel=1e-12)
     with pytest.raises(ValueError):
         so_geometry.unit_geometric_stiffness(length / elements, elements, 1.1 * length)
 
@@ -93,7 +92,7 @@ def test_partial_integral_is_exact_for_a_parabola(elements):
 # -- loop closure against exact geometry ----------------------------------------------------
 
 def circle_intersection(c1, r1, c2, r2, near):
-    """The intersection of two circles (complex centres) nearest to ``near``."""
+    """Return the intersection of two circles (complex centres) nearest to ``near``."""
     d = abs(c2 - c1)
     along = (d * d + r1 * r1 - r2 * r2) / (2.0 * d)
     half = math.sqrt(r1 * r1 - along * along)
@@ -121,8 +120,8 @@ def loop_errors(mech, theta, scale, with_rotation=True):
     rot_c = ((np.conj(1j * ec) * (b1 - a1)).real) ** 2 / (2.0 * lc) if with_rotation else 0.0
     rot_l = ((np.conj(1j * el) * b1).real) ** 2 / (2.0 * ll) if with_rotation else 0.0
     d_b = so_geometry.loop_closure_second_order(np.array([ec]), np.array([el]),
-                                       np.array([d_c + rot_c]), np.array([d_l + rot_l]),
-                                       np.array([a2]))[0]
+                                                np.array([d_c + rot_c]), np.array([d_l + rot_l]),
+                                                np.array([a2]))[0]
     return abs(exact - (b0 + b1 + d_b)), abs(exact - (b0 + b1))
 
 
@@ -190,6 +189,8 @@ def test_quadratic_form_equals_the_full_order_on_v_q(mech, options):
 @pytest.mark.parametrize('theta', [0.5, 2.0])
 def test_static_sag_second_order_matches_the_peer(mech, theta):
     """
+    Quasi-static second-order sag matches the geometrically exact peer.
+
     Quasi-static: under 2 and 4 g the peer's lever tip and coupler mid-point minus the linear
     sag are the second-order parts of Eqs. (3)-(4); what is left is third order (halves with g).
     """
@@ -238,16 +239,24 @@ def test_269rpm_linear_plus_second_order_matches_the_peer(mech):
 @pytest.mark.skipif(not (__import__('shutil').which('cc') or __import__('shutil').which('gcc')),
                     reason='no C compiler')
 def test_compiled_factored_kernel_agrees_and_is_timed(mech):
-    """The C kernel of studies/second_order_bench.py equals factored_second_order (checked
-    inside time_factored) and takes well under the issue's 2 us per sample (r = 26: 0.7 us)."""
+    """
+    The C kernel of the factored form agrees and is fast.
+
+    The C kernel of studies/second_order_bench.py equals factored_second_order (checked
+    inside time_factored) and takes well under the issue's 2 us per sample (r = 26: 0.7 us).
+    """
     from flexlink_ros.studies import second_order_bench
     ns = second_order_bench.time_factored(mech, 'flexible', False, 26, samples=2000, repeat=5)
     assert 0.0 < ns < 20000.0
 
 
 def test_reduced_model_second_order_follows_the_full_order(mech):
-    """The default reduced basis (r = 6, rigid bearings) as the estimator streams it: linear +
-    second order within 1 % of the full order's p2p (measured 0.1-0.2 % at 8 elements)."""
+    """
+    The default reduced basis streams the second order of the full order.
+
+    The default reduced basis (r = 6, rigid bearings) as the estimator streams it: linear +
+    second order within 1 % of the full order's p2p (measured 0.1-0.2 % at 8 elements).
+    """
     from flexlink_ros.core.fe.simulate import periodic_response
     from flexlink_ros.studies import second_order_study
     angles, streamed, size = second_order_study.reduced_response(

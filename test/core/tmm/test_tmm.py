@@ -2,11 +2,10 @@
 
 import math
 
-import numpy as np
-import pytest
-
 from flexlink_ros.core.tmm import beams, eigen, exact, matrices, roots, solve
 from flexlink_ros.errors import FlexlinkError
+import numpy as np
+import pytest
 
 BEAM = beams.UniformBeam.kim_moon()
 BCS = beams.BOUNDARY_CONDITIONS
@@ -94,12 +93,12 @@ def test_transfer_by_entries_equals_matrix_product_and_batch():
     state = np.eye(4)[:, [2, 3]]
     x = 0.0
     for end, mass in zip(model.segment_ends, model.point_masses):
-        state = matrices.point_matrix(mass, omega) @ matrices.field_matrix(end - x,
-                                                               model.flexural_rigidity) @ state
+        field = matrices.field_matrix(end - x, model.flexural_rigidity)
+        state = matrices.point_matrix(mass, omega) @ field @ state
         x = end
     expected = np.linalg.det(state[[2, 3]])
-    assert matrices.frequency_determinant(model, 'cantilever', omega) == pytest.approx(expected,
-                                                                                 rel=1e-12)
+    assert matrices.frequency_determinant(model, 'cantilever', omega) == pytest.approx(
+        expected, rel=1e-12)
     batch = matrices.frequency_determinants(model, 'cantilever', np.array([0.0, omega, 2 * omega]))
     assert batch[1] == pytest.approx(expected, rel=1e-12)
     assert batch[0] == pytest.approx(1.0)  # static cantilever: M_n, V_n equal M_0, V_0
@@ -107,14 +106,14 @@ def test_transfer_by_entries_equals_matrix_product_and_batch():
 
 def test_field_matrix_is_the_static_beam_solution():
     # columns of the field matrix = deflection, slope, moment, shear of u'''' = 0
-    ei, l = 2.5, 0.3
-    field = matrices.field_matrix(l, ei)
-    x = np.linspace(0, l, 4)
+    ei, span = 2.5, 0.3
+    field = matrices.field_matrix(span, ei)
+    x = np.linspace(0, span, 4)
     for moment0, shear0 in ((1.0, 0.0), (0.0, 1.0)):
         u = moment0 * x ** 2 / (2 * ei) + shear0 * x ** 3 / (6 * ei)
         end = field @ np.array([0.0, 0.0, moment0, shear0])
         assert end[0] == pytest.approx(u[-1])
-        assert end[2] == pytest.approx(moment0 + shear0 * l)
+        assert end[2] == pytest.approx(moment0 + shear0 * span)
 
 
 @pytest.mark.parametrize('bc', BCS)
@@ -174,7 +173,7 @@ def _frequencies(bc, segments, method):
     if method == 'fe':
         return eigen.fe_frequencies(BEAM, bc, segments, 3)
     return solve.tmm_frequencies(BEAM, bc, segments, int(method[-1]), 3, 'newton',
-                               step=50.0).frequencies_rad_s
+                                 step=50.0).frequencies_rad_s
 
 
 @pytest.mark.parametrize('method', list(RATES))
@@ -227,9 +226,9 @@ def test_skipped_root_is_reported():
     (lambda: solve.tmm_frequencies(BEAM, 'cantilever', 6, step=math.nan), '`step`'),
     (lambda: eigen.fe_frequencies(BEAM, 'supported', 0), '`elements`'),
     (lambda: eigen.fe_frequencies(BEAM, 'fixed-fixed', 1, modes=3), '`modes`'),
-    (lambda: beams.UniformBeam(E=-1.0, I=1.0, mass_per_length=1.0, length=1.0), '`E`'),
+    (lambda: beams.UniformBeam(-1.0, 1.0, mass_per_length=1.0, length=1.0), '`E`'),
     (lambda: roots.refine_root(beams.lump_masses(BEAM, 6, 3, 'supported'), 'supported',
-                             (100.0, 200.0)), '`bracket`'),
+                               (100.0, 200.0)), '`bracket`'),
 ])
 def test_bad_input_names_the_argument(call, argument):
     with pytest.raises(ValueError, match=argument):
@@ -246,7 +245,7 @@ def test_sparse_and_dense_eigen_paths_agree(bc, monkeypatch):
     np.testing.assert_allclose(sparse_fe, eigen.fe_frequencies(BEAM, bc, 40, 4), rtol=1e-8)
     np.testing.assert_allclose(sparse_lumped, eigen.lumped_frequencies(model, bc, 4), rtol=1e-8)
     np.testing.assert_allclose(sparse_lumped, solve.tmm_frequencies(BEAM, bc, 40, 3, 4, 'newton',
-                                                                  50.0).frequencies_rad_s,
+                                                                    50.0).frequencies_rad_s,
                                rtol=1e-8)
 
 
