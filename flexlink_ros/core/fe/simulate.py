@@ -7,7 +7,7 @@ Full order (the reference). Eq. 30 of Cho, Park & Lee (1992) in full, at crank s
     M U'' + (C_c + C_d) U' + (K + K_G + K_c) U = R
 
 with modal damping ``C_d = M Phi diag(2 zeta omega_i) Phi^T M`` from ALL frozen modes of
-(K + K_G) vs M at the current angle (:mod:`core.modes`), so every frozen mode has damping
+(K + K_G) vs M at the current angle (:mod:`core.fe.modes`), so every frozen mode has damping
 ratio zeta. It is integrated by Radau IIA (:mod:`core.integrators`; L-stable, so the
 unresolved axial modes follow quasi-statically) with the coefficient matrices assembled
 exactly at every stage time. The one-revolution map is affine, ``z_T = P z_0 + g``

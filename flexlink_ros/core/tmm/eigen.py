@@ -17,7 +17,7 @@ from ..fe import beam as beam_element
 # Largest eigenproblem solved dense; above it sparse LU + ARPACK (dense LAPACK on more DOFs
 # is slow when OpenBLAS threads compete for the cores).
 DENSE_EIGEN_LIMIT = 64
-# Bending DOFs (v1, phi1, v2, phi2) within core/beam.py's element order (u1, v1, phi1, ...).
+# Bending DOFs (v1, phi1, v2, phi2) within core/fe/beam.py's element order (u1, v1, phi1, ...).
 _BENDING = [1, 2, 4, 5]
 # Which ends are free, and which restrain the rotation, for the stiffness-based reference.
 _CLAMPED_ENDS = {'fixed-fixed': (True, True), 'fixed-supported': (True, False),
@@ -66,7 +66,7 @@ def lumped_frequencies(model, bc, modes=None):
     Lowest natural frequencies of a lumped model from its flexibility, no transfer matrices.
 
     Independent of the transfer matrices: massless cubic beam elements (exact for a massless
-    Euler-Bernoulli beam under point loads, core/beam.py bending part) join nodes at the ends
+    Euler-Bernoulli beam under point loads, core/fe/beam.py bending part) join nodes at the ends
     and at every mass. With S = diag(sqrt(m)) on the translations that carry mass, the
     frequencies are 1/sqrt(mu) for the eigenvalues mu of S K^-1 S (flexibility form, the
     rotations and massless translations condensed exactly by the solve with K). Small models
