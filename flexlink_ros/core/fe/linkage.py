@@ -63,6 +63,8 @@ class FlexibleLinkage:
     ----------
     links : tuple of int
         Modelled links (0 crank, 1 coupler, 2 lever).
+    dofs : DofMap
+        The DOF layout (:func:`core.fe.dofs.number_dofs`).
     size : int
         Number of system DOFs n.
     dof_names : tuple of str
