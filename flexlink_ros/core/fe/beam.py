@@ -65,9 +65,16 @@ def rigid_shape_functions(x, length):
     return h
 
 
-def beam_stiffness(E, A, I, length):
+def beam_stiffness(E, A, second_moment, length):
     """
     Elastic stiffness [K^m], Eq. A.3 (axial bar plus Euler-Bernoulli bending).
+
+    Parameters
+    ----------
+    E, A, second_moment : float
+        Young's modulus [Pa], area [m^2] and second moment of area I [m^4].
+    length : float
+        Element length [m].
 
     Returns
     -------
@@ -76,7 +83,7 @@ def beam_stiffness(E, A, I, length):
     """
     L = length
     axial = E * A / L
-    k = E * I / L ** 3
+    k = E * second_moment / L ** 3
     return np.array([
         [axial, 0.0, 0.0, -axial, 0.0, 0.0],
         [0.0, 12 * k, 6 * L * k, 0.0, -12 * k, 6 * L * k],

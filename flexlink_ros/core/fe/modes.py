@@ -76,7 +76,7 @@ def solve_frozen_modes(system, count=None, speed=0.0, accel=0.0, centrifugal=Fal
     Parameters
     ----------
     system : FrozenSystem
-        From :meth:`core.assembly.FlexibleLinkage.assemble`.
+        From :meth:`core.fe.linkage.FlexibleLinkage.assemble`.
     count : int or None
         Number of modes (all if None).
     speed, accel : float
@@ -120,6 +120,7 @@ def frozen_mode_sweep(model, crank_angles, count=3, speed=0.0, accel=0.0, centri
     Parameters
     ----------
     model : FlexibleLinkage
+        The FE model (:class:`core.fe.linkage.FlexibleLinkage`).
     crank_angles : ndarray, shape (N,)
         [rad].
     count, speed, accel, centrifugal
@@ -142,9 +143,11 @@ def modal_damping(mass, eigenvalues, shapes, zeta):
     Parameters
     ----------
     mass : ndarray, shape (..., n, n)
+        Mass matrices M.
     eigenvalues : ndarray, shape (..., m)
         omega_i^2 (negative values are taken as zero).
     shapes : ndarray, shape (..., n, m)
+        Mode shapes Phi (columns), mass-normalised.
     zeta : float
         Damping ratio of every mode.
 

@@ -7,7 +7,7 @@ Full order (the reference). Eq. 30 of Cho, Park & Lee (1992) in full, at crank s
     M U'' + (C_c + C_d) U' + (K + K_G + K_c) U = R
 
 with modal damping ``C_d = M Phi diag(2 zeta omega_i) Phi^T M`` from ALL frozen modes of
-(K + K_G) vs M at the current angle (:mod:`core.modes`), so every frozen mode has damping
+(K + K_G) vs M at the current angle (:mod:`core.fe.modes`), so every frozen mode has damping
 ratio zeta. It is integrated by Radau IIA (:mod:`core.integrators`; L-stable, so the
 unresolved axial modes follow quasi-statically) with the coefficient matrices assembled
 exactly at every stage time. The one-revolution map is affine, ``z_T = P z_0 + g``
@@ -41,8 +41,8 @@ import time
 import numpy as np
 import scipy.linalg
 
-from ..integrators import RadauIIA
 from .modes import modal_damping
+from ..integrators import RadauIIA
 
 METHODS = ('full', 'modal')
 # Time steps per revolution of the default run (order-3 Radau IIA, resolves ~40 Hz x 20).
@@ -66,7 +66,7 @@ class PeriodicResponse:
     displacement, velocity : ndarray, shape (P, n)
         U and U' (with the static correction in U when requested).
     outputs : ndarray, shape (P, 4)
-        Ground-frame deflections [m] in :data:`core.assembly.OUTPUT_NAMES` order.
+        Ground-frame deflections [m] in :data:`names.OUTPUT_NAMES` order.
     floquet_multipliers : ndarray, shape (2 n,) or (2 N,)
         Eigenvalues of the one-revolution map, largest modulus first.
     info : dict
@@ -132,6 +132,7 @@ def periodic_response(model, speed, method='full', modes=None, static_correction
     Parameters
     ----------
     model : FlexibleLinkage
+        The FE model (:class:`core.fe.linkage.FlexibleLinkage`).
     speed : float
         Crank speed w [rad/s] (non-zero, either sign).
     method : str
@@ -163,78 +164,132 @@ def periodic_response(model, speed, method='full', modes=None, static_correction
     if matrices is not None and method != 'full':
         raise ValueError('`matrices` replaces the full-order matrices: method must be full')
     started = time.perf_counter()
-    zeta = model.mechanism.damping_ratio if zeta is None else float(zeta)
-    integrator = RadauIIA(stages)
-    n = model.size
-    h = 2.0 * np.pi / abs(speed) / steps
-    stride = steps // points
     modal = method == 'modal'
-    size = modes if modal else n
+    run = _Run(integrator=RadauIIA(stages), speed=speed, h=2.0 * np.pi / abs(speed) / steps,
+               steps=steps, stride=steps // points, size=modes if modal else model.size,
+               modal=modal, start_angle=start_angle,
+               zeta=model.mechanism.damping_ratio if zeta is None else float(zeta))
+    q, v, saved = _propagate(model, run, matrices)
+    monodromy, disp, vel = _periodic_states(q, v, saved, modal)
+    out_angles = start_angle + speed * run.h * run.stride * np.arange(points)
+    corrected = modal and static_correction and run.size < model.size
+    if corrected:
+        disp = disp + _residual_flexibility(model, out_angles, speed, disp, vel, run.size)
+    outputs = np.einsum('kon,kn->ko', model.output_operator(out_angles), disp)
+    multipliers = np.linalg.eigvals(monodromy)
+    multipliers = multipliers[np.argsort(-np.abs(multipliers))]
+    info = {'method': method, 'modes': run.size if modal else None,
+            'static_correction': bool(corrected),
+            'steps': steps, 'points': points, 'stages': stages,
+            'zeta': run.zeta if matrices is None else None,
+            'speed_rad_s': float(speed), 'dofs': model.size,
+            'spectral_radius': float(np.abs(multipliers[0])),
+            'wall_s': time.perf_counter() - started}
+    return PeriodicResponse(crank_angle=out_angles, displacement=disp, velocity=vel,
+                            outputs=outputs, floquet_multipliers=multipliers, info=info)
 
-    basis = basis0 = mass_prev = None
-    columns = 2 * size + 1
-    q = np.zeros((size, columns))
-    v = np.zeros((size, columns))
+
+@dataclasses.dataclass(frozen=True)
+class _Run:
+    """Settings of one revolution's integration (see :func:`periodic_response`)."""
+
+    integrator: RadauIIA
+    speed: float
+    h: float
+    steps: int
+    stride: int
+    size: int
+    modal: bool
+    start_angle: float
+    zeta: float
+
+
+def _chunk_matrices(model, run, chunk, matrices):
+    """Return M, C, K, R (and frozen eigenpairs) at a chunk's stages, (steps, stages, ...)."""
+    angles = run.start_angle + run.speed * run.h * (chunk[:, None] + run.integrator.c[None, :])
+    stages = run.integrator.c.shape[0]
+    stage = (_stage_matrices(model, angles.ravel(), run.speed, run.zeta,
+                             run.size if run.modal else None)
+             if matrices is None else matrices(angles.ravel()))
+    return [x.reshape((len(chunk), stages) + x.shape[1:]) for x in stage]
+
+
+def _change_basis(mass, new_basis, old_basis):
+    """Map modal coordinates on ``old_basis`` to ``new_basis`` by M-orthogonal projection."""
+    gram = new_basis.T @ mass @ new_basis
+    return np.linalg.solve(gram, new_basis.T @ mass @ old_basis)
+
+
+def _integrate_step(run, q, v, step_matrices, basis):
+    """Advance the unit and loaded states (q, v) by one step of the integrator."""
+    mass, damping, stiffness, load = step_matrices
+    loads = np.zeros((load.shape[0], run.size, q.shape[1]))
+    if run.modal:
+        project = lambda x: basis.T @ x @ basis  # noqa: E731
+        loads[..., -1] = load @ basis
+        q, v, _ = run.integrator.step(q, v, run.h, project(mass), project(damping),
+                                      project(stiffness), loads)
+    else:
+        loads[..., -1] = load
+        q, v, _ = run.integrator.step(q, v, run.h, mass, damping, stiffness, loads)
+    return q, v
+
+
+def _propagate(model, run, matrices):
+    """
+    Carry the 2 N unit states and the loaded zero state over one revolution.
+
+    Returns the final (q, v), each (N, 2 N + 1) (columns: unit displacements, unit velocities,
+    loaded zero state), and (q, v, basis) at every output step (basis None for full order).
+    """
+    size = run.size
+    q = np.zeros((size, 2 * size + 1))
+    v = np.zeros((size, 2 * size + 1))
     q[:, :size] = np.eye(size)
     v[:, size:2 * size] = np.eye(size)
+    basis = basis0 = mass_prev = None
     saved = []
-    for begin in range(0, steps, CHUNK_STEPS):
-        chunk = np.arange(begin, min(begin + CHUNK_STEPS, steps))
-        angles = start_angle + speed * h * (chunk[:, None] + integrator.c[None, :])
-        stage = (_stage_matrices(model, angles.ravel(), speed, zeta, size if modal else None)
-                 if matrices is None else matrices(angles.ravel()))
-        mass, damping, stiffness, load, *eigen = (
-            x.reshape((len(chunk), stages) + x.shape[1:]) for x in stage)
+    for begin in range(0, run.steps, CHUNK_STEPS):
+        chunk = np.arange(begin, min(begin + CHUNK_STEPS, run.steps))
+        mass, damping, stiffness, load, *eigen = _chunk_matrices(model, run, chunk, matrices)
         for i, k in enumerate(chunk):
-            if modal:
+            if run.modal:
                 new_basis = eigen[1][i, 0][:, :size]
                 if k == 0:
                     basis = basis0 = new_basis
                 else:
-                    gram = new_basis.T @ mass_prev @ new_basis
-                    transfer = np.linalg.solve(gram, new_basis.T @ mass_prev @ basis)
+                    transfer = _change_basis(mass_prev, new_basis, basis)
                     q, v, basis = transfer @ q, transfer @ v, new_basis
-            if k % stride == 0:
+            if k % run.stride == 0:
                 saved.append((q.copy(), v.copy(), basis))
-            loads = np.zeros((stages, size, columns))
-            if modal:
-                project = lambda x: basis.T @ x @ basis  # noqa: E731
-                loads[..., -1] = load[i] @ basis
-                q, v, _ = integrator.step(q, v, h, project(mass[i]), project(damping[i]),
-                                          project(stiffness[i]), loads)
+            q, v = _integrate_step(run, q, v, (mass[i], damping[i], stiffness[i], load[i]),
+                                   basis)
+            if run.modal:
                 mass_prev = mass[i, -1]
-            else:
-                loads[..., -1] = load[i]
-                q, v, _ = integrator.step(q, v, h, mass[i], damping[i], stiffness[i], loads)
-    if modal:
-        gram = basis0.T @ mass_prev @ basis0
-        transfer = np.linalg.solve(gram, basis0.T @ mass_prev @ basis)
+    if run.modal:
+        transfer = _change_basis(mass_prev, basis0, basis)
         q, v = transfer @ q, transfer @ v
+    return q, v, saved
+
+
+def _periodic_states(q, v, saved, modal):
+    """
+    Monodromy matrix P, and U and U' at the output steps of the periodic orbit (shooting).
+
+    The one-revolution map is ``z_T = P z_0 + g``; the periodic start is ``(I - P)^-1 g``.
+    """
+    size = q.shape[0]
     monodromy = np.vstack([q[:, :-1], v[:, :-1]])
     offset = np.concatenate([q[:, -1], v[:, -1]])
     start = np.linalg.solve(np.eye(2 * size) - monodromy, offset)
     state = np.concatenate([start, [1.0]])
-    out_angles = start_angle + speed * h * stride * np.arange(points)
     if modal:
         disp = np.array([b @ (sq @ state) for sq, _, b in saved])
         vel = np.array([b @ (sv @ state) for _, sv, b in saved])
     else:
         disp = np.array([sq @ state for sq, _, _ in saved])
         vel = np.array([sv @ state for _, sv, _ in saved])
-    if modal and static_correction and size < n:
-        disp = disp + _residual_flexibility(model, out_angles, speed, disp, vel, size)
-    outputs = np.einsum('kon,kn->ko', model.output_operator(out_angles), disp)
-    multipliers = np.linalg.eigvals(monodromy)
-    multipliers = multipliers[np.argsort(-np.abs(multipliers))]
-    info = {'method': method, 'modes': size if modal else None,
-            'static_correction': bool(modal and static_correction and size < n),
-            'steps': steps, 'points': points, 'stages': stages,
-            'zeta': zeta if matrices is None else None,
-            'speed_rad_s': float(speed), 'dofs': n,
-            'spectral_radius': float(np.abs(multipliers[0])),
-            'wall_s': time.perf_counter() - started}
-    return PeriodicResponse(crank_angle=out_angles, displacement=disp, velocity=vel,
-                            outputs=outputs, floquet_multipliers=multipliers, info=info)
+    return monodromy, disp, vel
 
 
 def _residual_flexibility(model, angles, speed, disp, vel, kept):
@@ -256,6 +311,7 @@ def step_convergence(model, speed, steps=(90, 180, 360, 720), reference_steps=28
     Parameters
     ----------
     model : FlexibleLinkage
+        The FE model (:class:`core.fe.linkage.FlexibleLinkage`).
     speed : float
         Crank speed [rad/s].
     steps : sequence of int

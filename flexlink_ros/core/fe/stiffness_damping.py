@@ -4,7 +4,7 @@ Stiffness-proportional (Kelvin-Voigt) damping of the KED model, objective (issue
 The peer (:mod:`studies.peer_exudyn`) damps the material strain rates: axial force
 ``beta E A eps'`` and bending moment ``beta E I kappa'`` in every element, and ``c = beta k`` on
 the deflection rate of each bearing spring. This module gives the same damping to the linear
-KED model of :mod:`core.assembly`, where the elastic coordinates U are mixed: interior nodes in
+KED model of :mod:`core.fe.linkage`, where the elastic coordinates U are mixed: interior nodes in
 the moving link frames, joint (end) node translations in the ground frame.
 
 Derivation. For link L at rigid angle theta_L(t), rate w_L, the local element vector is
@@ -35,9 +35,9 @@ projection is needed: K_L annihilates every element rigid-body field (translatio
 infinitesimal rotation), so ``K_L D1^T U = K_L P (D1^T U)`` with P the projection on
 strain-producing fields. Terms of order w_L d d' (the rotation of the deformed shape relative
 to the frame, and the change of the chord direction) are second order in the deflection d and
-dropped, as everywhere in the linear KED model. Under a rigid rotation of the deformed linkage at any
-constant rate (u^L constant in every link frame: ground-frame U' = W S U on the end translations,
-zero elsewhere) ``u^L' = 0`` and the element force is zero identically.
+dropped, as everywhere in the linear KED model. Under a rigid rotation of the deformed linkage at
+any constant rate (u^L constant in every link frame: ground-frame U' = W S U on the end
+translations, zero elsewhere) ``u^L' = 0`` and the element force is zero identically.
 
 Bearings (peer convention): ``c = beta k`` on the ground-frame relative velocity of the two
 members (Exudyn's Cartesian spring-damper), ``beta K_b U'``; the input-shaft spring k_t gets
@@ -45,7 +45,7 @@ members (Exudyn's Cartesian spring-damper), ``beta K_b U'``; the input-shaft spr
 not under a change of observer: a bearing deflection Delta rotating at W dissipates
 ``beta k W^2 |Delta|^2`` (as in the peer).
 
-With ``M U'' + (w C1 + C_d) U' + (K + K_G + K_c) U = R`` (:class:`core.assembly.FrozenSystem`),
+With ``M U'' + (w C1 + C_d) U' + (K + K_G + K_c) U = R`` (:class:`core.fe.system.FrozenSystem`),
 beta damping adds C_beta to the damping and ``w Kb1`` (``Kb1 = beta sum g1_L T K_L D1^T``) to the
 stiffness; :func:`system_matrices` returns the four matrices in :meth:`FrozenSystem.evaluate`'s
 form. Modal damping is then usually off (zeta = 0): beta alone gives every frozen mode
@@ -54,7 +54,9 @@ form. Modal damping is then usually off (zeta = 0): beta alone gives every froze
 
 import numpy as np
 
-from .linkage import FlexibleLinkage  # noqa: F401  (documented type of ``model``)
+from .beam import beam_stiffness
+from .modes import modal_damping
+from .simulate import frozen_eigen
 
 # +90 degree rotation (I_s of Eq. 21).
 _S = np.array([[0.0, -1.0], [1.0, 0.0]])
@@ -67,6 +69,7 @@ def link_local_rate(model, link, link_angle, link_rate, displacement, velocity):
     Parameters
     ----------
     model : FlexibleLinkage
+        The FE model (:class:`core.fe.linkage.FlexibleLinkage`).
     link : int
         A modelled link.
     link_angle, link_rate : ndarray, shape (N,)
@@ -106,7 +109,7 @@ def link_damping_matrices(model, link, link_angle, link_rate, beta):
     t1 = model.gather(link, angle, 1)
     damping = beta * np.einsum('kai,ab,kbj->kij', t0, k_local, t0, optimize=True)
     rotation = beta * rate[:, None, None] * np.einsum('kai,ab,kbj->kij', t0, k_local, t1,
-                                                       optimize=True)
+                                                      optimize=True)
     return damping, rotation
 
 
@@ -177,8 +180,14 @@ def element_resultants(model, link, local_rate, beta):
 
     Parameters
     ----------
+    model : FlexibleLinkage
+        The FE model (:class:`core.fe.linkage.FlexibleLinkage`).
+    link : int
+        A modelled link.
     local_rate : ndarray, shape (N, 3 (e + 1))
         From :func:`link_local_rate`.
+    beta : float
+        Stiffness-proportional damping [s].
 
     Returns
     -------
@@ -199,8 +208,7 @@ def element_resultants(model, link, local_rate, beta):
 
 
 def _element_stiffness(model, link):
-    """The (6, 6) element stiffness A.3 of a link's elements (all equal)."""
-    from .beam import beam_stiffness
+    """Return the (6, 6) element stiffness A.3 of a link's elements (all equal)."""
     spec = model.mechanism.links[link]
     return beam_stiffness(model.mechanism.youngs_modulus, spec.area, spec.second_moment,
                           model.link_matrices[link].element_length)
@@ -238,7 +246,9 @@ def system_matrices(model, crank_angle, speed, beta, accel=0.0, zeta=0.0):
     Parameters
     ----------
     model : FlexibleLinkage
+        The FE model (:class:`core.fe.linkage.FlexibleLinkage`).
     crank_angle : ndarray, shape (N,)
+        Crank angles [rad].
     speed, accel : float
         Crank speed w [rad/s] and acceleration a [rad/s^2].
     beta : float
@@ -258,8 +268,6 @@ def system_matrices(model, crank_angle, speed, beta, accel=0.0, zeta=0.0):
     c_beta, d_beta = stiffness_damping_terms(model, theta, speed, beta)
     damping = gyro + c_beta
     if zeta:
-        from .modes import modal_damping
-        from .simulate import frozen_eigen
         values, shapes = frozen_eigen(system, speed, accel)
         damping = damping + modal_damping(mass, values, shapes, zeta)
     return mass, damping, stiffness + d_beta, load

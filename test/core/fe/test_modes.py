@@ -3,16 +3,16 @@
 import dataclasses
 import pathlib
 
+from flexlink_ros.core.fe import linkage
+from flexlink_ros.core.fe.linkage import FlexibleLinkage
+from flexlink_ros.core.fe.modes import frozen_mode_sweep, modal_damping, solve_frozen_modes
+from flexlink_ros.core.mechanism import load_mechanism
+from flexlink_ros.core.options import ModelOptions
 import numpy as np
 import pytest
 
-from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.core.fe.linkage import FlexibleLinkage
-from flexlink_ros.core.mechanism import load_mechanism
-from flexlink_ros.core.fe.modes import frozen_mode_sweep, modal_damping, solve_frozen_modes
-
-CONFIG = pathlib.Path(__file__).resolve().parents[1] / 'config'
-NO_KG = dict(geometric_stiffness=False)
+CONFIG = pathlib.Path(__file__).resolve().parents[3] / 'config'
+NO_KG = {'geometric_stiffness': False}
 
 
 @pytest.fixture(scope='module')
@@ -45,8 +45,12 @@ def test_modes_are_mass_normalised_and_damping_is_modal(cho):
 
 
 def test_rigid_crank_modes_are_pinned_coupler_and_lever(cho):
-    """Rigid crank, exact pins: the lowest modes are the coupler's and the lever's first
-    pinned-pinned bending modes (B hardly moves), the paper's 'near 34 Hz and 41 Hz'."""
+    """
+    Rigid crank, exact pins: the lowest modes are pinned-pinned link modes.
+
+    Rigid crank, exact pins: the lowest modes are the coupler's and the lever's first
+    pinned-pinned bending modes (B hardly moves), the paper's 'near 34 Hz and 41 Hz'.
+    """
     model = FlexibleLinkage(cho, ModelOptions.full_model(rigid_crank=True, **NO_KG))
     modes = frozen_mode_sweep(model, np.radians(np.arange(0.0, 360.0, 30.0)), count=2)
     np.testing.assert_allclose(modes.frequencies_hz[:, 0], _pinned_frequency_hz(cho, 1),
@@ -81,8 +85,8 @@ def test_frequencies_without_geometric_stiffness_do_not_depend_on_speed(cho):
 def test_flexible_bearings_lower_frequencies(cho):
     theta = np.radians(np.arange(0.0, 360.0, 45.0))
     pins = frozen_mode_sweep(FlexibleLinkage(cho, ModelOptions.full_model(**NO_KG)), theta, 3)
-    springs = frozen_mode_sweep(FlexibleLinkage(cho, ModelOptions.full_model(bearings='flexible', **NO_KG)),
-                                theta, 3)
+    springs = frozen_mode_sweep(
+        FlexibleLinkage(cho, ModelOptions.full_model(bearings='flexible', **NO_KG)), theta, 3)
     assert np.all(springs.eigenvalues < pins.eigenvalues)
 
 
@@ -100,8 +104,8 @@ def test_more_elements_converge(cho):
     freqs = []
     for elements in (2, 4, 8, 16):
         mech = dataclasses.replace(cho, elements_per_link=elements)
-        freqs.append(frozen_mode_sweep(FlexibleLinkage(mech, ModelOptions.full_model(**NO_KG)), theta,
-                                       3).frequencies_hz[0])
+        model = FlexibleLinkage(mech, ModelOptions.full_model(**NO_KG))
+        freqs.append(frozen_mode_sweep(model, theta, 3).frequencies_hz[0])
     freqs = np.array(freqs)
     errors = np.abs(freqs[:-1] - freqs[-1])
     assert np.all(errors[1] < errors[0]) and np.all(errors[2] < errors[1])
@@ -109,11 +113,12 @@ def test_more_elements_converge(cho):
 
 
 def test_geometric_stiffness_pieces_with_constant_tension(cho, monkeypatch):
-    """K_G assembly with a stand-in axial force: constant tension P on the coupler only.
+    """
+    K_G assembly with a stand-in axial force: constant tension P on the coupler only.
+
     A pinned-pinned beam under tension P has w^2 = w0^2 (1 + P L^2 / (pi^2 EI)) exactly; the
-    pieces (gravity, a, w^2) must combine linearly as P = P1 + a Pa + w^2 Pw2."""
-    import sys
-    import types
+    pieces (gravity, a, w^2) must combine linearly as P = P1 + a Pa + w^2 Pw2.
+    """
     pieces = {'1': 4.0, 'a': 0.01, 'w2': 0.002}
 
     def axial_force(mechanism, state, link, x):
@@ -121,9 +126,7 @@ def test_geometric_stiffness_pieces_with_constant_tension(cho, monkeypatch):
         value = gravity + pieces['a'] * state.alpha[0] + pieces['w2'] * state.omega[0] ** 2
         return np.outer(value, np.ones(len(x))) * (link == 1)
 
-    fake = types.ModuleType('flexlink_ros.core.dynamics')
-    fake.axial_force = axial_force
-    monkeypatch.setitem(sys.modules, 'flexlink_ros.core.dynamics', fake)
+    monkeypatch.setattr(linkage, 'axial_force', axial_force)
     mech = dataclasses.replace(cho, elements_per_link=8)
     model = FlexibleLinkage(mech, ModelOptions.full_model(rigid_crank=True))
     system = model.assemble(np.radians([27.0, 200.0]))

@@ -3,22 +3,23 @@
 import dataclasses
 import math
 
+from flexlink_ros.core.fe import stiffness_damping as sd
+from flexlink_ros.core.fe.link import link_matrices
+from flexlink_ros.core.fe.linkage import FlexibleLinkage
+from flexlink_ros.core.mechanism import load_mechanism
+from flexlink_ros.core.options import ModelOptions
 import numpy as np
 import pytest
 import scipy.linalg
-
-from flexlink_ros.core.fe import stiffness_damping as sd
-from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.core.fe.linkage import FlexibleLinkage, link_matrices
-from flexlink_ros.core.mechanism import load_mechanism
 
 BETA = 1e-4
 
 
 def _model(elements=4, bearings='rigid', rigid_crank=True, gravity=True, geometric=True):
     mech = dataclasses.replace(load_mechanism('cho1992'), elements_per_link=elements)
-    return FlexibleLinkage(mech, ModelOptions.full_model(rigid_crank=rigid_crank, bearings=bearings,
-                                              gravity=gravity, geometric_stiffness=geometric))
+    options = ModelOptions.full_model(rigid_crank=rigid_crank, bearings=bearings,
+                                      gravity=gravity, geometric_stiffness=geometric)
+    return FlexibleLinkage(mech, options)
 
 
 def _static(model, theta=1.0):
@@ -198,7 +199,8 @@ def test_system_matrices_add_beta_terms_to_evaluate():
 
 
 def test_naive_spurious_axial_force_in_coupler_end_element_at_391_rpm():
-    """The issue's ~760 N: naive beta K U' minus objective, coupler's element at B, 8 elements.
+    """
+    The issue's ~760 N: naive beta K U' minus objective, coupler's element at B, 8 elements.
 
     Measured 738 N (391 rpm, bearing springs, rigid crank, split masses, no gravity; 171 N at
     269 rpm; 240 steps per revolution instead of 720 change it by 0.1 %). It is
@@ -219,7 +221,8 @@ def test_naive_spurious_axial_force_in_coupler_end_element_at_391_rpm():
 
 
 def test_beta_damped_full_order_against_peer_at_four_elements():
-    """269 rpm, bearing springs, matched conventions: lever / coupler within 4.5 % RMS.
+    """
+    269 rpm, bearing springs, matched conventions: lever / coupler within 4.5 % RMS.
 
     Measured 2.8 / 3.4 % at 4 elements and 2.8 / 3.3 % at 8 (the issue: 2.9 / 3.4 %). The
     remainder is the second-order motion the linear model lacks (the issue's quasi-static

@@ -3,18 +3,17 @@
 import dataclasses
 import pathlib
 
+from flexlink_ros.core.fe.linkage import FlexibleLinkage
+from flexlink_ros.core.fe.modes import modal_damping
+from flexlink_ros.core.fe.simulate import frozen_eigen, periodic_response, step_convergence
+from flexlink_ros.core.mechanism import load_mechanism
+from flexlink_ros.core.options import ModelOptions
 import numpy as np
 import pytest
 import scipy.integrate
 
-from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.core.fe.linkage import FlexibleLinkage
-from flexlink_ros.core.mechanism import load_mechanism
-from flexlink_ros.core.fe.modes import modal_damping
-from flexlink_ros.core.fe.simulate import frozen_eigen, periodic_response, step_convergence
-
-CONFIG = pathlib.Path(__file__).resolve().parents[1] / 'config'
-NO_KG = dict(geometric_stiffness=False)
+CONFIG = pathlib.Path(__file__).resolve().parents[3] / 'config'
+NO_KG = {'geometric_stiffness': False}
 RPM = 2.0 * np.pi / 60.0
 
 
@@ -28,17 +27,22 @@ def _small(cho, elements=2):
 
 
 def test_periodic_state_matches_independent_integration(cho):
-    """One revolution from the shooting state by scipy's explicit DOP853 (rtol 1e-8) on the
+    """
+    The shooting state matches an independent explicit integration.
+
+    One revolution from the shooting state by scipy's explicit DOP853 (rtol 1e-8) on the
     matrices assembled at every requested time returns the same outputs and ends where it
     started (periodicity). The links are made 100 times less slender (E / 1e4, I * 1e4: same
     bending stiffness, axial modes 100 times lower) and the bearings 4 times softer so that an
-    explicit method can afford one revolution."""
+    explicit method can afford one revolution.
+    """
     soft = dataclasses.replace(
         _small(cho, 1), youngs_modulus=cho.youngs_modulus / 1e4,
         bearing_stiffness=cho.bearing_stiffness / 4,
         links=tuple(dataclasses.replace(link, second_moment=link.second_moment * 1e4)
                     for link in cho.links))
-    model = FlexibleLinkage(soft, ModelOptions.full_model(rigid_crank=True, bearings='flexible', **NO_KG))
+    options = ModelOptions.full_model(rigid_crank=True, bearings='flexible', **NO_KG)
+    model = FlexibleLinkage(soft, options)
     speed = 391 * RPM
     response = periodic_response(model, speed, steps=720, points=24, stages=3)
     n = model.size
@@ -73,7 +77,7 @@ def test_time_step_convergence_order(cho, stages, order):
 
 @pytest.mark.parametrize('options', [ModelOptions.full_model(**NO_KG),
                                      ModelOptions.full_model(rigid_crank=True, bearings='flexible',
-                                                  **NO_KG)])
+                                                             **NO_KG)])
 def test_modal_response_with_all_modes_equals_full_order(cho, options):
     model = FlexibleLinkage(_small(cho), options)
     full = periodic_response(model, 269 * RPM, steps=240, points=24)
@@ -86,10 +90,14 @@ def test_modal_response_with_all_modes_equals_full_order(cho, options):
 
 
 def test_static_correction_recovers_truncated_axial_response(cho):
-    """Rigid bearings: with 3 modes the lever tip (axial) deflection is missed; the
-    residual-flexibility correction restores it, and the coupler mid-point too."""
+    """
+    The static correction restores what truncated modes miss.
+
+    Rigid bearings: with 3 modes the lever tip (axial) deflection is missed; the
+    residual-flexibility correction restores it, and the coupler mid-point too.
+    """
     model = FlexibleLinkage(_small(cho), ModelOptions.full_model(rigid_crank=True, **NO_KG))
-    kwargs = dict(steps=240, points=24)
+    kwargs = {'steps': 240, 'points': 24}
     full = periodic_response(model, 391 * RPM, **kwargs)
     plain = periodic_response(model, 391 * RPM, method='modal', modes=3, **kwargs)
     fixed = periodic_response(model, 391 * RPM, method='modal', modes=3,
@@ -112,13 +120,17 @@ def test_slow_rotation_is_quasi_static(cho):
 
 
 def test_rigid_bearings_keep_lever_tip_deflection_tiny(cho):
-    """Paper, Fig. 20: with rigid bearings and a rigid crank the lever tip moves only by
-    axial strain, far less than the coupler mid-point; flexible bearings move it much more."""
+    """
+    Paper, Fig.
+
+    20: with rigid bearings and a rigid crank the lever tip moves only by
+    axial strain, far less than the coupler mid-point; flexible bearings move it much more.
+    """
     options = dict(rigid_crank=True, **NO_KG)
     pins = periodic_response(FlexibleLinkage(cho, ModelOptions.full_model(**options)), 391 * RPM,
                              steps=240, points=24).peak_to_peak
     springs = periodic_response(FlexibleLinkage(cho, ModelOptions.full_model(bearings='flexible',
-                                                                  **options)),
+                                                                             **options)),
                                 391 * RPM, steps=240, points=24).peak_to_peak
     assert pins[:2].max() < 1e-2 * pins[2:].max()
     assert springs[:2].max() > 100 * pins[:2].max()

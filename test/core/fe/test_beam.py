@@ -1,9 +1,8 @@
 """Cho 1992 element matrices against quadrature of their shape functions (Appendix A)."""
 
+from flexlink_ros.core.fe import beam
 import numpy as np
 import pytest
-
-from flexlink_ros.core.fe import beam
 
 RHO, AREA, E, I, L = 7718.0, 1.44e-5, 2.19e11, 1.153e-12, 0.0873
 GAUSS_X, GAUSS_W = np.polynomial.legendre.leggauss(8)  # exact to degree 15
