@@ -11,7 +11,7 @@ The layouts the C code shares with Python are defined here once: the crank filte
 (``enum F_*`` in the C file; a test parses it), a sample's record and a step row.
 """
 
-from ..reduction import model as reduced
+from ...names import JOINT_NAMES, OUTPUT_NAMES
 
 try:
     from . import _radau_step as impl
@@ -34,7 +34,7 @@ MODE_SPEED = 1.0        # FILTER_MODE of a filter fed measured speeds
 # deflections with the residual correction (outputs), the correction alone (outputs), joint
 # reactions (joints x 2), their time derivative (joints x 2) and squared cycle-RMS reactions
 # (joints).
-RECORD_SIZE = 2 * len(reduced.OUTPUT_NAMES) + 5 * len(reduced.JOINTS)
+RECORD_SIZE = 2 * len(OUTPUT_NAMES) + 5 * len(JOINT_NAMES)
 # A step row: step h [s], sub-steps, crank angle, speed, acceleration, angle advance.
 ROW_SIZE = 6
 

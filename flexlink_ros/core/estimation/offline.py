@@ -16,7 +16,7 @@ from .native import RECORD_SIZE
 from .sample import OUT_OF_BOUND
 from .step import MAX_SUBSTEP_NS
 from .streaming import DEFAULT_ACCEL_LIMIT, StreamingEstimator
-from ..reduction import model as reduced
+from ...names import JOINT_NAMES, OUTPUT_NAMES
 
 # Samples per batch of the offline replay (bounds its memory to a few MB).
 REPLAY_CHUNK = 4096
@@ -112,7 +112,7 @@ def _allocate(result, count, size):
     """Add the per-row outputs to a replay's ``result`` (NaN); return (modal, records)."""
     modal = np.full((count, size), math.nan)
     records = np.full((count, RECORD_SIZE), math.nan)
-    outputs, joints = len(reduced.OUTPUT_NAMES), len(reduced.JOINTS)
+    outputs, joints = len(OUTPUT_NAMES), len(JOINT_NAMES)
     joint = records[:, 2 * outputs:]
     result.update({'lever_tip': records[:, 0:2], 'coupler_mid': records[:, 2:4],
                    'modal': modal, 'force': joint[:, :2 * joints].reshape(count, joints, 2),
@@ -173,7 +173,7 @@ def _step_chunks(estimator, rows, prefix, outputs, result, on_rows):
     """
     modal, records = outputs
     r = estimator.model.size
-    channels = len(reduced.OUTPUT_NAMES)
+    channels = len(OUTPUT_NAMES)
     states = np.empty((min(REPLAY_CHUNK, rows.shape[0]), 2 * r))
     for first in range(0, rows.shape[0], REPLAY_CHUNK):
         chunk = rows[first:first + REPLAY_CHUNK]

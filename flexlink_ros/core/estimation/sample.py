@@ -56,7 +56,7 @@ class Sample:
         Per joint: R below the near-zero fraction of its cycle RMS at this speed.
     error_indicator : float
         Size of the residual-flexibility correction relative to the deflection (see
-        core/reduced.py); large values mean the reduced basis misses part of the response.
+        core/reduction); large values mean the reduced basis misses part of the response.
     flags : int
         What happened: bits of :class:`SampleFlag` (``sample.flags & SampleFlag.RESET``).
     message : str

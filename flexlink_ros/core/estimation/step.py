@@ -23,7 +23,8 @@ from . import native
 from .tables import hermite_basis
 from ..integrators import RADAU_TABLEAUX
 from ..numerics import TWO_PI
-from ..reduction import model as reduced
+from ..reduction.model import CELL_POWERS, MONOMIALS
+from ...names import OUTPUT_NAMES
 
 # Steps longer than this are split into equal sub-steps, the crank state interpolated linearly
 # between the samples: one Radau step across a gap loses the state of the fast modes (at
@@ -86,7 +87,7 @@ class NumpyStep:
     compiled = False
 
     def __init__(self, model, tables):
-        if reduced.MONOMIALS != ('a', '1', 'w2', 'w', 'w4', 'wa', 'w3'):
+        if MONOMIALS != ('a', '1', 'w2', 'w', 'w4', 'wa', 'w3'):
             raise ValueError('monomial order changed: update NumpyStep.evaluate')
         r = model.size
         self.tables = tables
@@ -99,8 +100,8 @@ class NumpyStep:
         self._stored = np.zeros((2, 4, r * r))
         self._flat = self._stored.reshape(2, 4 * r * r)
         self._parity = 0
-        self._weights = np.zeros(reduced.CELL_POWERS * len(reduced.MONOMIALS))
-        self._hermite = np.zeros((2, 2 * len(reduced.MONOMIALS)))
+        self._weights = np.zeros(CELL_POWERS * len(MONOMIALS))
+        self._hermite = np.zeros((2, 2 * len(MONOMIALS)))
 
     def evaluate(self, angle, speed, accel):
         """
@@ -131,7 +132,7 @@ class NumpyStep:
         h00, h10, h01, h11 = hermite_basis(t)
         w, a = speed, accel
         w2 = w * w
-        # Order of reduced.MONOMIALS: a, 1, w2, w, w4, wa, w3.
+        # Order of MONOMIALS: a, 1, w2, w, w4, wa, w3.
         monomials = (a, 1.0, w2, w, w2 * w2, w * a, w2 * w)
         self._weights[:] = [m * p for m in monomials for p in (1.0, t, t2, t3)]
         self._hermite[0] = [m * p for m in monomials for p in (h00, h10)]
@@ -196,7 +197,7 @@ class NumpyStep:
             A reaction below this fraction of its cycle RMS is near zero.
 
         """
-        return joint_criteria(record[2 * len(reduced.OUTPUT_NAMES):].tolist(),
+        return joint_criteria(record[2 * len(OUTPUT_NAMES):].tolist(),
                               near_zero_fraction)
 
     def _sub_steps(self, h, count, angle, speed, accel, advance):

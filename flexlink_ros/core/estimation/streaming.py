@@ -31,8 +31,8 @@ from .tables import _StepTables  # noqa: F401  SHIM
 from .throttled_log import ThrottledWarning
 from .warm_start import WarmStart
 from .warm_start import WarmStartLimiter  # noqa: F401  SHIM
-from ..reduction import model as reduced
 from ...errors import FlexlinkError, OutlierSample
+from ...names import JOINT_NAMES, OUTPUT_NAMES
 
 LOGGER = logging.getLogger(__name__)
 
@@ -55,7 +55,7 @@ class StreamingEstimator:
     Parameters
     ----------
     model : ReducedModel
-        Precomputed reduced model (core/reduced.py).
+        Precomputed reduced model (core/reduction).
     fit_time_constant_s : float
         Time constant of the crank-rate filter [s].
     warm_start : bool
@@ -114,7 +114,7 @@ class StreamingEstimator:
         self._speed_max = float(model.speed_max)
         # Without reaction data (core/dynamics.py absent at precompute) report zeros, flagged.
         self._base_flags = 0 if np.any(model.force_moments) else NO_CRITERIA
-        if len(reduced.JOINTS) != 4:
+        if len(JOINT_NAMES) != 4:
             raise ValueError('the criteria path is written for four joints')
         self._tables = tables.step_tables(model) if step_tables is None else step_tables
         if (self._tables.size, self._tables.mass.shape[0]) != (model.size, model.grid_size):
@@ -360,7 +360,7 @@ class StreamingEstimator:
     def _finish(self, stamp_ns, angle, speed, accel, flags, message):
         """Return the sample of the new state (OUT_OF_BOUND beyond the deflection bound)."""
         values = self._record.tolist()
-        outputs = len(reduced.OUTPUT_NAMES)
+        outputs = len(OUTPUT_NAMES)
         deflection = values[:outputs]
         correction = values[outputs:2 * outputs]
         criteria = self._stepper.criteria(self._record, self.near_zero_fraction)

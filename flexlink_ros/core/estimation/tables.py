@@ -12,7 +12,8 @@ import numpy as np
 
 from ..integrators import RADAU_TABLEAUX
 from ..numerics import TWO_PI
-from ..reduction import model as reduced
+from ..reduction.model import cell_groups, CELL_POWERS, monomial_values, MONOMIALS
+from ...names import OUTPUT_NAMES
 
 POWERS = (-2, -1, 0, 1, 2)   # G(h) is a Laurent polynomial in h
 FIRST_MC = 1                 # M and C start at monomial 1
@@ -34,9 +35,9 @@ def _check_layout(model, stages):
     """Refuse a model (or stage count) the step tables are not written for."""
     if stages != 2:
         raise ValueError('the streaming step is written for 2-stage Radau IIA')
-    if reduced.MONOMIALS[:5] != ('a', '1', 'w2', 'w', 'w4'):
+    if MONOMIALS[:5] != ('a', '1', 'w2', 'w', 'w4'):
         raise ValueError('monomial order changed: update _StepTables')
-    if reduced.CELL_POWERS != 4:
+    if CELL_POWERS != 4:
         raise ValueError('the step tables are written for cubic cells')
     for name, stop in (('M', 1 + GROUPS_C), ('C', 1 + GROUPS_C),
                        ('K', GROUPS_KF), ('f', GROUPS_KF)):
@@ -86,7 +87,7 @@ def build_output_tables(model):
     n_cells = model.table.shape[0]
     out_rows = max(_rows_used(model, 'out'), _rows_used(model, 'corr'))
     rows = slice(0, out_rows)
-    outputs = len(reduced.OUTPUT_NAMES)
+    outputs = len(OUTPUT_NAMES)
     out = np.zeros((n_cells, out_rows, outputs, r + 1))
     out[..., :r] = _block(model, 'out', rows).reshape(n_cells, out_rows, outputs, r)
     out[..., r] = _block(model, 'corr', rows)
@@ -269,7 +270,7 @@ def system_blocks(model, tables, theta, w, a):
     theta = np.asarray(theta, dtype=float)
     cells, t = model.cell(theta)
     basis = np.stack(hermite_basis(t), axis=-1)
-    monomials = np.stack(np.broadcast_arrays(*reduced.monomial_values(
+    monomials = np.stack(np.broadcast_arrays(*monomial_values(
         np.full(theta.size, float(w)), np.full(theta.size, float(a)))), axis=-1)
     # (angle, monomial, node k / k + 1, V / S)
     weights = (monomials[:, :, None] * basis[:, None, :]).reshape(theta.size, -1, 2, 2)
@@ -277,7 +278,7 @@ def system_blocks(model, tables, theta, w, a):
     damping = np.empty((theta.size, r * r))
     kf = np.empty((theta.size, r * r + r))
     first, after = tables.FIRST_MC, tables.FIRST_MC + tables.mass_groups
-    for k, group in reduced.cell_groups(cells):
+    for k, group in cell_groups(cells):
         k1 = (k + 1) % model.grid_size
         for out, table, groups in ((mass, tables.mass, slice(first, after)),
                                    (damping, tables.damping,

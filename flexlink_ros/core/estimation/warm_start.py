@@ -15,7 +15,7 @@ import numpy as np
 from .sample import COLD_START, WARM_START
 from .throttled_log import ThrottledWarning
 from ..numerics import TWO_PI
-from ..reduction import model as reduced
+from ..reduction.model import periodic_response
 
 LOGGER = logging.getLogger(__name__)
 
@@ -138,7 +138,7 @@ class WarmStart:
         """
         Return (q, v) of the periodic steady state at crank ``angle`` and constant ``speed``.
 
-        Shooting over one revolution (reduced.periodic_response, WARM_START_STEPS steps); the
+        Shooting over one revolution (periodic_response, WARM_START_STEPS steps); the
         orbit is kept, and a later call within WARM_START_SPEED_TOLERANCE of its speed takes
         the state from it by cubic Hermite interpolation in time (:func:`orbit_state`).
 
@@ -156,8 +156,8 @@ class WarmStart:
         """
         if not self.serves(speed):
             self.warm_starts += 1
-            _, q, v = reduced.periodic_response(model, speed, start_angle=angle,
-                                                steps=WARM_START_STEPS, blocks=blocks)
+            _, q, v = periodic_response(model, speed, start_angle=angle,
+                                        steps=WARM_START_STEPS, blocks=blocks)
             self.orbit = (speed, angle, q, v)
             return q[0].copy(), v[0].copy()
         return orbit_state(self.orbit, angle)
