@@ -1,16 +1,16 @@
 /*
  * The streaming estimator's per-sample step in C: the same arithmetic as
- * the numpy step, StreamingEstimator._step (core/estimator.py), without its ~30 numpy calls.
+ * the numpy step, NumpyStep._step (core/estimation/step.py), without its ~30 numpy calls.
  *
  * One 2-stage Radau IIA step of the reduced model M q'' + C q' + K q = f over h:
  *   - M, C, K, f at the first stage (crank state at c1 h, interpolated between samples)
  *     and at the sample, from the node tables of the cubic spline (Hermite weights =
  *     monomial * h00, h10, h01, h11 on nodes k and k + 1);
  *   - the step matrix and the operator on (q, v) from the 8 x 8 coefficient matrix
- *     G(h) = sum_p h^p g[p] (slot 0 = the sample, slot 1 = stage 1, see _StepTables);
+ *     G(h) = sum_p h^p g[p] (slot 0 = the sample, slot 1 = stage 1, see tables._StepTables);
  *   - the 2 r x 2 r system solved by LU with partial pivoting, z = (q, v) += dz.
  * A sample whose step is split into sub-steps (MAX_SUBSTEP_NS) is advanced here too,
- * with the crank state linear between the samples, as _advance does.
+ * with the crank state linear between the samples, as NumpyStep._sub_steps does.
  *
  * No numpy headers: arrays come through the buffer protocol (C-contiguous float64).
  */
@@ -36,7 +36,7 @@ static const double PI = 3.141592653589793;     /* math.pi */
 
 typedef struct {
     Py_ssize_t r, cells, mass_groups, out_rows, joint_rows;
-    const float *mass, *damping;    /* float32, node tables: see _StepTables */
+    const float *mass, *damping;    /* float32, node tables: see tables._StepTables */
     const double *kf, *out, *joint, *g0;
     double cells_per_radian, c1;
     /* scratch */
@@ -78,7 +78,7 @@ static inline double dot(const double *restrict a, const double *restrict b, Py_
     return (s0 + s1) + (s2 + s3);
 }
 
-/* Row and Hermite weights at (angle, w, a) and the cell: StreamingEstimator._evaluate. */
+/* Row and Hermite weights at (angle, w, a) and the cell: NumpyStep.evaluate. */
 static Py_ssize_t evaluate(const Step *s, double angle, double w, double a, double *weights,
                            double *hermite)
 {
@@ -163,7 +163,7 @@ STEP_CLONES static void combine(const double *weights, const double *table, Py_s
 DEFINE_COMBINE_NODES(combine_nodes, double)
 DEFINE_COMBINE_NODES(combine_nodes_f32, float)
 
-/* M, C, K and f of the crank state into a slot (StreamingEstimator._load). */
+/* M, C, K and f of the crank state into a slot (NumpyStep._load). */
 static void load(Step *s, int slot, double angle, double w, double a)
 {
     const Py_ssize_t r = s->r, r2 = r * r;
@@ -182,7 +182,7 @@ static void load(Step *s, int slot, double angle, double w, double a)
     combine_nodes(s->hermite, lo + r2, hi + r2, GROUPS_KF, kf_width, r, s->loads + slot * r);
 }
 
-/* The record of the crank state prev at the state z (_StepTables.record). */
+/* The record of the crank state prev at the state z (tables._StepTables.record). */
 static void record(Step *s, const double *z, const double *prev, double *restrict out)
 {
     const Py_ssize_t r = s->r, width = OUTPUTS * (r + 1);
@@ -338,7 +338,7 @@ static double python_mod(double x, double y)
     return mod;
 }
 
-/* One Radau IIA step of h to crank state (angle, w, a) from prev (StreamingEstimator._step). */
+/* One Radau IIA step of h to crank state (angle, w, a) from prev (NumpyStep._step). */
 STEP_CLONES static int radau_step(Step *s, double *z, double *prev, double h, double angle, double w,
                       double a, double advance)
 {
@@ -473,11 +473,11 @@ PyDoc_STRVAR(advance_doc,
 "\n"
 "Advance the modal state z = [q, v, 1] through the sample rows (h, sub-steps, angle,\n"
 "speed, acceleration, advance; 6 values each), 2-stage Radau IIA, as\n"
-"StreamingEstimator._step. Tables as _StepTables (C order; mass and damping float32, the\n"
+"NumpyStep._step. Tables as _StepTables (C order; mass and damping float32, the\n"
 "rest float64). prev (angle, speed,\n"
 "acceleration of the last step) is updated; states (rows x 2 r, or empty) receives\n"
 "z[:2 r] after each row; records (rows x 28, or 28 for the last row only) the sample's\n"
-"record (estimator.RECORD_SIZE).");
+"record (native.RECORD_SIZE).");
 
 /* Rows (row groups) per grid cell or node of a table (at most `most`), or -1 with an exception set. */
 static Py_ssize_t rows_of(const Py_buffer *view, Py_ssize_t per_row, Py_ssize_t cells,
@@ -625,7 +625,7 @@ done:
     return result;
 }
 
-/* ---- crank-rate filter: CrankRateFilter.update (core/estimator.py), the same arithmetic -- */
+/* ---- crank-rate filter: CrankRateFilter.update (crank_filter.py), the same arithmetic - */
 
 /* State layout (float64), mirrored by estimator.FILTER_STATE_* */
 enum {
@@ -773,7 +773,7 @@ EXACT_ARITHMETIC static void filter_update(double *st, double time_s, double ang
 PyDoc_STRVAR(filter_update_doc,
 "filter_update(state, time_s, angle, speed) -> (angle, speed, accel)\n"
 "\n"
-"CrankRateFilter.update on a state array (estimator.FILTER_STATE float64 values); speed NaN\n"
+"CrankRateFilter.update on a state array (native.FILTER_STATE float64 values); speed NaN\n"
 "when not measured. Returns the wrapped angle, speed and acceleration.");
 
 static PyObject *filter_update_py(PyObject *module, PyObject *args)
@@ -827,12 +827,12 @@ done:
     return result;
 }
 
-/* ---- joint criteria: StreamingEstimator._criteria, the same arithmetic ---------------- */
+/* ---- joint criteria: step.joint_criteria, the same arithmetic ----------------------- */
 
 PyDoc_STRVAR(criteria_doc,
 "criteria(record, near_zero_fraction, floor_fraction) -> (R, gamma_dot, ratio, near_zero)\n"
 "\n"
-"StreamingEstimator._criteria from a record (estimator.RECORD_SIZE): per joint the reaction\n"
+"step.joint_criteria from a record (native.RECORD_SIZE): per joint the reaction\n"
 "magnitude R, its direction's rate gamma_dot = (Fx dFy - Fy dFx) / R^2 with R^2 clamped to\n"
 "floor_fraction^2 of the cycle mean square, |gamma_dot| / R, and whether R is below\n"
 "near_zero_fraction of the cycle RMS (four-tuples).");
@@ -918,7 +918,7 @@ static PyMethodDef methods[] = {
 
 static struct PyModuleDef module_def = {
     PyModuleDef_HEAD_INIT, "_radau_step",
-    "Compiled per-sample Radau IIA step of the streaming estimator (core/estimator.py).",
+    "Compiled per-sample Radau IIA step of the streaming estimator (core/estimation/step.py).",
     -1, methods, NULL, NULL, NULL, NULL,
 };
 

@@ -1,0 +1,168 @@
+"""The per-sample step: against the reference Radau IIA step, compiled against numpy."""
+
+import estimation_toys as toys
+from estimation_toys import compiled_or_skip, sample_times, samples_fields
+from flexlink_ros.core.estimation import native
+from flexlink_ros.core.estimation.native import compiled_step_available, RECORD_SIZE
+from flexlink_ros.core.estimation.sample import SampleFlag
+from flexlink_ros.core.estimation.step import (joint_criteria, MAX_SUBSTEP_NS,
+                                               REACTION_FLOOR_FRACTION, STAGE1)
+from flexlink_ros.core.estimation.streaming import StreamingEstimator
+from flexlink_ros.core.integrators import RadauIIA
+from flexlink_ros.core.reduction import model as reduced
+import numpy as np
+import pytest
+
+
+@pytest.fixture(scope='module')
+def toy_model():
+    return toys.toy_model()
+
+
+def test_fused_step_equals_the_reference_radau_step(toy_model):
+    # The per-sample algebra (stacked tables, transformed unknowns) against RadauIIA.step
+    # with the same stage matrices (stage 1 at the crank state interpolated to c_1 h).
+    est = StreamingEstimator(toy_model, warm_start=False)
+    rng = np.random.default_rng(1)
+    stamp, angle, speed = 0, 1.0, 30.0
+    est.update(stamp, angle, speed)
+    method = RadauIIA(2)
+    clip = lambda a: float(np.clip(a, -est.accel_limit, est.accel_limit))  # noqa: E731
+    for _ in range(50):
+        # One step per sample up to MAX_SUBSTEP_NS (longer ones are split: tested below).
+        step_ns = int(10 ** rng.uniform(4, np.log10(MAX_SUBSTEP_NS)))
+        # Random speeds, each within the jump a sample may make (InputGate).
+        speed = float(np.clip(speed + rng.uniform(-25, 25), -60, 60))
+        last = est._last
+        q, v = np.array(last.modal), est._stepper.z[toy_model.size:2 * toy_model.size].copy()
+        stamp += step_ns
+        angle += speed * step_ns * 1e-9
+        sample = est.update(stamp, angle, speed)
+        c1 = method.c[0]
+        speeds = (last.crank_speed, sample.crank_speed)
+        accels = (clip(last.crank_accel), clip(sample.crank_accel))
+        stage1 = toy_model.evaluate(last.crank_angle + c1 * est.rate_filter.advance,
+                                    speeds[0] + c1 * (speeds[1] - speeds[0]),
+                                    accels[0] + c1 * (accels[1] - accels[0]))
+        current = toy_model.evaluate(sample.crank_angle, speeds[1], accels[1])
+        rows = np.vstack([stage1, current])
+        q_new, _, _ = method.step(q, v, step_ns * 1e-9, *reduced.system_blocks(toy_model, rows))
+        # 1e-6: the step tables hold M and C in float32 (2e-8 of the outputs; an error in
+        # the algebra shows at O(h) or more).
+        np.testing.assert_allclose(sample.modal, q_new, rtol=1e-6,
+                                   atol=1e-8 * np.max(np.abs(q_new)))
+
+
+@pytest.mark.parametrize('with_speed', [True, False])
+def test_compiled_step_equals_numpy_step(toy_model, with_speed):
+    # Jitter, drops, gaps that take sub-steps (7 and 40 ms), a reset (stamp back) and a
+    # speed beyond the model's range: every branch of the step runs on both paths.
+    compiled_or_skip()
+    times = sample_times(1000.0, 0.4, 0.5, 0.05, seed=21)
+    times = np.concatenate([times, times[-1] + 0.007 + times[:200],
+                            times[-1] + 0.247 + times[:200], times[-1] + 0.1 + times[:100]])
+    stamps = np.round(times * 1e9).astype(np.int64)
+    speed = lambda t: 30.0 + 60.0 * np.sin(3.0 * t)  # noqa: E731
+    angle = lambda t: 30.0 * t + 20.0 * (1.0 - np.cos(3.0 * t))  # noqa: E731
+    runs = {}
+    for compiled in (True, False):
+        est = StreamingEstimator(toy_model, compiled=compiled)
+        assert est.compiled is compiled
+        runs[compiled] = [est.update(int(s), float(angle(t)),
+                                     float(speed(t)) if with_speed else None)
+                          for s, t in zip(stamps, times)]
+    assert [s.flags for s in runs[True]] == [s.flags for s in runs[False]]
+    assert any(s.flags & SampleFlag.RESET for s in runs[True][1:])
+    compiled, numpy_step = samples_fields(runs[True]), samples_fields(runs[False])
+    for name, values in numpy_step.items():
+        scale = max(np.max(np.abs(values)), 1e-30)
+        np.testing.assert_allclose(compiled[name], values, rtol=0.0, atol=1e-9 * scale,
+                                   err_msg=name)
+
+
+@pytest.mark.parametrize('compiled', [False, True])
+def test_non_finite_step_is_flagged_and_the_next_sample_restarts(toy_model, compiled):
+    """A table gone non-finite: that sample is OUT_OF_BOUND (NaN), the next one restarts."""
+    if compiled:
+        compiled_or_skip()
+    est = StreamingEstimator(toy_model, compiled=compiled)
+    for n in range(5):
+        est.update(n * 10**6, 0.4 + 0.02 * n, 20.0)
+    kf = est._tables.kf
+    est._tables.kf = kf.copy()
+    est._tables.kf[..., 0] = np.nan
+    bad = est.update(5 * 10**6, 0.5, 20.0)
+    assert bad.flags & SampleFlag.OUT_OF_BOUND and 'non-finite' in bad.message
+    assert np.all(np.isnan(bad.lever_tip + bad.coupler_mid))
+    est._tables.kf = kf
+    after = est.update(6 * 10**6, 0.52, 20.0)
+    assert after.flags & SampleFlag.RESET and not after.flags & SampleFlag.OUT_OF_BOUND
+    assert np.all(np.isfinite(after.lever_tip + after.coupler_mid))
+    assert est.out_of_bound == 1
+
+
+def test_compiled_step_rejects_bad_buffers(toy_model):
+    compiled_or_skip()
+    est = StreamingEstimator(toy_model)
+    est.update(0, 0.0, 30.0)
+    step = est._stepper
+    t = step.tables
+    row = np.array([1e-3, 1.0, 0.03, 30.0, 0.0, 0.03])
+
+    def call(**change):
+        args = {'mass': t.mass, 'damping': t.damping, 'kf': t.kf, 'out': t.out,
+                'joint': t.joint, 'g0': t.g0, 'cells': step.cells_per_radian, 'c1': STAGE1,
+                'z': step.z, 'prev': step.previous, 'rows': row, 'states': np.empty(0),
+                'records': est.last_record}
+        args.update(change)
+        native.impl.advance(*args.values())
+
+    z_before = step.z.copy()
+    with pytest.raises(ValueError, match='kf'):
+        call(kf=t.kf[:-1])
+    with pytest.raises(ValueError, match='damping'):
+        call(damping=np.zeros(7, dtype=np.float32))
+    with pytest.raises(TypeError, match='float32'):
+        call(mass=t.mass.astype(np.float64))
+    with pytest.raises(TypeError, match='float64'):
+        call(kf=t.kf.astype(np.float32))
+    with pytest.raises(ValueError, match='rows'):
+        call(rows=row[:5])
+    with pytest.raises(ValueError, match='non-positive step'):
+        call(rows=np.array([0.0, 1.0, 0.03, 30.0, 0.0, 0.03]))
+    with pytest.raises(ValueError, match='records'):
+        call(records=np.zeros(5))
+    with pytest.raises(ValueError, match='states'):
+        call(states=np.zeros(3))
+    with pytest.raises((BufferError, ValueError), match='read-only|writable'):
+        call(z=np.frombuffer(bytes(z_before.nbytes)))
+    np.testing.assert_array_equal(step.z, z_before)
+    poisoned = t.kf.copy()
+    poisoned[..., 0] = np.nan
+    with pytest.raises(ValueError, match='non-finite'):
+        call(kf=poisoned)
+    np.testing.assert_array_equal(step.z, z_before)
+    call()
+    assert np.all(np.isfinite(step.z)) and not np.array_equal(step.z, z_before)
+
+
+def test_compiled_criteria_give_the_python_criteria_bit_for_bit(toy_model):
+    """The C criteria (the node's path) equal StreamingEstimator._criteria, zeros included."""
+    if not compiled_step_available():
+        pytest.skip('compiled step not built')
+    estimator = StreamingEstimator(toy_model, compiled=False)
+    rng = np.random.default_rng(5)
+    for n in range(2000):
+        record = rng.normal(size=RECORD_SIZE) * 10.0 ** rng.uniform(-8, 3)
+        joint = record[8:]
+        if n % 4 == 1:
+            joint[0:2] = 0.0                        # a zero reaction: clamped, flagged
+        if n % 4 == 2:
+            joint[2:4] *= 1e-9                      # near zero
+        if n % 7 == 3:
+            joint[16:] = 0.0                        # no cycle RMS either: criterion 0
+        joint[16:] = np.abs(joint[16:])
+        expected = joint_criteria(record[8:].tolist(), estimator.near_zero_fraction)
+        got = native.impl.criteria(record, estimator.near_zero_fraction,
+                                   REACTION_FLOOR_FRACTION)
+        assert got == expected
