@@ -3,7 +3,8 @@
 
     flexlink modes --mechanism config/cho1992.yaml --crank-deg 0:360:5 --count 3
                    [--speed-rad-s 30] [--rigid-crank] [--bearings rigid|flexible]
-                   [--no-geometric-stiffness] [--no-gravity] [--centrifugal] [--shapes] [--json]
+                   [--elements-per-link N] [--no-geometric-stiffness] [--no-gravity]
+                   [--centrifugal] [--shapes] [--json]
     flexlink simulate --mechanism config/cho1992.yaml --rpm 391 [--rigid-crank]
                    [--bearings rigid|flexible] [--method full|modal] [--modes N]
                    [--static-correction] [--damping-ratio Z] [--points-per-rev P]
@@ -16,12 +17,14 @@ optional ``shapes``. ``simulate`` JSON: ``crank_deg``, ``lever_tip`` and ``coupl
 ``peak_to_peak_m``, ``floquet_spectral_radius``, ``wall_s``, optional ``convergence``.
 """
 
+import dataclasses
 import math
 import time
 
 import numpy as np
 
 from .main import degree_range, emit
+from .model_args import add_model_arguments
 from ..core.options import ModelOptions
 from ..core.fe import linkage as assembly, modes, simulate
 from ..errors import FlexlinkError
@@ -29,17 +32,9 @@ from ..core.mechanism import load_mechanism
 
 
 def _model_arguments(parser):
-    parser.add_argument('--mechanism', default='cho1992',
-                        help='mechanism YAML file or bare name (default cho1992)')
-    parser.add_argument('--rigid-crank', action='store_true',
-                        help='rigid crank: crank pin A is a fixed point of the frozen structure')
-    parser.add_argument('--bearings', default='rigid',
-                        help='rigid (exact pins, default) or flexible (Eq. 23 springs)')
-    parser.add_argument('--no-geometric-stiffness', action='store_true',
-                        help='leave out the geometric stiffness A.4')
+    # The FE studies' defaults: rigid bearings, flexible crank (--elements: old spelling).
+    add_model_arguments(parser, 'rigid', 'the mechanism file', elements_alias=True)
     parser.add_argument('--no-gravity', action='store_true', help='leave out gravity')
-    parser.add_argument('--elements', default=None,
-                        help='beam elements per link (default: the mechanism file)')
     parser.add_argument('--json', action='store_true', help='print one JSON object')
 
 
@@ -96,12 +91,24 @@ def _number(text, name, integer=False, positive=True, allow_zero=False):
 
 
 def build_model(args):
-    """Mechanism and FlexibleLinkage from the common arguments."""
-    import dataclasses
+    """
+    Build the mechanism and its FlexibleLinkage from the common arguments.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The model flags (:func:`cli.model_args.add_model_arguments`) and ``no_gravity``.
+
+    Returns
+    -------
+    mech : Mechanism
+    model : FlexibleLinkage
+
+    """
     mech = load_mechanism(args.mechanism)
-    if args.elements is not None:
-        mech = dataclasses.replace(mech, elements_per_link=_number(args.elements, 'elements',
-                                                                   integer=True))
+    if args.elements_per_link is not None:
+        mech = dataclasses.replace(mech, elements_per_link=_number(
+            args.elements_per_link, 'elements-per-link', integer=True))
     if args.bearings not in assembly.BEARING_MODELS:
         raise ValueError(f'`--bearings` must be one of {", ".join(assembly.BEARING_MODELS)}, '
                          f'got {args.bearings!r}')
