@@ -22,12 +22,12 @@ from ..core.mechanism import load_mechanism
 from ..core.numerics import RPM
 from ..core.options import ModelOptions
 from ..report.estimator import plot_error_vs_cost
+from ..studies.bench import configuration_error  # noqa: F401  SHIM
 from ..studies.bench import run_bench
 from ..studies.plan import plan_table, run_plan
-from ..studies.synthetic import run_estimate
-from ..studies.bench import configuration_error  # noqa: F401  SHIM
 from ..studies.plan import scene_options  # noqa: F401  SHIM
 from ..studies.synthetic import last_revolution, synthetic_signal  # noqa: F401  SHIM
+from ..studies.synthetic import run_estimate
 
 
 def _estimate(args):
@@ -57,7 +57,7 @@ def _plan(args):
 
 
 def _bench_lines(result):
-    """The text of ``bench``: a row per configuration, the numpy step, CPU ratio, targets."""
+    """Write the text of ``bench``: a row per configuration, numpy step, CPU ratio, targets."""
     lines = [f'{"configuration":<22} {"r":>3} {"grid":>5} {"us p50":>7} {"us p99":>7} '
              f'{"offline/s":>10} {"coupler":>9} {"lever":>9} {"MB":>6}']
     for row in result['configurations']:
@@ -112,7 +112,7 @@ def register(subparsers):
     parser = subparsers.add_parser('plan', help='smallest model (physics and size) meeting a '
                                    'tolerance against the full-order response of the scene '
                                    '(flexible crank, geometric stiffness, refined elements, '
-                                   '--bearings); --elements-per-link sets the reference\'s '
+                                   "--bearings); --elements-per-link sets the reference's "
                                    'elements, crank and geometric-stiffness flags are ignored')
     add_estimator_arguments(parser)
     parser.add_argument('--rpm-max', type=float, required=True, help='largest speed [rpm]')

@@ -25,10 +25,10 @@ import numpy as np
 
 from .main import degree_range, emit
 from .model_args import add_model_arguments
-from ..core.options import ModelOptions
 from ..core.fe import linkage as assembly, modes, simulate
-from ..errors import FlexlinkError
 from ..core.mechanism import load_mechanism
+from ..core.options import ModelOptions
+from ..errors import FlexlinkError
 
 
 def _model_arguments(parser):
@@ -113,8 +113,8 @@ def build_model(args):
         raise ValueError(f'`--bearings` must be one of {", ".join(assembly.BEARING_MODELS)}, '
                          f'got {args.bearings!r}')
     options = ModelOptions.full_model(rigid_crank=args.rigid_crank, bearings=args.bearings,
-                                    geometric_stiffness=not args.no_geometric_stiffness,
-                                    gravity=not args.no_gravity)
+                                      geometric_stiffness=not args.no_geometric_stiffness,
+                                      gravity=not args.no_gravity)
     return mech, assembly.FlexibleLinkage(mech, options)
 
 
@@ -163,7 +163,7 @@ def modes_command(args):
     lines.append('crank deg  ' + '  '.join(f'f{i + 1} [Hz] (link)' for i in range(count)))
     for deg, row, names in zip(args.crank_deg, freqs, result_modes.dominant_link_names):
         lines.append(f'{deg:9.2f}  ' + '  '.join(f'{f:9.3f} ({name})'
-                                                   for f, name in zip(row, names)))
+                                                 for f, name in zip(row, names)))
     return emit(result, '\n'.join(lines), args.json)
 
 
@@ -185,8 +185,8 @@ def simulate_command(args):
     steps = _number(args.steps_per_rev, 'steps-per-rev', integer=True)
     stages = _number(args.stages, 'stages', integer=True)
     speed = rpm * 2.0 * math.pi / 60.0
-    kwargs = dict(method=method, modes=count, static_correction=args.static_correction,
-                  stages=stages, zeta=zeta)
+    kwargs = {'method': method, 'modes': count, 'static_correction': args.static_correction,
+              'stages': stages, 'zeta': zeta}
     response = _guard_geometric(simulate.periodic_response, model, speed, steps=steps,
                                 points=points, **kwargs)
     out = response.outputs

@@ -68,7 +68,7 @@ def add_model_arguments(parser, bearings_default, elements_help, elements_alias=
     crank = parser.add_mutually_exclusive_group()
     crank.add_argument('--rigid-crank', dest='rigid_crank', action='store_true', default=False,
                        help='treat the crank as rigid: crank pin A is a fixed point of the '
-                       'frozen structure (the paper\'s Figs 20-22 case)')
+                       "frozen structure (the paper's Figs 20-22 case)")
     crank.add_argument('--flexible-crank', dest='rigid_crank', action='store_false',
                        help='model the crank as a flexible beam (default)')
     parser.add_argument('--bearings', choices=BEARINGS, default=bearings_default,

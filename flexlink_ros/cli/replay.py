@@ -30,18 +30,18 @@ import numpy as np
 
 from .main import emit
 from .model_args import add_estimator_arguments, load_model, model_options
-from ..core.estimation.offline_run import BackgroundEstimate, allocate_estimate, \
+from ..core.estimation.offline_run import allocate_estimate, BackgroundEstimate, \
     estimate_offline
 from ..core.mechanism import load_mechanism
 from ..io.joint_states import read_crank_samples
 from ..io.recorder import refuse_existing
 from ..io.recording import choose_input_topic, damage_note, scan_recording
+from ..io.recording import iter_recording, JOINT_PROBE_MESSAGES  # noqa: F401  SHIM
 from ..io.replay_writer import write_replay
 from ..names import DEFAULT_FRAME_ID, NODE_NAME, OUTPUT_POINTS, output_topics
+from ..names import JOINT_STATE  # noqa: F401  SHIM
 from ..ros.messages import OK
 from ..ros.republish import publish_recording
-from ..io.recording import iter_recording, JOINT_PROBE_MESSAGES  # noqa: F401  SHIM
-from ..names import JOINT_STATE  # noqa: F401  SHIM
 
 PROGRESS_PERIOD_S = 0.5  # seconds between progress-bar updates
 
@@ -234,7 +234,7 @@ def _check_arguments(args):
 
 def summary_text(result):
     """
-    The human-readable summary of a replay.
+    Summarise a replay for people.
 
     Parameters
     ----------
@@ -259,7 +259,7 @@ def summary_text(result):
     lines += [f'  note: {note}' for note in result['notes']]
     lines.append(f"  lever tip peak-to-peak   dx {result['lever_tip_peak_to_peak_um'][0]:10.1f} "
                  f"um  dy {result['lever_tip_peak_to_peak_um'][1]:10.1f} um")
-    lines.append(f"  coupler mid peak-to-peak dx "
+    lines.append('  coupler mid peak-to-peak dx '
                  f"{result['coupler_mid_peak_to_peak_um'][0]:10.1f} um  dy "
                  f"{result['coupler_mid_peak_to_peak_um'][1]:10.1f} um")
     if not result['criteria_available']:

@@ -90,7 +90,7 @@ def _first_layout(payloads, joint_name):
 
 
 def _column(rows, offset, dtype):
-    """The values of type ``dtype`` at byte ``offset`` of every row."""
+    """Read the value of type ``dtype`` at byte ``offset`` of every row."""
     return rows[:, offset:offset + np.dtype(dtype).itemsize].copy().view(dtype)[:, 0]
 
 
@@ -174,7 +174,7 @@ def parse_crank_states(payloads, joint_name):
 
 def read_crank_samples(path, topic, joint_name, scan=None):
     """
-    The crank samples of one topic.
+    Read the crank samples of one topic.
 
     Parameters
     ----------

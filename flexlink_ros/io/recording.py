@@ -13,8 +13,8 @@ import struct
 
 from .cdr import parse_joint_state
 from .mcap_reader import (
-    MESSAGE_HEAD, MESSAGE_HEAD_SIZE, McapFileError, Salvage, iter_messages, map_file,
-    message_fields,
+    iter_messages, map_file, McapFileError, message_fields, MESSAGE_HEAD, MESSAGE_HEAD_SIZE,
+    Salvage,
 )
 from ..names import JOINT_STATE
 
@@ -24,7 +24,7 @@ JOINT_PROBE_MESSAGES = 1000
 
 def recording_files(path):
     """
-    The MCAP files of a bare file or a bag directory (in split order).
+    List the MCAP files of a bare file or a bag directory (in split order).
 
     Parameters
     ----------

@@ -9,7 +9,7 @@ encoders of :mod:`io.cdr`) and written in batches (:meth:`McapRecorder.write_bat
 
 import numpy as np
 
-from .cdr import MarkerEncoder, criteria_rows, rows_to_bytes, vector3_stamped_rows
+from .cdr import criteria_rows, MarkerEncoder, rows_to_bytes, vector3_stamped_rows
 from .recorder import McapRecorder
 from ..names import JOINT_STATE, MARKER_ARRAY, OUTPUT_POINTS, VECTOR3_STAMPED
 
@@ -90,7 +90,7 @@ def _add_topics(recorder, input_topic, topics, markers):
 
 
 def _output_columns(samples, estimate, chosen, frame):
-    """The input bytes and the encoded outputs of the samples ``chosen``, one list each."""
+    """Encode the outputs of the samples ``chosen``; with their input bytes, a list each."""
     stamps = samples['stamps_ns'][chosen]
     return [samples['data'][chosen],
             rows_to_bytes(vector3_stamped_rows(stamps, frame, estimate['lever_tip'][chosen])),

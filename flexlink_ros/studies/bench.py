@@ -13,12 +13,12 @@ import time
 
 import numpy as np
 
-from .synthetic import PAPER_RPM, last_revolution, run_estimate, stream_timed, \
+from .synthetic import last_revolution, PAPER_RPM, run_estimate, stream_timed, \
     synthetic_signal, timing_summary
 from ..core.estimation.streaming import compiled_step_available, replay
 from ..core.fe import linkage as assembly
 from ..core.integrators import RadauIIA
-from ..core.numerics import RPM, relative_rms
+from ..core.numerics import relative_rms, RPM
 from ..core.options import ModelOptions
 from ..core.reduction import model as reduced
 
@@ -86,7 +86,19 @@ def reference_cpu_per_second(mechanism, options, rpm, rate_hz):
 
 
 def bench_configurations(base):
-    """The configurations compared by ``bench``: the default first."""
+    """
+    List the configurations compared by ``bench``: the default first.
+
+    Parameters
+    ----------
+    base : ModelOptions
+        The default configuration.
+
+    Returns
+    -------
+    list of (label, ModelOptions)
+
+    """
     smaller = dataclasses.replace(base, modes=max(1, base.modes - 4))
     larger = dataclasses.replace(base, modes=base.modes + 4)
     return [('default', base),
@@ -99,7 +111,7 @@ def bench_configurations(base):
 
 def interleaved_timing(entries, signal, long_signal, rounds=3):
     """
-    Streaming and offline cost of several (model, step) entries, timed in interleaved rounds.
+    Time the streaming and offline cost of (model, step) entries in interleaved rounds.
 
     Every round times every entry once, so a slow spell of a shared machine hits all of them
     alike; each entry keeps its best round (lowest median: the slower rounds measure the
@@ -110,11 +122,16 @@ def interleaved_timing(entries, signal, long_signal, rounds=3):
     ----------
     entries : dict
         key -> (model, compiled).
+    signal, long_signal : tuple of ndarray
+        (stamps, angles, speeds) of the streamed and the replayed signal.
+    rounds : int
+        Rounds of timing.
 
     Returns
     -------
     dict
         key -> us_per_sample, us_per_sample_p99, offline_samples_per_s.
+
     """
     best = {key: {'us_per_sample': math.inf, 'offline_samples_per_s': 0.0} for key in entries}
     for _ in range(rounds):
@@ -128,7 +145,6 @@ def interleaved_timing(entries, signal, long_signal, rounds=3):
                 row.update(us_per_sample=median, us_per_sample_p99=p99)
             row['offline_samples_per_s'] = max(row['offline_samples_per_s'], offline)
     return best
-
 
 
 def _configuration_row(mechanism, label, options, model, timing, speeds_rpm, rate_hz):
@@ -149,7 +165,7 @@ def _configuration_row(mechanism, label, options, model, timing, speeds_rpm, rat
 
 def bench_targets(result):
     """
-    The estimator's targets, each judged from the default configuration's figures.
+    Judge the estimator's targets from the default configuration's figures.
 
     Parameters
     ----------
@@ -232,7 +248,7 @@ def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM
 
 def node_model_options():
     """
-    The node's default reduced model (flexlink_node's ``model.*`` parameter defaults).
+    Give the node's default reduced model (flexlink_node's ``model.*`` parameter defaults).
 
     Returns
     -------
@@ -246,7 +262,7 @@ def node_model_options():
 
 def estimator_report_data(mechanism, options):
     """
-    The report's estimator section: the bench and the 391 rpm estimate with its reference.
+    Compute the report's estimator section: the bench, the 391 rpm estimate and reference.
 
     Parameters
     ----------

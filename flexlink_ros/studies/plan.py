@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from .plan_scoring import PlanSignals, evaluate_model, physics_error
+from .plan_scoring import evaluate_model, physics_error, PlanSignals
 from .synthetic import PAPER_RPM
 from ..core.fe import linkage as assembly
 from ..core.reduction import model as reduced
@@ -42,7 +42,7 @@ def plan_candidates(base):
 
 def scene_options(mechanism, base):
     """
-    The richest model of the scene: the reference every candidate is compared with.
+    Give the richest model of the scene: the reference every candidate is compared with.
 
     The user's bearing model, geometric stiffness on, flexible crank, and
     ``base.elements_per_link`` beam elements per link if given, else twice the mechanism's
@@ -54,7 +54,7 @@ def scene_options(mechanism, base):
 
 
 def full_order_dofs(mechanism, options):
-    """DOFs of the full-order FE model of ``options`` (None if not available)."""
+    """Count the DOFs of the full-order FE model of ``options`` (None if not available)."""
     try:
         return assembly.FlexibleLinkage(reduced.fe_mechanism(mechanism, options),
                                         options).size
@@ -98,7 +98,6 @@ def _meets(row, tolerance):
             and row['error_coupler_mid'] <= tolerance and row['error_lever_tip'] <= tolerance)
 
 
-
 # The fields of a row whose reduced model was not built (None in the row).
 _NOT_BUILT = ('size', 'grid_size', 'bytes', 'build_s', 'us_per_sample', 'error_coupler_mid',
               'error_lever_tip')
@@ -137,7 +136,7 @@ class _Search:
 
 
 def _scene_reference(mechanism, scene, signals):
-    """The reference row of the plan: the scene's full-order responses at every speed."""
+    """Describe the plan's reference: the scene's full-order responses at every speed."""
     for rpm in signals.speeds_rpm:
         source = signals.reference(scene, rpm).get('source')
     return {'options': dataclasses.asdict(scene), 'label': describe_physics(scene),
@@ -226,7 +225,7 @@ def _size_search(search, sizes, extra, choice):
 def run_plan(mechanism, base, rpm_max, tolerance, rate_hz=1000.0, speeds_rpm=None,
              max_candidates=None, physics=None, scene=None):
     """
-    The smallest model (physics and size) meeting ``tolerance`` against the scene reference.
+    Find the smallest model (physics and size) meeting ``tolerance`` against the scene.
 
     Scene reference. The full-order periodic response (core/simulate.py via
     ``reduced.reference_response``) of the richest model of the scene,
@@ -256,6 +255,7 @@ def run_plan(mechanism, base, rpm_max, tolerance, rate_hz=1000.0, speeds_rpm=Non
     Parameters
     ----------
     mechanism : Mechanism
+        The mechanism.
     base : ModelOptions
         Bearings, speed range, and the scene's elements (``elements_per_link``, None: twice
         the mechanism's); its crank, geometric stiffness and sizes are what the plan chooses.
@@ -282,6 +282,7 @@ def run_plan(mechanism, base, rpm_max, tolerance, rate_hz=1000.0, speeds_rpm=Non
         scene; None when not built), truncation_error_* (reduced vs its own full order),
         size, bytes, build_s, us_per_sample), 'reference' (the scene), 'speeds_rpm',
         'tolerance', 'seconds'.
+
     """
     started = time.perf_counter()
     speeds_rpm = list(speeds_rpm or sorted({min(s, rpm_max) for s in PAPER_RPM} | {rpm_max}))
@@ -345,4 +346,3 @@ def plan_table(result):
                  f'order; coupler/lever: reduced vs the reference; plan took '
                  f'{result["seconds"]:.0f} s)')
     return '\n'.join(lines)
-

@@ -1,6 +1,8 @@
 """
-How ``plan`` scores a candidate: its full-order physics error and its reduced model's error
-and cost, all on the same synthetic signals and full-order references.
+How ``plan`` scores a candidate.
+
+Its full-order physics error and its reduced model's error and cost, all on the same
+synthetic signals and full-order references.
 """
 
 import math
@@ -8,15 +10,14 @@ import time
 
 from .synthetic import last_revolution, stream_timed, synthetic_signal, timing_summary
 from ..core.estimation.streaming import replay
-from ..core.numerics import RPM, relative_rms
+from ..core.numerics import relative_rms, RPM
 from ..core.reduction import model as reduced
 
 
 def physics_key(options):
-    """The physical choices of ``options`` (what its full-order reference depends on)."""
+    """Key the physical choices of ``options`` (what its full-order reference depends on)."""
     return (options.elements_per_link, options.rigid_crank, options.bearings,
             options.geometric_stiffness)
-
 
 
 class PlanSignals:
@@ -54,7 +55,7 @@ class PlanSignals:
         return sum(s for (k, _), s in self.seconds.items() if k == physics_key(options))
 
     def replay(self, model, rpm):
-        """The model's estimate over the last revolution at ``rpm``."""
+        """Estimate with ``model`` over the last revolution at ``rpm``."""
         stamps, angles, speeds, mask = self.signals[rpm]
         out = replay(model, stamps, angles, speeds)
         return {key: out[key][mask] for key in ('lever_tip', 'coupler_mid')}

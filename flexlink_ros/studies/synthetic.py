@@ -97,7 +97,7 @@ def timing_summary(update_ns):
 def run_estimate(model, rpm, seconds=3.0, rate_hz=1000.0, jitter=0.0, warm_start=True,
                  seed=0):
     """
-    The estimate over the last full revolution of a synthetic constant-speed signal.
+    Estimate over the last full revolution of a synthetic constant-speed signal.
 
     Returns
     -------

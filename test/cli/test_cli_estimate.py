@@ -5,17 +5,16 @@ import json
 import math
 import time
 
-import numpy as np
-import pytest
-from test_reduced import ZETA, toy_samples
-
 from flexlink_ros.cli import main as cli
 from flexlink_ros.core.mechanism import load_mechanism
-from flexlink_ros.core.numerics import RPM, relative_rms
+from flexlink_ros.core.numerics import relative_rms, RPM
 from flexlink_ros.core.reduction import model as reduced
 from flexlink_ros.report.estimator import plot_error_vs_cost, plot_estimate
 from flexlink_ros.ros import parameters as node_params
 from flexlink_ros.studies import bench, plan, synthetic
+import numpy as np
+import pytest
+from test_reduced import toy_samples, ZETA
 
 TOY_CACHE = {}
 
@@ -31,7 +30,7 @@ def toy_model(mechanism, options=None, cache_dir=None, use_cache=True):
 
 
 def toy_reference(mechanism, options, speed, angles):
-    """The toy system with every direction kept, periodic at `speed`, at `angles`."""
+    """Return the toy system with every direction kept, periodic at `speed`, at `angles`."""
     full = toy_model(None, reduced.ModelOptions(modes=10, static=0, grid_size=32,
                                                 speed_max=70.0))
     steps = 1024
@@ -108,11 +107,13 @@ def test_plan_picks_the_first_candidate_within_tolerance(toy, monkeypatch):
 
 def test_plan_on_cho1992_compares_every_physics_with_the_scene(config_dir, monkeypatch):
     """
-    Cho 1992, rigid bearings, 391 rpm (reduced cost: a 4-element scene, three physics
-    candidates, three sizes). Measured: the 3-element physics error is 0.62 % (coupler) /
-    0.67 % (lever); without geometric stiffness the coupler moves by 67 %; a rigid crank
-    misses the lever tip (which only moves through the crank's bending: 99.7 %); the chosen
-    8 + 4 model is 0.20 % off its own full order on the coupler but 0.74 % off the scene.
+    Plan Cho 1992 with rigid bearings at 391 rpm.
+
+    Reduced cost: a 4-element scene, three physics candidates, three sizes. Measured: the
+    3-element physics error is 0.62 % (coupler) / 0.67 % (lever); without geometric
+    stiffness the coupler moves by 67 %; a rigid crank misses the lever tip (which only moves
+    through the crank's bending: 99.7 %); the chosen 8 + 4 model is 0.20 % off its own full
+    order on the coupler but 0.74 % off the scene.
     """
     mechanism = load_mechanism(config_dir / 'cho1992.yaml')
     sizes = [(4, 2, 64), (8, 4, 128), (16, 4, 128)]
@@ -125,8 +126,7 @@ def test_plan_on_cho1992_compares_every_physics_with_the_scene(config_dir, monke
                dataclasses.replace(scene, elements_per_link=3, geometric_stiffness=False),
                dataclasses.replace(scene, elements_per_link=3)]
     start = time.perf_counter()
-    result = plan.run_plan(mechanism, base, 391.0, 0.03, speeds_rpm=[391.0],
-                                   physics=physics)
+    result = plan.run_plan(mechanism, base, 391.0, 0.03, speeds_rpm=[391.0], physics=physics)
     assert time.perf_counter() - start < 60.0
     reference = result['reference']['options']
     assert (reference['rigid_crank'], reference['geometric_stiffness'],

@@ -2,10 +2,9 @@
 
 import json
 
+from flexlink_ros.cli import main as cli
 import numpy as np
 import pytest
-
-from flexlink_ros.cli import main as cli
 
 
 def _run(capsys, *argv):

@@ -1,8 +1,7 @@
 """The model flags every model subcommand shares: spellings, choices, defaults, help."""
 
-import pytest
-
 from flexlink_ros.cli import main as cli
+import pytest
 
 # Each model subcommand with the arguments it requires.
 MODEL_COMMANDS = {'estimate': ['--rpm', '391'], 'plan': ['--rpm-max', '391'], 'bench': [],

@@ -5,17 +5,17 @@ import math
 import subprocess
 import sys
 
+from flexlink_ros.core.estimation.streaming import StreamingEstimator
+from flexlink_ros.core.mechanism import load_mechanism
+from flexlink_ros.core.reduction import model as reduced
+from flexlink_ros.io.recorder import McapRecorder
+from flexlink_ros.io.recording import iter_recording
+from flexlink_ros.ros import messages as ros_messages, parameters as node_params
+from geometry_msgs.msg import Vector3Stamped
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
-
-from flexlink_ros.io.recording import iter_recording
-from flexlink_ros.ros import parameters as node_params, messages as ros_messages
-from flexlink_ros.core.reduction import model as reduced
-from flexlink_ros.core.estimation.streaming import StreamingEstimator
-from flexlink_ros.core.mechanism import load_mechanism
-from flexlink_ros.io.recorder import McapRecorder
 
 RPM = 2.0 * math.pi / 60.0
 
@@ -36,7 +36,7 @@ def joint_state(stamp_ns, names, positions, velocities=()):
 
 
 def write_recording(path, stamps_ns, angles, speeds, bad=()):
-    """A bag of crank JointStates (receive time = stamp + 200 us), with bad messages."""
+    """Write a bag of crank JointStates (receive time = stamp + 200 us), with bad messages."""
     with McapRecorder(path) as recorder:
         recorder.add_topic('/joint_states', JointState)
         for stamp, angle, speed in zip(stamps_ns, angles, speeds):
@@ -76,7 +76,6 @@ def test_replay_equals_the_streaming_estimator(tmp_path, model):
     for topic, type_name, log_ns, _, data in iter_recording(out):
         counts[topic] = counts.get(topic, 0) + 1
         if topic.endswith('/deflection'):
-            from geometry_msgs.msg import Vector3Stamped
             message = deserialize_message(data, Vector3Stamped)
             stamp = ros_messages.stamp_to_ns(message.header.stamp)
             assert log_ns == stamp + 200_000          # logged at the input's receive time
@@ -116,7 +115,6 @@ def test_replay_refuses_missing_topic_and_existing_output(tmp_path):
 
 def deflections_by_stamp(path):
     """{stamp: (lever_tip x, y, coupler_mid x, y)} of a replay's output MCAP."""
-    from geometry_msgs.msg import Vector3Stamped
     found = {}
     for topic, _, _, _, data in iter_recording(path):
         if topic.endswith('/deflection'):
@@ -157,7 +155,6 @@ def test_replay_skips_poisoned_speeds_and_matches_a_clean_replay(tmp_path):
     assert sorted(poisoned) == sorted(clean) == stamps.tolist()
     for stamp, values in clean.items():
         assert poisoned[stamp] == values
-
 
 
 def test_replay_refuses_an_existing_out_path_before_estimating(tmp_path):

@@ -2,12 +2,11 @@
 
 import math
 
+from flexlink_ros.io import joint_states
+from flexlink_ros.ros import messages as ros_messages
 import numpy as np
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
-
-from flexlink_ros.io import joint_states
-from flexlink_ros.ros import messages as ros_messages
 
 
 def joint_state(stamp_ns, names, positions, velocities=()):
@@ -20,7 +19,7 @@ def joint_state(stamp_ns, names, positions, velocities=()):
 
 
 def test_crank_states_of_rclpy_messages_are_read_in_bulk(monkeypatch):
-    """rclpy's CDR leaves alignment padding unzeroed: the bulk reader must not need it."""
+    """Read in bulk although rclpy's CDR leaves alignment padding unzeroed."""
     rng = np.random.default_rng(2)
     payloads = []
     for n in range(500):

@@ -14,8 +14,8 @@ import time
 import numpy as np
 
 from .streaming import (
-    DEFAULT_ACCEL_LIMIT, DEFAULT_NEAR_ZERO_FRACTION, DEFAULT_RESET_GAP_S, InputGate,
-    REACTION_FLOOR_FRACTION, SampleFlag, WarmStartLimiter, plan_rows, replay, step_tables,
+    DEFAULT_ACCEL_LIMIT, DEFAULT_NEAR_ZERO_FRACTION, DEFAULT_RESET_GAP_S, InputGate, plan_rows,
+    REACTION_FLOOR_FRACTION, replay, SampleFlag, step_tables, WarmStartLimiter,
 )
 from ...names import JOINT_NAMES, OUTPUT_POINTS
 
@@ -31,16 +31,18 @@ _ESTIMATE_KEYS = OUTPUT_POINTS + ('crank_angle', 'crank_speed', 'modal', 'reacti
 def criteria_batch(model, angles, speeds, accels,
                    near_zero_fraction=DEFAULT_NEAR_ZERO_FRACTION, blocks=None):
     """
-    Joint reactions, direction rates and Earles-Wu criteria at many crank states.
+    Compute joint reactions, direction rates and Earles-Wu criteria at many crank states.
 
     The same tabulated quantities as StreamingEstimator._criteria, vectorised.
 
     Parameters
     ----------
     model : ReducedModel
+        The model (its joint-reaction tables).
     angles, speeds, accels : ndarray, shape (m,)
         Crank state as the model sees it (speed and acceleration clipped).
     near_zero_fraction : float
+        A reaction below this fraction of its cycle RMS is flagged near zero.
     blocks : dict, optional
         'force', 'force_dot' (m, joints, 2) and 'rms2' (m, joints) at these states, if
         already evaluated (core.estimator.replay returns them); else the table is evaluated.
@@ -101,7 +103,21 @@ def segments(stamps_ns, angles, reset_gap_s=DEFAULT_RESET_GAP_S):
 
 
 def allocate_estimate(model, count):
-    """The arrays :func:`estimate_offline` fills (zeros; 'flags' per sample)."""
+    """
+    Allocate the arrays :func:`estimate_offline` fills (zeros; 'flags' per sample).
+
+    Parameters
+    ----------
+    model : ReducedModel
+        The model (its basis size).
+    count : int
+        Number of samples.
+
+    Returns
+    -------
+    dict of ndarray
+
+    """
     result = {key: np.zeros((count, 2)) for key in OUTPUT_POINTS}
     for key in ('reaction_n', 'gamma_dot', 'criterion'):
         result[key] = np.zeros((count, len(JOINT_NAMES)))
@@ -115,7 +131,7 @@ def allocate_estimate(model, count):
 def estimate_offline(model, stamps_ns, angles, speeds, warm_start=True, result=None,
                      progress=None):
     """
-    Deflections and criteria of every sample, segment by segment as the node would.
+    Estimate deflections and criteria of every sample, segment by segment as the node would.
 
     The rows are planned as StreamingEstimator.update decides (core.estimator.plan_rows:
     restarts, repeats, outliers); each segment is replayed in one go. Outlier rows and rows
@@ -125,10 +141,15 @@ def estimate_offline(model, stamps_ns, angles, speeds, warm_start=True, result=N
     Parameters
     ----------
     model : ReducedModel
+        The model.
     stamps_ns : ndarray of int, shape (m,)
+        Sample stamps [ns].
     angles : ndarray, shape (m,)
+        Crank angles [rad].
     speeds : ndarray, shape (m,)
         Measured speeds; NaN where a message had none (the segment then differentiates).
+    warm_start : bool
+        Start each segment from the periodic state (else from the static deflection).
     result : dict or None
         The arrays to fill (:func:`allocate_estimate`); new ones if None.
     progress : callable or None
@@ -200,7 +221,7 @@ class _OfflineRun:
         self.planned = stop
 
     def next_start(self, position):
-        """The first START row at or after ``position`` in the planned rows, or None."""
+        """Find the first START row at or after ``position`` in the planned rows, or None."""
         starts = np.flatnonzero(self.kinds[position:self.planned] == InputGate.START)
         return position + int(starts[0]) if starts.size else None
 
@@ -274,9 +295,9 @@ class _OfflineRun:
         measured = seg_speeds if self.measured else None
         self.clock_s = max(self.clock_s, self.stamps_ns[chosen[0]] * 1e-9)
         out = replay(self.model, self.stamps_ns[chosen], self.angles[chosen],
-                                    measured, warm_start=self.warm_start, orbit=self.orbit,
-                                    on_rows=self.on_rows, tables=self.tables,
-                                    warm_start_limiter=self.limiter, resume=self.resume)
+                     measured, warm_start=self.warm_start, orbit=self.orbit,
+                     on_rows=self.on_rows, tables=self.tables,
+                     warm_start_limiter=self.limiter, resume=self.resume)
         self.orbit, self.resume = out['orbit'], out['resume']
         if out['stopped'] is None:
             return None
@@ -286,7 +307,7 @@ class _OfflineRun:
         return row
 
     def on_rows(self, out, upto):
-        """The rows of the current segment replay() has finished since the last call."""
+        """Take the rows of the current segment replay() has finished since the last call."""
         if upto <= self.done:
             return
         rows = slice(self.done, upto)
@@ -321,7 +342,6 @@ class _OfflineRun:
         self.final = max(self.final, final)
         if self.progress is not None:
             self.progress(self.final)
-
 
 
 class BackgroundEstimate:

@@ -2,22 +2,21 @@
 
 import math
 
-import numpy as np
-import pytest
-
 from flexlink_ros.core.estimation import offline_run, streaming as core_estimator
 from flexlink_ros.core.estimation.streaming import SampleFlag, StreamingEstimator
 from flexlink_ros.core.mechanism import load_mechanism
 from flexlink_ros.core.reduction import model as reduced
 from flexlink_ros.errors import OutlierSample
 from flexlink_ros.ros import parameters as node_params
+import numpy as np
+import pytest
 
 RPM = 2.0 * math.pi / 60.0
 
 
 @pytest.fixture(scope='module')
 def model():
-    """Return the replay's default model (the node's) without geometric stiffness, cached."""
+    """Build (or load) the node's default model without geometric stiffness."""
     options = node_params.default_model_options(geometric_stiffness=False)
     return reduced.model_for_mechanism(load_mechanism('cho1992'), options)
 
@@ -29,7 +28,6 @@ def test_segments_follow_the_streaming_resets():
     # 3 -> 1000 ms is a 0.997 s gap (> 0.5 s), 1000 -> 5 ms goes back.
     assert starts == [0, 5, 7]
     assert repeated.tolist() == [False, False, False, True] + [False] * 5
-
 
 
 def test_estimate_reports_only_final_samples_to_the_writer(model, monkeypatch):
@@ -87,7 +85,6 @@ def test_segments_share_one_set_of_step_tables(model, monkeypatch):
         small = reduced.model_for_mechanism(load_mechanism('cho1992'), reduced.ModelOptions(
             rigid_crank=True, bearings='rigid', geometric_stiffness=False))
         StreamingEstimator(model, step_tables=core_estimator.step_tables(small))
-
 
 
 @pytest.mark.parametrize('window', [offline_run.PLAN_WINDOW, 7])
