@@ -3,7 +3,8 @@
 
     flexlink modes --mechanism config/cho1992.yaml --crank-deg 0:360:5 --count 3
                    [--speed-rad-s 30] [--rigid-crank] [--bearings rigid|flexible]
-                   [--no-geometric-stiffness] [--no-gravity] [--centrifugal] [--shapes] [--json]
+                   [--elements-per-link N] [--no-geometric-stiffness] [--no-gravity]
+                   [--centrifugal] [--shapes] [--json]
     flexlink simulate --mechanism config/cho1992.yaml --rpm 391 [--rigid-crank]
                    [--bearings rigid|flexible] [--method full|modal] [--modes N]
                    [--static-correction] [--damping-ratio Z] [--points-per-rev P]
@@ -16,30 +17,24 @@ optional ``shapes``. ``simulate`` JSON: ``crank_deg``, ``lever_tip`` and ``coupl
 ``peak_to_peak_m``, ``floquet_spectral_radius``, ``wall_s``, optional ``convergence``.
 """
 
+import dataclasses
 import math
 import time
 
 import numpy as np
 
 from .main import degree_range, emit
-from ..core.options import ModelOptions
+from .model_args import add_model_arguments
 from ..core.fe import linkage as assembly, modes, simulate
-from ..errors import FlexlinkError
 from ..core.mechanism import load_mechanism
+from ..core.options import ModelOptions
+from ..errors import FlexlinkError
 
 
 def _model_arguments(parser):
-    parser.add_argument('--mechanism', default='cho1992',
-                        help='mechanism YAML file or bare name (default cho1992)')
-    parser.add_argument('--rigid-crank', action='store_true',
-                        help='rigid crank: crank pin A is a fixed point of the frozen structure')
-    parser.add_argument('--bearings', default='rigid',
-                        help='rigid (exact pins, default) or flexible (Eq. 23 springs)')
-    parser.add_argument('--no-geometric-stiffness', action='store_true',
-                        help='leave out the geometric stiffness A.4')
+    # The FE studies' defaults: rigid bearings, flexible crank (--elements: old spelling).
+    add_model_arguments(parser, 'rigid', 'the mechanism file', elements_alias=True)
     parser.add_argument('--no-gravity', action='store_true', help='leave out gravity')
-    parser.add_argument('--elements', default=None,
-                        help='beam elements per link (default: the mechanism file)')
     parser.add_argument('--json', action='store_true', help='print one JSON object')
 
 
@@ -96,18 +91,30 @@ def _number(text, name, integer=False, positive=True, allow_zero=False):
 
 
 def build_model(args):
-    """Mechanism and FlexibleLinkage from the common arguments."""
-    import dataclasses
+    """
+    Build the mechanism and its FlexibleLinkage from the common arguments.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The model flags (:func:`cli.model_args.add_model_arguments`) and ``no_gravity``.
+
+    Returns
+    -------
+    mech : Mechanism
+    model : FlexibleLinkage
+
+    """
     mech = load_mechanism(args.mechanism)
-    if args.elements is not None:
-        mech = dataclasses.replace(mech, elements_per_link=_number(args.elements, 'elements',
-                                                                   integer=True))
+    if args.elements_per_link is not None:
+        mech = dataclasses.replace(mech, elements_per_link=_number(
+            args.elements_per_link, 'elements-per-link', integer=True))
     if args.bearings not in assembly.BEARING_MODELS:
         raise ValueError(f'`--bearings` must be one of {", ".join(assembly.BEARING_MODELS)}, '
                          f'got {args.bearings!r}')
     options = ModelOptions.full_model(rigid_crank=args.rigid_crank, bearings=args.bearings,
-                                    geometric_stiffness=not args.no_geometric_stiffness,
-                                    gravity=not args.no_gravity)
+                                      geometric_stiffness=not args.no_geometric_stiffness,
+                                      gravity=not args.no_gravity)
     return mech, assembly.FlexibleLinkage(mech, options)
 
 
@@ -156,7 +163,7 @@ def modes_command(args):
     lines.append('crank deg  ' + '  '.join(f'f{i + 1} [Hz] (link)' for i in range(count)))
     for deg, row, names in zip(args.crank_deg, freqs, result_modes.dominant_link_names):
         lines.append(f'{deg:9.2f}  ' + '  '.join(f'{f:9.3f} ({name})'
-                                                   for f, name in zip(row, names)))
+                                                 for f, name in zip(row, names)))
     return emit(result, '\n'.join(lines), args.json)
 
 
@@ -178,8 +185,8 @@ def simulate_command(args):
     steps = _number(args.steps_per_rev, 'steps-per-rev', integer=True)
     stages = _number(args.stages, 'stages', integer=True)
     speed = rpm * 2.0 * math.pi / 60.0
-    kwargs = dict(method=method, modes=count, static_correction=args.static_correction,
-                  stages=stages, zeta=zeta)
+    kwargs = {'method': method, 'modes': count, 'static_correction': args.static_correction,
+              'stages': stages, 'zeta': zeta}
     response = _guard_geometric(simulate.periodic_response, model, speed, steps=steps,
                                 points=points, **kwargs)
     out = response.outputs

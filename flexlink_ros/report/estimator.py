@@ -6,14 +6,17 @@ Charts of the streaming estimator: accuracy against cost, and estimate against r
   marked, the tolerance drawn.
 - :func:`plot_estimate`: the estimated deflections over the last revolution against the
   full-order reference (ground-frame dx, dy of both points).
-- :func:`plot_estimator`: the report section (``flexlink report``): runs ``flexlink bench``
-  on Cho 1992 and draws both charts.
+- :func:`plot_estimator`: the report section (``flexlink report``): the bench of Cho 1992
+  and its 391 rpm estimate (:func:`studies.bench.estimator_report_data`), drawn.
 """
 
 import pathlib
 
 import numpy as np
-from matplotlib.figure import Figure
+
+from ..core.mechanism import load_mechanism
+from ..errors import FlexlinkError
+from ..studies.bench import estimator_report_data, node_model_options
 
 CHANNELS = (('coupler_mid', 'coupler mid-point'), ('lever_tip', 'lever tip'))
 
@@ -37,6 +40,8 @@ def plot_error_vs_cost(configurations, path, tolerance=None):
     pathlib.Path
 
     """
+    from matplotlib.figure import Figure   # only when drawing: `flexlink bench` starts fast
+
     path = pathlib.Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     figure = Figure(figsize=(10.0, 4.2), layout='constrained')
@@ -89,6 +94,8 @@ def plot_estimate(crank_deg, estimate, reference, path, title=''):
     pathlib.Path
 
     """
+    from matplotlib.figure import Figure   # only when drawing
+
     path = pathlib.Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     order = np.argsort(crank_deg)
@@ -113,9 +120,40 @@ def plot_estimate(crank_deg, estimate, reference, path, title=''):
     return path
 
 
-def plot_estimator(out_dir):
+def bench_table(configurations):
+    """
+    Markdown table of the bench's configurations.
+
+    Parameters
+    ----------
+    configurations : list of dict
+        :func:`studies.bench.run_bench`'s rows.
+
+    Returns
+    -------
+    str
+
+    """
+    lines = ['| configuration | r | us/sample p50 | p99 | offline samples/s | coupler error '
+             '| lever error | MB |', '|---|---|---|---|---|---|---|---|']
+    for row in configurations:
+        lines.append(f'| {row["label"]} | {row["size"]} | {row["us_per_sample"]:.1f} | '
+                     f'{row["us_per_sample_p99"]:.1f} | {row["offline_samples_per_s"]:.0f} | '
+                     f'{row["error_coupler_mid"]:.2%} | {row["error_lever_tip"]:.2%} | '
+                     f'{row["bytes"] / 1e6:.2f} |')
+    return '\n'.join(lines)
+
+
+def plot_estimator(out_dir, options=None):
     """
     Report section: bench of the Cho 1992 estimator and the 391 rpm estimate.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        Directory of the charts.
+    options : ModelOptions, optional
+        The default model (default: the node's, :func:`studies.bench.node_model_options`).
 
     Returns
     -------
@@ -124,32 +162,17 @@ def plot_estimator(out_dir):
         model is not available in this checkout.
 
     """
-    from ..ros import parameters as node_params
-    from ..cli.estimate import PAPER_RPM, RPM, run_bench, run_estimate
-    from ..core.reduction import model as reduced
-    from ..errors import FlexlinkError
-    from ..core.mechanism import load_mechanism
     out = pathlib.Path(out_dir)
     try:
-        mechanism = load_mechanism('cho1992')
-        options = node_params.default_model_options()   # the node's default model
-        bench = run_bench(mechanism, options, chart=out / 'estimator_error_vs_cost.png')
-        model = reduced.model_for_mechanism(mechanism, options)
-        estimate = run_estimate(model, PAPER_RPM[-1])
-        angles = np.radians(estimate['crank_deg'])
-        reference = reduced.reference_response(mechanism, options, PAPER_RPM[-1] * RPM, angles)
+        data = estimator_report_data(load_mechanism('cho1992'),
+                                     options or node_model_options())
     except FlexlinkError as exc:
         return {'charts': [], 'text': f'_Streaming estimator not available: {exc}_'}
-    series = {key: np.column_stack([estimate[key]['dx_m'], estimate[key]['dy_m']])
-              for key in ('lever_tip', 'coupler_mid')}
-    chart = plot_estimate(np.asarray(estimate['crank_deg']), series, reference,
+    bench = data['bench']
+    bench_chart = plot_error_vs_cost(bench['configurations'],
+                                     out / 'estimator_error_vs_cost.png')
+    chart = plot_estimate(data['crank_deg'], data['estimate'], data['reference'],
                           out / 'estimator_391rpm.png',
-                          title=f'Cho 1992 at {PAPER_RPM[-1]:g} rpm, 1 kHz')
-    lines = ['| configuration | r | us/sample p50 | p99 | offline samples/s | coupler error '
-             '| lever error | MB |', '|---|---|---|---|---|---|---|---|']
-    for row in bench['configurations']:
-        lines.append(f'| {row["label"]} | {row["size"]} | {row["us_per_sample"]:.1f} | '
-                     f'{row["us_per_sample_p99"]:.1f} | {row["offline_samples_per_s"]:.0f} | '
-                     f'{row["error_coupler_mid"]:.2%} | {row["error_lever_tip"]:.2%} | '
-                     f'{row["bytes"] / 1e6:.2f} |')
-    return {'charts': [bench['chart'], str(chart)], 'text': '\n'.join(lines)}
+                          title=f'Cho 1992 at {data["rpm"]:g} rpm, 1 kHz')
+    return {'charts': [str(bench_chart), str(chart)],
+            'text': bench_table(bench['configurations'])}

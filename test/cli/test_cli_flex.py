@@ -2,10 +2,9 @@
 
 import json
 
+from flexlink_ros.cli import main as cli
 import numpy as np
 import pytest
-
-from flexlink_ros.cli import main as cli
 
 
 def _run(capsys, *argv):
@@ -68,7 +67,6 @@ def test_simulate_convergence_check(capsys):
 
 
 @pytest.mark.parametrize('argv, message', [
-    (('modes', '--bearings', 'elastic'), '--bearings'),
     (('modes', '--count', 'x', '--no-geometric-stiffness'), '--count'),
     (('simulate', '--method', 'modal', '--no-geometric-stiffness'), '--modes'),
     (('simulate', '--rpm', '-5'), '--rpm'),
@@ -79,3 +77,12 @@ def test_bad_input_is_one_line_error(capsys, argv, message):
     code, out, err = _run(capsys, *argv)
     assert code == 1 and out == ''
     assert message in err and err.count('\n') == 1
+
+
+def test_unknown_bearings_are_refused_with_the_choices(capsys):
+    """--bearings takes its choices from the parser (as estimate/plan/bench/replay)."""
+    with pytest.raises(SystemExit) as exit_info:
+        cli.main(['modes', '--bearings', 'elastic'])
+    _, err = capsys.readouterr()
+    assert exit_info.value.code == 2
+    assert '--bearings' in err and "'flexible', 'rigid'" in err

@@ -5,15 +5,16 @@ import json
 import math
 import time
 
+from flexlink_ros.cli import main as cli
+from flexlink_ros.core.mechanism import load_mechanism
+from flexlink_ros.core.numerics import relative_rms, RPM
+from flexlink_ros.core.reduction import model as reduced
+from flexlink_ros.report.estimator import plot_error_vs_cost, plot_estimate
+from flexlink_ros.ros import parameters as node_params
+from flexlink_ros.studies import bench, plan, synthetic
 import numpy as np
 import pytest
-from test_reduced import ZETA, toy_samples
-
-from flexlink_ros.core.numerics import relative_rms
-from flexlink_ros.cli import main as cli, estimate as cli_estimate
-from flexlink_ros.core.reduction import model as reduced
-from flexlink_ros.core.mechanism import load_mechanism
-from flexlink_ros.report.estimator import plot_error_vs_cost, plot_estimate
+from test_reduced import toy_samples, ZETA
 
 TOY_CACHE = {}
 
@@ -29,7 +30,7 @@ def toy_model(mechanism, options=None, cache_dir=None, use_cache=True):
 
 
 def toy_reference(mechanism, options, speed, angles):
-    """The toy system with every direction kept, periodic at `speed`, at `angles`."""
+    """Return the toy system with every direction kept, periodic at `speed`, at `angles`."""
     full = toy_model(None, reduced.ModelOptions(modes=10, static=0, grid_size=32,
                                                 speed_max=70.0))
     steps = 1024
@@ -47,15 +48,15 @@ def toy_reference(mechanism, options, speed, angles):
 def toy(monkeypatch):
     monkeypatch.setattr(reduced, 'model_for_mechanism', toy_model)
     monkeypatch.setattr(reduced, 'reference_response', toy_reference)
-    monkeypatch.setattr(cli_estimate, 'reference_cpu_per_second', lambda *args: 1.0)
+    monkeypatch.setattr(bench, 'reference_cpu_per_second', lambda *args: 1.0)
 
 
 def test_synthetic_signal_and_last_revolution():
-    stamps, angles, speeds = cli_estimate.synthetic_signal(391.0, 1.0, 1000.0, jitter=0.3)
+    stamps, angles, speeds = synthetic.synthetic_signal(391.0, 1.0, 1000.0, jitter=0.3)
     steps = np.diff(stamps) * 1e-9
     assert np.all(steps > 0.7e-3 - 1e-9) and np.all(steps < 1.3e-3 + 1e-9)
-    np.testing.assert_allclose(angles, 391.0 * cli_estimate.RPM * stamps * 1e-9)
-    mask = cli_estimate.last_revolution(stamps, 391.0)
+    np.testing.assert_allclose(angles, 391.0 * RPM * stamps * 1e-9)
+    mask = synthetic.last_revolution(stamps, 391.0)
     swept = (angles[mask][-1] - angles[mask][0]) * 180 / math.pi
     assert 358.0 < swept <= 360.0
 
@@ -75,21 +76,21 @@ def test_estimate_json(toy, capsys):
 def test_estimate_matches_the_reference_over_the_last_revolution(toy):
     for jitter in (0.0, 0.3):
         model = toy_model(None, reduced.ModelOptions(modes=4, static=2, grid_size=32))
-        result = cli_estimate.run_estimate(model, 391.0, seconds=0.4, jitter=jitter)
+        result = synthetic.run_estimate(model, 391.0, seconds=0.4, jitter=jitter)
         angles = np.radians(result['crank_deg'])
-        ref = toy_reference(None, None, 391.0 * cli_estimate.RPM, angles)
+        ref = toy_reference(None, None, 391.0 * RPM, angles)
         for key in ('lever_tip', 'coupler_mid'):
             estimate = np.column_stack([result[key]['dx_m'], result[key]['dy_m']])
             assert relative_rms(estimate, ref[key]) < 0.01
 
 
 def test_plan_picks_the_first_candidate_within_tolerance(toy, monkeypatch):
-    monkeypatch.setattr(cli_estimate, 'plan_candidates', lambda base: [
+    monkeypatch.setattr(plan, 'plan_candidates', lambda base: [
         reduced.ModelOptions(modes=1, static=0, grid_size=32),
         reduced.ModelOptions(modes=4, static=2, grid_size=32),
         reduced.ModelOptions(modes=6, static=3, grid_size=32)])
     base = reduced.ModelOptions()
-    result = cli_estimate.run_plan(None, base, 391.0, 0.01, physics=[base], scene=base)
+    result = plan.run_plan(None, base, 391.0, 0.01, physics=[base], scene=base)
     assert result['choice'] is not None and result['choice']['options']['modes'] == 4
     # the physics stage builds the generous size (the last candidate); the size stage
     # bisects the smaller ones, listed from small to large
@@ -101,30 +102,31 @@ def test_plan_picks_the_first_candidate_within_tolerance(toy, monkeypatch):
     assert first['error_coupler_mid'] > 0.01 or first['error_lever_tip'] > 0.01
     assert all(row['us_per_sample'] > 0 for row in result['alternatives'])
     assert result['alternatives'][0]['physics_error_coupler_mid'] == 0.0
-    assert 'choice: ' in cli_estimate.plan_table(result)
+    assert 'choice: ' in plan.plan_table(result)
 
 
 def test_plan_on_cho1992_compares_every_physics_with_the_scene(config_dir, monkeypatch):
     """
-    Cho 1992, rigid bearings, 391 rpm (reduced cost: a 4-element scene, three physics
-    candidates, three sizes). Measured: the 3-element physics error is 0.62 % (coupler) /
-    0.67 % (lever); without geometric stiffness the coupler moves by 67 %; a rigid crank
-    misses the lever tip (which only moves through the crank's bending: 99.7 %); the chosen
-    8 + 4 model is 0.20 % off its own full order on the coupler but 0.74 % off the scene.
+    Plan Cho 1992 with rigid bearings at 391 rpm.
+
+    Reduced cost: a 4-element scene, three physics candidates, three sizes. Measured: the
+    3-element physics error is 0.62 % (coupler) / 0.67 % (lever); without geometric
+    stiffness the coupler moves by 67 %; a rigid crank misses the lever tip (which only moves
+    through the crank's bending: 99.7 %); the chosen 8 + 4 model is 0.20 % off its own full
+    order on the coupler but 0.74 % off the scene.
     """
     mechanism = load_mechanism(config_dir / 'cho1992.yaml')
     sizes = [(4, 2, 64), (8, 4, 128), (16, 4, 128)]
-    monkeypatch.setattr(cli_estimate, 'plan_candidates', lambda base: [
+    monkeypatch.setattr(plan, 'plan_candidates', lambda base: [
         dataclasses.replace(base, modes=m, static=s, grid_size=g) for m, s, g in sizes])
     base = reduced.ModelOptions(bearings='rigid', elements_per_link=4,
-                                speed_max=1.05 * 391.0 * cli_estimate.RPM)
-    scene = cli_estimate.scene_options(mechanism, base)
+                                speed_max=1.05 * 391.0 * RPM)
+    scene = plan.scene_options(mechanism, base)
     physics = [dataclasses.replace(scene, elements_per_link=3, rigid_crank=True),
                dataclasses.replace(scene, elements_per_link=3, geometric_stiffness=False),
                dataclasses.replace(scene, elements_per_link=3)]
     start = time.perf_counter()
-    result = cli_estimate.run_plan(mechanism, base, 391.0, 0.03, speeds_rpm=[391.0],
-                                   physics=physics)
+    result = plan.run_plan(mechanism, base, 391.0, 0.03, speeds_rpm=[391.0], physics=physics)
     assert time.perf_counter() - start < 60.0
     reference = result['reference']['options']
     assert (reference['rigid_crank'], reference['geometric_stiffness'],
@@ -155,9 +157,9 @@ def test_plan_on_cho1992_compares_every_physics_with_the_scene(config_dir, monke
 def test_bench_table_and_chart(toy, tmp_path):
     configurations = [('default', reduced.ModelOptions(modes=4, static=2, grid_size=32)),
                       ('small', reduced.ModelOptions(modes=2, static=0, grid_size=32))]
-    result = cli_estimate.run_bench(None, None, seconds=0.3, configurations=configurations,
-                                    chart=tmp_path / 'chart.png')
+    result = bench.run_bench(None, None, seconds=0.3, configurations=configurations)
     rows = result['configurations']
+    plot_error_vs_cost(rows, tmp_path / 'chart.png')
     assert [row['label'] for row in rows] == ['default', 'small']
     assert rows[0]['default'] and rows[0]['offline_samples_per_s'] > 0
     assert rows[0]['error_coupler_mid'] < rows[1]['error_coupler_mid']
@@ -192,3 +194,7 @@ def test_plot_estimate(tmp_path):
                                 'error_coupler_mid': 0.001, 'default': True}],
                               tmp_path / 'c.png', tolerance=0.01)
     assert path.read_bytes()[:4] == b'\x89PNG'
+
+
+def test_the_reports_default_model_is_the_nodes():
+    assert bench.node_model_options() == node_params.default_model_options()

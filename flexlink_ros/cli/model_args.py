@@ -1,0 +1,181 @@
+"""
+The model flags every model subcommand shares, and the options and model they give.
+
+``simulate``/``modes`` (full-order FE) and ``estimate``/``plan``/``bench``/``replay``
+(reduced model) take the same spellings: ``--mechanism``, ``--rigid-crank`` /
+``--flexible-crank``, ``--bearings {flexible,rigid}``, ``--elements-per-link N`` and
+``--no-geometric-stiffness``. Only the default bearings differ (as before: rigid for the FE
+studies, flexible for the estimator, as the node). ``--elements`` is accepted where it was
+(simulate, modes) as a deprecated spelling of ``--elements-per-link``.
+"""
+
+import argparse
+import sys
+
+from ..core.numerics import RPM
+from ..core.options import ModelOptions
+from ..core.reduction import model as reduced
+from ..ros import parameters as node_params
+
+BEARINGS = ('flexible', 'rigid')
+
+
+class DeprecatedAlias(argparse.Action):
+    """
+    Store a value like the option it is an old spelling of, and say so on stderr.
+
+    Parameters
+    ----------
+    option_strings : list of str
+        The old spelling(s).
+    dest : str
+        The destination of the preferred option.
+    preferred : str
+        The preferred spelling, named in the note.
+    **kwargs
+        Further arguments of :class:`argparse.Action` (type, help, ...).
+
+    """
+
+    def __init__(self, option_strings, dest, preferred, **kwargs):
+        super().__init__(option_strings, dest, **kwargs)
+        self.preferred = preferred
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        """Store ``values`` and print the deprecation note."""
+        print(f'flexlink: {option_string} is deprecated, use {self.preferred}', file=sys.stderr)
+        setattr(namespace, self.dest, values)
+
+
+def add_model_arguments(parser, bearings_default, elements_help, elements_alias=False):
+    """
+    Add the shared model flags.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser
+        A subcommand's parser.
+    bearings_default : str
+        'flexible' or 'rigid' (the subcommand's default, shown in ``--help``).
+    elements_help : str
+        What ``--elements-per-link`` defaults to (shown in ``--help``).
+    elements_alias : bool
+        Also accept the deprecated ``--elements``.
+
+    """
+    parser.add_argument('--mechanism', default='cho1992',
+                        help='mechanism YAML file or bare name (default: %(default)s)')
+    crank = parser.add_mutually_exclusive_group()
+    crank.add_argument('--rigid-crank', dest='rigid_crank', action='store_true', default=False,
+                       help='treat the crank as rigid: crank pin A is a fixed point of the '
+                       "frozen structure (the paper's Figs 20-22 case)")
+    crank.add_argument('--flexible-crank', dest='rigid_crank', action='store_false',
+                       help='model the crank as a flexible beam (default)')
+    parser.add_argument('--bearings', choices=BEARINGS, default=bearings_default,
+                        help='revolute bearings: flexible (the springs of the mechanism file, '
+                        'Eq. 23) or rigid (exact pins) (default: %(default)s)')
+    parser.add_argument('--elements-per-link', type=int, default=None, metavar='N',
+                        help=f'beam elements per link (default: {elements_help})')
+    if elements_alias:
+        parser.add_argument('--elements', dest='elements_per_link', type=int,
+                            action=DeprecatedAlias, preferred='--elements-per-link',
+                            default=argparse.SUPPRESS, help=argparse.SUPPRESS)
+    parser.add_argument('--no-geometric-stiffness', action='store_true',
+                        help='leave out the geometric stiffness of the axial forces (A.4)')
+
+
+def add_reduced_arguments(parser):
+    """
+    Add the flags of the reduced model and its input: sizes, sample rate, cache, JSON.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser
+        A subcommand's parser.
+
+    """
+    parser.add_argument('--modes', type=int,
+                        help='basis directions from frozen modes (default: by bearings and '
+                        'crank model)')
+    parser.add_argument('--static', type=int,
+                        help='basis directions from static responses (default: by bearings '
+                        'and crank model)')
+    parser.add_argument('--grid-size', type=int, help='crank-angle grid points (default: 128)')
+    parser.add_argument('--rate-hz', type=float, default=1000.0,
+                        help='sample rate [Hz] (default: %(default)s)')
+    parser.add_argument('--cache-dir', default=None,
+                        help='model cache directory (default: ~/.cache/flexlink_ros)')
+    parser.add_argument('--no-cache', action='store_true', help='build without the cache')
+    parser.add_argument('--json', action='store_true', help='print one JSON object')
+
+
+def add_estimator_arguments(parser):
+    """
+    Add the flags of the estimator's subcommands (estimate, plan, bench, replay).
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser
+        A subcommand's parser.
+
+    """
+    add_model_arguments(parser, 'flexible', "the node's 4 with a flexible crank, the "
+                        "mechanism file's with a rigid crank")
+    add_reduced_arguments(parser)
+
+
+def model_options(args, **overrides):
+    """
+    Build the reduced model's options from the command-line arguments, with overrides.
+
+    Without size arguments the sizes are the defaults for the chosen bearing and crank models
+    (core.options.DEFAULT_SIZES); a flexible crank gets the node's elements per link, a rigid
+    crank the mechanism file's.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed flags of :func:`add_estimator_arguments`.
+    **overrides
+        Fields set whatever the flags say.
+
+    Returns
+    -------
+    ModelOptions
+
+    """
+    rigid_crank = bool(args.rigid_crank)
+    node_elements = node_params.defaults()['model.elements_per_link'] or None
+    values = {'rigid_crank': rigid_crank, 'bearings': args.bearings,
+              'geometric_stiffness': not args.no_geometric_stiffness,
+              'elements_per_link': None if rigid_crank else node_elements}
+    for name in ('modes', 'static', 'grid_size', 'elements_per_link'):
+        value = getattr(args, name, None)
+        if value is not None:
+            values[name] = value
+    if getattr(args, 'rpm_max', None):
+        values['speed_max'] = max(ModelOptions.speed_max, 1.05 * args.rpm_max * RPM)
+    values.update(overrides)
+    return ModelOptions(**values)
+
+
+def load_model(mechanism, options, args):
+    """
+    Load the cached (or freshly built) reduced model for the command line.
+
+    Parameters
+    ----------
+    mechanism : Mechanism
+        The mechanism.
+    options : ModelOptions
+        The model's options.
+    args : argparse.Namespace
+        Parsed flags (``--cache-dir``, ``--no-cache``).
+
+    Returns
+    -------
+    ReducedModel
+
+    """
+    return reduced.model_for_mechanism(mechanism, options, cache_dir=args.cache_dir,
+                                       use_cache=not args.no_cache)

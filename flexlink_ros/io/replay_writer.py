@@ -1,0 +1,207 @@
+"""
+The MCAP of a replay: the input and the node's outputs recomputed offline.
+
+Per sample: the input, the two deflections and the criteria, and every
+``markers_every_n``-th sample the markers, each logged at the input's log time (the order
+:meth:`McapRecorder.write` calls would give). The messages are encoded in bulk (the row
+encoders of :mod:`io.cdr`) and written in batches (:meth:`McapRecorder.write_batch`).
+"""
+
+import numpy as np
+
+from .markers import criteria_rows, MarkerEncoder, rows_to_bytes, vector3_stamped_rows
+from .recorder import McapRecorder
+from ..names import JOINT_STATE, MARKER_ARRAY, OUTPUT_POINTS, VECTOR3_STAMPED
+
+# Samples per batch of write_replay (a progress report between batches).
+WRITE_BATCH = 1024
+
+
+class MarkerSource:
+    """
+    MarkerArray bytes of the deformed linkage at replayed samples.
+
+    Parameters
+    ----------
+    model : ReducedModel
+        The model whose shape table gives the link points.
+    frame_id : str
+        Frame of the markers.
+    exaggeration : float
+        Scale of the drawn deflections.
+    points_per_link : int
+        Points drawn along each link.
+    joint_levels : sequence
+        Diagnostic level of each of the four joints (their colours).
+
+    """
+
+    def __init__(self, model, frame_id, exaggeration, points_per_link, joint_levels):
+        self.model, self.exaggeration = model, exaggeration
+        self.encoder = MarkerEncoder(frame_id, points_per_link)
+        self.levels = list(joint_levels)
+        # Resampling the link points (linear interpolation along each link) is linear: apply
+        # it to the shape table once.
+        table = model.shape_table
+        source = np.linspace(0.0, 1.0, table.shape[3])
+        target = np.linspace(0.0, 1.0, points_per_link)
+        resample = np.stack([np.interp(target, source, unit) for unit in np.eye(source.size)],
+                            axis=1)
+        self.table = np.einsum('ts,nclsdr->ncltdr', resample, table)
+
+    def rows(self, stamps_ns, angles, modal):
+        """
+        Marker arrays at many samples.
+
+        Parameters
+        ----------
+        stamps_ns : ndarray of int, shape (m,)
+            Stamps [ns].
+        angles : ndarray, shape (m,)
+            Crank angles [rad].
+        modal : ndarray, shape (m, r)
+            Reduced coordinates.
+
+        Returns
+        -------
+        ndarray of uint8, shape (m, length)
+            One CDR message per row.
+
+        """
+        cells, t = self.model.cell(angles)
+        powers = t[:, None] ** np.arange(self.table.shape[1])
+        values = np.einsum('mp,mpltdr->mltdr', powers, self.table[cells])
+        positions = values[..., -1]
+        deflections = np.einsum('mltdr,mr->mltd', values[..., :-1], modal)
+        joints = positions[:, (0, 0, 1, 2), (0, -1, -1, 0)]
+        return self.encoder.encode_rows(stamps_ns, positions, deflections, self.exaggeration,
+                                        joints, self.levels)
+
+
+def _add_topics(recorder, input_topic, topics, markers):
+    """Declare the input and output topics; the per-sample topic names in write order."""
+    recorder.add_topic(input_topic, JOINT_STATE)
+    for key in OUTPUT_POINTS:
+        recorder.add_topic(topics[key], VECTOR3_STAMPED)
+    recorder.add_topic(topics['criteria'], JOINT_STATE)
+    if markers:
+        recorder.add_topic(topics['markers'], MARKER_ARRAY)
+    return (input_topic, topics['lever_tip'], topics['coupler_mid'], topics['criteria'])
+
+
+def _output_columns(samples, estimate, chosen, frame):
+    """Encode the outputs of the samples ``chosen``; with their input bytes, a list each."""
+    stamps = samples['stamps_ns'][chosen]
+    return [samples['data'][chosen],
+            rows_to_bytes(vector3_stamped_rows(stamps, frame, estimate['lever_tip'][chosen])),
+            rows_to_bytes(vector3_stamped_rows(stamps, frame,
+                                               estimate['coupler_mid'][chosen])),
+            rows_to_bytes(criteria_rows(stamps, frame, estimate['criterion'][chosen],
+                                        estimate['gamma_dot'][chosen],
+                                        estimate['reaction_n'][chosen]))]
+
+
+def _interleave(columns, names, valid, with_marker, markers, marker_topic):
+    """Messages and their topics in write order: per sample its input, outputs, marker."""
+    messages, topic_of = [], []
+    for n, row in enumerate(zip(*columns)):
+        if not valid[n]:
+            messages.append(row[0])
+            topic_of.append(names[0])
+            continue
+        messages += row
+        topic_of += names
+        if with_marker[n]:
+            messages.append(next(markers))
+            topic_of.append(marker_topic)
+    return messages, topic_of
+
+
+def _write_batch(recorder, samples, estimate, chosen, names, marker_topic, frame,
+                 markers_every_n, marker_source):
+    """Encode and write the samples of the slice ``chosen``."""
+    first = chosen.start
+    columns = _output_columns(samples, estimate, chosen, frame)
+    # Outlier and out-of-bound samples (NaN) keep their input, with no outputs.
+    valid = (np.all(np.isfinite(estimate['lever_tip'][chosen]), axis=1)
+             & np.all(np.isfinite(estimate['coupler_mid'][chosen]), axis=1))
+    per_sample = np.where(valid, len(names), 1)
+    markers = None
+    if markers_every_n:
+        marked = np.flatnonzero((np.arange(first, chosen.stop) % markers_every_n == 0) & valid)
+        markers = iter(rows_to_bytes(marker_source.rows(
+            samples['stamps_ns'][chosen][marked], estimate['crank_angle'][first + marked],
+            estimate['modal'][first + marked])))
+        per_sample[marked] += 1
+    messages, topic_of = _interleave(columns, names, valid.tolist(),
+                                     (per_sample > len(names)).tolist(), markers, marker_topic)
+    log_times = np.repeat(samples['log_ns'][chosen], per_sample)
+    publish_times = log_times.copy()
+    # The input keeps its publish time; the outputs are logged and sent at its log time.
+    publish_times[np.cumsum(per_sample) - per_sample] = samples['publish_ns'][chosen]
+    recorder.write_batch(topic_of, messages, log_times, publish_times)
+
+
+def write_replay(out_path, samples, estimate, input_topic, topics, frame_id, model,
+                 markers_every_n=10, exaggeration=10.0, points_per_link=9, wait_for=None,
+                 progress=None, joint_levels=None):
+    """
+    Write the input and the recomputed outputs into a rosbag2 MCAP.
+
+    Parameters
+    ----------
+    out_path : str or os.PathLike
+        Output ``.mcap`` file or bag directory (must not exist).
+    samples : dict
+        The input (:func:`io.joint_states.read_crank_samples`).
+    estimate : dict
+        The offline estimate of the samples (:func:`estimate_offline`).
+    input_topic : str
+        Topic of the input.
+    topics : dict
+        Output topics (:func:`names.output_topics`).
+    frame_id : str
+        Frame of the outputs.
+    model : ReducedModel
+        The model of the estimate (its shapes draw the markers).
+    markers_every_n : int
+        Markers on every n-th sample (0: none).
+    exaggeration : float
+        Scale of the drawn deflections.
+    points_per_link : int
+        Marker points along each link.
+    wait_for : callable, optional
+        ``wait_for(n)`` returns once the first n samples of ``estimate`` are final (the
+        estimate is then computed while this writes).
+    progress : callable, optional
+        ``progress(n)`` after each batch and ``progress(count, force=True)`` at the end.
+    joint_levels : sequence, optional
+        Diagnostic level of each joint in the markers (required with markers).
+
+    Returns
+    -------
+    dict
+        The recorder's final status.
+
+    """
+    recorder = McapRecorder(out_path)
+    recorder.open()
+    try:
+        names = _add_topics(recorder, input_topic, topics, markers_every_n)
+        marker_source = (MarkerSource(model, frame_id, exaggeration, points_per_link,
+                                      joint_levels) if markers_every_n else None)
+        frame = frame_id.encode()
+        count = len(samples['data'])
+        for first in range(0, count, WRITE_BATCH):
+            chosen = slice(first, min(first + WRITE_BATCH, count))
+            if wait_for is not None:
+                wait_for(chosen.stop)
+            _write_batch(recorder, samples, estimate, chosen, names, topics.get('markers'),
+                         frame, markers_every_n, marker_source)
+            if progress is not None:
+                progress(chosen.stop)
+        if progress is not None:
+            progress(count, force=True)
+    finally:
+        status = recorder.close()
+    return status

@@ -1,0 +1,348 @@
+"""
+``flexlink plan``: the smallest model (physics and size) meeting a tolerance.
+
+Every candidate is compared with the full-order response of the richest model of the scene
+(:func:`scene_options`) over a speed range, and the error and cost of the alternatives are
+kept (see :func:`run_plan`).
+"""
+
+import dataclasses
+import time
+
+import numpy as np
+
+from .plan_scoring import evaluate_model, physics_error, PlanSignals
+from .synthetic import PAPER_RPM
+from ..core.fe import linkage as assembly
+from ..core.reduction import model as reduced
+
+# Element counts tried as simplifications (besides the mechanism's own count).
+PLAN_ELEMENTS = (2, 3, 4)
+# Basis sizes of the size stage: frozen-mode directions, static directions, grid points.
+PLAN_MODES = (2, 4, 6, 8, 10, 12, 16, 20, 24)
+PLAN_STATIC = (0, 2, 4)
+PLAN_GRIDS = (64, 128, 256)
+
+
+def plan_candidates(base):
+    """
+    Size candidates (modes, static, grid) of one physics, from small to large.
+
+    Sorted by basis size r = modes + static, then grid points; the last is the generous size
+    at which :func:`run_plan` screens a physics choice.
+    """
+    candidates = []
+    for modes in PLAN_MODES:
+        for static in PLAN_STATIC:
+            for grid in PLAN_GRIDS:
+                candidates.append(dataclasses.replace(base, modes=modes, static=static,
+                                                      grid_size=grid))
+    return sorted(candidates, key=lambda o: (o.modes + o.static, o.grid_size))
+
+
+def scene_options(mechanism, base):
+    """
+    Give the richest model of the scene: the reference every candidate is compared with.
+
+    The user's bearing model, geometric stiffness on, flexible crank, and
+    ``base.elements_per_link`` beam elements per link if given, else twice the mechanism's
+    count (Cho 1992: 6 elements; 8 differ from 6 by < 0.1 % relative RMS at 269 and 391 rpm).
+    """
+    elements = base.elements_per_link or 2 * mechanism.elements_per_link
+    return dataclasses.replace(base, elements_per_link=int(elements), rigid_crank=False,
+                               geometric_stiffness=True)
+
+
+def full_order_dofs(mechanism, options):
+    """Count the DOFs of the full-order FE model of ``options`` (None if not available)."""
+    try:
+        return assembly.FlexibleLinkage(reduced.fe_mechanism(mechanism, options),
+                                        options).size
+    except Exception:   # noqa: BLE001 -- no FE model (toy systems, stripped checkouts)
+        return None
+
+
+def physics_candidates(mechanism, base, scene):
+    """
+    Physics simplifications of the scene, cheapest first, the scene's own physics last.
+
+    Rigid crank yes/no x geometric stiffness off/on x elements per link (:data:`PLAN_ELEMENTS`
+    and the mechanism's count, below the scene's), plus the opposite bearing model (expected
+    to fail: the scene's bearing model is the user's). Ordered by full-order DOFs, geometric
+    stiffness off before on, so the first acceptable one is the cheapest to build.
+    """
+    elements = sorted(e for e in {*PLAN_ELEMENTS, mechanism.elements_per_link}
+                      if e < scene.elements_per_link)
+    other = 'rigid' if scene.bearings == 'flexible' else 'flexible'
+    candidates = [dataclasses.replace(scene, elements_per_link=e, rigid_crank=rigid,
+                                      geometric_stiffness=geometric)
+                  for e in elements for rigid in (True, False) for geometric in (False, True)]
+    candidates.append(dataclasses.replace(scene, bearings=other,
+                                          elements_per_link=mechanism.elements_per_link))
+    if other == 'flexible' and not mechanism.bearing_stiffness:
+        candidates.pop()
+    costs = {o: (full_order_dofs(mechanism, o) or 0, o.geometric_stiffness)
+             for o in candidates}
+    return sorted(candidates, key=costs.__getitem__) + [scene]
+
+
+def describe_physics(options):
+    """Short label: elements, crank, geometric stiffness, bearings."""
+    return (f'{options.elements_per_link} el, {"rigid" if options.rigid_crank else "flex"} '
+            f'crank, GS {"on" if options.geometric_stiffness else "off"}, '
+            f'{options.bearings} bearings')
+
+
+def _meets(row, tolerance):
+    return (row.get('error_coupler_mid') is not None
+            and row['error_coupler_mid'] <= tolerance and row['error_lever_tip'] <= tolerance)
+
+
+# The fields of a row whose reduced model was not built (None in the row).
+_NOT_BUILT = ('size', 'grid_size', 'bytes', 'build_s', 'us_per_sample', 'error_coupler_mid',
+              'error_lever_tip')
+
+
+def _size_cost(options):
+    """Cost order of a size: basis size r, then grid points (options or their dict)."""
+    options = options if isinstance(options, dict) else dataclasses.asdict(options)
+    return (options['modes'] + options['static'], options['grid_size'])
+
+
+class _Search:
+    """The rows of a plan so far and the number of reduced models built."""
+
+    def __init__(self, signals, scene, tolerance, rate_hz, max_candidates):
+        self.signals, self.scene, self.tolerance = signals, scene, tolerance
+        self.rate_hz, self.max_candidates = rate_hz, max_candidates
+        self.rows, self.built = [], 0
+
+    def may_build(self):
+        """Whether another reduced model may be built (``max_candidates``)."""
+        return self.max_candidates is None or self.built < self.max_candidates
+
+    def build(self, options, stage, extra):
+        """Build and measure the model of ``options``; its row (kept)."""
+        row = {'stage': stage, 'options': dataclasses.asdict(options),
+               'label': describe_physics(options), **extra}
+        try:
+            row.update(evaluate_model(self.signals, self.scene, options, self.rate_hz))
+        except (np.linalg.LinAlgError, ValueError) as exc:   # e.g. r above the FE DOFs
+            row.update(dict.fromkeys(_NOT_BUILT), failed=str(exc))
+        row['meets_tolerance'] = _meets(row, self.tolerance)
+        self.rows.append(row)
+        self.built += 1
+        return row
+
+
+def _scene_reference(mechanism, scene, signals):
+    """Describe the plan's reference: the scene's full-order responses at every speed."""
+    for rpm in signals.speeds_rpm:
+        source = signals.reference(scene, rpm).get('source')
+    return {'options': dataclasses.asdict(scene), 'label': describe_physics(scene),
+            'dofs': full_order_dofs(mechanism, scene), 'source': source,
+            'steps_per_revolution': reduced.REFERENCE_STEPS,
+            'seconds': signals.reference_seconds(scene),
+            'description': 'full-order periodic response of the richest model of the '
+                           'scene (flexible crank, geometric stiffness, refined '
+                           'elements, the requested bearings)'}
+
+
+def _screen_physics(search, mechanism, physics):
+    """
+    Stage 1: the first physics within half the budget whose generous size meets it.
+
+    Returns
+    -------
+    (sizes, extra, row) or None
+        The chosen physics' size candidates, its physics fields and its row.
+
+    """
+    budget = 0.5 * search.tolerance
+    for options in physics:
+        if not search.may_build():
+            break
+        errors, evaluated = physics_error(search.signals, search.scene, options, budget)
+        extra = {'dofs': full_order_dofs(mechanism, options),
+                 'physics_error_coupler_mid': errors['coupler_mid'],
+                 'physics_error_lever_tip': errors['lever_tip'],
+                 'physics_speeds_rpm': evaluated,
+                 'reference_s': search.signals.reference_seconds(options)}
+        if max(errors.values()) > budget:
+            search.rows.append({'stage': 'physics', 'options': dataclasses.asdict(options),
+                                'label': describe_physics(options), **extra,
+                                **dict.fromkeys(_NOT_BUILT), 'meets_tolerance': False})
+            continue
+        sizes = plan_candidates(options)
+        row = search.build(sizes[-1], 'physics', extra)
+        if row['meets_tolerance']:
+            return sizes, extra, row
+    return None
+
+
+def _bisect_grid(search, below, extra, choice, sized):
+    """Bisect the sizes ``below`` (the last meets the tolerance) for the first meeting it."""
+    low, high = 0, len(below) - 1
+    while low < high and search.may_build():
+        middle = (low + high) // 2
+        row = search.build(below[middle], 'size', extra)
+        sized.append(row)
+        if row['meets_tolerance']:
+            high, choice = middle, row
+        else:
+            low = middle + 1
+    return choice
+
+
+def _size_search(search, sizes, extra, choice):
+    """
+    Stage 2: per grid, the smallest size beating ``choice`` that meets the tolerance.
+
+    Returns
+    -------
+    choice : dict
+        The chosen row.
+    sized : list of dict
+        Every row built in this stage.
+
+    """
+    sized = []
+    for grid in sorted({o.grid_size for o in sizes}):
+        if not search.may_build():
+            break
+        # sizes at this grid that would beat the current choice, small to large
+        below = [o for o in sizes if o.grid_size == grid
+                 and _size_cost(o) < _size_cost(choice['options'])]
+        if not below:
+            continue
+        row = search.build(below[-1], 'size', extra)    # the largest: can this grid serve?
+        sized.append(row)
+        if row['meets_tolerance']:
+            choice = _bisect_grid(search, below, extra, row, sized)
+    return choice, sized
+
+
+def run_plan(mechanism, base, rpm_max, tolerance, rate_hz=1000.0, speeds_rpm=None,
+             max_candidates=None, physics=None, scene=None):
+    """
+    Find the smallest model (physics and size) meeting ``tolerance`` against the scene.
+
+    Scene reference. The full-order periodic response (core/simulate.py via
+    ``reduced.reference_response``) of the richest model of the scene,
+    :func:`scene_options`: the user's bearings, flexible crank, geometric stiffness, refined
+    elements. Outputs are physical points (lever side of B, coupler material mid-point,
+    ground-frame elastic deflection), the same for every element count and crank model, so
+    every candidate is compared with this one reference at the same crank angles: the last
+    revolution of a constant-speed signal at each speed (the paper's speeds up to ``rpm_max``,
+    and ``rpm_max``); errors are relative RMS, the max over the speeds.
+
+    Search (two stages, every evaluated candidate is a row of 'alternatives').
+
+    1. Physics: the candidates of :func:`physics_candidates` (rigid crank, geometric stiffness
+       off/on, elements per link, the opposite bearing model; the scene's own physics last),
+       cheapest first. Each one's full-order response is compared with the scene's (the
+       physics error, no truncation in it). One within ``tolerance / 2`` (half the budget is
+       left to the reduction) is then built at the generous size (the last of
+       :func:`plan_candidates`); the first whose reduced model meets ``tolerance`` there is
+       chosen, and the later physics candidates are not evaluated.
+    2. Size: :func:`plan_candidates` of the chosen physics (modes x static x grid; cost is
+       basis size r, then grid). Per grid, smallest first: the largest r that would still
+       beat the current choice is built; if it meets ``tolerance`` the smaller r of that grid
+       are bisected for the first meeting it (assuming the error falls with r; the rows show
+       every size tried). The grid matters on its own: with a flexible crank the angle
+       interpolation of a 128-point grid leaves ~1 % on the coupler whatever the basis.
+
+    Parameters
+    ----------
+    mechanism : Mechanism
+        The mechanism.
+    base : ModelOptions
+        Bearings, speed range, and the scene's elements (``elements_per_link``, None: twice
+        the mechanism's); its crank, geometric stiffness and sizes are what the plan chooses.
+    rpm_max : float
+        Largest speed [rpm].
+    tolerance : float
+        Relative RMS error target on both outputs.
+    rate_hz : float
+        Sample rate of the synthetic signals [Hz].
+    speeds_rpm : sequence of float or None
+        Speeds checked (default: PAPER_RPM capped at ``rpm_max``, and ``rpm_max``).
+    max_candidates : int or None
+        Stop after this many reduced models built.
+    physics : list of ModelOptions or None
+        Physics candidates in order (default :func:`physics_candidates`).
+    scene : ModelOptions or None
+        Options of the scene reference (default :func:`scene_options`).
+
+    Returns
+    -------
+    dict
+        'choice' (a row) or None, 'alternatives' (every evaluated row: 'stage' 'physics' or
+        'size', options, dofs, physics_error_* (full order vs scene), error_* (reduced vs
+        scene; None when not built), truncation_error_* (reduced vs its own full order),
+        size, bytes, build_s, us_per_sample), 'reference' (the scene), 'speeds_rpm',
+        'tolerance', 'seconds'.
+
+    """
+    started = time.perf_counter()
+    speeds_rpm = list(speeds_rpm or sorted({min(s, rpm_max) for s in PAPER_RPM} | {rpm_max}))
+    scene = scene or scene_options(mechanism, base)
+    physics = physics if physics is not None else physics_candidates(mechanism, base, scene)
+    signals = PlanSignals(mechanism, speeds_rpm, rate_hz)
+    reference = _scene_reference(mechanism, scene, signals)
+    search = _Search(signals, scene, tolerance, rate_hz, max_candidates)
+    chosen_physics = _screen_physics(search, mechanism, physics)
+    rows, choice = search.rows, None
+    if chosen_physics is not None:
+        sizes, extra, choice = chosen_physics
+        choice, sized = _size_search(search, sizes, extra, choice)
+        rows = [r for r in search.rows if r['stage'] == 'physics'] + sorted(
+            sized, key=lambda r: _size_cost(r['options']))
+    return {'speeds_rpm': speeds_rpm, 'tolerance': tolerance, 'choice': choice,
+            'alternatives': rows, 'reference': reference,
+            'seconds': time.perf_counter() - started}
+
+
+def _fmt(value, spec, width):
+    return f'{"-":>{width}}' if value is None else f'{value:>{width}{spec}}'
+
+
+def plan_table(result):
+    """Text table of :func:`run_plan`'s rows."""
+    ref = result['reference']
+    speeds = ', '.join(f'{s:g}' for s in result['speeds_rpm'])
+    lines = [f'reference: {ref["label"]} ({ref["dofs"]} DOFs, {ref["source"]}, '
+             f'{ref["seconds"]:.1f} s), speeds {speeds} rpm, tolerance {result["tolerance"]:g}',
+             f'{"stage":<7} {"physics":<42} {"n":>3} {"modes":>5} {"stat":>4} {"grid":>4} '
+             f'{"r":>3} {"MB":>6} {"build s":>7} {"us":>6} {"phys c":>8} {"phys l":>8} '
+             f'{"trunc c":>8} {"trunc l":>8} {"coupler":>8} {"lever":>8} ok']
+    for row in result['alternatives']:
+        o = row['options']
+        built = row['size'] is not None
+        lines.append(
+            f'{row["stage"]:<7} {row["label"]:<42} {_fmt(row.get("dofs"), "d", 3)} '
+            f'{_fmt(o["modes"] if built else None, "d", 5)} '
+            f'{_fmt(o["static"] if built else None, "d", 4)} '
+            f'{_fmt(o["grid_size"] if built else None, "d", 4)} {_fmt(row["size"], "d", 3)} '
+            f'{_fmt(None if row["bytes"] is None else row["bytes"] / 1e6, ".1f", 6)} '
+            f'{_fmt(row["build_s"], ".1f", 7)} {_fmt(row["us_per_sample"], ".0f", 6)} '
+            f'{_fmt(row.get("physics_error_coupler_mid"), ".2e", 8)} '
+            f'{_fmt(row.get("physics_error_lever_tip"), ".2e", 8)} '
+            f'{_fmt(row.get("truncation_error_coupler_mid"), ".2e", 8)} '
+            f'{_fmt(row.get("truncation_error_lever_tip"), ".2e", 8)} '
+            f'{_fmt(row["error_coupler_mid"], ".2e", 8)} '
+            f'{_fmt(row["error_lever_tip"], ".2e", 8)} '
+            f'{"yes" if row["meets_tolerance"] else "no"}')
+    chosen = result['choice']
+    if chosen:
+        o = chosen['options']
+        lines.append(f'choice: {chosen["label"]}, {o["modes"]} modes + {o["static"]} static, '
+                     f'grid {o["grid_size"]} (r = {chosen["size"]}): coupler '
+                     f'{chosen["error_coupler_mid"]:.2e}, lever {chosen["error_lever_tip"]:.2e}, '
+                     f'{chosen["us_per_sample"]:.0f} us/sample')
+    else:
+        lines.append('choice: none of the candidates meets the tolerance')
+    lines.append(f'(physics error: full order vs the reference; trunc: reduced vs its own full '
+                 f'order; coupler/lever: reduced vs the reference; plan took '
+                 f'{result["seconds"]:.0f} s)')
+    return '\n'.join(lines)

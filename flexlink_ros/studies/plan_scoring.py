@@ -1,0 +1,130 @@
+"""
+How ``plan`` scores a candidate.
+
+Its full-order physics error and its reduced model's error and cost, all on the same
+synthetic signals and full-order references.
+"""
+
+import math
+import time
+
+from .synthetic import last_revolution, stream_timed, synthetic_signal, timing_summary
+from ..core.estimation.streaming import replay
+from ..core.numerics import relative_rms, RPM
+from ..core.reduction import model as reduced
+
+
+def physics_key(options):
+    """Key the physical choices of ``options`` (what its full-order reference depends on)."""
+    return (options.elements_per_link, options.rigid_crank, options.bearings,
+            options.geometric_stiffness)
+
+
+class PlanSignals:
+    """
+    Per speed: the synthetic signal, the last revolution's angles, and full-order references.
+
+    Every candidate sees the same signal at a speed, so references at those angles are
+    computed once per physics (``reduced.reference_response`` keeps one entry only).
+    """
+
+    def __init__(self, mechanism, speeds_rpm, rate_hz):
+        self.mechanism = mechanism
+        self.speeds_rpm = list(speeds_rpm)
+        self.signals = {}
+        for rpm in self.speeds_rpm:
+            period = 2.0 * math.pi / (rpm * RPM)
+            stamps, angles, speeds = synthetic_signal(rpm, 2.0 * period, rate_hz)
+            self.signals[rpm] = (stamps, angles, speeds, last_revolution(stamps, rpm))
+        self.references = {}
+        self.seconds = {}
+
+    def reference(self, options, rpm):
+        """Full-order response of the physics of ``options`` at ``rpm`` (cached)."""
+        key = (physics_key(options), rpm)
+        if key not in self.references:
+            _, angles, _, mask = self.signals[rpm]
+            start = time.perf_counter()
+            self.references[key] = reduced.reference_response(self.mechanism, options,
+                                                              rpm * RPM, angles[mask])
+            self.seconds[key] = time.perf_counter() - start
+        return self.references[key]
+
+    def reference_seconds(self, options):
+        """Time spent on the full-order references of ``options`` [s]."""
+        return sum(s for (k, _), s in self.seconds.items() if k == physics_key(options))
+
+    def replay(self, model, rpm):
+        """Estimate with ``model`` over the last revolution at ``rpm``."""
+        stamps, angles, speeds, mask = self.signals[rpm]
+        out = replay(model, stamps, angles, speeds)
+        return {key: out[key][mask] for key in ('lever_tip', 'coupler_mid')}
+
+
+def _errors(estimate, reference):
+    return {key: relative_rms(estimate[key], reference[key])
+            for key in ('coupler_mid', 'lever_tip')}
+
+
+def _max_errors(rows_per_speed):
+    return {key: max(row[key] for row in rows_per_speed)
+            for key in ('coupler_mid', 'lever_tip')}
+
+
+def physics_error(signals, scene, options, budget):
+    """
+    Full-order response of ``options`` against the scene's: relative RMS, max over speeds.
+
+    Speeds are taken highest first; one already over ``budget`` ends the evaluation (the
+    candidate cannot be accepted), so the returned maximum covers ``speeds`` only.
+
+    Returns
+    -------
+    errors : dict
+        'coupler_mid', 'lever_tip'.
+    speeds : list of float
+        Speeds evaluated [rpm].
+
+    """
+    per_speed, speeds = [], []
+    for rpm in sorted(signals.speeds_rpm, reverse=True):
+        if physics_key(options) == physics_key(scene):
+            per_speed.append({'coupler_mid': 0.0, 'lever_tip': 0.0})
+        else:
+            per_speed.append(_errors(signals.reference(options, rpm),
+                                     signals.reference(scene, rpm)))
+        speeds.append(rpm)
+        if max(per_speed[-1].values()) > budget:
+            break
+    return _max_errors(per_speed), speeds
+
+
+def evaluate_model(signals, scene, options, rate_hz):
+    """
+    Build the reduced model of ``options`` and measure its cost and errors.
+
+    Returns
+    -------
+    dict
+        size, bytes, build_s, us_per_sample (median streaming update), error_coupler_mid and
+        error_lever_tip (against the scene reference, max over the speeds), and
+        truncation_error_* (against the full-order model of its own physics).
+
+    """
+    start = time.perf_counter()
+    model = reduced.model_for_mechanism(signals.mechanism, options, use_cache=False)
+    build_s = time.perf_counter() - start
+    total, truncation = [], []
+    for rpm in signals.speeds_rpm:
+        estimate = signals.replay(model, rpm)
+        total.append(_errors(estimate, signals.reference(scene, rpm)))
+        truncation.append(_errors(estimate, signals.reference(options, rpm)))
+    stamps, angles, speeds = synthetic_signal(max(signals.speeds_rpm), 0.3, rate_hz)
+    _, update_ns = stream_timed(model, stamps, angles, speeds)
+    median, _ = timing_summary(update_ns)
+    total, truncation = _max_errors(total), _max_errors(truncation)
+    return {'size': model.size, 'grid_size': model.grid_size, 'bytes': int(model.nbytes),
+            'build_s': build_s, 'us_per_sample': median,
+            'error_coupler_mid': total['coupler_mid'], 'error_lever_tip': total['lever_tip'],
+            'truncation_error_coupler_mid': truncation['coupler_mid'],
+            'truncation_error_lever_tip': truncation['lever_tip']}

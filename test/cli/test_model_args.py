@@ -1,0 +1,51 @@
+"""The model flags every model subcommand shares: spellings, choices, defaults, help."""
+
+from flexlink_ros.cli import main as cli
+import pytest
+
+# Each model subcommand with the arguments it requires.
+MODEL_COMMANDS = {'estimate': ['--rpm', '391'], 'plan': ['--rpm-max', '391'], 'bench': [],
+                  'replay': ['bag'], 'simulate': [], 'modes': []}
+DEFAULT_BEARINGS = {'estimate': 'flexible', 'plan': 'flexible', 'bench': 'flexible',
+                    'replay': 'flexible', 'simulate': 'rigid', 'modes': 'rigid'}
+
+
+def parse(*argv):
+    """Parse ``argv`` with the parser of its subcommand."""
+    return cli.build_parser(list(argv)).parse_args(list(argv))
+
+
+@pytest.mark.parametrize('command', sorted(MODEL_COMMANDS))
+def test_every_model_subcommand_accepts_the_shared_flags(command):
+    required = MODEL_COMMANDS[command]
+    args = parse(command, *required, '--mechanism', 'kang1990', '--rigid-crank',
+                 '--bearings', 'flexible', '--elements-per-link', '3',
+                 '--no-geometric-stiffness')
+    assert (args.mechanism, args.rigid_crank, args.bearings, args.elements_per_link,
+            args.no_geometric_stiffness) == ('kang1990', True, 'flexible', 3, True)
+    args = parse(command, *required, '--flexible-crank', '--bearings', 'rigid')
+    assert (args.rigid_crank, args.bearings) == (False, 'rigid')
+
+
+@pytest.mark.parametrize('command', sorted(MODEL_COMMANDS))
+def test_defaults_are_unchanged_and_shown_in_help(command, capsys):
+    args = parse(command, *MODEL_COMMANDS[command])
+    assert (args.mechanism, args.rigid_crank, args.bearings, args.elements_per_link,
+            args.no_geometric_stiffness) == ('cho1992', False, DEFAULT_BEARINGS[command],
+                                             None, False)
+    with pytest.raises(SystemExit):
+        parse(command, '--help')
+    text = ' '.join(capsys.readouterr().out.split())
+    assert f'(default: {DEFAULT_BEARINGS[command]})' in text
+    assert '(default: cho1992)' in text and '{flexible,rigid}' in text
+
+
+@pytest.mark.parametrize('command', ['simulate', 'modes'])
+def test_elements_is_a_deprecated_spelling_of_elements_per_link(command, capsys):
+    old = parse(command, '--elements', '3')
+    assert 'flexlink: --elements is deprecated, use --elements-per-link' in \
+        capsys.readouterr().err
+    new = parse(command, '--elements-per-link', '3')
+    assert capsys.readouterr().err == ''
+    assert old == new and new.elements_per_link == 3
+    assert '--elements ' not in cli.build_parser([command]).format_help()

@@ -1,0 +1,135 @@
+"""The offline estimate of a sample stream against the streaming estimator."""
+
+import math
+
+from flexlink_ros.core.estimation import offline_run, streaming as core_estimator
+from flexlink_ros.core.estimation.streaming import SampleFlag, StreamingEstimator
+from flexlink_ros.core.mechanism import load_mechanism
+from flexlink_ros.core.reduction import model as reduced
+from flexlink_ros.errors import OutlierSample
+from flexlink_ros.ros import parameters as node_params
+import numpy as np
+import pytest
+
+RPM = 2.0 * math.pi / 60.0
+
+
+@pytest.fixture(scope='module')
+def model():
+    """Build (or load) the node's default model without geometric stiffness."""
+    options = node_params.default_model_options(geometric_stiffness=False)
+    return reduced.model_for_mechanism(load_mechanism('cho1992'), options)
+
+
+def test_segments_follow_the_streaming_resets():
+    stamps = np.array([0, 1, 2, 2, 3, 10**9, 10**9 + 1, 5, 6]) * 1_000_000
+    angles = np.array([0.0, 0.1, 0.2, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7])
+    starts, repeated = offline_run.segments(stamps, angles)
+    # 3 -> 1000 ms is a 0.997 s gap (> 0.5 s), 1000 -> 5 ms goes back.
+    assert starts == [0, 5, 7]
+    assert repeated.tolist() == [False, False, False, True] + [False] * 5
+
+
+def test_estimate_reports_only_final_samples_to_the_writer(model, monkeypatch):
+    """progress(n) comes only once the first n samples are final, through gaps and repeats."""
+    monkeypatch.setattr(core_estimator, 'REPLAY_CHUNK', 64)     # many chunks per segment
+    stamps = np.arange(700) * 1_000_000
+    stamps[400:] += 800_000_000                                 # a gap: two segments
+    stamps[200] = stamps[199]                                   # a repeated sample
+    angles = 391 * RPM * stamps * 1e-9
+    angles[200] = angles[199]
+    speeds = np.full(stamps.size, 391 * RPM)
+    speeds[300:310] = np.nan                                    # no speed in a stretch
+    snapshots = []
+    result = offline_run.allocate_estimate(model, stamps.size)
+
+    def progress(count):
+        snapshots.append((count, {key: result[key][:count].copy()
+                                  for key in ('lever_tip', 'criterion', 'modal')}))
+    offline_run.estimate_offline(model, stamps, angles, speeds, result=result, progress=progress)
+    counts = [count for count, _ in snapshots]
+    assert counts == sorted(counts) and counts[-1] == stamps.size and len(counts) > 10
+    for count, early in snapshots:
+        for key, values in early.items():
+            np.testing.assert_array_equal(values, result[key][:count])
+    assert result['segments'] == 2
+    np.testing.assert_array_equal(result['lever_tip'][200], result['lever_tip'][199])
+
+
+def test_replay_writer_gets_the_estimate_error():
+    def failing(result, progress):
+        progress(10)
+        raise ValueError('estimate failed')
+    background = offline_run.BackgroundEstimate(failing, {})
+    with pytest.raises(ValueError, match='estimate failed'):
+        background.wait_for(11)
+    with pytest.raises(ValueError, match='estimate failed'):
+        background.join()
+
+
+def test_segments_share_one_set_of_step_tables(model, monkeypatch):
+    """A recording with many gaps builds the step tables once, not per segment."""
+    built = []
+    original = core_estimator._StepTables.__init__
+
+    def counted(self, *args, **kwargs):
+        built.append(1)
+        original(self, *args, **kwargs)
+    monkeypatch.setattr(core_estimator._StepTables, '__init__', counted)
+    stamps = np.arange(60) * 1_000_000 + np.repeat(np.arange(6), 10) * 700_000_000
+    angles = 391 * RPM * stamps * 1e-9
+    speeds = np.full(stamps.size, 391 * RPM)
+    result = offline_run.estimate_offline(model, stamps, angles, speeds)
+    assert result['segments'] == 6 and len(built) == 1
+    with pytest.raises(ValueError, match='do not match the model'):
+        small = reduced.model_for_mechanism(load_mechanism('cho1992'), reduced.ModelOptions(
+            rigid_crank=True, bearings='rigid', geometric_stiffness=False))
+        StreamingEstimator(model, step_tables=core_estimator.step_tables(small))
+
+
+@pytest.mark.parametrize('window', [offline_run.PLAN_WINDOW, 7])
+def test_offline_estimate_equals_streaming_through_outliers_and_out_of_bound(
+        model, monkeypatch, window):
+    """Outliers, a jump and out-of-bound resets: replay's rows are the node's samples."""
+    monkeypatch.setattr(offline_run, 'PLAN_WINDOW', window)     # planned in windows or not
+    stamps = 10**9 + np.arange(1500, dtype=np.int64) * 1_000_000
+    speed = np.full(stamps.size, 391.0 * RPM)
+    speed[1000:] = -100.0            # a jump: outliers until it is plausible over their dt
+    angles = np.cumsum(speed) * 1e-3
+    speed[[200, 201, 600]] = (1.7e308, -1.7e308, 1e6)
+    stamps[800], angles[800] = stamps[799], angles[799]       # an exact repeat
+    reference = StreamingEstimator(model)
+    normal = max(max(map(abs, reference.update(int(s), a, w).lever_tip))
+                 for s, a, w in zip(stamps[:400].tolist(), angles[:400], speed[:400])
+                 if abs(w) < 1e3)
+    # A bound below the normal peak: the peaks go out of bound and restart the estimate.
+    monkeypatch.setattr(core_estimator, 'DEFLECTION_SAFETY_FACTOR',
+                        core_estimator.DEFLECTION_SAFETY_FACTOR * 0.9 * normal
+                        / reference.deflection_bound_m)
+    estimator = StreamingEstimator(model)
+    streamed = []
+    for stamp, angle, value in zip(stamps.tolist(), angles.tolist(), speed.tolist()):
+        try:
+            streamed.append(estimator.update(stamp, angle, value))
+        except OutlierSample:
+            streamed.append(None)
+    result = offline_run.estimate_offline(model, stamps, angles, speed)
+    flags = result['flags']
+    refused = [n for n, s in enumerate(streamed) if s is None]
+    assert refused == np.flatnonzero(flags & SampleFlag.OUTLIER).tolist()
+    assert refused[:4] == [200, 201, 600, 1000]
+    out = [n for n, s in enumerate(streamed)
+           if s is not None and s.flags & SampleFlag.OUT_OF_BOUND]
+    assert len(out) > 5 and out == np.flatnonzero(flags & SampleFlag.OUT_OF_BOUND).tolist()
+    assert result['outliers'] == len(refused) and result['out_of_bound'] == len(out)
+    for n, sample in enumerate(streamed):
+        if sample is None or sample.flags & SampleFlag.OUT_OF_BOUND:
+            assert np.all(np.isnan(result['lever_tip'][n]))
+            continue
+        assert bool(flags[n] & SampleFlag.REPEATED) == bool(sample.flags & SampleFlag.REPEATED)
+        if not sample.flags & SampleFlag.REPEATED:
+            assert bool(flags[n] & SampleFlag.RESET) == bool(sample.flags & SampleFlag.RESET)
+        np.testing.assert_allclose(result['lever_tip'][n], sample.lever_tip, rtol=1e-7,
+                                   atol=1e-12)
+        np.testing.assert_allclose(result['coupler_mid'][n], sample.coupler_mid, rtol=1e-7,
+                                   atol=1e-12)
