@@ -19,6 +19,9 @@ from ..core.options import ModelOptions
 # Crank speeds of the paper's frequency plots [rad/s] (Figs. 8-13) and deflection plots [rpm].
 PAPER_SPEEDS_RAD_S = (30.0, 45.0)
 PAPER_RPM = (269.0, 391.0)
+# The paper's mode-shape angles [deg] (Figs. 14-15) and bearing models (Figs. 20-21).
+SHAPE_ANGLES_DEG = (27.0, 123.0)
+BEARINGS = ('rigid', 'flexible')
 
 
 def quasi_static_axial_force(mechanism, state, link, x):
@@ -189,5 +192,6 @@ def sweep_case(mechanism, case, crank_deg, count=3):
                  strain_share=frozen.strain_share[:, keep], events=events)
 
 
-__all__ = ['PAPER_SPEEDS_RAD_S', 'PAPER_RPM', 'quasi_static_axial_force', 'FrequencyCase',
+__all__ = ['PAPER_SPEEDS_RAD_S', 'PAPER_RPM', 'SHAPE_ANGLES_DEG', 'BEARINGS',
+           'quasi_static_axial_force', 'FrequencyCase',
            'paper_frequency_cases', 'Sweep', 'sweep_case']

@@ -102,5 +102,16 @@ def shape_correlation(values, template):
         return np.where(norms > 0.0, values @ template / norms, 0.0)
 
 
-__all__ = ['harmonic_shares', 'signed_area', 'uniform_load_shape', 'bending_deflection',
-           'shape_correlation']
+def peak_to_peak(response):
+    """Peak-to-peak of each output of a periodic response over its revolution [m]."""
+    return response.outputs.max(axis=0) - response.outputs.min(axis=0)
+
+
+def coupler_mid_path(mechanism, crank_angle):
+    """Rigid-body path of the coupler mid-point [m], complex, shape (P,)."""
+    state = solve_kinematics(mechanism, crank_angle)
+    return state.point(1, 0.5 * mechanism.lengths[2])[0]
+
+
+__all__ = ['peak_to_peak', 'coupler_mid_path', 'harmonic_shares', 'signed_area',
+           'uniform_load_shape', 'bending_deflection', 'shape_correlation']
