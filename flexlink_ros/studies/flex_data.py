@@ -188,8 +188,8 @@ def _mode_shapes(mechanism, deg):
     out['mac'] = mac(flex, rigid)
     # Draw each rigid-crank mode with the sign of the all-flexible mode it resembles.
     signs = np.where(np.einsum('pm,pm->m', flex, rigid) < 0.0, -1.0, 1.0)
-    out['rigid_crank']['deflection'] = out['rigid_crank']['deflection'] * signs[:, None, None,
-                                                                               None]
+    out['rigid_crank']['deflection'] = (out['rigid_crank']['deflection']
+                                        * signs[:, None, None, None])
     return out
 
 

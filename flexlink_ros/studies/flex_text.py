@@ -128,7 +128,7 @@ def _claim_lines(data):
 
 def _time_lines(data):
     return ['', 'Compute time: ' + ', '.join(f'{k} {v:.1f} s'
-                                            for k, v in data['seconds'].items()) + '.']
+                                             for k, v in data['seconds'].items()) + '.']
 
 
 SECTIONS = (_model_lines, _frequency_lines, _event_lines, _deflection_lines, _truncation_lines,
