@@ -18,9 +18,9 @@ Charts of the transfer-matrix beam check (Kim & Moon): accuracy, speed and root-
 import pathlib
 import time
 
-import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter
+import numpy as np
 
 from ..core.tmm import transfer as tmm
 
@@ -50,10 +50,7 @@ PAPER_TABLE2_BISECTION = {'fixed-fixed': 5, 'fixed-supported': 17, 'cantilever':
 
 def frequencies(beam, bc, segments, method, modes=1, search='newton', step=50.0,
                 verify=True):
-    """
-    Lowest `modes` frequencies [rad/s] of `method` ('tmm1'..'tmm3', 'fe'), ndarray (modes,).
-
-    """
+    """Lowest `modes` frequencies [rad/s] of `method` ('tmm1'..'tmm3', 'fe'), ndarray (modes,)."""
     if method == 'fe':
         return tmm.fe_frequencies(beam, bc, segments, modes)
     return tmm.tmm_frequencies(beam, bc, segments, int(method[-1]), modes, search, step,
@@ -129,7 +126,7 @@ def timing_table(beam, segment_counts=TIMING_SEGMENTS, repeats=TIMING_REPEATS,
 
 def iteration_table(beam, steps=SCAN_STEPS_RAD_S, segments=PAPER_SEGMENTS):
     """
-    Iterations to the paper's |D| <= 1e-6 (kgf-mm) for mode 1, lumping method 3.
+    Count iterations to the paper's |D| <= 1e-6 (kgf-mm) for mode 1, lumping method 3.
 
     Returns
     -------
@@ -220,7 +217,7 @@ def plot_errors(table, beam, path):
 def plot_frequencies(beam, path, max_segments=20):
     """Chart 2: the first frequency against segments 2..max_segments (paper's Figs. 2-5)."""
     figure, axes = _grid('Kim & Moon beam: first frequency against number of segments '
-                         '(cf. the paper\'s Figs. 2-5)')
+                         "(cf. the paper's Figs. 2-5)")
     for bc, ax in axes.items():
         exact = tmm.exact_frequencies(beam, bc, 1)[0]
         for method, (label, colour, marker) in METHOD_STYLE.items():

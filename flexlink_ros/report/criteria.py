@@ -17,13 +17,13 @@ import dataclasses
 import math
 import pathlib
 
-import numpy as np
 from matplotlib.figure import Figure
+import numpy as np
 
 from ..core import criteria, spring_design
 from ..core.dynamics import solve_dynamics
 from ..core.kinematics import solve_kinematics
-from ..core.mechanism import JOINT_NAMES, Spring, load_mechanism
+from ..core.mechanism import JOINT_NAMES, load_mechanism, Spring
 
 # Curve resolution [deg]: finer than the narrowest peak (about 1 degree wide).
 CURVE_STEP_DEG = 0.02
@@ -230,7 +230,7 @@ def _text(maxima, found, speed):
                      f'{entry.objective:.2f} | {entry.feasible} | '
                      f'{", ".join(entry.active) or "none"} |')
     torque = paper.constraints['torque_max']
-    lines += ['', f'The paper\'s design stops on the torque limit (max torque '
+    lines += ['', f"The paper's design stops on the torque limit (max torque "
               f'{torque["value"]:.4f} N m against {torque["limit"]:.4f}, '
               f'{-100 * torque["margin"]:.4f} % over); the global search lowers the objective '
               f'by {100 * (1 - design.objective / paper.objective):.0f} %.']

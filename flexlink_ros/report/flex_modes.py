@@ -6,8 +6,8 @@ frequencies against the crank angle with the mode events marked (Figs. 7-13) and
 three mode shapes at the paper's angles (Figs. 14-15).
 """
 
-import numpy as np
 from matplotlib.figure import Figure
+import numpy as np
 
 from ..core.mechanism import LINK_NAMES
 from ..studies.flex_data import SHAPE_SPEED_RAD_S
@@ -151,7 +151,6 @@ def plot_mode_shapes(shapes, deg, path):
                     f'K_G at {SHAPE_SPEED_RAD_S:g} rad/s', fontsize=10)
     figure.savefig(path, dpi=DPI)
     return path
-
 
 
 __all__ = ['plot_fig7', 'plot_fig8_10', 'plot_fig11_13', 'plot_mode_shapes']

@@ -6,10 +6,10 @@ Draws the responses computed by :func:`studies.flex_data.compute_flex`: the defl
 mid-point path (Fig. 22) and the truncation error against the number of modes.
 """
 
-import numpy as np
 from matplotlib import colormaps
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
+import numpy as np
 
 from ..core.kinematics import solve_kinematics
 from ..studies.flex_data import SHAPE_SPEED_RAD_S
@@ -24,7 +24,7 @@ DPI = 120
 
 
 def _exaggeration(deflection, reference_length):
-    """A round factor making the largest deflection about 5 % of reference_length."""
+    """Choose a round factor making the largest deflection about 5 % of reference_length."""
     peak = np.abs(deflection).max()
     raw = 0.05 * reference_length / max(peak, 1e-12)
     for factor in (1, 2, 5, 10, 20, 50, 100, 200, 500, 1000):
@@ -34,7 +34,7 @@ def _exaggeration(deflection, reference_length):
 
 
 def plot_deflected_linkage(linkage, mechanism, path):
-    """The deflected linkage every 3 degrees at 30 rad/s in four quarter turns (Figs. 16-19)."""
+    """Draw the deflected linkage every 3 degrees at 30 rad/s in quarter turns (Figs. 16-19)."""
     deg = linkage['crank_deg']
     positions, deflection = linkage['positions'], linkage['deflection']
     factor = _exaggeration(deflection, mechanism.lengths[2])

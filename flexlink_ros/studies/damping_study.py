@@ -57,7 +57,7 @@ OUTPUT_KEYS = ('lever_tip_dx', 'lever_tip_dy', 'coupler_mid_dx', 'coupler_mid_dy
 
 
 def matched_model(mechanism='cho1992', elements=8, gravity=False, bearings='flexible'):
-    """The package's model in the peer's matched conventions (rigid crank, split masses)."""
+    """Build the package's model in the peer's matched conventions (rigid crank, split masses)."""
     mech = mechanism if isinstance(mechanism, Mechanism) else load_mechanism(mechanism)
     mech = dataclasses.replace(mech, elements_per_link=elements, joint_mass_split=0.5)
     return FlexibleLinkage(mech, ModelOptions.full_model(rigid_crank=True, bearings=bearings,

@@ -28,7 +28,7 @@ def _variation(sweep, mode):
 
 
 def _kg_sweep(sweeps, key, speed=PAPER_SPEEDS_RAD_S[0]):
-    """The sweep of a case with K_G at ``speed`` [rad/s]."""
+    """Return the sweep of a case with K_G at ``speed`` [rad/s]."""
     return sweeps[f'{key}_kg_{speed:g}']
 
 

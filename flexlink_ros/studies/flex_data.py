@@ -159,7 +159,7 @@ def _spring_at_b_only(mechanism, q):
 
 
 def _responses_without_kg(mechanism, q):
-    """The full-order responses again without geometric stiffness (Conclusion 1)."""
+    """Compute the full-order responses again without geometric stiffness (Conclusion 1)."""
     responses = {}
     for bearings in BEARINGS:
         model = FlexibleLinkage(mechanism, _rigid_crank_options(bearings, False))

@@ -65,7 +65,9 @@ def mac(first, second, mass=None):
     Parameters
     ----------
     first : ndarray, shape (n, p)
+        Shapes a_i as columns.
     second : ndarray, shape (n, q)
+        Shapes b_j as columns.
     mass : ndarray, shape (n, n) or None
         Weighting (identity if None).
 
@@ -102,6 +104,7 @@ def detect_mode_events(parameter, frequencies, shapes, mass=None, periodic=False
     frequencies : ndarray, shape (N, m)
         Ascending at each sample.
     shapes : ndarray, shape (N, n, m)
+        Mode shapes at each sample (columns in the order of ``frequencies``).
     mass : ndarray, shape (N, n, n) or (n, n) or None
         Weighting of the MAC (identity if None).
     periodic : bool
@@ -151,7 +154,7 @@ class _SampledSweep:
         return self.weights if self.weights.ndim == 2 else self.weights[k % len(self.parameter)]
 
     def neighbour(self, k):
-        """The sample after k (wrapping around if periodic)."""
+        """Return the sample after k (wrapping around if periodic)."""
         return (k + 1) % len(self.parameter) if self.periodic else k + 1
 
 
@@ -252,6 +255,7 @@ def refine_mode_event(model, speed, event, step_deg):
     Parameters
     ----------
     model : FlexibleLinkage
+        The model of the sweep.
     speed : float
         Crank speed of the axial forces in K_G [rad/s].
     event : ModeEvent

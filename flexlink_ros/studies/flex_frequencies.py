@@ -36,10 +36,12 @@ def quasi_static_axial_force(mechanism, state, link, x):
     Parameters
     ----------
     mechanism : Mechanism
+        The linkage.
     state : LinkageState
         Rigid-body state at N crank angles (crank speed ``state.omega[0]``, acceleration
         ``state.alpha[0]``).
     link : int
+        Link index (0 crank, 1 coupler, 2 lever).
     x : ndarray, shape (m,)
         Positions along the link [m].
 
@@ -87,7 +89,7 @@ class FrequencyCase:
 
 def paper_frequency_cases():
     """
-    The cases of Figs. 7-13 of Cho 1992 (bearings rigid unless named).
+    Return the cases of Figs. 7-13 of Cho 1992 (bearings rigid unless named).
 
     The speed-free cases without geometric stiffness, and the K_G cases at 30 and 45 rad/s.
 
@@ -162,7 +164,9 @@ def sweep_case(mechanism, case, crank_deg, count=3):
     Parameters
     ----------
     mechanism : Mechanism
+        The linkage.
     case : FrequencyCase
+        Model options and speed of the axial forces.
     crank_deg : ndarray, shape (N,)
         Crank angles [deg]; a full turn (equal steps) is treated as periodic.
     count : int

@@ -67,6 +67,7 @@ def bending_deflection(model, displacement, crank_angle, link, points_per_elemen
     Parameters
     ----------
     model : FlexibleLinkage
+        The model of ``displacement``.
     displacement : ndarray, shape (N, n)
         System vectors U at the crank angles.
     crank_angle : ndarray, shape (N,)
@@ -74,6 +75,7 @@ def bending_deflection(model, displacement, crank_angle, link, points_per_elemen
     link : int
         A modelled link.
     points_per_element : int
+        Points drawn per beam element.
 
     Returns
     -------

@@ -33,7 +33,7 @@ def deflection_unit(values_m):
 
 
 def _length(value_m):
-    """A deflection for people: micrometres below 0.1 mm, millimetres otherwise."""
+    """Format a deflection for people: micrometres below 0.1 mm, millimetres otherwise."""
     scale, unit = deflection_unit(value_m)
     return f'{scale * value_m:.3g} {unit}' if unit != 'mm' else f'{scale * value_m:.3f} mm'
 

@@ -36,6 +36,7 @@ def truncation_study(model, speed, mode_counts, steps=DEFAULT_STEPS, points=DEFA
     Parameters
     ----------
     model : FlexibleLinkage
+        The full-order model.
     speed : float
         Crank speed [rad/s].
     mode_counts : sequence of int
@@ -89,7 +90,9 @@ def modes_needed(mode_counts, errors, tolerance):
     mode_counts : ndarray, shape (k,)
         Increasing.
     errors : ndarray, shape (k,)
+        Error of each N.
     tolerance : float
+        Largest error accepted.
 
     Returns
     -------

@@ -114,6 +114,7 @@ def peer_response(mechanism, rpm, *, elements_per_link=DEFAULT_ELEMENTS, bearing
     Parameters
     ----------
     mechanism : Mechanism or str
+        A Mechanism, or a mechanism file path or bare name ('cho1992').
     rpm : float
         Crank speed [rpm], non-zero.
     elements_per_link, bearings, gravity, beta_s, mass_placement, start_angle :
@@ -241,7 +242,7 @@ def peak_to_peak(response, revolution=-1):
 def peer_static(mechanism, crank_angle=0.0, *, elements_per_link=DEFAULT_ELEMENTS,
                 bearings='rigid', mass_placement='coupler-end'):
     """
-    Static deflection under gravity at a fixed crank angle (zero speed), nonlinear.
+    Solve the nonlinear static deflection under gravity at a fixed crank angle (zero speed).
 
     Returns
     -------
@@ -319,7 +320,8 @@ def compare(peer, linear):
 
 def main(argv=None):
     """
-    Print peer and linear peak-to-peak side by side (the issue's table):
+    Print peer and linear peak-to-peak side by side (the issue's table).
+
     ``python -m flexlink_ros.studies.peer_exudyn --rpm 269 391 [--gravity] [--json]``.
     """
     parser = argparse.ArgumentParser(prog='python -m flexlink_ros.studies.peer_exudyn',

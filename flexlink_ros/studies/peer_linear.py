@@ -19,7 +19,7 @@ from ..core.options import ModelOptions
 
 def linear_model(mechanism, *, elements_per_link=DEFAULT_ELEMENTS, bearings='rigid',
                  gravity=True):
-    """The package's FE model (rigid crank) matching the peer's settings."""
+    """Build the package's FE model (rigid crank) matching the peer's settings."""
     mech = dataclasses.replace(resolve_mechanism(mechanism), elements_per_link=elements_per_link)
     options = ModelOptions.full_model(
         rigid_crank=True, bearings={'rigid': 'rigid', 'springs': 'flexible'}[bearings],
@@ -30,7 +30,7 @@ def linear_model(mechanism, *, elements_per_link=DEFAULT_ELEMENTS, bearings='rig
 def linear_static(mechanism, crank_angle=0.0, *, elements_per_link=DEFAULT_ELEMENTS,
                   bearings='rigid'):
     """
-    The package's static deflection under gravity: (K + K_G) U = R at zero speed.
+    Solve the package's static deflection under gravity: (K + K_G) U = R at zero speed.
 
     Returns
     -------
@@ -51,7 +51,7 @@ def linear_static(mechanism, crank_angle=0.0, *, elements_per_link=DEFAULT_ELEME
 def linear_response(mechanism, rpm, *, elements_per_link=DEFAULT_ELEMENTS, bearings='rigid',
                     gravity=True, zeta=None, steps=720, points=120):
     """
-    The package's linear KED periodic response (``flexlink simulate --rigid-crank``, full).
+    Run the package's linear KED periodic response (``flexlink simulate --rigid-crank``).
 
     Returns
     -------

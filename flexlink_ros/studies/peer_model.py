@@ -142,8 +142,10 @@ def _crank_offset(fun, crank, omega, theta0):
 
 def _joint_masses(mech, placement):
     """
-    Point masses per (link, end): {(1, 0): coupler at A, (1, 1): coupler at B,
-    (2, 0): lever at O4, (2, 1): lever at B, ('pin', 'A'): crank pin}.
+    Place the joints' point masses per (link, end).
+
+    {(1, 0): coupler at A, (1, 1): coupler at B, (2, 0): lever at O4, (2, 1): lever at B,
+    ('pin', 'A'): crank pin}.
     """
     m = mech.joint_masses
     s = mech.joint_mass_split

@@ -189,17 +189,23 @@ def _call(lib, data, qs, thetas, repeat):
 
 def time_factored(mechanism, bearings, rigid_crank, size, samples=20000, repeat=20):
     """
-    Nanoseconds per sample of the compiled factored step (checked against the numpy form).
+    Time the compiled factored step: nanoseconds per sample (checked against numpy).
 
     Parameters
     ----------
     mechanism : Mechanism
+        The linkage.
     bearings : str
         'rigid' or 'flexible'.
     rigid_crank : bool
+        Treat the crank as rigid.
     size : int
         Reduced size r (a random orthonormal basis of that size: the cost does not depend on
         the values).
+    samples : int
+        Samples per timed call.
+    repeat : int
+        Passes over the samples (the time per sample is their mean).
 
     Returns
     -------

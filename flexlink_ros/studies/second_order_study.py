@@ -74,12 +74,15 @@ def run_case(mechanism, rpm, gravity, elements, points=720, zeta=None, revolutio
 
 def reduced_response(mechanism, rpm, gravity, elements, points=720, sizes=None, grid=128):
     """
-    The reduced model's periodic response (core.reduced, as the estimator streams it) plus its
-    second order by the factored form (:func:`core.second_order.factored_second_order`).
+    Run the reduced model's periodic response plus its factored second order.
+
+    The reduced model as the estimator streams it (core.reduced), the second order by the
+    factored form (:func:`core.second_order.factored_second_order`).
 
     Parameters
     ----------
     mechanism : Mechanism or str
+        A Mechanism, or a mechanism file path or bare name.
     rpm, gravity, elements :
         As :func:`run_case` (rigid crank, rigid bearings).
     points : int
@@ -123,7 +126,7 @@ def meets_targets(record):
 
 
 def format_record(record):
-    """The text table of one case."""
+    """Format the text table of one case."""
     lines = [f"{record['rpm']:g} rpm, gravity {'on' if record['gravity'] else 'off'}, "
              f"{record['elements']} elements per link, rigid crank and bearings "
              f"(modal zeta {record['info']['zeta']:g} in the linear model)",
@@ -147,8 +150,10 @@ def format_record(record):
 
 def reduced_costs(mechanism):
     """
-    Multiply-adds per sample (:func:`core.second_order.step_cost`) for the reduced models'
-    default sizes (core.reduced.DEFAULT_SIZES) with the mechanism's elements per link.
+    Count multiply-adds per sample (:func:`core.second_order.step_cost`) of the reduced models.
+
+    For their default sizes (core.reduced.DEFAULT_SIZES) with the mechanism's elements per
+    link.
     """
     out = []
     for (bearings, rigid_crank), (modes, static) in DEFAULT_SIZES.items():

@@ -123,8 +123,11 @@ def run_speed(mechanism, rpm, elements=DEFAULT_ELEMENTS, bearings='rigid', zeta=
 
 
 def separation(records, key):
-    """Largest ``key`` over accurate speeds and smallest over inaccurate ones, and whether
-    the first is below the second (the candidate separates the sweep)."""
+    """
+    Find the largest ``key`` over accurate speeds and the smallest over inaccurate ones.
+
+    And whether the first is below the second (the candidate separates the sweep).
+    """
     good = [r[key] for r in records if r['accurate']]
     bad = [r[key] for r in records if not r['accurate']]
     top, bottom = (max(good) if good else None), (min(bad) if bad else None)
@@ -133,7 +136,7 @@ def separation(records, key):
 
 
 def format_table(records, threshold=VALIDITY_THRESHOLD):
-    """The sweep table (text)."""
+    """Format the sweep table (text)."""
     head = (f"{'rpm':>5s} {'peer tip p2p um':>16s} {'peer mid p2p um':>16s} "
             f"{'tip err':>8s} {'mid err':>8s} {'tip rms':>8s} {'mid rms':>8s} "
             f"{'I max':>7s} {'N/Pcr':>7s} {'2nd/lin':>7s} {'acc':>4s} {'valid':>5s}")
