@@ -2,17 +2,16 @@
 
 import dataclasses
 
-import numpy as np
-import pytest
-import scipy.linalg
-
 from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.fe.modes import solve_frozen_modes
 from flexlink_ros.core.fe.simulate import periodic_response
 from flexlink_ros.core.mechanism import load_mechanism
-from flexlink_ros.core.numerics import RPM, relative_rms
+from flexlink_ros.core.numerics import relative_rms, RPM
 from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.studies import flex_events, flex_frequencies, flex_measures, flex_truncation
+import numpy as np
+import pytest
+import scipy.linalg
 
 
 def _family(matrices):
@@ -34,7 +33,8 @@ def test_mac_is_one_for_scaled_shapes_and_zero_for_mass_orthogonal_ones():
     _, shapes = scipy.linalg.eigh(np.diag(np.arange(1.0, 6.0)), mass)
     matrix = flex_events.mac(shapes, -3.0 * shapes, mass)
     assert np.allclose(matrix, np.eye(5), atol=1e-12)
-    assert not np.allclose(flex_events.mac(shapes, shapes), np.eye(5), atol=1e-3)  # weighting matters
+    # weighting matters
+    assert not np.allclose(flex_events.mac(shapes, shapes), np.eye(5), atol=1e-3)
 
 
 def test_avoided_crossing_of_a_2x2_family_is_a_veering_at_the_smallest_gap():
@@ -81,7 +81,8 @@ def test_relative_rms_and_modes_needed():
     assert relative_rms(1.1 * reference, reference) == pytest.approx(0.1)
     counts = np.array([1, 2, 3, 4, 6])
     errors = np.array([0.5, 0.008, 0.02, 0.004, 1e-9])
-    assert flex_truncation.modes_needed(counts, errors, 0.01) == 4      # N = 2 passes but 3 fails again
+    # N = 2 passes but 3 fails again
+    assert flex_truncation.modes_needed(counts, errors, 0.01) == 4
     assert flex_truncation.modes_needed(counts, errors, 0.05) == 2
     assert flex_truncation.modes_needed(counts, errors, 1.0) == 1
     assert flex_truncation.modes_needed(counts, np.full(5, 0.5), 0.01) is None
@@ -99,12 +100,12 @@ def test_harmonic_shares_and_signed_area():
 
 def test_pinned_coupler_mode_bends_like_a_simply_supported_beam(small_mechanism):
     model = FlexibleLinkage(small_mechanism, ModelOptions.full_model(rigid_crank=True,
-                                                          geometric_stiffness=False))
+                                                                     geometric_stiffness=False))
     theta = np.radians([40.0])
     frozen = solve_frozen_modes(model.assemble(theta), 2)
     coupler_mode = frozen.dominant_link[0].tolist().index(1)
     s, bending = flex_measures.bending_deflection(model, frozen.shapes[0][:, coupler_mode][None],
-                                       theta, 1)
+                                                  theta, 1)
     assert abs(bending[0, 0]) < 1e-12 and abs(bending[0, -1]) < 1e-12
     correlation = flex_measures.shape_correlation(bending, flex_measures.uniform_load_shape(s))[0]
     assert abs(correlation) > 0.99
@@ -113,7 +114,7 @@ def test_pinned_coupler_mode_bends_like_a_simply_supported_beam(small_mechanism)
 
 def test_truncation_error_falls_with_modes_and_vanishes_with_all(small_mechanism):
     model = FlexibleLinkage(small_mechanism, ModelOptions.full_model(rigid_crank=True,
-                                                          geometric_stiffness=False))
+                                                                     geometric_stiffness=False))
     counts = [1, 2, 5, 9, model.size]
     study = flex_truncation.truncation_study(model, 391.0 * RPM, counts, steps=120, points=30)
     plain, static = study['plain'], study['static']
@@ -137,7 +138,8 @@ def test_sweep_case_shapes_and_status(small_mechanism):
     cases = flex_frequencies.paper_frequency_cases()
     assert {'flex', 'rigid_crank', 'rigid_crank_bearings'} <= set(cases)
     assert any('_kg_' in key for key in cases)
-    sweep = flex_frequencies.sweep_case(small_mechanism, cases['rigid_crank'], np.arange(0.0, 360.0, 30.0), 3)
+    sweep = flex_frequencies.sweep_case(small_mechanism, cases['rigid_crank'],
+                                        np.arange(0.0, 360.0, 30.0), 3)
     assert sweep.frequencies_hz.shape == (12, 3) and sweep.shapes.shape[2] == 3
     assert np.all(np.diff(sweep.frequencies_hz, axis=1) > 0)
     assert all(max(e.modes) < 3 for e in sweep.events)
