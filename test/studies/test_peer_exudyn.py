@@ -14,6 +14,7 @@ from flexlink_ros.core.kinematics import solve_kinematics
 from flexlink_ros.core.mechanism import load_mechanism
 from flexlink_ros.errors import FlexlinkError
 from flexlink_ros.studies import peer_exudyn as peer
+from flexlink_ros.studies import peer_model
 from flexlink_ros.studies.peer_model import build_peer, solver_settings
 import numpy as np
 import pytest
@@ -59,7 +60,9 @@ def test_module_imports_without_exudyn_rclpy_or_matplotlib():
 
 
 def test_missing_exudyn_raises_flexlink_error(monkeypatch):
-    monkeypatch.setitem(sys.modules, 'exudyn', None)
+    # exudyn is imported once, at the top of peer_model: simulate a failed import there
+    monkeypatch.setattr(peer_model, 'exudyn', None)
+    monkeypatch.setattr(peer_model, 'EXUDYN_IMPORT_ERROR', "No module named 'exudyn'")
     with pytest.raises(FlexlinkError, match='exudyn'):
         build_peer('cho1992', 269.0)
     with pytest.raises(FlexlinkError, match='exudyn'):
