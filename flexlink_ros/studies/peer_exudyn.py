@@ -148,16 +148,8 @@ def peer_response(mechanism, rpm, *, elements_per_link=DEFAULT_ELEMENTS, bearing
     mech = resolve_mechanism(mechanism)
     if rpm == 0.0:
         raise ValueError('`rpm` must be non-zero (see peer_static for the static case)')
-    if revolutions is None:
-        revolutions = default_revolutions(mech, rpm, beta_s)
-    if not (isinstance(revolutions, int) and revolutions >= 1):
-        raise ValueError(f'`revolutions` must be an integer >= 1, got {revolutions!r}')
-    if samples_per_revolution is None:
-        samples_per_revolution = steps_per_revolution
-    if (samples_per_revolution < 1 or steps_per_revolution < 1
-            or steps_per_revolution % samples_per_revolution):
-        raise ValueError(f'`steps_per_revolution` ({steps_per_revolution}) must be a positive '
-                         f'multiple of `samples_per_revolution` ({samples_per_revolution})')
+    revolutions, samples_per_revolution = _run_length(
+        mech, rpm, beta_s, revolutions, steps_per_revolution, samples_per_revolution)
     wall0, cpu0 = time.perf_counter(), time.process_time()
     model = build_peer(mech, rpm, elements_per_link=elements_per_link, bearings=bearings,
                        gravity=gravity, beta_s=beta_s, mass_placement=mass_placement,
@@ -170,15 +162,9 @@ def peer_response(mechanism, rpm, *, elements_per_link=DEFAULT_ELEMENTS, bearing
     if not ok:
         raise FlexlinkError(f'the Exudyn peer did not solve at {rpm:g} rpm '
                             f'({elements_per_link} elements per link, {bearings} bearings)')
-    data = {name: np.asarray(model.mbs.GetSensorStoredData(sensor))
-            for name, sensor in model.sensors.items()}
-    t_all = data['lever_tip'][:, 0]
-    stride = steps_per_revolution // samples_per_revolution
-    wanted = np.arange(revolutions * samples_per_revolution + 1) * stride * h
-    index = np.searchsorted(t_all, wanted - 0.25 * h)
-    if index.max() >= len(t_all) or np.abs(t_all[index] - wanted).max() > 0.25 * h:
-        raise FlexlinkError('the Exudyn sensors did not store every step')
-    t = t_all[index]
+    data, index, wanted = _stored_samples(model, revolutions * samples_per_revolution + 1,
+                                          steps_per_revolution // samples_per_revolution, h)
+    t = data['lever_tip'][:, 0][index]
     theta = model.omega * wanted + model.start_angle
     out = deflections(mech, theta, data['lever_tip'][index, 1:3],
                       data['coupler_mid'][index, 1:3])
@@ -194,6 +180,37 @@ def peer_response(mechanism, rpm, *, elements_per_link=DEFAULT_ELEMENTS, bearing
     result.update(out)
     result['info'] = info
     return result
+
+
+def _run_length(mech, rpm, beta_s, revolutions, steps_per_revolution, samples_per_revolution):
+    """Check the revolutions and the sampling of a run, filling in their defaults."""
+    if revolutions is None:
+        revolutions = default_revolutions(mech, rpm, beta_s)
+    if not (isinstance(revolutions, int) and revolutions >= 1):
+        raise ValueError(f'`revolutions` must be an integer >= 1, got {revolutions!r}')
+    if samples_per_revolution is None:
+        samples_per_revolution = steps_per_revolution
+    if (samples_per_revolution < 1 or steps_per_revolution < 1
+            or steps_per_revolution % samples_per_revolution):
+        raise ValueError(f'`steps_per_revolution` ({steps_per_revolution}) must be a positive '
+                         f'multiple of `samples_per_revolution` ({samples_per_revolution})')
+    return revolutions, samples_per_revolution
+
+
+def _stored_samples(model, count, stride, h):
+    """
+    Pick every ``stride``-th step of the sensors' stored data, ``count`` samples from t = 0.
+
+    Returns the stored data per sensor, the indices picked and their wanted times [s].
+    """
+    data = {name: np.asarray(model.mbs.GetSensorStoredData(sensor))
+            for name, sensor in model.sensors.items()}
+    t_all = data['lever_tip'][:, 0]
+    wanted = np.arange(count) * stride * h
+    index = np.searchsorted(t_all, wanted - 0.25 * h)
+    if index.max() >= len(t_all) or np.abs(t_all[index] - wanted).max() > 0.25 * h:
+        raise FlexlinkError('the Exudyn sensors did not store every step')
+    return data, index, wanted
 
 
 def revolution_slice(response, revolution=-1):
