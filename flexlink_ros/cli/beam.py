@@ -77,7 +77,7 @@ def _choice(text, choices, name):
 
 def beam_from_args(args):
     """
-    The Kim & Moon beam with any dimension or material given on the command line replaced.
+    Return the Kim & Moon beam with any dimension or material given on the command line.
 
     Returns
     -------
@@ -112,6 +112,7 @@ def beam_frequencies(beam, bc, segments, method='tmm3', search='false-position',
     Parameters
     ----------
     beam : tmm.UniformBeam
+        The beam.
     bc : str
         One of :data:`flexlink_ros.core.tmm.transfer.BOUNDARY_CONDITIONS`.
     segments : int
@@ -123,8 +124,11 @@ def beam_frequencies(beam, bc, segments, method='tmm3', search='false-position',
     step : float
         Scan increment [rad/s].
     modes : int
+        Lowest modes computed.
     rtol : float
+        Relative tolerance of the TMM root search.
     illinois : bool
+        Illinois variant of false position.
 
     Returns
     -------

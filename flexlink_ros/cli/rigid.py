@@ -23,7 +23,7 @@ from .main import degree_range, emit
 from ..core import criteria as core_criteria
 from ..core import spring_design
 from ..core.kinematics import dead_centres, solve_kinematics, transmission_extremes
-from ..core.mechanism import JOINT_NAMES, LINK_NAMES, Spring, load_mechanism
+from ..core.mechanism import JOINT_NAMES, LINK_NAMES, load_mechanism, Spring
 
 # Paper numbering of the clearance joints (Kang 1990).
 PAPER_JOINT = {'A': 1, 'B': 2, 'O4': 3}
@@ -44,7 +44,7 @@ def register(subparsers):
     _mechanism_args(crit)
     crit.add_argument('--spring', nargs=2, metavar=('K', 'THETA0_DEG'), default=None,
                       help='coil spring between coupler and lever [N m/rad, deg] '
-                           '(replaces the file\'s)')
+                           "(replaces the file's)")
     crit.add_argument('--grid-deg', default='1', help='user grid step from 0 [deg] (default 1)')
     crit.add_argument('--scan-points', default=str(core_criteria.SCAN_POINTS),
                       help='scan size before peak refinement')
@@ -57,9 +57,9 @@ def register(subparsers):
     design.add_argument('--maxiter', default='60', help='generations (default 60)')
     design.add_argument('--popsize', default='15', help='population multiplier (default 15)')
     design.add_argument('--k-max', default=str(spring_design.STIFFNESS_MAX),
-                        help='upper bound of K [N m/rad] (default 20, the paper\'s)')
+                        help="upper bound of K [N m/rad] (default 20, the paper's)")
     design.add_argument('--theta0-max-deg', default='360',
-                        help='upper bound of theta0 [deg] (default 360, the paper\'s; larger '
+                        help="upper bound of theta0 [deg] (default 360, the paper's; larger "
                              'means a spring pre-wound by more than a turn)')
     design.set_defaults(func=design_spring_command)
 
@@ -103,6 +103,7 @@ def kinematics_result(mechanism, crank_deg, crank_speed, crank_accel=0.0):
     Parameters
     ----------
     mechanism : Mechanism
+        The linkage.
     crank_deg : sequence of float
         Crank angles [deg].
     crank_speed, crank_accel : float
@@ -172,6 +173,7 @@ def criteria_result(mechanism, crank_speed, grid_deg=1.0,
     grid_deg : float
         User-grid step [deg] from 0.
     scan_points : int
+        Points of the scan that brackets each criterion's extremes.
 
     Returns
     -------

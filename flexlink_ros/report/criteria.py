@@ -13,40 +13,24 @@ Charts of the Earles-Wu joint criteria and the coil-spring design (Kang, Lee & Y
 - ``criteria_input_torque.png``: input torque with the limits of Eqs. 16-17.
 """
 
-import dataclasses
 import math
 import pathlib
 
-import numpy as np
 from matplotlib.figure import Figure
+import numpy as np
 
-from ..core import criteria, spring_design
-from ..core.dynamics import solve_dynamics
-from ..core.kinematics import solve_kinematics
-from ..core.mechanism import JOINT_NAMES, Spring, load_mechanism
+from ..core import spring_design
+from ..core.mechanism import JOINT_NAMES
+from ..studies.criteria_study import criteria_data, criteria_text, PAPER_JOINT, TABLE_2
 
-# Curve resolution [deg]: finer than the narrowest peak (about 1 degree wide).
-CURVE_STEP_DEG = 0.02
-PAPER_JOINT = {'A': 'joint 1 (A)', 'B': 'joint 2 (B)', 'O4': 'joint 3 (O4)', 'O2': 'O2'}
 CASE_STYLE = {  # label colour
     'original': ('original (no spring)', 'tab:red'),
     'paper': ('paper spring K = 20, theta0 = 279.14 deg', 'tab:blue'),
     'design': ('this design', 'tab:green'),
 }
-# Kang 1990, Table 2 (1-degree grid), joints A, B, O4.
-TABLE_2 = {'original': (42.77, 1319.45, 1011.35), 'paper': (15.80, 22.44, 22.03)}
 
 
-def _cases(mechanism, design):
-    paper_k, paper_deg = spring_design.PAPER_DESIGN
-    return {'original': dataclasses.replace(mechanism, spring=None),
-            'paper': dataclasses.replace(mechanism,
-                                         spring=Spring(paper_k, math.radians(paper_deg))),
-            'design': dataclasses.replace(mechanism,
-                                          spring=Spring(design.stiffness, design.theta0))}
-
-
-def plot_criteria(out_dir, mechanism=None):
+def plot_criteria(out_dir, mechanism=None, data=None):
     """
     Write the criteria charts into `out_dir`.
 
@@ -56,6 +40,9 @@ def plot_criteria(out_dir, mechanism=None):
         Directory (created if missing).
     mechanism : Mechanism or None
         Default: Kang 1990 (``config/kang1990.yaml``).
+    data : dict or None
+        A :func:`studies.criteria_study.criteria_data` result to draw (computed for
+        ``mechanism`` if None).
 
     Returns
     -------
@@ -63,18 +50,12 @@ def plot_criteria(out_dir, mechanism=None):
         'charts': list of pathlib.Path; 'text': markdown with the numbers.
 
     """
-    mechanism = mechanism or load_mechanism('kang1990')
     out = pathlib.Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    speed = mechanism.crank_speed
-    found = spring_design.design_spring(mechanism)
-    cases = _cases(mechanism, found['design'])
-    theta_deg = np.arange(0.0, 360.0, CURVE_STEP_DEG)
-    curves = {name: criteria.criterion_curves(mech, np.radians(theta_deg), speed)
-              for name, mech in cases.items()}
-    maxima = {name: criteria.evaluate_criteria(mech, speed) for name, mech in cases.items()}
-    torques = {name: solve_dynamics(mech, solve_kinematics(mech, np.radians(theta_deg), speed))
-               .input_torque for name, mech in cases.items()}
+    if data is None:
+        data = criteria_data(mechanism)
+    theta_deg, curves, maxima = data['theta_deg'], data['curves'], data['maxima']
+    found = data['found']
     design = found['design']
     labels = {name: style[0] for name, style in CASE_STYLE.items()}
     labels['design'] = (f'this design K = {design.stiffness:.2f}, theta0 = '
@@ -82,10 +63,11 @@ def plot_criteria(out_dir, mechanism=None):
     charts = [
         _plot_ratio(theta_deg, curves, maxima, labels, out / 'criteria_ratio_vs_crank.png'),
         _plot_force(theta_deg, curves, found, labels, out / 'criteria_force_vs_crank.png'),
-        _plot_grid_vs_true(mechanism, maxima, out / 'criteria_grid_vs_true.png'),
-        _plot_torque(theta_deg, torques, found, labels, out / 'criteria_input_torque.png'),
+        _plot_grid_vs_true(data['zoom'], maxima, out / 'criteria_grid_vs_true.png'),
+        _plot_torque(theta_deg, data['torques'], found, labels,
+                     out / 'criteria_input_torque.png'),
     ]
-    return {'charts': charts, 'text': _text(maxima, found, speed)}
+    return {'charts': charts, 'text': criteria_text(data)}
 
 
 def _plot_ratio(theta_deg, curves, maxima, labels, path):
@@ -137,7 +119,7 @@ def _plot_force(theta_deg, curves, found, labels, path):
     return path
 
 
-def _plot_grid_vs_true(mechanism, maxima, path):
+def _plot_grid_vs_true(zoom, maxima, path):
     fig = Figure(figsize=(12, 4.8), layout='constrained')
     left, right = fig.subplots(1, 2, width_ratios=(1.1, 1.0))
     joints = ('A', 'B', 'O4')
@@ -164,14 +146,10 @@ def _plot_grid_vs_true(mechanism, maxima, path):
     left.legend(fontsize=7.5, loc='upper left')
     left.grid(True, axis='y', which='both', alpha=0.3)
 
-    peak = maxima['original']['B']
-    centre = math.degrees(peak.at_crank_angle)
-    fine = np.linspace(centre - 3.0, centre + 3.0, 3001)
-    grid = np.arange(math.ceil(centre - 3.0), centre + 3.0, 1.0)
-    j = JOINT_NAMES.index('B')
-    for values, style, label in (
-            (fine, '-', 'continuous'), (grid, 'o', '1-deg grid samples (Table 2)')):
-        curve = criteria.criterion_curves(mechanism, np.radians(values))['ratio'][j]
+    peak, centre = zoom['peak'], zoom['centre']
+    for key, style, label in (('fine', '-', 'continuous'),
+                              ('grid', 'o', '1-deg grid samples (Table 2)')):
+        values, curve = zoom[key]
         right.plot(values, curve, style, color='tab:red' if style == '-' else 'k', label=label)
     right.plot(centre, peak.max_ratio, 'v', color='tab:red', ms=9,
                label=f'true max {peak.max_ratio:.1f} at {centre:.3f} deg')
@@ -206,32 +184,4 @@ def _plot_torque(theta_deg, torques, found, labels, path):
     return path
 
 
-def _text(maxima, found, speed):
-    design, paper = found['design'], found['paper']
-    lines = [f'Kang 1990 crank-rocker at {speed * 60 / (2 * math.pi):.0f} rpm, rigid links, '
-             'no gravity. |gamma_dot/R| in rad/(s N); grid = 1 degree from the crank along '
-             'O2->O4; true = refined maximum.', '',
-             '| case | joint | Table 2 | 1-deg grid | true max | at crank [deg] | grid misses '
-             '[%] | min R [N] |', '|---|---|---|---|---|---|---|---|']
-    for name in ('original', 'paper'):
-        for k, joint in enumerate(('A', 'B', 'O4')):
-            c = maxima[name][joint]
-            lines.append(f'| {name} | {PAPER_JOINT[joint]} | {TABLE_2[name][k]:.2f} | '
-                         f'{c.max_ratio_on_grid:.2f} | {c.max_ratio:.2f} | '
-                         f'{math.degrees(c.at_crank_angle):.3f} | '
-                         f'{c.grid_shortfall_percent:.2f} | {c.min_force:.2f} |')
-    lines += ['', 'Spring design (sum over A, B, O4 of the true maxima; K <= 20 N m/rad, '
-              'theta0 in [0, 360] deg, torque within 1.7x and forces within 1.5x the '
-              'original extremes):', '',
-              '| design | K [N m/rad] | theta0 [deg] | objective | feasible | active limits |',
-              '|---|---|---|---|---|---|']
-    for label, entry in (('paper', paper), ('this tool', design)):
-        lines.append(f'| {label} | {entry.stiffness:.3f} | {math.degrees(entry.theta0):.2f} | '
-                     f'{entry.objective:.2f} | {entry.feasible} | '
-                     f'{", ".join(entry.active) or "none"} |')
-    torque = paper.constraints['torque_max']
-    lines += ['', f'The paper\'s design stops on the torque limit (max torque '
-              f'{torque["value"]:.4f} N m against {torque["limit"]:.4f}, '
-              f'{-100 * torque["margin"]:.4f} % over); the global search lowers the objective '
-              f'by {100 * (1 - design.objective / paper.objective):.0f} %.']
-    return '\n'.join(lines)
+__all__ = ['plot_criteria']

@@ -37,30 +37,32 @@ rpm) against elastic axial forces of 2-9 N: anything that reads element forces w
 damping part (stresses, the nonlinearity indicator) must use the objective form.
 """
 
+import argparse
 import dataclasses
 import math
 
 import numpy as np
 
-from ..core.numerics import relative_rms
-from ..core.options import ModelOptions
+from .peer_exudyn import compare, peer_response, revolution_slice
 from ..core.fe.linkage import FlexibleLinkage
-from ..core.mechanism import Mechanism, load_mechanism
 from ..core.fe.simulate import periodic_response
 from ..core.fe.stiffness_damping import (
     element_resultants, link_local_rate, stiffness_damping_terms, system_matrices,
 )
+from ..core.mechanism import load_mechanism, Mechanism
+from ..core.options import ModelOptions
 
 DAMPING = ('objective', 'naive', 'modal')
 OUTPUT_KEYS = ('lever_tip_dx', 'lever_tip_dy', 'coupler_mid_dx', 'coupler_mid_dy')
 
 
 def matched_model(mechanism='cho1992', elements=8, gravity=False, bearings='flexible'):
-    """The package's model in the peer's matched conventions (rigid crank, split masses)."""
+    """Build the package's model in the peer's matched conventions (rigid crank, split masses)."""
     mech = mechanism if isinstance(mechanism, Mechanism) else load_mechanism(mechanism)
     mech = dataclasses.replace(mech, elements_per_link=elements, joint_mass_split=0.5)
     return FlexibleLinkage(mech, ModelOptions.full_model(rigid_crank=True, bearings=bearings,
-                                              geometric_stiffness=True, gravity=gravity))
+                                                         geometric_stiffness=True,
+                                                         gravity=gravity))
 
 
 def _matrices(model, angles, speed, beta, damping, zeta):
@@ -126,7 +128,6 @@ def spurious_axial_force(model, response, speed, beta):
 
 def compare_with_peer(peer, linear):
     """Per output: relative RMS and p2p of linear against the peer's last revolution."""
-    from .peer_exudyn import compare
     return compare(peer, linear)
 
 
@@ -143,7 +144,6 @@ def point_rms(peer, linear):
         'lever_tip', 'coupler_mid'.
 
     """
-    from .peer_exudyn import revolution_slice
     span = revolution_slice(peer)
     stride = (span.stop - span.start) // len(linear['crank_angle'])
     out = {}
@@ -156,8 +156,6 @@ def point_rms(peer, linear):
 
 def main(argv=None):
     """Print the package's beta-damped full order (objective, naive, modal) against the peer."""
-    import argparse
-    from .peer_exudyn import peer_response
     parser = argparse.ArgumentParser(prog='python -m flexlink_ros.studies.damping_study',
                                      description=main.__doc__)
     parser.add_argument('--rpm', type=float, default=269.0)
@@ -182,17 +180,17 @@ def main(argv=None):
         table = compare_with_peer(peer, run)
         label = damping if damping != 'modal' else f'modal {args.zeta:g}'
         both = point_rms(peer, run)
-        print(f"  {label:14s} relative RMS per point (dX, dY together): lever tip "
+        print(f'  {label:14s} relative RMS per point (dX, dY together): lever tip '
               f"{100 * both['lever_tip']:.1f} %, coupler mid {100 * both['coupler_mid']:.1f} %")
         print(f'  {label:14s} RMS ' + ' '.join(f"{100 * table[k]['rms_error']:14.1f}%"
-                                             for k in OUTPUT_KEYS))
+                                               for k in OUTPUT_KEYS))
         print(f'  {label:14s} p2p ' + ' '.join(f"{100 * table[k]['p2p_error']:14.1f}%"
-                                             for k in OUTPUT_KEYS))
+                                               for k in OUTPUT_KEYS))
         if damping == 'objective':
             spur = spurious_axial_force(model, run, speed, args.beta)
-            print('  naive beta K U\' spurious axial force, max |N| per element [N]: '
+            print("  naive beta K U' spurious axial force, max |N| per element [N]: "
                   + '; '.join(f'link {k}: ' + ' '.join(f'{x:.0f}' for x in
-                                                      np.abs(v).max(axis=0))
+                                                       np.abs(v).max(axis=0))
                               for k, v in spur.items()))
     return 0
 

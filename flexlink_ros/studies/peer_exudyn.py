@@ -49,78 +49,28 @@ Integration: Exudyn's implicit generalized-alpha (index 3, spectral radius 0.9 b
 constant step ``1 / steps_per_revolution`` of a revolution; outputs sampled at every step by
 default (``samples_per_revolution``, a divisor of the steps).
 
-Exudyn is optional: this module imports without it, and the functions that need it raise
-:class:`core.errors.FlexlinkError` naming the package to install (``exudyn==1.13.6``,
-requirements-test.txt).
+The model itself is built by :mod:`studies.peer_model`. Exudyn is optional: this module
+imports without it, and the functions that need it raise :class:`errors.FlexlinkError` naming
+the package to install (``exudyn==1.13.6``, requirements-test.txt).
 """
 
-import dataclasses
+import argparse
+import json
 import math
 import time
 
 import numpy as np
 
+from .peer_linear import linear_model, linear_response, linear_static
+from .peer_model import BEARINGS, build_peer, DEFAULT_BETA_S, DEFAULT_ELEMENTS
+from .peer_model import DEFAULT_SPECTRAL_RADIUS, DEFAULT_STEPS, deflections
+from .peer_model import exudyn_available, EXUDYN_REQUIREMENT, FLEXIBLE_LINKS, MASS_PLACEMENTS
+from .peer_model import OUTPUT_KEYS, PeerModel, require_exudyn, resolve_mechanism
+from .peer_model import solver_settings
 from ..errors import FlexlinkError
-from ..core.kinematics import solve_kinematics
-from ..core.mechanism import Mechanism, load_mechanism
 
-BEARINGS = ('rigid', 'springs')
-MASS_PLACEMENTS = ('coupler-end', 'split')
-OUTPUT_KEYS = ('lever_tip_dx', 'lever_tip_dy', 'coupler_mid_dx', 'coupler_mid_dy')
-EXUDYN_REQUIREMENT = 'exudyn==1.13.6'
-DEFAULT_ELEMENTS = 8
-DEFAULT_BETA_S = 1e-4
-DEFAULT_STEPS = 720
-DEFAULT_SPECTRAL_RADIUS = 0.9
 # The transient is let decay to this fraction of its start (ln(1/1e-3) = 6.9 time constants).
 SETTLE_FRACTION = 1e-3
-# Links modelled as flexible (crank rigid): 1 coupler, 2 lever.
-FLEXIBLE_LINKS = (1, 2)
-
-
-def _exudyn():
-    """Import exudyn, or raise FlexlinkError saying how to install it."""
-    try:
-        import exudyn
-        import exudyn.itemInterface as items
-    except ImportError as exc:
-        raise FlexlinkError(
-            f'the nonlinear peer needs Exudyn, which is not installed ({exc}); install it with '
-            f'`pip install {EXUDYN_REQUIREMENT}` (listed in requirements-test.txt)') from exc
-    return exudyn, items
-
-
-def exudyn_available():
-    """True if exudyn can be imported (the peer can run)."""
-    try:
-        _exudyn()
-    except FlexlinkError:
-        return False
-    return True
-
-
-def _mechanism(mechanism):
-    if isinstance(mechanism, Mechanism):
-        return mechanism
-    return load_mechanism(mechanism)
-
-
-def _check(mech, rpm, elements, bearings, beta_s, mass_placement):
-    if not mech.is_flexible:
-        raise ValueError('`mechanism` lacks the material or section data of a flexible model')
-    if not (isinstance(elements, int) and not isinstance(elements, bool) and elements >= 1):
-        raise ValueError(f'`elements_per_link` must be an integer >= 1, got {elements!r}')
-    if bearings not in BEARINGS:
-        raise ValueError(f'`bearings` must be one of {BEARINGS}, got {bearings!r}')
-    if bearings == 'springs' and not mech.bearing_stiffness:
-        raise ValueError("bearings='springs' needs bearings.stiffness_n_m in the mechanism")
-    if mass_placement not in MASS_PLACEMENTS:
-        raise ValueError(f'`mass_placement` must be one of {MASS_PLACEMENTS}, '
-                         f'got {mass_placement!r}')
-    if not (math.isfinite(beta_s) and beta_s >= 0.0):
-        raise ValueError(f'`beta_s` must be >= 0, got {beta_s!r}')
-    if not math.isfinite(rpm):
-        raise ValueError(f'`rpm` must be finite, got {rpm!r}')
 
 
 def lowest_bending_frequency(mechanism):
@@ -130,7 +80,7 @@ def lowest_bending_frequency(mechanism):
     (pi / L)^2 sqrt(E I / (rho A)) per link; about 217 rad/s (34.5 Hz) for the cho1992
     coupler. Used to size the settling run; the linkage's own lowest mode is somewhat lower.
     """
-    mech = _mechanism(mechanism)
+    mech = resolve_mechanism(mechanism)
     return min((math.pi / mech.links[k].length) ** 2
                * math.sqrt(mech.youngs_modulus * mech.links[k].second_moment
                            / (mech.density * mech.links[k].area)) for k in FLEXIBLE_LINKS)
@@ -153,262 +103,6 @@ def default_revolutions(mechanism, rpm, beta_s=DEFAULT_BETA_S, extra=2):
     return int(math.ceil(settle * abs(rpm) / 60.0)) + int(extra)
 
 
-@dataclasses.dataclass
-class PeerModel:
-    """
-    An assembled Exudyn model of the linkage and what is needed to read it.
-
-    Attributes
-    ----------
-    system_container, mbs :
-        Exudyn SystemContainer and MainSystem.
-    mechanism : Mechanism
-    omega : float
-        Crank speed [rad/s].
-    start_angle : float
-        Crank angle at t = 0 [rad].
-    nodes : dict of int to list of int
-        Node numbers of the coupler (1) and lever (2), first joint to second.
-    elements : dict of int to list of int
-        Cable object numbers per link.
-    sensors : dict of str to int
-        'lever_tip' (lever node at B) and 'coupler_mid' (material mid-point), positions.
-    options : dict
-        The modelling choices.
-
-    """
-
-    system_container: object
-    mbs: object
-    mechanism: Mechanism
-    omega: float
-    start_angle: float
-    nodes: dict
-    elements: dict
-    sensors: dict
-    options: dict
-
-
-def _crank_offset(fun, crank, omega, theta0):
-    """Offset user function: displacement a fun(omega t + theta0) - a fun(theta0) of pin A."""
-    start = crank * fun(theta0)
-
-    def offset(mbs, t, itemNumber, lOffset):
-        return crank * fun(omega * t + theta0) - start
-    return offset
-
-
-def _joint_masses(mech, placement):
-    """
-    Point masses per (link, end): {(1, 0): coupler at A, (1, 1): coupler at B,
-    (2, 0): lever at O4, (2, 1): lever at B, ('pin', 'A'): crank pin}.
-    """
-    m = mech.joint_masses
-    s = mech.joint_mass_split
-    if placement == 'coupler-end':
-        return {(1, 0): m['A'], (1, 1): m['B'], (2, 0): m['O4'], (2, 1): 0.0,
-                ('pin', 'A'): 0.0}
-    return {(1, 0): (1.0 - s) * m['A'], (1, 1): s * m['B'], (2, 0): s * m['O4'],
-            (2, 1): (1.0 - s) * m['B'], ('pin', 'A'): s * m['A']}
-
-
-def build_peer(mechanism, rpm, *, elements_per_link=DEFAULT_ELEMENTS, bearings='rigid',
-               gravity=True, beta_s=DEFAULT_BETA_S, mass_placement='coupler-end',
-               start_angle=0.0):
-    """
-    Build (not solve) the Exudyn model of the linkage at constant crank speed.
-
-    Parameters
-    ----------
-    mechanism : Mechanism or str
-        A Mechanism, or a mechanism file path or bare name ('cho1992').
-    rpm : float
-        Crank speed [rpm] (0 for a static model; negative turns clockwise).
-    elements_per_link : int
-        ANCF cable elements of the coupler and of the lever.
-    bearings : str
-        'rigid' (revolute joints) or 'springs' (bearing springs at ``mechanism.bearing_joints``
-        among A, B, O4; rigid crank pivot).
-    gravity : bool
-        Apply ``mechanism.gravity`` to the cables and the joint masses.
-    beta_s : float
-        Stiffness-proportional damping beta [s] on the material strain rates (and c = beta k
-        on the bearing springs).
-    mass_placement : str
-        'coupler-end' or 'split' (see the module notes).
-    start_angle : float
-        Crank angle theta0 at t = 0 [rad].
-
-    Returns
-    -------
-    PeerModel
-
-    Raises
-    ------
-    FlexlinkError
-        If exudyn is not installed.
-
-    """
-    exu, items = _exudyn()
-    mech = _mechanism(mechanism)
-    _check(mech, rpm, elements_per_link, bearings, beta_s, mass_placement)
-    omega = rpm * 2.0 * math.pi / 60.0
-    theta0 = float(start_angle)
-    state = solve_kinematics(mech, np.array([theta0]), omega)
-    crank = mech.links[0].length
-    E, rho = mech.youngs_modulus, mech.density
-    gvec = list(mech.gravity) + [0.0] if gravity else [0.0, 0.0, 0.0]
-
-    container = exu.SystemContainer()
-    mbs = container.AddSystem()
-    ground = mbs.AddNode(items.NodePointGround(referenceCoordinates=[0.0, 0.0, 0.0]))
-    ground_coord = mbs.AddMarker(items.MarkerNodeCoordinate(nodeNumber=ground, coordinate=0))
-
-    nodes, elements = {}, {}
-    for link in FLEXIBLE_LINKS:
-        spec = mech.links[link]
-        count = elements_per_link
-        le = spec.length / count
-        angle = float(state.angle[link][0])
-        rate = float(state.omega[link][0])
-        tangent = complex(math.cos(angle), math.sin(angle))
-        slope_rate = 1j * rate * tangent
-        nodes[link] = []
-        for k in range(count + 1):
-            x = k * le
-            position, velocity = (p[0] for p in state.point(link, x)[:2])
-            nodes[link].append(mbs.AddNode(items.NodePoint2DSlope1(
-                referenceCoordinates=[position.real, position.imag, tangent.real, tangent.imag],
-                initialVelocities=[velocity.real, velocity.imag, slope_rate.real,
-                                   slope_rate.imag])))
-        EA, EI, rhoA = E * spec.area, E * spec.second_moment, rho * spec.area
-        elements[link] = []
-        for k in range(count):
-            body = mbs.AddObject(items.ObjectANCFCable2D(
-                length=le, massPerLength=rhoA, bendingStiffness=EI, axialStiffness=EA,
-                bendingDamping=beta_s * EI, axialDamping=beta_s * EA,
-                nodeNumbers=[nodes[link][k], nodes[link][k + 1]]))
-            elements[link].append(body)
-            if any(gvec):
-                marker = mbs.AddMarker(items.MarkerBodyMass(bodyNumber=body))
-                mbs.AddLoad(items.LoadMassProportional(markerNumber=marker, loadVector=gvec))
-
-    def coordinate_marker(node, index):
-        return mbs.AddMarker(items.MarkerNodeCoordinate(nodeNumber=node, coordinate=index))
-
-    def position_marker(node):
-        return mbs.AddMarker(items.MarkerNodePosition(nodeNumber=node))
-
-    def point_mass(node, mass):
-        if mass <= 0.0:
-            return
-        body = mbs.AddObject(items.ObjectMassPoint2D(mass=mass, nodeNumber=node))
-        if any(gvec):
-            marker = mbs.AddMarker(items.MarkerBodyMass(bodyNumber=body))
-            mbs.AddLoad(items.LoadMassProportional(markerNumber=marker, loadVector=gvec))
-
-    def prescribe_crank_pin(node):
-        """Pin the node's position to crank pin A, a (cos, sin)(omega t + theta0)."""
-        for index, fun in ((0, math.cos), (1, math.sin)):
-            mbs.AddObject(items.ObjectConnectorCoordinate(
-                markerNumbers=[ground_coord, coordinate_marker(node, index)],
-                offsetUserFunction=_crank_offset(fun, crank, omega, theta0)))
-
-    def pin(node_a, node_b):
-        """Equal displacements of two nodes (same reference position): a rigid revolute."""
-        for index in (0, 1):
-            first = ground_coord if node_a is None else coordinate_marker(node_a, index)
-            mbs.AddObject(items.ObjectConnectorCoordinate(
-                markerNumbers=[first, coordinate_marker(node_b, index)]))
-
-    def spring(marker_a, marker_b):
-        k = mech.bearing_stiffness
-        mbs.AddObject(items.ObjectConnectorCartesianSpringDamper(
-            markerNumbers=[marker_a, marker_b], stiffness=[k, k, 0.0],
-            damping=[beta_s * k, beta_s * k, 0.0]))
-
-    springs = set(mech.bearing_joints) if bearings == 'springs' else set()
-    masses = _joint_masses(mech, mass_placement)
-    coupler, lever = nodes[1], nodes[2]
-    # Joint A: coupler's first node on the crank pin.
-    if 'A' in springs:
-        a0 = state.joints['A'][0]
-        crank_pin = mbs.AddNode(items.NodePoint2D(referenceCoordinates=[a0.real, a0.imag]))
-        # the pin is prescribed; give it a mass so its rows are regular (the value is inert)
-        mbs.AddObject(items.ObjectMassPoint2D(mass=max(masses[('pin', 'A')], 1e-3),
-                                              nodeNumber=crank_pin))
-        prescribe_crank_pin(crank_pin)
-        spring(position_marker(crank_pin), position_marker(coupler[0]))
-    else:
-        prescribe_crank_pin(coupler[0])
-    # Joint B: coupler's last node and lever's last node.
-    if 'B' in springs:
-        spring(position_marker(coupler[-1]), position_marker(lever[-1]))
-    else:
-        pin(coupler[-1], lever[-1])
-    # Joint O4: lever's first node on the ground.
-    if 'O4' in springs:
-        o4 = mbs.AddNode(items.NodePointGround(
-            referenceCoordinates=[mech.ground_length, 0.0, 0.0]))
-        spring(position_marker(o4), position_marker(lever[0]))
-    else:
-        pin(None, lever[0])
-    point_mass(coupler[0], masses[(1, 0)])
-    point_mass(coupler[-1], masses[(1, 1)])
-    point_mass(lever[0], masses[(2, 0)])
-    point_mass(lever[-1], masses[(2, 1)])
-
-    # Outputs: absolute positions of the lever tip and the coupler's material mid-point.
-    position = exu.OutputVariableType.Position
-    half = 0.5 * mech.links[1].length
-    le = mech.links[1].length / elements_per_link
-    which = min(int(half // le), elements_per_link - 1)
-    sensors = {
-        'lever_tip': mbs.AddSensor(items.SensorNode(
-            nodeNumber=lever[-1], storeInternal=True, writeToFile=False,
-            outputVariableType=position)),
-        'coupler_mid': mbs.AddSensor(items.SensorBody(
-            bodyNumber=elements[1][which], localPosition=[half - which * le, 0.0, 0.0],
-            storeInternal=True, writeToFile=False, outputVariableType=position)),
-    }
-    mbs.Assemble()
-    options = {'elements_per_link': elements_per_link, 'bearings': bearings,
-               'gravity': bool(gravity), 'beta_s': beta_s, 'mass_placement': mass_placement,
-               'start_angle_rad': theta0, 'rpm': float(rpm),
-               'springs_at': sorted(springs)}
-    return PeerModel(system_container=container, mbs=mbs, mechanism=mech, omega=omega,
-                     start_angle=theta0, nodes=nodes, elements=elements, sensors=sensors,
-                     options=options)
-
-
-def _settings(exu, end_time, steps, spectral_radius, write_period):
-    settings = exu.SimulationSettings()
-    settings.timeIntegration.endTime = end_time
-    settings.timeIntegration.numberOfSteps = steps
-    settings.timeIntegration.verboseMode = 0
-    settings.timeIntegration.generalizedAlpha.spectralRadius = spectral_radius
-    settings.timeIntegration.adaptiveStep = False
-    settings.solution.file.write = False
-    settings.solution.sensors.writePeriod = write_period
-    settings.show.statistics = False
-    settings.show.computationTime = False
-    return settings
-
-
-def _rigid_outputs(mech, theta):
-    """Rigid positions of the lever tip (B) and the coupler mid-point, complex (n,) each."""
-    state = solve_kinematics(mech, theta)
-    return state.joints['B'], state.point(1, 0.5 * mech.links[1].length)[0]
-
-
-def _deflections(mech, theta, tip, mid):
-    rigid_tip, rigid_mid = _rigid_outputs(mech, theta)
-    d_tip = tip[:, 0] + 1j * tip[:, 1] - rigid_tip
-    d_mid = mid[:, 0] + 1j * mid[:, 1] - rigid_mid
-    return {'lever_tip_dx': d_tip.real, 'lever_tip_dy': d_tip.imag,
-            'coupler_mid_dx': d_mid.real, 'coupler_mid_dy': d_mid.imag}
-
-
 def peer_response(mechanism, rpm, *, elements_per_link=DEFAULT_ELEMENTS, bearings='rigid',
                   gravity=True, beta_s=DEFAULT_BETA_S, mass_placement='coupler-end',
                   revolutions=None, steps_per_revolution=DEFAULT_STEPS,
@@ -420,6 +114,7 @@ def peer_response(mechanism, rpm, *, elements_per_link=DEFAULT_ELEMENTS, bearing
     Parameters
     ----------
     mechanism : Mechanism or str
+        A Mechanism, or a mechanism file path or bare name ('cho1992').
     rpm : float
         Crank speed [rpm], non-zero.
     elements_per_link, bearings, gravity, beta_s, mass_placement, start_angle :
@@ -449,20 +144,12 @@ def peer_response(mechanism, rpm, *, elements_per_link=DEFAULT_ELEMENTS, bearing
         If exudyn is missing or the solver fails.
 
     """
-    exu, _ = _exudyn()
-    mech = _mechanism(mechanism)
+    exu, _ = require_exudyn()
+    mech = resolve_mechanism(mechanism)
     if rpm == 0.0:
         raise ValueError('`rpm` must be non-zero (see peer_static for the static case)')
-    if revolutions is None:
-        revolutions = default_revolutions(mech, rpm, beta_s)
-    if not (isinstance(revolutions, int) and revolutions >= 1):
-        raise ValueError(f'`revolutions` must be an integer >= 1, got {revolutions!r}')
-    if samples_per_revolution is None:
-        samples_per_revolution = steps_per_revolution
-    if (samples_per_revolution < 1 or steps_per_revolution < 1
-            or steps_per_revolution % samples_per_revolution):
-        raise ValueError(f'`steps_per_revolution` ({steps_per_revolution}) must be a positive '
-                         f'multiple of `samples_per_revolution` ({samples_per_revolution})')
+    revolutions, samples_per_revolution = _run_length(
+        mech, rpm, beta_s, revolutions, steps_per_revolution, samples_per_revolution)
     wall0, cpu0 = time.perf_counter(), time.process_time()
     model = build_peer(mech, rpm, elements_per_link=elements_per_link, bearings=bearings,
                        gravity=gravity, beta_s=beta_s, mass_placement=mass_placement,
@@ -470,23 +157,17 @@ def peer_response(mechanism, rpm, *, elements_per_link=DEFAULT_ELEMENTS, bearing
     period = 2.0 * math.pi / abs(model.omega)
     steps = revolutions * steps_per_revolution
     h = period / steps_per_revolution
-    settings = _settings(exu, revolutions * period, steps, spectral_radius, 0.5 * h)
+    settings = solver_settings(exu, revolutions * period, steps, spectral_radius, 0.5 * h)
     ok = exu.SolveDynamic(model.mbs, settings)
     if not ok:
         raise FlexlinkError(f'the Exudyn peer did not solve at {rpm:g} rpm '
                             f'({elements_per_link} elements per link, {bearings} bearings)')
-    data = {name: np.asarray(model.mbs.GetSensorStoredData(sensor))
-            for name, sensor in model.sensors.items()}
-    t_all = data['lever_tip'][:, 0]
-    stride = steps_per_revolution // samples_per_revolution
-    wanted = np.arange(revolutions * samples_per_revolution + 1) * stride * h
-    index = np.searchsorted(t_all, wanted - 0.25 * h)
-    if index.max() >= len(t_all) or np.abs(t_all[index] - wanted).max() > 0.25 * h:
-        raise FlexlinkError('the Exudyn sensors did not store every step')
-    t = t_all[index]
+    data, index, wanted = _stored_samples(model, revolutions * samples_per_revolution + 1,
+                                          steps_per_revolution // samples_per_revolution, h)
+    t = data['lever_tip'][:, 0][index]
     theta = model.omega * wanted + model.start_angle
-    out = _deflections(mech, theta, data['lever_tip'][index, 1:3],
-                       data['coupler_mid'][index, 1:3])
+    out = deflections(mech, theta, data['lever_tip'][index, 1:3],
+                      data['coupler_mid'][index, 1:3])
     info = dict(model.options)
     info.update({'revolutions': revolutions, 'steps_per_revolution': steps_per_revolution,
                  'samples_per_revolution': samples_per_revolution,
@@ -499,6 +180,37 @@ def peer_response(mechanism, rpm, *, elements_per_link=DEFAULT_ELEMENTS, bearing
     result.update(out)
     result['info'] = info
     return result
+
+
+def _run_length(mech, rpm, beta_s, revolutions, steps_per_revolution, samples_per_revolution):
+    """Check the revolutions and the sampling of a run, filling in their defaults."""
+    if revolutions is None:
+        revolutions = default_revolutions(mech, rpm, beta_s)
+    if not (isinstance(revolutions, int) and revolutions >= 1):
+        raise ValueError(f'`revolutions` must be an integer >= 1, got {revolutions!r}')
+    if samples_per_revolution is None:
+        samples_per_revolution = steps_per_revolution
+    if (samples_per_revolution < 1 or steps_per_revolution < 1
+            or steps_per_revolution % samples_per_revolution):
+        raise ValueError(f'`steps_per_revolution` ({steps_per_revolution}) must be a positive '
+                         f'multiple of `samples_per_revolution` ({samples_per_revolution})')
+    return revolutions, samples_per_revolution
+
+
+def _stored_samples(model, count, stride, h):
+    """
+    Pick every ``stride``-th step of the sensors' stored data, ``count`` samples from t = 0.
+
+    Returns the stored data per sensor, the indices picked and their wanted times [s].
+    """
+    data = {name: np.asarray(model.mbs.GetSensorStoredData(sensor))
+            for name, sensor in model.sensors.items()}
+    t_all = data['lever_tip'][:, 0]
+    wanted = np.arange(count) * stride * h
+    index = np.searchsorted(t_all, wanted - 0.25 * h)
+    if index.max() >= len(t_all) or np.abs(t_all[index] - wanted).max() > 0.25 * h:
+        raise FlexlinkError('the Exudyn sensors did not store every step')
+    return data, index, wanted
 
 
 def revolution_slice(response, revolution=-1):
@@ -547,7 +259,7 @@ def peak_to_peak(response, revolution=-1):
 def peer_static(mechanism, crank_angle=0.0, *, elements_per_link=DEFAULT_ELEMENTS,
                 bearings='rigid', mass_placement='coupler-end'):
     """
-    Static deflection under gravity at a fixed crank angle (zero speed), nonlinear.
+    Solve the nonlinear static deflection under gravity at a fixed crank angle (zero speed).
 
     Returns
     -------
@@ -555,12 +267,12 @@ def peer_static(mechanism, crank_angle=0.0, *, elements_per_link=DEFAULT_ELEMENT
         The four :data:`OUTPUT_KEYS` [m].
 
     """
-    exu, _ = _exudyn()
-    mech = _mechanism(mechanism)
+    exu, _ = require_exudyn()
+    mech = resolve_mechanism(mechanism)
     model = build_peer(mech, 0.0, elements_per_link=elements_per_link, bearings=bearings,
                        gravity=True, beta_s=0.0, mass_placement=mass_placement,
                        start_angle=crank_angle)
-    settings = _settings(exu, 1.0, 1, DEFAULT_SPECTRAL_RADIUS, 1.0)
+    settings = solver_settings(exu, 1.0, 1, DEFAULT_SPECTRAL_RADIUS, 1.0)
     settings.staticSolver.verboseMode = 0
     settings.staticSolver.numberOfLoadSteps = 4
     # loads are about 1 N and axial forces round off near 1e-9 N (E A = 3e6 N)
@@ -573,67 +285,8 @@ def peer_static(mechanism, crank_angle=0.0, *, elements_per_link=DEFAULT_ELEMENT
                                        configuration=config))[None, :2]
     sensor = mbs.GetSensorValues(model.sensors['coupler_mid'], configuration=config)
     mid = np.asarray(sensor)[None, :2]
-    out = _deflections(mech, np.array([float(crank_angle)]), tip, mid)
+    out = deflections(mech, np.array([float(crank_angle)]), tip, mid)
     return {key: float(value[0]) for key, value in out.items()}
-
-
-# ---------------------------------------------------------------------------------------
-# The package's linear side, with the same conventions (for comparisons and tests)
-
-def linear_model(mechanism, *, elements_per_link=DEFAULT_ELEMENTS, bearings='rigid',
-                 gravity=True):
-    """The package's FE model (rigid crank) matching the peer's settings."""
-    from ..core.options import ModelOptions
-    from ..core.fe.linkage import FlexibleLinkage
-    mech = dataclasses.replace(_mechanism(mechanism), elements_per_link=elements_per_link)
-    options = ModelOptions.full_model(rigid_crank=True,
-                           bearings={'rigid': 'rigid', 'springs': 'flexible'}[bearings],
-                           geometric_stiffness=True, gravity=gravity)
-    return FlexibleLinkage(mech, options)
-
-
-def linear_static(mechanism, crank_angle=0.0, *, elements_per_link=DEFAULT_ELEMENTS,
-                  bearings='rigid'):
-    """
-    The package's static deflection under gravity: (K + K_G) U = R at zero speed.
-
-    Returns
-    -------
-    dict
-        The four :data:`OUTPUT_KEYS` [m].
-
-    """
-    model = linear_model(mechanism, elements_per_link=elements_per_link, bearings=bearings,
-                         gravity=True)
-    theta = np.array([float(crank_angle)])
-    system = model.assemble(theta)
-    stiffness = system.frozen_stiffness(0.0)[0]
-    displacement = np.linalg.solve(stiffness, system.load_at(0.0)[0])
-    values = model.output_operator(theta)[0] @ displacement
-    return dict(zip(OUTPUT_KEYS, (float(v) for v in values)))
-
-
-def linear_response(mechanism, rpm, *, elements_per_link=DEFAULT_ELEMENTS, bearings='rigid',
-                    gravity=True, zeta=None, steps=720, points=120):
-    """
-    The package's linear KED periodic response (``flexlink simulate --rigid-crank``, full).
-
-    Returns
-    -------
-    dict
-        'crank_angle' [rad] and the four :data:`OUTPUT_KEYS` [m] over one steady revolution,
-        'info' of :func:`core.simulate.periodic_response`.
-
-    """
-    from ..core.fe.simulate import periodic_response
-    model = linear_model(mechanism, elements_per_link=elements_per_link, bearings=bearings,
-                         gravity=gravity)
-    response = periodic_response(model, rpm * 2.0 * math.pi / 60.0, method='full',
-                                 steps=steps, points=points, zeta=zeta)
-    out = {'crank_angle': response.crank_angle}
-    out.update(zip(OUTPUT_KEYS, response.outputs.T))
-    out['info'] = response.info
-    return out
 
 
 def compare(peer, linear):
@@ -684,11 +337,10 @@ def compare(peer, linear):
 
 def main(argv=None):
     """
-    Print peer and linear peak-to-peak side by side (the issue's table):
+    Print peer and linear peak-to-peak side by side (the issue's table).
+
     ``python -m flexlink_ros.studies.peer_exudyn --rpm 269 391 [--gravity] [--json]``.
     """
-    import argparse
-    import json
     parser = argparse.ArgumentParser(prog='python -m flexlink_ros.studies.peer_exudyn',
                                      description=main.__doc__)
     parser.add_argument('--mechanism', default='cho1992')
@@ -697,7 +349,7 @@ def main(argv=None):
     parser.add_argument('--bearings', choices=BEARINGS, default='rigid')
     parser.add_argument('--mass-placement', choices=MASS_PLACEMENTS, default='coupler-end')
     parser.add_argument('--gravity', action='store_true', help='apply gravity (default off, '
-                        'as in the issue\'s table)')
+                        "as in the issue's table)")
     parser.add_argument('--beta', type=float, default=DEFAULT_BETA_S)
     parser.add_argument('--steps', type=int, default=DEFAULT_STEPS)
     parser.add_argument('--revolutions', type=int, default=None)

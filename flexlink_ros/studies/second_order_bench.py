@@ -18,10 +18,12 @@ import tempfile
 
 import numpy as np
 
-from ..core.fe import linkage as assembly
-from ..core.reduction import model as reduced
-from ..core.fe import second_order as so
+from ..core.fe.linkage import FlexibleLinkage
+from ..core.fe.second_order import factored_forms, factored_second_order
+from ..core.fe.second_order import gather_harmonics, link_forms, output_coefficients
 from ..core.kinematics import solve_kinematics
+from ..core.options import ModelOptions
+from ..core.reduction.model import fe_mechanism, periodic_cell_coefficients
 
 SCALARS = 22    # cos, sin of the three link angles, then kappa (4 x 4), per grid node
 GRID = 128
@@ -85,7 +87,8 @@ double run(int samples, int repeat, int r, int m, const double *vsel, const int 
             one(r, m, vsel, rows, nslot, kind, i0, i1, slot_link, nforms, grows, gptr, gcol, gval,
                 form_first, cells, table, qs + (long)i * r, thetas[i], y, z, outs + 4L * i);
     clock_gettime(CLOCK_MONOTONIC, &t1);
-    return ((t1.tv_sec - t0.tv_sec) * 1e9 + (t1.tv_nsec - t0.tv_nsec)) / ((double)samples * repeat);
+    return ((t1.tv_sec - t0.tv_sec) * 1e9 + (t1.tv_nsec - t0.tv_nsec))
+           / ((double)samples * repeat);
 }
 """
 
@@ -104,14 +107,14 @@ def _compile(directory):
 
 def kernel_data(linkage, basis, grid=GRID):
     """Flat arrays of the kernel: rows of V, slot maps, CSR bands of G, spline tables."""
-    forms = so.link_forms(linkage)
+    forms = link_forms(linkage)
     used = sorted({int(i) for link in linkage.links
-                   for i in np.flatnonzero(np.abs(so.gather_harmonics(linkage, link))
+                   for i in np.flatnonzero(np.abs(gather_harmonics(linkage, link))
                                            .sum(axis=(0, 1)))})
     where = {dof: k for k, dof in enumerate(used)}
     kind, i0, i1, slot_link, first = [], [], [], [], {}
     for link in linkage.links:
-        pieces = so.gather_harmonics(linkage, link)
+        pieces = gather_harmonics(linkage, link)
         first[link] = len(kind)
         for a in range(pieces.shape[1]):
             if a % 3 == 0:
@@ -146,11 +149,11 @@ def kernel_data(linkage, basis, grid=GRID):
     values = np.zeros((grid, SCALARS))
     for link in range(3):
         values[:, 2 * link], values[:, 2 * link + 1] = np.cos(angle[link]), np.sin(angle[link])
-    kappa = so.output_coefficients(linkage.mechanism, theta)
+    kappa = output_coefficients(linkage.mechanism, theta)
     if 0 not in linkage.links:
         kappa[:, :, 0] = 0.0
     values[:, 6:] = kappa.reshape(grid, 16)
-    table = reduced.periodic_cell_coefficients(values)
+    table = periodic_cell_coefficients(values)
     return {'vsel': np.ascontiguousarray(basis[used]), 'rows': np.arange(len(used)),
             'kind': kind, 'i0': i0, 'i1': i1, 'slot_link': slot_link, 'gptr': gptr.ravel(),
             'gcol': gcol, 'gval': gval, 'form_first': form_first, 'grows': grows, 'table': table,
@@ -166,7 +169,7 @@ def _call(lib, data, qs, thetas, repeat):
         return a.ctypes.data_as(ctypes.POINTER(kind))
     dbl, i32 = ctypes.c_double, ctypes.c_int
     arrays = {k: _int(data[k]) for k in ('rows', 'kind', 'i0', 'i1', 'slot_link', 'grows',
-                                        'gptr', 'gcol', 'form_first')}
+                                         'gptr', 'gcol', 'form_first')}
     gval = np.ascontiguousarray(data['gval'], dtype=float)
     table = np.ascontiguousarray(data['table'])
     qs, thetas = np.ascontiguousarray(qs), np.ascontiguousarray(thetas)
@@ -186,26 +189,32 @@ def _call(lib, data, qs, thetas, repeat):
 
 def time_factored(mechanism, bearings, rigid_crank, size, samples=20000, repeat=20):
     """
-    Nanoseconds per sample of the compiled factored step (checked against the numpy form).
+    Time the compiled factored step: nanoseconds per sample (checked against numpy).
 
     Parameters
     ----------
     mechanism : Mechanism
+        The linkage.
     bearings : str
         'rigid' or 'flexible'.
     rigid_crank : bool
+        Treat the crank as rigid.
     size : int
         Reduced size r (a random orthonormal basis of that size: the cost does not depend on
         the values).
+    samples : int
+        Samples per timed call.
+    repeat : int
+        Passes over the samples (the time per sample is their mean).
 
     Returns
     -------
     float
 
     """
-    options = reduced.ModelOptions(bearings=bearings, rigid_crank=rigid_crank, grid_size=8)
-    linkage = assembly.FlexibleLinkage(reduced.fe_mechanism(mechanism, options),
-                                       options)
+    options = ModelOptions(bearings=bearings, rigid_crank=rigid_crank, grid_size=8)
+    linkage = FlexibleLinkage(fe_mechanism(mechanism, options),
+                              options)
     rng = np.random.default_rng(1)
     basis = np.linalg.qr(rng.standard_normal((linkage.size, size)))[0]
     data = kernel_data(linkage, basis)
@@ -214,8 +223,8 @@ def time_factored(mechanism, bearings, rigid_crank, size, samples=20000, repeat=
         grid_theta = 2.0 * np.pi * np.arange(data['grid']) / data['grid']
         q = rng.standard_normal((grid_theta.size, size)) * 1e-3
         _, out = _call(lib, data, q, grid_theta, 1)
-        expected = so.factored_second_order(so.factored_forms(linkage, basis), mechanism,
-                                            grid_theta, q)
+        expected = factored_second_order(factored_forms(linkage, basis), mechanism,
+                                         grid_theta, q)
         if not np.allclose(out, expected, rtol=1e-9, atol=1e-12 * np.abs(expected).max()):
             raise RuntimeError('the compiled kernel disagrees with factored_second_order')
         qs = rng.standard_normal((samples, size)) * 1e-3

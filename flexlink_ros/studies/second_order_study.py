@@ -6,25 +6,36 @@ Linear KED and linear + second order against the nonlinear Exudyn peer (issue 14
 the peer's peak-to-peak of the four outputs, the package's linear full-order response and the
 same plus the second-order motion of :mod:`core.second_order` (p2p error and relative RMS
 against the peer), and the reduced model of core.reduced (default basis, as the estimator
-streams it) with the factored second order. ``--cost`` prints the multiply-adds per sample of the streaming form for the
-reduced models, and ``--bench`` times it compiled (needs a C compiler).
+streams it) with the factored second order. ``--cost`` prints the multiply-adds per sample of
+the streaming form for the reduced models, and ``--bench`` times it compiled (needs a C
+compiler).
 """
 
 import argparse
+import dataclasses
 import json
 import math
 
 import numpy as np
 
-from ..core.fe import second_order as so
-from . import peer_exudyn as peer
+from . import second_order_bench
+from .peer_exudyn import compare, DEFAULT_ELEMENTS, linear_model, OUTPUT_KEYS, peak_to_peak
+from .peer_exudyn import peer_response
+from .peer_model import resolve_mechanism
+from ..core.fe.linkage import FlexibleLinkage
+from ..core.fe.second_order import corrected_response, factored_forms
+from ..core.fe.second_order import factored_second_order, FORMS, step_cost
+from ..core.fe.simulate import periodic_response
+from ..core.options import DEFAULT_SIZES, ModelOptions
+from ..core.reduction.model import build_model, fe_mechanism, output_values
+from ..core.reduction.model import periodic_response as reduced_periodic_response
 
 TARGETS = {'lever_tip': 0.10, 'coupler_mid': 0.03}
 
 
 def _as_response(angles, values):
     out = {'crank_angle': angles}
-    out.update(zip(peer.OUTPUT_KEYS, np.asarray(values).T))
+    out.update(zip(OUTPUT_KEYS, np.asarray(values).T))
     return out
 
 
@@ -40,36 +51,38 @@ def run_case(mechanism, rpm, gravity, elements, points=720, zeta=None, revolutio
         'max_sums' (largest S per :data:`core.second_order.FORMS`, m), 'info'.
 
     """
-    from ..core.fe.simulate import periodic_response
-    response = peer.peer_response(mechanism, rpm, elements_per_link=elements, gravity=gravity,
-                                  revolutions=revolutions)
-    linkage = peer.linear_model(mechanism, elements_per_link=elements, gravity=gravity)
+    response = peer_response(mechanism, rpm, elements_per_link=elements, gravity=gravity,
+                             revolutions=revolutions)
+    linkage = linear_model(mechanism, elements_per_link=elements, gravity=gravity)
     linear = periodic_response(linkage, rpm * math.pi / 30.0, method='full', points=points,
                                zeta=zeta)
-    corrected = so.corrected_response(linkage, linear)
-    p2p = peer.peak_to_peak(response)
+    corrected = corrected_response(linkage, linear)
+    p2p = peak_to_peak(response)
     streamed = reduced_response(mechanism, rpm, gravity, elements, points)
     return {'rpm': float(rpm), 'gravity': bool(gravity), 'elements': elements,
-            'peer_p2p': {k: p2p[k] for k in peer.OUTPUT_KEYS},
+            'peer_p2p': {k: p2p[k] for k in OUTPUT_KEYS},
             'periodicity': p2p['periodicity'],
-            'linear': peer.compare(response, _as_response(linear.crank_angle, linear.outputs)),
-            'second_order': peer.compare(response, _as_response(linear.crank_angle,
-                                                                corrected['total'])),
-            'reduced': peer.compare(response, _as_response(*streamed[:2])),
+            'linear': compare(response, _as_response(linear.crank_angle, linear.outputs)),
+            'second_order': compare(response, _as_response(linear.crank_angle,
+                                                           corrected['total'])),
+            'reduced': compare(response, _as_response(*streamed[:2])),
             'reduced_size': streamed[2],
-            'max_sums': dict(zip(so.FORMS, np.abs(corrected['detail']['sums']).max(axis=0))),
+            'max_sums': dict(zip(FORMS, np.abs(corrected['detail']['sums']).max(axis=0))),
             'info': {'peer_cpu_s': response['info']['cpu_s'],
                      'linear_wall_s': linear.info['wall_s'], 'zeta': linear.info['zeta']}}
 
 
 def reduced_response(mechanism, rpm, gravity, elements, points=720, sizes=None, grid=128):
     """
-    The reduced model's periodic response (core.reduced, as the estimator streams it) plus its
-    second order by the factored form (:func:`core.second_order.factored_second_order`).
+    Run the reduced model's periodic response plus its factored second order.
+
+    The reduced model as the estimator streams it (core.reduced), the second order by the
+    factored form (:func:`core.second_order.factored_second_order`).
 
     Parameters
     ----------
     mechanism : Mechanism or str
+        A Mechanism, or a mechanism file path or bare name.
     rpm, gravity, elements :
         As :func:`run_case` (rigid crank, rigid bearings).
     points : int
@@ -88,74 +101,71 @@ def reduced_response(mechanism, rpm, gravity, elements, points=720, sizes=None, 
         r.
 
     """
-    import dataclasses
-    from ..core.fe import linkage as assembly
-    from ..core.reduction import model as reduced
-    mech = peer._mechanism(mechanism)
+    mech = resolve_mechanism(mechanism)
     if not gravity:
         mech = dataclasses.replace(mech, gravity=(0.0, 0.0))
     modes, static = sizes or (None, None)
-    options = reduced.ModelOptions(modes=modes, static=static, grid_size=grid,
-                                   elements_per_link=elements, bearings='rigid')
-    model = reduced.build_model(mech, options)
-    linkage = assembly.FlexibleLinkage(reduced.fe_mechanism(mech, options),
-                                       options)
+    options = ModelOptions(modes=modes, static=static, grid_size=grid,
+                           elements_per_link=elements, bearings='rigid')
+    model = build_model(mech, options)
+    linkage = FlexibleLinkage(fe_mechanism(mech, options),
+                              options)
     speed = rpm * math.pi / 30.0
-    angles, q, _ = reduced.periodic_response(model, speed, steps=720)
+    angles, q, _ = reduced_periodic_response(model, speed, steps=720)
     stride = 720 // points
     angles, q = angles[:-1:stride], q[:-1:stride]
-    linear = reduced.output_values(model, model.evaluate(angles, speed, 0.0), q)
-    second = so.factored_second_order(so.factored_forms(linkage, model.basis), mech, angles, q)
+    linear = output_values(model, model.evaluate(angles, speed, 0.0), q)
+    second = factored_second_order(factored_forms(linkage, model.basis), mech, angles, q)
     return angles, linear + second, model.size
 
 
 def meets_targets(record):
     """Whether linear + second order meets the issue's p2p targets, per output."""
     return {key: abs(record['second_order'][key]['p2p_error'])
-            <= TARGETS[key.rsplit('_', 1)[0]] for key in peer.OUTPUT_KEYS}
+            <= TARGETS[key.rsplit('_', 1)[0]] for key in OUTPUT_KEYS}
 
 
 def format_record(record):
-    """The text table of one case."""
+    """Format the text table of one case."""
     lines = [f"{record['rpm']:g} rpm, gravity {'on' if record['gravity'] else 'off'}, "
              f"{record['elements']} elements per link, rigid crank and bearings "
              f"(modal zeta {record['info']['zeta']:g} in the linear model)",
-             '  ' + ' ' * 24 + ''.join(f'{k:>16s}' for k in peer.OUTPUT_KEYS),
+             '  ' + ' ' * 24 + ''.join(f'{k:>16s}' for k in OUTPUT_KEYS),
              '  peer p2p [um]           ' + ''.join(f"{record['peer_p2p'][k] * 1e6:16.2f}"
-                                                  for k in peer.OUTPUT_KEYS)]
+                                                    for k in OUTPUT_KEYS)]
     ok = meets_targets(record)
     for label, name in (('linear', 'linear'), ('linear + 2nd', 'second_order'),
                         (f"reduced r={record['reduced_size']} + 2nd", 'reduced')):
         table = record[name]
         lines.append(f'  {label + " p2p [um]":24s}' + ''.join(
-            f"{table[k]['other_p2p'] * 1e6:16.2f}" for k in peer.OUTPUT_KEYS))
+            f"{table[k]['other_p2p'] * 1e6:16.2f}" for k in OUTPUT_KEYS))
         lines.append(f'  {label + " p2p err":24s}' + ''.join(
-            f"{100 * table[k]['p2p_error']:15.1f}%" for k in peer.OUTPUT_KEYS))
+            f"{100 * table[k]['p2p_error']:15.1f}%" for k in OUTPUT_KEYS))
         lines.append(f'  {label + " rel RMS":24s}' + ''.join(
-            f"{100 * table[k]['rms_error']:15.1f}%" for k in peer.OUTPUT_KEYS))
+            f"{100 * table[k]['rms_error']:15.1f}%" for k in OUTPUT_KEYS))
     lines.append('  target (10 % tip, 3 % mid) ' + ' '.join(
-        f"{k}: {'met' if ok[k] else 'MISSED'}" for k in peer.OUTPUT_KEYS))
+        f"{k}: {'met' if ok[k] else 'MISSED'}" for k in OUTPUT_KEYS))
     return '\n'.join(lines)
 
 
 def reduced_costs(mechanism):
     """
-    Multiply-adds per sample (:func:`core.second_order.step_cost`) for the reduced models'
-    default sizes (core.reduced.DEFAULT_SIZES) with the mechanism's elements per link.
+    Count multiply-adds per sample (:func:`core.second_order.step_cost`) of the reduced models.
+
+    For their default sizes (core.reduced.DEFAULT_SIZES) with the mechanism's elements per
+    link.
     """
-    from ..core.fe import linkage as assembly
-    from ..core.reduction import model as reduced
     out = []
-    for (bearings, rigid_crank), (modes, static) in reduced.DEFAULT_SIZES.items():
-        options = reduced.ModelOptions(bearings=bearings, rigid_crank=rigid_crank, grid_size=8)
-        linkage = assembly.FlexibleLinkage(reduced.fe_mechanism(mechanism, options),
-                                           options)
+    for (bearings, rigid_crank), (modes, static) in DEFAULT_SIZES.items():
+        options = ModelOptions(bearings=bearings, rigid_crank=rigid_crank, grid_size=8)
+        linkage = FlexibleLinkage(fe_mechanism(mechanism, options),
+                                  options)
         size = modes + static
         basis = np.eye(linkage.size)[:, :size] if size <= linkage.size else None
         if basis is None:
             continue
-        factored = so.factored_forms(linkage, basis)
-        cost = so.step_cost(factored, size)
+        factored = factored_forms(linkage, basis)
+        cost = step_cost(factored, size)
         out.append({'bearings': bearings, 'rigid_crank': rigid_crank, 'r': size,
                     'elements': mechanism.elements_per_link, 'dofs': linkage.size, **cost})
     return out
@@ -168,7 +178,7 @@ def main(argv=None):
     parser.add_argument('--mechanism', default='cho1992')
     parser.add_argument('--rpm', type=float, nargs='+', default=[269.0, 391.0])
     parser.add_argument('--gravity', choices=('off', 'on', 'both'), default='both')
-    parser.add_argument('--elements', type=int, default=peer.DEFAULT_ELEMENTS)
+    parser.add_argument('--elements', type=int, default=DEFAULT_ELEMENTS)
     parser.add_argument('--zeta', type=float, default=None,
                         help='modal damping ratio of the linear model (default: mechanism)')
     parser.add_argument('--revolutions', type=int, default=None,
@@ -178,11 +188,10 @@ def main(argv=None):
                         help='time the factored step compiled (needs cc)')
     parser.add_argument('--json', action='store_true')
     args = parser.parse_args(argv)
-    mech = peer._mechanism(args.mechanism)
+    mech = resolve_mechanism(args.mechanism)
     if args.cost or args.bench:
         costs = reduced_costs(mech)
         if args.bench:
-            from . import second_order_bench
             for entry in costs:
                 entry['compiled_ns'] = second_order_bench.time_factored(
                     mech, entry['bearings'], entry['rigid_crank'], entry['r'])
@@ -200,7 +209,8 @@ def main(argv=None):
     return 0
 
 
-__all__ = ['TARGETS', 'run_case', 'reduced_response', 'meets_targets', 'format_record', 'reduced_costs', 'main']
+__all__ = ['TARGETS', 'run_case', 'reduced_response', 'meets_targets', 'format_record',
+           'reduced_costs', 'main']
 
 
 if __name__ == '__main__':

@@ -37,9 +37,13 @@ import os
 
 import numpy as np
 
-from ..core.fe import second_order as so
-from ..core import validity
-from . import peer_exudyn as peer
+from .peer_exudyn import BEARINGS, compare, DEFAULT_BETA_S, DEFAULT_ELEMENTS, linear_model
+from .peer_exudyn import OUTPUT_KEYS, peer_response
+from .peer_model import resolve_mechanism
+from ..core.fe.second_order import corrected_response
+from ..core.fe.simulate import periodic_response
+from ..core.validity import load_ratios, nonlinearity_indicator
+from ..core.validity import VALIDITY_THRESHOLD
 
 TARGETS = {'lever_tip': 0.10, 'coupler_mid': 0.03}
 DEFAULT_RPM = tuple(sorted(set(range(250, 451, 10)) | set(range(385, 430, 10)) | {269, 391,
@@ -57,8 +61,8 @@ def _peer(mechanism, rpm, elements, bearings, cache):
             out['info'] = json.loads(str(data['info']))
             return out
     placement = 'split' if bearings == 'springs' else 'coupler-end'
-    out = peer.peer_response(mechanism, rpm, elements_per_link=elements, bearings=bearings,
-                             gravity=False, mass_placement=placement)
+    out = peer_response(mechanism, rpm, elements_per_link=elements, bearings=bearings,
+                        gravity=False, mass_placement=placement)
     if name:
         os.makedirs(cache, exist_ok=True)
         np.savez(name, **{k: v for k, v in out.items() if k != 'info'},
@@ -78,7 +82,7 @@ def _errors(table):
     return out
 
 
-def run_speed(mechanism, rpm, elements=peer.DEFAULT_ELEMENTS, bearings='rigid', zeta=None,
+def run_speed(mechanism, rpm, elements=DEFAULT_ELEMENTS, bearings='rigid', zeta=None,
               points=120, cache=None):
     """
     Peer, linear + second order and the candidate indicators at one crank speed.
@@ -92,20 +96,19 @@ def run_speed(mechanism, rpm, elements=peer.DEFAULT_ELEMENTS, bearings='rigid', 
         |N_e| / P_cr per link), 'peer_cpu_s'.
 
     """
-    from ..core.fe.simulate import periodic_response
     response = _peer(mechanism, rpm, elements, bearings, cache)
-    linkage = peer.linear_model(mechanism, elements_per_link=elements, bearings=bearings,
-                                gravity=False)
+    linkage = linear_model(mechanism, elements_per_link=elements, bearings=bearings,
+                           gravity=False)
     speed = rpm * math.pi / 30.0
     linear = periodic_response(linkage, speed, method='full', points=points, zeta=zeta)
-    corrected = so.corrected_response(linkage, linear)
+    corrected = corrected_response(linkage, linear)
     total = {'crank_angle': linear.crank_angle}
-    total.update(zip(peer.OUTPUT_KEYS, corrected['total'].T))
-    errors = _errors(peer.compare(response, total))
+    total.update(zip(OUTPUT_KEYS, corrected['total'].T))
+    errors = _errors(compare(response, total))
     used_zeta = linear.info['zeta']
-    samples = validity.nonlinearity_indicator(linkage, linear.displacement,
-                                              linear.crank_angle, speed, zeta=used_zeta)
-    ratios = validity.load_ratios(linkage, linear.displacement, linear.crank_angle, speed)
+    samples = nonlinearity_indicator(linkage, linear.displacement,
+                                     linear.crank_angle, speed, zeta=used_zeta)
+    ratios = load_ratios(linkage, linear.displacement, linear.crank_angle, speed)
     load_ratio = np.max(np.abs(np.stack(list(ratios.values()))))
     p2p = lambda x: x.max(axis=0) - x.min(axis=0)  # noqa: E731
     second_ratio = float(np.max(p2p(corrected['second'][:, 2:])
@@ -120,8 +123,11 @@ def run_speed(mechanism, rpm, elements=peer.DEFAULT_ELEMENTS, bearings='rigid', 
 
 
 def separation(records, key):
-    """Largest ``key`` over accurate speeds and smallest over inaccurate ones, and whether
-    the first is below the second (the candidate separates the sweep)."""
+    """
+    Find the largest ``key`` over accurate speeds and the smallest over inaccurate ones.
+
+    And whether the first is below the second (the candidate separates the sweep).
+    """
     good = [r[key] for r in records if r['accurate']]
     bad = [r[key] for r in records if not r['accurate']]
     top, bottom = (max(good) if good else None), (min(bad) if bad else None)
@@ -129,8 +135,8 @@ def separation(records, key):
             'separates': top is not None and bottom is not None and top < bottom}
 
 
-def format_table(records, threshold=validity.VALIDITY_THRESHOLD):
-    """The sweep table (text)."""
+def format_table(records, threshold=VALIDITY_THRESHOLD):
+    """Format the sweep table (text)."""
     head = (f"{'rpm':>5s} {'peer tip p2p um':>16s} {'peer mid p2p um':>16s} "
             f"{'tip err':>8s} {'mid err':>8s} {'tip rms':>8s} {'mid rms':>8s} "
             f"{'I max':>7s} {'N/Pcr':>7s} {'2nd/lin':>7s} {'acc':>4s} {'valid':>5s}")
@@ -140,8 +146,8 @@ def format_table(records, threshold=validity.VALIDITY_THRESHOLD):
         tip, mid = (e[k]['peer_p2p'] for k in ('lever_tip', 'coupler_mid'))
         lines.append(
             f"{r['rpm']:5.0f} {tip[0] * 1e6:7.1f}/{tip[1] * 1e6:<8.1f} "
-            f"{mid[0] * 1e6:7.0f}/{mid[1] * 1e6:<8.0f} "
-            + ''.join(f"{100 * e[point][kind]:7.1f}% " for kind in ('p2p_error', 'rms_error')
+            f'{mid[0] * 1e6:7.0f}/{mid[1] * 1e6:<8.0f} '
+            + ''.join(f'{100 * e[point][kind]:7.1f}% ' for kind in ('p2p_error', 'rms_error')
                       for point in ('lever_tip', 'coupler_mid'))
             + f"{r['indicator']:7.3f} {r['load_ratio']:7.4f} {r['second_ratio']:7.3f} "
             f"{'yes' if r['accurate'] else 'NO':>4s} "
@@ -156,7 +162,7 @@ def format_table(records, threshold=validity.VALIDITY_THRESHOLD):
     return '\n'.join(lines)
 
 
-def plot_sweep(records, path, threshold=validity.VALIDITY_THRESHOLD):
+def plot_sweep(records, path, threshold=VALIDITY_THRESHOLD):
     """Chart of the errors and the indicator against crank speed, written to ``path``."""
     import matplotlib
     matplotlib.use('Agg')
@@ -199,15 +205,15 @@ def main(argv=None):
                                      description=__doc__.strip().splitlines()[0])
     parser.add_argument('--mechanism', default='cho1992')
     parser.add_argument('--rpm', type=float, nargs='+', default=list(DEFAULT_RPM))
-    parser.add_argument('--elements', type=int, default=peer.DEFAULT_ELEMENTS)
-    parser.add_argument('--bearings', choices=peer.BEARINGS, default='rigid')
+    parser.add_argument('--elements', type=int, default=DEFAULT_ELEMENTS)
+    parser.add_argument('--bearings', choices=BEARINGS, default='rigid')
     parser.add_argument('--zeta', type=float, default=None,
                         help='modal damping ratio of the linear model (default: mechanism)')
     parser.add_argument('--cache', default=None, help='directory to keep peer runs in')
     parser.add_argument('--chart', default=None, help='write the chart to this path (PNG)')
     parser.add_argument('--json', action='store_true')
     args = parser.parse_args(argv)
-    mech = peer._mechanism(args.mechanism)
+    mech = resolve_mechanism(args.mechanism)
     records = [run_speed(mech, rpm, args.elements, args.bearings, args.zeta, cache=args.cache)
                for rpm in args.rpm]
     if args.chart:
@@ -216,9 +222,9 @@ def main(argv=None):
         slim = [{k: v for k, v in r.items() if k != 'indicator_samples'} for r in records]
         print(json.dumps(slim, indent=1, default=float))
         return 0
-    print(f"{args.bearings} bearings, rigid crank, no gravity, {args.elements} elements per "
-          f"link, linear modal zeta {records[0]['zeta']:g}, peer beta {peer.DEFAULT_BETA_S:g} s; "
-          f"threshold {validity.VALIDITY_THRESHOLD:g}")
+    print(f'{args.bearings} bearings, rigid crank, no gravity, {args.elements} elements per '
+          f"link, linear modal zeta {records[0]['zeta']:g}, peer beta {DEFAULT_BETA_S:g} s; "
+          f'threshold {VALIDITY_THRESHOLD:g}')
     print(format_table(records))
     return 0
 

@@ -3,9 +3,8 @@
 import json
 import math
 
-import pytest
-
 from flexlink_ros.cli import main as cli
+import pytest
 
 
 def _run(capsys, *argv):

@@ -10,13 +10,14 @@ import math
 import subprocess
 import sys
 
-import numpy as np
-import pytest
-
-from flexlink_ros.errors import FlexlinkError
 from flexlink_ros.core.kinematics import solve_kinematics
 from flexlink_ros.core.mechanism import load_mechanism
+from flexlink_ros.errors import FlexlinkError
 from flexlink_ros.studies import peer_exudyn as peer
+from flexlink_ros.studies import peer_model
+from flexlink_ros.studies.peer_model import build_peer, solver_settings
+import numpy as np
+import pytest
 
 needs_exudyn = pytest.mark.skipif(
     not peer.exudyn_available(),
@@ -59,9 +60,11 @@ def test_module_imports_without_exudyn_rclpy_or_matplotlib():
 
 
 def test_missing_exudyn_raises_flexlink_error(monkeypatch):
-    monkeypatch.setitem(sys.modules, 'exudyn', None)
+    # exudyn is imported once, at the top of peer_model: simulate a failed import there
+    monkeypatch.setattr(peer_model, 'exudyn', None)
+    monkeypatch.setattr(peer_model, 'EXUDYN_IMPORT_ERROR', "No module named 'exudyn'")
     with pytest.raises(FlexlinkError, match='exudyn'):
-        peer.build_peer('cho1992', 269.0)
+        build_peer('cho1992', 269.0)
     with pytest.raises(FlexlinkError, match='exudyn'):
         peer.peer_static('cho1992')
 
@@ -77,11 +80,11 @@ def test_default_revolutions_follow_the_damping(mech):
 
 
 @needs_exudyn
-@pytest.mark.parametrize('kwargs', [dict(bearings='loose'), dict(mass_placement='lever'),
-                                    dict(elements_per_link=0), dict(beta_s=-1.0)])
+@pytest.mark.parametrize('kwargs', [{'bearings': 'loose'}, {'mass_placement': 'lever'},
+                                    {'elements_per_link': 0}, {'beta_s': -1.0}])
 def test_bad_arguments(mech, kwargs):
     with pytest.raises(ValueError):
-        peer.build_peer(mech, 269.0, **kwargs)
+        build_peer(mech, 269.0, **kwargs)
 
 
 @needs_exudyn
@@ -114,9 +117,9 @@ def test_joints_follow_the_package_conventions(mech):
     import exudyn
 
     rpm, theta0 = 269.0, 0.7
-    model = peer.build_peer(mech, rpm, elements_per_link=ELEMENTS, start_angle=theta0)
+    model = build_peer(mech, rpm, elements_per_link=ELEMENTS, start_angle=theta0)
     end = 0.3 * 60.0 / rpm   # 0.3 revolution
-    settings = peer._settings(exudyn, end, 216, 0.9, end)
+    settings = solver_settings(exudyn, end, 216, 0.9, end)
     assert exudyn.SolveDynamic(model.mbs, settings)
 
     def where(node):

@@ -1,14 +1,12 @@
-"""Report section of the flexible four-bar (plots/flex.py) on reduced sizes."""
+"""Report section of the flexible four-bar (studies/flex_data, report/flex) on reduced sizes."""
 
-import sys
 import time
-import types
 
+from flexlink_ros.report import flex
+from flexlink_ros.studies.flex_data import compute_flex
+from flexlink_ros.studies.flex_frequencies import PAPER_RPM
 import numpy as np
 import pytest
-
-from flexlink_ros.studies import flex_study as fs
-from flexlink_ros.report import flex
 
 PNG_SIGNATURE = b'\x89PNG\r\n\x1a\n'
 EXPECTED = ('flex_frequencies_fig7.png', 'flex_frequencies_fig8_10.png',
@@ -21,7 +19,7 @@ EXPECTED = ('flex_frequencies_fig7.png', 'flex_frequencies_fig8_10.png',
 def section(tmp_path_factory):
     out = tmp_path_factory.mktemp('flex')
     started = time.perf_counter()
-    data = flex.compute_flex(quick=True)
+    data = compute_flex(quick=True)
     result = flex.plot_flex(out, data=data)
     return out, result, time.perf_counter() - started, data
 
@@ -53,9 +51,9 @@ def test_quick_section_text_carries_the_numbers(section):
         count = line.count('|')
         cells = count if cells is None else cells
         assert count == cells, line
-    available = section[3]['geometric']
-    assert ('not computed' in text) == (not available)
-    assert ('Computed without geometric stiffness' in text) == (not available)
+    # geometric stiffness is always built now: nothing is left out
+    assert 'not computed' not in text
+    assert 'Computed without geometric stiffness' not in text
 
 
 def test_claims_follow_from_the_numbers(section):
@@ -65,33 +63,13 @@ def test_claims_follow_from_the_numbers(section):
     tip = {key: np.ptp(r.outputs[:, :2], axis=0) for key, r in data['responses'].items()}
     # rigid bearings leave the lever tip to axial strain only: orders of magnitude smaller
     assert all(tip['flexible', rpm].max() > 100 * tip['rigid', rpm].max()
-               for rpm in fs.PAPER_RPM)
+               for rpm in PAPER_RPM)
     assert fig20['verdict'] == 'agree'
-    assert {c['verdict'] for c in data['claims']} <= {'agree', 'disagree', 'partly',
-                                                       'not computed'}
+    assert {c['verdict'] for c in data['claims']} <= {'agree', 'disagree', 'partly'}
 
 
-@pytest.fixture(scope='module')
-def section_with_geometric_stiffness(section, tmp_path_factory):
-    """The section with K_G: from core.dynamics if usable, else its quasi-static stand-in."""
-    if section[3]['geometric']:
-        return section[1]
-    module = types.ModuleType('flexlink_ros.core.dynamics')
-    module.axial_force = fs.quasi_static_axial_force
-    saved = sys.modules.get(module.__name__)
-    sys.modules[module.__name__] = module
-    try:
-        return flex.plot_flex(tmp_path_factory.mktemp('flex_kg'), quick=True)
-    finally:
-        if saved is None:
-            del sys.modules[module.__name__]
-        else:
-            sys.modules[module.__name__] = saved
-
-
-def test_geometric_stiffness_cases_appear_when_dynamics_is_usable(
-        section_with_geometric_stiffness):
-    result = section_with_geometric_stiffness
+def test_geometric_stiffness_cases_appear(section):
+    result = section[1]
     text = result['text']
     assert 'not computed' not in text and 'Computed without' not in text
     for label in ('all flexible, K_G at 30 rad/s', 'rigid crank, K_G at 45 rad/s',

@@ -2,10 +2,9 @@
 
 import json
 
-import pytest
-
 from flexlink_ros.cli import main as cli
 from flexlink_ros.core.tmm import transfer as tmm
+import pytest
 
 
 def _run(capsys, *argv):
