@@ -2,7 +2,7 @@
 
 import math
 
-from flexlink_ros.core.estimation import offline_run, streaming as core_estimator
+from flexlink_ros.core.estimation import offline, offline_run, streaming, tables
 from flexlink_ros.core.estimation.streaming import SampleFlag, StreamingEstimator
 from flexlink_ros.core.mechanism import load_mechanism
 from flexlink_ros.core.reduction import model as reduced
@@ -32,7 +32,7 @@ def test_segments_follow_the_streaming_resets():
 
 def test_estimate_reports_only_final_samples_to_the_writer(model, monkeypatch):
     """progress(n) comes only once the first n samples are final, through gaps and repeats."""
-    monkeypatch.setattr(core_estimator, 'REPLAY_CHUNK', 64)     # many chunks per segment
+    monkeypatch.setattr(offline, 'REPLAY_CHUNK', 64)     # many chunks per segment
     stamps = np.arange(700) * 1_000_000
     stamps[400:] += 800_000_000                                 # a gap: two segments
     stamps[200] = stamps[199]                                   # a repeated sample
@@ -70,12 +70,12 @@ def test_replay_writer_gets_the_estimate_error():
 def test_segments_share_one_set_of_step_tables(model, monkeypatch):
     """A recording with many gaps builds the step tables once, not per segment."""
     built = []
-    original = core_estimator._StepTables.__init__
+    original = tables._StepTables.__init__
 
     def counted(self, *args, **kwargs):
         built.append(1)
         original(self, *args, **kwargs)
-    monkeypatch.setattr(core_estimator._StepTables, '__init__', counted)
+    monkeypatch.setattr(tables._StepTables, '__init__', counted)
     stamps = np.arange(60) * 1_000_000 + np.repeat(np.arange(6), 10) * 700_000_000
     angles = 391 * RPM * stamps * 1e-9
     speeds = np.full(stamps.size, 391 * RPM)
@@ -84,7 +84,7 @@ def test_segments_share_one_set_of_step_tables(model, monkeypatch):
     with pytest.raises(ValueError, match='do not match the model'):
         small = reduced.model_for_mechanism(load_mechanism('cho1992'), reduced.ModelOptions(
             rigid_crank=True, bearings='rigid', geometric_stiffness=False))
-        StreamingEstimator(model, step_tables=core_estimator.step_tables(small))
+        StreamingEstimator(model, step_tables=tables.step_tables(small))
 
 
 @pytest.mark.parametrize('window', [offline_run.PLAN_WINDOW, 7])
@@ -103,8 +103,8 @@ def test_offline_estimate_equals_streaming_through_outliers_and_out_of_bound(
                  for s, a, w in zip(stamps[:400].tolist(), angles[:400], speed[:400])
                  if abs(w) < 1e3)
     # A bound below the normal peak: the peaks go out of bound and restart the estimate.
-    monkeypatch.setattr(core_estimator, 'DEFLECTION_SAFETY_FACTOR',
-                        core_estimator.DEFLECTION_SAFETY_FACTOR * 0.9 * normal
+    monkeypatch.setattr(streaming, 'DEFLECTION_SAFETY_FACTOR',
+                        streaming.DEFLECTION_SAFETY_FACTOR * 0.9 * normal
                         / reference.deflection_bound_m)
     estimator = StreamingEstimator(model)
     streamed = []
