@@ -5,7 +5,7 @@ import pathlib
 from flexlink_ros.core.reduction.basis import frozen_modes, FrozenSamples
 from flexlink_ros.core.reduction.build import reduce_samples
 from flexlink_ros.core.reduction.periodic import periodic_response
-from flexlink_ros.core.reduction.tables import output_values
+from flexlink_ros.core.reduction.model import output_values
 import numpy as np
 
 ZETA = 0.02

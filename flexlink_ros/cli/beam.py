@@ -16,7 +16,11 @@ import math
 import time
 
 from .main import emit
-from ..core.tmm import transfer as tmm
+from ..core.tmm import beams
+from ..core.tmm import eigen
+from ..core.tmm import exact as tmm_exact
+from ..core.tmm import roots
+from ..core.tmm import solve
 
 METHODS = ('tmm1', 'tmm2', 'tmm3', 'fe')
 
@@ -34,10 +38,10 @@ def register(subparsers):
                         help='tmm1, tmm2, tmm3 (mass-lumping method, default) or fe')
     parser.add_argument('--search', default='false-position',
                         help='bisection, false-position (default) or newton')
-    parser.add_argument('--step', default=str(tmm.DEFAULT_STEP_RAD_S),
+    parser.add_argument('--step', default=str(roots.DEFAULT_STEP_RAD_S),
                         help='scan increment d_omega [rad/s] (default 10)')
     parser.add_argument('--modes', default='3', help='number of frequencies (default 3)')
-    parser.add_argument('--rtol', default=str(tmm.DEFAULT_RTOL),
+    parser.add_argument('--rtol', default=str(roots.DEFAULT_RTOL),
                         help='relative frequency tolerance of the root search (default 1e-12)')
     parser.add_argument('--plain-false-position', action='store_true',
                         help="the paper's regula falsi without the Illinois modification")
@@ -81,10 +85,10 @@ def beam_from_args(args):
 
     Returns
     -------
-    tmm.UniformBeam
+    beams.UniformBeam
 
     """
-    base = tmm.UniformBeam.kim_moon()
+    base = beams.UniformBeam.kim_moon()
     width, thickness = 0.030, 0.0015
     density = base.mass_per_length / (width * thickness)
     given = {key: _positive_float(value, key.replace('_', '-'))
@@ -95,7 +99,7 @@ def beam_from_args(args):
              if value is not None}
     if not given:
         return base
-    return tmm.UniformBeam.rectangular(
+    return beams.UniformBeam.rectangular(
         E=given.get('youngs_modulus_pa', base.E),
         density=given.get('density_kg_m3', density),
         length=given.get('length_m', base.length),
@@ -104,17 +108,17 @@ def beam_from_args(args):
 
 
 def beam_frequencies(beam, bc, segments, method='tmm3', search='false-position',
-                     step=tmm.DEFAULT_STEP_RAD_S, modes=3, rtol=tmm.DEFAULT_RTOL,
+                     step=roots.DEFAULT_STEP_RAD_S, modes=3, rtol=roots.DEFAULT_RTOL,
                      illinois=True):
     """
     Frequencies, search effort and error against the exact Euler-Bernoulli values.
 
     Parameters
     ----------
-    beam : tmm.UniformBeam
+    beam : beams.UniformBeam
         The beam.
     bc : str
-        One of :data:`flexlink_ros.core.tmm.transfer.BOUNDARY_CONDITIONS`.
+        One of :data:`flexlink_ros.core.tmm.beams.BOUNDARY_CONDITIONS`.
     segments : int
         Segments (TMM) or elements (FE).
     method : str
@@ -139,18 +143,18 @@ def beam_frequencies(beam, bc, segments, method='tmm3', search='false-position',
     _choice(method, METHODS, 'method')
     start = time.perf_counter()
     if method == 'fe':
-        frequencies = list(tmm.fe_frequencies(beam, bc, segments, modes))
+        frequencies = list(eigen.fe_frequencies(beam, bc, segments, modes))
         iterations = paper_iterations = [None] * modes
         scan_evaluations = None
     else:
-        result = tmm.tmm_frequencies(beam, bc, segments, int(method[-1]), modes, search, step,
+        result = solve.tmm_frequencies(beam, bc, segments, int(method[-1]), modes, search, step,
                                      rtol=rtol, illinois=illinois)
         frequencies = list(result.frequencies_rad_s)
         iterations = result.iterations
         paper_iterations = [root.iterations_paper_criterion for root in result.roots]
         scan_evaluations = result.scan_evaluations
     elapsed = time.perf_counter() - start
-    exact = list(tmm.exact_frequencies(beam, bc, modes))
+    exact = list(tmm_exact.exact_frequencies(beam, bc, modes))
     return {
         'boundary_condition': bc, 'method': method, 'segments': segments,
         'search': None if method == 'fe' else search,
@@ -162,8 +166,8 @@ def beam_frequencies(beam, bc, segments, method='tmm3', search='false-position',
         'exact_rad_s': exact,
         'error_percent': [100.0 * (f - e) / e for f, e in zip(frequencies, exact)],
         'wall_time_s': elapsed,
-        'tolerance': {'rtol': rtol, 'dtol_relative_to_bracket': tmm.DEFAULT_DTOL,
-                      'paper_determinant_kgf_mm': tmm.PAPER_DETERMINANT_TOL,
+        'tolerance': {'rtol': rtol, 'dtol_relative_to_bracket': roots.DEFAULT_DTOL,
+                      'paper_determinant_kgf_mm': roots.PAPER_DETERMINANT_TOL,
                       'illinois': illinois},
         'beam': {'E_pa': beam.E, 'I_m4': beam.I, 'mass_per_length_kg_m': beam.mass_per_length,
                  'length_m': beam.length},
@@ -190,9 +194,9 @@ def _table(result):
 
 def beam_command(args):
     """Run `flexlink beam`; returns the exit code."""
-    bc = _choice(args.bc, tmm.BOUNDARY_CONDITIONS, 'bc')
+    bc = _choice(args.bc, beams.BOUNDARY_CONDITIONS, 'bc')
     method = _choice(args.method, METHODS, 'method')
-    search = _choice(args.search, tmm.SEARCHES, 'search')
+    search = _choice(args.search, roots.SEARCHES, 'search')
     segments = _positive_int(args.segments, 'segments')
     modes = _positive_int(args.modes, 'modes')
     step = _positive_float(args.step, 'step')

@@ -20,7 +20,7 @@ import time
 
 from .demo_summary import summarise_recording
 from .main import emit
-from ..core.mechanism import find_config
+from ..core.mechanism_file import find_config
 from ..names import FIRST_INPUT_MESSAGE, READY_MESSAGE
 from ..ros.runtime import isolate_ros_environment
 

@@ -11,7 +11,7 @@ import pathlib
 import numpy as np
 
 from .mcap import mcap_info
-from .replay import iter_recording
+from ..io.recording import iter_recording
 from ..io.msg_schema import message_class
 from ..names import JOINT_NAMES, JOINT_STATE
 

@@ -18,15 +18,12 @@ import numpy as np
 
 from .main import emit
 from .model_args import add_estimator_arguments, load_model, model_options
-from ..core.mechanism import load_mechanism
+from ..core.mechanism_file import load_mechanism
 from ..core.numerics import RPM
 from ..core.options import ModelOptions
 from ..report.estimator import plot_error_vs_cost
-from ..studies.bench import configuration_error  # noqa: F401  SHIM
 from ..studies.bench import run_bench
 from ..studies.plan import plan_table, run_plan
-from ..studies.plan import scene_options  # noqa: F401  SHIM
-from ..studies.synthetic import last_revolution, synthetic_signal  # noqa: F401  SHIM
 from ..studies.synthetic import run_estimate
 
 

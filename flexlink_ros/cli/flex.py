@@ -26,7 +26,7 @@ import numpy as np
 from .main import degree_range, emit
 from .model_args import add_model_arguments
 from ..core.fe import linkage as assembly, modes, simulate
-from ..core.mechanism import load_mechanism
+from ..core.mechanism_file import load_mechanism
 from ..core.options import ModelOptions
 from ..errors import FlexlinkError
 

@@ -16,7 +16,9 @@ from mcap.writer import LIBRARY_IDENTIFIER, Writer
 
 from .main import emit
 from ..errors import RecorderError
-from ..io.mcap_reader import iter_messages, map_file, MESSAGE_HEAD, MESSAGE_HEAD_SIZE, Salvage
+from ..io.mcap_reader import iter_messages, map_file, Salvage
+from ..io.mcap_records import MESSAGE_HEAD_SIZE
+from ..io.mcap_records import MESSAGE_HEAD
 
 RECOVER_LIBRARY = f'flexlink mcap-recover; {LIBRARY_IDENTIFIER}'
 

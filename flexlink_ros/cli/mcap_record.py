@@ -11,7 +11,7 @@ from .main import emit
 from ..errors import RecorderError
 from ..io.msg_schema import message_class
 from ..io.recorder import McapRecorder
-from ..ros.crank_driver import spin_until_shutdown
+from ..ros.runtime import spin_until_shutdown
 
 
 def register(subparsers):

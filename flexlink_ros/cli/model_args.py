@@ -14,8 +14,8 @@ import sys
 
 from ..core.numerics import RPM
 from ..core.options import ModelOptions
-from ..core.reduction import model as reduced
 from ..ros import parameters as node_params
+from ..core.reduction import pipeline
 
 BEARINGS = ('flexible', 'rigid')
 
@@ -177,5 +177,5 @@ def load_model(mechanism, options, args):
     ReducedModel
 
     """
-    return reduced.model_for_mechanism(mechanism, options, cache_dir=args.cache_dir,
+    return pipeline.model_for_mechanism(mechanism, options, cache_dir=args.cache_dir,
                                        use_cache=not args.no_cache)

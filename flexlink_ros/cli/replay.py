@@ -32,14 +32,12 @@ from .main import emit
 from .model_args import add_estimator_arguments, load_model, model_options
 from ..core.estimation.offline_run import allocate_estimate, BackgroundEstimate, \
     estimate_offline
-from ..core.mechanism import load_mechanism
+from ..core.mechanism_file import load_mechanism
 from ..io.joint_states import read_crank_samples
-from ..io.recorder import refuse_existing
+from ..io.recorder_files import refuse_existing
 from ..io.recording import choose_input_topic, damage_note, scan_recording
-from ..io.recording import iter_recording, JOINT_PROBE_MESSAGES  # noqa: F401  SHIM
 from ..io.replay_writer import write_replay
 from ..names import DEFAULT_FRAME_ID, NODE_NAME, OUTPUT_POINTS, output_topics
-from ..names import JOINT_STATE  # noqa: F401  SHIM
 from ..ros.messages import OK
 from ..ros.republish import publish_recording
 

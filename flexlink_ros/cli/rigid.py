@@ -23,7 +23,10 @@ from .main import degree_range, emit
 from ..core import criteria as core_criteria
 from ..core import spring_design
 from ..core.kinematics import dead_centres, solve_kinematics, transmission_extremes
-from ..core.mechanism import JOINT_NAMES, LINK_NAMES, load_mechanism, Spring
+from ..names import JOINT_NAMES
+from ..core.mechanism import Spring
+from ..names import LINK_NAMES
+from ..core.mechanism_file import load_mechanism
 
 # Paper numbering of the clearance joints (Kang 1990).
 PAPER_JOINT = {'A': 1, 'B': 2, 'O4': 3}

@@ -190,7 +190,3 @@ def check_crank_rocker(ground, crank, coupler, lever):
 
 
 # Re-exports for importers not yet moved; at the end: core/mechanism_file.py imports this module.
-from .mechanism_file import (find_config, load_mechanism, MAX_FILE_BYTES,  # noqa: E402,F401,I100
-                             MAX_NAME_CHARS, MAX_SOURCE_CHARS, MAX_YAML_DEPTH,
-                             mechanism_from_dict, read_yaml_bounded)  # SHIM
-from ..names import LINK_NAMES  # noqa: E402,F401  SHIM

@@ -69,7 +69,7 @@ import math
 import numpy as np
 
 from .dynamics import axial_force
-from .fe.linkage import gauss_points
+from .fe.link import gauss_points
 from .fe.modes import frozen_mode_sweep
 from .kinematics import solve_kinematics
 

@@ -33,7 +33,6 @@ from .mcap_records import (
     HEADER, KNOWN_OPCODES, MCAP_MAGIC, MESSAGE, MESSAGE_HEAD_SIZE, MESSAGE_INDEX, opcode_name,
     parse_channel, parse_schema, read_strings, RECORD_PREFIX, records_in, SCHEMA, STATISTICS,
 )
-from .mcap_records import message_fields, MESSAGE_HEAD  # noqa: F401  SHIM
 from ..errors import DamagedRecord, McapFileError
 
 MAX_DAMAGE_REPORTED = 1000  # damaged places listed per file (all are counted)

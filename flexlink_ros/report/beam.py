@@ -21,11 +21,13 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter
 import numpy as np
 
-from ..core.tmm import transfer as tmm
 from ..studies.beam_study import error_table, frequency_table, iteration_table
 from ..studies.beam_study import observed_order, PAPER_SEGMENTS, PAPER_TABLE2_BISECTION
 from ..studies.beam_study import PAPER_TABLE3_MODE1, SCAN_STEPS_RAD_S, timing_table
 from ..studies.beam_study import TIMING_REPEATS
+from ..core.tmm import beams
+from ..core.tmm import eigen
+from ..core.tmm import exact as tmm_exact
 
 METHOD_STYLE = {  # label, colour, marker
     'tmm1': ('TMM, lumping 1 (segment centres)', 'tab:blue', 'o'),
@@ -39,11 +41,11 @@ def _grid(title):
     figure = Figure(figsize=(12, 9), layout='constrained')
     axes = figure.subplots(2, 2)
     figure.suptitle(title, fontsize=13)
-    return figure, dict(zip(tmm.BOUNDARY_CONDITIONS, axes.ravel()))
+    return figure, dict(zip(beams.BOUNDARY_CONDITIONS, axes.ravel()))
 
 
 def _panel_title(bc, beam):
-    exact = tmm.exact_frequencies(beam, bc, 1)[0]
+    exact = tmm_exact.exact_frequencies(beam, bc, 1)[0]
     name = 'supported-supported' if bc == 'supported' else bc
     return f'{name}  (exact first frequency {exact:.3f} rad/s)'
 
@@ -126,7 +128,7 @@ def plot_speed(table, path):
     segments = ', '.join(str(n) for n in next(iter(table.values()))['fe'][0])
     figure.text(0.5, 0.0, f'Segments per curve: {segments}. TMM: scan from 0 with d_omega '
                 '= 10 rad/s, then false position; FE: assembly, then scipy.linalg.eigh (up to '
-                f'{tmm.DENSE_EIGEN_LIMIT} DOFs) or sparse LU + ARPACK.',
+                f'{eigen.DENSE_EIGEN_LIMIT} DOFs) or sparse LU + ARPACK.',
                 ha='center', va='top', fontsize=9)
     figure.savefig(path, dpi=110, bbox_inches='tight')
     return path
@@ -175,7 +177,7 @@ def plot_beam(out_dir, beam=None):
     ----------
     out_dir : str or pathlib.Path
         Directory (created if missing).
-    beam : tmm.UniformBeam, optional
+    beam : beams.UniformBeam, optional
         Default: the Kim & Moon beam.
 
     Returns
@@ -184,7 +186,7 @@ def plot_beam(out_dir, beam=None):
         The PNG files written.
 
     """
-    beam = beam or tmm.UniformBeam.kim_moon()
+    beam = beam or beams.UniformBeam.kim_moon()
     out = pathlib.Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     return [

@@ -20,7 +20,7 @@ from matplotlib.figure import Figure
 import numpy as np
 
 from ..core import spring_design
-from ..core.mechanism import JOINT_NAMES
+from ..names import JOINT_NAMES
 from ..studies.criteria_study import criteria_data, criteria_text, PAPER_JOINT, TABLE_2
 
 CASE_STYLE = {  # label colour

@@ -14,7 +14,7 @@ import pathlib
 
 import numpy as np
 
-from ..core.mechanism import load_mechanism
+from ..core.mechanism_file import load_mechanism
 from ..errors import FlexlinkError
 from ..studies.bench import estimator_report_data, node_model_options
 

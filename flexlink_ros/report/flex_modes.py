@@ -9,7 +9,7 @@ three mode shapes at the paper's angles (Figs. 14-15).
 from matplotlib.figure import Figure
 import numpy as np
 
-from ..core.mechanism import LINK_NAMES
+from ..names import LINK_NAMES
 from ..studies.flex_data import SHAPE_SPEED_RAD_S
 
 LINK_COLOURS = ('tab:green', 'tab:blue', 'tab:red')

@@ -33,8 +33,6 @@ from sensor_msgs.msg import JointState
 from . import runtime
 from .messages import parameter_descriptor
 from .parameters import ParameterSpec
-from .runtime import INVALID_CONTEXT_TEXTS, is_shutdown_error  # noqa: F401  SHIM
-from .runtime import make_executor, spin_until_shutdown  # noqa: F401  SHIM
 from ..core.numerics import RPM, wrap_to_pi
 
 PROFILES = ('constant', 'ramp', 'sweep')

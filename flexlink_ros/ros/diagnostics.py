@@ -12,7 +12,7 @@ import numpy as np
 
 from .messages import ERROR, joint_level, OK, STALE, status, WARN
 from .node_model import OTHER_KINDS, SKIP_KINDS, WARN_FLAGS
-from ..core.estimation.streaming import SampleFlag
+from ..core.estimation.sample import SampleFlag
 from ..names import JOINT_NAMES, NODE_NAME
 
 

@@ -24,7 +24,6 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 
 from ..errors import InputRejected
-from ..io.markers import linkage_markers  # noqa: F401  SHIM
 from ..names import JOINT_NAMES
 
 OK, WARN, ERROR, STALE = (DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR,

@@ -42,7 +42,6 @@ from rclpy.node import Node  # noqa: E402
 from rclpy.utilities import remove_ros_args  # noqa: E402
 
 from . import runtime, startup  # noqa: E402
-from ..names import FIRST_INPUT_MESSAGE, READY_MESSAGE  # noqa: E402, F401  SHIM
 from .pipeline import EstimatorPipeline  # noqa: E402
 from ..errors import FlexlinkError  # noqa: E402
 

@@ -11,12 +11,11 @@ import math
 
 from . import parameters
 from .messages import crank_from_joint_state
-from ..core.estimation.streaming import SampleFlag
-from ..core.mechanism import load_mechanism
-from ..core.reduction.model import model_for_mechanism
+from ..core.estimation.sample import SampleFlag
+from ..core.mechanism_file import load_mechanism
+from ..core.reduction.pipeline import model_for_mechanism
 from ..errors import InputRejected, MalformedCdr
 from ..io import cdr
-from ..names import FIRST_INPUT_MESSAGE, READY_MESSAGE  # noqa: F401  SHIM
 
 # The default model (node parameters, core.options.DEFAULT_SIZES) meets this relative RMS
 # error on Cho 1992 against flexlink plan's scene reference (1.3 % coupler, 0.9 % lever).

@@ -23,11 +23,14 @@ from visualization_msgs.msg import MarkerArray
 from . import diagnostics
 from . import parameters
 from .messages import diagnostics_message, joint_level, parameter_descriptor
-from .node_model import (crank_sample, FIRST_INPUT_MESSAGE, load_node_model, one_line,
-                         PeriodStats, publishable, READY_MESSAGE, SKIP_KINDS, Totals)
+from .node_model import (
+    crank_sample, load_node_model, one_line, PeriodStats, publishable, SKIP_KINDS, Totals,
+)
+from ..names import FIRST_INPUT_MESSAGE, READY_MESSAGE
 from .runtime import is_shutdown_error
 from .startup import check_startup_signal
-from ..core.estimation.streaming import SampleFlag, StreamingEstimator
+from ..core.estimation.sample import SampleFlag
+from ..core.estimation.streaming import StreamingEstimator
 from ..errors import FlexlinkError, InputRejected, OutlierSample, RecorderError
 from ..io import cdr
 from ..io.markers import MarkerEncoder

@@ -13,7 +13,11 @@ import time
 
 import numpy as np
 
-from ..core.tmm import transfer as tmm
+from ..core.tmm import beams
+from ..core.tmm import eigen
+from ..core.tmm import exact as tmm_exact
+from ..core.tmm import roots
+from ..core.tmm import solve
 
 # The methods compared: TMM with lumping 1, 2, 3, and consistent-mass FE.
 METHODS = ('tmm1', 'tmm2', 'tmm3', 'fe')
@@ -39,8 +43,8 @@ def frequencies(beam, bc, segments, method, modes=1, search='newton', step=50.0,
                 verify=True):
     """Lowest `modes` frequencies [rad/s] of `method` ('tmm1'..'tmm3', 'fe'), ndarray (modes,)."""
     if method == 'fe':
-        return tmm.fe_frequencies(beam, bc, segments, modes)
-    return tmm.tmm_frequencies(beam, bc, segments, int(method[-1]), modes, search, step,
+        return eigen.fe_frequencies(beam, bc, segments, modes)
+    return solve.tmm_frequencies(beam, bc, segments, int(method[-1]), modes, search, step,
                                verify=verify).frequencies_rad_s
 
 
@@ -50,8 +54,8 @@ def has_mode(beam, bc, segments, method):
         return segments >= (2 if bc == 'fixed-fixed' else 1)
     if method == 'tmm2' and segments < 2:
         return False
-    model = tmm.lump_masses(beam, segments, int(method[-1]), bc)
-    return tmm.available_modes(model, bc) >= 1
+    model = beams.lump_masses(beam, segments, int(method[-1]), bc)
+    return roots.available_modes(model, bc) >= 1
 
 
 def error_table(beam, segment_counts=ERROR_SEGMENTS):
@@ -66,8 +70,8 @@ def error_table(beam, segment_counts=ERROR_SEGMENTS):
 
     """
     table = {}
-    for bc in tmm.BOUNDARY_CONDITIONS:
-        exact = tmm.exact_frequencies(beam, bc, 1)[0]
+    for bc in beams.BOUNDARY_CONDITIONS:
+        exact = tmm_exact.exact_frequencies(beam, bc, 1)[0]
         table[bc] = {}
         for method in METHODS:
             counts = [n for n in segment_counts if has_mode(beam, bc, n, method)]
@@ -92,8 +96,8 @@ def timing_table(beam, segment_counts=TIMING_SEGMENTS, repeats=TIMING_REPEATS,
 
     """
     table = {}
-    for bc in tmm.BOUNDARY_CONDITIONS:
-        exact = tmm.exact_frequencies(beam, bc, modes)
+    for bc in beams.BOUNDARY_CONDITIONS:
+        exact = tmm_exact.exact_frequencies(beam, bc, modes)
         table[bc] = {}
         for method in METHODS:
             seconds, errors = [], []
@@ -102,7 +106,7 @@ def timing_table(beam, segment_counts=TIMING_SEGMENTS, repeats=TIMING_REPEATS,
                 for repeat in range(repeats + 1):
                     start = time.perf_counter()
                     values = frequencies(beam, bc, n, method, modes, 'false-position',
-                                         tmm.DEFAULT_STEP_RAD_S, verify=False)
+                                         roots.DEFAULT_STEP_RAD_S, verify=False)
                     if repeat:  # the first call only warms caches up
                         best = min(best, time.perf_counter() - start)
                 seconds.append(best)
@@ -128,12 +132,12 @@ def iteration_table(beam, steps=SCAN_STEPS_RAD_S, segments=PAPER_SEGMENTS):
                 ('false position (Illinois)', 'false-position', True),
                 ('newton', 'newton', True))
     table = {}
-    for bc in tmm.BOUNDARY_CONDITIONS:
+    for bc in beams.BOUNDARY_CONDITIONS:
         table[bc] = {}
         for label, search, illinois in variants:
             loose, tight = [], []
             for step in steps:
-                root = tmm.tmm_frequencies(beam, bc, segments, 3, 1, search, step,
+                root = solve.tmm_frequencies(beam, bc, segments, 3, 1, search, step,
                                            illinois=illinois).roots[0]
                 loose.append(root.iterations_paper_criterion)
                 tight.append(root.iterations)
@@ -161,7 +165,7 @@ def frequency_table(beam, max_segments=20):
 
     Parameters
     ----------
-    beam : tmm.UniformBeam
+    beam : beams.UniformBeam
         The beam.
     max_segments : int
         Largest number of segments.
@@ -173,8 +177,8 @@ def frequency_table(beam, max_segments=20):
 
     """
     table = {}
-    for bc in tmm.BOUNDARY_CONDITIONS:
-        table[bc] = {'exact': tmm.exact_frequencies(beam, bc, 1)[0]}
+    for bc in beams.BOUNDARY_CONDITIONS:
+        table[bc] = {'exact': tmm_exact.exact_frequencies(beam, bc, 1)[0]}
         for method in METHODS:
             counts = [n for n in range(2, max_segments + 1) if has_mode(beam, bc, n, method)]
             table[bc][method] = (counts, [frequencies(beam, bc, n, method)[0] for n in counts])

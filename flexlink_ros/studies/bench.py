@@ -15,12 +15,14 @@ import numpy as np
 
 from .synthetic import last_revolution, PAPER_RPM, run_estimate, stream_timed, \
     synthetic_signal, timing_summary
-from ..core.estimation.streaming import compiled_step_available, replay
+from ..core.estimation.native import compiled_step_available
+from ..core.estimation.offline import replay
 from ..core.fe import linkage as assembly
 from ..core.integrators import RadauIIA
 from ..core.numerics import relative_rms, RPM
 from ..core.options import ModelOptions
-from ..core.reduction import model as reduced
+from ..core.reduction import pipeline
+from ..core.reduction import reference as reduction_reference
 
 # Length of the signal the offline replay rate is measured on [s] (amortises the warm start).
 OFFLINE_SECONDS = 20.0
@@ -46,7 +48,7 @@ def configuration_error(mechanism, model, options, rpm, rate_hz=1000.0, jitter=0
     stamps, angles, speeds = synthetic_signal(rpm, seconds, rate_hz, jitter, seed)
     out = replay(model, stamps, angles, speeds)
     mask = last_revolution(stamps, rpm)
-    ref = reduced.reference_response(mechanism, options, rpm * RPM, angles[mask])
+    ref = reduction_reference.reference_response(mechanism, options, rpm * RPM, angles[mask])
     return {'error_lever_tip': relative_rms(out['lever_tip'][mask], ref['lever_tip']),
             'error_coupler_mid': relative_rms(out['coupler_mid'][mask], ref['coupler_mid']),
             'reference': ref.get('source')}
@@ -60,7 +62,7 @@ def full_order_cpu_per_second(mechanism, options, rpm, rate_hz=1000.0, steps=40)
     builds the modal damping from all frozen modes and takes one order-3 Radau IIA step:
     what integrating the unreduced model sample by sample costs.
     """
-    mech = reduced.fe_mechanism(mechanism, options)
+    mech = pipeline.fe_mechanism(mechanism, options)
     linkage = assembly.FlexibleLinkage(mech, options)
     method = RadauIIA(2)
     speed, h = rpm * RPM, 1.0 / rate_hz
@@ -71,7 +73,7 @@ def full_order_cpu_per_second(mechanism, options, rpm, rate_hz=1000.0, steps=40)
         system = linkage.assemble(speed * h * (n + method.c))
         mass, damping, stiffness, load = system.evaluate(speed)
         frozen = system.frozen_stiffness(speed)
-        damping = damping + np.array([reduced.modal_damping_matrix(m, k, mech.damping_ratio)
+        damping = damping + np.array([pipeline.modal_damping_matrix(m, k, mech.damping_ratio)
                                       for m, k in zip(mass, frozen)])
         q, v, _ = method.step(q, v, h, mass, damping, stiffness, load)
     return (time.process_time() - start) / steps * rate_hz
@@ -220,7 +222,7 @@ def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM
     long_signal = synthetic_signal(max(speeds_rpm), OFFLINE_SECONDS, rate_hz)
     models, entries = [], {}
     for label, options in configurations or bench_configurations(base):
-        model = reduced.model_for_mechanism(mechanism, options, use_cache=False)
+        model = pipeline.model_for_mechanism(mechanism, options, use_cache=False)
         models.append((label, options, model))
         entries[label] = (model, compiled_step_available())
     # The default's numpy step too (the compiled step's reference and fallback).
@@ -279,11 +281,11 @@ def estimator_report_data(mechanism, options):
 
     """
     bench = run_bench(mechanism, options)
-    model = reduced.model_for_mechanism(mechanism, options)
+    model = pipeline.model_for_mechanism(mechanism, options)
     rpm = PAPER_RPM[-1]
     estimate = run_estimate(model, rpm)
     angles = np.radians(estimate['crank_deg'])
-    reference = reduced.reference_response(mechanism, options, rpm * RPM, angles)
+    reference = reduction_reference.reference_response(mechanism, options, rpm * RPM, angles)
     series = {key: np.column_stack([estimate[key]['dx_m'], estimate[key]['dy_m']])
               for key in ('lever_tip', 'coupler_mid')}
     return {'bench': bench, 'crank_deg': np.asarray(estimate['crank_deg']),

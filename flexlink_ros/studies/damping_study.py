@@ -49,7 +49,8 @@ from ..core.fe.simulate import periodic_response
 from ..core.fe.stiffness_damping import (
     element_resultants, link_local_rate, stiffness_damping_terms, system_matrices,
 )
-from ..core.mechanism import load_mechanism, Mechanism
+from ..core.mechanism_file import load_mechanism
+from ..core.mechanism import Mechanism
 from ..core.options import ModelOptions
 
 DAMPING = ('objective', 'naive', 'modal')

@@ -11,7 +11,7 @@ import numpy as np
 from .flex_frequencies import BEARINGS, PAPER_RPM, PAPER_SPEEDS_RAD_S, SHAPE_ANGLES_DEG
 from .flex_measures import coupler_mid_path, harmonic_shares, peak_to_peak
 from .flex_measures import shape_correlation, signed_area, uniform_load_shape
-from ..core.mechanism import LINK_NAMES
+from ..names import LINK_NAMES
 
 # The link holding modes 1, 2, 3 according to Conclusion 2: coupler, lever, crank.
 CONCLUSION_2_LINKS = (1, 2, 0)

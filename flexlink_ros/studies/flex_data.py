@@ -22,7 +22,7 @@ from .flex_truncation import truncation_study
 from ..core.fe.linkage import FlexibleLinkage
 from ..core.fe.modes import solve_frozen_modes
 from ..core.fe.simulate import periodic_response
-from ..core.mechanism import load_mechanism
+from ..core.mechanism_file import load_mechanism
 from ..core.numerics import RPM
 from ..core.options import ModelOptions
 

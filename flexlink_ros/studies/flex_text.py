@@ -11,7 +11,7 @@ import numpy as np
 from .flex_data import SWEEP_STEP_DEG
 from .flex_measures import peak_to_peak
 from .flex_truncation import modes_needed, TOLERANCES
-from ..core.mechanism import LINK_NAMES
+from ..names import LINK_NAMES
 
 
 def deflection_unit(values_m):

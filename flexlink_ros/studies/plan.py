@@ -14,7 +14,8 @@ import numpy as np
 from .plan_scoring import evaluate_model, physics_error, PlanSignals
 from .synthetic import PAPER_RPM
 from ..core.fe import linkage as assembly
-from ..core.reduction import model as reduced
+from ..core.reduction import pipeline
+from ..core.reduction import reference as reduction_reference
 
 # Element counts tried as simplifications (besides the mechanism's own count).
 PLAN_ELEMENTS = (2, 3, 4)
@@ -56,7 +57,7 @@ def scene_options(mechanism, base):
 def full_order_dofs(mechanism, options):
     """Count the DOFs of the full-order FE model of ``options`` (None if not available)."""
     try:
-        return assembly.FlexibleLinkage(reduced.fe_mechanism(mechanism, options),
+        return assembly.FlexibleLinkage(pipeline.fe_mechanism(mechanism, options),
                                         options).size
     except Exception:   # noqa: BLE001 -- no FE model (toy systems, stripped checkouts)
         return None
@@ -141,7 +142,7 @@ def _scene_reference(mechanism, scene, signals):
         source = signals.reference(scene, rpm).get('source')
     return {'options': dataclasses.asdict(scene), 'label': describe_physics(scene),
             'dofs': full_order_dofs(mechanism, scene), 'source': source,
-            'steps_per_revolution': reduced.REFERENCE_STEPS,
+            'steps_per_revolution': reduction_reference.REFERENCE_STEPS,
             'seconds': signals.reference_seconds(scene),
             'description': 'full-order periodic response of the richest model of the '
                            'scene (flexible crank, geometric stiffness, refined '

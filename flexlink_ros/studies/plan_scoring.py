@@ -9,9 +9,10 @@ import math
 import time
 
 from .synthetic import last_revolution, stream_timed, synthetic_signal, timing_summary
-from ..core.estimation.streaming import replay
+from ..core.estimation.offline import replay
 from ..core.numerics import relative_rms, RPM
-from ..core.reduction import model as reduced
+from ..core.reduction import pipeline
+from ..core.reduction import reference as reduction_reference
 
 
 def physics_key(options):
@@ -45,7 +46,7 @@ class PlanSignals:
         if key not in self.references:
             _, angles, _, mask = self.signals[rpm]
             start = time.perf_counter()
-            self.references[key] = reduced.reference_response(self.mechanism, options,
+            self.references[key] = reduction_reference.reference_response(self.mechanism, options,
                                                               rpm * RPM, angles[mask])
             self.seconds[key] = time.perf_counter() - start
         return self.references[key]
@@ -112,7 +113,7 @@ def evaluate_model(signals, scene, options, rate_hz):
 
     """
     start = time.perf_counter()
-    model = reduced.model_for_mechanism(signals.mechanism, options, use_cache=False)
+    model = pipeline.model_for_mechanism(signals.mechanism, options, use_cache=False)
     build_s = time.perf_counter() - start
     total, truncation = [], []
     for rpm in signals.speeds_rpm:

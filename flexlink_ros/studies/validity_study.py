@@ -37,10 +37,13 @@ import os
 
 import numpy as np
 
-from .peer_exudyn import BEARINGS, compare, DEFAULT_BETA_S, DEFAULT_ELEMENTS, linear_model
-from .peer_exudyn import OUTPUT_KEYS, peer_response
+from .peer_model import BEARINGS, DEFAULT_BETA_S, DEFAULT_ELEMENTS
+from .peer_exudyn import compare
+from .peer_linear import linear_model
+from .peer_model import OUTPUT_KEYS
+from .peer_exudyn import peer_response
 from .peer_model import resolve_mechanism
-from ..core.fe.second_order import corrected_response
+from ..core.fe.second_order_full import corrected_response
 from ..core.fe.simulate import periodic_response
 from ..core.validity import load_ratios, nonlinearity_indicator
 from ..core.validity import VALIDITY_THRESHOLD

@@ -3,8 +3,8 @@
 import json
 
 from flexlink_ros.cli import main as cli
-from flexlink_ros.core.tmm import transfer as tmm
 import pytest
+from flexlink_ros.core.tmm import roots
 
 
 def _run(capsys, *argv):
@@ -13,7 +13,7 @@ def _run(capsys, *argv):
     return code, captured.out, captured.err
 
 
-@pytest.mark.parametrize('search', tmm.SEARCHES)
+@pytest.mark.parametrize('search', roots.SEARCHES)
 def test_json_keys_and_table5_value(capsys, search):
     code, out, _ = _run(capsys, '--bc', 'fixed-supported', '--segments', '6', '--method', 'tmm3',
                         '--search', search, '--step', '10', '--modes', '2', '--json')

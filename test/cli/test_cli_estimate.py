@@ -1,4 +1,4 @@
-"""flexlink estimate / plan / bench, on the synthetic system of test_reduced.py."""
+"""flexlink estimate / plan / bench, on the synthetic system of toy_system.py."""
 
 import dataclasses
 import json
@@ -6,24 +6,30 @@ import math
 import time
 
 from flexlink_ros.cli import main as cli
-from flexlink_ros.core.mechanism import load_mechanism
+from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.numerics import relative_rms, RPM
-from flexlink_ros.core.reduction import model as reduced
 from flexlink_ros.report.estimator import plot_error_vs_cost, plot_estimate
 from flexlink_ros.ros import parameters as node_params
 from flexlink_ros.studies import bench, plan, synthetic
 import numpy as np
 import pytest
-from test_reduced import toy_samples, ZETA
+from toy_system import toy_samples, ZETA
+from flexlink_ros.core import options as core_options
+from flexlink_ros.core.reduction import build
+from flexlink_ros.core.reduction import cells
+from flexlink_ros.core.reduction import periodic
+from flexlink_ros.core.reduction import pipeline
+from flexlink_ros.core.reduction import reference as reduction_reference
+from flexlink_ros.core.reduction import model as tables
 
 TOY_CACHE = {}
 
 
 def toy_model(mechanism, options=None, cache_dir=None, use_cache=True):
-    options = options or reduced.ModelOptions()
+    options = options or core_options.ModelOptions()
     key = (min(options.modes, 6), min(options.static, 2), options.grid_size)
     if key not in TOY_CACHE:
-        TOY_CACHE[key] = reduced.reduce_samples(
+        TOY_CACHE[key] = build.reduce_samples(
             toy_samples(grid=options.grid_size), key[0], key[1],
             speed_max=options.speed_max, zeta=ZETA, info={'options': {'modes': key[0]}})
     return TOY_CACHE[key]
@@ -31,12 +37,12 @@ def toy_model(mechanism, options=None, cache_dir=None, use_cache=True):
 
 def toy_reference(mechanism, options, speed, angles):
     """Return the toy system with every direction kept, periodic at `speed`, at `angles`."""
-    full = toy_model(None, reduced.ModelOptions(modes=10, static=0, grid_size=32,
+    full = toy_model(None, core_options.ModelOptions(modes=10, static=0, grid_size=32,
                                                 speed_max=70.0))
     steps = 1024
-    grid, q, _ = reduced.periodic_response(full, speed, start_angle=0.0, steps=steps)
-    out = reduced.output_values(full, full.evaluate(grid, speed, 0.0), q)[:-1]
-    coef = reduced.periodic_cell_coefficients(out)
+    grid, q, _ = periodic.periodic_response(full, speed, start_angle=0.0, steps=steps)
+    out = tables.output_values(full, full.evaluate(grid, speed, 0.0), q)[:-1]
+    coef = cells.periodic_cell_coefficients(out)
     phase = np.mod(angles, 2 * np.pi) / (2 * np.pi) * steps
     k = np.floor(phase).astype(int) % steps
     values = np.einsum('mp,mpc->mc', (phase - np.floor(phase))[:, None] ** np.arange(4),
@@ -46,8 +52,8 @@ def toy_reference(mechanism, options, speed, angles):
 
 @pytest.fixture
 def toy(monkeypatch):
-    monkeypatch.setattr(reduced, 'model_for_mechanism', toy_model)
-    monkeypatch.setattr(reduced, 'reference_response', toy_reference)
+    monkeypatch.setattr(pipeline, 'model_for_mechanism', toy_model)
+    monkeypatch.setattr(reduction_reference, 'reference_response', toy_reference)
     monkeypatch.setattr(bench, 'reference_cpu_per_second', lambda *args: 1.0)
 
 
@@ -75,7 +81,7 @@ def test_estimate_json(toy, capsys):
 
 def test_estimate_matches_the_reference_over_the_last_revolution(toy):
     for jitter in (0.0, 0.3):
-        model = toy_model(None, reduced.ModelOptions(modes=4, static=2, grid_size=32))
+        model = toy_model(None, core_options.ModelOptions(modes=4, static=2, grid_size=32))
         result = synthetic.run_estimate(model, 391.0, seconds=0.4, jitter=jitter)
         angles = np.radians(result['crank_deg'])
         ref = toy_reference(None, None, 391.0 * RPM, angles)
@@ -86,10 +92,10 @@ def test_estimate_matches_the_reference_over_the_last_revolution(toy):
 
 def test_plan_picks_the_first_candidate_within_tolerance(toy, monkeypatch):
     monkeypatch.setattr(plan, 'plan_candidates', lambda base: [
-        reduced.ModelOptions(modes=1, static=0, grid_size=32),
-        reduced.ModelOptions(modes=4, static=2, grid_size=32),
-        reduced.ModelOptions(modes=6, static=3, grid_size=32)])
-    base = reduced.ModelOptions()
+        core_options.ModelOptions(modes=1, static=0, grid_size=32),
+        core_options.ModelOptions(modes=4, static=2, grid_size=32),
+        core_options.ModelOptions(modes=6, static=3, grid_size=32)])
+    base = core_options.ModelOptions()
     result = plan.run_plan(None, base, 391.0, 0.01, physics=[base], scene=base)
     assert result['choice'] is not None and result['choice']['options']['modes'] == 4
     # the physics stage builds the generous size (the last candidate); the size stage
@@ -119,7 +125,7 @@ def test_plan_on_cho1992_compares_every_physics_with_the_scene(config_dir, monke
     sizes = [(4, 2, 64), (8, 4, 128), (16, 4, 128)]
     monkeypatch.setattr(plan, 'plan_candidates', lambda base: [
         dataclasses.replace(base, modes=m, static=s, grid_size=g) for m, s, g in sizes])
-    base = reduced.ModelOptions(bearings='rigid', elements_per_link=4,
+    base = core_options.ModelOptions(bearings='rigid', elements_per_link=4,
                                 speed_max=1.05 * 391.0 * RPM)
     scene = plan.scene_options(mechanism, base)
     physics = [dataclasses.replace(scene, elements_per_link=3, rigid_crank=True),
@@ -155,8 +161,8 @@ def test_plan_on_cho1992_compares_every_physics_with_the_scene(config_dir, monke
 
 
 def test_bench_table_and_chart(toy, tmp_path):
-    configurations = [('default', reduced.ModelOptions(modes=4, static=2, grid_size=32)),
-                      ('small', reduced.ModelOptions(modes=2, static=0, grid_size=32))]
+    configurations = [('default', core_options.ModelOptions(modes=4, static=2, grid_size=32)),
+                      ('small', core_options.ModelOptions(modes=2, static=0, grid_size=32))]
     result = bench.run_bench(None, None, seconds=0.3, configurations=configurations)
     rows = result['configurations']
     plot_error_vs_cost(rows, tmp_path / 'chart.png')

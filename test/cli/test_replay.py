@@ -6,8 +6,7 @@ import subprocess
 import sys
 
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
-from flexlink_ros.core.mechanism import load_mechanism
-from flexlink_ros.core.reduction import model as reduced
+from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.io.recorder import McapRecorder
 from flexlink_ros.io.recording import iter_recording
 from flexlink_ros.ros import messages as ros_messages, parameters as node_params
@@ -16,6 +15,7 @@ import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
+from flexlink_ros.core.reduction import pipeline
 
 RPM = 2.0 * math.pi / 60.0
 
@@ -24,7 +24,7 @@ RPM = 2.0 * math.pi / 60.0
 def model():
     # The replay's default model (the node's) without geometric stiffness, cached.
     options = node_params.default_model_options(geometric_stiffness=False)
-    return reduced.model_for_mechanism(load_mechanism('cho1992'), options)
+    return pipeline.model_for_mechanism(load_mechanism('cho1992'), options)
 
 
 def joint_state(stamp_ns, names, positions, velocities=()):

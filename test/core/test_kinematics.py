@@ -1,7 +1,7 @@
 """Rigid-body kinematics against loop closure and finite differences of itself."""
 
 from flexlink_ros.core.kinematics import dead_centres, solve_kinematics
-from flexlink_ros.core.mechanism import load_mechanism
+from flexlink_ros.core.mechanism_file import load_mechanism
 import numpy as np
 import pytest
 

@@ -16,7 +16,6 @@ import math
 
 from flexlink_ros.core import validity
 from flexlink_ros.core.fe import linkage as assembly
-from flexlink_ros.core.fe import second_order as so
 from flexlink_ros.core.fe.simulate import periodic_response
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
@@ -24,6 +23,7 @@ from flexlink_ros.studies import peer_exudyn as peer
 import numpy as np
 import pytest
 import scipy.linalg
+from flexlink_ros.core.fe import second_order_geometry
 
 ELEMENTS = 4
 
@@ -61,7 +61,7 @@ def test_buckling_load_against_fe_eigenvalue(mech, link):
     spec, elements = mech.links[link], 12
     mats = assembly.link_matrices(mech.youngs_modulus, spec.area, spec.second_moment,
                                   mech.density, spec.length, elements)
-    gmat = so.unit_geometric_stiffness(mats.element_length, elements)
+    gmat = second_order_geometry.unit_geometric_stiffness(mats.element_length, elements)
     free = np.setdiff1d(np.arange(3 * (elements + 1)), [0, 1, 3 * elements + 1])
     # G is singular (no axial terms): the largest 1/P of G u = (1/P) K u, K positive definite
     inverse = scipy.linalg.eigh(gmat[np.ix_(free, free)], mats.stiffness[np.ix_(free, free)],
@@ -76,7 +76,7 @@ def test_frequency_shift_of_axial_force(mech, tension):
     spec, elements = mech.links[2], 12
     mats = assembly.link_matrices(mech.youngs_modulus, spec.area, spec.second_moment,
                                   mech.density, spec.length, elements)
-    gmat = so.unit_geometric_stiffness(mats.element_length, elements)
+    gmat = second_order_geometry.unit_geometric_stiffness(mats.element_length, elements)
     free = np.setdiff1d(np.arange(3 * (elements + 1)), [0, 1, 3 * elements + 1])
     sub = np.ix_(free, free)
     first = lambda k: scipy.linalg.eigh(k[sub], mats.mass[sub], eigvals_only=True)[0]  # noqa

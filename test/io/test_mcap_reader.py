@@ -18,6 +18,8 @@ import pytest
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 import zstandard
+from flexlink_ros.io import recording as io_recording
+from flexlink_ros import names as flexlink_ros_names
 
 T0_NS = 1_700_000_000_000_000_000
 STEP_NS = 1_000_000
@@ -99,7 +101,7 @@ def test_a_bad_crc_in_the_first_chunk_loses_only_that_chunk(recording, tmp_path,
 
     damaged = []
     counts, kept = cli_replay.scan_recording(bad, joint_name='crank', damaged=damaged)
-    assert counts == {'/joint_states': [cli_replay.JOINT_STATE, 5000 - lost]}
+    assert counts == {'/joint_states': [flexlink_ros_names.JOINT_STATE, 5000 - lost]}
     assert [data for _, _, data in kept['/joint_states']] == [d for _, _, d in original[lost:]]
     assert [(f, o) for f, o, _ in damaged] == [(str(bad), first)]
 
@@ -182,11 +184,11 @@ def test_joint_detection_looks_past_the_first_messages(tmp_path):
     assert samples['skipped_reasons'] == {"no position for joint 'crank'": 49}
     # Beyond the probe the topic is not taken (bounded), with the usual one-line refusal.
     late = write_crank_recording(
-        tmp_path / 'late.mcap', cli_replay.JOINT_PROBE_MESSAGES + 20,
-        payload=lambda k: crank_state(k, ('lever',) if k < cli_replay.JOINT_PROBE_MESSAGES
+        tmp_path / 'late.mcap', io_recording.JOINT_PROBE_MESSAGES + 20,
+        payload=lambda k: crank_state(k, ('lever',) if k < io_recording.JOINT_PROBE_MESSAGES
                                       else ('crank',)))
     scan = cli_replay.scan_recording(late, joint_name='crank')
-    assert len(scan[1]['/joint_states']) == cli_replay.JOINT_PROBE_MESSAGES
+    assert len(scan[1]['/joint_states']) == io_recording.JOINT_PROBE_MESSAGES
     with pytest.raises(ValueError, match='no sensor_msgs/msg/JointState topic with joint'):
         cli_replay.choose_input_topic(late, 'crank', scan=scan)
 

@@ -11,7 +11,8 @@ import time
 from flexlink_ros.core.options import DEFAULT_SIZES, ModelOptions
 from flexlink_ros.names import NODE_NAME
 from flexlink_ros.ros import parameters as node_params
-from flexlink_ros.ros.node_model import FIRST_INPUT_MESSAGE, load_node_model, READY_MESSAGE
+from flexlink_ros.names import FIRST_INPUT_MESSAGE, READY_MESSAGE
+from flexlink_ros.ros.node_model import load_node_model
 import numpy as np
 import pytest
 

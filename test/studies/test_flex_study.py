@@ -5,7 +5,7 @@ import dataclasses
 from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.fe.modes import solve_frozen_modes
 from flexlink_ros.core.fe.simulate import periodic_response
-from flexlink_ros.core.mechanism import load_mechanism
+from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.numerics import relative_rms, RPM
 from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.studies import flex_events, flex_frequencies, flex_measures, flex_truncation

@@ -11,7 +11,7 @@ import subprocess
 import sys
 
 from flexlink_ros.core.kinematics import solve_kinematics
-from flexlink_ros.core.mechanism import load_mechanism
+from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.errors import FlexlinkError
 from flexlink_ros.studies import peer_exudyn as peer
 from flexlink_ros.studies import peer_model

@@ -13,10 +13,13 @@ import time
 
 import numpy as np
 
-from .streaming import (
-    DEFAULT_ACCEL_LIMIT, DEFAULT_NEAR_ZERO_FRACTION, DEFAULT_RESET_GAP_S, InputGate, plan_rows,
-    REACTION_FLOOR_FRACTION, replay, SampleFlag, step_tables, WarmStartLimiter,
-)
+from .gate import DEFAULT_RESET_GAP_S, InputGate, plan_rows
+from .offline import replay
+from .sample import SampleFlag
+from .step import REACTION_FLOOR_FRACTION
+from .streaming import DEFAULT_ACCEL_LIMIT, DEFAULT_NEAR_ZERO_FRACTION
+from .tables import step_tables
+from .warm_start import WarmStartLimiter
 from ...names import JOINT_NAMES, OUTPUT_POINTS
 
 # Rows planned at a time (plan_rows) ahead of the segment being replayed; after a restart the

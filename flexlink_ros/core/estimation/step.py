@@ -23,7 +23,7 @@ from . import native
 from .tables import hermite_basis
 from ..integrators import RADAU_TABLEAUX
 from ..numerics import TWO_PI
-from ..reduction.model import CELL_POWERS, MONOMIALS
+from ..reduction.cells import CELL_POWERS, MONOMIALS
 from ...names import OUTPUT_NAMES
 
 # Steps longer than this are split into equal sub-steps, the crank state interpolated linearly

@@ -20,17 +20,12 @@ import numpy as np
 from . import tables
 from .crank_filter import CompiledCrankRateFilter, CrankRateFilter, DEFAULT_FIT_TIME_CONSTANT_S
 from .gate import DEFAULT_RESET_GAP_S, InputGate
-from .gate import plan_rows  # noqa: F401  SHIM
 from .native import compiled_step_available, RECORD_SIZE, ROW_SIZE
 from .sample import (CLIPPED_ACCEL, CLIPPED_SPEED, LARGE_STEP, nan_sample, NO_CRITERIA,
                      OUT_OF_BOUND, REPEATED, sample_from_record, SPEED_FROM_ANGLE)
-from .sample import SampleFlag  # noqa: F401  SHIM
 from .step import CompiledStep, MAX_SUBSTEP_NS, NumpyStep
-from .step import REACTION_FLOOR_FRACTION  # noqa: F401  SHIM
-from .tables import _StepTables  # noqa: F401  SHIM
 from .throttled_log import ThrottledWarning
 from .warm_start import WarmStart
-from .warm_start import WarmStartLimiter  # noqa: F401  SHIM
 from ...errors import FlexlinkError, OutlierSample
 from ...names import JOINT_NAMES, OUTPUT_NAMES
 
@@ -45,7 +40,6 @@ DEFAULT_NEAR_ZERO_FRACTION = 0.05
 # Deflection bound: this factor times the resonant amplification 1 / (2 zeta) times the
 # largest quasi-static deflection over the grid at constant speeds up to speed_max.
 DEFLECTION_SAFETY_FACTOR = 2.0
-step_tables = tables.step_tables  # not an import: the estimator has a parameter of this name SHIM
 
 
 class StreamingEstimator:
@@ -393,7 +387,3 @@ class StreamingEstimator:
 
         """
         return self.model.shapes(sample.crank_angle, np.array(sample.modal))
-
-
-# Re-exported after StreamingEstimator, which offline.py imports (a cycle until SHIMs go).
-from .offline import replay, REPLAY_CHUNK  # noqa: E402, F401, I100  SHIM

@@ -15,7 +15,7 @@ import numpy as np
 from .sample import COLD_START, WARM_START
 from .throttled_log import ThrottledWarning
 from ..numerics import TWO_PI
-from ..reduction.model import periodic_response
+from ..reduction.periodic import periodic_response
 
 LOGGER = logging.getLogger(__name__)
 

@@ -17,7 +17,9 @@ import dataclasses
 
 import numpy as np
 
-from ..mechanism import JOINT_MEMBERS, JOINT_NAMES, LINK_NAMES
+from ..mechanism import JOINT_MEMBERS
+from ...names import JOINT_NAMES
+from ...names import LINK_NAMES
 
 # First joint of each link: the link frame's x runs from it to the link's second joint.
 FIRST_JOINT = {0: 'O2', 1: 'A', 2: 'O4'}

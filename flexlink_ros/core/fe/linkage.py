@@ -15,7 +15,6 @@ import numpy as np
 
 from . import outputs, system
 from .dofs import gather_matrix, number_dofs
-from .link import gauss_points  # noqa: F401  SHIM
 from .link import gauss_positions, link_matrices
 from ..dynamics import axial_force
 from ..kinematics import solve_kinematics

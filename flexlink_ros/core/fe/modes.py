@@ -18,7 +18,7 @@ import dataclasses
 import numpy as np
 import scipy.linalg
 
-from ..mechanism import LINK_NAMES
+from ...names import LINK_NAMES
 
 
 @dataclasses.dataclass(frozen=True)

@@ -12,7 +12,7 @@ import numpy as np
 
 from .basis import build_basis, fit_in_w2
 from .cells import CELL_POWERS, MONOMIALS, periodic_cell_coefficients
-from .tables import ReducedModel, TableLayout
+from .model import ReducedModel, TableLayout
 
 # The affine pieces of stiffness, load and reactions: F = F_1 + a F_a + w^2 F_w2.
 AFFINE_PIECES = ('1', 'a', 'w2')

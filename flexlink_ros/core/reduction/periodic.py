@@ -6,7 +6,7 @@ The full-order counterpart is core/fe/simulate.py's ``periodic_response``.
 
 import numpy as np
 
-from .tables import system_blocks
+from .model import system_blocks
 from ..integrators import compose_affine, RadauIIA, step_maps
 
 # Steps per chunk of periodic_response (bounds its peak memory).

@@ -14,7 +14,7 @@ import scipy.linalg
 from . import store
 from .basis import FrozenSamples
 from .build import reduce_samples
-from .tables import ReducedModel
+from .model import ReducedModel
 from .. import dynamics
 from ..fe import linkage as assembly
 from ..options import MODEL_VERSION, ModelOptions

@@ -14,7 +14,7 @@ from .build import reduce_samples
 from .cells import CELL_POWERS, periodic_cell_coefficients
 from .periodic import periodic_response
 from .pipeline import fe_mechanism, frozen_samples_for
-from .tables import output_values
+from .model import output_values
 from ..fe import linkage as assembly
 from ..fe import simulate
 

@@ -1,12 +1,15 @@
 """Shared inputs of the estimation tests: sample times, the toy model and its forces, feeds."""
 
 from flexlink_ros.core.estimation.native import compiled_step_available
-from flexlink_ros.core.mechanism import load_mechanism
-from flexlink_ros.core.reduction import model as reduced
+from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.errors import OutlierSample
 import numpy as np
 import pytest
-from test_reduced import CONFIG, toy_samples, ZETA
+from toy_system import CONFIG, toy_samples, ZETA
+from flexlink_ros.core.reduction import build
+from flexlink_ros.core.reduction import cells
+from flexlink_ros.core.reduction import periodic
+from flexlink_ros.core.reduction import model as tables
 
 SPEED_MAX = 65.0
 SPEED = 41.0            # rad/s (391 rpm)
@@ -61,18 +64,18 @@ def toy_model():
     """Reduced toy model (64-point grid, 4 modes + 2 static) with joint reactions."""
     samples = toy_samples(grid=64)
     forces, _ = toy_forces(64)
-    return reduced.reduce_samples(samples, modes=4, static=2, speed_max=SPEED_MAX, zeta=ZETA,
+    return build.reduce_samples(samples, modes=4, static=2, speed_max=SPEED_MAX, zeta=ZETA,
                                   forces=forces)
 
 
 def periodic_outputs(model, speed, angles):
     """Periodic steady-state outputs of the reduced model at given crank angles."""
     steps = 2048
-    grid, q, _ = reduced.periodic_response(model, speed, start_angle=0.0, steps=steps)
-    out = reduced.output_values(model, model.evaluate(grid, speed, 0.0), q)[:-1]
+    grid, q, _ = periodic.periodic_response(model, speed, start_angle=0.0, steps=steps)
+    out = tables.output_values(model, model.evaluate(grid, speed, 0.0), q)[:-1]
     phase = np.mod(angles, 2 * np.pi) / (2 * np.pi) * steps * np.sign(speed)
     # Periodic cubic interpolation of the fine reference.
-    coef = reduced.periodic_cell_coefficients(out)
+    coef = cells.periodic_cell_coefficients(out)
     k = np.floor(np.mod(phase, steps)).astype(int)
     t = np.mod(phase, steps) - k
     return np.einsum('mp,mpc->mc', t[:, None] ** np.arange(4), coef[k])

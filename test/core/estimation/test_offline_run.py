@@ -3,13 +3,15 @@
 import math
 
 from flexlink_ros.core.estimation import offline, offline_run, streaming, tables
-from flexlink_ros.core.estimation.streaming import SampleFlag, StreamingEstimator
-from flexlink_ros.core.mechanism import load_mechanism
-from flexlink_ros.core.reduction import model as reduced
+from flexlink_ros.core.estimation.sample import SampleFlag
+from flexlink_ros.core.estimation.streaming import StreamingEstimator
+from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.errors import OutlierSample
 from flexlink_ros.ros import parameters as node_params
 import numpy as np
 import pytest
+from flexlink_ros.core import options as core_options
+from flexlink_ros.core.reduction import pipeline
 
 RPM = 2.0 * math.pi / 60.0
 
@@ -18,7 +20,7 @@ RPM = 2.0 * math.pi / 60.0
 def model():
     """Build (or load) the node's default model without geometric stiffness."""
     options = node_params.default_model_options(geometric_stiffness=False)
-    return reduced.model_for_mechanism(load_mechanism('cho1992'), options)
+    return pipeline.model_for_mechanism(load_mechanism('cho1992'), options)
 
 
 def test_segments_follow_the_streaming_resets():
@@ -82,7 +84,7 @@ def test_segments_share_one_set_of_step_tables(model, monkeypatch):
     result = offline_run.estimate_offline(model, stamps, angles, speeds)
     assert result['segments'] == 6 and len(built) == 1
     with pytest.raises(ValueError, match='do not match the model'):
-        small = reduced.model_for_mechanism(load_mechanism('cho1992'), reduced.ModelOptions(
+        small = pipeline.model_for_mechanism(load_mechanism('cho1992'), core_options.ModelOptions(
             rigid_crank=True, bearings='rigid', geometric_stiffness=False))
         StreamingEstimator(model, step_tables=tables.step_tables(small))
 

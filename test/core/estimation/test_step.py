@@ -9,9 +9,9 @@ from flexlink_ros.core.estimation.step import (joint_criteria, MAX_SUBSTEP_NS,
                                                REACTION_FLOOR_FRACTION, STAGE1)
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
 from flexlink_ros.core.integrators import RadauIIA
-from flexlink_ros.core.reduction import model as reduced
 import numpy as np
 import pytest
+from flexlink_ros.core.reduction import model as tables
 
 
 @pytest.fixture(scope='module')
@@ -46,7 +46,7 @@ def test_fused_step_equals_the_reference_radau_step(toy_model):
                                     accels[0] + c1 * (accels[1] - accels[0]))
         current = toy_model.evaluate(sample.crank_angle, speeds[1], accels[1])
         rows = np.vstack([stage1, current])
-        q_new, _, _ = method.step(q, v, step_ns * 1e-9, *reduced.system_blocks(toy_model, rows))
+        q_new, _, _ = method.step(q, v, step_ns * 1e-9, *tables.system_blocks(toy_model, rows))
         # 1e-6: the step tables hold M and C in float32 (2e-8 of the outputs; an error in
         # the algebra shows at O(h) or more).
         np.testing.assert_allclose(sample.modal, q_new, rtol=1e-6,

@@ -12,11 +12,16 @@ from flexlink_ros.core.estimation import streaming
 from flexlink_ros.core.estimation.native import FILTER_SPEED_FIT
 from flexlink_ros.core.estimation.sample import SampleFlag
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
-from flexlink_ros.core.reduction import model as reduced
 from flexlink_ros.ros import parameters as node_params
 import numpy as np
 import pytest
-from test_reduced import toy_samples, ZETA
+from toy_system import toy_samples, ZETA
+from flexlink_ros.core import options as core_options
+from flexlink_ros.core.reduction import build
+from flexlink_ros.core.reduction import pipeline
+from flexlink_ros.core.reduction import reference as reduction_reference
+from flexlink_ros.core.reduction import model as tables
+from flexlink_ros.studies import bench
 
 
 @pytest.fixture(scope='module')
@@ -61,8 +66,8 @@ def test_speed_steps_stops_reversal_and_sweep_stay_finite_and_bounded(toy_model)
         # modal rate zeta * omega_1 of the model (about 3.6 /s here).
         rest = [(t, s) for s, t in zip(samples, times) if 3.0 < t < 4.5]
         rows = toy_model.evaluate(rest[-1][1].crank_angle, 0.0, 0.0)
-        mass, damping, stiffness, load = (b[0] for b in reduced.system_blocks(toy_model, rows))
-        static = reduced.output_values(toy_model, rows, np.linalg.solve(stiffness, load)[None])
+        mass, damping, stiffness, load = (b[0] for b in tables.system_blocks(toy_model, rows))
+        static = tables.output_values(toy_model, rows, np.linalg.solve(stiffness, load)[None])
         free = np.array([s.lever_tip + s.coupler_mid for _, s in rest]) - static
         t_rest = np.array([t for t, _ in rest])
         early = np.max(np.abs(free[(t_rest > 3.3) & (t_rest < 3.6)]))
@@ -165,18 +170,18 @@ TARGETS = {0.0: (0.01, 0.05), 0.3: (0.02, 0.07)}
 @pytest.mark.parametrize('bearings', ['rigid', 'flexible'])
 def test_cho1992_streaming_accuracy_at_269_and_391_rpm(cho, bearings):
     # The default model: geometric stiffness of the rigid-body axial forces included.
-    options = reduced.ModelOptions(bearings=bearings)
-    model = reduced.model_for_mechanism(cho, options, use_cache=False)
+    options = core_options.ModelOptions(bearings=bearings)
+    model = pipeline.model_for_mechanism(cho, options, use_cache=False)
     for rpm in (269.0, 391.0):
         for jitter, (coupler_limit, lever_limit) in TARGETS.items():
-            errors = cli_estimate.configuration_error(cho, model, options, rpm, 1000.0, jitter,
+            errors = bench.configuration_error(cho, model, options, rpm, 1000.0, jitter,
                                                       seed=3)
             assert errors['error_coupler_mid'] < coupler_limit, (rpm, jitter, errors)
             assert errors['error_lever_tip'] < lever_limit, (rpm, jitter, errors)
 
 
 def test_model_without_reactions_flags_zero_criteria():
-    model = reduced.reduce_samples(toy_samples(grid=16), modes=3, speed_max=30.0, zeta=ZETA)
+    model = build.reduce_samples(toy_samples(grid=16), modes=3, speed_max=30.0, zeta=ZETA)
     sample = StreamingEstimator(model).update(0, 0.3, 20.0)
     assert sample.flags & SampleFlag.NO_CRITERIA
     assert sample.criterion == (0.0,) * 4 and sample.reaction_n == (0.0,) * 4
@@ -185,8 +190,8 @@ def test_model_without_reactions_flags_zero_criteria():
 def test_cho1992_criteria_equal_the_rigid_body_analysis_at_constant_speed(cho):
     """Tabulated reactions (F_1 + a F_a + w^2 F_w2, dF/dtheta) against core/criteria.py."""
     criteria = pytest.importorskip('flexlink_ros.core.criteria')
-    options = reduced.ModelOptions(bearings='rigid', geometric_stiffness=False)
-    model = reduced.model_for_mechanism(cho, options, use_cache=False)
+    options = core_options.ModelOptions(bearings='rigid', geometric_stiffness=False)
+    model = pipeline.model_for_mechanism(cho, options, use_cache=False)
     speed = 391.0 * 2.0 * np.pi / 60.0
     times = np.arange(600) * 1e-3
     angles = 0.4 + speed * times
@@ -218,7 +223,7 @@ def test_criterion_is_finite_and_flagged_at_a_zero_reaction():
     rate = np.zeros((count, 4, 2))
     rate[:, :, 1] = 3.0
     pieces = {'force': {'1': force}, 'force_rate': {'1': rate}}
-    model = reduced.reduce_samples(samples, modes=3, speed_max=30.0, zeta=ZETA, forces=pieces)
+    model = build.reduce_samples(samples, modes=3, speed_max=30.0, zeta=ZETA, forces=pieces)
     sample = StreamingEstimator(model).update(0, 0.0, 20.0)
     assert not sample.flags & SampleFlag.NO_CRITERIA
     assert all(math.isfinite(c) for c in sample.criterion)
@@ -230,14 +235,14 @@ def test_criterion_is_finite_and_flagged_at_a_zero_reaction():
 def test_gap_in_the_input_costs_no_accuracy(cho, gap_s):
     """391 rpm at 1 kHz with the input missing for gap_s: sub-steps keep the state."""
     options = node_params.default_model_options()
-    model = reduced.model_for_mechanism(cho, options)
+    model = pipeline.model_for_mechanism(cho, options)
     speed = 391.0 * np.pi / 30.0
     times = np.arange(0.0, 2.0, 1e-3)
     times = times[(times <= 1.0) | (times >= 1.0 + gap_s)]
     est = StreamingEstimator(model)
     samples = [est.update(int(round(t * 1e9)), speed * t, speed) for t in times]
     after = times >= 1.0 + gap_s
-    reference = reduced.reference_response(cho, options, speed,
+    reference = reduction_reference.reference_response(cho, options, speed,
                                            np.mod(speed * times[after], 2.0 * np.pi))
     got = np.array([s.coupler_mid for s in samples])[after]
     size = np.ptp(reference['coupler_mid'], axis=0).max()
@@ -257,7 +262,7 @@ def test_released_model_table_changes_nothing_streamed(toy_model):
     theta = np.concatenate([np.linspace(-1.0, 8.0, 37), nodes, nodes + 0.7 * nodes[1],
                             [2.0 * np.pi - 1e-9]])
     blocks = zip(kept.system_blocks(theta, 20.0, 3.0),
-                 reduced.system_blocks(toy_model, toy_model.evaluate(theta, 20.0, 3.0)))
+                 tables.system_blocks(toy_model, toy_model.evaluate(theta, 20.0, 3.0)))
     # M and C come from float32 step tables (6e-8 per entry); K and f are float64, exact.
     for (ours, theirs), rtol in zip(blocks, (1e-6, 1e-6, 1e-12, 1e-12)):
         np.testing.assert_allclose(ours, theirs, rtol=rtol, atol=rtol * np.abs(theirs).max())

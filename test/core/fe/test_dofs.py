@@ -3,7 +3,7 @@
 import pathlib
 
 from flexlink_ros.core.fe.linkage import FlexibleLinkage
-from flexlink_ros.core.mechanism import load_mechanism
+from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
 import numpy as np
 import pytest

@@ -6,7 +6,7 @@ import pathlib
 from flexlink_ros.core.fe import linkage
 from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.fe.modes import frozen_mode_sweep, modal_damping, solve_frozen_modes
-from flexlink_ros.core.mechanism import load_mechanism
+from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
 import numpy as np
 import pytest

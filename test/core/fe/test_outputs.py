@@ -6,7 +6,7 @@ import pathlib
 from flexlink_ros.core.fe.link import gauss_points
 from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.kinematics import solve_kinematics
-from flexlink_ros.core.mechanism import load_mechanism
+from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
 import numpy as np
 import pytest

@@ -9,7 +9,7 @@ import dataclasses
 import math
 
 from flexlink_ros.core.fe import second_order_full as so_full
-from flexlink_ros.core.mechanism import load_mechanism
+from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.studies import peer_exudyn as peer
 import numpy as np
 import pytest

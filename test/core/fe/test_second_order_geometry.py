@@ -9,7 +9,7 @@ import math
 
 from flexlink_ros.core.fe import second_order_geometry as so_geometry
 from flexlink_ros.core.kinematics import solve_kinematics
-from flexlink_ros.core.mechanism import load_mechanism
+from flexlink_ros.core.mechanism_file import load_mechanism
 import numpy as np
 import pytest
 

@@ -10,11 +10,13 @@ import math
 from flexlink_ros.core.fe import linkage as assembly
 from flexlink_ros.core.fe import second_order_full as so_full
 from flexlink_ros.core.fe import second_order_reduced as so_reduced
-from flexlink_ros.core.mechanism import load_mechanism
-from flexlink_ros.core.reduction import model as reduced
+from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.studies import peer_exudyn as peer
 import numpy as np
 import pytest
+from flexlink_ros.core import options as core_options
+from flexlink_ros.core.reduction import basis as reduction_basis
+from flexlink_ros.core.reduction import pipeline
 
 ELEMENTS = 4
 
@@ -27,14 +29,14 @@ def mech():
 # -- reduced basis ----------------------------------------------------------------------------
 
 @pytest.mark.parametrize('options', [
-    reduced.ModelOptions(grid_size=8, bearings='rigid', elements_per_link=ELEMENTS),
-    reduced.ModelOptions(grid_size=8, bearings='flexible', rigid_crank=False,
+    core_options.ModelOptions(grid_size=8, bearings='rigid', elements_per_link=ELEMENTS),
+    core_options.ModelOptions(grid_size=8, bearings='flexible', rigid_crank=False,
                          elements_per_link=3, modes=24, static=2)], ids=['rigid', 'flexible'])
 def test_quadratic_form_equals_the_full_order_on_v_q(mech, options):
-    samples = reduced.frozen_samples_for(mech, options)
-    basis, _ = reduced.build_basis(samples, options.modes, options.static,
+    samples = pipeline.frozen_samples_for(mech, options)
+    basis, _ = reduction_basis.build_basis(samples, options.modes, options.static,
                                    np.linspace(0.0, 60.0, 2))
-    linkage = assembly.FlexibleLinkage(reduced.fe_mechanism(mech, options),
+    linkage = assembly.FlexibleLinkage(pipeline.fe_mechanism(mech, options),
                                        options)
     theta = np.linspace(0.0, 2.0 * np.pi, 9, endpoint=False) + 0.2
     q = np.random.default_rng(3).standard_normal((theta.size, basis.shape[1])) * 1e-4

@@ -6,7 +6,7 @@ import pathlib
 from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.fe.modes import modal_damping
 from flexlink_ros.core.fe.simulate import frozen_eigen, periodic_response, step_convergence
-from flexlink_ros.core.mechanism import load_mechanism
+from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
 import numpy as np
 import pytest

@@ -6,7 +6,7 @@ import math
 from flexlink_ros.core.fe import stiffness_damping as sd
 from flexlink_ros.core.fe.link import link_matrices
 from flexlink_ros.core.fe.linkage import FlexibleLinkage
-from flexlink_ros.core.mechanism import load_mechanism
+from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
 import numpy as np
 import pytest

@@ -10,10 +10,11 @@ from flexlink_ros.core.reduction.basis import frozen_modes
 from flexlink_ros.core.reduction.build import reduce_samples
 from flexlink_ros.core.reduction.pipeline import (fe_mechanism, frozen_samples_for,
                                                   model_for_mechanism, model_key)
-from flexlink_ros.core.reduction.tables import system_blocks
-from flexlink_ros.studies import flex_study as fs
+from flexlink_ros.core.reduction.model import system_blocks
 import numpy as np
 import scipy.linalg
+from flexlink_ros.studies import flex_events
+from flexlink_ros.studies import flex_frequencies
 
 CONFIG = pathlib.Path(__file__).resolve().parents[3] / 'config'
 
@@ -51,9 +52,9 @@ def test_constant_basis_resolves_the_veering_where_per_angle_mode_interpolation_
     linkage = FlexibleLinkage(fe_mechanism(mechanism, options),
                               options)
     # 1. The library's detection on the model's grid, refined to the closest approach.
-    case = fs.FrequencyCase('veering', 'rigid crank and bearings, K_G at 391 rpm',
+    case = flex_frequencies.FrequencyCase('veering', 'rigid crank and bearings, K_G at 391 rpm',
                             options, speed)
-    sweep = fs.sweep_case(fe_mechanism(mechanism, options), case,
+    sweep = flex_frequencies.sweep_case(fe_mechanism(mechanism, options), case,
                           np.degrees(step * np.arange(options.grid_size)), 2)
     assert sweep.events and all(e.modes == (0, 1) for e in sweep.events)
     basis = model.basis
@@ -69,7 +70,7 @@ def test_constant_basis_resolves_the_veering_where_per_angle_mode_interpolation_
         # Sorted by frequency, signs aligned across the cell (the naive method's best case).
         signs = np.sign(np.einsum('im,ij,jm->m', left, mass[0], right))
         naive = 0.5 * (left + signs * right)
-        naive_mac = np.diag(fs.mac(naive, frozen.shapes[1], mass[1]))
+        naive_mac = np.diag(flex_events.mac(naive, frozen.shapes[1], mass[1]))
         assert naive_mac.max() < 0.8, naive_mac          # measured 0.52 and 0.57
         # 3. Every true mode of the pair, at both ends and the midpoint, lies in span(V):
         # mass-weighted residual of the M(theta)-orthogonal projection (shapes M-normalised).

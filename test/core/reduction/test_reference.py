@@ -2,7 +2,7 @@
 
 import pathlib
 
-from flexlink_ros.core.mechanism import load_mechanism
+from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction.reference import reference_response, unreduced_revolution
 import numpy as np

@@ -8,7 +8,7 @@ import struct
 import tracemalloc
 import zipfile
 
-from flexlink_ros.core.mechanism import load_mechanism
+from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.reduction import store as cache
 from flexlink_ros.errors import CacheError
 import numpy as np

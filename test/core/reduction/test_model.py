@@ -1,7 +1,7 @@
 """The reduced model's tables: arrays round trip, link shapes."""
 
 from flexlink_ros.core.reduction.build import reduce_samples
-from flexlink_ros.core.reduction.tables import ReducedModel
+from flexlink_ros.core.reduction.model import ReducedModel
 import numpy as np
 from toy_system import toy_samples, ZETA
 
