@@ -4,8 +4,8 @@ import pathlib
 
 from flexlink_ros.core.reduction.basis import frozen_modes, FrozenSamples
 from flexlink_ros.core.reduction.build import reduce_samples
-from flexlink_ros.core.reduction.periodic import periodic_response
 from flexlink_ros.core.reduction.model import output_values
+from flexlink_ros.core.reduction.periodic import periodic_response
 import numpy as np
 
 ZETA = 0.02

@@ -148,7 +148,7 @@ def beam_frequencies(beam, bc, segments, method='tmm3', search='false-position',
         scan_evaluations = None
     else:
         result = solve.tmm_frequencies(beam, bc, segments, int(method[-1]), modes, search, step,
-                                     rtol=rtol, illinois=illinois)
+                                       rtol=rtol, illinois=illinois)
         frequencies = list(result.frequencies_rad_s)
         iterations = result.iterations
         paper_iterations = [root.iterations_paper_criterion for root in result.roots]

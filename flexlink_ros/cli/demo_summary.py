@@ -11,8 +11,8 @@ import pathlib
 import numpy as np
 
 from .mcap import mcap_info
-from ..io.recording import iter_recording
 from ..io.msg_schema import message_class
+from ..io.recording import iter_recording
 from ..names import JOINT_NAMES, JOINT_STATE
 
 

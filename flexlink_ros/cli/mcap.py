@@ -17,8 +17,7 @@ from mcap.writer import LIBRARY_IDENTIFIER, Writer
 from .main import emit
 from ..errors import RecorderError
 from ..io.mcap_reader import iter_messages, map_file, Salvage
-from ..io.mcap_records import MESSAGE_HEAD_SIZE
-from ..io.mcap_records import MESSAGE_HEAD
+from ..io.mcap_records import MESSAGE_HEAD, MESSAGE_HEAD_SIZE
 
 RECOVER_LIBRARY = f'flexlink mcap-recover; {LIBRARY_IDENTIFIER}'
 

@@ -14,8 +14,8 @@ import sys
 
 from ..core.numerics import RPM
 from ..core.options import ModelOptions
-from ..ros import parameters as node_params
 from ..core.reduction import pipeline
+from ..ros import parameters as node_params
 
 BEARINGS = ('flexible', 'rigid')
 
@@ -178,4 +178,4 @@ def load_model(mechanism, options, args):
 
     """
     return pipeline.model_for_mechanism(mechanism, options, cache_dir=args.cache_dir,
-                                       use_cache=not args.no_cache)
+                                        use_cache=not args.no_cache)

@@ -30,8 +30,7 @@ from .mcap import mcap_info
 from ..io.cdr import CDR_LE
 from ..io.msg_schema import message_class
 from ..names import JOINT_STATE, VECTOR3_STAMPED
-from ..ros.runtime import make_executor, spin_until_shutdown
-from ..ros.runtime import isolate_ros_environment
+from ..ros.runtime import isolate_ros_environment, make_executor, spin_until_shutdown
 
 INPUT_TOPIC = '/bench/joint_states'
 ECHO_TOPIC = '/bench/echo'

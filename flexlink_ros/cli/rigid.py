@@ -23,10 +23,9 @@ from .main import degree_range, emit
 from ..core import criteria as core_criteria
 from ..core import spring_design
 from ..core.kinematics import dead_centres, solve_kinematics, transmission_extremes
-from ..names import JOINT_NAMES
 from ..core.mechanism import Spring
-from ..names import LINK_NAMES
 from ..core.mechanism_file import load_mechanism
+from ..names import JOINT_NAMES, LINK_NAMES
 
 # Paper numbering of the clearance joints (Kang 1990).
 PAPER_JOINT = {'A': 1, 'B': 2, 'O4': 3}

@@ -13,9 +13,8 @@ import struct
 
 from .cdr import parse_joint_state
 from .mcap_reader import iter_messages, map_file, Salvage
+from .mcap_records import message_fields, MESSAGE_HEAD, MESSAGE_HEAD_SIZE
 from ..errors import McapFileError
-from .mcap_records import MESSAGE_HEAD_SIZE
-from .mcap_records import message_fields, MESSAGE_HEAD
 from ..names import JOINT_STATE
 
 # A channel of the wanted type is probed for the crank joint in at most this many messages.

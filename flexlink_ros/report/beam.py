@@ -21,13 +21,11 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter
 import numpy as np
 
-from ..studies.beam_study import error_table, frequency_table, iteration_table
-from ..studies.beam_study import observed_order, PAPER_SEGMENTS, PAPER_TABLE2_BISECTION
-from ..studies.beam_study import PAPER_TABLE3_MODE1, SCAN_STEPS_RAD_S, timing_table
-from ..studies.beam_study import TIMING_REPEATS
-from ..core.tmm import beams
-from ..core.tmm import eigen
+from ..core.tmm import beams, eigen
 from ..core.tmm import exact as tmm_exact
+from ..studies.beam_study import (error_table, frequency_table, iteration_table, observed_order,
+                                  PAPER_SEGMENTS, PAPER_TABLE2_BISECTION, PAPER_TABLE3_MODE1,
+                                  SCAN_STEPS_RAD_S, TIMING_REPEATS, timing_table)
 
 METHOD_STYLE = {  # label, colour, marker
     'tmm1': ('TMM, lumping 1 (segment centres)', 'tab:blue', 'o'),

@@ -20,13 +20,10 @@ from rclpy.subscription import RCLError
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
-from . import diagnostics
-from . import parameters
+from . import diagnostics, parameters
 from .messages import diagnostics_message, joint_level, parameter_descriptor
-from .node_model import (
-    crank_sample, load_node_model, one_line, PeriodStats, publishable, SKIP_KINDS, Totals,
-)
-from ..names import FIRST_INPUT_MESSAGE, READY_MESSAGE
+from .node_model import (crank_sample, load_node_model, one_line, PeriodStats, publishable,
+                         SKIP_KINDS, Totals)
 from .runtime import is_shutdown_error
 from .startup import check_startup_signal
 from ..core.estimation.sample import SampleFlag
@@ -35,7 +32,7 @@ from ..errors import FlexlinkError, InputRejected, OutlierSample, RecorderError
 from ..io import cdr
 from ..io.markers import MarkerEncoder
 from ..io.recorder import McapRecorder
-from ..names import NODE_NAME, TOPICS
+from ..names import FIRST_INPUT_MESSAGE, NODE_NAME, READY_MESSAGE, TOPICS
 
 WARN_THROTTLE_S = 1.0  # at most one warning per second per kind of bad input
 # Message type of each output (keys of names.TOPICS).

@@ -45,7 +45,7 @@ def frequencies(beam, bc, segments, method, modes=1, search='newton', step=50.0,
     if method == 'fe':
         return eigen.fe_frequencies(beam, bc, segments, modes)
     return solve.tmm_frequencies(beam, bc, segments, int(method[-1]), modes, search, step,
-                               verify=verify).frequencies_rad_s
+                                 verify=verify).frequencies_rad_s
 
 
 def has_mode(beam, bc, segments, method):
@@ -138,7 +138,7 @@ def iteration_table(beam, steps=SCAN_STEPS_RAD_S, segments=PAPER_SEGMENTS):
             loose, tight = [], []
             for step in steps:
                 root = solve.tmm_frequencies(beam, bc, segments, 3, 1, search, step,
-                                           illinois=illinois).roots[0]
+                                             illinois=illinois).roots[0]
                 loose.append(root.iterations_paper_criterion)
                 tight.append(root.iterations)
             table[bc][label] = loose

@@ -16,9 +16,9 @@ import numpy as np
 from ..core import criteria, spring_design
 from ..core.dynamics import solve_dynamics
 from ..core.kinematics import solve_kinematics
-from ..names import JOINT_NAMES
 from ..core.mechanism import Spring
 from ..core.mechanism_file import load_mechanism
+from ..names import JOINT_NAMES
 
 # Curve resolution [deg]: finer than the narrowest peak (about 1 degree wide).
 CURVE_STEP_DEG = 0.02

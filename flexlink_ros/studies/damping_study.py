@@ -46,11 +46,10 @@ import numpy as np
 from .peer_exudyn import compare, peer_response, revolution_slice
 from ..core.fe.linkage import FlexibleLinkage
 from ..core.fe.simulate import periodic_response
-from ..core.fe.stiffness_damping import (
-    element_resultants, link_local_rate, stiffness_damping_terms, system_matrices,
-)
-from ..core.mechanism_file import load_mechanism
+from ..core.fe.stiffness_damping import (element_resultants, link_local_rate,
+                                         stiffness_damping_terms, system_matrices)
 from ..core.mechanism import Mechanism
+from ..core.mechanism_file import load_mechanism
 from ..core.options import ModelOptions
 
 DAMPING = ('objective', 'naive', 'modal')

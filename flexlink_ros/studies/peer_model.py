@@ -19,8 +19,8 @@ import math
 import numpy as np
 
 from ..core.kinematics import solve_kinematics
-from ..core.mechanism_file import load_mechanism
 from ..core.mechanism import Mechanism
+from ..core.mechanism_file import load_mechanism
 from ..errors import FlexlinkError
 
 try:

@@ -47,7 +47,7 @@ class PlanSignals:
             _, angles, _, mask = self.signals[rpm]
             start = time.perf_counter()
             self.references[key] = reduction_reference.reference_response(self.mechanism, options,
-                                                              rpm * RPM, angles[mask])
+                                                                          rpm * RPM, angles[mask])
             self.seconds[key] = time.perf_counter() - start
         return self.references[key]
 

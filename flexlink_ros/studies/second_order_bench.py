@@ -19,14 +19,13 @@ import tempfile
 import numpy as np
 
 from ..core.fe.linkage import FlexibleLinkage
-from ..core.fe.second_order_reduced import factored_forms, factored_second_order
-from ..core.fe.second_order_reduced import gather_harmonics
 from ..core.fe.second_order_full import link_forms
 from ..core.fe.second_order_geometry import output_coefficients
+from ..core.fe.second_order_reduced import factored_forms, factored_second_order, gather_harmonics
 from ..core.kinematics import solve_kinematics
 from ..core.options import ModelOptions
-from ..core.reduction.pipeline import fe_mechanism
 from ..core.reduction.cells import periodic_cell_coefficients
+from ..core.reduction.pipeline import fe_mechanism
 
 SCALARS = 22    # cos, sin of the three link angles, then kappa (4 x 4), per grid node
 GRID = 128

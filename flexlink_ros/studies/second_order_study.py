@@ -19,21 +19,18 @@ import math
 import numpy as np
 
 from . import second_order_bench
-from .peer_exudyn import compare, peak_to_peak
-from .peer_model import DEFAULT_ELEMENTS, OUTPUT_KEYS
+from .peer_exudyn import compare, peak_to_peak, peer_response
 from .peer_linear import linear_model
-from .peer_exudyn import peer_response
-from .peer_model import resolve_mechanism
+from .peer_model import DEFAULT_ELEMENTS, OUTPUT_KEYS, resolve_mechanism
 from ..core.fe.linkage import FlexibleLinkage
 from ..core.fe.second_order_full import corrected_response
-from ..core.fe.second_order_reduced import factored_forms
-from ..core.fe.second_order_reduced import factored_second_order, step_cost
 from ..core.fe.second_order_geometry import FORMS
+from ..core.fe.second_order_reduced import factored_forms, factored_second_order, step_cost
 from ..core.fe.simulate import periodic_response
 from ..core.options import DEFAULT_SIZES, ModelOptions
-from ..core.reduction.pipeline import build_model, fe_mechanism
 from ..core.reduction.model import output_values
 from ..core.reduction.periodic import periodic_response as reduced_periodic_response
+from ..core.reduction.pipeline import build_model, fe_mechanism
 
 TARGETS = {'lever_tip': 0.10, 'coupler_mid': 0.03}
 

@@ -37,16 +37,12 @@ import os
 
 import numpy as np
 
-from .peer_model import BEARINGS, DEFAULT_BETA_S, DEFAULT_ELEMENTS
-from .peer_exudyn import compare
+from .peer_exudyn import compare, peer_response
 from .peer_linear import linear_model
-from .peer_model import OUTPUT_KEYS
-from .peer_exudyn import peer_response
-from .peer_model import resolve_mechanism
+from .peer_model import BEARINGS, DEFAULT_BETA_S, DEFAULT_ELEMENTS, OUTPUT_KEYS, resolve_mechanism
 from ..core.fe.second_order_full import corrected_response
 from ..core.fe.simulate import periodic_response
-from ..core.validity import load_ratios, nonlinearity_indicator
-from ..core.validity import VALIDITY_THRESHOLD
+from ..core.validity import load_ratios, nonlinearity_indicator, VALIDITY_THRESHOLD
 
 TARGETS = {'lever_tip': 0.10, 'coupler_mid': 0.03}
 DEFAULT_RPM = tuple(sorted(set(range(250, 451, 10)) | set(range(385, 430, 10)) | {269, 391,

@@ -3,8 +3,8 @@
 import json
 
 from flexlink_ros.cli import main as cli
-import pytest
 from flexlink_ros.core.tmm import roots
+import pytest
 
 
 def _run(capsys, *argv):

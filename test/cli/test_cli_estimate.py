@@ -6,21 +6,19 @@ import math
 import time
 
 from flexlink_ros.cli import main as cli
+from flexlink_ros.core import options as core_options
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.numerics import relative_rms, RPM
+from flexlink_ros.core.reduction import build, cells
+from flexlink_ros.core.reduction import model as tables
+from flexlink_ros.core.reduction import periodic, pipeline
+from flexlink_ros.core.reduction import reference as reduction_reference
 from flexlink_ros.report.estimator import plot_error_vs_cost, plot_estimate
 from flexlink_ros.ros import parameters as node_params
 from flexlink_ros.studies import bench, plan, synthetic
 import numpy as np
 import pytest
 from toy_system import toy_samples, ZETA
-from flexlink_ros.core import options as core_options
-from flexlink_ros.core.reduction import build
-from flexlink_ros.core.reduction import cells
-from flexlink_ros.core.reduction import periodic
-from flexlink_ros.core.reduction import pipeline
-from flexlink_ros.core.reduction import reference as reduction_reference
-from flexlink_ros.core.reduction import model as tables
 
 TOY_CACHE = {}
 
@@ -38,7 +36,7 @@ def toy_model(mechanism, options=None, cache_dir=None, use_cache=True):
 def toy_reference(mechanism, options, speed, angles):
     """Return the toy system with every direction kept, periodic at `speed`, at `angles`."""
     full = toy_model(None, core_options.ModelOptions(modes=10, static=0, grid_size=32,
-                                                speed_max=70.0))
+                                                     speed_max=70.0))
     steps = 1024
     grid, q, _ = periodic.periodic_response(full, speed, start_angle=0.0, steps=steps)
     out = tables.output_values(full, full.evaluate(grid, speed, 0.0), q)[:-1]
@@ -126,7 +124,7 @@ def test_plan_on_cho1992_compares_every_physics_with_the_scene(config_dir, monke
     monkeypatch.setattr(plan, 'plan_candidates', lambda base: [
         dataclasses.replace(base, modes=m, static=s, grid_size=g) for m, s, g in sizes])
     base = core_options.ModelOptions(bearings='rigid', elements_per_link=4,
-                                speed_max=1.05 * 391.0 * RPM)
+                                     speed_max=1.05 * 391.0 * RPM)
     scene = plan.scene_options(mechanism, base)
     physics = [dataclasses.replace(scene, elements_per_link=3, rigid_crank=True),
                dataclasses.replace(scene, elements_per_link=3, geometric_stiffness=False),

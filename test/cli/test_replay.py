@@ -7,15 +7,16 @@ import sys
 
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
 from flexlink_ros.core.mechanism_file import load_mechanism
+from flexlink_ros.core.reduction import pipeline
 from flexlink_ros.io.recorder import McapRecorder
 from flexlink_ros.io.recording import iter_recording
-from flexlink_ros.ros import messages as ros_messages, parameters as node_params
+from flexlink_ros.ros import messages as ros_messages
+from flexlink_ros.ros import parameters as node_params
 from geometry_msgs.msg import Vector3Stamped
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
-from flexlink_ros.core.reduction import pipeline
 
 RPM = 2.0 * math.pi / 60.0
 

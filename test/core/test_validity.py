@@ -16,6 +16,7 @@ import math
 
 from flexlink_ros.core import validity
 from flexlink_ros.core.fe import linkage as assembly
+from flexlink_ros.core.fe import second_order_geometry
 from flexlink_ros.core.fe.simulate import periodic_response
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
@@ -23,7 +24,6 @@ from flexlink_ros.studies import peer_exudyn as peer
 import numpy as np
 import pytest
 import scipy.linalg
-from flexlink_ros.core.fe import second_order_geometry
 
 ELEMENTS = 4
 

@@ -8,9 +8,12 @@ import subprocess
 import sys
 import zlib
 
-from flexlink_ros.cli import main as cli, replay as cli_replay
+from flexlink_ros import names as flexlink_ros_names
+from flexlink_ros.cli import main as cli
+from flexlink_ros.cli import replay as cli_replay
 from flexlink_ros.cli.mcap import mcap_info, recover_mcap
 from flexlink_ros.io import mcap_reader, mcap_records
+from flexlink_ros.io import recording as io_recording
 from flexlink_ros.io.recorder import McapRecorder
 from flexlink_ros.ros import messages as ros_messages
 from mcap.reader import make_reader
@@ -18,8 +21,6 @@ import pytest
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 import zstandard
-from flexlink_ros.io import recording as io_recording
-from flexlink_ros import names as flexlink_ros_names
 
 T0_NS = 1_700_000_000_000_000_000
 STEP_NS = 1_000_000

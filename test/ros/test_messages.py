@@ -2,13 +2,13 @@
 
 import math
 
+from flexlink_ros.io import markers
 from flexlink_ros.ros import messages as rm
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
-from flexlink_ros.io import markers
 
 
 def _state(names, position, velocity=(), sec=3, nanosec=5):
@@ -60,7 +60,7 @@ def test_markers_exaggerate_deflection_and_colour_joints():
     deflection = [np.array([[0.0, 0.0], [0.0, 1e-4]])] * 3
     joints = np.array([[0, 0], [0.1, 0], [0.2, 0.1], [0.24, 0]])
     msg = markers.linkage_markers(rm.ns_to_stamp(1), 'g', points, deflection, 100.0, joints,
-                             [rm.OK, rm.WARN, rm.ERROR, rm.OK])
+                                  [rm.OK, rm.WARN, rm.ERROR, rm.OK])
     back = deserialize_message(serialize_message(msg), MarkerArray)
     deformed = [m for m in back.markers if m.ns.endswith('deformed')]
     assert len(deformed) == 3 and deformed[0].points[1].y == pytest.approx(0.01)

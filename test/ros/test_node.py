@@ -9,9 +9,8 @@ import sys
 import time
 
 from flexlink_ros.core.options import DEFAULT_SIZES, ModelOptions
-from flexlink_ros.names import NODE_NAME
+from flexlink_ros.names import FIRST_INPUT_MESSAGE, NODE_NAME, READY_MESSAGE
 from flexlink_ros.ros import parameters as node_params
-from flexlink_ros.names import FIRST_INPUT_MESSAGE, READY_MESSAGE
 from flexlink_ros.ros.node_model import load_node_model
 import numpy as np
 import pytest
@@ -124,9 +123,8 @@ def spin_until(executor, condition, timeout_s, what, detail=lambda: ''):
 
 
 def joint_state(stamp_ns, names, positions, velocities):
-    from sensor_msgs.msg import JointState
-
     from flexlink_ros.ros.messages import ns_to_stamp
+    from sensor_msgs.msg import JointState
     message = JointState(name=list(names), position=[float(p) for p in positions],
                          velocity=[float(v) for v in velocities])
     message.header.stamp = ns_to_stamp(stamp_ns)

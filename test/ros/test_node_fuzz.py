@@ -7,16 +7,15 @@ import time
 
 from flexlink_ros.errors import InputRejected
 from flexlink_ros.io import cdr
+from flexlink_ros.names import READY_MESSAGE
 from flexlink_ros.ros.messages import ns_to_stamp
 from flexlink_ros.ros.node_model import crank_sample, SKIP_KINDS
-from flexlink_ros.names import READY_MESSAGE
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 import test_node
-from test_node import (DISCOVERY_TIMEOUT_S, NodeProcess, OUTPUTS, READY_TIMEOUT_S,
-                       spin_until)
+from test_node import DISCOVERY_TIMEOUT_S, NodeProcess, OUTPUTS, READY_TIMEOUT_S, spin_until
 
 processes = test_node.processes   # fixtures of test_node, used here by name
 ros = test_node.ros
@@ -284,10 +283,9 @@ def test_repeats_are_not_published_and_a_poison_speed_is_not_ok(
     One message beyond the 1 MiB bound goes in too: refused as malformed, unrecorded.
     """
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    from flexlink_ros.core.estimation.streaming import StreamingEstimator
     from geometry_msgs.msg import Vector3Stamped
     from rclpy.qos import QoSProfile, ReliabilityPolicy
-
-    from flexlink_ros.core.estimation.streaming import StreamingEstimator
     from test_node import node_model
 
     node_process = NodeProcess(tmp_path, 'diagnostics.period_s:=0.2')

@@ -1,10 +1,9 @@
 """
 The offline estimate of a recorded sample stream, segment by segment as the node would.
 
-:func:`estimate_offline` plans the rows as :meth:`StreamingEstimator.update` decides
-(:func:`plan_rows`: restarts, repeats, outliers) and replays each segment in one go
-(:func:`replay`, the same numbers as streaming); :func:`criteria_batch` adds the joint
-criteria. :class:`BackgroundEstimate` runs it in a thread for a writer that follows it.
+:func:`estimate_offline` plans the rows as :meth:`StreamingEstimator.update` decides (restarts,
+repeats, outliers) and replays each segment in one go (the same numbers as streaming);
+:func:`criteria_batch` adds the criteria; :class:`BackgroundEstimate` runs it in a thread.
 """
 
 import math

@@ -12,8 +12,8 @@ import numpy as np
 
 from ..integrators import RADAU_TABLEAUX
 from ..numerics import TWO_PI
-from ..reduction.model import cell_groups
 from ..reduction.cells import CELL_POWERS, monomial_values, MONOMIALS
+from ..reduction.model import cell_groups
 from ...names import OUTPUT_NAMES
 
 POWERS = (-2, -1, 0, 1, 2)   # G(h) is a Laurent polynomial in h

@@ -2,14 +2,13 @@
 
 from flexlink_ros.core.estimation.native import compiled_step_available
 from flexlink_ros.core.mechanism_file import load_mechanism
+from flexlink_ros.core.reduction import build, cells
+from flexlink_ros.core.reduction import model as tables
+from flexlink_ros.core.reduction import periodic
 from flexlink_ros.errors import OutlierSample
 import numpy as np
 import pytest
 from toy_system import CONFIG, toy_samples, ZETA
-from flexlink_ros.core.reduction import build
-from flexlink_ros.core.reduction import cells
-from flexlink_ros.core.reduction import periodic
-from flexlink_ros.core.reduction import model as tables
 
 SPEED_MAX = 65.0
 SPEED = 41.0            # rad/s (391 rpm)
@@ -65,7 +64,7 @@ def toy_model():
     samples = toy_samples(grid=64)
     forces, _ = toy_forces(64)
     return build.reduce_samples(samples, modes=4, static=2, speed_max=SPEED_MAX, zeta=ZETA,
-                                  forces=forces)
+                                forces=forces)
 
 
 def periodic_outputs(model, speed, angles):

@@ -4,22 +4,19 @@ import dataclasses
 
 import estimation_toys as toys
 from estimation_toys import compiled_or_skip, sample_times, SPEED_MAX, toy_forces
-from flexlink_ros.cli import estimate as cli_estimate
+from flexlink_ros.core import options as core_options
 from flexlink_ros.core.estimation.offline import replay
 from flexlink_ros.core.estimation.step import MAX_SUBSTEP_NS
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
 from flexlink_ros.core.numerics import relative_rms as numerics_relative_rms
+from flexlink_ros.core.reduction import build, pipeline
+from flexlink_ros.core.reduction import reference as reduction_reference
 from flexlink_ros.ros import parameters as node_params
 from flexlink_ros.ros.node_model import DEFAULT_MODEL_TOLERANCE
+from flexlink_ros.studies import plan, synthetic
 import numpy as np
 import pytest
 from toy_system import toy_samples, ZETA
-from flexlink_ros.core import options as core_options
-from flexlink_ros.core.reduction import build
-from flexlink_ros.core.reduction import pipeline
-from flexlink_ros.core.reduction import reference as reduction_reference
-from flexlink_ros.studies import plan
-from flexlink_ros.studies import synthetic
 
 
 @pytest.fixture(scope='module')
@@ -67,7 +64,7 @@ def test_compiled_replay_equals_numpy_replay(modes, static):
     compiled_or_skip()
     forces, _ = toy_forces(32)
     toy_model = build.reduce_samples(toy_samples(grid=32), modes=modes, static=static,
-                                       speed_max=SPEED_MAX, zeta=ZETA, forces=forces)
+                                     speed_max=SPEED_MAX, zeta=ZETA, forces=forces)
     assert toy_model.size == modes + static
     times = sample_times(2000.0, 0.6, 0.5, 0.1, seed=5)
     times[300:] += 0.013       # one gap that takes sub-steps
@@ -98,13 +95,13 @@ def test_node_default_model_meets_its_budget_against_the_scene_reference(cho):
     stamps, angles, speeds = synthetic.synthetic_signal(rpm, 2.0 * period, 1000.0, 0.3, 3)
     mask = synthetic.last_revolution(stamps, rpm)
     out = replay(model, stamps, angles, speeds)
-    reference = reduction_reference.reference_response(cho, scene, rpm * 2.0 * np.pi / 60.0, angles[mask])
+    speed = rpm * 2.0 * np.pi / 60.0
+    reference = reduction_reference.reference_response(cho, scene, speed, angles[mask])
     errors = {key: numerics_relative_rms(out[key][mask], reference[key])
               for key in ('coupler_mid', 'lever_tip')}
     # Measured 1.04 % / 0.94 %; the budget the node states is 2 %.
     assert max(errors.values()) < DEFAULT_MODEL_TOLERANCE, errors
     # The rigid crank of the paper's cases would miss the same reference by far.
-    rigid = reduction_reference.reference_response(cho, dataclasses.replace(scene, rigid_crank=True,
-                                                                elements_per_link=4),
-                                       rpm * 2.0 * np.pi / 60.0, angles[mask])
+    rigid_scene = dataclasses.replace(scene, rigid_crank=True, elements_per_link=4)
+    rigid = reduction_reference.reference_response(cho, rigid_scene, speed, angles[mask])
     assert numerics_relative_rms(rigid['coupler_mid'], reference['coupler_mid']) > 0.2

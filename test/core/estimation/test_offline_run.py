@@ -2,16 +2,16 @@
 
 import math
 
+from flexlink_ros.core import options as core_options
 from flexlink_ros.core.estimation import offline, offline_run, streaming, tables
 from flexlink_ros.core.estimation.sample import SampleFlag
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
 from flexlink_ros.core.mechanism_file import load_mechanism
+from flexlink_ros.core.reduction import pipeline
 from flexlink_ros.errors import OutlierSample
 from flexlink_ros.ros import parameters as node_params
 import numpy as np
 import pytest
-from flexlink_ros.core import options as core_options
-from flexlink_ros.core.reduction import pipeline
 
 RPM = 2.0 * math.pi / 60.0
 

@@ -9,9 +9,9 @@ from flexlink_ros.core.estimation.step import (joint_criteria, MAX_SUBSTEP_NS,
                                                REACTION_FLOOR_FRACTION, STAGE1)
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
 from flexlink_ros.core.integrators import RadauIIA
+from flexlink_ros.core.reduction import model as tables
 import numpy as np
 import pytest
-from flexlink_ros.core.reduction import model as tables
 
 
 @pytest.fixture(scope='module')

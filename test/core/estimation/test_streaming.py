@@ -7,21 +7,20 @@ import estimation_toys as toys
 from estimation_toys import (clean_signal, deflections, feed, finite, largest, PATHS,
                              periodic_outputs, relative_rms, sample_times, SPEED, SPEED_MAX,
                              stream, toy_forces)
-from flexlink_ros.cli import estimate as cli_estimate
+from flexlink_ros.core import options as core_options
 from flexlink_ros.core.estimation import streaming
 from flexlink_ros.core.estimation.native import FILTER_SPEED_FIT
 from flexlink_ros.core.estimation.sample import SampleFlag
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
+from flexlink_ros.core.reduction import build
+from flexlink_ros.core.reduction import model as tables
+from flexlink_ros.core.reduction import pipeline
+from flexlink_ros.core.reduction import reference as reduction_reference
 from flexlink_ros.ros import parameters as node_params
+from flexlink_ros.studies import bench
 import numpy as np
 import pytest
 from toy_system import toy_samples, ZETA
-from flexlink_ros.core import options as core_options
-from flexlink_ros.core.reduction import build
-from flexlink_ros.core.reduction import pipeline
-from flexlink_ros.core.reduction import reference as reduction_reference
-from flexlink_ros.core.reduction import model as tables
-from flexlink_ros.studies import bench
 
 
 @pytest.fixture(scope='module')
@@ -175,7 +174,7 @@ def test_cho1992_streaming_accuracy_at_269_and_391_rpm(cho, bearings):
     for rpm in (269.0, 391.0):
         for jitter, (coupler_limit, lever_limit) in TARGETS.items():
             errors = bench.configuration_error(cho, model, options, rpm, 1000.0, jitter,
-                                                      seed=3)
+                                               seed=3)
             assert errors['error_coupler_mid'] < coupler_limit, (rpm, jitter, errors)
             assert errors['error_lever_tip'] < lever_limit, (rpm, jitter, errors)
 
@@ -243,7 +242,7 @@ def test_gap_in_the_input_costs_no_accuracy(cho, gap_s):
     samples = [est.update(int(round(t * 1e9)), speed * t, speed) for t in times]
     after = times >= 1.0 + gap_s
     reference = reduction_reference.reference_response(cho, options, speed,
-                                           np.mod(speed * times[after], 2.0 * np.pi))
+                                                       np.mod(speed * times[after], 2.0 * np.pi))
     got = np.array([s.coupler_mid for s in samples])[after]
     size = np.ptp(reference['coupler_mid'], axis=0).max()
     # Measured 0.9 % of the peak-to-peak (as without a gap); one 15 ms step gave 28 %.

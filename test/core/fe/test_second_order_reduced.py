@@ -7,16 +7,16 @@ factored kernel, and the reduced model as the estimator streams it.
 
 import math
 
+from flexlink_ros.core import options as core_options
 from flexlink_ros.core.fe import linkage as assembly
 from flexlink_ros.core.fe import second_order_full as so_full
 from flexlink_ros.core.fe import second_order_reduced as so_reduced
 from flexlink_ros.core.mechanism_file import load_mechanism
+from flexlink_ros.core.reduction import basis as reduction_basis
+from flexlink_ros.core.reduction import pipeline
 from flexlink_ros.studies import peer_exudyn as peer
 import numpy as np
 import pytest
-from flexlink_ros.core import options as core_options
-from flexlink_ros.core.reduction import basis as reduction_basis
-from flexlink_ros.core.reduction import pipeline
 
 ELEMENTS = 4
 
@@ -35,7 +35,7 @@ def mech():
 def test_quadratic_form_equals_the_full_order_on_v_q(mech, options):
     samples = pipeline.frozen_samples_for(mech, options)
     basis, _ = reduction_basis.build_basis(samples, options.modes, options.static,
-                                   np.linspace(0.0, 60.0, 2))
+                                           np.linspace(0.0, 60.0, 2))
     linkage = assembly.FlexibleLinkage(pipeline.fe_mechanism(mech, options),
                                        options)
     theta = np.linspace(0.0, 2.0 * np.pi, 9, endpoint=False) + 0.2

@@ -1,8 +1,8 @@
 """Reduced model built from full-order samples: tables, residual flexibility."""
 
 from flexlink_ros.core.reduction.build import reduce_samples
-from flexlink_ros.core.reduction.periodic import periodic_response
 from flexlink_ros.core.reduction.model import output_values, system_blocks
+from flexlink_ros.core.reduction.periodic import periodic_response
 import numpy as np
 from toy_system import full_periodic_outputs, toy_samples, ZETA
 

@@ -2,8 +2,8 @@
 
 from flexlink_ros.core.integrators import RadauIIA
 from flexlink_ros.core.reduction.build import reduce_samples
-from flexlink_ros.core.reduction.periodic import periodic_response
 from flexlink_ros.core.reduction.model import system_blocks
+from flexlink_ros.core.reduction.periodic import periodic_response
 import numpy as np
 from toy_system import toy_samples, ZETA
 

@@ -8,13 +8,12 @@ from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction.basis import frozen_modes
 from flexlink_ros.core.reduction.build import reduce_samples
+from flexlink_ros.core.reduction.model import system_blocks
 from flexlink_ros.core.reduction.pipeline import (fe_mechanism, frozen_samples_for,
                                                   model_for_mechanism, model_key)
-from flexlink_ros.core.reduction.model import system_blocks
+from flexlink_ros.studies import flex_events, flex_frequencies
 import numpy as np
 import scipy.linalg
-from flexlink_ros.studies import flex_events
-from flexlink_ros.studies import flex_frequencies
 
 CONFIG = pathlib.Path(__file__).resolve().parents[3] / 'config'
 
@@ -53,9 +52,9 @@ def test_constant_basis_resolves_the_veering_where_per_angle_mode_interpolation_
                               options)
     # 1. The library's detection on the model's grid, refined to the closest approach.
     case = flex_frequencies.FrequencyCase('veering', 'rigid crank and bearings, K_G at 391 rpm',
-                            options, speed)
+                                          options, speed)
     sweep = flex_frequencies.sweep_case(fe_mechanism(mechanism, options), case,
-                          np.degrees(step * np.arange(options.grid_size)), 2)
+                                        np.degrees(step * np.arange(options.grid_size)), 2)
     assert sweep.events and all(e.modes == (0, 1) for e in sweep.events)
     basis = model.basis
     for event in sweep.events:
