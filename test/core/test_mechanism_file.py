@@ -161,7 +161,7 @@ def test_modes_cli_refuses_a_million_elements_in_one_line(config_dir, tmp_path):
     cho = (config_dir / 'cho1992.yaml').read_text()
     path = _write(tmp_path, cho.replace('elements_per_link: 3', 'elements_per_link: 1000000'))
     assert 'elements_per_link: 1000000' in path.read_text()
-    for extra in ([], ['--elements', '1000000']):
+    for extra in ([], ['--elements-per-link', '1000000']):
         mechanism = path if not extra else config_dir / 'cho1992.yaml'
         done = subprocess.run(
             [sys.executable, '-m', 'flexlink_ros.cli.main', 'modes', '--mechanism', str(mechanism),

@@ -8,7 +8,7 @@ import subprocess
 import sys
 import zlib
 
-from flexlink_ros import names as flexlink_ros_names
+from flexlink_ros.names import JOINT_STATE
 from flexlink_ros.cli import main as cli
 from flexlink_ros.cli import replay as cli_replay
 from flexlink_ros.cli.mcap import mcap_info, recover_mcap
@@ -102,7 +102,7 @@ def test_a_bad_crc_in_the_first_chunk_loses_only_that_chunk(recording, tmp_path,
 
     damaged = []
     counts, kept = cli_replay.scan_recording(bad, joint_name='crank', damaged=damaged)
-    assert counts == {'/joint_states': [flexlink_ros_names.JOINT_STATE, 5000 - lost]}
+    assert counts == {'/joint_states': [JOINT_STATE, 5000 - lost]}
     assert [data for _, _, data in kept['/joint_states']] == [d for _, _, d in original[lost:]]
     assert [(f, o) for f, o, _ in damaged] == [(str(bad), first)]
 
