@@ -8,13 +8,12 @@ import subprocess
 import sys
 import zlib
 
-from flexlink_ros.names import JOINT_STATE
 from flexlink_ros.cli import main as cli
-from flexlink_ros.cli import replay as cli_replay
 from flexlink_ros.cli.mcap import mcap_info, recover_mcap
-from flexlink_ros.io import mcap_reader, mcap_records
+from flexlink_ros.io import joint_states, mcap_reader, mcap_records
 from flexlink_ros.io import recording as io_recording
 from flexlink_ros.io.recorder import McapRecorder
+from flexlink_ros.names import JOINT_STATE
 from flexlink_ros.ros import messages as ros_messages
 from mcap.reader import make_reader
 import pytest
@@ -101,7 +100,7 @@ def test_a_bad_crc_in_the_first_chunk_loses_only_that_chunk(recording, tmp_path,
     assert mcap_info(out)['complete']
 
     damaged = []
-    counts, kept = cli_replay.scan_recording(bad, joint_name='crank', damaged=damaged)
+    counts, kept = io_recording.scan_recording(bad, joint_name='crank', damaged=damaged)
     assert counts == {'/joint_states': [JOINT_STATE, 5000 - lost]}
     assert [data for _, _, data in kept['/joint_states']] == [d for _, _, d in original[lost:]]
     assert [(f, o) for f, o, _ in damaged] == [(str(bad), first)]
@@ -178,9 +177,9 @@ def test_joint_detection_looks_past_the_first_messages(tmp_path):
     def payload(k):
         return crank_state(k, ('lever',) if k < 49 else ('crank',))
     path = write_crank_recording(tmp_path / 'rec.mcap', 400, payload=payload)
-    scan = cli_replay.scan_recording(path, joint_name='crank')
-    topic = cli_replay.choose_input_topic(path, 'crank', scan=scan)
-    samples = cli_replay.read_crank_samples(path, topic, 'crank', scan)
+    scan = io_recording.scan_recording(path, joint_name='crank')
+    topic = io_recording.choose_input_topic(path, 'crank', scan=scan)
+    samples = joint_states.read_crank_samples(path, topic, 'crank', scan)
     assert topic == '/joint_states' and len(samples['data']) == 400 - 49
     assert samples['skipped_reasons'] == {"no position for joint 'crank'": 49}
     # Beyond the probe the topic is not taken (bounded), with the usual one-line refusal.
@@ -188,10 +187,10 @@ def test_joint_detection_looks_past_the_first_messages(tmp_path):
         tmp_path / 'late.mcap', io_recording.JOINT_PROBE_MESSAGES + 20,
         payload=lambda k: crank_state(k, ('lever',) if k < io_recording.JOINT_PROBE_MESSAGES
                                       else ('crank',)))
-    scan = cli_replay.scan_recording(late, joint_name='crank')
+    scan = io_recording.scan_recording(late, joint_name='crank')
     assert len(scan[1]['/joint_states']) == io_recording.JOINT_PROBE_MESSAGES
     with pytest.raises(ValueError, match='no sensor_msgs/msg/JointState topic with joint'):
-        cli_replay.choose_input_topic(late, 'crank', scan=scan)
+        io_recording.choose_input_topic(late, 'crank', scan=scan)
 
 
 # -- decompression bombs -------------------------------------------------------------------
@@ -255,8 +254,8 @@ def test_decompression_bombs_are_refused_with_a_bound(tmp_path, declared, expect
     assert code == 0 and 'declares' in out and peak < 200, (err, peak)
     assert len(read_messages(recovered)) == 50
 
-    reader = ('import sys; from flexlink_ros.cli import replay as cli_replay; damaged = []\n'
-              'counts, kept = cli_replay.scan_recording(sys.argv[1], joint_name="crank", '
+    reader = ('import sys; from flexlink_ros.io import recording as io_recording; damaged = []\n'
+              'counts, kept = io_recording.scan_recording(sys.argv[1], joint_name="crank", '
               'damaged=damaged)\n'
               'print(len(kept["/joint_states"]), damaged[0][1], damaged[0][2])\n')
     code, out, err, peak = peak_rss_of([sys.executable, '-c', reader, str(path)])
