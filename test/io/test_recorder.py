@@ -436,7 +436,8 @@ def test_write_batch_writes_the_same_file_as_write(tmp_path, chunk_size, bag):
     data = [bytes([n % 256]) * int(rng.integers(1, 400)) for n in range(count)]
 
     def record(name, batched):
-        path = tmp_path / (name if bag else f'{name}.mcap')
+        # Same file names (the rosbag2 metadata records name the files), different folders.
+        path = tmp_path / name / ('rec' if bag else 'rec.mcap')
         recorder = McapRecorder(path, chunk_size_bytes=chunk_size, flush_thread=False)
         recorder.open()
         recorder.add_topic('/a', 'sensor_msgs/msg/JointState')
@@ -456,7 +457,7 @@ def test_write_batch_writes_the_same_file_as_write(tmp_path, chunk_size, bag):
                 recorder.write(topics[k], data[k], int(log[k]), int(publish[k]))
         status = recorder.close()
         files = [pathlib.Path(f).read_bytes() for f in status['files']]
-        metadata = (path / 'metadata.yaml').read_text().replace(name, 'X') if bag else None
+        metadata = (path / 'metadata.yaml').read_text() if bag else None
         status.pop('path'), status.pop('files')
         return files, metadata, status
 

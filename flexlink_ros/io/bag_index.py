@@ -1,0 +1,148 @@
+"""
+What a bag directory's MCAP files hold, read from the files alone (for ``flexlink reindex``).
+
+A recorder killed before its ``close`` leaves a bag directory without ``metadata.yaml`` and
+its last file without a summary. :func:`bag_files` finds the directory's MCAP files in
+rosbag2's order (``<name>_0.mcap``, ``<name>_1.mcap``, ...) and :func:`scan_bag_file` reads
+one through the salvaging reader (:mod:`.mcap_reader`, bounded): its intact messages per
+channel, their log times, and each channel's topic, type, ``offered_qos_profiles`` and
+``topic_type_hash``. :func:`bag_topics` merges them into the topic records
+:func:`.bag_metadata.write_bag_metadata` takes.
+"""
+
+import dataclasses
+import pathlib
+import re
+
+import yaml
+
+from .mcap_reader import iter_messages, map_file, Salvage
+from .mcap_records import MESSAGE_HEAD
+
+MAX_BAG_FILES = 100_000   # files of one bag directory read at most
+_INDEX = re.compile(r'_(\d+)\.mcap$')
+
+
+@dataclasses.dataclass
+class BagTopic:
+    """A topic as ``metadata.yaml`` lists it, rebuilt from the files' channels."""
+
+    name: str
+    type_name: str
+    qos_profiles: list
+    type_hash: str
+    message_count: int = 0
+
+
+def bag_files(bag):
+    """
+    Return the MCAP files of a bag directory in rosbag2's order (by the ``_N`` index).
+
+    Parameters
+    ----------
+    bag : pathlib.Path
+        The bag directory.
+
+    Returns
+    -------
+    list of pathlib.Path
+        Regular files (links are not followed) named ``*.mcap``.
+
+    Raises
+    ------
+    ValueError
+        More than ``MAX_BAG_FILES`` files.
+
+    """
+    files = []
+    for path in pathlib.Path(bag).iterdir():
+        if path.suffix == '.mcap' and path.is_file() and not path.is_symlink():
+            files.append(path)
+            if len(files) > MAX_BAG_FILES:
+                raise ValueError(f'{bag} holds more than {MAX_BAG_FILES} .mcap files')
+
+    def order(path):
+        match = _INDEX.search(path.name)
+        return (0, int(match.group(1)), path.name) if match else (1, 0, path.name)
+    return sorted(files, key=order)
+
+
+def scan_bag_file(path):
+    """
+    Read one MCAP file (whole, truncated or damaged) and describe its intact messages.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        The file.
+
+    Returns
+    -------
+    dict
+        ``path``, ``complete`` (has its summary and footer), ``end_reason``,
+        ``message_count``, ``first_log_ns``, ``last_log_ns`` (None without messages),
+        ``channels`` (list of dicts: ``topic``, ``type``, ``encoding``, ``metadata``,
+        ``count``), ``damaged_count``.
+
+    """
+    salvage = Salvage()
+    counts, first, last = {}, None, None
+    buffer = map_file(path)
+    try:
+        for records, body, _ in iter_messages(buffer, salvage):
+            channel_id, _, log_time, _ = MESSAGE_HEAD.unpack_from(records, body)
+            if channel_id not in salvage.channels:
+                continue
+            counts[channel_id] = counts.get(channel_id, 0) + 1
+            first = log_time if first is None else min(first, log_time)
+            last = log_time if last is None else max(last, log_time)
+    finally:
+        buffer.close()
+    channels = []
+    for channel in salvage.channels.values():
+        schema = salvage.schemas.get(channel.schema_id)
+        channels.append({'topic': channel.topic, 'type': schema.name if schema else '',
+                         'encoding': channel.message_encoding,
+                         'metadata': dict(channel.metadata),
+                         'count': counts.get(channel.id, 0)})
+    return {'path': pathlib.Path(path), 'complete': salvage.end_reason == 'complete',
+            'end_reason': salvage.end_reason, 'message_count': sum(counts.values()),
+            'first_log_ns': first, 'last_log_ns': last, 'channels': channels,
+            'damaged_count': salvage.damaged_count}
+
+
+def bag_topics(scans):
+    """
+    Merge the channels of a bag's files into its topics (first file's QoS and type win).
+
+    Parameters
+    ----------
+    scans : list of dict
+        :func:`scan_bag_file` results.
+
+    Returns
+    -------
+    dict
+        Topic name -> :class:`BagTopic`, in order of first appearance.
+
+    Raises
+    ------
+    ValueError
+        A channel that is not CDR-encoded or has no schema (not a rosbag2 recording).
+
+    """
+    topics = {}
+    for scan in scans:
+        for channel in scan['channels']:
+            if channel['encoding'] != 'cdr' or not channel['type']:
+                raise ValueError(f"{scan['path']}: topic {channel['topic']!r} is not a ROS 2 "
+                                 f"CDR channel with a schema (encoding {channel['encoding']!r})")
+            topic = topics.get(channel['topic'])
+            if topic is None:
+                metadata = channel['metadata']
+                profiles = yaml.safe_load(metadata.get('offered_qos_profiles') or '[]') or []
+                topic = topics[channel['topic']] = BagTopic(
+                    channel['topic'], channel['type'], list(profiles),
+                    metadata.get('topic_type_hash', ''))
+            topic.message_count += channel['count']
+    return topics
