@@ -1,0 +1,133 @@
+"""
+``flexlink reindex BAG``: rebuild the ``metadata.yaml`` of a bag directory whose recorder died.
+
+A recorder killed (SIGKILL, power cut of the process) leaves its bag directory without
+``metadata.yaml`` and its last file without summary and footer, so ``rosbags`` and
+``ros2 bag`` refuse the folder. This reads every ``*.mcap`` file of the directory (bounded,
+salvaging reader), rewrites a file cut short into a complete one holding all its intact
+messages (the original is kept beside it as ``<file>.truncated``), and writes ``metadata.yaml``
+as the recorder's ``close`` would have (rosbag2 version 9). Like ``ros2 bag reindex`` it takes
+what the files say: topics, types, offered QoS and type hashes from their channels.
+
+It refuses a path that is not a directory of MCAP files, and never replaces an existing
+``metadata.yaml`` (written by a recorder that closed the bag) unless ``--force`` is given.
+"""
+
+import os
+import pathlib
+import tempfile
+
+from .main import emit
+from .mcap import recover_mcap
+from ..errors import FlexlinkError, RecorderError
+from ..io.bag_index import bag_files, bag_topics, scan_bag_file
+from ..io.bag_metadata import write_bag_metadata
+
+
+def register(subparsers):
+    """
+    Add the reindex subcommand.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+        The ``flexlink`` subcommands.
+
+    """
+    parser = subparsers.add_parser(
+        'reindex', help='rebuild metadata.yaml of a bag directory whose recorder was killed')
+    parser.add_argument('bag', help='the bag directory (holding <name>_0.mcap, ...)')
+    parser.add_argument('--force', action='store_true',
+                        help='replace an existing metadata.yaml')
+    parser.add_argument('--json', action='store_true', help='one JSON object on stdout')
+    parser.set_defaults(func=_reindex_command)
+
+
+def reindex_bag(bag, force=False):
+    """
+    Rebuild ``metadata.yaml`` of a bag directory from its MCAP files.
+
+    Parameters
+    ----------
+    bag : str or os.PathLike
+        The bag directory.
+    force : bool
+        Replace an existing ``metadata.yaml``.
+
+    Returns
+    -------
+    dict
+        ``bag``, ``files`` (per file: ``path``, ``message_count``, ``end_reason``,
+        ``salvaged_from``), ``skipped`` (files with nothing readable: ``path``, ``reason``),
+        ``message_count``, ``topics`` (name -> count).
+
+    Raises
+    ------
+    FlexlinkError
+        Not a bag directory, or ``metadata.yaml`` exists and ``force`` is False.
+
+    """
+    bag = pathlib.Path(bag)
+    if not bag.is_dir():
+        raise FlexlinkError(f'{bag} is not a directory: reindex takes a bag directory')
+    files = bag_files(bag)
+    if not files:
+        raise FlexlinkError(f'{bag} holds no .mcap file: not a bag directory')
+    metadata = bag / 'metadata.yaml'
+    if os.path.lexists(metadata) and not force:
+        raise FlexlinkError(f'{metadata} exists (the recording was closed, and rosbags and '
+                            'ros2 bag open it as it is); --force rebuilds it from the files')
+    scans, skipped = [], []
+    for path in files:
+        scan = scan_bag_file(path)
+        if not scan['complete']:
+            try:
+                salvaged = _salvage(path)
+            except RecorderError as exc:   # nothing readable: left alone, not listed
+                skipped.append({'path': str(path), 'reason': str(exc)})
+                continue
+            scan = dict(scan_bag_file(path), salvaged_from=str(salvaged),
+                        end_reason=scan['end_reason'])
+        scans.append(scan)
+    if not scans:
+        raise FlexlinkError(f'{bag}: no readable MCAP file')
+    topics = bag_topics(scans)
+    write_bag_metadata(bag, scans, topics)
+    return {'bag': str(bag), 'message_count': sum(s['message_count'] for s in scans),
+            'files': [{'path': str(s['path']), 'message_count': s['message_count'],
+                       'end_reason': s['end_reason'], 'salvaged_from': s.get('salvaged_from')}
+                      for s in scans],
+            'skipped': skipped,
+            'topics': {t.name: t.message_count for t in topics.values()}}
+
+
+def _salvage(path):
+    """Rewrite a truncated file complete in place; keep the original as ``.truncated``."""
+    kept = path.with_name(path.name + '.truncated')
+    if os.path.lexists(kept):
+        raise FlexlinkError(f'{kept} exists (an earlier salvage?): move it away first')
+    descriptor, temporary = tempfile.mkstemp(prefix=path.name + '.', suffix='.salvage',
+                                             dir=path.parent)
+    os.close(descriptor)
+    try:
+        recover_mcap(path, temporary)
+        os.link(path, kept)     # fails rather than replace anything at `kept`
+        os.replace(temporary, path)
+    finally:
+        if os.path.lexists(temporary):
+            os.unlink(temporary)
+    return kept
+
+
+def _reindex_command(args):
+    result = reindex_bag(args.bag, force=args.force)
+    lines = [f"{result['bag']}/metadata.yaml: {len(result['files'])} files, "
+             f"{result['message_count']} messages"]
+    lines += [f'  {name}: {count}' for name, count in result['topics'].items()]
+    for entry in result['files']:
+        if entry['salvaged_from']:
+            lines.append(f"  {entry['path']} was cut short ({entry['end_reason']}); rewritten "
+                         f"with its {entry['message_count']} intact messages, original kept "
+                         f"as {entry['salvaged_from']}")
+    lines += [f"  skipped {entry['path']}: {entry['reason']}" for entry in result['skipped']]
+    return emit(result, '\n'.join(lines), args.json)
