@@ -244,7 +244,7 @@ class McapRecorder(QueuedWriting):
             Send time [ns]; defaults to ``log_time_ns``.
         sequence : int, optional
             The message's MCAP sequence number (e.g. the publisher's, taken modulo 2**32);
-            default: 1, 2, 3, ... per topic over the whole recording.
+            default: the message's number in its topic (1, 2, ... over the whole recording).
 
         Returns
         -------
@@ -267,10 +267,10 @@ class McapRecorder(QueuedWriting):
             try:
                 self._maybe_split(log_time_ns)
                 current = self._file
-                if sequence is None:
-                    sequence = int(self._topics[topic].next_sequences(1)[0])
+                number = int(self._topics[topic].next_sequences(1)[0])
+                sequence = number if sequence is None else int(sequence) % 2 ** 32
                 current.writer.add_message(current.channel_ids[topic], log_time_ns, data,
-                                           publish_time_ns, int(sequence) % 2 ** 32)
+                                           publish_time_ns, sequence)
             except OSError as exc:
                 self._fail(exc)
                 return self._refuse()

@@ -8,13 +8,13 @@ import subprocess
 import sys
 import zlib
 
-from flexlink_ros.names import JOINT_STATE
 from flexlink_ros.cli import main as cli
 from flexlink_ros.cli import replay as cli_replay
 from flexlink_ros.cli.mcap import mcap_info, recover_mcap
 from flexlink_ros.io import mcap_reader, mcap_records
 from flexlink_ros.io import recording as io_recording
 from flexlink_ros.io.recorder import McapRecorder
+from flexlink_ros.names import JOINT_STATE
 from flexlink_ros.ros import messages as ros_messages
 from mcap.reader import make_reader
 import pytest
