@@ -10,6 +10,9 @@ from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 import numpy as np
 import pytest
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rosbags.rosbag2 import Reader
+from rosbags.interfaces import QosDurability, QosReliability
 from sensor_msgs.msg import JointState
 import yaml
 
@@ -109,3 +112,24 @@ def test_metadata_records_are_written_as_the_mcap_writer_writes_them(tmp_path):
             writer.finish()
         outputs.append(path.read_bytes())
     assert outputs[0] == outputs[1]
+
+
+def test_offered_qos_given_when_the_first_message_comes_reaches_rosbags(tmp_path):
+    """A topic declared while recording (the node on its first input) keeps its offered QoS."""
+    bag = tmp_path / 'qos'
+    offered = [QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT,
+                          durability=DurabilityPolicy.TRANSIENT_LOCAL),
+               QoSProfile(depth=1000)]
+    with McapRecorder(bag) as recorder:
+        recorder.write('/out', Vector3Stamped(), T0_NS)
+        recorder.add_topic('/in', JointState, qos_profiles=offered)
+        recorder.write('/in', JointState(name=['crank']), T0_NS + 1)
+    with Reader(bag) as reader:
+        profiles = {c.topic: c.ext.offered_qos_profiles for c in reader.connections}
+        assert sum(1 for _ in reader.messages()) == 2
+    assert [(p.reliability, p.durability, p.depth) for p in profiles['/in']] == [
+        (QosReliability.BEST_EFFORT, QosDurability.TRANSIENT_LOCAL, 5),
+        (QosReliability.RELIABLE, QosDurability.VOLATILE, 1000)]
+    _, _, summary = read_file(bag / 'qos_0.mcap')
+    (channel,) = [c for c in summary.channels.values() if c.topic == '/in']
+    assert yaml.safe_load(channel.metadata['offered_qos_profiles'])[0]['depth'] == 5
