@@ -11,6 +11,8 @@ what the files say: topics, types, offered QoS and type hashes from their channe
 
 It refuses a path that is not a directory of MCAP files, and never replaces an existing
 ``metadata.yaml`` (written by a recorder that closed the bag) unless ``--force`` is given.
+Only files named as rosbag2 names them (``<dir>/<dir>_<N>.mcap``) are taken; any other file is
+left out and untouched.
 """
 
 import os
@@ -72,7 +74,8 @@ def reindex_bag(bag, force=False):
         raise FlexlinkError(f'{bag} is not a directory: reindex takes a bag directory')
     files = bag_files(bag)
     if not files:
-        raise FlexlinkError(f'{bag} holds no .mcap file: not a bag directory')
+        raise FlexlinkError(f'{bag} holds no {bag.resolve().name}_<N>.mcap file (as rosbag2 '
+                            'names them): not a bag directory')
     metadata = bag / 'metadata.yaml'
     if os.path.lexists(metadata) and not force:
         raise FlexlinkError(f'{metadata} exists (the recording was closed, and rosbags and '

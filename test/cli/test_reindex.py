@@ -9,6 +9,7 @@ import time
 
 from flexlink_ros.cli import main as cli
 from flexlink_ros.cli.mcap import scan_mcap
+from flexlink_ros.errors import McapFileError
 from flexlink_ros.io.recorder import McapRecorder
 from geometry_msgs.msg import Vector3Stamped
 from mcap.reader import make_reader
@@ -31,6 +32,14 @@ def rosbags_messages(bag):
                 for connection, log_ns, data in reader.messages()]
 
 
+def _recorded(path):
+    """Tell whether a file being recorded holds a message (False while its header is written)."""
+    try:
+        return scan_mcap(path)['message_count'] > 0
+    except McapFileError:   # created, magic not written yet
+        return False
+
+
 def record_then_kill(bag, record_s=2.5):
     """Record crank_driver's 1 kHz /joint_states into a split bag directory; SIGKILL it."""
     driver = subprocess.Popen([sys.executable, '-m', 'flexlink_ros.ros.crank_driver', '--ros-args',
@@ -43,7 +52,7 @@ def record_then_kill(bag, record_s=2.5):
     try:
         deadline = time.monotonic() + 15.0
         while time.monotonic() < deadline:  # discovery, then the first flushed chunk
-            if first.exists() and scan_mcap(first)['message_count'] > 0:
+            if first.exists() and _recorded(first):
                 break
             time.sleep(0.1)
         else:
@@ -154,12 +163,17 @@ def test_reindex_refuses_what_is_not_a_crashed_bag(tmp_path, capsys):
     (tmp_path / 'empty').mkdir()
     (tmp_path / 'other').mkdir()
     (tmp_path / 'other' / 'notes.txt').write_text('x')
+    (tmp_path / 'stray').mkdir()      # a folder that merely holds some MCAP file
+    with McapRecorder(tmp_path / 'stray' / 'rr.mcap') as recorder:
+        recorder.write('/a', JointState(), T0_NS)
     for path, reason in ((tmp_path / 'file.mcap', 'not a directory'),
+                         (tmp_path / 'stray', 'not a bag directory'),
                          (tmp_path / 'missing', 'not a directory'),
                          (tmp_path / 'empty', 'not a bag directory'),
                          (tmp_path / 'other', 'not a bag directory')):
         assert cli.main(['reindex', str(path)]) == 1
         assert reason in capsys.readouterr().err
+        assert not (path / 'metadata.yaml').exists()
     bag = tmp_path / 'closed'
     record_bag(bag, count=200)
     before = (bag / 'metadata.yaml').read_bytes()

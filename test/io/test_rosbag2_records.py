@@ -11,8 +11,8 @@ from mcap.writer import CompressionType, Writer
 import numpy as np
 import pytest
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from rosbags.rosbag2 import Reader
 from rosbags.interfaces import QosDurability, QosReliability
+from rosbags.rosbag2 import Reader
 from sensor_msgs.msg import JointState
 import yaml
 
