@@ -5,7 +5,8 @@ A recorder killed (SIGKILL, power cut of the process) leaves its bag directory w
 ``metadata.yaml`` and its last file without summary and footer, so ``rosbags`` and
 ``ros2 bag`` refuse the folder. This reads every ``*.mcap`` file of the directory (bounded,
 salvaging reader), rewrites a file cut short into a complete one holding all its intact
-messages (the original is kept beside it as ``<file>.truncated``), and writes ``metadata.yaml``
+messages and the ``rosbag2`` metadata records (the original is kept beside it as
+``<file>.truncated``), and writes ``metadata.yaml``
 as the recorder's ``close`` would have (rosbag2 version 9). Like ``ros2 bag reindex`` it takes
 what the files say: topics, types, offered QoS and type hashes from their channels.
 
@@ -17,13 +18,11 @@ left out and untouched.
 
 import os
 import pathlib
-import tempfile
 
 from .main import emit
-from .mcap import recover_mcap
-from ..errors import FlexlinkError, RecorderError
-from ..io.bag_index import bag_files, bag_topics, scan_bag_file
-from ..io.bag_metadata import write_bag_metadata
+from ..errors import FlexlinkError
+from ..io.bag_index import bag_files, bag_topics, rewrite_complete, scan_bag_file
+from ..io.bag_metadata import serialized_metadata, UNSET_NS, write_bag_metadata
 
 
 def register(subparsers):
@@ -83,18 +82,16 @@ def reindex_bag(bag, force=False):
     scans, skipped = [], []
     for path in files:
         scan = scan_bag_file(path)
-        if not scan['complete']:
-            try:
-                salvaged = _salvage(path)
-            except RecorderError as exc:   # nothing readable: left alone, not listed
-                skipped.append({'path': str(path), 'reason': str(exc)})
-                continue
-            scan = dict(scan_bag_file(path), salvaged_from=str(salvaged),
-                        end_reason=scan['end_reason'])
-        scans.append(scan)
+        if scan['header'] or scan['message_count']:
+            scans.append(scan)
+        else:   # nothing readable: left alone, not listed
+            skipped.append({'path': str(path), 'reason': scan['end_reason']})
     if not scans:
         raise FlexlinkError(f'{bag}: no readable MCAP file')
     topics = bag_topics(scans)
+    for n, scan in enumerate(scans):
+        if not scan['complete']:
+            scan['salvaged_from'] = str(_salvage(scans, n))
     write_bag_metadata(bag, scans, topics)
     return {'bag': str(bag), 'message_count': sum(s['message_count'] for s in scans),
             'files': [{'path': str(s['path']), 'message_count': s['message_count'],
@@ -104,22 +101,39 @@ def reindex_bag(bag, force=False):
             'topics': {t.name: t.message_count for t in topics.values()}}
 
 
-def _salvage(path):
-    """Rewrite a truncated file complete in place; keep the original as ``.truncated``."""
+def _salvage(scans, n):
+    """Rewrite file ``n`` complete in place; keep the original as ``.truncated``."""
+    path = scans[n]['path']
     kept = path.with_name(path.name + '.truncated')
     if os.path.lexists(kept):
         raise FlexlinkError(f'{kept} exists (an earlier salvage?): move it away first')
-    descriptor, temporary = tempfile.mkstemp(prefix=path.name + '.', suffix='.salvage',
-                                             dir=path.parent)
-    os.close(descriptor)
+    # The rosbag2 records the recorder would have written: at open, the files before this
+    # one and this one empty; at close, the bag up to this file.
+    empty = {'path': path, 'message_count': 0, 'first_log_ns': None, 'last_log_ns': None}
+    opening = serialized_metadata(scans[:n] + [empty], bag_topics(scans[:n]), UNSET_NS)
+    closing = serialized_metadata(scans[:n + 1], bag_topics(scans[:n + 1]))
+    temporary = path.with_name(f'.{path.name}.{os.getpid()}.salvage')
     try:
-        recover_mcap(path, temporary)
+        rewrite_complete(path, temporary, opening, closing)   # refuses an existing file
+    except FileExistsError:
+        raise
+    except BaseException:
+        _remove(temporary)
+        raise
+    try:
         os.link(path, kept)     # fails rather than replace anything at `kept`
-        os.replace(temporary, path)
-    finally:
-        if os.path.lexists(temporary):
-            os.unlink(temporary)
+    except BaseException:
+        _remove(temporary)
+        raise
+    os.replace(temporary, path)
     return kept
+
+
+def _remove(path):
+    try:
+        os.unlink(path)
+    except FileNotFoundError:
+        pass
 
 
 def _reindex_command(args):

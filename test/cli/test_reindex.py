@@ -146,7 +146,15 @@ def test_reindex_rebuilds_the_recorders_metadata_exactly_and_salvages_a_cut_file
     messages = rosbags_messages(bag)
     assert 0 < kept < 1100 and len(messages) == earlier + kept < status['message_count']
     with open(files[-1], 'rb') as stream:       # the rewritten file has its summary again
-        assert make_reader(stream).get_summary().statistics.message_count == kept
+        reader = make_reader(stream)
+        assert reader.get_summary().statistics.message_count == kept
+        records = [yaml.safe_load(m.metadata['serialized_metadata'])
+                   for m in reader.iter_metadata() if m.name == 'rosbag2']
+        sequences = [m.sequence for _, c, m in reader.iter_messages(log_time_order=False)
+                     if c.topic == '/deflection']
+    assert len(records) == 2 and records[0]['files'][-1]['message_count'] == 0
+    assert sequences == list(range(sequences[0], sequences[0] + len(sequences)))
+    assert sequences[0] > 1     # numbering carried on from the earlier files, and kept
     counts = {}
     for topic, _, _ in messages:
         counts[topic] = counts.get(topic, 0) + 1
@@ -154,6 +162,7 @@ def test_reindex_rebuilds_the_recorders_metadata_exactly_and_salvages_a_cut_file
     assert {t['topic_metadata']['name']: t['message_count']
             for t in metadata['topics_with_message_count']} == counts
     assert metadata['message_count'] == len(messages)
+    assert records[1] == metadata   # the closing record is the rebuilt metadata.yaml
     (qos,) = metadata['topics_with_message_count'][0]['topic_metadata']['offered_qos_profiles']
     assert (qos['reliability'], qos['depth']) == ('best_effort', 100)
 
