@@ -55,7 +55,6 @@ def test_module_imports_without_exudyn_rclpy_or_matplotlib():
     assert run.returncode == 0, run.stderr
 
 
-
 def test_default_revolutions_follow_the_damping(mech):
     # 4.1 s of settling at beta = 1e-4 s: 18 + 2 revolutions at 269 rpm, 27 + 2 at 391
     assert peer.default_revolutions(mech, 269.0) == 21
@@ -64,7 +63,6 @@ def test_default_revolutions_follow_the_damping(mech):
     with pytest.raises(ValueError):
         peer.default_revolutions(mech, 269.0, beta_s=0.0)
     assert 2 * math.pi * 34.0 < peer.lowest_bending_frequency(mech) < 2 * math.pi * 35.0
-
 
 
 @needs_exudyn
@@ -89,7 +87,6 @@ def test_static_sag_matches_the_package(mech, crank_deg):
     assert abs(mid_nl - mid_lin) < 0.02 * abs(mid_lin)
     # the lever tip hardly moves under gravity (pins; second order only): below 1 um
     assert abs(complex(nonlinear['lever_tip_dx'], nonlinear['lever_tip_dy'])) < 1e-6
-
 
 
 @needs_exudyn
