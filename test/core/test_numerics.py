@@ -49,8 +49,8 @@ def test_wrap_to_pi_works_on_arrays():
     assert wrapped.shape == angles.shape
     assert np.all((wrapped >= -math.pi) & (wrapped < math.pi))
     # the same direction: sine and cosine unchanged
-    assert np.allclose(np.sin(wrapped), np.sin(angles)) and np.allclose(np.cos(wrapped),
-                                                                         np.cos(angles))
+    assert np.allclose(np.sin(wrapped), np.sin(angles))
+    assert np.allclose(np.cos(wrapped), np.cos(angles))
 
 
 def test_relative_rms_closed_cases():

@@ -150,9 +150,9 @@ def test_geometric_stiffness_is_symmetric_linear_and_a4_for_constant_tension():
     constant = np.full((1, ELEMENTS, GAUSS_POINTS), force)
     kg = system.geometric_stiffness(identity, link, dict.fromkeys(system.PIECES, constant))['1'][0]
     a4 = force / (30.0 * le) * np.array([[36.0, 3 * le, -36.0, 3 * le],
-                                          [3 * le, 4 * le * le, -3 * le, -le * le],
-                                          [-36.0, -3 * le, 36.0, -3 * le],
-                                          [3 * le, -le * le, -3 * le, 4 * le * le]])
+                                         [3 * le, 4 * le * le, -3 * le, -le * le],
+                                         [-36.0, -3 * le, 36.0, -3 * le],
+                                         [3 * le, -le * le, -3 * le, 4 * le * le]])
     first = [1, 2, 4, 5]
     expected = np.zeros((SIZE, SIZE))
     for e in range(ELEMENTS):
