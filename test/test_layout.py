@@ -214,7 +214,7 @@ def test_the_checks_see_what_they_forbid(tmp_path):
 
 
 def mirrored_tests(path):
-    """The test files that may hold ``path``'s tests: its mirror, or the layer-named one."""
+    """Return the test files that may hold ``path``'s tests: its mirror or the layer-named one."""
     relative = path.relative_to(PACKAGE)
     folder = ROOT / 'test' / relative.parent
     names = [f'test_{path.stem}.py']
@@ -249,10 +249,10 @@ WITHOUT_OWN_TEST_FILE = {
 }
 
 
-@pytest.mark.parametrize('path', [p for p in MODULES if p.name not in ('__init__.py',
-                                                                         '__main__.py')],
-                         ids=[i for p, i in zip(MODULES, IDS)
-                              if p.name not in ('__init__.py', '__main__.py')])
+TESTED = [(p, i) for p, i in zip(MODULES, IDS) if p.name not in ('__init__.py', '__main__.py')]
+
+
+@pytest.mark.parametrize('path', [p for p, _ in TESTED], ids=[i for _, i in TESTED])
 def test_every_module_has_its_test_file(path):
     relative = str(path.relative_to(PACKAGE))
     has_file = any(candidate.is_file() for candidate in mirrored_tests(path))
