@@ -11,6 +11,7 @@ import pathlib
 import time
 
 from .main import emit
+from .progress import Progress
 
 # (title, module, function), in reading order.
 SECTIONS = (
@@ -24,7 +25,7 @@ SECTIONS = (
 )
 
 
-def write_report(out_dir, only=None):
+def write_report(out_dir, only=None, progress=None):
     """
     Write every section's charts and an index.md into out_dir.
 
@@ -34,6 +35,8 @@ def write_report(out_dir, only=None):
         Target directory (created).
     only : sequence of str or None
         Module names to include (default: all).
+    progress : callable or None
+        ``progress(done, total, what)`` before each section and at the end.
 
     Returns
     -------
@@ -45,9 +48,10 @@ def write_report(out_dir, only=None):
     out.mkdir(parents=True, exist_ok=True)
     lines = ['# flexlink_ros report', '']
     sections = []
-    for title, module_name, function_name in SECTIONS:
-        if only and module_name not in only:
-            continue
+    chosen = [s for s in SECTIONS if not only or s[1] in only]
+    for title, module_name, function_name in chosen:
+        if progress is not None:
+            progress(len(sections), len(chosen), title)
         entry = {'title': title, 'charts': [], 'seconds': 0.0, 'error': None}
         start = time.perf_counter()
         try:
@@ -72,13 +76,16 @@ def write_report(out_dir, only=None):
         for chart in entry['charts']:
             name = pathlib.Path(chart).name
             lines += [f'![{name}]({os.path.relpath(chart, out)})', '']
+    if progress is not None:
+        progress(len(sections), len(chosen), 'index')
     index = out / 'index.md'
     index.write_text('\n'.join(lines))
     return {'index': str(index), 'sections': sections}
 
 
 def _report(args):
-    result = write_report(args.out)
+    with Progress('report', unit='section') as progress:
+        result = write_report(args.out, progress=progress)
     text = [f'report: {result["index"]}']
     for entry in result['sections']:
         state = entry['error'] or f'{len(entry["charts"])} charts, {entry["seconds"]:.1f} s'
