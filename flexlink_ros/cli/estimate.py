@@ -50,7 +50,7 @@ def _estimate(args):
 
 def plan_fixed(args):
     """
-    The physical choices fixed on the command line, which every plan candidate keeps.
+    Collect the physical choices fixed on the command line, which every plan candidate keeps.
 
     ``--rigid-crank`` / ``--flexible-crank`` fix the crank model (neither: the plan tries
     both), ``--no-geometric-stiffness`` leaves it out (otherwise off and on are tried).

@@ -83,7 +83,7 @@ class Progress:
             self.close()
 
     def line(self):
-        """Describe the state in one plain line (count, percentage, elapsed, rate, step)."""
+        """Return the state as one plain line: count, percentage, elapsed, rate, step."""
         text = tqdm.format_meter(self.done, self.total, time.monotonic() - self.started,
                                  ncols=0, prefix=self.label, unit=self.unit)
         return f'{text} {self.what}'.rstrip()

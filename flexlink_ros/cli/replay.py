@@ -41,6 +41,7 @@ from ..names import DEFAULT_FRAME_ID, NODE_NAME, OUTPUT_POINTS, output_topics
 from ..ros.messages import OK
 from ..ros.republish import publish_recording
 
+
 def read_input(args, damaged):
     """
     Find the input topic of the recording and read its crank samples.

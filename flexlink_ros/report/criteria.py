@@ -4,8 +4,9 @@ Charts of the Earles-Wu joint criteria and the coil-spring design (Kang, Lee & Y
 :func:`plot_criteria` writes four PNG files and returns markdown with the numbers:
 
 - ``criteria_ratio_vs_crank.png``: |gamma_dot / R| against crank angle at joints O2, A, B,
-  O4 (the node's names; the paper's 1, 2, 3 are A, B, O4), log scale, for the original mechanism, the paper's spring and
-  the design found by :func:`core.spring_design.design_spring`; true maxima marked.
+  O4 (the node's names; the paper's 1, 2, 3 are A, B, O4), log scale, for the original
+  mechanism, the paper's spring and the design found by
+  :func:`core.spring_design.design_spring`; true maxima marked.
 - ``criteria_force_vs_crank.png``: reaction magnitude R against crank angle, same cases, with
   the force limits 1.5 R0 of Eq. 19.
 - ``criteria_grid_vs_true.png``: the 1-degree-grid maxima (Table 2) against the refined true

@@ -7,12 +7,12 @@ kept (see :func:`run_plan`).
 """
 
 import dataclasses
-import math
 import time
 
 import numpy as np
 
-from .plan_scoring import evaluate_model, physics_error, physics_key, PlanSignals
+from .plan_scoring import constrain_physics, evaluate_model, physics_error, PlanSignals, \
+    size_steps
 from .synthetic import PAPER_RPM
 from ..core.fe import linkage as assembly
 from ..core.reduction import pipeline
@@ -88,28 +88,6 @@ def physics_candidates(mechanism, base, scene):
     return sorted(candidates, key=costs.__getitem__) + [scene]
 
 
-def constrain_physics(candidates, fixed):
-    """
-    Keep the physical choices the user fixed in every candidate (the plan searches the rest).
-
-    Each candidate gets the ``fixed`` fields; duplicates (by physics) are dropped, the first
-    kept, so the order (cheapest first, the scene's physics with those fields last) stays.
-
-    Parameters
-    ----------
-    candidates : list of ModelOptions
-        :func:`physics_candidates`.
-    fixed : dict
-        Fields of :class:`ModelOptions` the user fixed ('rigid_crank', 'geometric_stiffness').
-
-    """
-    constrained = {}
-    for options in candidates:
-        options = dataclasses.replace(options, **fixed)
-        constrained.setdefault(physics_key(options), options)
-    return list(constrained.values())
-
-
 def describe_physics(options):
     """Short label: elements, crank, geometric stiffness, bearings."""
     return (f'{options.elements_per_link} el, {"rigid" if options.rigid_crank else "flex"} '
@@ -131,15 +109,6 @@ def _size_cost(options):
     """Cost order of a size: basis size r, then grid points (options or their dict)."""
     options = options if isinstance(options, dict) else dataclasses.asdict(options)
     return (options['modes'] + options['static'], options['grid_size'])
-
-
-def _size_steps(sizes):
-    """Most reduced models the size stage builds from ``sizes``: per grid, one and a bisection."""
-    steps = 0
-    for grid in {o.grid_size for o in sizes}:
-        count = sum(o.grid_size == grid for o in sizes)
-        steps += 1 + math.ceil(math.log2(max(count, 1)))
-    return steps
 
 
 class _Search:
@@ -344,13 +313,13 @@ def run_plan(mechanism, base, rpm_max, tolerance, rate_hz=1000.0, speeds_rpm=Non
     search = _Search(signals, scene, tolerance, rate_hz, max_candidates, progress)
     # steps: the scene's references, each physics screened and built, the size stage at most
     search.total = (len(speeds_rpm) + 2 * len(physics)
-                    + _size_steps(plan_candidates(physics[-1] if physics else scene)))
+                    + size_steps(plan_candidates(physics[-1] if physics else scene)))
     reference = _scene_reference(search, mechanism, scene, signals)
     chosen_physics = _screen_physics(search, mechanism, physics)
     rows, choice = search.rows, None
     if chosen_physics is not None:
         sizes, extra, choice = chosen_physics
-        search.total = search.done + _size_steps(sizes)
+        search.total = search.done + size_steps(sizes)
         choice, sized = _size_search(search, sizes, extra, choice)
         rows = [r for r in search.rows if r['stage'] == 'physics'] + sorted(
             sized, key=lambda r: _size_cost(r['options']))

@@ -5,8 +5,8 @@ import io
 import os
 import pathlib
 import pty
-import subprocess
 import struct
+import subprocess
 import sys
 import termios
 import time
