@@ -119,7 +119,11 @@ def _plot_force(theta_deg, curves, found, labels, path):
     for ax in axes[2:]:
         ax.set_xlabel('crank angle [deg]')
         ax.set_xticks(np.arange(0, 361, 45))
-    fig.legend(*axes[0].get_legend_handles_labels(), loc='outside lower center', ncols=4,
+    entries = {}    # every case and the force limit (drawn only at the design's joints)
+    for ax in axes:
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            entries.setdefault(label, handle)
+    fig.legend(entries.values(), entries.keys(), loc='outside lower center', ncols=4,
                fontsize=8)
     fig.suptitle('Joint reaction magnitude (zero-clearance rigid mechanism, 900 rpm)')
     fig.savefig(path, dpi=110)
