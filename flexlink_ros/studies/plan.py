@@ -371,7 +371,9 @@ def plan_table(result):
                      f'{chosen["error_coupler_mid"]:.2e}, lever {chosen["error_lever_tip"]:.2e}, '
                      f'{chosen["us_per_sample"]:.0f} us/sample')
     else:
-        lines.append('choice: none of the candidates meets the tolerance')
+        lines.append('choice: none of the candidates meets the tolerance'
+                     + ('; leave out the fixed choices to let the plan try the others'
+                        if result.get('fixed') else ''))
     lines.append(f'(physics error: full order vs the reference; trunc: reduced vs its own full '
                  f'order; coupler/lever: reduced vs the reference; plan took '
                  f'{result["seconds"]:.0f} s)')

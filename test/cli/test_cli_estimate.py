@@ -238,3 +238,13 @@ def test_plan_keeps_the_crank_and_geometric_stiffness_the_user_fixed(toy, monkey
     # not a terminal: plain progress lines, the last at 100 %
     last = captured.err.strip().splitlines()[-1]
     assert last.startswith('plan: 100%') and 'step' in last
+
+
+def test_plan_says_when_the_fixed_choices_leave_no_candidate(toy, monkeypatch, capsys):
+    monkeypatch.setattr(plan, 'plan_candidates', lambda base: [
+        dataclasses.replace(base, modes=1, static=0, grid_size=32)])
+    assert cli.main(['plan', '--rpm-max', '391', '--bearings', 'rigid', '--tolerance', '1e-9',
+                     '--rigid-crank']) == 0
+    out = capsys.readouterr().out
+    assert 'fixed in every candidate: rigid crank yes' in out
+    assert 'choice: none of the candidates meets the tolerance; leave out the fixed' in out
