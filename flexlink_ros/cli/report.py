@@ -6,6 +6,7 @@ list of PNG paths or a dict ``{'charts': [...], 'text': 'markdown with the numbe
 """
 
 import importlib
+import inspect
 import os
 import pathlib
 import time
@@ -23,6 +24,14 @@ SECTIONS = (
     ('Streaming estimator: speed against accuracy', 'flexlink_ros.report.estimator',
      'plot_estimator'),
 )
+
+
+def _section_progress(function, progress, done, total, title):
+    """Give a section that reports its own steps (a ``progress`` argument) the report's."""
+    if progress is None or 'progress' not in inspect.signature(function).parameters:
+        return {}
+    return {'progress': lambda step, steps, what: progress(
+        done, total, f'{title}: {what} ({step}/{steps})')}
 
 
 def write_report(out_dir, only=None, progress=None):
@@ -59,7 +68,8 @@ def write_report(out_dir, only=None, progress=None):
         except (ImportError, AttributeError) as exc:
             entry['error'] = f'not available in this checkout ({exc})'
         else:
-            result = function(out)
+            result = function(out, **_section_progress(function, progress, len(sections),
+                                                       len(chosen), title))
             if isinstance(result, dict):
                 entry['charts'] = [str(p) for p in result.get('charts', [])]
                 entry['text'] = result.get('text', '')

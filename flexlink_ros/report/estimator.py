@@ -171,7 +171,7 @@ def bench_table(configurations):
     return '\n'.join(lines)
 
 
-def plot_estimator(out_dir, options=None):
+def plot_estimator(out_dir, options=None, progress=None):
     """
     Report section: bench of the Cho 1992 estimator and the 391 rpm estimate.
 
@@ -181,6 +181,8 @@ def plot_estimator(out_dir, options=None):
         Directory of the charts.
     options : ModelOptions, optional
         The default model (default: the node's, :func:`studies.bench.node_model_options`).
+    progress : callable or None
+        ``progress(done, total, what)`` of the bench (:func:`studies.bench.run_bench`).
 
     Returns
     -------
@@ -192,7 +194,7 @@ def plot_estimator(out_dir, options=None):
     out = pathlib.Path(out_dir)
     try:
         data = estimator_report_data(load_mechanism('cho1992'),
-                                     options or node_model_options())
+                                     options or node_model_options(), progress)
     except FlexlinkError as exc:
         return {'charts': [], 'text': f'_Streaming estimator not available: {exc}_'}
     bench = data['bench']

@@ -290,7 +290,7 @@ def node_model_options():
     return ModelOptions(rigid_crank=False, elements_per_link=4)
 
 
-def estimator_report_data(mechanism, options):
+def estimator_report_data(mechanism, options, progress=None):
     """
     Compute the report's estimator section: the bench, the 391 rpm estimate and reference.
 
@@ -300,6 +300,8 @@ def estimator_report_data(mechanism, options):
         The mechanism (Cho 1992).
     options : ModelOptions
         The default model.
+    progress : callable or None
+        ``progress(done, total, what)`` of the bench (:func:`run_bench`).
 
     Returns
     -------
@@ -308,7 +310,7 @@ def estimator_report_data(mechanism, options):
         'estimate' and 'reference' ({'lever_tip', 'coupler_mid'}: (m, 2) arrays), 'rpm'.
 
     """
-    bench = run_bench(mechanism, options)
+    bench = run_bench(mechanism, options, progress=progress)
     model = pipeline.model_for_mechanism(mechanism, options)
     rpm = PAPER_RPM[-1]
     estimate = run_estimate(model, rpm)

@@ -13,6 +13,9 @@ import time
 
 from flexlink_ros.cli import progress as progress_module
 from flexlink_ros.cli.progress import Progress
+from flexlink_ros.cli.report import _section_progress
+from flexlink_ros.report.criteria import plot_criteria
+from flexlink_ros.report.estimator import plot_estimator
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 
@@ -72,3 +75,13 @@ def test_a_terminal_gets_a_tqdm_bar_on_stderr_and_stdout_keeps_the_result():
     text = terminal.decode()
     assert '\r' in text and 'bench: 100%|' in text and '4/4' in text
     assert '\u2588' in text      # the bar itself
+
+
+def test_a_report_section_with_its_own_steps_reports_them_within_the_report():
+    calls = []
+    kwargs = _section_progress(plot_estimator, lambda *call: calls.append(call), 3, 4,
+                               'Streaming estimator')
+    kwargs['progress'](5, 16, 'timing round 1 of 3')
+    assert calls == [(3, 4, 'Streaming estimator: timing round 1 of 3 (5/16)')]
+    assert _section_progress(plot_criteria, calls.append, 0, 4, 'criteria') == {}
+    assert _section_progress(plot_estimator, None, 0, 4, 'estimator') == {}
