@@ -12,6 +12,7 @@ import math
 import os
 import sys
 
+from .. import __version__
 from ..errors import FlexlinkError
 
 
@@ -126,6 +127,7 @@ def build_parser(argv=None):
         prog='flexlink',
         description='Flexible four-bar linkage: kinematics, joint criteria, beam and FE '
                     'models, streaming estimator, ROS 2 node and MCAP tools.')
+    parser.add_argument('--version', action='version', version=f'%(prog)s {__version__}')
     subparsers = parser.add_subparsers(dest='command', metavar='COMMAND')
     subparsers.required = True
     only = _command_module(argv) if argv is not None else None
