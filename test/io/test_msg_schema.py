@@ -1,11 +1,14 @@
 """msg_schema: .msg definitions, type hashes and exact CDR serialisation against rclpy."""
 
+import re
+
 from cdr_helpers import rclpy_exact
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from flexlink_ros.io.msg_schema import cdr_layout, serialize_exact
+from flexlink_ros.io.msg_schema import cdr_layout, message_definition, serialize_exact, type_hash
 from flexlink_ros.ros import messages as ros_messages
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
+from rosbags.typesys import get_types_from_msg
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import Marker
 
@@ -38,3 +41,17 @@ def test_serialize_exact_equals_rclpy_trimmed_with_zeroed_padding(message):
     assert data == rclpy_exact(message)
     assert cdr_layout(message)[0] == len(data)
     assert deserialize_message(data, type(message)) == message
+
+
+def test_joint_state_definition_parses_to_its_fields_and_hash_has_the_rihs01_form():
+    """The .msg text of JointState, read by rosbags' parser; its hash in rosbag2's form."""
+    text = message_definition('sensor_msgs/msg/JointState')
+    types = get_types_from_msg(text, 'sensor_msgs/msg/JointState')
+    # The text carries its dependencies (MSG: sections) as rosbag2 writes them.
+    assert {'std_msgs/msg/Header', 'builtin_interfaces/msg/Time'} <= set(types)
+    fields = types['sensor_msgs/msg/JointState'][1]
+    assert [name for name, _ in fields] == ['header', 'name', 'position', 'velocity', 'effort']
+    assert [name for name, _ in types['std_msgs/msg/Header'][1]] == ['stamp', 'frame_id']
+    digest = type_hash('sensor_msgs/msg/JointState')
+    assert re.fullmatch('RIHS01_[0-9a-f]{64}', digest)
+    assert digest != type_hash('geometry_msgs/msg/Vector3Stamped')
