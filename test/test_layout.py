@@ -226,8 +226,6 @@ def mirrored_tests(path):
 # Modules still tested only from the test file of a module that uses them (to shrink).
 WITHOUT_OWN_TEST_FILE = {
     'cli/demo_summary.py',
-    'cli/main.py',
-    'cli/mcap.py',
     'cli/mcap_record.py',
     'ros/diagnostics.py',
     'ros/node_model.py',
