@@ -35,7 +35,7 @@ def test_estimate_chart_draws_estimate_and_reference(tmp_path):
 
 def test_error_vs_cost_marks_the_default(tmp_path):
     path = estimator.plot_error_vs_cost(ROWS, tmp_path / 'cost.png', tolerance=0.01)
-    assert png_size(path) == (1200, 504)
+    assert png_size(path) == (1200, 576)   # the legend under both panels
     assert has_colour(path, 'tab:red') and has_colour(path, 'tab:blue')
     plain = estimator.plot_error_vs_cost(ROWS[1:], tmp_path / 'plain.png')
     assert not has_colour(plain, 'tab:red')            # no default: no red star
