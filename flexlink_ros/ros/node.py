@@ -42,6 +42,7 @@ from rclpy.node import Node  # noqa: E402
 from rclpy.utilities import remove_ros_args  # noqa: E402
 
 from . import runtime, startup  # noqa: E402
+from .overrides import NODE_OPTIONS  # noqa: E402
 from .pipeline import EstimatorPipeline  # noqa: E402
 from ..errors import FlexlinkError  # noqa: E402
 
@@ -53,7 +54,7 @@ class FlexlinkNode(EstimatorPipeline, Node):
     """flexlink_node: configured and streaming from construction."""
 
     def __init__(self, **kwargs):
-        super().__init__(NODE_NAME, **kwargs)
+        super().__init__(NODE_NAME, **NODE_OPTIONS, **kwargs)
         self._declare()
         self._configure(self.create_publisher)
         self._activate()
@@ -69,7 +70,7 @@ class FlexlinkManagedNode(EstimatorPipeline, LifecycleNode):
     """
 
     def __init__(self, **kwargs):
-        super().__init__(NODE_NAME, **kwargs)
+        super().__init__(NODE_NAME, **NODE_OPTIONS, **kwargs)
         self._declare()
 
     def on_configure(self, state):

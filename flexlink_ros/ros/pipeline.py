@@ -21,9 +21,10 @@ from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
 from . import diagnostics, parameters
-from .messages import diagnostics_message, joint_level, parameter_descriptor
+from .messages import diagnostics_message, joint_level
 from .node_model import (crank_sample, load_node_model, one_line, PeriodStats, publishable,
                          SKIP_KINDS, Totals)
+from .overrides import declare_table
 from .runtime import is_shutdown_error
 from .startup import check_startup_signal
 from ..core.estimation.sample import SampleFlag
@@ -46,8 +47,7 @@ class EstimatorPipeline:
     """The node's work, shared by the plain and the managed (lifecycle) node."""
 
     def _declare(self):
-        for spec in parameters.PARAMETERS:
-            self.declare_parameter(spec.name, spec.default, parameter_descriptor(spec))
+        self.unknown_overrides = declare_table(self, parameters.PARAMETERS)
         self.values = parameters.validate_all(
             {spec.name: self.get_parameter(spec.name).value for spec in parameters.PARAMETERS})
         self.add_on_set_parameters_callback(self._validate)

@@ -44,10 +44,10 @@ def test_model_options_follow_the_parameters():
 class NodeProcess:
     """flexlink_node in a subprocess, its log in a file."""
 
-    def __init__(self, tmp_path, *parameters, flags=()):
+    def __init__(self, tmp_path, *parameters, flags=(), ros_args=(), params_file=PARAMS_FILE):
         self.log_path = tmp_path / f'node_{time.monotonic_ns()}.log'
         command = [sys.executable, '-m', 'flexlink_ros.ros.node', *flags, '--ros-args',
-                   '--params-file', str(PARAMS_FILE)]
+                   *ros_args, '--params-file', str(params_file)]
         for item in parameters:
             command += ['-p', item]
         env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path), PYTHONUNBUFFERED='1',

@@ -57,7 +57,7 @@ def _flatten(tree, prefix=''):
 def test_params_file_equals_the_code_defaults():
     # `ros2 run` without --params-file must behave as with config/flexlink_node.yaml.
     path = pathlib.Path(__file__).resolve().parents[2] / 'config' / 'flexlink_node.yaml'
-    shipped = dict(_flatten(yaml.safe_load(path.read_text())['flexlink_node']['ros__parameters']))
+    shipped = dict(_flatten(yaml.safe_load(path.read_text())['/**']['ros__parameters']))
     assert shipped == node_params.defaults()
 
 
