@@ -177,8 +177,8 @@ def validate_parameter(name, value, current=None):
     if spec.max_bytes is not None and len(value.encode('utf-8', 'replace')) > spec.max_bytes:
         return (f'{name} must be at most {spec.max_bytes} bytes, got '
                 f'{len(value.encode("utf-8", "replace"))}')
-    if name == 'crank_joint' and not value:
-        return 'crank_joint must not be empty'
+    if name in ('crank_joint', 'frame_id') and not value:
+        return f'{name} must not be empty'
     if spec.choices is not None and value not in spec.choices:
         return f'{name} must be one of {", ".join(spec.choices)}, got {value!r}'
     if name in ('diagnostics.criterion_warn', 'diagnostics.criterion_error') and current:

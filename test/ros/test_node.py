@@ -323,6 +323,7 @@ def test_driver_to_node_and_sigkill_leaves_a_recoverable_file(tmp_path, processe
     ('damping_ratio:=2.0', 'out of range'),         # refused by the descriptor's range
     ('qos.depth:=2.5', 'expecting type'),           # refused by the parameter's type
     ('frame_id:=' + 'x' * 300, 'frame_id must be at most 256 bytes, got 300'),
+    ("frame_id:=''", 'frame_id must not be empty'),
 ])
 def test_bad_parameters_file_value_stops_the_node_with_a_reason(tmp_path, processes, parameter,
                                                                 reason):

@@ -22,6 +22,7 @@ def test_defaults_are_valid():
     ('qos.depth', True, 'type int'),
     ('frame_id', 3, 'type str'),
     ('no.such.parameter', 1, 'unknown'),
+    ('frame_id', '', 'frame_id must not be empty'),
 ])
 def test_bad_values_give_reasons(name, value, fragment):
     reason = node_params.validate_parameter(name, value, node_params.defaults())
