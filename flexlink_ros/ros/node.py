@@ -53,6 +53,8 @@ SWITCH_INTERVAL_S = 0.0005
 class FlexlinkNode(EstimatorPipeline, Node):
     """flexlink_node: configured and streaming from construction."""
 
+    finalized = False   # runs until SIGINT/SIGTERM
+
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **NODE_OPTIONS, **kwargs)
         self._declare()
@@ -66,11 +68,12 @@ class FlexlinkManagedNode(EstimatorPipeline, LifecycleNode):
 
     configure loads or builds the model, creates the publishers and opens the recording;
     activate subscribes and starts publishing; deactivate stops receiving; cleanup closes
-    the recording.
+    the recording; shutdown (from any state) closes it and the process exits.
     """
 
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **NODE_OPTIONS, **kwargs)
+        self.finalized = False
         self._declare()
 
     def on_configure(self, state):
@@ -95,6 +98,7 @@ class FlexlinkManagedNode(EstimatorPipeline, LifecycleNode):
 
     def on_shutdown(self, state):
         self._cleanup()
+        self.finalized = True   # the spin ends once the transition has been answered
         return TransitionCallbackReturn.SUCCESS
 
 
@@ -183,7 +187,7 @@ def _run(args):
             startup.end_startup()      # from here on rclpy's shutdown ends the spin
             executor = runtime.make_executor()
             executor.add_node(node)
-            runtime.spin_until_shutdown(executor)
+            runtime.spin_until_shutdown(executor, lambda: node.finalized)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

@@ -138,3 +138,19 @@ def test_two_namespaced_nodes_report_distinct_diagnostics_also_while_inactive(
     assert inactive[f'{second}: input'][:2] == (
         DiagnosticStatus.STALE, 'inactive: not subscribed to /robot2/joint_states')
     assert plain.stop() == 0 and managed.stop() == 0
+
+
+def test_managed_node_process_exits_after_the_shutdown_transition(tmp_path, processes, ros):
+    from lifecycle_msgs.msg import Transition
+    from lifecycle_msgs.srv import ChangeState
+
+    managed = NodeProcess(tmp_path, flags=['--managed'], ros_args=['-r', f'__ns:={NAMESPACE}'])
+    processes.append(managed)
+    test_node, executor = ros
+    change_state = test_node.create_client(ChangeState, f'{NAMESPACE}/{NODE_NAME}/change_state')
+    spin_until(executor, change_state.service_is_ready, READY_TIMEOUT_S, 'the lifecycle service')
+    future = change_state.call_async(ChangeState.Request(
+        transition=Transition(id=Transition.TRANSITION_UNCONFIGURED_SHUTDOWN)))
+    spin_until(executor, future.done, 30.0, 'the shutdown transition')
+    assert future.result().success                  # answered before the process ends
+    assert managed.process.wait(timeout=60) == 0, managed.log()
