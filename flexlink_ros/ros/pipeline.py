@@ -175,6 +175,12 @@ class EstimatorPipeline:
     def _open_recorder(self, qos):
         values = self.values
         path = values['record.path'] or time.strftime('flexlink_%Y%m%d_%H%M%S')
+        # The recorder never overwrites: a re-configure records next to the earlier takes.
+        self._takes = getattr(self, '_takes', {})
+        take = self._takes[path] = self._takes.get(path, 0) + 1
+        if take > 1:
+            stem, dot, suffix = path.rpartition('.') if path.endswith('.mcap') else (path, '', '')
+            path = f'{stem}_{take}{dot}{suffix}'
         recorder = McapRecorder(path, split_size_bytes=values['record.max_bytes'],
                                 split_duration_s=values['record.max_duration_s'])
         # Topics first: if opening fails, writes to them are then dropped as failed,

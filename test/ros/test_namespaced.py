@@ -154,3 +154,25 @@ def test_managed_node_process_exits_after_the_shutdown_transition(tmp_path, proc
     spin_until(executor, future.done, 30.0, 'the shutdown transition')
     assert future.result().success                  # answered before the process ends
     assert managed.process.wait(timeout=60) == 0, managed.log()
+
+
+def test_reconfigured_node_records_again_next_to_the_first_take(tmp_path, processes, ros):
+    from lifecycle_msgs.msg import Transition
+    from lifecycle_msgs.srv import ChangeState
+
+    bag = tmp_path / 'take'
+    managed = NodeProcess(tmp_path, 'record.enabled:=true', f'record.path:={bag}',
+                          flags=['--managed'])
+    processes.append(managed)
+    test_node, executor = ros
+    change_state = test_node.create_client(ChangeState, f'/{NODE_NAME}/change_state')
+    spin_until(executor, change_state.service_is_ready, READY_TIMEOUT_S, 'the lifecycle service')
+    for transition in ('CONFIGURE', 'CLEANUP', 'CONFIGURE', 'CLEANUP'):
+        future = change_state.call_async(ChangeState.Request(
+            transition=Transition(id=getattr(Transition, f'TRANSITION_{transition}'))))
+        spin_until(executor, future.done, READY_TIMEOUT_S, transition)
+        assert future.result().success, managed.log()
+    assert bag.is_dir() and (tmp_path / 'take_2').is_dir()
+    assert 'recording disabled' not in managed.log()
+    assert managed.log().count('recording closed') == 2
+    assert managed.stop() == 0
