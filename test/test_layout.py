@@ -211,3 +211,43 @@ def test_the_checks_see_what_they_forbid(tmp_path):
         sample.unlink()
     assert strongly_connected({'a': {'b'}, 'b': {'a'}, 'c': set()}) in (
         [{'a', 'b'}, {'c'}], [{'c'}, {'a', 'b'}])
+
+
+def mirrored_tests(path):
+    """Return the test files that may hold ``path``'s tests: its mirror or the layer-named one."""
+    relative = path.relative_to(PACKAGE)
+    folder = ROOT / 'test' / relative.parent
+    names = [f'test_{path.stem}.py']
+    if relative.parent.parts:
+        names.append(f'test_{relative.parts[0]}_{path.stem}.py')
+    return [folder / name for name in names]
+
+
+# Modules still tested only from the test file of a module that uses them (to shrink).
+WITHOUT_OWN_TEST_FILE = {
+    'cli/demo_summary.py',
+    'cli/mcap_record.py',
+    'ros/diagnostics.py',
+    'ros/node_model.py',
+    'ros/pipeline.py',
+    'ros/republish.py',
+    'ros/startup.py',
+}
+
+
+TESTED = [(p, i) for p, i in zip(MODULES, IDS) if p.name not in ('__init__.py', '__main__.py')]
+
+
+@pytest.mark.parametrize('path', [p for p, _ in TESTED], ids=[i for _, i in TESTED])
+def test_every_module_has_its_test_file(path):
+    relative = str(path.relative_to(PACKAGE))
+    has_file = any(candidate.is_file() for candidate in mirrored_tests(path))
+    if relative in WITHOUT_OWN_TEST_FILE:
+        assert not has_file, f'{relative} has its test file now: take it off the list'
+    else:
+        assert has_file, [str(c.relative_to(ROOT)) for c in mirrored_tests(path)]
+
+
+def test_test_file_names_are_unique():
+    names = [p.name for p in (ROOT / 'test').rglob('test_*.py')]
+    assert sorted(n for n in set(names) if names.count(n) > 1) == []

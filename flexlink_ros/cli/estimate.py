@@ -12,12 +12,14 @@
   error; it prints a table and writes a chart of error against cost (:mod:`studies.bench`).
 """
 
+import argparse
 import pathlib
 
 import numpy as np
 
 from .main import emit
 from .model_args import add_estimator_arguments, load_model, model_options
+from .progress import Progress
 from ..core.mechanism_file import load_mechanism
 from ..core.numerics import RPM
 from ..core.options import ModelOptions
@@ -46,10 +48,29 @@ def _estimate(args):
     return emit(result, text, args.json)
 
 
+def plan_fixed(args):
+    """
+    Collect the physical choices fixed on the command line, which every plan candidate keeps.
+
+    ``--rigid-crank`` / ``--flexible-crank`` fix the crank model (neither: the plan tries
+    both), ``--no-geometric-stiffness`` leaves it out (otherwise off and on are tried).
+    """
+    fixed = {}
+    if args.rigid_crank is not None:
+        fixed['rigid_crank'] = args.rigid_crank
+    if args.no_geometric_stiffness:
+        fixed['geometric_stiffness'] = False
+    return fixed
+
+
 def _plan(args):
     mechanism = load_mechanism(args.mechanism)
-    base = model_options(args)
-    result = run_plan(mechanism, base, args.rpm_max, args.tolerance, args.rate_hz)
+    # the scene (the reference) is the richest model whatever the user fixed
+    scene_args = argparse.Namespace(**{**vars(args), 'rigid_crank': False,
+                                       'no_geometric_stiffness': False})
+    with Progress('plan', unit='step') as progress:
+        result = run_plan(mechanism, model_options(scene_args), args.rpm_max, args.tolerance,
+                          args.rate_hz, fixed=plan_fixed(args), progress=progress)
     return emit(result, plan_table(result), args.json)
 
 
@@ -85,7 +106,8 @@ def _bench_lines(result):
 
 def _bench(args):
     mechanism = load_mechanism(args.mechanism)
-    result = run_bench(mechanism, model_options(args), args.rate_hz)
+    with Progress('bench', unit='step') as progress:
+        result = run_bench(mechanism, model_options(args), args.rate_hz, progress=progress)
     if not args.no_chart:
         chart = pathlib.Path(args.out) / 'estimator_error_vs_cost.png'
         result['chart'] = str(plot_error_vs_cost(result['configurations'], chart))
@@ -110,8 +132,11 @@ def register(subparsers):
                                    'tolerance against the full-order response of the scene '
                                    '(flexible crank, geometric stiffness, refined elements, '
                                    "--bearings); --elements-per-link sets the reference's "
-                                   'elements, crank and geometric-stiffness flags are ignored')
+                                   'elements; --rigid-crank/--flexible-crank and '
+                                   '--no-geometric-stiffness fix those choices in every '
+                                   'candidate (otherwise the plan tries both)')
     add_estimator_arguments(parser)
+    parser.set_defaults(rigid_crank=None)   # None: the plan chooses the crank model
     parser.add_argument('--rpm-max', type=float, required=True, help='largest speed [rpm]')
     parser.add_argument('--tolerance', type=float, default=0.01,
                         help='relative RMS error target (default 0.01)')

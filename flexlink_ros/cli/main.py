@@ -12,6 +12,7 @@ import math
 import os
 import sys
 
+from .. import __version__
 from ..errors import FlexlinkError
 
 
@@ -29,6 +30,7 @@ COMMANDS = {
     'mcap-recover': 'flexlink_ros.cli.mcap',
     'mcap-record': 'flexlink_ros.cli.mcap_record',
     'node-bench': 'flexlink_ros.cli.node_bench',
+    'reindex': 'flexlink_ros.cli.reindex',
     'replay': 'flexlink_ros.cli.replay',
     'report': 'flexlink_ros.cli.report',
     'kinematics': 'flexlink_ros.cli.rigid',
@@ -125,6 +127,7 @@ def build_parser(argv=None):
         prog='flexlink',
         description='Flexible four-bar linkage: kinematics, joint criteria, beam and FE '
                     'models, streaming estimator, ROS 2 node and MCAP tools.')
+    parser.add_argument('--version', action='version', version=f'%(prog)s {__version__}')
     subparsers = parser.add_subparsers(dest='command', metavar='COMMAND')
     subparsers.required = True
     only = _command_module(argv) if argv is not None else None

@@ -4,10 +4,11 @@ MCAP subcommands: ``mcap-info`` and ``mcap-recover`` (``mcap-record``: its own m
 - ``flexlink mcap-info FILE|BAG_DIR [--json]``: topics, types, counts, time range, and whether
   the file is complete, checked: every chunk is decompressed (bounded) and CRC-checked, and
   damaged chunks are listed with their offsets rather than trusting the summary.
-- ``flexlink mcap-recover IN.mcap --out OUT.mcap [--json]``: read a truncated or damaged file
+- ``flexlink mcap-recover IN.mcap [--out OUT.mcap] [--json]``: read a truncated or damaged file
   (a recorder killed with SIGKILL, a full disk, a bad sector) record by record, keep every
   intact chunk and message, skipping damaged chunks, and write a proper file with summary
-  and statistics. Bounds and salvage rules: :mod:`flexlink_ros.io.mcap_reader`.
+  and statistics. Bounds and salvage rules: :mod:`flexlink_ros.io.mcap_reader`. Without
+  ``--out`` it writes :func:`default_recovered_path` and refuses to overwrite it.
 """
 
 import pathlib
@@ -40,7 +41,9 @@ def register(subparsers):
     recover = subparsers.add_parser(
         'mcap-recover', help='salvage every complete message of a truncated MCAP file')
     recover.add_argument('input', help='truncated .mcap file')
-    recover.add_argument('--out', required=True, help='recovered .mcap file to write')
+    recover.add_argument('--out', help='recovered .mcap file to write (default: INPUT with '
+                         'the suffix .recovered.mcap, beside the bag directory when INPUT is '
+                         'one of its files; never overwritten)')
     recover.add_argument('--json', action='store_true', help='one JSON object on stdout')
     recover.set_defaults(func=_recover_command)
 
@@ -284,7 +287,38 @@ def _stream_copy(source, copier):
             'readable_bytes': salvage.readable_bytes, 'source_bytes': salvage.size}
 
 
+def default_recovered_path(source):
+    """
+    Where ``mcap-recover`` writes without ``--out``: ``NAME.recovered.mcap`` beside the input.
+
+    A file of a rosbag2 bag directory (``BAG/BAG_0.mcap``) is recovered beside the directory
+    (``BAG_0.recovered.mcap``), so the bag keeps only its own files (mcap-info, reindex and
+    rosbag2 read every .mcap in it).
+
+    Parameters
+    ----------
+    source : str or os.PathLike
+        The damaged or truncated .mcap file.
+
+    Returns
+    -------
+    pathlib.Path
+
+    """
+    source = pathlib.Path(source)
+    stem = source.name[:-len('.mcap')] if source.name.endswith('.mcap') else source.name
+    folder = source.parent
+    if folder.name and stem.startswith(folder.name + '_'):
+        folder = folder.parent
+    return folder / f'{stem}.recovered.mcap'
+
+
 def _recover_command(args):
+    if args.out is None:
+        args.out = str(default_recovered_path(args.input))
+        if pathlib.Path(args.out).exists():
+            raise ValueError(f'{args.out} exists (the default output is never overwritten); '
+                             'remove it or choose another file with --out')
     result = recover_mcap(args.input, args.out)
     for key in ('header', 'chunk_count', 'summary'):
         result.pop(key, None)

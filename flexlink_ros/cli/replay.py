@@ -23,13 +23,13 @@ restarts, as in the node.
 import functools
 import math
 import pathlib
-import sys
 import time
 
 import numpy as np
 
 from .main import emit
 from .model_args import add_estimator_arguments, load_model, model_options
+from .progress import Progress
 from ..core.estimation.offline_run import allocate_estimate, BackgroundEstimate, \
     estimate_offline
 from ..core.mechanism_file import load_mechanism
@@ -40,42 +40,6 @@ from ..io.replay_writer import write_replay
 from ..names import DEFAULT_FRAME_ID, NODE_NAME, OUTPUT_POINTS, output_topics
 from ..ros.messages import OK
 from ..ros.republish import publish_recording
-
-PROGRESS_PERIOD_S = 0.5  # seconds between progress-bar updates
-
-
-class Progress:
-    """
-    A one-line progress bar on stderr (only on a terminal).
-
-    Parameters
-    ----------
-    total : int
-        The count at 100 %.
-    label : str
-        What is in progress.
-    stream : file
-        Where to draw it.
-
-    """
-
-    def __init__(self, total, label, stream=sys.stderr):
-        self.total, self.label, self.stream = max(total, 1), label, stream
-        self.enabled = stream.isatty()
-        self.last = 0.0
-
-    def __call__(self, done, force=False):
-        """Draw ``done`` of the total (at most every PROGRESS_PERIOD_S unless ``force``)."""
-        now = time.monotonic()
-        if not self.enabled or (not force and now - self.last < PROGRESS_PERIOD_S):
-            return
-        self.last = now
-        fraction = min(done / self.total, 1.0)
-        bar = '#' * int(30 * fraction)
-        self.stream.write(f'\r{self.label} [{bar:<30}] {100 * fraction:5.1f} %')
-        if force:
-            self.stream.write('\n')
-        self.stream.flush()
 
 
 def read_input(args, damaged):
@@ -146,11 +110,11 @@ def estimate_and_write(args, model, samples, topic):
     background = BackgroundEstimate(run_estimate,
                                     allocate_estimate(model, len(samples['data'])))
     try:
-        status = write_replay(args.out, samples, background.result, topic,
-                              output_topics(args.node_name), args.frame_id, model,
-                              args.markers_every_n, wait_for=background.wait_for,
-                              progress=Progress(len(samples['data']), f'writing {args.out}'),
-                              joint_levels=[OK] * 4)
+        with Progress(f'writing {args.out}', len(samples['data']), unit='sample') as progress:
+            status = write_replay(args.out, samples, background.result, topic,
+                                  output_topics(args.node_name), args.frame_id, model,
+                                  args.markers_every_n, wait_for=background.wait_for,
+                                  progress=progress, joint_levels=[OK] * 4)
     finally:
         background.join()
     return background.result, {'estimate_s': background.seconds, 'status': status,
@@ -209,9 +173,9 @@ def run_replay(args):
     result['times_real_time'] = span_s / total if total > 0 else math.inf
     _peak_to_peak(estimate, result)
     if args.publish:
-        result['published'] = publish_recording(
-            samples, topic, args.publish_speed,
-            progress=Progress(count, f'publishing {topic}'))
+        with Progress(f'publishing {topic}', count, unit='msg') as progress:
+            result['published'] = publish_recording(samples, topic, args.publish_speed,
+                                                    progress=progress)
     return result
 
 

@@ -6,11 +6,13 @@ list of PNG paths or a dict ``{'charts': [...], 'text': 'markdown with the numbe
 """
 
 import importlib
+import inspect
 import os
 import pathlib
 import time
 
 from .main import emit
+from .progress import Progress
 
 # (title, module, function), in reading order.
 SECTIONS = (
@@ -24,7 +26,15 @@ SECTIONS = (
 )
 
 
-def write_report(out_dir, only=None):
+def _section_progress(function, progress, done, total, title):
+    """Give a section that reports its own steps (a ``progress`` argument) the report's."""
+    if progress is None or 'progress' not in inspect.signature(function).parameters:
+        return {}
+    return {'progress': lambda step, steps, what: progress(
+        done, total, f'{title}: {what} ({step}/{steps})')}
+
+
+def write_report(out_dir, only=None, progress=None):
     """
     Write every section's charts and an index.md into out_dir.
 
@@ -34,6 +44,8 @@ def write_report(out_dir, only=None):
         Target directory (created).
     only : sequence of str or None
         Module names to include (default: all).
+    progress : callable or None
+        ``progress(done, total, what)`` before each section and at the end.
 
     Returns
     -------
@@ -45,9 +57,10 @@ def write_report(out_dir, only=None):
     out.mkdir(parents=True, exist_ok=True)
     lines = ['# flexlink_ros report', '']
     sections = []
-    for title, module_name, function_name in SECTIONS:
-        if only and module_name not in only:
-            continue
+    chosen = [s for s in SECTIONS if not only or s[1] in only]
+    for title, module_name, function_name in chosen:
+        if progress is not None:
+            progress(len(sections), len(chosen), title)
         entry = {'title': title, 'charts': [], 'seconds': 0.0, 'error': None}
         start = time.perf_counter()
         try:
@@ -55,7 +68,8 @@ def write_report(out_dir, only=None):
         except (ImportError, AttributeError) as exc:
             entry['error'] = f'not available in this checkout ({exc})'
         else:
-            result = function(out)
+            result = function(out, **_section_progress(function, progress, len(sections),
+                                                       len(chosen), title))
             if isinstance(result, dict):
                 entry['charts'] = [str(p) for p in result.get('charts', [])]
                 entry['text'] = result.get('text', '')
@@ -72,13 +86,16 @@ def write_report(out_dir, only=None):
         for chart in entry['charts']:
             name = pathlib.Path(chart).name
             lines += [f'![{name}]({os.path.relpath(chart, out)})', '']
+    if progress is not None:
+        progress(len(sections), len(chosen), 'index')
     index = out / 'index.md'
     index.write_text('\n'.join(lines))
     return {'index': str(index), 'sections': sections}
 
 
 def _report(args):
-    result = write_report(args.out)
+    with Progress('report', unit='section') as progress:
+        result = write_report(args.out, progress=progress)
     text = [f'report: {result["index"]}']
     for entry in result['sections']:
         state = entry['error'] or f'{len(entry["charts"])} charts, {entry["seconds"]:.1f} s'

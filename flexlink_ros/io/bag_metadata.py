@@ -16,6 +16,8 @@ from .recorder_files import create_exclusive
 
 ROSBAG2_METADATA_VERSION = 9  # rosbag2 metadata.yaml version written (QoS policies as names)
 ROS_DISTRO = 'kilted'
+METADATA_RECORD = 'rosbag2'   # name of the MCAP Metadata record rosbag2 writes
+UNSET_NS = 2 ** 63 - 1   # rosbag2's starting time before the first message (nanoseconds::max)
 DEFAULT_QOS = {
     'history': 'keep_last', 'depth': 10, 'reliability': 'reliable', 'durability': 'volatile',
     'deadline': {'sec': 9223372036, 'nsec': 854775807},
@@ -38,16 +40,22 @@ def _since_epoch(nanoseconds):
     return {'nanoseconds_since_epoch': int(nanoseconds)}
 
 
-def bag_metadata(files, topics):
+def bag_metadata(files, topics, no_message_ns=0):
     """
     Return the rosbag2 (version 9) bag information of MCAP files and their topics.
+
+    Keys in the order rosbag2's ``YAML::convert<BagMetadata>::encode`` writes them.
 
     Parameters
     ----------
     files : list of dict
         Per file: ``path``, ``message_count``, ``first_log_ns``, ``last_log_ns``.
     topics : dict
-        Topic name -> object with ``name``, ``type_name``, ``qos_profiles``, ``message_count``.
+        Topic name -> object with ``name``, ``type_name``, ``qos_profiles``, ``message_count``
+        (and optionally ``type_hash``, else the installed type's).
+    no_message_ns : int
+        Starting time written while there is no message (rosbag2 writes ``UNSET_NS`` in the
+        record at open; ``metadata.yaml`` of an empty bag here says 0).
 
     Returns
     -------
@@ -56,12 +64,11 @@ def bag_metadata(files, topics):
     """
     starts = [f['first_log_ns'] for f in files if f['first_log_ns'] is not None]
     ends = [f['last_log_ns'] for f in files if f['last_log_ns'] is not None]
-    start = min(starts) if starts else 0
+    start = min(starts) if starts else no_message_ns
     duration = max(ends) - start if ends else 0
     return {
         'version': ROSBAG2_METADATA_VERSION,
         'storage_identifier': 'mcap',
-        'relative_file_paths': [pathlib.Path(f['path']).name for f in files],
         'duration': {'nanoseconds': duration},
         'starting_time': _since_epoch(start),
         'message_count': sum(f['message_count'] for f in files),
@@ -69,20 +76,46 @@ def bag_metadata(files, topics):
             {'topic_metadata': {'name': t.name, 'type': t.type_name,
                                 'serialization_format': 'cdr',
                                 'offered_qos_profiles': list(t.qos_profiles),
-                                'type_description_hash': type_hash(t.type_name)},
+                                'type_description_hash': (getattr(t, 'type_hash', None)
+                                                          or type_hash(t.type_name))},
              'message_count': t.message_count}
             for t in topics.values()],
         'compression_format': '',
         'compression_mode': '',
+        'relative_file_paths': [pathlib.Path(f['path']).name for f in files],
         'files': [
             {'path': pathlib.Path(f['path']).name,
-             'starting_time': _since_epoch(f['first_log_ns'] or 0),
-             'duration': {'nanoseconds': (f['last_log_ns'] or 0) - (f['first_log_ns'] or 0)},
+             'starting_time': _since_epoch(_or(f['first_log_ns'], no_message_ns)),
+             'duration': {'nanoseconds': _or(f['last_log_ns'], 0) - _or(f['first_log_ns'], 0)},
              'message_count': f['message_count']}
             for f in files],
         'custom_data': {},
         'ros_distro': ROS_DISTRO,
     }
+
+
+def _or(value, default):
+    return default if value is None else value
+
+
+def serialized_metadata(files, topics, no_message_ns=0):
+    """
+    Return the ``rosbag2`` MCAP Metadata record's map, as rosbag2's MCAP storage writes it.
+
+    rosbag2 (``MCAPStorage::update_metadata``) writes a Metadata record named ``rosbag2`` with
+    one key, ``serialized_metadata``: the YAML of the bag information (no
+    ``rosbag2_bagfile_information`` wrapper), once when a file is opened and again before it is
+    closed. Arguments as :func:`bag_metadata`.
+
+    Returns
+    -------
+    dict
+        ``{'serialized_metadata': yaml_text}``.
+
+    """
+    text = yaml.dump(bag_metadata(files, topics, no_message_ns), Dumper=_PlainDumper,
+                     sort_keys=False)
+    return {'serialized_metadata': text}
 
 
 def write_bag_metadata(bag_dir, files, topics):

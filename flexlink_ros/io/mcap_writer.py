@@ -21,8 +21,8 @@ import zlib
 
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
-from mcap.records import (Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Schema,
-                          Statistics, SummaryOffset)
+from mcap.records import (Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Metadata,
+                          MetadataIndex, Schema, Statistics, SummaryOffset)
 import numpy as np
 import zstandard
 
@@ -70,6 +70,7 @@ class McapFileWriter:
             message_count=0, metadata_count=0, message_start_time=0, message_end_time=0,
             schema_count=0)
         self._chunk_indexes = ChunkIndexStore(spill_directory)
+        self._metadata_indexes = []
         self._reset_chunk()
 
     # -- the open chunk ---------------------------------------------------------------------
@@ -128,6 +129,16 @@ class McapFileWriter:
         self._statistics.channel_count += 1
         self._add_record(channel)
         return channel.id
+
+    def add_metadata(self, name, data):
+        """Write a Metadata record now, outside any chunk (as ``Writer.add_metadata``)."""
+        builder = RecordBuilder()
+        Metadata(name=name, metadata=dict(data)).write(builder)
+        record = builder.end()
+        self._metadata_indexes.append(MetadataIndex(offset=self._offset, length=len(record),
+                                                    name=name))
+        self._statistics.metadata_count += 1
+        self._write(record)
 
     def _add_record(self, record):
         builder = RecordBuilder()
@@ -200,7 +211,8 @@ class McapFileWriter:
 
     # -- many messages at once --------------------------------------------------------------
 
-    def add_messages(self, channels, messages, log, publish, flush_period_ns, last_flush_ns):
+    def add_messages(self, channels, messages, log, publish, flush_period_ns, last_flush_ns,
+                     sequences=None):
         """
         Add messages as :meth:`add_message` calls in order would, plus flushes by log time.
 
@@ -222,6 +234,8 @@ class McapFileWriter:
             Log time between flushes [ns].
         last_flush_ns : int or None
             Log time of the last flush [ns].
+        sequences : numpy.ndarray of uint32, shape (n,), optional
+            Sequence number of each message (default 0).
 
         Returns
         -------
@@ -231,7 +245,7 @@ class McapFileWriter:
         """
         count = len(messages)
         sizes = np.fromiter(map(len, messages), dtype=np.int64, count=count)
-        parts = _message_records(channels, messages, sizes, log, publish)
+        parts = _message_records(channels, messages, sizes, log, publish, sequences)
         ends = np.cumsum(sizes + _MESSAGE_HEAD.size)   # end of each record in the batch
         starts = ends - (sizes + _MESSAGE_HEAD.size)
         self._count_batch(channels, log)
@@ -316,7 +330,7 @@ class McapFileWriter:
         group(Opcode.STATISTICS, [self._statistics])
         group(Opcode.CHUNK_INDEX, [self._chunk_indexes])
         group(Opcode.ATTACHMENT_INDEX, [])
-        group(Opcode.METADATA_INDEX, [])
+        group(Opcode.METADATA_INDEX, self._metadata_indexes)
         summary_offset_start = summary_start + summary.count
         for offset in offsets:
             offset.write(summary)
@@ -334,7 +348,7 @@ class McapFileWriter:
         self._chunk_indexes.close()
 
 
-def _message_records(channels, messages, sizes, log, publish):
+def _message_records(channels, messages, sizes, log, publish, sequences):
     """Message records of a batch, as a list alternating headers and data."""
     count = len(messages)
     head_size = _MESSAGE_HEAD.size
@@ -344,6 +358,8 @@ def _message_records(channels, messages, sizes, log, publish):
     headers['channel'] = channels
     headers['log'] = log
     headers['publish'] = publish
+    if sequences is not None:
+        headers['sequence'] = sequences
     head = headers.tobytes()
     parts = [None] * (2 * count)
     parts[0::2] = [head[k:k + head_size] for k in range(0, head_size * count, head_size)]

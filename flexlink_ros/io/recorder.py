@@ -29,21 +29,22 @@ counts them, so the caller can report it (a diagnostic) and carry on.
 """
 
 import collections
-import dataclasses
 import logging
 import os
 import pathlib
 import threading
 import time
 
-from .bag_metadata import DEFAULT_QOS, write_bag_metadata
+from .bag_metadata import (
+    DEFAULT_QOS, METADATA_RECORD, serialized_metadata, UNSET_NS, write_bag_metadata,
+)
 from .mcap_writer import COMPRESSIONS
 from .msg_schema import (
     message_definition, message_type_name, qos_profile_dict, serialize_exact,
 )
 from .recorder_files import (
     abandon, create_exclusive, file_path, OpenFile, refuse_existing, register_topic, split_due,
-    start_file,
+    start_file, Topic,
 )
 from .recorder_queue import QueuedWriting, RecorderState
 from ..errors import RecorderError
@@ -52,14 +53,6 @@ LOGGER = logging.getLogger(__name__)
 
 DEFAULT_CHUNK_SIZE = 128 * 1024  # bytes before compression; one chunk is the unit of loss
 DEFAULT_FLUSH_PERIOD_S = 0.5  # at most this much data (log time, or wall time) sits in memory
-
-
-@dataclasses.dataclass
-class _Topic:
-    name: str
-    type_name: str
-    qos_profiles: list
-    message_count: int = 0
 
 
 class McapRecorder(QueuedWriting):
@@ -227,14 +220,14 @@ class McapRecorder(QueuedWriting):
                     raise ValueError(f'`topic` {topic!r} already recorded as {known.type_name}, '
                                      f'not {type_name}')
                 return
-            self._topics[topic] = _Topic(topic, type_name, profiles)
+            self._topics[topic] = Topic(topic, type_name, profiles)
             if self._state is RecorderState.RECORDING and self._file is not None:
                 try:
                     register_topic(self._file.writer, self._file, self._topics[topic])
                 except OSError as exc:
                     self._fail(exc)
 
-    def write(self, topic, message, log_time_ns, publish_time_ns=None, sequence=0):
+    def write(self, topic, message, log_time_ns, publish_time_ns=None, sequence=None):
         """
         Record one message.
 
@@ -249,8 +242,9 @@ class McapRecorder(QueuedWriting):
             Receive time [ns].
         publish_time_ns : int, optional
             Send time [ns]; defaults to ``log_time_ns``.
-        sequence : int
-            The message's sequence number in the file.
+        sequence : int, optional
+            The message's MCAP sequence number (e.g. the publisher's, taken modulo 2**32);
+            default: the message's number in its topic (1, 2, ... over the whole recording).
 
         Returns
         -------
@@ -273,6 +267,8 @@ class McapRecorder(QueuedWriting):
             try:
                 self._maybe_split(log_time_ns)
                 current = self._file
+                number = int(self._topics[topic].next_sequences(1)[0])
+                sequence = number if sequence is None else int(sequence) % 2 ** 32
                 current.writer.add_message(current.channel_ids[topic], log_time_ns, data,
                                            publish_time_ns, sequence)
             except OSError as exc:
@@ -374,10 +370,15 @@ class McapRecorder(QueuedWriting):
     def _open_file(self):
         path = file_path(self.path, self.bare, len(self._closed_files))
         self._file = OpenFile(path, create_exclusive(path), None, {})
-        start_file(self._file, self.chunk_size_bytes, self.compression, self._topics.values())
+        opening = serialized_metadata(self._closed_files + [self._file.entry(complete=False)],
+                                      self._topics, UNSET_NS)   # as rosbag2 at open
+        start_file(self._file, self.chunk_size_bytes, self.compression, self._topics.values(),
+                   opening)
 
     def _finish_file(self):
         current = self._file
+        current.writer.add_metadata(METADATA_RECORD, serialized_metadata(
+            self._closed_files + [current.entry(complete=True)], self._topics))
         current.writer.finish()
         current.stream.close()
         self._closed_files.append(current.entry(complete=True))

@@ -17,6 +17,7 @@ import pathlib
 import stat
 
 from mcap.writer import LIBRARY_IDENTIFIER
+import numpy as np
 
 from .mcap_writer import McapFileWriter
 from .msg_schema import message_definition, offered_qos_yaml, type_hash
@@ -106,6 +107,22 @@ class OpenFile:
                 'complete': complete}
 
 
+@dataclasses.dataclass
+class Topic:
+    """A recorded topic: type, offered QoS, messages so far and its last sequence number."""
+
+    name: str
+    type_name: str
+    qos_profiles: list
+    message_count: int = 0
+    sequence: int = 0   # of the last message (MCAP: per channel, uint32, rolls over to 0)
+
+    def next_sequences(self, count):
+        """Take the sequence numbers of the next ``count`` messages (1, 2, ... per topic)."""
+        first, self.sequence = self.sequence + 1, self.sequence + count
+        return np.arange(first, self.sequence + 1, dtype=np.uint64) % 2 ** 32
+
+
 def file_path(path, bare, index):
     """
     Return the path of a recording's file number ``index``.
@@ -129,7 +146,7 @@ def file_path(path, bare, index):
     return path / f'{path.name}_{index}.mcap'
 
 
-def start_file(current, chunk_size, compression, topics):
+def start_file(current, chunk_size, compression, topics, metadata):
     """
     Write a new file's header, schemas and channels and flush them; set its writer last.
 
@@ -143,11 +160,14 @@ def start_file(current, chunk_size, compression, topics):
         Chunk compression.
     topics : iterable of topic records
         Each with ``name``, ``type_name``, ``qos_profiles``.
+    metadata : dict
+        The ``rosbag2`` Metadata record written after the header, as rosbag2 does at open.
 
     """
     writer = McapFileWriter(current.stream, chunk_size=chunk_size, compression=compression,
                             spill_directory=current.path.parent)
     writer.start(profile='ros2', library=LIBRARY)
+    writer.add_metadata('rosbag2', metadata)
     for topic in topics:
         register_topic(writer, current, topic)
     writer.flush()

@@ -181,10 +181,14 @@ class QueuedWriting:
         current = self._file
         channel_of = np.array([current.channel_ids[name] for name in names],
                               dtype=np.uint16)[index]
+        sequences = np.zeros(count, dtype=np.uint64)
+        for k, name in enumerate(names):
+            chosen = index == k
+            sequences[chosen] = self._topics[name].next_sequences(int(chosen.sum()))
         try:
             flushes = current.writer.add_messages(channel_of, messages, log, publish,
                                                   self.flush_period_ns,
-                                                  self._last_flush_log_ns)
+                                                  self._last_flush_log_ns, sequences)
         except OSError as exc:
             self._dropped += count - 1
             self._fail(exc)

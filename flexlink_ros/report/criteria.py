@@ -3,9 +3,10 @@ Charts of the Earles-Wu joint criteria and the coil-spring design (Kang, Lee & Y
 
 :func:`plot_criteria` writes four PNG files and returns markdown with the numbers:
 
-- ``criteria_ratio_vs_crank.png``: |gamma_dot / R| against crank angle at joints A, B, O4
-  (the paper's 1, 2, 3) and O2, log scale, for the original mechanism, the paper's spring and
-  the design found by :func:`core.spring_design.design_spring`; true maxima marked.
+- ``criteria_ratio_vs_crank.png``: |gamma_dot / R| against crank angle at joints O2, A, B,
+  O4 (the node's names; the paper's 1, 2, 3 are A, B, O4), log scale, for the original
+  mechanism, the paper's spring and the design found by
+  :func:`core.spring_design.design_spring`; true maxima marked.
 - ``criteria_force_vs_crank.png``: reaction magnitude R against crank angle, same cases, with
   the force limits 1.5 R0 of Eq. 19.
 - ``criteria_grid_vs_true.png``: the 1-degree-grid maxima (Table 2) against the refined true
@@ -21,7 +22,13 @@ import numpy as np
 
 from ..core import spring_design
 from ..names import JOINT_NAMES
-from ..studies.criteria_study import criteria_data, criteria_text, PAPER_JOINT, TABLE_2
+from ..studies.criteria_study import criteria_data, criteria_text, TABLE_2
+
+# Joints named as the node names them (names.JOINT_NAMES, its /diagnostics and outputs), the
+# paper's numbers (Kang 1990: 1, 2, 3 for A, B, O4) after them.
+JOINT_TITLE = {'O2': 'O2 (ground-crank; no number in Kang 1990)',
+               'A': 'A (Kang 1990 joint 1)', 'B': 'B (Kang 1990 joint 2)',
+               'O4': 'O4 (Kang 1990 joint 3)'}
 
 CASE_STYLE = {  # label colour
     'original': ('original (no spring)', 'tab:red'),
@@ -73,7 +80,7 @@ def plot_criteria(out_dir, mechanism=None, data=None):
 def _plot_ratio(theta_deg, curves, maxima, labels, path):
     fig = Figure(figsize=(11, 7.5), layout='constrained')
     axes = fig.subplots(2, 2, sharex=True).ravel()
-    for ax, joint in zip(axes, ('A', 'B', 'O4', 'O2')):
+    for ax, joint in zip(axes, JOINT_NAMES):
         j = JOINT_NAMES.index(joint)
         for name, (_, colour) in CASE_STYLE.items():
             label = labels[name]
@@ -81,7 +88,7 @@ def _plot_ratio(theta_deg, curves, maxima, labels, path):
             ax.semilogy(theta_deg, curves[name]['ratio'][j], color=colour, lw=1.1,
                         label=f'{label}: max {peak.max_ratio:.2f}')
             ax.plot(math.degrees(peak.at_crank_angle), peak.max_ratio, 'v', color=colour, ms=7)
-        ax.set_title(f'{PAPER_JOINT[joint]}')
+        ax.set_title(JOINT_TITLE[joint])
         ax.set_ylim(1e-3, None)
         ax.grid(True, which='both', alpha=0.3)
         ax.legend(fontsize=7.5, loc='lower left')
@@ -97,7 +104,7 @@ def _plot_ratio(theta_deg, curves, maxima, labels, path):
 def _plot_force(theta_deg, curves, found, labels, path):
     fig = Figure(figsize=(11, 7.5), layout='constrained')
     axes = fig.subplots(2, 2, sharex=True).ravel()
-    for ax, joint in zip(axes, ('A', 'B', 'O4', 'O2')):
+    for ax, joint in zip(axes, JOINT_NAMES):
         j = JOINT_NAMES.index(joint)
         for name, (_, colour) in CASE_STYLE.items():
             label = labels[name]
@@ -105,14 +112,18 @@ def _plot_force(theta_deg, curves, found, labels, path):
         if joint in spring_design.DESIGN_JOINTS:
             limit = found['design'].constraints[f'force_{joint}']['limit']
             ax.axhline(limit, color='k', ls='--', lw=0.9, label='limit 1.5 R0 (Eq. 19)')
-        ax.set_title(PAPER_JOINT[joint])
+        ax.set_title(JOINT_TITLE[joint])
         ax.set_ylabel('reaction R [N]')
         ax.set_ylim(0.0, None)
         ax.grid(True, alpha=0.3)
     for ax in axes[2:]:
         ax.set_xlabel('crank angle [deg]')
         ax.set_xticks(np.arange(0, 361, 45))
-    fig.legend(*axes[0].get_legend_handles_labels(), loc='outside lower center', ncols=4,
+    entries = {}    # every case and the force limit (drawn only at the design's joints)
+    for ax in axes:
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            entries.setdefault(label, handle)
+    fig.legend(entries.values(), entries.keys(), loc='outside lower center', ncols=4,
                fontsize=8)
     fig.suptitle('Joint reaction magnitude (zero-clearance rigid mechanism, 900 rpm)')
     fig.savefig(path, dpi=110)
@@ -140,7 +151,7 @@ def _plot_grid_vs_true(zoom, maxima, path):
         left.plot(x + offset * width, TABLE_2[name], 'k_', ms=14, mew=2)
     left.plot([], [], 'k_', ms=14, mew=2, label='Kang 1990 Table 2')
     left.set_yscale('log')
-    left.set_xticks(x, [PAPER_JOINT[j] for j in joints])
+    left.set_xticks(x, [JOINT_TITLE[j].replace(' (', '\n(') for j in joints])
     left.set_ylabel('max |gamma_dot / R| [rad/(s N)]')
     left.set_title('grid sample vs true maximum (label: how much the grid misses)')
     left.legend(fontsize=7.5, loc='upper left')
@@ -156,7 +167,7 @@ def _plot_grid_vs_true(zoom, maxima, path):
     right.axhline(TABLE_2['original'][1], color='0.4', ls=':', label='Table 2: 1319.45')
     right.set_xlabel('crank angle [deg]')
     right.set_ylabel('|gamma_dot / R| [rad/(s N)]')
-    right.set_title('joint 2 (B), original: the peak is about a degree wide')
+    right.set_title(f'{JOINT_TITLE["B"]}, original: a peak 1 deg wide')
     right.legend(fontsize=7.5)
     right.grid(True, alpha=0.3)
     fig.savefig(path, dpi=110)

@@ -21,15 +21,70 @@ from ..studies.bench import estimator_report_data, node_model_options
 CHANNELS = (('coupler_mid', 'coupler mid-point'), ('lever_tip', 'lever tip'))
 
 
-def plot_error_vs_cost(configurations, path, tolerance=None):
+# Markers of the configurations after the default's star (colours: matplotlib's tab10).
+MARKERS = ('o', 's', '^', 'v', 'D', 'P', 'X', '<', '>', 'h')
+
+
+def error_vs_cost_figure(configurations, tolerance=None):
     """
-    Error against cost per sample, one marker per configuration.
+    Draw error against cost per sample, one marker per configuration, named in the legend.
+
+    The configurations sit close together (a few us apart, errors within a decade), so they
+    are named in one legend under both panels rather than beside their markers, where the
+    labels overlapped each other and the axes' edge.
 
     Parameters
     ----------
     configurations : list of dict
         Each with 'label' (str), 'us_per_sample' (float), 'error_coupler_mid' and
         'error_lever_tip' (relative RMS, float) and optionally 'default' (bool).
+    tolerance : float or None
+        Relative error target, drawn as a horizontal line.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    """
+    from matplotlib.figure import Figure   # only when drawing: `flexlink bench` starts fast
+
+    figure = Figure(figsize=(10.0, 4.8), layout='constrained')
+    axes = figure.subplots(1, 2, sharex=True)
+    others = iter(zip(MARKERS * 2, ('tab:blue', 'tab:orange', 'tab:green', 'tab:purple',
+                                    'tab:brown', 'tab:pink', 'tab:gray', 'tab:olive',
+                                    'tab:cyan', 'k') * 2))
+    styles = [('*', 'tab:red', 140) if c.get('default') else (*next(others), 40)
+              for c in configurations]
+    for ax, (key, title) in zip(axes, CHANNELS):
+        for config, (marker, colour, size) in zip(configurations, styles):
+            ax.scatter(config['us_per_sample'], max(config[f'error_{key}'], 1e-6), s=size,
+                       marker=marker, color=colour, zorder=3, label=config['label'])
+        if tolerance is not None:
+            ax.axhline(tolerance, color='grey', linestyle='--', linewidth=1.0,
+                       label=f'tolerance {tolerance:g}')
+        errors = [max(c[f'error_{key}'], 1e-6) for c in configurations]
+        low, high = min(errors + [tolerance or errors[0]]), max(errors + [tolerance or 0.0])
+        ax.set_ylim(low / 3.0, high * 3.0)
+        ax.set_yscale('log')
+        ax.set_title(f'{title}: relative RMS error')
+        ax.set_xlabel('streaming update, median [us/sample]')
+        ax.grid(True, which='both', alpha=0.3)
+        ax.margins(x=0.15)
+    axes[0].set_ylabel('error vs full-order reference')
+    handles, labels = axes[0].get_legend_handles_labels()
+    figure.legend(handles, labels, loc='outside lower center', fontsize=8,
+                  ncols=min(len(labels), 4))
+    return figure
+
+
+def plot_error_vs_cost(configurations, path, tolerance=None):
+    """
+    Write :func:`error_vs_cost_figure` to a PNG file.
+
+    Parameters
+    ----------
+    configurations : list of dict
+        As :func:`error_vs_cost_figure`.
     path : str or Path
         PNG file to write.
     tolerance : float or None
@@ -40,37 +95,9 @@ def plot_error_vs_cost(configurations, path, tolerance=None):
     pathlib.Path
 
     """
-    from matplotlib.figure import Figure   # only when drawing: `flexlink bench` starts fast
-
     path = pathlib.Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    figure = Figure(figsize=(10.0, 4.2), layout='constrained')
-    axes = figure.subplots(1, 2, sharex=True)
-    for ax, (key, title) in zip(axes, CHANNELS):
-        for config in configurations:
-            error = config[f'error_{key}']
-            default = config.get('default', False)
-            ax.scatter(config['us_per_sample'], max(error, 1e-6), s=90 if default else 30,
-                       marker='*' if default else 'o',
-                       color='tab:red' if default else 'tab:blue', zorder=3)
-            ax.annotate(config['label'], (config['us_per_sample'], max(error, 1e-6)),
-                        textcoords='offset points', fontsize=7,
-                        # the default's label below its star: neighbours' labels go above
-                        xytext=(6, -10) if default else (4, 3),
-                        fontweight='bold' if default else 'normal')
-        if tolerance is not None:
-            ax.axhline(tolerance, color='grey', linestyle='--', linewidth=1.0,
-                       label=f'tolerance {tolerance:g}')
-            ax.legend(loc='upper right', fontsize=8)
-        errors = [max(c[f'error_{key}'], 1e-6) for c in configurations]
-        low, high = min(errors + [tolerance or errors[0]]), max(errors + [tolerance or 0.0])
-        ax.set_ylim(low / 3.0, high * 3.0)
-        ax.set_yscale('log')
-        ax.set_title(f'{title}: relative RMS error')
-        ax.set_xlabel('streaming update, median [us/sample]')
-        ax.grid(True, which='both', alpha=0.3)
-    axes[0].set_ylabel('error vs full-order reference')
-    figure.savefig(path, dpi=120)
+    error_vs_cost_figure(configurations, tolerance).savefig(path, dpi=120)
     return path
 
 
@@ -144,7 +171,7 @@ def bench_table(configurations):
     return '\n'.join(lines)
 
 
-def plot_estimator(out_dir, options=None):
+def plot_estimator(out_dir, options=None, progress=None):
     """
     Report section: bench of the Cho 1992 estimator and the 391 rpm estimate.
 
@@ -154,6 +181,8 @@ def plot_estimator(out_dir, options=None):
         Directory of the charts.
     options : ModelOptions, optional
         The default model (default: the node's, :func:`studies.bench.node_model_options`).
+    progress : callable or None
+        ``progress(done, total, what)`` of the bench (:func:`studies.bench.run_bench`).
 
     Returns
     -------
@@ -165,7 +194,7 @@ def plot_estimator(out_dir, options=None):
     out = pathlib.Path(out_dir)
     try:
         data = estimator_report_data(load_mechanism('cho1992'),
-                                     options or node_model_options())
+                                     options or node_model_options(), progress)
     except FlexlinkError as exc:
         return {'charts': [], 'text': f'_Streaming estimator not available: {exc}_'}
     bench = data['bench']

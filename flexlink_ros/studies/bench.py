@@ -111,7 +111,7 @@ def bench_configurations(base):
             ('grid 256', dataclasses.replace(base, grid_size=256))]
 
 
-def interleaved_timing(entries, signal, long_signal, rounds=3):
+def interleaved_timing(entries, signal, long_signal, rounds=3, each_round=None):
     """
     Time the streaming and offline cost of (model, step) entries in interleaved rounds.
 
@@ -128,6 +128,8 @@ def interleaved_timing(entries, signal, long_signal, rounds=3):
         (stamps, angles, speeds) of the streamed and the replayed signal.
     rounds : int
         Rounds of timing.
+    each_round : callable or None
+        ``each_round(k)`` before round k (0-based).
 
     Returns
     -------
@@ -136,7 +138,9 @@ def interleaved_timing(entries, signal, long_signal, rounds=3):
 
     """
     best = {key: {'us_per_sample': math.inf, 'offline_samples_per_s': 0.0} for key in entries}
-    for _ in range(rounds):
+    for k in range(rounds):
+        if each_round is not None:
+            each_round(k)
         for key, (model, compiled) in entries.items():
             median, p99 = timing_summary(stream_timed(model, *signal, compiled=compiled)[1])
             start = time.perf_counter()
@@ -191,8 +195,21 @@ def bench_targets(result):
     ]
 
 
+class _Steps:
+    """Counts a job's steps for a ``progress(done, total, what)`` callable (or none)."""
+
+    def __init__(self, progress, total):
+        self.progress, self.total, self.done = progress, total, 0
+
+    def __call__(self, what):
+        """Report the step starting now."""
+        if self.progress is not None:
+            self.progress(self.done, self.total, what)
+        self.done += 1
+
+
 def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM,
-              configurations=None):
+              configurations=None, progress=None):
     """
     Side-by-side costs and errors of the configurations (see module docstring).
 
@@ -210,6 +227,9 @@ def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM
         Speeds of the error checks [rpm].
     configurations : list of (label, ModelOptions), optional
         The configurations (default :func:`bench_configurations`).
+    progress : callable or None
+        ``progress(done, total, what)`` before each step (a model built, a timing round, a
+        configuration's errors, the full-order CPU) and once at the end.
 
     Returns
     -------
@@ -221,20 +241,27 @@ def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM
     signal = synthetic_signal(max(speeds_rpm), seconds, rate_hz)
     long_signal = synthetic_signal(max(speeds_rpm), OFFLINE_SECONDS, rate_hz)
     models, entries = [], {}
-    for label, options in configurations or bench_configurations(base):
+    configurations = configurations or bench_configurations(base)
+    rounds = 3
+    step = _Steps(progress, 2 * len(configurations) + rounds + 1)
+    for label, options in configurations:
+        step(f'building {label}')
         model = pipeline.model_for_mechanism(mechanism, options, use_cache=False)
         models.append((label, options, model))
         entries[label] = (model, compiled_step_available())
     # The default's numpy step too (the compiled step's reference and fallback).
     numpy_key = ('numpy step',)
     entries[numpy_key] = (models[0][2], False)
-    timings = interleaved_timing(entries, signal, long_signal)
+    timings = interleaved_timing(entries, signal, long_signal, rounds,
+                                 lambda k: step(f'timing round {k + 1} of {rounds}'))
     numpy_step = timings.pop(numpy_key)
     rows, reference_cpu = [], None
     for label, options, model in models:
+        step(f'errors of {label}')
         rows.append(_configuration_row(mechanism, label, options, model, timings[label],
                                        speeds_rpm, rate_hz))
         if reference_cpu is None:
+            step('full-order CPU')
             reference_cpu = reference_cpu_per_second(mechanism, options, max(speeds_rpm),
                                                      rate_hz)
     estimator_cpu = rows[0]['us_per_sample'] * 1e-6 * rate_hz  # CPU s per simulated s
@@ -245,6 +272,7 @@ def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM
               'compiled_step': compiled_step_available(),
               'numpy_step': numpy_step}
     result['targets'] = bench_targets(result)
+    step('done')
     return result
 
 
@@ -262,7 +290,7 @@ def node_model_options():
     return ModelOptions(rigid_crank=False, elements_per_link=4)
 
 
-def estimator_report_data(mechanism, options):
+def estimator_report_data(mechanism, options, progress=None):
     """
     Compute the report's estimator section: the bench, the 391 rpm estimate and reference.
 
@@ -272,6 +300,8 @@ def estimator_report_data(mechanism, options):
         The mechanism (Cho 1992).
     options : ModelOptions
         The default model.
+    progress : callable or None
+        ``progress(done, total, what)`` of the bench (:func:`run_bench`).
 
     Returns
     -------
@@ -280,7 +310,7 @@ def estimator_report_data(mechanism, options):
         'estimate' and 'reference' ({'lever_tip', 'coupler_mid'}: (m, 2) arrays), 'rpm'.
 
     """
-    bench = run_bench(mechanism, options)
+    bench = run_bench(mechanism, options, progress=progress)
     model = pipeline.model_for_mechanism(mechanism, options)
     rpm = PAPER_RPM[-1]
     estimate = run_estimate(model, rpm)

@@ -11,7 +11,8 @@ import time
 
 import numpy as np
 
-from .plan_scoring import evaluate_model, physics_error, PlanSignals
+from .plan_scoring import constrain_physics, evaluate_model, physics_error, PlanSignals, \
+    size_steps
 from .synthetic import PAPER_RPM
 from ..core.fe import linkage as assembly
 from ..core.reduction import pipeline
@@ -111,12 +112,20 @@ def _size_cost(options):
 
 
 class _Search:
-    """The rows of a plan so far and the number of reduced models built."""
+    """The rows of a plan so far, the number of reduced models built, and its progress."""
 
-    def __init__(self, signals, scene, tolerance, rate_hz, max_candidates):
+    def __init__(self, signals, scene, tolerance, rate_hz, max_candidates, progress):
         self.signals, self.scene, self.tolerance = signals, scene, tolerance
         self.rate_hz, self.max_candidates = rate_hz, max_candidates
         self.rows, self.built = [], 0
+        self.progress, self.done, self.total = progress, 0, None
+
+    def step(self, what, total=None):
+        """Report the step starting now (``what``) and the steps so far (``progress``)."""
+        self.total = total if total is not None else self.total
+        if self.progress is not None:
+            self.progress(self.done, self.total, what)
+        self.done += 1
 
     def may_build(self):
         """Whether another reduced model may be built (``max_candidates``)."""
@@ -124,6 +133,8 @@ class _Search:
 
     def build(self, options, stage, extra):
         """Build and measure the model of ``options``; its row (kept)."""
+        self.step(f'{stage}: {describe_physics(options)}, {options.modes}+{options.static} '
+                  f'grid {options.grid_size}')
         row = {'stage': stage, 'options': dataclasses.asdict(options),
                'label': describe_physics(options), **extra}
         try:
@@ -136,9 +147,10 @@ class _Search:
         return row
 
 
-def _scene_reference(mechanism, scene, signals):
+def _scene_reference(search, mechanism, scene, signals):
     """Describe the plan's reference: the scene's full-order responses at every speed."""
     for rpm in signals.speeds_rpm:
+        search.step(f'reference at {rpm:g} rpm')
         source = signals.reference(scene, rpm).get('source')
     return {'options': dataclasses.asdict(scene), 'label': describe_physics(scene),
             'dofs': full_order_dofs(mechanism, scene), 'source': source,
@@ -163,6 +175,7 @@ def _screen_physics(search, mechanism, physics):
     for options in physics:
         if not search.may_build():
             break
+        search.step(f'physics: {describe_physics(options)}')
         errors, evaluated = physics_error(search.signals, search.scene, options, budget)
         extra = {'dofs': full_order_dofs(mechanism, options),
                  'physics_error_coupler_mid': errors['coupler_mid'],
@@ -224,7 +237,7 @@ def _size_search(search, sizes, extra, choice):
 
 
 def run_plan(mechanism, base, rpm_max, tolerance, rate_hz=1000.0, speeds_rpm=None,
-             max_candidates=None, physics=None, scene=None):
+             max_candidates=None, physics=None, scene=None, fixed=None, progress=None):
     """
     Find the smallest model (physics and size) meeting ``tolerance`` against the scene.
 
@@ -274,6 +287,12 @@ def run_plan(mechanism, base, rpm_max, tolerance, rate_hz=1000.0, speeds_rpm=Non
         Physics candidates in order (default :func:`physics_candidates`).
     scene : ModelOptions or None
         Options of the scene reference (default :func:`scene_options`).
+    fixed : dict or None
+        Physical choices the user fixed ('rigid_crank', 'geometric_stiffness'): every default
+        physics candidate keeps them (:func:`constrain_physics`); the scene does not.
+    progress : callable or None
+        ``progress(done, total, what)`` before each step (a full-order reference, a physics
+        screened, a reduced model built; ``total`` an upper bound until the end).
 
     Returns
     -------
@@ -282,25 +301,31 @@ def run_plan(mechanism, base, rpm_max, tolerance, rate_hz=1000.0, speeds_rpm=Non
         'size', options, dofs, physics_error_* (full order vs scene), error_* (reduced vs
         scene; None when not built), truncation_error_* (reduced vs its own full order),
         size, bytes, build_s, us_per_sample), 'reference' (the scene), 'speeds_rpm',
-        'tolerance', 'seconds'.
+        'tolerance', 'fixed', 'seconds'.
 
     """
     started = time.perf_counter()
     speeds_rpm = list(speeds_rpm or sorted({min(s, rpm_max) for s in PAPER_RPM} | {rpm_max}))
     scene = scene or scene_options(mechanism, base)
-    physics = physics if physics is not None else physics_candidates(mechanism, base, scene)
+    if physics is None:
+        physics = constrain_physics(physics_candidates(mechanism, base, scene), fixed or {})
     signals = PlanSignals(mechanism, speeds_rpm, rate_hz)
-    reference = _scene_reference(mechanism, scene, signals)
-    search = _Search(signals, scene, tolerance, rate_hz, max_candidates)
+    search = _Search(signals, scene, tolerance, rate_hz, max_candidates, progress)
+    # steps: the scene's references, each physics screened and built, the size stage at most
+    search.total = (len(speeds_rpm) + 2 * len(physics)
+                    + size_steps(plan_candidates(physics[-1] if physics else scene)))
+    reference = _scene_reference(search, mechanism, scene, signals)
     chosen_physics = _screen_physics(search, mechanism, physics)
     rows, choice = search.rows, None
     if chosen_physics is not None:
         sizes, extra, choice = chosen_physics
+        search.total = search.done + size_steps(sizes)
         choice, sized = _size_search(search, sizes, extra, choice)
         rows = [r for r in search.rows if r['stage'] == 'physics'] + sorted(
             sized, key=lambda r: _size_cost(r['options']))
+    search.step('done', total=search.done)
     return {'speeds_rpm': speeds_rpm, 'tolerance': tolerance, 'choice': choice,
-            'alternatives': rows, 'reference': reference,
+            'alternatives': rows, 'reference': reference, 'fixed': dict(fixed or {}),
             'seconds': time.perf_counter() - started}
 
 
@@ -317,6 +342,10 @@ def plan_table(result):
              f'{"stage":<7} {"physics":<42} {"n":>3} {"modes":>5} {"stat":>4} {"grid":>4} '
              f'{"r":>3} {"MB":>6} {"build s":>7} {"us":>6} {"phys c":>8} {"phys l":>8} '
              f'{"trunc c":>8} {"trunc l":>8} {"coupler":>8} {"lever":>8} ok']
+    if result.get('fixed'):
+        lines.insert(1, 'fixed in every candidate: ' + ', '.join(
+            f'{name.replace("_", " ")} {"yes" if value else "no"}'
+            for name, value in result['fixed'].items()))
     for row in result['alternatives']:
         o = row['options']
         built = row['size'] is not None
@@ -342,7 +371,9 @@ def plan_table(result):
                      f'{chosen["error_coupler_mid"]:.2e}, lever {chosen["error_lever_tip"]:.2e}, '
                      f'{chosen["us_per_sample"]:.0f} us/sample')
     else:
-        lines.append('choice: none of the candidates meets the tolerance')
+        lines.append('choice: none of the candidates meets the tolerance'
+                     + ('; leave out the fixed choices to let the plan try the others'
+                        if result.get('fixed') else ''))
     lines.append(f'(physics error: full order vs the reference; trunc: reduced vs its own full '
                  f'order; coupler/lever: reduced vs the reference; plan took '
                  f'{result["seconds"]:.0f} s)')

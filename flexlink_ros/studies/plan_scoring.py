@@ -1,10 +1,11 @@
 """
-How ``plan`` scores a candidate.
+How ``plan`` scores a candidate, and the candidates it keeps and counts.
 
 Its full-order physics error and its reduced model's error and cost, all on the same
 synthetic signals and full-order references.
 """
 
+import dataclasses
 import math
 import time
 
@@ -13,6 +14,37 @@ from ..core.estimation.offline import replay
 from ..core.numerics import relative_rms, RPM
 from ..core.reduction import pipeline
 from ..core.reduction import reference as reduction_reference
+
+
+def constrain_physics(candidates, fixed):
+    """
+    Keep the physical choices the user fixed in every candidate (the plan searches the rest).
+
+    Each candidate gets the ``fixed`` fields; duplicates (by physics) are dropped, the first
+    kept, so the order (cheapest first, the scene's physics with those fields last) stays.
+
+    Parameters
+    ----------
+    candidates : list of ModelOptions
+        :func:`physics_candidates`.
+    fixed : dict
+        Fields of :class:`ModelOptions` the user fixed ('rigid_crank', 'geometric_stiffness').
+
+    """
+    constrained = {}
+    for options in candidates:
+        options = dataclasses.replace(options, **fixed)
+        constrained.setdefault(physics_key(options), options)
+    return list(constrained.values())
+
+
+def size_steps(sizes):
+    """Most reduced models the size stage builds from ``sizes``: per grid, one and a bisection."""
+    steps = 0
+    for grid in {o.grid_size for o in sizes}:
+        count = sum(o.grid_size == grid for o in sizes)
+        steps += 1 + math.ceil(math.log2(max(count, 1)))
+    return steps
 
 
 def physics_key(options):

@@ -161,8 +161,16 @@ def test_plan_on_cho1992_compares_every_physics_with_the_scene(config_dir, monke
 def test_bench_table_and_chart(toy, tmp_path):
     configurations = [('default', core_options.ModelOptions(modes=4, static=2, grid_size=32)),
                       ('small', core_options.ModelOptions(modes=2, static=0, grid_size=32))]
-    result = bench.run_bench(None, None, seconds=0.3, configurations=configurations)
+    calls = []
+    result = bench.run_bench(None, None, seconds=0.3, configurations=configurations,
+                             progress=lambda *call: calls.append(call))
     rows = result['configurations']
+    # every step reported before it runs, counted up to the total: 2 builds, 3 timing
+    # rounds, 2 error rows, the full-order CPU, then the end
+    assert [done for done, _, _ in calls] == list(range(9))
+    assert {total for _, total, _ in calls} == {8} and calls[-1][2] == 'done'
+    assert [what for _, _, what in calls[:3]] == ['building default', 'building small',
+                                                  'timing round 1 of 3']
     plot_error_vs_cost(rows, tmp_path / 'chart.png')
     assert [row['label'] for row in rows] == ['default', 'small']
     assert rows[0]['default'] and rows[0]['offline_samples_per_s'] > 0
@@ -202,3 +210,41 @@ def test_plot_estimate(tmp_path):
 
 def test_the_reports_default_model_is_the_nodes():
     assert bench.node_model_options() == node_params.default_model_options()
+
+
+@pytest.mark.parametrize('flags, fixed', [
+    ([], {}),
+    (['--rigid-crank'], {'rigid_crank': True}),
+    (['--flexible-crank', '--no-geometric-stiffness'],
+     {'rigid_crank': False, 'geometric_stiffness': False})])
+def test_plan_keeps_the_crank_and_geometric_stiffness_the_user_fixed(toy, monkeypatch, capsys,
+                                                                     flags, fixed):
+    monkeypatch.setattr(plan, 'plan_candidates', lambda base: [
+        dataclasses.replace(base, modes=m, static=s, grid_size=32) for m, s in ((1, 0), (4, 2))])
+    code = cli.main(['plan', '--rpm-max', '391', '--bearings', 'rigid', '--json', *flags])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    result = json.loads(captured.out)       # one JSON object: progress went to stderr
+    assert result['fixed'] == fixed
+    # the reference stays the richest model of the scene whatever was fixed
+    reference = result['reference']['options']
+    assert (reference['rigid_crank'], reference['geometric_stiffness']) == (False, True)
+    tried = {(row['options']['rigid_crank'], row['options']['geometric_stiffness'])
+             for row in result['alternatives']}
+    assert tried and all(all(dict(zip(('rigid_crank', 'geometric_stiffness'), physics))[k]
+                             == v for k, v in fixed.items()) for physics in tried)
+    if not fixed:   # free: both crank models screened (the toy's physics all agree)
+        assert result['alternatives'][0]['options']['rigid_crank']
+    # not a terminal: plain progress lines, the last at 100 %
+    last = captured.err.strip().splitlines()[-1]
+    assert last.startswith('plan: 100%') and 'step' in last
+
+
+def test_plan_says_when_the_fixed_choices_leave_no_candidate(toy, monkeypatch, capsys):
+    monkeypatch.setattr(plan, 'plan_candidates', lambda base: [
+        dataclasses.replace(base, modes=1, static=0, grid_size=32)])
+    assert cli.main(['plan', '--rpm-max', '391', '--bearings', 'rigid', '--tolerance', '1e-9',
+                     '--rigid-crank']) == 0
+    out = capsys.readouterr().out
+    assert 'fixed in every candidate: rigid crank yes' in out
+    assert 'choice: none of the candidates meets the tolerance; leave out the fixed' in out

@@ -1,27 +1,14 @@
-"""CDR codecs of flexlink_ros.io.cdr and .markers against rclpy's serialisation."""
+"""CDR codecs of flexlink_ros.io.cdr against rclpy's serialisation."""
 
 import struct
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from cdr_helpers import rclpy_exact
 from flexlink_ros.io import cdr
-from flexlink_ros.io import markers
-from flexlink_ros.io.msg_schema import cdr_layout, serialize_exact
 from flexlink_ros.ros import messages as ros_messages
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
-from visualization_msgs.msg import Marker
-
-
-def rclpy_exact(message):
-    """Serialise with rclpy, zero the padding and cut the buffer at the exact CDR length."""
-    data = bytearray(serialize_message(message))
-    length, padding = cdr_layout(message)
-    assert length <= len(data)
-    for start, stop in padding:
-        data[start:stop] = bytes(stop - start)
-    return bytes(data[:length])
 
 
 def joint_state(stamp_ns, names, positions, velocities=()):
@@ -77,50 +64,6 @@ def test_big_endian_joint_state_is_read():
         == (5 * 10**9 + 7, 0.5, 2.0)
 
 
-@pytest.mark.parametrize('frame, count', [('linkage_ground', 9), ('m', 2), ('odd_frame', 17)])
-def test_marker_encoder_equals_the_exact_serialisation(frame, count):
-    rng = np.random.default_rng(count)
-    encoder = markers.MarkerEncoder(frame, count)
-    assert len(encoder.stamp_offsets) == 10      # 6 link strips + 4 joint spheres
-    levels = [ros_messages.OK, ros_messages.WARN, ros_messages.ERROR, ros_messages.STALE]
-    for _ in range(3):
-        points = [rng.normal(size=(count, 2)) for _ in range(3)]
-        deflections = [1e-3 * rng.normal(size=(count, 2)) for _ in range(3)]
-        joints = rng.normal(size=(4, 2))
-        stamp_ns = int(rng.integers(0, 2**31 - 1)) * 10**9 + int(rng.integers(0, 10**9))
-        rng.shuffle(levels)
-        expected = rclpy_exact(markers.linkage_markers(
-            ros_messages.ns_to_stamp(stamp_ns), frame, points, deflections, 37.0, joints,
-            levels))
-        assert encoder.encode(stamp_ns, points, deflections, 37.0, joints, levels) == expected
-
-
-@pytest.mark.parametrize('frame', ['linkage_ground', 'm', 'odd_frame'])
-def test_row_encoders_equal_the_one_message_encoders(frame):
-    rng = np.random.default_rng(len(frame))
-    count = 7
-    stamps = rng.integers(0, 2**31 - 1, count) * 10**9 + rng.integers(0, 10**9, count)
-    values = rng.normal(size=(count, 2))
-    ratio, rate, force = (rng.normal(size=(count, 4)) for _ in range(3))
-    encoded = frame.encode()
-    vectors = markers.rows_to_bytes(markers.vector3_stamped_rows(stamps, encoded, values))
-    criteria = markers.rows_to_bytes(markers.criteria_rows(stamps, encoded, ratio, rate, force))
-    encoder = markers.MarkerEncoder(frame, 5)
-    points = rng.normal(size=(count, 3, 5, 2))
-    deflections = 1e-3 * rng.normal(size=(count, 3, 5, 2))
-    joints = rng.normal(size=(count, 4, 2))
-    levels = [ros_messages.OK, ros_messages.WARN, ros_messages.ERROR, ros_messages.OK]
-    marker_rows = markers.rows_to_bytes(encoder.encode_rows(stamps, points, deflections, 11.0,
-                                                            joints, levels))
-    for n, stamp in enumerate(stamps.tolist()):
-        sec, nanosec = divmod(stamp, 10**9)
-        assert vectors[n] == cdr.vector3_stamped_cdr(sec, nanosec, encoded, *values[n])
-        assert criteria[n] == cdr.criteria_cdr(sec, nanosec, encoded, ratio[n], rate[n],
-                                               force[n])
-        assert marker_rows[n] == encoder.encode(stamp, list(points[n]), list(deflections[n]),
-                                                11.0, joints[n], levels)
-
-
 @pytest.mark.parametrize('frame', ['g', 'linkage_ground', 'abc', 'machine_base_frame'])
 def test_criteria_template_path_equals_rclpy_for_any_frame_length(frame):
     """The per-sample template encoder against rclpy, frames of every padding class."""
@@ -130,22 +73,3 @@ def test_criteria_template_path_equals_rclpy_for_any_frame_length(frame):
         stamp = ros_messages.ns_to_stamp(stamp_ns)
         got = cdr.criteria_cdr(stamp.sec, stamp.nanosec, frame.encode(), *values)
         assert got == rclpy_exact(ros_messages.criteria_message(stamp, frame, *values))
-
-
-def diagnostics():
-    status = DiagnosticStatus(level=DiagnosticStatus.WARN, name='jöint', message='',
-                              values=[KeyValue(key='k', value='v' * 5)])
-    return DiagnosticArray(status=[status, DiagnosticStatus()])
-
-
-@pytest.mark.parametrize('message', [
-    JointState(), JointState(name=['a', 'bb'], position=[1.0, 2.0], velocity=[], effort=[3.0]),
-    Marker(), Marker(points=[], text='é', frame_locked=True),
-    ros_messages.deflection_message(ros_messages.ns_to_stamp(7), 'ground', 1.0, 2.0),
-    diagnostics(),
-], ids=['empty', 'joints', 'marker', 'marker-text', 'vector', 'diagnostics'])
-def test_serialize_exact_equals_rclpy_trimmed_with_zeroed_padding(message):
-    data = serialize_exact(message)
-    assert data == rclpy_exact(message)
-    assert cdr_layout(message)[0] == len(data)
-    assert deserialize_message(data, type(message)) == message

@@ -13,10 +13,10 @@ import sys
 import tracemalloc
 import zlib
 
-from flexlink_ros.cli import replay as cli_replay
 from flexlink_ros.cli.mcap import mcap_info, recover_mcap
 from flexlink_ros.errors import FlexlinkError
-from flexlink_ros.io import mcap_records
+from flexlink_ros.io import joint_states, mcap_records
+from flexlink_ros.io import recording as io_recording
 import pytest
 from test_mcap_reader import chunks_of, read_messages, write_crank_recording
 import zstandard
@@ -115,10 +115,10 @@ def read_everything(path, out):
         info = mcap_info(path)
         recovered = recover_mcap(path, out)
         damaged = []
-        scan = cli_replay.scan_recording(path, topic='/joint_states', damaged=damaged)
-        samples = cli_replay.read_crank_samples(path, '/joint_states', 'crank', scan)
+        scan = io_recording.scan_recording(path, topic='/joint_states', damaged=damaged)
+        samples = joint_states.read_crank_samples(path, '/joint_states', 'crank', scan)
         try:
-            cli_replay.choose_input_topic(path, 'crank', scan=scan)
+            io_recording.choose_input_topic(path, 'crank', scan=scan)
         except ValueError as exc:      # the CLI's one-line refusal: nothing usable
             assert '\n' not in str(exc)
         return info, recovered, len(samples['data']) + samples['skipped']

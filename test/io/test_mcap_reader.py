@@ -1,26 +1,22 @@
 """Damaged, truncated and crafted MCAP files through mcap-info, mcap-recover and replay."""
 
 import json
-import math
-import random
 import struct
 import subprocess
 import sys
-import zlib
 
-from flexlink_ros.names import JOINT_STATE
 from flexlink_ros.cli import main as cli
-from flexlink_ros.cli import replay as cli_replay
 from flexlink_ros.cli.mcap import mcap_info, recover_mcap
-from flexlink_ros.io import mcap_reader, mcap_records
+from flexlink_ros.io import joint_states, mcap_reader, mcap_records
 from flexlink_ros.io import recording as io_recording
 from flexlink_ros.io.recorder import McapRecorder
+from flexlink_ros.names import JOINT_STATE
 from flexlink_ros.ros import messages as ros_messages
 from mcap.reader import make_reader
+from mcap_helpers import chunk_record, zstd_zeros
 import pytest
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
-import zstandard
 
 T0_NS = 1_700_000_000_000_000_000
 STEP_NS = 1_000_000
@@ -101,7 +97,7 @@ def test_a_bad_crc_in_the_first_chunk_loses_only_that_chunk(recording, tmp_path,
     assert mcap_info(out)['complete']
 
     damaged = []
-    counts, kept = cli_replay.scan_recording(bad, joint_name='crank', damaged=damaged)
+    counts, kept = io_recording.scan_recording(bad, joint_name='crank', damaged=damaged)
     assert counts == {'/joint_states': [JOINT_STATE, 5000 - lost]}
     assert [data for _, _, data in kept['/joint_states']] == [d for _, _, d in original[lost:]]
     assert [(f, o) for f, o, _ in damaged] == [(str(bad), first)]
@@ -178,9 +174,9 @@ def test_joint_detection_looks_past_the_first_messages(tmp_path):
     def payload(k):
         return crank_state(k, ('lever',) if k < 49 else ('crank',))
     path = write_crank_recording(tmp_path / 'rec.mcap', 400, payload=payload)
-    scan = cli_replay.scan_recording(path, joint_name='crank')
-    topic = cli_replay.choose_input_topic(path, 'crank', scan=scan)
-    samples = cli_replay.read_crank_samples(path, topic, 'crank', scan)
+    scan = io_recording.scan_recording(path, joint_name='crank')
+    topic = io_recording.choose_input_topic(path, 'crank', scan=scan)
+    samples = joint_states.read_crank_samples(path, topic, 'crank', scan)
     assert topic == '/joint_states' and len(samples['data']) == 400 - 49
     assert samples['skipped_reasons'] == {"no position for joint 'crank'": 49}
     # Beyond the probe the topic is not taken (bounded), with the usual one-line refusal.
@@ -188,26 +184,10 @@ def test_joint_detection_looks_past_the_first_messages(tmp_path):
         tmp_path / 'late.mcap', io_recording.JOINT_PROBE_MESSAGES + 20,
         payload=lambda k: crank_state(k, ('lever',) if k < io_recording.JOINT_PROBE_MESSAGES
                                       else ('crank',)))
-    scan = cli_replay.scan_recording(late, joint_name='crank')
+    scan = io_recording.scan_recording(late, joint_name='crank')
     assert len(scan[1]['/joint_states']) == io_recording.JOINT_PROBE_MESSAGES
     with pytest.raises(ValueError, match='no sensor_msgs/msg/JointState topic with joint'):
-        cli_replay.choose_input_topic(late, 'crank', scan=scan)
-
-
-# -- decompression bombs -------------------------------------------------------------------
-
-def zstd_zeros(size):
-    """Compress ``size`` zero bytes into a zstd frame (content size in its header), streaming."""
-    compressor = zstandard.ZstdCompressor(level=1).compressobj(size=size)
-    block = bytes(1 << 20)
-    parts = [compressor.compress(block) for _ in range(size >> 20)]
-    return b''.join(parts) + compressor.flush()
-
-
-def chunk_record(records_compressed, uncompressed_size, crc=0, compression=b'zstd'):
-    body = struct.pack('<QQQII', T0_NS, T0_NS, uncompressed_size, crc, len(compression)) + \
-        compression + struct.pack('<Q', len(records_compressed)) + records_compressed
-    return struct.pack('<BQ', mcap_records.CHUNK, len(body)) + body
+        io_recording.choose_input_topic(late, 'crank', scan=scan)
 
 
 def bomb_file(tmp_path, name, declared):
@@ -255,8 +235,8 @@ def test_decompression_bombs_are_refused_with_a_bound(tmp_path, declared, expect
     assert code == 0 and 'declares' in out and peak < 200, (err, peak)
     assert len(read_messages(recovered)) == 50
 
-    reader = ('import sys; from flexlink_ros.cli import replay as cli_replay; damaged = []\n'
-              'counts, kept = cli_replay.scan_recording(sys.argv[1], joint_name="crank", '
+    reader = ('import sys; from flexlink_ros.io import recording as io_recording; damaged = []\n'
+              'counts, kept = io_recording.scan_recording(sys.argv[1], joint_name="crank", '
               'damaged=damaged)\n'
               'print(len(kept["/joint_states"]), damaged[0][1], damaged[0][2])\n')
     code, out, err, peak = peak_rss_of([sys.executable, '-c', reader, str(path)])
@@ -268,29 +248,6 @@ def test_decompression_bombs_are_refused_with_a_bound(tmp_path, declared, expect
     assert run.returncode == 0 and 'Traceback' not in run.stderr, run.stderr
     assert run.stdout.startswith(f'{path}: 50 samples on /joint_states')
     assert f'at offset {offset}: chunk: declares {declared} bytes uncompressed' in run.stdout
-
-
-def test_a_bomb_within_the_size_bound_but_beyond_the_ratio_is_refused(tmp_path):
-    declared = 32 * 2**20      # under 64 MiB, but about 3000 times its compressed size
-    frame = zstd_zeros(declared)
-    assert declared > mcap_records.MAX_CHUNK_RATIO * len(frame)
-    with pytest.raises(mcap_records.DamagedRecord, match='bound'):
-        mcap_records.decode_chunk(chunk_record(frame, declared), 9,
-                                  len(chunk_record(frame, declared)))
-    # A frame that claims less than the chunk, or more, is refused before decompressing.
-    noise = random.Random(1).randbytes(2**16)
-    frame = zstandard.ZstdCompressor().compress(noise)
-    for claimed in (2**16 - 1, 2**16 + 1):
-        record = chunk_record(frame, claimed)
-        with pytest.raises(mcap_records.DamagedRecord, match='zstd frame declares 65536 bytes'):
-            mcap_records.decode_chunk(record, 9, len(record))
-    record = chunk_record(frame, 2**16, zlib.crc32(noise))
-    assert mcap_records.decode_chunk(record, 9, len(record)) == noise
-    records = b''.join(bytes([mcap_records.MESSAGE]) + struct.pack('<Q', 30) + bytes(30)
-                       for _ in range(10))
-    record = chunk_record(records, len(records), zlib.crc32(records), b'')
-    assert mcap_records.decode_chunk(record, 9, len(record)) == records
-    assert math.isclose(mcap_records.chunk_bound(10), mcap_records.CHUNK_RATIO_FLOOR)
 
 
 def test_overlapping_bomb_candidates_share_one_decompression_budget(tmp_path):
@@ -330,22 +287,3 @@ def test_unreadable_files_are_refused_in_one_line_without_output(tmp_path, conte
     expected = 'nothing readable' if content.startswith(mcap_records.MCAP_MAGIC) else 'bad magic'
     assert expected in run.stderr
     assert not out.exists()
-
-
-def test_lz4_chunks_are_decompressed_within_their_declared_size():
-    import lz4.frame
-    records = b''.join(bytes([mcap_records.MESSAGE]) + struct.pack('<Q', 30) + bytes(30)
-                       for _ in range(100))
-    frame = lz4.frame.compress(records)
-    record = chunk_record(frame, len(records), zlib.crc32(records), b'lz4')
-    assert mcap_records.decode_chunk(record, 9, len(record)) == records
-    # The same frame under a smaller declared size: refused after at most that many bytes.
-    record = chunk_record(frame, len(records) // 2, 0, b'lz4')
-    with pytest.raises(mcap_records.DamagedRecord, match='does not end after the 1950 bytes'):
-        mcap_records.decode_chunk(record, 9, len(record))
-    record = chunk_record(frame[:-4], len(records), 0, b'lz4')
-    with pytest.raises(mcap_records.DamagedRecord, match='does not end after the 3900 bytes'):
-        mcap_records.decode_chunk(record, 9, len(record))
-    record = chunk_record(frame[:12] + b'\xff' * 8 + frame[20:], len(records), 0, b'lz4')
-    with pytest.raises(mcap_records.DamagedRecord, match='lz4'):
-        mcap_records.decode_chunk(record, 9, len(record))

@@ -75,7 +75,7 @@ def receive_joint_states(extra_parameters, seconds):
             command += ['-p', item]
         driver = subprocess.Popen(command)
         try:
-            deadline = time.monotonic() + 10.0
+            deadline = time.monotonic() + 60.0   # start-up and discovery on a loaded machine
             while node.count_publishers('joint_states') == 0 and time.monotonic() < deadline:
                 executor.spin_once(timeout_sec=0.05)
             assert node.count_publishers('joint_states') == 1, 'crank_driver not discovered'

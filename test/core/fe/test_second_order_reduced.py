@@ -1,11 +1,9 @@
 """
 Second-order outputs on a reduced basis (core/fe/second_order_reduced.py, issue 14 item 1).
 
-The quadratic form on a reduced basis against the full-order computation on V q, the compiled
-factored kernel, and the reduced model as the estimator streams it.
+The quadratic form on a reduced basis against the full-order computation on V q (the compiled
+kernel and the streamed reduced model: test/studies/test_second_order_{bench,study}.py).
 """
-
-import math
 
 from flexlink_ros.core import options as core_options
 from flexlink_ros.core.fe import linkage as assembly
@@ -14,7 +12,6 @@ from flexlink_ros.core.fe import second_order_reduced as so_reduced
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.reduction import basis as reduction_basis
 from flexlink_ros.core.reduction import pipeline
-from flexlink_ros.studies import peer_exudyn as peer
 import numpy as np
 import pytest
 
@@ -52,39 +49,3 @@ def test_quadratic_form_equals_the_full_order_on_v_q(mech, options):
                                rtol=0, atol=1e-13 * scale)
     cost = so_reduced.step_cost(factored, basis.shape[1])
     assert cost['factored'] < cost['tables']
-
-
-@pytest.mark.skipif(not (__import__('shutil').which('cc') or __import__('shutil').which('gcc')),
-                    reason='no C compiler')
-def test_compiled_factored_kernel_agrees_and_is_timed(mech):
-    """
-    The C kernel of the factored form agrees and is fast.
-
-    The C kernel of studies/second_order_bench.py equals factored_second_order (checked
-    inside time_factored) and takes well under the issue's 2 us per sample (r = 26: 0.7 us).
-    """
-    from flexlink_ros.studies import second_order_bench
-    ns = second_order_bench.time_factored(mech, 'flexible', False, 26, samples=2000, repeat=5)
-    assert 0.0 < ns < 20000.0
-
-
-def test_reduced_model_second_order_follows_the_full_order(mech):
-    """
-    The default reduced basis streams the second order of the full order.
-
-    The default reduced basis (r = 6, rigid bearings) as the estimator streams it: linear +
-    second order within 1 % of the full order's p2p (measured 0.1-0.2 % at 8 elements).
-    """
-    from flexlink_ros.core.fe.simulate import periodic_response
-    from flexlink_ros.studies import second_order_study
-    angles, streamed, size = second_order_study.reduced_response(
-        mech, 269.0, True, ELEMENTS, points=120, grid=64)
-    assert size == 6
-    linkage = peer.linear_model(mech, elements_per_link=ELEMENTS, gravity=True)
-    full = so_full.corrected_response(
-        linkage, periodic_response(linkage, 269.0 * math.pi / 30.0, method='full',
-                                   points=120))
-    assert np.allclose(full['crank_angle'], angles)
-    span = np.ptp(full['total'], axis=0)
-    assert np.all(np.ptp(streamed - full['total'], axis=0) < 0.01 * span)
-    assert np.ptp(full['second'][:, 0]) > 5.0 * np.ptp(full['linear'][:, 0])

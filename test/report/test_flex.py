@@ -1,4 +1,4 @@
-"""Report section of the flexible four-bar (studies/flex_data, report/flex) on reduced sizes."""
+"""Report section of the flexible four-bar (report/flex.py, studies/flex_data), reduced sizes."""
 
 import time
 

@@ -1,0 +1,46 @@
+"""`flexlink --version`: one number, the same in the package, setup.py and package.xml."""
+
+import ast
+import importlib.metadata
+import pathlib
+import re
+import subprocess
+import sys
+import xml.etree.ElementTree as ElementTree
+
+import flexlink_ros
+from flexlink_ros.cli import main as cli
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+
+
+def setup_py_version():
+    """Return the ``version=`` literal of setup.py's ``setup(...)`` call."""
+    tree = ast.parse((ROOT / 'setup.py').read_text())
+    calls = [node for node in ast.walk(tree) if isinstance(node, ast.Call)
+             and getattr(node.func, 'id', None) == 'setup']
+    (keyword,) = [k for k in calls[0].keywords if k.arg == 'version']
+    return ast.literal_eval(keyword.value)
+
+
+def test_the_version_is_the_same_in_the_package_setup_py_and_package_xml():
+    version = flexlink_ros.__version__
+    assert re.fullmatch(r'\d+\.\d+\.\d+', version)
+    assert setup_py_version() == version
+    assert ElementTree.parse(ROOT / 'package.xml').getroot().findtext('version') == version
+    try:
+        installed = importlib.metadata.version('flexlink_ros')
+    except importlib.metadata.PackageNotFoundError:
+        return
+    assert installed == version, 'the installed copy is stale: run `make install`'
+
+
+def test_flexlink_version_prints_it_and_exits_0(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        cli.main(['--version'])
+    assert exit_info.value.code == 0
+    assert capsys.readouterr().out == f'flexlink {flexlink_ros.__version__}\n'
+    run = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', '--version'],
+                         capture_output=True, text=True, cwd=ROOT)
+    assert run.returncode == 0 and run.stdout == f'flexlink {flexlink_ros.__version__}\n'

@@ -1,0 +1,67 @@
+"""`flexlink mcap-recover FILE` without --out, as the README runs it on a bag's file."""
+
+import os
+import pathlib
+import subprocess
+import sys
+
+from flexlink_ros.cli import main as cli
+from flexlink_ros.cli.mcap import default_recovered_path
+from mcap.reader import make_reader
+from mcap.writer import Writer
+
+MESSAGES = 200
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+# the tree's flexlink_ros, whatever the venv holds
+ENV = dict(os.environ, PYTHONPATH=os.pathsep.join(
+    [str(ROOT)] + [p for p in os.environ.get('PYTHONPATH', '').split(os.pathsep) if p]))
+
+
+def write_truncated_bag(folder):
+    """Write ``folder/<name>_0.mcap`` in small chunks and cut it short, as a SIGKILL does."""
+    folder.mkdir()
+    path = folder / f'{folder.name}_0.mcap'
+    with open(path, 'wb') as stream:
+        writer = Writer(stream, chunk_size=2048)
+        writer.start(profile='ros2', library='test')
+        schema = writer.register_schema('std_msgs/msg/String', 'ros2msg', b'string data')
+        channel = writer.register_channel('/chatter', 'cdr', schema)
+        for n in range(MESSAGES):
+            writer.add_message(channel, n * 1000, bytes(100), n * 1000, sequence=n)
+        writer.finish()
+    data = path.read_bytes()
+    path.write_bytes(data[:len(data) // 2])
+    return path
+
+
+def test_default_output_is_beside_the_bag_directory_and_never_overwritten(tmp_path):
+    source = write_truncated_bag(tmp_path / 'run1')
+    run = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'mcap-recover',
+                          'run1/run1_0.mcap'], cwd=tmp_path, env=ENV, capture_output=True,
+                         text=True)
+    assert run.returncode == 0, run.stderr
+    out = tmp_path / 'run1_0.recovered.mcap'
+    assert 'into run1_0.recovered.mcap' in run.stdout
+    assert sorted(p.name for p in (tmp_path / 'run1').iterdir()) == ['run1_0.mcap']
+    with open(out, 'rb') as stream:
+        reader = make_reader(stream)
+        sequences = [message.sequence for _, _, message in reader.iter_messages()]
+        summary = reader.get_summary()
+    # the intact first half, in order, in a complete file (summary written)
+    assert 0 < len(sequences) < MESSAGES and sequences == list(range(len(sequences)))
+    assert summary.statistics.message_count == len(sequences)
+    recovered = out.read_bytes()
+    run = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'mcap-recover',
+                          'run1/run1_0.mcap'], cwd=tmp_path, env=ENV, capture_output=True,
+                         text=True)
+    assert run.returncode == 1 and run.stdout == ''
+    assert run.stderr.count('\n') == 1 and 'exists' in run.stderr and '--out' in run.stderr
+    assert out.read_bytes() == recovered
+    assert cli.main(['mcap-recover', str(source), '--out', str(tmp_path / 'x.mcap')]) == 0
+
+
+def test_default_output_of_a_file_outside_a_bag_is_beside_it(tmp_path):
+    assert default_recovered_path(tmp_path / 'cut.mcap') == tmp_path / 'cut.recovered.mcap'
+    assert default_recovered_path('run1/run1_0.mcap').as_posix() == 'run1_0.recovered.mcap'
+    assert default_recovered_path('/data/run1_3.mcap').as_posix() == \
+        '/data/run1_3.recovered.mcap'

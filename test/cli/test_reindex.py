@@ -1,0 +1,196 @@
+"""`flexlink reindex`: metadata.yaml of a killed recording rebuilt; rosbags then opens the bag."""
+
+import json
+import pathlib
+import signal
+import subprocess
+import sys
+import time
+
+from flexlink_ros.cli import main as cli
+from flexlink_ros.cli.mcap import scan_mcap
+from flexlink_ros.errors import McapFileError
+from flexlink_ros.io.recorder import McapRecorder
+from geometry_msgs.msg import Vector3Stamped
+from mcap.reader import make_reader
+import pytest
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rosbags.rosbag2 import Reader
+from rosbags.typesys import get_typestore, Stores
+from sensor_msgs.msg import JointState
+import yaml
+
+REPO = pathlib.Path(__file__).resolve().parents[2]
+T0_NS = 1_700_000_000_000_000_000
+TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+
+
+def rosbags_messages(bag):
+    """Every message of a bag directory through rosbags: (topic, log time, decoded)."""
+    with Reader(bag) as reader:
+        return [(connection.topic, log_ns, TYPESTORE.deserialize_cdr(data, connection.msgtype))
+                for connection, log_ns, data in reader.messages()]
+
+
+def _recorded(path):
+    """Tell whether a file being recorded holds a message (False while its header is written)."""
+    try:
+        return scan_mcap(path)['message_count'] > 0
+    except McapFileError:   # created, magic not written yet
+        return False
+
+
+def record_then_kill(bag, record_s=2.5):
+    """Record crank_driver's 1 kHz /joint_states into a split bag directory; SIGKILL it."""
+    driver = subprocess.Popen([sys.executable, '-m', 'flexlink_ros.ros.crank_driver', '--ros-args',
+                               '-p', 'duration_s:=30.0'], cwd=REPO)
+    recorder = subprocess.Popen(
+        [sys.executable, '-m', 'flexlink_ros.cli.main', 'mcap-record', str(bag),
+         '--topic', 'joint_states:sensor_msgs/msg/JointState', '--split-duration-s', '1.0'],
+        cwd=REPO, stdout=subprocess.DEVNULL)
+    first = bag / f'{bag.name}_0.mcap'
+    try:
+        deadline = time.monotonic() + 15.0
+        while time.monotonic() < deadline:  # discovery, then the first flushed chunk
+            if first.exists() and _recorded(first):
+                break
+            time.sleep(0.1)
+        else:
+            pytest.fail('nothing recorded within 15 s')
+        time.sleep(record_s)
+        recorder.send_signal(signal.SIGKILL)
+        recorder.wait(timeout=10)
+    finally:
+        for process in (recorder, driver):
+            if process.poll() is None:
+                process.terminate()
+                try:
+                    process.wait(timeout=5)
+                except subprocess.TimeoutExpired:
+                    process.kill()
+                    process.wait()
+    return recorder.returncode
+
+
+def test_reindex_after_a_real_sigkill_lets_rosbags_open_the_bag(tmp_path, capsys):
+    bag = tmp_path / 'killed'
+    assert record_then_kill(bag) == -signal.SIGKILL
+    files = sorted(bag.glob('*.mcap'))
+    assert len(files) >= 2 and not (bag / 'metadata.yaml').exists()
+    with pytest.raises(Exception):
+        rosbags_messages(bag)          # what a ROS user met: rosbags refuses the folder
+    readable = sum(scan_mcap(path)['message_count'] for path in files)
+    last = files[-1].read_bytes()
+
+    assert cli.main(['reindex', str(bag), '--json']) == 0
+    result = json.loads(capsys.readouterr().out)
+    messages = rosbags_messages(bag)
+    cut = [pathlib.Path(f['path']).name for f in result['files'] if f['salvaged_from']]
+    with capsys.disabled():
+        print(f"\nreindex after SIGKILL: {len(result['files'])} files, {len(messages)} "
+              f'messages read by rosbags, cut short and rewritten: {cut}')
+    assert len(messages) == result['message_count'] == readable > 1000
+    assert result['topics'] == {'/joint_states': readable}
+    assert {topic for topic, _, _ in messages} == {'/joint_states'}
+    stamps = [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for _, _, m in messages]
+    assert stamps == sorted(stamps) and len(set(stamps)) == len(stamps)
+    # The cut-short last file was rewritten complete; the original is kept, untouched.
+    salvaged = [f for f in result['files'] if f['salvaged_from']]
+    assert [f['path'] for f in salvaged] == [str(files[-1])]
+    assert pathlib.Path(salvaged[0]['salvaged_from']).read_bytes() == last
+    metadata = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    assert metadata['version'] == 9 and metadata['storage_identifier'] == 'mcap'
+    assert metadata['relative_file_paths'] == [f.name for f in files]
+    (topic,) = metadata['topics_with_message_count']
+    assert topic['topic_metadata']['type'] == 'sensor_msgs/msg/JointState'
+    assert topic['topic_metadata']['offered_qos_profiles'][0]['reliability'] == 'reliable'
+    assert topic['topic_metadata']['type_description_hash'].startswith('RIHS01_')
+    # A second run finds metadata.yaml and refuses, unless told to rebuild it.
+    before = (bag / 'metadata.yaml').read_bytes()
+    assert cli.main(['reindex', str(bag)]) == 1
+    assert 'exists' in capsys.readouterr().err
+    assert cli.main(['reindex', str(bag), '--force']) == 0
+    assert (bag / 'metadata.yaml').read_bytes() == before
+
+
+def record_bag(bag, count=3000):
+    """Record two topics into a bag split by log time; return the closed recorder's status."""
+    with McapRecorder(bag, split_duration_s=1.0, chunk_size_bytes=4096) as recorder:
+        offered = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT)
+        recorder.add_topic('/joint_states', JointState, qos_profiles=[offered])
+        for k in range(count):
+            t = T0_NS + k * 1_000_000
+            joint = JointState(name=['crank'], position=[0.001 * k])
+            joint.header.stamp.sec, joint.header.stamp.nanosec = divmod(t, 10**9)
+            recorder.write('/joint_states', joint, t + 5_000, publish_time_ns=t)
+            if k % 10 == 0:
+                recorder.write('/deflection', Vector3Stamped(), t + 6_000)
+        return recorder.status()
+
+
+def test_reindex_rebuilds_the_recorders_metadata_exactly_and_salvages_a_cut_file(tmp_path):
+    bag = tmp_path / 'run'
+    status = record_bag(bag)
+    files = [pathlib.Path(f) for f in status['files']]
+    assert len(files) == 3
+    written = (bag / 'metadata.yaml').read_text()
+    (bag / 'metadata.yaml').unlink()
+    assert cli.main(['reindex', str(bag)]) == 0
+    assert (bag / 'metadata.yaml').read_text() == written   # what close() wrote, byte for byte
+
+    data = files[-1].read_bytes()
+    earlier = status['message_count'] - scan_mcap(files[-1])['message_count']
+    files[-1].write_bytes(data[:len(data) * 2 // 3])   # the last file cut short
+    kept = scan_mcap(files[-1])['message_count']
+    assert cli.main(['reindex', str(bag), '--force']) == 0
+    messages = rosbags_messages(bag)
+    assert 0 < kept < 1100 and len(messages) == earlier + kept < status['message_count']
+    with open(files[-1], 'rb') as stream:       # the rewritten file has its summary again
+        reader = make_reader(stream)
+        assert reader.get_summary().statistics.message_count == kept
+        records = [yaml.safe_load(m.metadata['serialized_metadata'])
+                   for m in reader.iter_metadata() if m.name == 'rosbag2']
+        sequences = [m.sequence for _, c, m in reader.iter_messages(log_time_order=False)
+                     if c.topic == '/deflection']
+    assert len(records) == 2 and records[0]['files'][-1]['message_count'] == 0
+    assert sequences == list(range(sequences[0], sequences[0] + len(sequences)))
+    assert sequences[0] > 1     # numbering carried on from the earlier files, and kept
+    counts = {}
+    for topic, _, _ in messages:
+        counts[topic] = counts.get(topic, 0) + 1
+    metadata = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    assert {t['topic_metadata']['name']: t['message_count']
+            for t in metadata['topics_with_message_count']} == counts
+    assert metadata['message_count'] == len(messages)
+    assert records[1] == metadata   # the closing record is the rebuilt metadata.yaml
+    (qos,) = metadata['topics_with_message_count'][0]['topic_metadata']['offered_qos_profiles']
+    assert (qos['reliability'], qos['depth']) == ('best_effort', 100)
+
+
+def test_reindex_refuses_what_is_not_a_crashed_bag(tmp_path, capsys):
+    (tmp_path / 'file.mcap').write_bytes(b'x')
+    (tmp_path / 'empty').mkdir()
+    (tmp_path / 'other').mkdir()
+    (tmp_path / 'other' / 'notes.txt').write_text('x')
+    (tmp_path / 'stray').mkdir()      # a folder that merely holds some MCAP file
+    with McapRecorder(tmp_path / 'stray' / 'rr.mcap') as recorder:
+        recorder.write('/a', JointState(), T0_NS)
+    for path, reason in ((tmp_path / 'file.mcap', 'not a directory'),
+                         (tmp_path / 'stray', 'not a bag directory'),
+                         (tmp_path / 'missing', 'not a directory'),
+                         (tmp_path / 'empty', 'not a bag directory'),
+                         (tmp_path / 'other', 'not a bag directory')):
+        assert cli.main(['reindex', str(path)]) == 1
+        assert reason in capsys.readouterr().err
+        assert not (path / 'metadata.yaml').exists()
+    bag = tmp_path / 'closed'
+    record_bag(bag, count=200)
+    before = (bag / 'metadata.yaml').read_bytes()
+    assert cli.main(['reindex', str(bag)]) == 1
+    assert '--force' in capsys.readouterr().err
+    assert (bag / 'metadata.yaml').read_bytes() == before
+    (bag / 'metadata.yaml').unlink()
+    (bag / 'closed_0.mcap').write_bytes(b'not an MCAP file')
+    assert cli.main(['reindex', str(bag)]) == 1      # one file is not MCAP at all: said so
+    assert 'not an MCAP file' in capsys.readouterr().err
+    assert not (bag / 'metadata.yaml').exists()

@@ -1,0 +1,74 @@
+"""replay_writer: the input and its recomputed outputs interleaved per sample in a bag."""
+
+from flexlink_ros.io.msg_schema import serialize_exact
+from flexlink_ros.io.replay_writer import write_replay
+from flexlink_ros.names import JOINT_NAMES, output_topics
+from flexlink_ros.ros import messages as ros_messages
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+import numpy as np
+from recorder_helpers import STEP_NS, T0_NS
+from rosbags.highlevel import AnyReader
+from sensor_msgs.msg import JointState
+
+COUNT = 6
+OUTLIER = 2     # its estimate is NaN: the input is kept, no outputs
+
+
+def replay_inputs():
+    rng = np.random.default_rng(5)
+    stamps = T0_NS + STEP_NS * np.arange(COUNT)
+    data = []
+    for k, stamp in enumerate(stamps.tolist()):
+        message = JointState(name=['crank'], position=[0.1 * k], velocity=[40.0])
+        message.header.stamp = ros_messages.ns_to_stamp(stamp)
+        data.append(serialize_exact(message))
+    samples = {'data': data, 'stamps_ns': stamps, 'log_ns': stamps + 50_000,
+               'publish_ns': stamps + 20_000}
+    estimate = {key: rng.normal(size=(COUNT, 2)) for key in ('lever_tip', 'coupler_mid')}
+    estimate.update({key: rng.normal(size=(COUNT, 4))
+                     for key in ('criterion', 'gamma_dot', 'reaction_n')})
+    estimate['lever_tip'][OUTLIER] = np.nan
+    return samples, estimate
+
+
+def test_replay_bag_holds_each_input_then_its_outputs(tmp_path):
+    samples, estimate = replay_inputs()
+    topics = output_topics('/flexlink_node')
+    progress = []
+    status = write_replay(tmp_path / 'replay', samples, estimate, '/joint_states', topics,
+                          'linkage_ground', None, markers_every_n=0,
+                          progress=lambda n, force=False: progress.append((n, force)))
+    assert status['state'] == 'closed' and status['message_count'] == 1 + 4 * (COUNT - 1)
+    assert progress == [(COUNT, False), (COUNT, True)]
+    with open(status['files'][0], 'rb') as stream:
+        decoded = [(channel.topic, message, msg) for _, channel, message, msg in make_reader(
+            stream, decoder_factories=[DecoderFactory()]).iter_decoded_messages(
+                log_time_order=False)]
+    order = [topic for topic, _, _ in decoded]
+    per_sample = ['/joint_states', topics['lever_tip'], topics['coupler_mid'], topics['criteria']]
+    assert order == per_sample * OUTLIER + ['/joint_states'] + \
+        per_sample * (COUNT - OUTLIER - 1)
+    rows = iter(k for k in range(COUNT) for _ in range(1 if k == OUTLIER else 4))
+    for (topic, message, msg), k in zip(decoded, rows):
+        assert message.log_time == samples['log_ns'][k]
+        stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+        assert stamp == samples['stamps_ns'][k]
+        if topic == '/joint_states':
+            assert message.publish_time == samples['publish_ns'][k]
+            assert list(msg.position) == [0.1 * k]
+            continue
+        assert message.publish_time == message.log_time and msg.header.frame_id == 'linkage_ground'
+        if topic == topics['criteria']:
+            assert list(msg.name) == list(JOINT_NAMES)
+            assert list(msg.position) == estimate['criterion'][k].tolist()
+            assert list(msg.velocity) == estimate['gamma_dot'][k].tolist()
+            assert list(msg.effort) == estimate['reaction_n'][k].tolist()
+        else:
+            point = 'lever_tip' if topic == topics['lever_tip'] else 'coupler_mid'
+            assert [msg.vector.x, msg.vector.y, msg.vector.z] == \
+                estimate[point][k].tolist() + [0.0]
+    with AnyReader([tmp_path / 'replay']) as reader:
+        assert {c.topic: c.msgcount for c in reader.connections} == {
+            '/joint_states': COUNT, topics['lever_tip']: COUNT - 1,
+            topics['coupler_mid']: COUNT - 1, topics['criteria']: COUNT - 1}

@@ -1,0 +1,58 @@
+"""Candidates of ``flexlink plan`` (studies/plan.py): sizes, the scene, physics simplifications."""
+
+import dataclasses
+
+from flexlink_ros.core.mechanism_file import load_mechanism
+from flexlink_ros.core.options import ModelOptions
+from flexlink_ros.studies import plan
+import pytest
+
+
+@pytest.fixture(scope='module')
+def cho():
+    return load_mechanism('cho1992')
+
+
+def test_size_candidates_run_from_small_to_large():
+    base = ModelOptions(bearings='rigid')
+    candidates = plan.plan_candidates(base)
+    assert len(candidates) == len(plan.PLAN_MODES) * len(plan.PLAN_STATIC) * len(plan.PLAN_GRIDS)
+    keys = [(o.modes + o.static, o.grid_size) for o in candidates]
+    assert keys == sorted(keys)
+    assert (candidates[0].modes, candidates[0].static, candidates[0].grid_size) == (2, 0, 64)
+    assert (candidates[-1].modes, candidates[-1].static, candidates[-1].grid_size) == (24, 4, 256)
+    assert all(o.bearings == 'rigid' for o in candidates)     # the physics is kept
+
+
+def test_scene_is_the_richest_model_of_the_users_bearings(cho):
+    scene = plan.scene_options(cho, ModelOptions(bearings='rigid'))
+    assert scene.elements_per_link == 2 * cho.elements_per_link
+    assert scene.rigid_crank is False and scene.geometric_stiffness is True
+    assert scene.bearings == 'rigid'
+    given = plan.scene_options(cho, ModelOptions(elements_per_link=5, geometric_stiffness=False))
+    assert given.elements_per_link == 5 and given.geometric_stiffness is True
+
+
+def test_full_order_dofs_grow_by_an_interior_node_per_link_and_element(cho):
+    def dofs(elements, rigid_crank):
+        return plan.full_order_dofs(cho, ModelOptions.full_model(elements_per_link=elements,
+                                                                 rigid_crank=rigid_crank))
+    # one more element per link: one more interior node (u, v, phi) on each flexible link
+    assert dofs(3, False) - dofs(2, False) == 9
+    assert dofs(3, True) - dofs(2, True) == 6
+    assert plan.full_order_dofs(None, ModelOptions()) is None
+
+
+def test_physics_candidates_are_cheapest_first_and_end_with_the_scene(cho):
+    scene = plan.scene_options(cho, ModelOptions(bearings='flexible'))
+    candidates = plan.physics_candidates(cho, ModelOptions(bearings='flexible'), scene)
+    assert candidates[-1] == scene
+    costs = [plan.full_order_dofs(cho, o) for o in candidates[:-1]]
+    assert costs == sorted(costs)
+    assert any(o.bearings == 'rigid' for o in candidates)          # the other bearing model
+    assert all(o.elements_per_link < scene.elements_per_link for o in candidates[:-1])
+
+
+def test_describe_physics():
+    options = dataclasses.replace(ModelOptions.full_model(), elements_per_link=4)
+    assert plan.describe_physics(options) == '4 el, flex crank, GS on, rigid bearings'
