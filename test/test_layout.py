@@ -227,7 +227,6 @@ def mirrored_tests(path):
 WITHOUT_OWN_TEST_FILE = {
     'cli/demo_summary.py',
     'cli/mcap_record.py',
-    'ros/diagnostics.py',
     'ros/node_model.py',
     'ros/pipeline.py',
     'ros/republish.py',

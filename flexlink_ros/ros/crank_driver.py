@@ -31,7 +31,7 @@ from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import JointState
 
 from . import runtime
-from .messages import parameter_descriptor
+from .overrides import declare_table, NODE_OPTIONS
 from .parameters import ParameterSpec
 from ..core.numerics import RPM, wrap_to_pi
 
@@ -155,9 +155,8 @@ class CrankDriver(Node):
     """Publishes the crank JointState on a timer; see the module docstring."""
 
     def __init__(self):
-        super().__init__('crank_driver')
-        for spec in PARAMETERS:
-            self.declare_parameter(spec.name, spec.default, parameter_descriptor(spec))
+        super().__init__('crank_driver', **NODE_OPTIONS)
+        declare_table(self, PARAMETERS)
         self.add_on_set_parameters_callback(self._validate)
         self.add_post_set_parameters_callback(self._restart_profile)
         values = self._values()

@@ -3,7 +3,10 @@ The statuses of flexlink_node's ``/diagnostics``: plain functions of the node's 
 
 One status for the input, one for the estimator, one per joint (O2, A, B, O4) and one for the
 recorder, each from the totals (:class:`node_model.Totals`), the period's counts
-(:class:`node_model.PeriodStats`) and the node's parameter values.
+(:class:`node_model.PeriodStats`) and the node's parameter values. A managed node that is not
+active says so instead (:func:`inactive_statuses`, :func:`unconfigured_statuses`). The names
+are relative ('estimator'); :func:`named` prefixes them with the node's fully qualified name,
+as diagnostic_updater prefixes its node's name ('/robot1/flexlink_node: estimator').
 """
 
 import math
@@ -11,9 +14,9 @@ import math
 import numpy as np
 
 from .messages import ERROR, joint_level, OK, STALE, status, WARN
-from .node_model import OTHER_KINDS, SKIP_KINDS, WARN_FLAGS
+from .node_model import OTHER_KINDS, PeriodStats, SKIP_KINDS, WARN_FLAGS
 from ..core.estimation.sample import SampleFlag
-from ..names import JOINT_NAMES, NODE_NAME
+from ..names import JOINT_NAMES
 
 
 def input_status(totals, period, values, topic, rate_hz, stale_s):
@@ -51,7 +54,7 @@ def input_status(totals, period, values, topic, rate_hz, stale_s):
     elif period.rejected or period.counts.get('outlier'):
         level, message = WARN, (f'{period.rejected} input messages skipped, '
                                 f'{period.counts.get("outlier", 0)} outliers')
-    return status(f'{NODE_NAME}: input', level, message, input_counts(
+    return status('input', level, message, input_counts(
         totals, period, {'topic': topic, 'rate_hz': rate_hz, 'stale_s': stale_s}))
 
 
@@ -136,7 +139,7 @@ def estimator_status(period, values, model_facts):
     p99 = float(np.percentile(durations, 99)) if durations.size else math.nan
     flags = [flag.name for flag in SampleFlag if flag and period.flags & flag]
     level, message = estimator_level(period, values['diagnostics.error_indicator_warn'])
-    return status(f'{NODE_NAME}: estimator', level, message, {
+    return status('estimator', level, message, {
         'error_indicator_max': period.max_error_indicator, 'update_us_median': median,
         'update_us_p99': p99, 'samples_in_period': period.valid, 'flags': ' '.join(flags),
         **model_facts})
@@ -174,7 +177,7 @@ def joint_statuses(period, values, criteria_source):
                                 values['diagnostics.criterion_error'])
             message = f'max |dgamma/dt|/R {ratio:.4g} rad/(s N)' + (
                 ', reaction near zero' if period.near_zero[j] else '')
-        statuses.append(status(f'{NODE_NAME}: joint {name}', level, message,
+        statuses.append(status(f'joint {name}', level, message,
                                {'criterion_max': ratio, 'near_zero': period.near_zero[j]}))
     return statuses
 
@@ -194,10 +197,68 @@ def recorder_status(state):
 
     """
     if state is None:
-        return status(f'{NODE_NAME}: recorder', OK, 'disabled', {})
+        return status('recorder', OK, 'disabled', {})
     failed = state['state'] == 'failed'
-    return status(f'{NODE_NAME}: recorder', ERROR if failed else OK,
+    return status('recorder', ERROR if failed else OK,
                   (f'FAILED: {state["error"]}' if failed else state['state']), {
                       'path': state['path'], 'messages': state['message_count'],
                       'dropped': state['dropped_count'], 'bytes': state['bytes_written'],
                       'files': len(state['files'])})
+
+
+def inactive_statuses(totals, topic, model_facts, recorder_state):
+    """
+    Report a managed node that is configured but not active: model loaded, input not read.
+
+    Parameters
+    ----------
+    totals : node_model.Totals
+        Counts since the configure transition.
+    topic : str
+        The input topic (not subscribed while inactive).
+    model_facts : dict
+        Key values describing the model.
+    recorder_state : dict or None
+        ``McapRecorder.status()``; None when not recording.
+
+    Returns
+    -------
+    list of diagnostic_msgs.msg.DiagnosticStatus
+        input (STALE), estimator (OK, configured), recorder.
+
+    """
+    return [status('input', STALE, f'inactive: not subscribed to {topic}',
+                   input_counts(totals, PeriodStats(), {'topic': topic})),
+            status('estimator', OK, 'configured, waiting for activation', model_facts),
+            recorder_status(recorder_state)]
+
+
+def unconfigured_statuses():
+    """Report a managed node before its configure transition (no model, no input)."""
+    return [status('estimator', STALE, 'unconfigured: waiting for the configure transition',
+                   {})]
+
+
+def named(statuses, node_name, hardware_id):
+    """
+    Prefix every status name with the node's name and set its hardware_id (in place).
+
+    Parameters
+    ----------
+    statuses : list of diagnostic_msgs.msg.DiagnosticStatus
+        Statuses with relative names ('estimator').
+    node_name : str
+        The node's fully qualified name ('/robot1/flexlink_node').
+    hardware_id : str
+        The ``diagnostics.hardware_id`` parameter.
+
+    Returns
+    -------
+    list of diagnostic_msgs.msg.DiagnosticStatus
+        ``statuses``, named '<node_name>: <name>'.
+
+    """
+    for item in statuses:
+        item.name = f'{node_name}: {item.name}'
+        item.hardware_id = hardware_id
+    return statuses

@@ -129,7 +129,7 @@ def joint_level(ratio, flagged, warn, error):
     return OK
 
 
-def status(name, level, message, values, hardware_id='flexlink'):
+def status(name, level, message, values, hardware_id=''):
     """Build a DiagnosticStatus with key-value pairs (values formatted as strings)."""
     return DiagnosticStatus(
         level=level, name=name, message=message, hardware_id=hardware_id,

@@ -42,6 +42,7 @@ from rclpy.node import Node  # noqa: E402
 from rclpy.utilities import remove_ros_args  # noqa: E402
 
 from . import runtime, startup  # noqa: E402
+from .overrides import NODE_OPTIONS  # noqa: E402
 from .pipeline import EstimatorPipeline  # noqa: E402
 from ..errors import FlexlinkError  # noqa: E402
 
@@ -52,8 +53,10 @@ SWITCH_INTERVAL_S = 0.0005
 class FlexlinkNode(EstimatorPipeline, Node):
     """flexlink_node: configured and streaming from construction."""
 
+    finalized = False   # runs until SIGINT/SIGTERM
+
     def __init__(self, **kwargs):
-        super().__init__(NODE_NAME, **kwargs)
+        super().__init__(NODE_NAME, **NODE_OPTIONS, **kwargs)
         self._declare()
         self._configure(self.create_publisher)
         self._activate()
@@ -65,11 +68,12 @@ class FlexlinkManagedNode(EstimatorPipeline, LifecycleNode):
 
     configure loads or builds the model, creates the publishers and opens the recording;
     activate subscribes and starts publishing; deactivate stops receiving; cleanup closes
-    the recording.
+    the recording; shutdown (from any state) closes it and the process exits.
     """
 
     def __init__(self, **kwargs):
-        super().__init__(NODE_NAME, **kwargs)
+        super().__init__(NODE_NAME, **NODE_OPTIONS, **kwargs)
+        self.finalized = False
         self._declare()
 
     def on_configure(self, state):
@@ -94,6 +98,7 @@ class FlexlinkManagedNode(EstimatorPipeline, LifecycleNode):
 
     def on_shutdown(self, state):
         self._cleanup()
+        self.finalized = True   # the spin ends once the transition has been answered
         return TransitionCallbackReturn.SUCCESS
 
 
@@ -182,7 +187,7 @@ def _run(args):
             startup.end_startup()      # from here on rclpy's shutdown ends the spin
             executor = runtime.make_executor()
             executor.add_node(node)
-            runtime.spin_until_shutdown(executor)
+            runtime.spin_until_shutdown(executor, lambda: node.finalized)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

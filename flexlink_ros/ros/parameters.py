@@ -107,6 +107,9 @@ PARAMETERS = (
                   low=0.0, high=10.0),
     ParameterSpec('diagnostics.period_s', 1.0, 'Period of /diagnostics [s]',
                   low=0.01, high=60.0),
+    ParameterSpec('diagnostics.hardware_id', 'flexlink',
+                  'hardware_id of every /diagnostics status (the status names carry the '
+                  'fully qualified node name)', max_bytes=NAME_MAX_BYTES),
     ParameterSpec('record.enabled', False, 'Record input and outputs to MCAP',
                   read_only=True),
     ParameterSpec('record.path', '', 'MCAP file or directory (empty: ./flexlink_<time>)',
@@ -139,6 +142,7 @@ RUN_TIME_EFFECT = {
     'diagnostics.min_rate_hz': 'the next /diagnostics',
     'diagnostics.error_indicator_warn': 'the next /diagnostics',
     'diagnostics.period_s': 'the diagnostics timer is restarted with the new period',
+    'diagnostics.hardware_id': 'the next /diagnostics',
 }
 
 
@@ -173,8 +177,8 @@ def validate_parameter(name, value, current=None):
     if spec.max_bytes is not None and len(value.encode('utf-8', 'replace')) > spec.max_bytes:
         return (f'{name} must be at most {spec.max_bytes} bytes, got '
                 f'{len(value.encode("utf-8", "replace"))}')
-    if name == 'crank_joint' and not value:
-        return 'crank_joint must not be empty'
+    if name in ('crank_joint', 'frame_id') and not value:
+        return f'{name} must not be empty'
     if spec.choices is not None and value not in spec.choices:
         return f'{name} must be one of {", ".join(spec.choices)}, got {value!r}'
     if name in ('diagnostics.criterion_warn', 'diagnostics.criterion_error') and current:

@@ -21,9 +21,10 @@ from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
 from . import diagnostics, parameters
-from .messages import diagnostics_message, joint_level, parameter_descriptor
+from .messages import diagnostics_message, joint_level
 from .node_model import (crank_sample, load_node_model, one_line, PeriodStats, publishable,
                          SKIP_KINDS, Totals)
+from .overrides import declare_table
 from .runtime import is_shutdown_error
 from .startup import check_startup_signal
 from ..core.estimation.sample import SampleFlag
@@ -36,8 +37,10 @@ from ..names import FIRST_INPUT_MESSAGE, NODE_NAME, READY_MESSAGE, TOPICS
 
 WARN_THROTTLE_S = 1.0  # at most one warning per second per kind of bad input
 # Message type of each output (keys of names.TOPICS).
+# /diagnostics is a plain publisher, created with the node: a managed node reports while
+# unconfigured and inactive too.
 OUTPUT_TYPES = {'lever_tip': Vector3Stamped, 'coupler_mid': Vector3Stamped,
-                'criteria': JointState, 'markers': MarkerArray, 'diagnostics': DiagnosticArray}
+                'criteria': JointState, 'markers': MarkerArray}
 PER_SAMPLE_OUTPUTS = ('lever_tip', 'coupler_mid', 'criteria')   # with the input's QoS
 OTHER_OUTPUT_DEPTH = 10   # history depth of markers and /diagnostics
 
@@ -46,8 +49,7 @@ class EstimatorPipeline:
     """The node's work, shared by the plain and the managed (lifecycle) node."""
 
     def _declare(self):
-        for spec in parameters.PARAMETERS:
-            self.declare_parameter(spec.name, spec.default, parameter_descriptor(spec))
+        self.unknown_overrides = declare_table(self, parameters.PARAMETERS)
         self.values = parameters.validate_all(
             {spec.name: self.get_parameter(spec.name).value for spec in parameters.PARAMETERS})
         self.add_on_set_parameters_callback(self._validate)
@@ -59,6 +61,10 @@ class EstimatorPipeline:
         self._serialize = serialize_message
         self._frame = self.values['frame_id'].encode()
         self._marker_encoder = None
+        self.totals = self.model_facts = None
+        self._diagnostics_publisher = self.create_publisher(
+            DiagnosticArray, TOPICS['diagnostics'], OTHER_OUTPUT_DEPTH)
+        self._start_diagnostics_timer()
 
     # -- lifecycle ------------------------------------------------------------------------
 
@@ -96,6 +102,7 @@ class EstimatorPipeline:
             key: make_publisher(message_type, TOPICS[key],
                                 self.qos if key in PER_SAMPLE_OUTPUTS else OTHER_OUTPUT_DEPTH)
             for key, message_type in OUTPUT_TYPES.items()}
+        self.publishers_['diagnostics'] = self._diagnostics_publisher
         self.input_topic = self.resolve_topic_name(values['input_topic'])
         self.output_topics = {key: publisher.topic_name
                               for key, publisher in self.publishers_.items()}
@@ -108,7 +115,6 @@ class EstimatorPipeline:
         self._period_start = time.monotonic()
         self.subscription = self.create_subscription(
             JointState, values['input_topic'], self._on_joint_state, self.qos, raw=True)
-        self._start_diagnostics_timer()
         self.get_logger().info(
             f'{READY_MESSAGE} {self.subscription.topic_name} (joint '
             f'{values["crank_joint"]!r}), publishing under {self.get_name()}/'
@@ -126,20 +132,18 @@ class EstimatorPipeline:
                                         self._publish_diagnostics)
 
     def _deactivate(self):
-        """Stop receiving (the model, publishers and recording stay)."""
+        """Stop receiving (the model, publishers, recording and /diagnostics stay)."""
         if self.subscription is not None:
             self.destroy_subscription(self.subscription)
             self.subscription = None
-        if self._timer is not None:
-            self.destroy_timer(self._timer)
-            self._timer = None
 
     def _cleanup(self):
         """Close the recording and drop publishers and model."""
         self._deactivate()
         self.close()
-        for publisher in self.publishers_.values():
-            self.destroy_publisher(publisher)
+        for key, publisher in self.publishers_.items():
+            if key != 'diagnostics':
+                self.destroy_publisher(publisher)
         self.publishers_ = {}
         self.estimator = self.recorder = None
 
@@ -171,6 +175,12 @@ class EstimatorPipeline:
     def _open_recorder(self, qos):
         values = self.values
         path = values['record.path'] or time.strftime('flexlink_%Y%m%d_%H%M%S')
+        # The recorder never overwrites: a re-configure records next to the earlier takes.
+        self._takes = getattr(self, '_takes', {})
+        take = self._takes[path] = self._takes.get(path, 0) + 1
+        if take > 1:
+            stem, dot, suffix = path.rpartition('.') if path.endswith('.mcap') else (path, '', '')
+            path = f'{stem}_{take}{dot}{suffix}'
         recorder = McapRecorder(path, split_size_bytes=values['record.max_bytes'],
                                 split_duration_s=values['record.max_duration_s'])
         # Topics first: if opening fails, writes to them are then dropped as failed,
@@ -345,7 +355,20 @@ class EstimatorPipeline:
     # -- diagnostics ----------------------------------------------------------------------
 
     def diagnostic_statuses(self):
-        """Return the statuses of one /diagnostics message (and restart the period)."""
+        """Return the statuses of one /diagnostics message, named after the node."""
+        if self.estimator is None:
+            statuses = diagnostics.unconfigured_statuses()
+        elif self.subscription is None:
+            statuses = diagnostics.inactive_statuses(
+                self.totals, self.input_topic, self.model_facts,
+                None if self.recorder is None else self.recorder.status())
+        else:
+            statuses = self._active_statuses()
+        return diagnostics.named(statuses, self.get_fully_qualified_name(),
+                                 self.values['diagnostics.hardware_id'])
+
+    def _active_statuses(self):
+        """Return the statuses of a streaming node (and restart the period)."""
         now = time.monotonic()
         elapsed = max(now - self._period_start, 1e-9)
         period, self.period, self._period_start = self.period, PeriodStats(), now
@@ -362,7 +385,7 @@ class EstimatorPipeline:
     def _publish_diagnostics(self):
         now = self._clock.now()
         message = diagnostics_message(now.to_msg(), self.diagnostic_statuses())
-        publisher = self.publishers_['diagnostics']
+        publisher = self._diagnostics_publisher
         try:
             publisher.publish(message)
         except RCLError as exc:

@@ -14,6 +14,7 @@ from flexlink_ros.ros import parameters as node_params
 from flexlink_ros.ros.node_model import load_node_model
 import numpy as np
 import pytest
+import yaml
 
 READY_TIMEOUT_S = 240.0     # node start-up incl. a first model build on a loaded machine
 DISCOVERY_TIMEOUT_S = 20.0
@@ -44,10 +45,10 @@ def test_model_options_follow_the_parameters():
 class NodeProcess:
     """flexlink_node in a subprocess, its log in a file."""
 
-    def __init__(self, tmp_path, *parameters, flags=()):
+    def __init__(self, tmp_path, *parameters, flags=(), ros_args=(), params_file=PARAMS_FILE):
         self.log_path = tmp_path / f'node_{time.monotonic_ns()}.log'
         command = [sys.executable, '-m', 'flexlink_ros.ros.node', *flags, '--ros-args',
-                   '--params-file', str(PARAMS_FILE)]
+                   *ros_args, '--params-file', str(params_file)]
         for item in parameters:
             command += ['-p', item]
         env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path), PYTHONUNBUFFERED='1',
@@ -322,10 +323,17 @@ def test_driver_to_node_and_sigkill_leaves_a_recoverable_file(tmp_path, processe
     ('damping_ratio:=2.0', 'out of range'),         # refused by the descriptor's range
     ('qos.depth:=2.5', 'expecting type'),           # refused by the parameter's type
     ('frame_id:=' + 'x' * 300, 'frame_id must be at most 256 bytes, got 300'),
+    ("frame_id:=''", 'frame_id must not be empty'),
 ])
 def test_bad_parameters_file_value_stops_the_node_with_a_reason(tmp_path, processes, parameter,
                                                                 reason):
-    node_process = NodeProcess(tmp_path, parameter)
+    # The bad value in a /** params file of its own: with the shipped file and -p, rcl merges
+    # a value of another type than the file's into the file's entry and keeps the file's.
+    name, value = parameter.split(':=')
+    params_file = tmp_path / 'bad.yaml'
+    params_file.write_text(yaml.safe_dump({'/**': {'ros__parameters': {
+        name: yaml.safe_load(value)}}}))
+    node_process = NodeProcess(tmp_path, params_file=params_file)
     processes.append(node_process)
     assert node_process.process.wait(timeout=READY_TIMEOUT_S) == 1
     log = node_process.log()

@@ -22,6 +22,7 @@ def test_defaults_are_valid():
     ('qos.depth', True, 'type int'),
     ('frame_id', 3, 'type str'),
     ('no.such.parameter', 1, 'unknown'),
+    ('frame_id', '', 'frame_id must not be empty'),
 ])
 def test_bad_values_give_reasons(name, value, fragment):
     reason = node_params.validate_parameter(name, value, node_params.defaults())
@@ -57,7 +58,7 @@ def _flatten(tree, prefix=''):
 def test_params_file_equals_the_code_defaults():
     # `ros2 run` without --params-file must behave as with config/flexlink_node.yaml.
     path = pathlib.Path(__file__).resolve().parents[2] / 'config' / 'flexlink_node.yaml'
-    shipped = dict(_flatten(yaml.safe_load(path.read_text())['flexlink_node']['ros__parameters']))
+    shipped = dict(_flatten(yaml.safe_load(path.read_text())['/**']['ros__parameters']))
     assert shipped == node_params.defaults()
 
 
