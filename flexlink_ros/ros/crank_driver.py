@@ -32,7 +32,7 @@ from sensor_msgs.msg import JointState
 
 from . import runtime
 from .overrides import declare_table, NODE_OPTIONS
-from .parameters import ParameterSpec
+from .parameters import parameter_help, ParameterSpec
 from ..core.numerics import RPM, wrap_to_pi
 
 PROFILES = ('constant', 'ramp', 'sweep')
@@ -133,22 +133,13 @@ class SpeedProfile:
         return cycles * 0.5 * self.omega_max * P + partial
 
 
-def _parameter_help():
-    lines = ['parameters (--ros-args -p name:=value, or --params-file FILE):']
-    for spec in PARAMETERS:
-        allowed = (f' [{", ".join(spec.choices)}]' if spec.choices else
-                   f' [{spec.low:g} .. {spec.high:g}]' if spec.low is not None else '')
-        lines.append(f'  {spec.name} (default {spec.default!r}){allowed}: {spec.description}')
-    return '\n'.join(lines)
-
-
 def build_parser():
     """Command-line parser for the non-ROS arguments (only --help)."""
     return argparse.ArgumentParser(
         prog='crank_driver', formatter_class=argparse.RawDescriptionHelpFormatter,
         description='Publish the crank JointState (angle wrapped to [-pi, pi), speed) at a '
                     'fixed rate with a constant, ramp or sweep speed profile.',
-        epilog=_parameter_help())
+        epilog=parameter_help(PARAMETERS))
 
 
 class CrankDriver(Node):

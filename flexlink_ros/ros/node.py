@@ -41,8 +41,9 @@ from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn  # noqa: E40
 from rclpy.node import Node  # noqa: E402
 from rclpy.utilities import remove_ros_args  # noqa: E402
 
-from . import runtime, startup  # noqa: E402
+from . import parameters, runtime, startup  # noqa: E402
 from .overrides import NODE_OPTIONS  # noqa: E402
+from .parameters import parameter_help  # noqa: E402
 from .pipeline import EstimatorPipeline  # noqa: E402
 from ..errors import FlexlinkError  # noqa: E402
 
@@ -120,8 +121,10 @@ def make_node(managed=False, **kwargs):
 def build_parser():
     """Build the command-line parser for the non-ROS arguments."""
     parser = argparse.ArgumentParser(
-        prog=NODE_NAME, description='Elastic deflections and joint criteria of the flexible '
-        'four-bar from a crank JointState (parameters: --ros-args --params-file FILE).')
+        prog=NODE_NAME, formatter_class=argparse.RawDescriptionHelpFormatter,
+        description='Elastic deflections and joint criteria of the flexible four-bar from a '
+        'crank JointState (parameters: --ros-args --params-file FILE).',
+        epilog=parameter_help(parameters.PARAMETERS))
     parser.add_argument('--managed', action='store_true',
                         help='start as a lifecycle node (configure/activate via '
                         'lifecycle services)')

@@ -204,6 +204,24 @@ def defaults():
     return {spec.name: spec.default for spec in PARAMETERS}
 
 
+def parameter_help(specs):
+    """
+    Return the ``--help`` text of a node's parameters: name, default, range and description.
+
+    Parameters
+    ----------
+    specs : sequence of ParameterSpec
+        The node's parameter table.
+
+    """
+    lines = ['parameters (--ros-args -p name:=value, or --params-file FILE):']
+    for spec in specs:
+        allowed = (f' [{", ".join(spec.choices)}]' if spec.choices else
+                   f' [{spec.low:g} .. {spec.high:g}]' if spec.low is not None else '')
+        lines.append(f'  {spec.name} (default {spec.default!r}){allowed}: {spec.description}')
+    return '\n'.join(lines)
+
+
 def markdown_table():
     """Write the parameters as a markdown table (README)."""
     rows = ['| parameter | default | range / choices | description |', '|---|---|---|---|']

@@ -1,6 +1,8 @@
 """Node parameter table: defaults valid, bad values rejected with a reason."""
 
 import pathlib
+import subprocess
+import sys
 
 from flexlink_ros.ros import parameters as node_params
 import pytest
@@ -100,3 +102,13 @@ def test_every_run_time_parameter_says_how_it_takes_effect():
 
 def test_empty_crank_joint_is_refused():
     assert 'must not be empty' in node_params.validate_parameter('crank_joint', '')
+
+
+def test_node_help_lists_every_parameter():
+    done = subprocess.run([sys.executable, '-m', 'flexlink_ros.ros.node', '--help'],
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    listed = [line.split()[0] for line in done.stdout.splitlines() if line.startswith('  ')]
+    assert [spec.name for spec in node_params.PARAMETERS] == [
+        name for name in listed if name in {spec.name for spec in node_params.PARAMETERS}]
+    assert 'diagnostics.hardware_id (default ' in done.stdout
