@@ -101,7 +101,7 @@ def publishable(sample):
     return None
 
 
-def load_node_model(values, warn):
+def load_node_model(values, warn, progress=None):
     """
     Load the mechanism and its reduced model (cached, else built).
 
@@ -113,6 +113,8 @@ def load_node_model(values, warn):
         Parameter name -> value.
     warn : callable
         Called with a warning sentence.
+    progress : callable or None
+        ``progress(done, total, what)`` while the model is built (not on a cache hit).
 
     Returns
     -------
@@ -134,7 +136,7 @@ def load_node_model(values, warn):
                      f'{values["model.tolerance"]:g}` and set model.modes')
         warn(notes[-1])
     cache_dir = values['model.cache_dir'] or None
-    model = model_for_mechanism(mechanism, options, cache_dir=cache_dir)
+    model = model_for_mechanism(mechanism, options, cache_dir=cache_dir, progress=progress)
     return model, options, notes
 
 

@@ -14,6 +14,7 @@ import scipy.linalg
 from . import store
 from .basis import FrozenSamples
 from .build import reduce_samples
+from .build_progress import BuildProgress
 from .model import ReducedModel
 from .. import dynamics
 from ..fe import linkage as assembly
@@ -30,7 +31,7 @@ def model_key(mechanism, options):
                            options.cache_fields(), {'criteria': True})
 
 
-def model_for_mechanism(mechanism, options=None, cache_dir=None, use_cache=True):
+def model_for_mechanism(mechanism, options=None, cache_dir=None, use_cache=True, progress=None):
     """
     Return the reduced model of a mechanism: from a verified cache file, or built (and cached).
 
@@ -44,6 +45,9 @@ def model_for_mechanism(mechanism, options=None, cache_dir=None, use_cache=True)
         Cache directory (None: core.store.default_cache_dir()).
     use_cache : bool
         False builds without reading or writing a cache.
+    progress : callable or None
+        ``progress(done, total, what)`` while a model is built (not called on a cache hit);
+        see :class:`.build_progress.BuildProgress`.
 
     Returns
     -------
@@ -58,21 +62,28 @@ def model_for_mechanism(mechanism, options=None, cache_dir=None, use_cache=True)
         path = f'{directory}/{mechanism.name}-{key[:16]}.npz'
 
     def build():
-        return build_model(mechanism, options).to_arrays()
+        return build_model(mechanism, options, progress).to_arrays()
 
     arrays, meta, _ = store.load_or_build(path, key, build)
     return ReducedModel.from_arrays(arrays, meta)
 
 
-def build_model(mechanism, options):
-    """Precompute the reduced model of a mechanism (full-order pieces from core/assembly.py)."""
-    samples = frozen_samples_for(mechanism, options)
+def build_model(mechanism, options, progress=None):
+    """
+    Precompute the reduced model of a mechanism (full-order pieces from core/assembly.py).
+
+    ``progress(done, total, what)``, if given, follows the build (:mod:`.build_progress`).
+    """
+    tracker = BuildProgress(progress, options.grid_size)
+    samples = tracker.follow(frozen_samples_for(mechanism, options))
     angles = 2.0 * np.pi * np.arange(options.grid_size) / options.grid_size
     forces, criteria_source = reaction_pieces(mechanism, angles)
-    return reduce_samples(samples, options.modes, options.static, options.speed_max,
-                          mechanism.damping_ratio, forces=forces,
-                          info={'options': options.cache_fields(),
-                                'mechanism': mechanism.name, 'criteria': criteria_source})
+    model = reduce_samples(samples, options.modes, options.static, options.speed_max,
+                           mechanism.damping_ratio, forces=forces,
+                           info={'options': options.cache_fields(),
+                                 'mechanism': mechanism.name, 'criteria': criteria_source})
+    tracker.finish()
+    return model
 
 
 def fe_mechanism(mechanism, options):
