@@ -92,9 +92,9 @@ class NodeRecording:
         if self.recorder is None:
             return
         try:
-            # Bytes come exact: the input's from rclpy, the per-sample outputs' from the
-            # node's encoders; rclpy serialises only /diagnostics and the markers here, whose
-            # types have no float64[] (rclpy can pad an empty one with stray bytes).
+            # Bytes come exact: the input's from rclpy, the outputs' from the node's
+            # encoders; rclpy serialises only /diagnostics here, whose type has no float64[]
+            # (rclpy can pad an empty one with stray bytes).
             self.recorder.enqueue(topic, message if isinstance(message, bytes)
                                   else self._serialize(message), log_time_ns)
         except RecorderError as exc:

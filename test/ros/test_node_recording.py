@@ -14,6 +14,7 @@ import sys
 import time
 
 from flexlink_ros.names import FIRST_INPUT_MESSAGE, QUALITY_NAMES, READY_MESSAGE
+import pytest
 import test_node
 from test_node import DISCOVERY_TIMEOUT_S, NodeProcess, READY_TIMEOUT_S, spin_until
 import yaml
@@ -26,11 +27,11 @@ LEVER = '/flexlink_node/lever_tip/deflection'
 
 
 def _channel_qos(bag_file):
-    """Return topic -> the offered_qos_profiles of its channel, parsed (mcap reader)."""
+    """Return topic -> (channel id, its offered_qos_profiles parsed) (mcap reader)."""
     from mcap.reader import make_reader
     with open(bag_file, 'rb') as stream:
         summary = make_reader(stream).get_summary()
-    return {channel.topic: yaml.safe_load(channel.metadata['offered_qos_profiles'])
+    return {channel.topic: (channel.id, yaml.safe_load(channel.metadata['offered_qos_profiles']))
             for channel in summary.channels.values()}
 
 
@@ -49,24 +50,40 @@ def _stamps_and_quality(bag_file):
     return stamps, quality
 
 
-def test_driver_qos_is_recorded_as_offered_and_every_estimate_has_its_quality(
-        tmp_path, processes, ros):
-    from rclpy.qos import qos_profile_sensor_data
-    from sensor_msgs.msg import JointState
-    bag = tmp_path / 'bag'
-    node_process = NodeProcess(tmp_path, 'record.enabled:=true', f'record.path:={bag}',
-                               'qos.reliability:=best_effort')
-    processes.append(node_process)
-    node_process.wait_for(READY_MESSAGE, READY_TIMEOUT_S)
-    test_node, executor = ros
-    received = []
-    test_node.create_subscription(JointState, QUALITY, received.append, qos_profile_sensor_data)
-    # The driver starts after the node: the input topic is declared at its first message.
+def _start_driver(processes):
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
     driver = subprocess.Popen([sys.executable, '-m', 'flexlink_ros.ros.crank_driver',
                                '--ros-args', '-p', 'speed_rpm:=120.0'], env=env,
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     processes.append(driver)
+    return driver
+
+
+@pytest.mark.parametrize('driver_first', [False, True], ids=['node_first', 'driver_first'])
+def test_driver_qos_is_recorded_as_offered_and_every_estimate_has_its_quality(
+        tmp_path, processes, ros, driver_first):
+    """
+    Record the driver's offered QoS whichever process starts first.
+
+    Node first: the input is declared at its first message (its channel comes after the
+    outputs'); driver first: at the open, once discovery has found the driver by then.
+    """
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import JointState
+    test_node, executor = ros
+    driver = None
+    if driver_first:
+        driver = _start_driver(processes)
+        spin_until(executor, lambda: test_node.count_publishers(INPUT) > 0,
+                   DISCOVERY_TIMEOUT_S, 'the driver')
+    bag = tmp_path / 'bag'
+    node_process = NodeProcess(tmp_path, 'record.enabled:=true', f'record.path:={bag}',
+                               'qos.reliability:=best_effort')
+    processes.append(node_process)
+    node_process.wait_for(READY_MESSAGE, READY_TIMEOUT_S)
+    received = []
+    test_node.create_subscription(JointState, QUALITY, received.append, qos_profile_sensor_data)
+    driver = driver or _start_driver(processes)
     node_process.wait_for(FIRST_INPUT_MESSAGE, DISCOVERY_TIMEOUT_S)
     spin_until(executor, lambda: len(received) >= 200, DISCOVERY_TIMEOUT_S, '~/quality')
     driver.send_signal(signal.SIGINT)
@@ -82,10 +99,12 @@ def test_driver_qos_is_recorded_as_offered_and_every_estimate_has_its_quality(
 
     (bag_file,) = sorted(bag.glob('*.mcap'))
     qos = _channel_qos(bag_file)
-    (offered,) = qos[INPUT]                           # one publisher: the driver
+    input_channel, (offered,) = qos[INPUT]            # one publisher: the driver
     assert offered['reliability'] == 'reliable'       # the driver's, not the node's
     assert offered['durability'] == 'volatile'
-    (own,) = qos[LEVER]
+    lever_channel, (own,) = qos[LEVER]
+    if not driver_first:
+        assert input_channel > lever_channel          # declared at the first message
     assert (own['reliability'], own['depth']) == ('best_effort', 1000)
     metadata = yaml.safe_load((bag / 'metadata.yaml').read_text())
     topics = {entry['topic_metadata']['name']: entry['topic_metadata']
