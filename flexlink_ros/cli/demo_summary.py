@@ -1,8 +1,8 @@
 """
 What a flexlink_node recording holds: the summary `flexlink demo` prints.
 
-Read the recording (input, outputs, diagnostics; markers and quality skipped), tally it per topic and
-joint, and return one dict: counts, rates, peak-to-peak deflections, criterion peaks,
+Read the recording (input, outputs, diagnostics; markers and quality skipped), tally it per
+topic and joint, and return one dict: counts, rates, peak-to-peak deflections, criterion peaks,
 latencies and the estimator's update times.
 """
 
