@@ -201,10 +201,14 @@ def test_launch_service_runs_driver_and_node_in_a_namespace(name, tmp_path, ros)
             assert 'flexlink_node is inactive: activating' in log_path.read_text()
     finally:
         if process.poll() is None:
-            process.send_signal(signal.SIGINT)   # as Ctrl-C on `ros2 launch`
+            # Ctrl-C on `ros2 launch`: the terminal signals the whole process group (launch
+            # then leaves the signal to the nodes and escalates only if they do not exit).
+            os.killpg(process.pid, signal.SIGINT)
             try:
                 process.wait(timeout=30)
             except subprocess.TimeoutExpired:
                 os.killpg(process.pid, signal.SIGKILL)
                 process.wait()
-    assert process.returncode == 0, log_path.read_text()
+    log = log_path.read_text()
+    assert process.returncode == 0, log
+    assert 'escalating' not in log and log.count('process has finished cleanly') == 2, log
