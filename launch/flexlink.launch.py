@@ -51,7 +51,7 @@ def launch_arguments(config_dir):
 def node_parameters():
     """Return the node's parameters: the file, then the arguments that override it."""
     return [LaunchConfiguration('params_file'),
-            {'mechanism': LaunchConfiguration('mechanism'),
+            {'mechanism': ParameterValue(LaunchConfiguration('mechanism'), value_type=str),
              'use_sim_time': ParameterValue(LaunchConfiguration('use_sim_time'), value_type=bool)}]
 
 

@@ -77,7 +77,7 @@ def generate_launch_description():
         package=PACKAGE, executable='flexlink_node', name='flexlink_node',
         namespace=LaunchConfiguration('namespace'), output='screen',
         parameters=[LaunchConfiguration('params_file'),
-                    {'mechanism': LaunchConfiguration('mechanism'),
+                    {'mechanism': ParameterValue(LaunchConfiguration('mechanism'), value_type=str),
                      'use_sim_time': ParameterValue(LaunchConfiguration('use_sim_time'),
                                                     value_type=bool)}],
         arguments=['--managed', '--ros-args', '--log-level', LaunchConfiguration('log_level')])

@@ -106,10 +106,10 @@ def test_launch_description_declares_and_launches_the_package_executables(name, 
     assert ('--managed' in [getattr(s, 'text', None) for s in node.cmd[1]]) == managed
     # The parameters as launch evaluates them: the file, then the arguments' overrides.
     context.launch_configurations.update(defaults)
-    context.launch_configurations['mechanism'] = 'kang1990'
+    context.launch_configurations['mechanism'] = '1990'   # a string, though YAML reads a number
     params_file, overrides = _evaluated_parameters(context, node)
     assert pathlib.Path(params_file) == pathlib.Path(defaults['params_file'])
-    assert overrides == {'mechanism': 'kang1990', 'use_sim_time': False}
+    assert overrides == {'mechanism': '1990', 'use_sim_time': False}
     params_file, = _evaluated_parameters(context, nodes['crank_driver'])
     assert pathlib.Path(params_file).name == 'crank_driver.yaml'
 
