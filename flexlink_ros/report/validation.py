@@ -98,10 +98,15 @@ def plot_sweep(records, path):
     axes[2].semilogy(rpm, indicator, 'k.-', label='validity indicator (max per revolution)')
     axes[2].axhline(records[0]['threshold'], color='tab:red', ls='--',
                     label=f"threshold {records[0]['threshold']:g}")
-    step = np.min(np.diff(rpm)) if rpm.size > 1 else 5.0
+    # each flagged speed shades the band closer to it than to its neighbours
+    edges = np.concatenate([rpm[:1], 0.5 * (rpm[1:] + rpm[:-1]), rpm[-1:]])
+    flagged = np.flatnonzero(indicator > records[0]['threshold'])
     for ax in axes:
-        for value in rpm[indicator > records[0]['threshold']]:
-            ax.axvspan(value - step / 2, value + step / 2, color='0.88', lw=0)
+        for index in flagged:
+            low, high = edges[index], edges[index + 1]
+            if high - low < 1.0:
+                low, high = rpm[index] - 0.5, rpm[index] + 0.5
+            ax.axvspan(low, high, color='0.88', lw=0)
     axes[2].set_ylabel('nonlinearity indicator')
     axes[2].set_xlabel('crank speed [rpm]  (grey: flagged not valid)')
     axes[2].legend(fontsize=8)

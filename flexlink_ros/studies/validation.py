@@ -308,16 +308,16 @@ def format_speed(record):
 def format_sweep(records):
     """Text table of a sweep: worst p2p error per point and model, the indicator and flag."""
     short = {'linear': 'lin', 'second_order': '2nd', 'dynamic': 'dyn'}
-    head = (f"{'rpm':>6s} " + ''.join(f"{'tip ' + short[m]:>8s}" for m in MODELS)
-            + ''.join(f"{'mid ' + short[m]:>8s}" for m in MODELS)
-            + f"{'I max':>8s} {'valid':>5s} {'2nd in targets':>14s}")
+    head = (f"{'rpm':>6s}  " + ''.join(f"{'tip ' + short[m]:>9s}" for m in MODELS)
+            + ''.join(f"{'mid ' + short[m]:>9s}" for m in MODELS)
+            + f"{'I max':>9s} {'valid':>5s} {'2nd in targets':>14s}")
     lines = ['p2p error against the peer (worse of dX / dY), validity indicator', head]
     for r in sorted(records, key=lambda item: item['rpm']):
         met = r['targets_met']['second_order']
-        lines.append(f"{r['rpm']:6g} " + ''.join(
-            f"{100 * _worst(r['models'][m], point):7.1f}%" for point in TARGETS
+        lines.append(f"{r['rpm']:6g}  " + ''.join(
+            f"{100 * _worst(r['models'][m], point):8.1f}%" for point in TARGETS
             for m in MODELS)
-            + f"{r['nonlinearity']['indicator_max']:8.3f} "
+            + f"{r['nonlinearity']['indicator_max']:9.3f} "
             f"{'yes' if r['nonlinearity']['valid'] else 'NO':>5s} "
             f"{'yes' if all(met.values()) else 'NO':>14s}")
     turns = flag_turns(records)
