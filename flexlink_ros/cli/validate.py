@@ -38,13 +38,13 @@ def register(subparsers):
                         help='rigid pins, or the bearing springs of the mechanism file '
                         '(default: %(default)s)')
     parser.add_argument('--gravity', action=argparse.BooleanOptionalAction, default=True,
-                        help='apply the mechanism\'s gravity in both models (default: on)')
+                        help="apply the mechanism's gravity in both models (default: on)")
     parser.add_argument('--elements-per-link', type=int, default=validation.DEFAULT_ELEMENTS,
                         metavar='N', help='elements per flexible link in both models '
                         '(default: %(default)s)')
     parser.add_argument('--zeta', type=float, default=None,
                         help='modal damping ratio of the package (default: the mechanism '
-                        'file; 0.012 matches the peer\'s beta = 1e-4 s at the first modes)')
+                        "file; 0.012 matches the peer's beta = 1e-4 s at the first modes)")
     parser.add_argument('--revolutions', type=int, default=None, metavar='N',
                         help='peer revolutions (default: until its start transient decays)')
     parser.add_argument('--cache', default=None, metavar='DIR',

@@ -123,7 +123,7 @@ def peer_run(mech, rpm, settings):
 
 def package_runs(mech, rpm, settings):
     """
-    The package's three responses at one speed, and the validity indicator per sample.
+    Run the package's three models at one speed, and the validity indicator per sample.
 
     Returns
     -------
@@ -270,12 +270,12 @@ def sweep_speeds(text):
 
 
 def without_series(record):
-    """The record as ``--json`` prints it (no sample series)."""
+    """Return the record as ``--json`` prints it (no sample series)."""
     return {key: value for key, value in record.items() if key != 'series'}
 
 
 def _worst(table, point, kind='p2p_error'):
-    """The worse (by magnitude) of an output point's dX / dY entries."""
+    """Return the worse (by magnitude) of an output point's dX / dY entries."""
     return max((table[f'{point}_{axis}'][kind] for axis in ('dx', 'dy')), key=abs)
 
 
@@ -291,9 +291,9 @@ def format_speed(record):
                  f"{record['peer_p2p'][k] * 1e6:16.1f}" for k in OUTPUT_KEYS)]
     for name in MODELS:
         table = record['models'][name]
-        for kind, unit, scale in (('other_p2p', ' p2p [um]', 1e6), ('p2p_error', ' p2p error',
-                                                                     100.0),
-                                  ('rms_error', ' rel RMS', 100.0)):
+        rows = (('other_p2p', ' p2p [um]', 1e6), ('p2p_error', ' p2p error', 100.0),
+                ('rms_error', ' rel RMS', 100.0))
+        for kind, unit, scale in rows:
             cells = ''.join(f'{table[k][kind] * scale:16.1f}' if scale == 1e6
                             else f'{table[k][kind] * scale:15.1f}%' for k in OUTPUT_KEYS)
             lines.append(f'{MODEL_LABELS[name] + unit:30s}' + cells)
