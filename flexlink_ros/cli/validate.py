@@ -3,7 +3,8 @@
 
     flexlink validate --peer exudyn --rpm R [R ...] [--sweep START:STOP:STEP]
                       [--bearings rigid|flexible] [--gravity | --no-gravity]
-                      [--elements-per-link N] [--zeta Z] [--revolutions N] [--cache DIR]
+                      [--elements-per-link N] [--zeta Z | --stiffness-damping BETA_S]
+                      [--revolutions N] [--cache DIR]
                       [--chart PATH] [--json]
 
 Prints, per speed, the peer's peak-to-peak and, for the linear KED, linear + quasi-static
@@ -45,6 +46,9 @@ def register(subparsers):
     parser.add_argument('--zeta', type=float, default=None,
                         help='modal damping ratio of the package (default: the mechanism '
                         "file; 0.012 matches the peer's beta = 1e-4 s at the first modes)")
+    parser.add_argument('--stiffness-damping', type=float, default=None, metavar='BETA_S',
+                        help='damp the package with beta [s] on the link-frame strain rates '
+                        'and bearing deflection rates, as the peer (default: modal zeta)')
     parser.add_argument('--revolutions', type=int, default=None, metavar='N',
                         help='peer revolutions (default: until its start transient decays)')
     parser.add_argument('--cache', default=None, metavar='DIR',
@@ -64,7 +68,8 @@ def validate_command(args):
         raise ValueError('give crank speeds with --rpm R [R ...] or --sweep START:STOP:STEP')
     settings = validation.Settings(
         elements_per_link=args.elements_per_link, bearings=args.bearings,
-        gravity=args.gravity, zeta=args.zeta, revolutions=args.revolutions, cache=args.cache)
+        gravity=args.gravity, zeta=args.zeta, revolutions=args.revolutions,
+        stiffness_damping=args.stiffness_damping, cache=args.cache)
     records = [validation.validate_speed(args.mechanism, rpm, settings)
                for rpm in sorted(set(speeds))]
     sweep = bool(args.sweep)

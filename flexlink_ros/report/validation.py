@@ -57,8 +57,8 @@ def _speed_row(axes, record, first_row):
 def _settings_text(record):
     s = record['settings']
     return (f"{s['bearings']} bearings, gravity {'on' if s['gravity'] else 'off'}, rigid "
-            f"crank, {s['elements_per_link']} elements per link; package modal zeta "
-            f"{record['zeta']:g}, peer beta {s['beta_s']:g} s")
+            f"crank, {s['elements_per_link']} elements per link; package "
+            f"{record['damping']}, peer beta {s['beta_s']:g} s")
 
 
 def plot_speeds(records, path):

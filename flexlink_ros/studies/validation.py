@@ -40,6 +40,7 @@ from .peer_model import (DEFAULT_BETA_S, DEFAULT_ELEMENTS, DEFAULT_STEPS, exudyn
 from ..core.fe.second_order_dynamic import dynamic_pass
 from ..core.fe.second_order_full import corrected_response
 from ..core.fe.simulate import periodic_response
+from ..core.fe.stiffness_damping import system_matrices
 from ..core.validity import is_valid, nonlinearity_indicator, VALIDITY_THRESHOLD
 from ..errors import FlexlinkError
 
@@ -68,6 +69,7 @@ class Settings:
     peer_steps: int = DEFAULT_STEPS
     points: int = DEFAULT_POINTS
     beta_s: float = DEFAULT_BETA_S
+    stiffness_damping: float = None
     cache: str = None
 
     def __post_init__(self):
@@ -77,6 +79,8 @@ class Settings:
                              f'got {self.bearings!r}')
         if self.elements_per_link < 1:
             raise ValueError('`elements_per_link` must be >= 1')
+        if self.stiffness_damping is not None and not self.stiffness_damping > 0.0:
+            raise ValueError('`stiffness_damping` must be a positive beta [s]')
         if self.peer_steps % self.points or DEFAULT_STEPS % self.points:
             raise ValueError(f'`points` ({self.points}) must divide {DEFAULT_STEPS} and the '
                              f'peer steps ({self.peer_steps})')
@@ -129,22 +133,30 @@ def package_runs(mech, rpm, settings):
     -------
     dict
         'crank_angle' (P,), per :data:`MODELS` the outputs (P, 4) [m], 'indicator' (P,),
-        'zeta', 'wall_s' (linear and dynamic pass).
+        'zeta' (the indicator's), 'damping' (text), 'wall_s' (linear and dynamic pass).
 
     """
     linkage = linear_model(mech, elements_per_link=settings.elements_per_link,
                            bearings=BEARINGS[settings.bearings], gravity=settings.gravity)
     speed = rpm * math.pi / 30.0
+    matrices = None
+    if settings.stiffness_damping is not None:
+        beta = settings.stiffness_damping
+        matrices = lambda angles: system_matrices(linkage, angles, speed, beta)  # noqa: E731
     linear = periodic_response(linkage, speed, method='full', points=settings.points,
-                               zeta=settings.zeta)
+                               zeta=settings.zeta, matrices=matrices)
     quasi_static = corrected_response(linkage, linear)
-    dynamic = dynamic_pass(linkage, linear)
-    zeta = linear.info['zeta']
+    dynamic = dynamic_pass(linkage, linear, matrices=matrices)
+    # with beta damping the indicator's resonance floor keeps the modal zeta (given or file)
+    zeta = linear.info['zeta'] if matrices is None else (
+        mech.damping_ratio if settings.zeta is None else settings.zeta)
+    damping = (f'modal zeta {zeta:g}' if matrices is None
+               else f'beta {settings.stiffness_damping:g} s')
     indicator = nonlinearity_indicator(linkage, linear.displacement, linear.crank_angle, speed,
                                        zeta=zeta)
     return {'crank_angle': linear.crank_angle, 'linear': linear.outputs,
             'second_order': quasi_static['total'], 'dynamic': dynamic['total'],
-            'indicator': indicator, 'zeta': zeta,
+            'indicator': indicator, 'zeta': zeta, 'damping': damping,
             'wall_s': {'linear': linear.info['wall_s'], 'dynamic': dynamic['info']['wall_s']}}
 
 
@@ -197,7 +209,7 @@ def validate_speed(mechanism, rpm, settings=None):
         'rpm', 'settings', 'peer_p2p' (per output [m]), 'periodicity' (peer), 'models' (per
         :data:`MODELS`: per output 'other_p2p' [m], 'p2p_error', 'rms_error'), 'targets_met'
         (per model and output point), 'nonlinearity' ({'indicator_max', 'valid'}),
-        'threshold', 'zeta', 'peer_cpu_s', 'wall_s', and 'series' (for charts: crank angle
+        'threshold', 'zeta', 'damping', 'peer_cpu_s', 'wall_s', and 'series' (for charts: crank angle
         [deg] and outputs [m] of the peer's last revolution and of every model).
 
     """
@@ -227,7 +239,7 @@ def validate_speed(mechanism, rpm, settings=None):
                                 for name in MODELS},
             'targets_met': {name: meets_targets(table) for name, table in models.items()},
             'nonlinearity': is_valid(runs['indicator']), 'threshold': VALIDITY_THRESHOLD,
-            'zeta': runs['zeta'], 'peer_cpu_s': peer['info']['cpu_s'],
+            'zeta': runs['zeta'], 'damping': runs['damping'], 'peer_cpu_s': peer['info']['cpu_s'],
             'wall_s': runs['wall_s'], 'series': series}
 
 
@@ -284,7 +296,7 @@ def format_speed(record):
     s, info = record['settings'], record['nonlinearity']
     lines = [f"{record['rpm']:g} rpm, {s['bearings']} bearings, gravity "
              f"{'on' if s['gravity'] else 'off'}, {s['elements_per_link']} elements per link, "
-             f"rigid crank ({record['mechanism']}; package modal zeta {record['zeta']:g}, "
+             f"rigid crank ({record['mechanism']}; package {record['damping']}, "
              f"peer beta {s['beta_s']:g} s)",
              f"{'':30s}" + ''.join(f'{LABELS[k]:>16s}' for k in OUTPUT_KEYS),
              f"{'Exudyn peer p2p [um]':30s}" + ''.join(

@@ -160,29 +160,36 @@ def second_order_load(linkage, displacement, crank_angle, speed, include_elastic
     return out
 
 
-def pass_matrices(linkage, response, zeta):
+def pass_matrices(linkage, response, zeta, matrices=None):
     """
     ``matrices(angles) -> (M, C_c + C_d, K + K_G + K_c, F2)`` of Eq. (4) for periodic_response.
 
     U1 at the integrator's stage angles comes from :func:`periodic_interpolation` of
-    ``response``'s displacement; the damping is the linear pass's modal zeta.
+    ``response``'s displacement. M, C and K are the linear pass's: modal damping ``zeta``, or
+    the first three of ``matrices(angles)`` when the linear pass was run with ``matrices``
+    (another damping model, e.g. :func:`core.fe.stiffness_damping.system_matrices`).
     """
     speed = response.info['speed_rad_s']
     start = float(response.crank_angle[0])
     spacing = float(response.crank_angle[1] - response.crank_angle[0])
 
-    def matrices(angles):
+    def modal(angles):
         system = linkage.assemble(angles)
         mass, gyro, stiffness, _ = system.evaluate(speed, 0.0)
         values, shapes = frozen_eigen(system, speed)
-        damping = gyro + modal_damping(mass, values, shapes, zeta)
+        return mass, gyro + modal_damping(mass, values, shapes, zeta), stiffness
+
+    linear = modal if matrices is None else (lambda angles: matrices(angles)[:3])
+
+    def second(angles):
         state = periodic_interpolation(response.displacement, angles, start, spacing)
-        return mass, damping, stiffness, second_order_load(linkage, state, angles, speed)
+        return (*linear(angles), second_order_load(linkage, state, angles, speed))
 
-    return matrices
+    return second
 
 
-def dynamic_pass(linkage, response, zeta=None, steps=DEFAULT_STEPS, stages=DEFAULT_STAGES):
+def dynamic_pass(linkage, response, zeta=None, steps=DEFAULT_STEPS, stages=DEFAULT_STAGES,
+                 matrices=None):
     """
     Eq. (4) over one steady revolution: the second-order motion with its inertia.
 
@@ -197,6 +204,9 @@ def dynamic_pass(linkage, response, zeta=None, steps=DEFAULT_STEPS, stages=DEFAU
         Modal damping ratio of the pass (None: the linear pass's).
     steps, stages : int
         Integration of the pass (steps a multiple of the response's points).
+    matrices : callable or None
+        The ``matrices`` the linear pass was run with (:func:`core.fe.simulate.periodic_response`),
+        whose M, C and K the pass then uses in place of modal damping.
 
     Returns
     -------
@@ -208,13 +218,13 @@ def dynamic_pass(linkage, response, zeta=None, steps=DEFAULT_STEPS, stages=DEFAU
     if response.info['method'] != 'full':
         raise ValueError('the dynamic pass needs the full-order linear state (method full)')
     zeta = response.info['zeta'] if zeta is None else float(zeta)
-    if zeta is None:
+    if zeta is None and matrices is None:
         zeta = linkage.mechanism.damping_ratio
     points = response.crank_angle.shape[0]
     second = periodic_response(linkage, response.info['speed_rad_s'], method='full',
                                steps=steps, points=points, stages=stages,
                                start_angle=float(response.crank_angle[0]),
-                               matrices=pass_matrices(linkage, response, zeta))
+                               matrices=pass_matrices(linkage, response, zeta, matrices))
     return {'crank_angle': response.crank_angle, 'linear': response.outputs,
             'second': second.outputs, 'total': response.outputs + second.outputs,
             'displacement': second.displacement, 'info': dict(second.info, zeta=zeta)}

@@ -15,6 +15,7 @@ from flexlink_ros.core.fe import second_order_dynamic as dyn
 from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.fe.second_order_full import corrected_response, second_order_outputs
 from flexlink_ros.core.fe.simulate import periodic_response
+from flexlink_ros.core.fe.stiffness_damping import system_matrices
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
 import numpy as np
@@ -23,9 +24,9 @@ import pytest
 ELEMENTS = 4
 
 
-def _linkage(bearings='rigid', gravity=True):
+def _linkage(bearings='rigid', gravity=True, rigid_crank=True):
     mech = dataclasses.replace(load_mechanism('cho1992'), elements_per_link=ELEMENTS)
-    options = ModelOptions.full_model(rigid_crank=True, bearings=bearings,
+    options = ModelOptions.full_model(rigid_crank=rigid_crank, bearings=bearings,
                                       geometric_stiffness=True, gravity=gravity)
     return FlexibleLinkage(mech, options)
 
@@ -54,10 +55,11 @@ def test_periodic_interpolation_reproduces_a_trigonometric_polynomial(spacing):
     np.testing.assert_allclose(got, curve(angles), atol=1e-12)
 
 
-@pytest.mark.parametrize('bearings', ['rigid', 'flexible'])
-def test_quasi_static_eigenstrain_reproduces_the_loop_closure(bearings):
+@pytest.mark.parametrize('bearings, rigid_crank', [('rigid', True), ('flexible', True),
+                                                   ('rigid', False)])
+def test_quasi_static_eigenstrain_reproduces_the_loop_closure(bearings, rigid_crank):
     """K U2 = F2 (eigenstrain alone) gives Eqs. (3)-(4): the frame only rotates its links."""
-    linkage = _linkage(bearings, gravity=False)
+    linkage = _linkage(bearings, gravity=False, rigid_crank=rigid_crank)
     theta = np.array([0.4, 1.9, 4.4])
     state = np.random.default_rng(7).normal(scale=1e-3, size=(theta.size, linkage.size))
     load = dyn.second_order_load(linkage, state, theta, 0.0, include_elastic_force=False)
@@ -88,6 +90,22 @@ def test_slow_pass_equals_the_quasi_static_second_order(slow):
     assert np.max(np.abs(result['second'] - quasi_static).max(axis=0) / scale) < 0.01
     np.testing.assert_allclose(result['total'], result['linear'] + result['second'])
     assert result['displacement'].shape == linear.displacement.shape
+
+
+def test_pass_with_the_linear_pass_matrices(slow):
+    """Beta damping (the linear pass's own matrices): the slow pass is quasi-static too."""
+    linkage, _ = slow
+    speed = math.pi
+    matrices = lambda angles: system_matrices(linkage, angles, speed, 1e-4)  # noqa: E731
+    linear = periodic_response(linkage, speed, method='full', steps=240, points=60,
+                               matrices=matrices)
+    quasi_static = corrected_response(linkage, linear)['second']
+    damped = dyn.dynamic_pass(linkage, linear, steps=240, matrices=matrices)
+    modal = dyn.dynamic_pass(linkage, linear, steps=240, zeta=0.02)
+    scale = np.abs(quasi_static).max(axis=0)
+    assert np.max(np.abs(damped['second'] - quasi_static).max(axis=0) / scale) < 0.01
+    assert damped['info']['zeta'] is None and modal['info']['zeta'] == 0.02
+    assert np.abs(damped['second'] - modal['second']).max() > 0.0
 
 
 def test_pass_needs_the_full_order_state(slow):
