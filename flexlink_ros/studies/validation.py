@@ -208,9 +208,10 @@ def validate_speed(mechanism, rpm, settings=None):
     dict
         'rpm', 'settings', 'peer_p2p' (per output [m]), 'periodicity' (peer), 'models' (per
         :data:`MODELS`: per output 'other_p2p' [m], 'p2p_error', 'rms_error'), 'targets_met'
-        (per model and output point), 'nonlinearity' ({'indicator_max', 'valid'}),
-        'threshold', 'zeta', 'damping', 'peer_cpu_s', 'wall_s', and 'series' (for charts: crank angle
-        [deg] and outputs [m] of the peer's last revolution and of every model).
+        (per model and output point), 'point_rms_error' (per model and output point: the
+        deflection vector's relative RMS), 'nonlinearity' ({'indicator_max', 'valid'}),
+        'threshold', 'zeta', 'damping', 'peer_cpu_s', 'wall_s', and 'series' (for charts:
+        crank angle [deg] and outputs [m] of the peer's last revolution and of every model).
 
     """
     settings = Settings() if settings is None else settings
