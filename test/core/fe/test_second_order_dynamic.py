@@ -113,3 +113,6 @@ def test_pass_needs_the_full_order_state(slow):
     modal = periodic_response(linkage, 3.0, method='modal', modes=4, steps=60, points=30)
     with pytest.raises(ValueError, match='full-order'):
         dyn.dynamic_pass(linkage, modal)
+    coarse = periodic_response(linkage, 3.0, method='full', steps=60, points=12)
+    with pytest.raises(ValueError, match='output points'):
+        dyn.dynamic_pass(linkage, coarse)
