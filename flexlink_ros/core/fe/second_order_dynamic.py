@@ -238,5 +238,5 @@ def dynamic_pass(linkage, response, zeta=None, steps=DEFAULT_STEPS, stages=DEFAU
             'displacement': second.displacement, 'info': dict(second.info, zeta=zeta)}
 
 
-__all__ = ['MIN_POINTS', 'periodic_interpolation', 'element_second_order_loads', 'second_order_load',
-           'pass_matrices', 'dynamic_pass']
+__all__ = ['MIN_POINTS', 'periodic_interpolation', 'element_second_order_loads',
+           'second_order_load', 'pass_matrices', 'dynamic_pass']
