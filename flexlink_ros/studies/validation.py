@@ -323,14 +323,18 @@ def format_sweep(records):
     short = {'linear': 'lin', 'second_order': '2nd', 'dynamic': 'dyn'}
     head = (f"{'rpm':>6s}  " + ''.join(f"{'tip ' + short[m]:>9s}" for m in MODELS)
             + ''.join(f"{'mid ' + short[m]:>9s}" for m in MODELS)
-            + f"{'I max':>9s} {'valid':>5s} {'2nd in targets':>14s}")
-    lines = ['p2p error against the peer (worse of dX / dY), validity indicator', head]
+            + f"{'mid RMS 2nd':>12s}{'mid RMS dyn':>12s}"
+            + f"{'I max':>8s} {'valid':>5s} {'2nd in targets':>14s}")
+    lines = ['p2p error against the peer (worse of dX / dY), the coupler mid-point\'s vector '
+             'relative RMS, validity indicator', head]
     for r in sorted(records, key=lambda item: item['rpm']):
         met = r['targets_met']['second_order']
         lines.append(f"{r['rpm']:6g}  " + ''.join(
             f"{100 * _worst(r['models'][m], point):8.1f}%" for point in TARGETS
             for m in MODELS)
-            + f"{r['nonlinearity']['indicator_max']:9.3f} "
+            + ''.join(f"{100 * r['point_rms_error'][m]['coupler_mid']:11.1f}%"
+                      for m in ('second_order', 'dynamic'))
+            + f"{r['nonlinearity']['indicator_max']:8.3f} "
             f"{'yes' if r['nonlinearity']['valid'] else 'NO':>5s} "
             f"{'yes' if all(met.values()) else 'NO':>14s}")
     turns = flag_turns(records)

@@ -85,6 +85,8 @@ def _record(rpm, valid, errors=0.01):
              for key in OUTPUT_KEYS}
     return {'rpm': rpm, 'nonlinearity': {'indicator_max': 0.1 if valid else 0.9,
                                          'valid': valid},
+            'point_rms_error': {name: {'lever_tip': 0.5, 'coupler_mid': errors}
+                                for name in validation.MODELS},
             'models': {name: table for name in validation.MODELS},
             'targets_met': {name: validation.meets_targets(table)
                             for name in validation.MODELS}}
@@ -100,6 +102,7 @@ def test_flag_turns_and_sweep_table():
     assert len(text) == 2 + 5 + 1
     assert [line.split()[0] for line in text[2:7]] == ['250', '260', '270', '280', '290']
     assert text[5].split()[-2:] == ['NO', 'NO'] and text[2].split()[-2:] == ['yes', 'yes']
+    assert text[5].split()[7:9] == ['20.0%', '20.0%']     # the coupler's vector RMS
     assert 'NOT valid from 270 rpm' in text[-1] and 'valid from 290 rpm' in text[-1]
 
 
