@@ -325,7 +325,7 @@ def format_sweep(records):
             + ''.join(f"{'mid ' + short[m]:>9s}" for m in MODELS)
             + f"{'mid RMS 2nd':>12s}{'mid RMS dyn':>12s}"
             + f"{'I max':>8s} {'valid':>5s} {'2nd in targets':>14s}")
-    lines = ['p2p error against the peer (worse of dX / dY), the coupler mid-point\'s vector '
+    lines = ["p2p error against the peer (worse of dX / dY), the coupler mid-point's vector "
              'relative RMS, validity indicator', head]
     for r in sorted(records, key=lambda item: item['rpm']):
         met = r['targets_met']['second_order']

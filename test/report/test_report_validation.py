@@ -23,8 +23,8 @@ def _record(rpm, indicator, error=0.05):
                              'other_p2p': 2e-4, 'peer_p2p': 2e-4}
                        for key in validation.OUTPUT_KEYS}
     rms = {name: {'lever_tip': 2 * error, 'coupler_mid': error} for name in validation.MODELS}
-    return {'rpm': rpm, 'settings': SETTINGS, 'point_rms_error': rms, 'zeta': 0.02, 'damping': 'modal zeta 0.02',
-            'threshold': 0.5,
+    return {'rpm': rpm, 'settings': SETTINGS, 'point_rms_error': rms, 'zeta': 0.02,
+            'damping': 'modal zeta 0.02', 'threshold': 0.5,
             'nonlinearity': {'indicator_max': indicator, 'valid': indicator <= 0.5},
             'models': table, 'series': series}
 
