@@ -11,8 +11,9 @@ fixed point, the O2 bearing spring drops out; the peer prescribes the crank), be
 A, B, O4 with c = beta k, joint masses split 50/50 (``mass_placement='split'``; the package's
 ``joint_mass_split`` 0.5: the crank's share at A and the ground's at O4 are inert in both).
 
-The full-order response is :func:`core.simulate.periodic_response` with the stage matrices of
-:func:`core.stiffness_damping.system_matrices` passed in (``matrices``).
+The full-order response is :func:`core.fe.simulate.periodic_response` with ``beta`` (its own
+objective stiffness damping, zeta = 0) or ``zeta`` (beta = 0); the naive form passes its stage
+matrices in (``matrices``).
 
 Run: ``python -m flexlink_ros.studies.damping_study [--elements 8] [--gravity] [--rpm 269]``.
 
@@ -65,15 +66,11 @@ def matched_model(mechanism='cho1992', elements=8, gravity=False, bearings='flex
                                                          gravity=gravity))
 
 
-def _matrices(model, angles, speed, beta, damping, zeta):
-    """Stage matrices M, C, K, R for one damping choice (the study's own dispatch)."""
-    if damping == 'objective':
-        return system_matrices(model, angles, speed, beta)
-    if damping == 'naive':
-        mass, c, k, load = system_matrices(model, angles, speed, beta)
-        _, d_beta = stiffness_damping_terms(model, angles, speed, beta)
-        return mass, c, k - d_beta, load      # beta K U' only, no D_beta U
-    return system_matrices(model, angles, speed, 0.0, zeta=zeta)
+def _naive_matrices(model, angles, speed, beta):
+    """Stage matrices M, C, K, R with the naive ``beta K U'`` (no D_beta U, no modal zeta)."""
+    mass, c, k, load = system_matrices(model, angles, speed, beta)
+    _, d_beta = stiffness_damping_terms(model, angles, speed, beta)
+    return mass, c, k - d_beta, load
 
 
 def full_order_response(model, speed, beta=1e-4, damping='objective', zeta=0.02, steps=720,
@@ -81,7 +78,8 @@ def full_order_response(model, speed, beta=1e-4, damping='objective', zeta=0.02,
     """
     Periodic full-order response with beta (or modal) damping.
 
-    :func:`core.simulate.periodic_response` ('full') with this study's stage matrices.
+    :func:`core.fe.simulate.periodic_response` ('full'): ``beta`` with zeta = 0 (objective),
+    ``zeta`` with beta = 0 (modal), or this study's naive stage matrices.
 
     Returns
     -------
@@ -92,10 +90,12 @@ def full_order_response(model, speed, beta=1e-4, damping='objective', zeta=0.02,
     """
     if damping not in DAMPING:
         raise ValueError(f'`damping` must be one of {DAMPING}, got {damping!r}')
-    response = periodic_response(
-        model, speed, method='full', steps=steps, points=points, stages=stages,
-        start_angle=start_angle,
-        matrices=lambda angles: _matrices(model, angles, speed, beta, damping, zeta))
+    kwargs = {'objective': {'zeta': 0.0, 'beta': beta},
+              'modal': {'zeta': zeta, 'beta': 0.0},
+              'naive': {'matrices': lambda angles: _naive_matrices(model, angles, speed,
+                                                                   beta)}}[damping]
+    response = periodic_response(model, speed, method='full', steps=steps, points=points,
+                                 stages=stages, start_angle=start_angle, **kwargs)
     out = {'crank_angle': response.crank_angle, 'displacement': response.displacement,
            'velocity': response.velocity, 'spectral_radius': response.info['spectral_radius']}
     out.update(zip(OUTPUT_KEYS, response.outputs.T))
