@@ -45,6 +45,7 @@ import math
 import numpy as np
 
 from .peer_exudyn import compare, peer_response, revolution_slice
+from ..core.estimation.offline import replay
 from ..core.fe.linkage import FlexibleLinkage
 from ..core.fe.simulate import periodic_response
 from ..core.fe.stiffness_damping import (element_resultants, link_local_rate,
@@ -52,6 +53,7 @@ from ..core.fe.stiffness_damping import (element_resultants, link_local_rate,
 from ..core.mechanism import Mechanism
 from ..core.mechanism_file import load_mechanism
 from ..core.options import ModelOptions
+from ..core.reduction import pipeline
 
 DAMPING = ('objective', 'naive', 'modal')
 OUTPUT_KEYS = ('lever_tip_dx', 'lever_tip_dy', 'coupler_mid_dx', 'coupler_mid_dy')
@@ -99,6 +101,50 @@ def full_order_response(model, speed, beta=1e-4, damping='objective', zeta=0.02,
     out = {'crank_angle': response.crank_angle, 'displacement': response.displacement,
            'velocity': response.velocity, 'spectral_radius': response.info['spectral_radius']}
     out.update(zip(OUTPUT_KEYS, response.outputs.T))
+    return out
+
+
+def matched_reduced_model(mechanism='cho1992', elements=8, gravity=False, beta=1e-4,
+                          use_cache=True):
+    """
+    The streaming estimator's reduced model in the peer's matched conventions.
+
+    Rigid crank, bearing springs, joint masses split 50/50, modal zeta = 0 and stiffness
+    damping ``beta`` (the node's ``damping_ratio: 0.0`` and ``model.stiffness_damping``),
+    the default sizes for this bearing and crank model.
+    """
+    mech = mechanism if isinstance(mechanism, Mechanism) else load_mechanism(mechanism)
+    mech = dataclasses.replace(mech, joint_mass_split=0.5, damping_ratio=0.0)
+    options = ModelOptions(rigid_crank=True, bearings='flexible', geometric_stiffness=True,
+                           gravity=gravity, elements_per_link=elements, stiffness_damping=beta)
+    return pipeline.model_for_mechanism(mech, options, use_cache=use_cache)
+
+
+def streaming_response(model, speed, revolutions=3, points=120, oversample=2):
+    """
+    The streaming estimate at constant crank speed: its last revolution on the output grid.
+
+    :func:`core.estimation.offline.replay` (the streaming step over a whole signal, warm
+    start at the first sample) fed ``points * oversample`` samples per revolution of the
+    exact crank angle and speed; every ``oversample``-th sample of the last revolution lands
+    on the grid ``2 pi i / points`` from crank angle 0 (as :func:`full_order_response`).
+
+    Returns
+    -------
+    dict
+        'crank_angle' (points,) and the four OUTPUT_KEYS [m].
+
+    """
+    per_rev = points * oversample
+    count = revolutions * per_rev + 1
+    step = 2.0 * math.pi / per_rev
+    angles = step * np.arange(count)
+    stamps = np.round(angles / abs(speed) * 1e9).astype(np.int64)
+    run = replay(model, stamps, np.sign(speed) * angles, np.full(count, float(speed)))
+    last = slice(count - 1 - per_rev, count - 1, oversample)
+    values = np.concatenate([run['lever_tip'][last], run['coupler_mid'][last]], axis=1)
+    out = {'crank_angle': np.sign(speed) * angles[:per_rev:oversample]}
+    out.update(zip(OUTPUT_KEYS, values.T))
     return out
 
 
