@@ -107,7 +107,7 @@ def full_order_response(model, speed, beta=1e-4, damping='objective', zeta=0.02,
 def matched_reduced_model(mechanism='cho1992', elements=8, gravity=False, beta=1e-4,
                           use_cache=True):
     """
-    The streaming estimator's reduced model in the peer's matched conventions.
+    Build the streaming estimator's reduced model in the peer's matched conventions.
 
     Rigid crank, bearing springs, joint masses split 50/50, modal zeta = 0 and stiffness
     damping ``beta`` (the node's ``damping_ratio: 0.0`` and ``model.stiffness_damping``),
@@ -122,7 +122,7 @@ def matched_reduced_model(mechanism='cho1992', elements=8, gravity=False, beta=1
 
 def streaming_response(model, speed, revolutions=3, points=120, oversample=2):
     """
-    The streaming estimate at constant crank speed: its last revolution on the output grid.
+    Run the streaming estimate at constant crank speed: its last revolution on the grid.
 
     :func:`core.estimation.offline.replay` (the streaming step over a whole signal, warm
     start at the first sample) fed ``points * oversample`` samples per revolution of the

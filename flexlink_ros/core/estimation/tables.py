@@ -174,11 +174,12 @@ class _StepTables:
     streaming through the cells (a new cell's tables are not in the core's own caches at
     most sample rates) reads half the bytes of the per-cell power form, and the tables take
     half the memory.
-    ``mass`` M (monomial 1), ``damping`` C (1, w2, w, w4) and ``kf`` [K | f] (a, 1, w2,
-    and w with stiffness damping: ``kf_groups``): node x (monomial, V/S) x width. ``out`` (the output operator [O | corr], outputs x
+    ``mass`` M (monomial 1), ``damping`` C (1, w2, w, w4) and ``kf`` [K | f] (a, 1, w2):
+    node x (monomial, V/S) x width. ``out`` (the output operator [O | corr], outputs x
     (r + 1), leading rows used) and ``joint`` [reactions F (joints x 2), their time
     derivative (joints x 2), squared cycle-RMS reaction (joints)] stay per cell in power form
-    (rows ``monomial * 4 + power``; small, read once per sample).
+    (rows ``monomial * 4 + power``; small, read once per sample). With stiffness damping
+    ``kf`` has a fourth group, w (``kf_groups``).
     Two samples' [M, C, K, F] (F an r x r block holding f in its first r entries) in
     alternating slots times a 8 x 8 coefficient matrix G(h) give, in one product, the
     Radau IIA block matrix and the right-hand-side operator on (q, v).

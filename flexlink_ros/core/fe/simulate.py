@@ -222,7 +222,7 @@ class _Run:
 
 
 def _beta(model, beta):
-    """The stiffness-proportional damping [s] of a run: ``beta``, else the model's option."""
+    """Return a run's stiffness-proportional damping [s]: ``beta``, else the model's option."""
     value = getattr(model.options, 'stiffness_damping', 0.0) if beta is None else beta
     value = float(value)
     if not (np.isfinite(value) and value >= 0.0):

@@ -71,7 +71,7 @@ def toy_model():
 
 def toy_damped_model(beta=2e-4):
     """
-    The toy model with stiffness damping: C_beta = beta K_1 and D_beta = w Kb1 (a 'w' piece).
+    Build the toy model with stiffness damping: C_beta = beta K_1, D_beta = w Kb1 ('w' piece).
 
     Kb1 is an angle-dependent, non-symmetric beta-scaled matrix, as the linkage's
     ``beta sum g1_L T K_L D1^T`` (core/fe/stiffness_damping.py).
