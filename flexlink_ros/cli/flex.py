@@ -15,7 +15,8 @@
 ``strain_share`` (crank, coupler, lever, springs), ``range_hz`` (min and max per mode),
 optional ``shapes``. ``simulate`` JSON: ``crank_deg``, ``lever_tip`` and ``coupler_mid``
 (``dx_m``, ``dy_m``: ground-frame elastic deflection over one steady revolution),
-``peak_to_peak_m``, ``floquet_spectral_radius``, ``wall_s``, optional ``convergence``.
+``peak_to_peak_m``, ``floquet_spectral_radius``, ``damping_ratio``, ``stiffness_damping_s``
+(beta [s]), ``wall_s``, optional ``convergence``.
 """
 
 import dataclasses

@@ -24,7 +24,8 @@ class ModelOptions:
     One set of options from the node's parameters or the CLI's flags down to the assembly.
     The defaults are the node's (rigid crank, flexible bearings); :meth:`full_model` gives
     the full-order studies' defaults (flexible crank, pinned bearings). Every field but
-    ``gravity`` is part of the reduced model's cache key (:meth:`cache_fields`).
+    ``gravity`` is part of the reduced model's cache key (:meth:`cache_fields`;
+    ``stiffness_damping`` only when it is not 0).
 
     Parameters
     ----------

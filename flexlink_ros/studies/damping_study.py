@@ -105,16 +105,16 @@ def full_order_response(model, speed, beta=1e-4, damping='objective', zeta=0.02,
 
 
 def matched_reduced_model(mechanism='cho1992', elements=8, gravity=False, beta=1e-4,
-                          use_cache=True):
+                          use_cache=True, zeta=0.0):
     """
     Build the streaming estimator's reduced model in the peer's matched conventions.
 
-    Rigid crank, bearing springs, joint masses split 50/50, modal zeta = 0 and stiffness
-    damping ``beta`` (the node's ``damping_ratio: 0.0`` and ``model.stiffness_damping``),
+    Rigid crank, bearing springs, joint masses split 50/50, modal ``zeta`` (0: the node's
+    ``damping_ratio: 0.0``) and stiffness damping ``beta`` (``model.stiffness_damping``),
     the default sizes for this bearing and crank model.
     """
     mech = mechanism if isinstance(mechanism, Mechanism) else load_mechanism(mechanism)
-    mech = dataclasses.replace(mech, joint_mass_split=0.5, damping_ratio=0.0)
+    mech = dataclasses.replace(mech, joint_mass_split=0.5, damping_ratio=float(zeta))
     options = ModelOptions(rigid_crank=True, bearings='flexible', geometric_stiffness=True,
                            gravity=gravity, elements_per_link=elements, stiffness_damping=beta)
     return pipeline.model_for_mechanism(mech, options, use_cache=use_cache)
@@ -200,6 +200,19 @@ def point_rms(peer, linear):
     return out
 
 
+def streaming_lines(peer, speed, elements, gravity, beta, zeta):
+    """Lines of :func:`main` for the streaming estimate: beta (zeta 0), then modal zeta."""
+    lines = []
+    for label, b, z in ((f'streaming beta {beta:g}', beta, 0.0),
+                        (f'streaming zeta {zeta:g}', 0.0, zeta)):
+        model = matched_reduced_model('cho1992', elements, gravity, b, zeta=z)
+        both = point_rms(peer, streaming_response(model, speed))
+        lines.append(f'  {label:22s} relative RMS per point (dX, dY together): lever tip '
+                     f"{100 * both['lever_tip']:.1f} %, coupler mid "
+                     f"{100 * both['coupler_mid']:.1f} % (r = {model.size})")
+    return lines
+
+
 def main(argv=None):
     """Print the package's beta-damped full order (objective, naive, modal) against the peer."""
     parser = argparse.ArgumentParser(prog='python -m flexlink_ros.studies.damping_study',
@@ -238,11 +251,14 @@ def main(argv=None):
                   + '; '.join(f'link {k}: ' + ' '.join(f'{x:.0f}' for x in
                                                        np.abs(v).max(axis=0))
                               for k, v in spur.items()))
+    print('\n'.join(streaming_lines(peer, speed, args.elements, args.gravity, args.beta,
+                                    args.zeta)))
     return 0
 
 
-__all__ = ['DAMPING', 'matched_model', 'full_order_response', 'spurious_axial_force',
-           'compare_with_peer', 'point_rms', 'main']
+__all__ = ['DAMPING', 'matched_model', 'full_order_response', 'matched_reduced_model',
+           'streaming_response', 'spurious_axial_force', 'compare_with_peer', 'point_rms',
+           'streaming_lines', 'main']
 
 
 if __name__ == '__main__':
