@@ -12,7 +12,7 @@ import math
 from . import parameters
 from .messages import crank_from_joint_state
 from ..core.estimation.sample import SampleFlag
-from ..core.mechanism_file import load_mechanism
+from ..core.mechanism_file import load_mechanism, stiffness_damping_from_file
 from ..core.reduction.pipeline import model_for_mechanism
 from ..errors import InputRejected, MalformedCdr
 from ..io import cdr
@@ -128,7 +128,9 @@ def load_node_model(values, warn, progress=None):
     mechanism = load_mechanism(values['mechanism'])
     if values['damping_ratio'] != mechanism.damping_ratio:
         mechanism = dataclasses.replace(mechanism, damping_ratio=values['damping_ratio'])
-    options = parameters.model_options(values)
+    file_beta = (stiffness_damping_from_file(values['mechanism'])
+                 if values['model.stiffness_damping'] < 0 else 0.0)
+    options = parameters.model_options(values, file_beta)
     notes = []
     if values['model.modes'] == 0 and values['model.tolerance'] < DEFAULT_MODEL_TOLERANCE:
         notes.append(f'the default model was planned for {DEFAULT_MODEL_TOLERANCE:g} relative '

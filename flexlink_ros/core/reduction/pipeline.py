@@ -18,6 +18,7 @@ from .build_progress import BuildProgress
 from .model import ReducedModel
 from .. import dynamics
 from ..fe import linkage as assembly
+from ..fe.stiffness_damping import stiffness_damping_terms
 from ..options import MODEL_VERSION, ModelOptions
 
 # Points per beam element where link shapes are tabulated (3 elements: 10 points per link).
@@ -119,7 +120,11 @@ def frozen_samples_for(mechanism, options, points_per_element=SHAPE_POINTS_PER_E
     Full-order affine pieces of the flexible model (core/assembly.py) on the crank-angle grid.
 
     The frozen eigenproblem and the modal damping use ``K + K_G(w, a)`` as core/modes.py does
-    (no centrifugal term); the equations of motion add the rotating-frame terms K_c.
+    (no centrifugal term); the equations of motion add the rotating-frame terms K_c. With
+    ``options.stiffness_damping`` (beta > 0) the objective Kelvin-Voigt damping of
+    core/fe/stiffness_damping.py is added: ``C_beta = beta K`` to the damping and
+    ``D_beta = w Kb1`` as the stiffness piece 'w' (linear in the crank speed). With beta = 0
+    nothing changes (no piece 'w', the same damping).
 
     """
     mechanism = fe_mechanism(mechanism, options)
@@ -132,10 +137,16 @@ def frozen_samples_for(mechanism, options, points_per_element=SHAPE_POINTS_PER_E
                  'w2': system.coupling['w2'] + system.geometric['w2']}
     positions, operator = linkage.shape_operator(angles, points_per_element)
     zeta = mechanism.damping_ratio
+    beta = options.stiffness_damping
+    beta_damping = None
+    if beta:
+        # D_beta at unit crank speed is Kb1: the stiffness piece of monomial w.
+        beta_damping, stiffness['w'] = stiffness_damping_terms(linkage, angles, 1.0, beta)
 
     def damping(k, w):
         stiff = frozen['1'][k] + w * w * frozen['w2'][k]
-        return modal_damping_matrix(system.mass[k], stiff, zeta)
+        modal = modal_damping_matrix(system.mass[k], stiff, zeta)
+        return modal if beta_damping is None else modal + beta_damping[k]
 
     return FrozenSamples(mass=system.mass, gyroscopic=system.gyroscopic, stiffness=stiffness,
                          load=dict(system.load), outputs=linkage.output_operator(angles),
