@@ -23,9 +23,9 @@ class ModelOptions:
 
     One set of options from the node's parameters or the CLI's flags down to the assembly.
     The defaults are the node's (rigid crank, flexible bearings); :meth:`full_model` gives
-    the full-order studies' defaults (flexible crank, pinned bearings). Every field but
-    ``gravity`` is part of the reduced model's cache key (:meth:`cache_fields`;
-    ``stiffness_damping`` only when it is not 0).
+    the full-order studies' defaults (flexible crank, pinned bearings). Every field is part
+    of the reduced model's cache key (:meth:`cache_fields`; ``gravity`` only when it is off
+    and ``stiffness_damping`` only when it is not 0, so the default model keeps its key).
 
     Parameters
     ----------
@@ -92,13 +92,15 @@ class ModelOptions:
 
     def cache_fields(self):
         """
-        Return the fields identifying a reduced model, in declaration order (no ``gravity``).
+        Return the fields identifying a reduced model, in declaration order.
 
-        ``stiffness_damping`` is left out when it is 0, so a model without it keeps the key it
-        had before the field existed.
+        ``gravity`` is left out when it is on and ``stiffness_damping`` when it is 0, so a
+        default model keeps the key it had before these fields existed; a model built without
+        gravity has loads of its own and must not share that key.
         """
         fields = dataclasses.asdict(self)
-        del fields['gravity']
+        if fields['gravity']:
+            del fields['gravity']
         if not fields['stiffness_damping']:
             del fields['stiffness_damping']
         return fields

@@ -213,7 +213,7 @@ def streaming_lines(peer, speed, elements, gravity, beta, zeta):
     lines = []
     for label, b, z in ((f'streaming beta {beta:g}', beta, 0.0),
                         (f'streaming zeta {zeta:g}', 0.0, zeta)):
-        # Not cached: the cache key leaves out ModelOptions.gravity (core/options.py).
+        # Built, not cached: matched-convention models are the study's, not a user's.
         model = matched_reduced_model('cho1992', elements, gravity, b, use_cache=False, zeta=z)
         both = point_rms(peer, streaming_response(model, speed))
         lines.append(f'  {label:22s} relative RMS per point (dX, dY together): lever tip '

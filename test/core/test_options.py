@@ -39,14 +39,16 @@ def test_given_sizes_are_kept_as_ints():
     assert options.modes == 5 and isinstance(options.modes, int) and options.static == 0
 
 
-def test_cache_fields_exclude_gravity_and_keep_the_declaration_order():
-    options = ModelOptions(gravity=False, grid_size=64)
+def test_cache_fields_keep_the_declaration_order_and_name_gravity_only_when_off():
+    options = ModelOptions(grid_size=64)
     fields = options.cache_fields()
     names = [f.name for f in dataclasses.fields(ModelOptions)]
     assert list(fields) == [n for n in names if n not in ('gravity', 'stiffness_damping')]
-    assert 'gravity' not in fields and fields['grid_size'] == 64
-    # gravity alone does not change the key; any other field does
-    assert ModelOptions(gravity=True).cache_fields() == ModelOptions(gravity=False).cache_fields()
+    assert fields['grid_size'] == 64
+    # a model without gravity has other loads: its own key; the default's key is unchanged
+    weightless = ModelOptions(gravity=False, grid_size=64).cache_fields()
+    assert weightless['gravity'] is False and weightless != fields
+    assert list(weightless) == [n for n in names if n != 'stiffness_damping']
     assert ModelOptions(speed_max=30.0).cache_fields() != ModelOptions().cache_fields()
 
 
