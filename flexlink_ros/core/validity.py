@@ -291,12 +291,19 @@ def nonlinearity_indicator(linkage, displacement, crank_angle, speed, zeta=None,
 
 def is_valid(indicator, threshold=VALIDITY_THRESHOLD):
     """
-    Summary of a revolution (or any run): {'indicator_max': float, 'valid': bool}.
+    Summary of a revolution (or any run): the ``"nonlinearity"`` entry of the JSON outputs.
 
-    The form of the ``"nonlinearity"`` entry of ``simulate`` / ``estimate --json``.
+    ``{'indicator_max': float, 'valid': bool, 'threshold': float}`` over the finite values of
+    ``indicator`` (``simulate`` / ``estimate --json``); with no finite value (a model without
+    the indicator's tables) 'indicator_max' and 'valid' are None.
     """
-    peak = float(np.max(indicator)) if np.size(indicator) else 0.0
-    return {'indicator_max': peak, 'valid': bool(peak <= threshold)}
+    values = np.asarray(indicator, dtype=float).ravel()
+    values = values[np.isfinite(values)]
+    if not values.size:
+        return {'indicator_max': None, 'valid': None, 'threshold': float(threshold)}
+    peak = float(np.max(values))
+    return {'indicator_max': peak, 'valid': bool(peak <= threshold),
+            'threshold': float(threshold)}
 
 
 __all__ = ['INDICATOR_LINKS', 'REFERENCE_MODES', 'VALIDITY_THRESHOLD', 'buckling_loads',

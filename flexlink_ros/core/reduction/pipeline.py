@@ -15,6 +15,7 @@ from . import store
 from .basis import FrozenSamples
 from .build import reduce_samples
 from .model import ReducedModel
+from .nonlinearity_tables import nonlinearity_tables, NONLINEARITY_VERSION
 from .. import dynamics
 from ..fe import linkage as assembly
 from ..options import MODEL_VERSION, ModelOptions
@@ -27,7 +28,8 @@ def model_key(mechanism, options):
     """Cache key of a mechanism's reduced model (hex)."""
     # {'criteria': True} keeps the keys of models cached when the reactions were optional.
     return store.cache_key('reduced-model', MODEL_VERSION, mechanism.key(),
-                           options.cache_fields(), {'criteria': True})
+                           options.cache_fields(), {'criteria': True},
+                           {'nonlinearity': NONLINEARITY_VERSION})
 
 
 def model_for_mechanism(mechanism, options=None, cache_dir=None, use_cache=True):
@@ -69,10 +71,13 @@ def build_model(mechanism, options):
     samples = frozen_samples_for(mechanism, options)
     angles = 2.0 * np.pi * np.arange(options.grid_size) / options.grid_size
     forces, criteria_source = reaction_pieces(mechanism, angles)
-    return reduce_samples(samples, options.modes, options.static, options.speed_max,
-                          mechanism.damping_ratio, forces=forces,
-                          info={'options': options.cache_fields(),
-                                'mechanism': mechanism.name, 'criteria': criteria_source})
+    model = reduce_samples(samples, options.modes, options.static, options.speed_max,
+                           mechanism.damping_ratio, forces=forces,
+                           info={'options': options.cache_fields(),
+                                 'mechanism': mechanism.name, 'criteria': criteria_source})
+    linkage = assembly.FlexibleLinkage(fe_mechanism(mechanism, options), options)
+    return dataclasses.replace(model, nonlinearity=nonlinearity_tables(
+        linkage, samples, model.basis, options.speed_max))
 
 
 def fe_mechanism(mechanism, options):

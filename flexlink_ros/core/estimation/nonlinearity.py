@@ -1,0 +1,148 @@
+"""
+The validity indicator per estimate: :func:`core.validity.nonlinearity_indicator` from q.
+
+The detuning ratio of :mod:`core.validity` (Eq. 3 there) from the reduced state: the link-mean
+elastic axial forces over the Euler loads are one table row per link dotted with
+(q, 1, a, w^2) (:mod:`core.reduction.nonlinearity_tables`), the reference modes are
+interpolated in w^2, and the distance to the nearest crank harmonic is computed per sample.
+:class:`NonlinearityIndicator` gives it per sample (the streaming estimator's
+``Sample.nonlinearity``) and for many samples at once (the offline estimate); NaN for a model
+built without the tables. The threshold is :data:`core.validity.VALIDITY_THRESHOLD`.
+"""
+
+import math
+
+import numpy as np
+
+from ..reduction.cells import CELL_POWERS
+from ..validity import VALIDITY_THRESHOLD
+
+_POWERS = tuple(range(CELL_POWERS))
+
+
+def detuning_ratio(omega, share, ratios, speed, zeta):
+    """
+    Detuning ratio max_j |Delta omega_j| / sqrt(d_j^2 + (zeta omega_j)^2) (core.validity Eq. 3).
+
+    Parameters
+    ----------
+    omega : ndarray, shape (..., modes)
+        Reference frequencies [rad/s].
+    share : ndarray, shape (..., modes, links)
+        Strain-energy shares of the links.
+    ratios : ndarray, shape (..., links)
+        Link-mean elastic axial force over the Euler load.
+    speed : ndarray, shape (...)
+        Crank speed [rad/s] (its magnitude sets the harmonics).
+    zeta : float
+        Modal damping ratio.
+
+    Returns
+    -------
+    ndarray, shape (...)
+
+    """
+    shift = 0.5 * omega * np.einsum('...jl,...l->...j', share, ratios)
+    rate = np.abs(np.asarray(speed, dtype=float))[..., None]
+    safe = np.where(rate > 0.0, rate, 1.0)
+    harmonic = np.where(rate > 0.0, np.maximum(np.round(omega / safe), 1.0) * safe, omega)
+    return np.max(np.abs(shift) / np.hypot(omega - harmonic, zeta * omega), axis=-1)
+
+
+class NonlinearityIndicator:
+    """
+    The validity indicator of a reduced model's estimates.
+
+    Parameters
+    ----------
+    model : ReducedModel
+        With its ``nonlinearity`` tables (None: every value is NaN).
+
+    """
+
+    def __init__(self, model):
+        tables = model.nonlinearity
+        self.available = tables is not None
+        self.threshold = VALIDITY_THRESHOLD
+        if not self.available:
+            return
+        self._grid = model.grid_size
+        self._cell_scale = model.grid_size / (2.0 * math.pi)
+        table = np.asarray(tables['nonlinearity_table'], dtype=float)
+        self._table = np.ascontiguousarray(table)                 # (N, P, links, r + 3)
+        self._speeds2 = np.asarray(tables['nonlinearity_speeds'], dtype=float) ** 2
+        self._omega = np.asarray(tables['nonlinearity_omega'], dtype=float)
+        self._share = np.asarray(tables['nonlinearity_share'], dtype=float)
+        self._zeta = float(model.zeta)
+        self._speed_max = float(model.speed_max)
+        self._size = model.size
+        self._x = np.zeros(model.size + 3)
+        self._x[model.size] = 1.0
+
+    def _reference(self, speed2):
+        """Interpolate the reference omega (modes,) and shares (modes, links) linearly in w^2."""
+        grid = self._speeds2
+        i = min(int(np.searchsorted(grid, speed2, side='right')) - 1, grid.size - 2)
+        f = min(max((speed2 - grid[i]) / (grid[i + 1] - grid[i]), 0.0), 1.0)
+        return (self._omega[i] + f * (self._omega[i + 1] - self._omega[i]),
+                self._share[i] + f * (self._share[i + 1] - self._share[i]))
+
+    def __call__(self, crank_angle, speed, accel, q):
+        """
+        Return the indicator of one sample (NaN without tables).
+
+        Parameters
+        ----------
+        crank_angle : float
+            Crank angle [rad], any range.
+        speed, accel : float
+            Crank speed [rad/s] and acceleration [rad/s^2] as the model saw them.
+        q : ndarray, shape (r,)
+            Reduced coordinates.
+
+        """
+        if not self.available:
+            return math.nan
+        x = (crank_angle % (2.0 * math.pi)) * self._cell_scale
+        k = min(int(x), self._grid - 1)
+        t = x - k
+        speed = min(max(speed, -self._speed_max), self._speed_max)
+        self._x[:self._size] = q
+        self._x[self._size + 1] = accel
+        self._x[self._size + 2] = speed * speed
+        per_power = self._table[k] @ self._x                       # (P, links)
+        ratios = per_power[0] + t * (per_power[1] + t * (per_power[2] + t * per_power[3]))
+        omega, share = self._reference(speed * speed)
+        return float(detuning_ratio(omega, share, ratios, speed, self._zeta))
+
+    def batch(self, crank_angles, speeds, accels, modal):
+        """
+        Return the indicator of many samples, shape (m,) (NaN without tables, or where q is).
+
+        Parameters
+        ----------
+        crank_angles, speeds, accels : ndarray, shape (m,)
+            Crank state as the model saw it.
+        modal : ndarray, shape (m, r)
+            Reduced coordinates.
+
+        """
+        angles = np.asarray(crank_angles, dtype=float)
+        if not self.available:
+            return np.full(angles.shape, math.nan)
+        speeds = np.clip(np.asarray(speeds, dtype=float), -self._speed_max, self._speed_max)
+        accels = np.broadcast_to(np.asarray(accels, dtype=float), speeds.shape)
+        x = np.mod(angles, 2.0 * math.pi) * self._cell_scale
+        cells = np.minimum(np.floor(x).astype(int), self._grid - 1)
+        powers = (x - cells)[:, None] ** np.array(_POWERS)
+        extended = np.concatenate([np.asarray(modal, dtype=float),
+                                   np.ones((angles.size, 1)), accels[:, None],
+                                   (speeds ** 2)[:, None]], axis=1)
+        ratios = np.einsum('mp,mplc,mc->ml', powers, self._table[cells], extended)
+        speed2 = speeds ** 2
+        omega = np.stack([np.interp(speed2, self._speeds2, column)
+                          for column in self._omega.T], axis=-1)
+        share = np.stack([np.interp(speed2, self._speeds2, column)
+                          for column in self._share.reshape(self._share.shape[0], -1).T],
+                         axis=-1).reshape((angles.size,) + self._share.shape[1:])
+        return detuning_ratio(omega, share, ratios, speeds, self._zeta)
