@@ -28,8 +28,7 @@ def model_key(mechanism, options):
     """Cache key of a mechanism's reduced model (hex)."""
     # {'criteria': True} keeps the keys of models cached when the reactions were optional.
     return store.cache_key('reduced-model', MODEL_VERSION, mechanism.key(),
-                           options.cache_fields(), {'criteria': True},
-                           {'nonlinearity': NONLINEARITY_VERSION})
+                           options.cache_fields(), {'criteria': True})
 
 
 def model_for_mechanism(mechanism, options=None, cache_dir=None, use_cache=True):
@@ -63,7 +62,8 @@ def model_for_mechanism(mechanism, options=None, cache_dir=None, use_cache=True)
         return build_model(mechanism, options).to_arrays()
 
     arrays, meta, _ = store.load_or_build(path, key, build)
-    return ReducedModel.from_arrays(arrays, meta)
+    return with_nonlinearity(ReducedModel.from_arrays(arrays, meta), mechanism, options,
+                             None if path is None else f'{path[:-4]}-nonlinearity.npz', key)
 
 
 def build_model(mechanism, options):
@@ -71,13 +71,28 @@ def build_model(mechanism, options):
     samples = frozen_samples_for(mechanism, options)
     angles = 2.0 * np.pi * np.arange(options.grid_size) / options.grid_size
     forces, criteria_source = reaction_pieces(mechanism, angles)
-    model = reduce_samples(samples, options.modes, options.static, options.speed_max,
-                           mechanism.damping_ratio, forces=forces,
-                           info={'options': options.cache_fields(),
-                                 'mechanism': mechanism.name, 'criteria': criteria_source})
-    linkage = assembly.FlexibleLinkage(fe_mechanism(mechanism, options), options)
-    return dataclasses.replace(model, nonlinearity=nonlinearity_tables(
-        linkage, samples, model.basis, options.speed_max))
+    return reduce_samples(samples, options.modes, options.static, options.speed_max,
+                          mechanism.damping_ratio, forces=forces,
+                          info={'options': options.cache_fields(),
+                                'mechanism': mechanism.name, 'criteria': criteria_source})
+
+
+def with_nonlinearity(model, mechanism, options, path, key):
+    """
+    Return the model with the validity indicator's tables (:mod:`.nonlinearity_tables`).
+
+    Cached in a file of their own beside the model's (``path``; None: built, not cached),
+    keyed by the model's key and :data:`NONLINEARITY_VERSION`: the model's own file and key
+    are those of a model without the tables.
+    """
+    def build():
+        linkage = assembly.FlexibleLinkage(fe_mechanism(mechanism, options), options)
+        samples = frozen_samples_for(mechanism, options)
+        return nonlinearity_tables(linkage, samples, model.basis, options.speed_max), {}
+
+    arrays, _, _ = store.load_or_build(
+        path, store.cache_key('nonlinearity-tables', NONLINEARITY_VERSION, key), build)
+    return dataclasses.replace(model, nonlinearity=arrays)
 
 
 def fe_mechanism(mechanism, options):

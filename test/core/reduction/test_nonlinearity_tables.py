@@ -89,8 +89,20 @@ def test_tables_survive_the_cache_file_and_the_key_carries_their_version(mech, m
     plain = ReducedModel.from_arrays({k: v for k, v in arrays.items()
                                       if k not in nl.TABLE_NAMES}, meta)
     assert plain.nonlinearity is None
-    key = pipeline.model_key(mech, OPTIONS)
-    assert key == store.cache_key('reduced-model', pipeline.MODEL_VERSION, mech.key(),
-                                  OPTIONS.cache_fields(), {'criteria': True},
-                                  {'nonlinearity': nl.NONLINEARITY_VERSION})
     assert math.isfinite(float(model.nonlinearity['nonlinearity_omega'][0, 0]))
+
+
+def test_tables_cached_beside_the_model_under_their_own_key(mech, model, tmp_path):
+    """The model's file and key are unchanged by the tables (test_pipeline pins the keys)."""
+    again = pipeline.model_for_mechanism(mech, OPTIONS, cache_dir=tmp_path)
+    files = sorted(path.name for path in tmp_path.iterdir())
+    key = pipeline.model_key(mech, OPTIONS)
+    assert files == [f'cho1992-{key[:16]}-nonlinearity.npz', f'cho1992-{key[:16]}.npz']
+    arrays, _ = store.load_cache(tmp_path / files[0], store.cache_key(
+        'nonlinearity-tables', nl.NONLINEARITY_VERSION, key))
+    assert set(arrays) == set(nl.TABLE_NAMES)
+    model_arrays, _ = store.load_cache(tmp_path / files[1], key)
+    assert not set(nl.TABLE_NAMES) & set(model_arrays)
+    loaded = pipeline.model_for_mechanism(mech, OPTIONS, cache_dir=tmp_path)   # from the files
+    for name in nl.TABLE_NAMES:
+        np.testing.assert_array_equal(loaded.nonlinearity[name], again.nonlinearity[name])
