@@ -3,6 +3,7 @@
 import json
 
 from flexlink_ros.cli import main as cli
+from flexlink_ros.core import validity
 import numpy as np
 import pytest
 
@@ -86,3 +87,20 @@ def test_unknown_bearings_are_refused_with_the_choices(capsys):
     _, err = capsys.readouterr()
     assert exit_info.value.code == 2
     assert '--bearings' in err and "'flexible', 'rigid'" in err
+
+
+def test_simulate_json_says_whether_the_linear_response_is_valid(capsys):
+    """The validity indicator over the revolution: valid at 269 rpm, not at 405 (rigid)."""
+    summaries = {}
+    for rpm in ('269', '405'):
+        code, out, _ = _run(capsys, 'simulate', '--rpm', rpm, '--rigid-crank', '--bearings',
+                            'rigid', '--elements-per-link', '4', '--points-per-rev', '60',
+                            '--json')
+        assert code == 0
+        summaries[rpm] = json.loads(out)['nonlinearity']
+    assert summaries['269']['valid'] is True and summaries['405']['valid'] is False
+    assert summaries['269']['indicator_max'] < 0.5 < summaries['405']['indicator_max']
+    assert summaries['405']['threshold'] == validity.VALIDITY_THRESHOLD
+    code, out, _ = _run(capsys, 'simulate', '--rpm', '405', '--rigid-crank', '--bearings',
+                        'rigid', '--elements-per-link', '4', '--points-per-rev', '60')
+    assert 'linear estimate NOT valid' in out

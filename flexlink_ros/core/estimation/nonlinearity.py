@@ -78,18 +78,22 @@ class NonlinearityIndicator:
         self._size = model.size
         self._x = np.zeros(model.size + 3)
         self._x[model.size] = 1.0
-
-    def _reference(self, speed2):
-        """Interpolate the reference omega (modes,) and shares (modes, links) linearly in w^2."""
-        grid = self._speeds2
-        i = min(int(np.searchsorted(grid, speed2, side='right')) - 1, grid.size - 2)
-        f = min(max((speed2 - grid[i]) / (grid[i + 1] - grid[i]), 0.0), 1.0)
-        return (self._omega[i] + f * (self._omega[i + 1] - self._omega[i]),
-                self._share[i] + f * (self._share[i + 1] - self._share[i]))
+        # Per-sample form: the reference modes per interval of the (uniform) w^2 grid.
+        self._inverse_step2 = (self._speeds2.size - 1) / self._speeds2[-1]
+        self._last_interval = self._speeds2.size - 2
+        self._links = table.shape[2]
+        self._flat_table = self._table.reshape(table.shape[0], -1, table.shape[3])
+        omega_step, share_step = np.diff(self._omega, axis=0), np.diff(self._share, axis=0)
+        self._reference_rows = [
+            list(zip(self._omega[i].tolist(), omega_step[i].tolist(), self._share[i].tolist(),
+                     share_step[i].tolist())) for i in range(self._speeds2.size - 1)]
 
     def __call__(self, crank_angle, speed, accel, q):
         """
         Return the indicator of one sample (NaN without tables).
+
+        One matrix-vector product with the cell's table; the rest in floats (two links, two
+        reference modes: numpy's per-call cost would dominate).
 
         Parameters
         ----------
@@ -107,13 +111,30 @@ class NonlinearityIndicator:
         k = min(int(x), self._grid - 1)
         t = x - k
         speed = min(max(speed, -self._speed_max), self._speed_max)
-        self._x[:self._size] = q
-        self._x[self._size + 1] = accel
-        self._x[self._size + 2] = speed * speed
-        per_power = self._table[k] @ self._x                       # (P, links)
-        ratios = per_power[0] + t * (per_power[1] + t * (per_power[2] + t * per_power[3]))
-        omega, share = self._reference(speed * speed)
-        return float(detuning_ratio(omega, share, ratios, speed, self._zeta))
+        speed2 = speed * speed
+        extended = self._x
+        extended[:self._size] = q
+        extended[self._size + 1] = accel
+        extended[self._size + 2] = speed2
+        values = self._flat_table[k].dot(extended).tolist()     # power-major, (P x links)
+        links = self._links
+        ratios = [values[l] + t * (values[links + l] + t * (values[2 * links + l]
+                                                           + t * values[3 * links + l]))
+                  for l in range(links)]
+        position = speed2 * self._inverse_step2
+        i = min(int(position), self._last_interval)
+        f = min(position - i, 1.0)
+        rate, zeta, worst = abs(speed), self._zeta, 0.0
+        for omega0, omega_step, share0, share_step in self._reference_rows[i]:
+            omega = omega0 + f * omega_step
+            total = 0.0
+            for s0, step, ratio in zip(share0, share_step, ratios):
+                total += (s0 + f * step) * ratio
+            harmonic = max(round(omega / rate), 1.0) * rate if rate > 0.0 else omega
+            detuning = abs(0.5 * omega * total) / math.hypot(omega - harmonic, zeta * omega)
+            if detuning > worst:
+                worst = detuning
+        return worst
 
     def batch(self, crank_angles, speeds, accels, modal):
         """
