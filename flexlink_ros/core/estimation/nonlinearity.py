@@ -118,9 +118,9 @@ class NonlinearityIndicator:
         extended[self._size + 2] = speed2
         values = self._flat_table[k].dot(extended).tolist()     # power-major, (P x links)
         links = self._links
-        ratios = [values[l] + t * (values[links + l] + t * (values[2 * links + l]
-                                                           + t * values[3 * links + l]))
-                  for l in range(links)]
+        ratios = [v0 + t * (v1 + t * (v2 + t * v3)) for v0, v1, v2, v3 in zip(
+            values[:links], values[links:2 * links], values[2 * links:3 * links],
+            values[3 * links:])]
         position = speed2 * self._inverse_step2
         i = min(int(position), self._last_interval)
         f = min(position - i, 1.0)
