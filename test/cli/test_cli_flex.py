@@ -99,7 +99,8 @@ def test_simulate_json_says_whether_the_linear_response_is_valid(capsys):
         assert code == 0
         summaries[rpm] = json.loads(out)['nonlinearity']
     assert summaries['269']['valid'] is True and summaries['405']['valid'] is False
-    assert summaries['269']['indicator_max'] < 0.5 < summaries['405']['indicator_max']
+    assert (summaries['269']['indicator_max'] < validity.VALIDITY_THRESHOLD
+            < summaries['405']['indicator_max'])
     assert summaries['405']['threshold'] == validity.VALIDITY_THRESHOLD
     code, out, _ = _run(capsys, 'simulate', '--rpm', '405', '--rigid-crank', '--bearings',
                         'rigid', '--elements-per-link', '4', '--points-per-rev', '60')

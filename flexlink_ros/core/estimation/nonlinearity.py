@@ -15,38 +15,9 @@ import math
 import numpy as np
 
 from ..reduction.cells import CELL_POWERS
-from ..validity import VALIDITY_THRESHOLD
+from ..validity import detuning_ratio, VALIDITY_THRESHOLD
 
 _POWERS = tuple(range(CELL_POWERS))
-
-
-def detuning_ratio(omega, share, ratios, speed, zeta):
-    """
-    Detuning ratio max_j |Delta omega_j| / sqrt(d_j^2 + (zeta omega_j)^2) (core.validity Eq. 3).
-
-    Parameters
-    ----------
-    omega : ndarray, shape (..., modes)
-        Reference frequencies [rad/s].
-    share : ndarray, shape (..., modes, links)
-        Strain-energy shares of the links.
-    ratios : ndarray, shape (..., links)
-        Link-mean elastic axial force over the Euler load.
-    speed : ndarray, shape (...)
-        Crank speed [rad/s] (its magnitude sets the harmonics).
-    zeta : float
-        Modal damping ratio.
-
-    Returns
-    -------
-    ndarray, shape (...)
-
-    """
-    shift = 0.5 * omega * np.einsum('...jl,...l->...j', share, ratios)
-    rate = np.abs(np.asarray(speed, dtype=float))[..., None]
-    safe = np.where(rate > 0.0, rate, 1.0)
-    harmonic = np.where(rate > 0.0, np.maximum(np.round(omega / safe), 1.0) * safe, omega)
-    return np.max(np.abs(shift) / np.hypot(omega - harmonic, zeta * omega), axis=-1)
 
 
 class NonlinearityIndicator:
