@@ -90,6 +90,9 @@ INDICATOR_LINKS = (1, 2)
 VALIDITY_THRESHOLD = 0.5
 # Frozen modes of the detuning ratio (each flexible link's first bending mode, rigid crank).
 REFERENCE_MODES = 2
+# Below this crank speed [rad/s] the harmonics are dense: the distance to resonance is its floor
+# zeta omega (and omega / speed stays a finite number to round).
+REST_SPEED = 1e-6
 
 
 def buckling_loads(mechanism, links=INDICATOR_LINKS):
@@ -258,7 +261,8 @@ def detuning_ratio(omega, share, ratios, speed, zeta):
     Return the detuning ratio max_j |Delta omega_j| / sqrt(d_j^2 + (zeta omega_j)^2) (Eq. 3).
 
     Delta omega_j = omega_j / 2 sum_l s_jl N_e,l / P_cr,l; d_j the distance of omega_j from the
-    nearest crank harmonic k |speed| (k >= 1; d_j = 0 at rest), as :func:`resonance_distance`.
+    nearest crank harmonic k |speed| (k >= 1; d_j = 0 below :data:`REST_SPEED`), as
+    :func:`resonance_distance`.
 
     Parameters
     ----------
@@ -280,8 +284,9 @@ def detuning_ratio(omega, share, ratios, speed, zeta):
     """
     shift = 0.5 * omega * np.einsum('...jl,...l->...j', share, ratios)
     rate = np.abs(np.asarray(speed, dtype=float))[..., None]
-    safe = np.where(rate > 0.0, rate, 1.0)
-    harmonic = np.where(rate > 0.0, np.maximum(np.round(omega / safe), 1.0) * safe, omega)
+    moving = rate > REST_SPEED
+    safe = np.where(moving, rate, 1.0)
+    harmonic = np.where(moving, np.maximum(np.round(omega / safe), 1.0) * safe, omega)
     return np.max(np.abs(shift) / np.hypot(omega - harmonic, zeta * omega), axis=-1)
 
 
@@ -343,7 +348,7 @@ def is_valid(indicator, threshold=VALIDITY_THRESHOLD):
             'threshold': float(threshold)}
 
 
-__all__ = ['INDICATOR_LINKS', 'REFERENCE_MODES', 'VALIDITY_THRESHOLD', 'buckling_loads',
-           'rigid_element_axial_forces', 'elastic_axial_forces', 'load_ratios',
+__all__ = ['INDICATOR_LINKS', 'REFERENCE_MODES', 'REST_SPEED', 'VALIDITY_THRESHOLD',
+           'buckling_loads', 'rigid_element_axial_forces', 'elastic_axial_forces', 'load_ratios',
            'load_ratio_indicator', 'mode_reference', 'resonance_distance',
            'detuning_ratio', 'nonlinearity_indicator', 'is_valid']

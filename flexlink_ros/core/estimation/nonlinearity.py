@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from ..reduction.cells import CELL_POWERS
-from ..validity import detuning_ratio, VALIDITY_THRESHOLD
+from ..validity import detuning_ratio, REST_SPEED, VALIDITY_THRESHOLD
 
 _POWERS = tuple(range(CELL_POWERS))
 
@@ -61,7 +61,7 @@ class NonlinearityIndicator:
 
     def __call__(self, crank_angle, speed, accel, q):
         """
-        Return the indicator of one sample (NaN without tables).
+        Return the indicator of one sample (NaN without tables or for a non-finite state).
 
         One matrix-vector product with the cell's table; the rest in floats (two links, two
         reference modes: numpy's per-call cost would dominate).
@@ -76,7 +76,7 @@ class NonlinearityIndicator:
             Reduced coordinates.
 
         """
-        if not self.available:
+        if not (self.available and math.isfinite(speed) and math.isfinite(accel)):
             return math.nan
         x = (crank_angle % (2.0 * math.pi)) * self._cell_scale
         k = min(int(x), self._grid - 1)
@@ -101,7 +101,7 @@ class NonlinearityIndicator:
             total = 0.0
             for s0, step, ratio in zip(share0, share_step, ratios):
                 total += (s0 + f * step) * ratio
-            harmonic = max(round(omega / rate), 1.0) * rate if rate > 0.0 else omega
+            harmonic = max(round(omega / rate), 1.0) * rate if rate > REST_SPEED else omega
             detuning = abs(0.5 * omega * total) / math.hypot(omega - harmonic, zeta * omega)
             if detuning > worst:
                 worst = detuning

@@ -114,7 +114,13 @@ def test_speed_beyond_the_tables_and_at_rest(models):
     q = np.zeros(model.size)
     beyond = indicator(0.3, 2.0 * model.speed_max, 0.0, q)
     assert beyond == indicator(0.3, model.speed_max, 0.0, q)
-    assert math.isfinite(indicator(0.3, 0.0, 0.0, q))
+    # at rest and at speeds too small for harmonics (no overflow), the same in both forms
+    for speed in (0.0, 1e-300, -1e-9):
+        value = indicator(0.3, speed, 0.0, q)
+        assert math.isfinite(value)
+        assert indicator.batch([0.3], [speed], [0.0], [q])[0] == pytest.approx(value, rel=1e-12)
+    assert math.isnan(indicator(0.3, math.nan, 0.0, q))
+    assert math.isnan(indicator(0.3, 10.0, math.inf, q))
 
 
 def test_model_without_tables_gives_nan():
