@@ -3,8 +3,9 @@ The validity indicator per estimate: :func:`core.validity.nonlinearity_indicator
 
 The detuning ratio of :mod:`core.validity` (Eq. 3 there) from the reduced state: the link-mean
 elastic axial forces over the Euler loads are one table row per link dotted with
-(q, 1, a, w^2) (:mod:`core.reduction.nonlinearity_tables`), the reference modes are
-interpolated in w^2, and the distance to the nearest crank harmonic is computed per sample.
+(q, a q, w^2 q, q', w q', w^2 q', w^4 q', 1, a, w^2) (the mode-acceleration form of
+:mod:`core.reduction.nonlinearity_tables`), the reference modes are interpolated in w^2, and
+the distance to the nearest crank harmonic is computed per sample.
 :class:`NonlinearityIndicator` gives it per sample (the streaming estimator's
 ``Sample.nonlinearity``) and for many samples at once (the offline estimate); NaN for a model
 built without the tables. The threshold is :data:`core.validity.VALIDITY_THRESHOLD`.
@@ -40,15 +41,25 @@ class NonlinearityIndicator:
         self._grid = model.grid_size
         self._cell_scale = model.grid_size / (2.0 * math.pi)
         table = np.asarray(tables['nonlinearity_table'], dtype=float)
-        self._table = np.ascontiguousarray(table)                 # (N, P, links, r + 3)
+        if table.shape[1:2] + table.shape[3:] != (CELL_POWERS, 7 * model.size + 3):
+            raise ValueError(f'the nonlinearity table {table.shape} does not fit the model '
+                             f'(r = {model.size})')
+        self._table = np.ascontiguousarray(table)               # (N, P, links, 7 r + 3)
         self._speeds2 = np.asarray(tables['nonlinearity_speeds'], dtype=float) ** 2
         self._omega = np.asarray(tables['nonlinearity_omega'], dtype=float)
         self._share = np.asarray(tables['nonlinearity_share'], dtype=float)
         self._zeta = float(model.zeta)
         self._speed_max = float(model.speed_max)
         self._size = model.size
-        self._x = np.zeros(model.size + 3)
-        self._x[model.size] = 1.0
+        # The extended state of Eq. (1) there: q times (1, a, w^2), q' times (1, w, w^2, w^4),
+        # then 1, a, w^2; filled in place per sample.
+        size = model.size
+        self._x = np.zeros(7 * size + 3)
+        self._x[7 * size] = 1.0
+        self._x_q = self._x[:3 * size].reshape(3, size)
+        self._x_v = self._x[3 * size:7 * size].reshape(4, size)
+        self._monomials_q = np.ones((3, 1))
+        self._monomials_v = np.ones((4, 1))
         # Per-sample form: the reference modes per interval of the (uniform) w^2 grid.
         self._inverse_step2 = (self._speeds2.size - 1) / self._speeds2[-1]
         self._last_interval = self._speeds2.size - 2
@@ -59,7 +70,7 @@ class NonlinearityIndicator:
             list(zip(self._omega[i].tolist(), omega_step[i].tolist(), self._share[i].tolist(),
                      share_step[i].tolist())) for i in range(self._speeds2.size - 1)]
 
-    def __call__(self, crank_angle, speed, accel, q):
+    def __call__(self, crank_angle, speed, accel, state):
         """
         Return the indicator of one sample (NaN without tables or for a non-finite state).
 
@@ -72,8 +83,8 @@ class NonlinearityIndicator:
             Crank angle [rad], any range.
         speed, accel : float
             Crank speed [rad/s] and acceleration [rad/s^2] as the model saw them.
-        q : ndarray, shape (r,)
-            Reduced coordinates.
+        state : ndarray, shape (2 r,)
+            Reduced coordinates q and their rates q'.
 
         """
         if not (self.available and math.isfinite(speed) and math.isfinite(accel)):
@@ -83,10 +94,13 @@ class NonlinearityIndicator:
         t = x - k
         speed = min(max(speed, -self._speed_max), self._speed_max)
         speed2 = speed * speed
-        extended = self._x
-        extended[:self._size] = q
-        extended[self._size + 1] = accel
-        extended[self._size + 2] = speed2
+        size, extended = self._size, self._x
+        monomials_q, monomials_v = self._monomials_q, self._monomials_v
+        monomials_q[1, 0] = extended[-2] = accel
+        monomials_q[2, 0] = monomials_v[2, 0] = extended[-1] = speed2
+        monomials_v[1, 0], monomials_v[3, 0] = speed, speed2 * speed2
+        np.multiply(monomials_q, state[:size], out=self._x_q)
+        np.multiply(monomials_v, state[size:2 * size], out=self._x_v)
         values = self._flat_table[k].dot(extended).tolist()     # power-major, (P x links)
         links = self._links
         ratios = [v0 + t * (v1 + t * (v2 + t * v3)) for v0, v1, v2, v3 in zip(
@@ -107,7 +121,7 @@ class NonlinearityIndicator:
                 worst = detuning
         return worst
 
-    def batch(self, crank_angles, speeds, accels, modal):
+    def batch(self, crank_angles, speeds, accels, modal, velocity):
         """
         Return the indicator of many samples, shape (m,) (NaN without tables, or where q is).
 
@@ -115,8 +129,8 @@ class NonlinearityIndicator:
         ----------
         crank_angles, speeds, accels : ndarray, shape (m,)
             Crank state as the model saw it.
-        modal : ndarray, shape (m, r)
-            Reduced coordinates.
+        modal, velocity : ndarray, shape (m, r)
+            Reduced coordinates q and their rates q'.
 
         """
         angles = np.asarray(crank_angles, dtype=float)
@@ -127,9 +141,11 @@ class NonlinearityIndicator:
         x = np.mod(angles, 2.0 * math.pi) * self._cell_scale
         cells = np.minimum(np.floor(x).astype(int), self._grid - 1)
         powers = (x - cells)[:, None] ** np.array(_POWERS)
-        extended = np.concatenate([np.asarray(modal, dtype=float),
-                                   np.ones((angles.size, 1)), accels[:, None],
-                                   (speeds ** 2)[:, None]], axis=1)
+        q, v = np.asarray(modal, dtype=float), np.asarray(velocity, dtype=float)
+        ones, w2 = np.ones(angles.size), speeds ** 2
+        extended = np.concatenate(
+            [q, accels[:, None] * q, w2[:, None] * q, v, speeds[:, None] * v, w2[:, None] * v,
+             (w2 * w2)[:, None] * v, np.stack([ones, accels, w2], axis=1)], axis=1)
         ratios = np.einsum('mp,mplc,mc->ml', powers, self._table[cells], extended)
         speed2 = speeds ** 2
         omega = np.stack([np.interp(speed2, self._speeds2, column)

@@ -322,8 +322,8 @@ class _OfflineRun:
         reaction, gamma_dot, criterion, _, self.available = criteria_batch(
             model, out['crank_angle'][rows], model_speed, model_accel, blocks=blocks)
         target = self.chosen[rows]
-        nonlinearity = self.nonlinearity.batch(out['crank_angle'][rows], model_speed,
-                                               model_accel, out['modal'][rows])
+        nonlinearity = self.nonlinearity.batch(out['crank_angle'][rows], model_speed, model_accel,
+                                               out['modal'][rows], out['velocity'][rows])
         for key, values in (('lever_tip', out['lever_tip'][rows]),
                             ('coupler_mid', out['coupler_mid'][rows]),
                             ('crank_angle', out['crank_angle'][rows]),

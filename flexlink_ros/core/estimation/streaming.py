@@ -154,6 +154,9 @@ class StreamingEstimator:
     def orbit(self, orbit):
         self._warm.orbit = orbit
 
+    state = property(lambda self: self._stepper.z[:2 * self._tables.size],
+                     doc="The model state (q, q') of the newest sample (a view).")
+
     @property
     def last_record(self):
         """
@@ -365,12 +368,12 @@ class StreamingEstimator:
             return self._out_of_bound(
                 stamp_ns, angle, speed, accel, flags,
                 f'deflection {largest:.6g} m beyond the bound {self.deflection_bound_m:.6g} m')
-        q = self._stepper.z[:self._tables.size]
+        state = self.state
         sample = sample_from_record(
             stamp_ns, (angle, speed, accel), deflection, correction, criteria,
-            flags | self._base_flags, message, tuple(q.tolist()),
+            flags | self._base_flags, message, tuple(state[:self._tables.size].tolist()),
             self.nonlinearity(angle, speed, min(max(accel, -self.accel_limit), self.accel_limit),
-                              q))
+                              state))
         self._last = sample
         self.samples += 1
         return sample

@@ -51,7 +51,7 @@ def project_system(pieces, samples, basis, speed_max, damping_speeds):
     pieces['out']['1'] = samples.outputs @ basis
 
 
-def residual_flexibility(samples, basis, operator=None):
+def residual_flexibility(samples, basis):
     """
     Output error of the basis on the quasi-static response, per load piece and grid angle.
 
@@ -63,8 +63,6 @@ def residual_flexibility(samples, basis, operator=None):
         Full-order pieces on the grid.
     basis : ndarray, shape (n, r)
         Constant basis V.
-    operator : ndarray, shape (N, outputs, n), or None
-        O per grid angle (None: the output operator ``samples.outputs``).
 
     Returns
     -------
@@ -73,8 +71,7 @@ def residual_flexibility(samples, basis, operator=None):
 
     """
     count = samples.grid_size
-    operator = samples.outputs if operator is None else operator
-    residual = np.zeros((3, count, operator.shape[1]))
+    residual = np.zeros((3, count, samples.outputs.shape[1]))
     for k in range(count):
         stiffness = samples.stiffness['1'][k]
         reduced_k = basis.T @ stiffness @ basis
@@ -82,7 +79,7 @@ def residual_flexibility(samples, basis, operator=None):
             load = samples.load[piece][k]
             full = np.linalg.solve(stiffness, load)
             kept = basis @ np.linalg.solve(reduced_k, basis.T @ load)
-            residual[i, k] = operator[k] @ (full - kept)
+            residual[i, k] = samples.outputs[k] @ (full - kept)
     return {piece: residual[i] for i, piece in enumerate(AFFINE_PIECES)}
 
 

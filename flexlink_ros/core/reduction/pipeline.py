@@ -88,7 +88,7 @@ def with_nonlinearity(model, mechanism, options, path, key):
     def build():
         linkage = assembly.FlexibleLinkage(fe_mechanism(mechanism, options), options)
         samples = frozen_samples_for(mechanism, options)
-        return nonlinearity_tables(linkage, samples, model.basis, options.speed_max), {}
+        return nonlinearity_tables(linkage, samples, model, options.speed_max), {}
 
     arrays, _, _ = store.load_or_build(
         path, store.cache_key('nonlinearity-tables', NONLINEARITY_VERSION, key), build)

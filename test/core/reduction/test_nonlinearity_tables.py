@@ -72,7 +72,7 @@ def test_reference_table_against_mode_reference(linkage):
 def test_table_passes_through_the_grid_values(model):
     table = model.nonlinearity['nonlinearity_table']
     count, powers, links, width = table.shape
-    assert (count, powers, links, width) == (16, 4, 2, model.size + 3)
+    assert (count, powers, links, width) == (16, 4, 2, 7 * model.size + 3)
     # t = 1 of cell k is t = 0 of cell k + 1 (the spline is continuous across cells)
     end = table.sum(axis=1)
     np.testing.assert_allclose(end, np.roll(table[:, 0], -1, axis=0), rtol=1e-9, atol=1e-12)
