@@ -18,6 +18,11 @@ import numpy as np
 from ..reduction.cells import CELL_POWERS
 from ..validity import detuning_ratio, REST_SPEED, VALIDITY_THRESHOLD
 
+try:
+    from . import _nonlinearity as kernel       # _nonlinearity.c: the per-sample form in C
+except ImportError:     # not built: the Python form serves
+    kernel = None
+
 _POWERS = tuple(range(CELL_POWERS))
 
 
@@ -29,12 +34,23 @@ class NonlinearityIndicator:
     ----------
     model : ReducedModel
         With its ``nonlinearity`` tables (None: every value is NaN).
+    compiled : bool
+        Evaluate single samples with the compiled form (_nonlinearity.c) where it is built;
+        False: the Python form (the same numbers to rounding, 1e-12).
+
+    Attributes
+    ----------
+    available : bool
+        The model has the tables.
+    compiled : bool
+        Single samples go through the compiled form.
 
     """
 
-    def __init__(self, model):
+    def __init__(self, model, compiled=True):
         tables = model.nonlinearity
         self.available = tables is not None
+        self.compiled = bool(compiled and self.available and kernel is not None)
         self.threshold = VALIDITY_THRESHOLD
         if not self.available:
             return
@@ -65,6 +81,10 @@ class NonlinearityIndicator:
         self._last_interval = self._speeds2.size - 2
         self._links = table.shape[2]
         self._flat_table = self._table.reshape(table.shape[0], -1, table.shape[3])
+        self._context = np.concatenate([
+            [model.grid_size, size, self._links, self._omega.shape[1], self._speeds2.size,
+             self._zeta, self._speed_max, self._cell_scale, self._inverse_step2, REST_SPEED],
+            self._omega.ravel(), self._share.ravel()])
         omega_step, share_step = np.diff(self._omega, axis=0), np.diff(self._share, axis=0)
         self._reference_rows = [
             list(zip(self._omega[i].tolist(), omega_step[i].tolist(), self._share[i].tolist(),
@@ -84,10 +104,14 @@ class NonlinearityIndicator:
         speed, accel : float
             Crank speed [rad/s] and acceleration [rad/s^2] as the model saw them.
         state : ndarray, shape (2 r,)
-            Reduced coordinates q and their rates q'.
+            Reduced coordinates q and their rates q' (contiguous float64 for the compiled form).
 
         """
-        if not (self.available and math.isfinite(speed) and math.isfinite(accel)):
+        if self.compiled:
+            return kernel.indicator(self._context, self._table, state, crank_angle, speed,
+                                    accel)
+        if not (self.available and math.isfinite(speed) and math.isfinite(accel)
+                and math.isfinite(crank_angle)):
             return math.nan
         x = (crank_angle % (2.0 * math.pi)) * self._cell_scale
         k = min(int(x), self._grid - 1)

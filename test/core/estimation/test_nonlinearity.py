@@ -13,6 +13,7 @@ import math
 from estimation_toys import toy_model
 from flexlink_ros.core import validity
 from flexlink_ros.core.estimation import offline_run
+from flexlink_ros.core.estimation.native import compiled_step_available
 from flexlink_ros.core.estimation.nonlinearity import NonlinearityIndicator
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
 from flexlink_ros.core.fe import linkage as assembly
@@ -112,9 +113,27 @@ def test_per_sample_batch_and_offline_agree(models):
     np.testing.assert_allclose(offline['nonlinearity'], batch, rtol=1e-6, atol=1e-9)
 
 
-def test_speed_beyond_the_tables_and_at_rest(models):
+def test_compiled_and_python_forms_agree(models):
+    model = models['rigid']
+    _, _, samples, states = _streamed(model, 405.0, seconds=0.5)
+    compiled, python = NonlinearityIndicator(model), NonlinearityIndicator(model, False)
+    assert compiled.compiled == compiled_step_available()    # built together
+    assert not python.compiled
+    for sample, state in zip(samples[::7], states[::7]):
+        for speed in (sample.crank_speed, -sample.crank_speed, 0.3 * sample.crank_speed):
+            args = (sample.crank_angle, speed, 250.0, state)
+            assert compiled(*args) == pytest.approx(python(*args), rel=1e-12, abs=1e-15)
+    for args in ((-7.5, 40.0, 0.0, states[0]), (1e3, 1e4, 0.0, states[0])):
+        assert compiled(*args) == pytest.approx(python(*args), rel=1e-12)
+    assert math.isnan(compiled(0.3, math.nan, 0.0, states[0]))
+    with pytest.raises(ValueError, match='state'):
+        compiled(0.3, 10.0, 0.0, states[0][:3].copy())
+
+
+@pytest.mark.parametrize('compiled', [True, False])
+def test_speed_beyond_the_tables_and_at_rest(models, compiled):
     model = models['flexible']
-    indicator = NonlinearityIndicator(model)
+    indicator = NonlinearityIndicator(model, compiled)
     q = np.zeros(2 * model.size)
     beyond = indicator(0.3, 2.0 * model.speed_max, 0.0, q)
     assert beyond == indicator(0.3, model.speed_max, 0.0, q)
