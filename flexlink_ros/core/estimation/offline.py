@@ -72,10 +72,10 @@ def replay(model, stamps_ns, angles, speeds=None,
     dict of str to ndarray
         'crank_angle', 'crank_speed', 'crank_accel' (m,); 'lever_tip', 'coupler_mid' (m, 2)
         [m]; 'modal', 'velocity' (m, r): q and q'; 'force', 'force_dot' (m, joints, 2) and
-        'rms2' (m, joints): the
-        tabulated joint reactions at the model's (clipped) crank state; 'orbit' for the next
-        call; 'stopped': the index of the sample that went out of bound (the rows after it
-        are not computed), or None; 'resume' for a call on the samples that follow.
+        'rms2' (m, joints): the tabulated joint reactions at the model's (clipped) crank
+        state; 'orbit' for the next call; 'stopped': the index of the sample that went out of
+        bound (the rows after it are not computed), or None; 'resume' for a call on the
+        samples that follow.
 
     """
     stamps_ns = np.asarray(stamps_ns, dtype=np.int64)
