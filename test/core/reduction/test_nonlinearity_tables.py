@@ -78,7 +78,7 @@ def test_table_passes_through_the_grid_values(model):
     np.testing.assert_allclose(end, np.roll(table[:, 0], -1, axis=0), rtol=1e-9, atol=1e-12)
 
 
-def test_tables_survive_the_cache_file_and_the_key_carries_their_version(mech, model, tmp_path):
+def test_tables_survive_a_cache_file_as_plain_arrays(model, tmp_path):
     arrays, meta = model.to_arrays()
     assert set(nl.TABLE_NAMES) <= set(arrays)
     path = tmp_path / 'model.npz'
