@@ -12,6 +12,7 @@ Validity indicator (flexlink_ros/core/validity.py, issue 14 item 4): independent
 """
 
 import dataclasses
+import inspect
 import math
 
 from flexlink_ros.core import validity
@@ -151,6 +152,8 @@ def test_candidate_load_ratio(linkage, responses):
 
 
 def test_is_valid_summary():
+    assert inspect.signature(validity.is_valid).parameters['threshold'].default \
+        is validity.VALIDITY_THRESHOLD
     assert validity.is_valid(np.array([0.0, 0.01])) == {'indicator_max': 0.01, 'valid': True,
                                                         'threshold': validity.VALIDITY_THRESHOLD}
     assert validity.is_valid(np.array([1.0]))['valid'] is False

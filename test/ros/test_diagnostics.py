@@ -5,6 +5,7 @@ The validity indicator (core/validity.py) graded from a period's counts, and a r
 real JointState messages at 269 rpm (valid) and 405 rpm (not valid: WARN with the value).
 """
 
+import inspect
 import math
 import time
 
@@ -87,6 +88,9 @@ def _sample(nonlinearity):
 
 
 def test_estimator_warns_when_the_validity_indicator_passes_the_threshold():
+    # the threshold is core.validity's constant, not a copy of it
+    default = inspect.signature(diagnostics.estimator_level).parameters['nonlinearity_warn']
+    assert default.default is validity.VALIDITY_THRESHOLD
     period = PeriodStats()
     period.add_sample(_sample(math.nan))            # a model without the tables
     assert diagnostics.estimator_level(period, 0.05) == (OK, 'ok')
