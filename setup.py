@@ -20,6 +20,10 @@ setup(
     # package falls back to its numpy step when the extension is not built.
     ext_modules=[Extension('flexlink_ros.core.estimation._radau_step',
                            ['flexlink_ros/core/estimation/_radau_step.c'],
+                           extra_compile_args=['-O3']),
+                 # the validity indicator per sample (its Python twin serves where not built)
+                 Extension('flexlink_ros.core.estimation._nonlinearity',
+                           ['flexlink_ros/core/estimation/_nonlinearity.c'],
                            extra_compile_args=['-O3'])],
     install_requires=['setuptools'],
     # The geometrically nonlinear peer the linear model is checked against (studies/).

@@ -2,7 +2,9 @@
 `flexlink estimate`, `flexlink plan`, `flexlink bench`: the streaming estimator offline.
 
 - ``estimate`` runs :class:`StreamingEstimator` on a synthetic constant-speed crank signal
-  (optionally jittered) and prints the last full revolution (:mod:`studies.synthetic`).
+  (optionally jittered) and prints the last full revolution (:mod:`studies.synthetic`); its
+  JSON has the validity indicator's ``nonlinearity`` (``indicator_max``, ``valid``,
+  ``threshold``) over that revolution.
 - ``plan`` picks the smallest model (physics: elements per link, rigid crank, geometric
   stiffness, bearings; size: modes, static directions, grid) meeting a tolerance against the
   full-order response of the richest model of the scene over a speed range, and shows the
@@ -17,6 +19,7 @@ import pathlib
 
 import numpy as np
 
+from .flex import nonlinearity_line
 from .main import emit
 from .model_args import add_estimator_arguments, load_model, model_options
 from .progress import Progress
@@ -44,7 +47,7 @@ def _estimate(args):
             f'  coupler mid |d| max {1e3 * coupler.max():.4f} mm\n'
             f'  update {result["us_per_sample_median"]:.1f} us median, '
             f'{result["us_per_sample_p99"]:.1f} us p99 (r = {model.size}, '
-            f'{model.grid_size} grid cells)')
+            f'{model.grid_size} grid cells)\n  ' + nonlinearity_line(result['nonlinearity']))
     return emit(result, text, args.json)
 
 

@@ -16,7 +16,8 @@
 optional ``shapes``. ``simulate`` JSON: ``crank_deg``, ``lever_tip`` and ``coupler_mid``
 (``dx_m``, ``dy_m``: ground-frame elastic deflection over one steady revolution),
 ``peak_to_peak_m``, ``floquet_spectral_radius``, ``damping_ratio``, ``stiffness_damping_s``
-(beta [s]), ``wall_s``, optional ``convergence``.
+(beta [s]), ``nonlinearity`` (``indicator_max``, ``valid``, ``threshold``: the validity
+indicator of core/validity.py over the revolution), ``wall_s``, optional ``convergence``.
 """
 
 import dataclasses
@@ -27,6 +28,7 @@ import numpy as np
 
 from .main import degree_range, emit
 from .model_args import add_model_arguments, add_stiffness_damping_argument, stiffness_damping
+from ..core import validity
 from ..core.fe import linkage as assembly, modes, simulate
 from ..core.mechanism_file import load_mechanism
 from ..core.options import ModelOptions
@@ -171,6 +173,15 @@ def modes_command(args):
     return emit(result, '\n'.join(lines), args.json)
 
 
+def nonlinearity_line(summary):
+    """Say the validity indicator's verdict in one line of text."""
+    if summary['valid'] is None:
+        return 'nonlinearity indicator: not available for this model'
+    verdict = 'valid' if summary['valid'] else 'NOT valid (amplitude-dependent detuning)'
+    return (f'nonlinearity indicator max {summary["indicator_max"]:.3g} (threshold '
+            f'{summary["threshold"]:g}): linear estimate {verdict}')
+
+
 def simulate_command(args):
     """Periodic steady-state response at constant speed; returns the exit code."""
     started = time.perf_counter()
@@ -205,7 +216,10 @@ def simulate_command(args):
               'damping_ratio': response.info['zeta'],
               'stiffness_damping_s': response.info['stiffness_damping_s'], 'steps_per_rev': steps,
               'stages': stages, 'options': _options_record(model), 'mechanism': mech.name,
-              'solve_s': response.info['wall_s']}
+              'solve_s': response.info['wall_s'],
+              'nonlinearity': validity.is_valid(validity.nonlinearity_indicator(
+                  model, response.displacement, response.crank_angle, speed,
+                  zeta=response.info['zeta']))}
     if args.check_convergence:
         if steps % 4:
             raise ValueError('--check-convergence needs steps-per-rev divisible by 4')
@@ -223,7 +237,7 @@ def simulate_command(args):
             f'peak-to-peak [mm]: lever tip dX {1e3 * p2p[0]:.4f} dY {1e3 * p2p[1]:.4f}, '
             f'coupler mid dX {1e3 * p2p[2]:.4f} dY {1e3 * p2p[3]:.4f}\n'
             f'Floquet spectral radius {response.info["spectral_radius"]:.4f}, '
-            f'wall {result["wall_s"]:.2f} s')
+            f'wall {result["wall_s"]:.2f} s\n' + nonlinearity_line(result['nonlinearity']))
     if 'convergence' in result:
         conv = result['convergence']
         text += ('\nstep check: max error [m] ' + ', '.join(

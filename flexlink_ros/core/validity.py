@@ -61,7 +61,12 @@ candidates were computed from the linear state:
   (or flagged). The indicator does not, and should not, see a damping mismatch.
 
 Cost per sample: the link means of N_e (one row of T^T U per element end, two links) and a 2 x 2
-product; omega_j, s_jl and d_j are constants per speed.
+product; omega_j, s_jl and d_j are constants per speed. The estimator evaluates it from the
+reduced state (:mod:`core.reduction.nonlinearity_tables` tabulates N_e / P_cr per link as rows
+on the basis, with the residual flexibility the basis misses; :mod:`core.estimation.nonlinearity`
+gives ``Sample.nonlinearity``), ``simulate`` / ``estimate --json`` summarise it as
+``"nonlinearity": {"indicator_max", "valid", "threshold"}`` (:func:`is_valid`), and
+flexlink_node's ``/diagnostics`` estimator status WARNs above :data:`VALIDITY_THRESHOLD`.
 """
 
 import math
@@ -85,6 +90,9 @@ INDICATOR_LINKS = (1, 2)
 VALIDITY_THRESHOLD = 0.5
 # Frozen modes of the detuning ratio (each flexible link's first bending mode, rigid crank).
 REFERENCE_MODES = 2
+# Below this crank speed [rad/s] the harmonics are dense: the distance to resonance is its floor
+# zeta omega (and omega / speed stays a finite number to round).
+REST_SPEED = 1e-6
 
 
 def buckling_loads(mechanism, links=INDICATOR_LINKS):
@@ -248,6 +256,40 @@ def resonance_distance(reference, zeta):
     return np.hypot(omega - harmonic, zeta * omega)
 
 
+def detuning_ratio(omega, share, ratios, speed, zeta):
+    """
+    Return the detuning ratio max_j |Delta omega_j| / sqrt(d_j^2 + (zeta omega_j)^2) (Eq. 3).
+
+    Delta omega_j = omega_j / 2 sum_l s_jl N_e,l / P_cr,l; d_j the distance of omega_j from the
+    nearest crank harmonic k |speed| (k >= 1; d_j = 0 below :data:`REST_SPEED`), as
+    :func:`resonance_distance`.
+
+    Parameters
+    ----------
+    omega : ndarray, shape (..., modes)
+        Reference frequencies [rad/s].
+    share : ndarray, shape (..., modes, links)
+        Strain-energy shares of the links.
+    ratios : ndarray, shape (..., links)
+        Link-mean elastic axial force over the Euler load.
+    speed : ndarray, shape (...)
+        Crank speed [rad/s] (its magnitude sets the harmonics).
+    zeta : float
+        Modal damping ratio.
+
+    Returns
+    -------
+    ndarray, shape (...)
+
+    """
+    shift = 0.5 * omega * np.einsum('...jl,...l->...j', share, ratios)
+    rate = np.abs(np.asarray(speed, dtype=float))[..., None]
+    moving = rate > REST_SPEED
+    safe = np.where(moving, rate, 1.0)
+    harmonic = np.where(moving, np.maximum(np.round(omega / safe), 1.0) * safe, omega)
+    return np.max(np.abs(shift) / np.hypot(omega - harmonic, zeta * omega), axis=-1)
+
+
 def nonlinearity_indicator(linkage, displacement, crank_angle, speed, zeta=None,
                            reference=None, accel=0.0):
     """
@@ -284,22 +326,29 @@ def nonlinearity_indicator(linkage, displacement, crank_angle, speed, zeta=None,
     zeta = linkage.mechanism.damping_ratio if zeta is None else float(zeta)
     reference = mode_reference(linkage, speed) if reference is None else reference
     ratios = load_ratios(linkage, displacement, crank_angle, speed, accel)
-    rel = sum(reference['share'][None, :, link] * ratios[link][:, None] for link in ratios)
-    shift = 0.5 * reference['omega'][None, :] * rel                      # (N, modes)
-    return np.max(np.abs(shift) / resonance_distance(reference, zeta)[None, :], axis=1)
+    links = list(ratios)
+    return detuning_ratio(reference['omega'], reference['share'][:, links],
+                          np.stack([ratios[link] for link in links], axis=-1), speed, zeta)
 
 
 def is_valid(indicator, threshold=VALIDITY_THRESHOLD):
     """
-    Summary of a revolution (or any run): {'indicator_max': float, 'valid': bool}.
+    Summary of a revolution (or any run): the ``"nonlinearity"`` entry of the JSON outputs.
 
-    The form of the ``"nonlinearity"`` entry of ``simulate`` / ``estimate --json``.
+    ``{'indicator_max': float, 'valid': bool, 'threshold': float}`` over the finite values of
+    ``indicator`` (``simulate`` / ``estimate --json``); with no finite value (a model without
+    the indicator's tables) 'indicator_max' and 'valid' are None.
     """
-    peak = float(np.max(indicator)) if np.size(indicator) else 0.0
-    return {'indicator_max': peak, 'valid': bool(peak <= threshold)}
+    values = np.asarray(indicator, dtype=float).ravel()
+    values = values[np.isfinite(values)]
+    if not values.size:
+        return {'indicator_max': None, 'valid': None, 'threshold': float(threshold)}
+    peak = float(np.max(values))
+    return {'indicator_max': peak, 'valid': bool(peak <= threshold),
+            'threshold': float(threshold)}
 
 
-__all__ = ['INDICATOR_LINKS', 'REFERENCE_MODES', 'VALIDITY_THRESHOLD', 'buckling_loads',
-           'rigid_element_axial_forces', 'elastic_axial_forces', 'load_ratios',
+__all__ = ['INDICATOR_LINKS', 'REFERENCE_MODES', 'REST_SPEED', 'VALIDITY_THRESHOLD',
+           'buckling_loads', 'rigid_element_axial_forces', 'elastic_axial_forces', 'load_ratios',
            'load_ratio_indicator', 'mode_reference', 'resonance_distance',
-           'nonlinearity_indicator', 'is_valid']
+           'detuning_ratio', 'nonlinearity_indicator', 'is_valid']

@@ -16,6 +16,7 @@ import numpy as np
 from .messages import ERROR, joint_level, OK, STALE, status, WARN
 from .node_model import OTHER_KINDS, PeriodStats, SKIP_KINDS, WARN_FLAGS
 from ..core.estimation.sample import SampleFlag
+from ..core.validity import VALIDITY_THRESHOLD
 from ..names import JOINT_NAMES
 
 
@@ -84,7 +85,7 @@ def input_counts(totals, period, values):
     return values
 
 
-def estimator_level(period, error_indicator_warn):
+def estimator_level(period, error_indicator_warn, nonlinearity_warn=VALIDITY_THRESHOLD):
     """
     Grade the estimates: ERROR if out of bound, WARN if flagged or a large indicator.
 
@@ -94,6 +95,9 @@ def estimator_level(period, error_indicator_warn):
         Counts of the period.
     error_indicator_warn : float
         WARN above this error indicator.
+    nonlinearity_warn : float
+        WARN above this validity indicator (core/validity.py: near a resonance the
+        amplitude-dependent detuning makes the linear estimate untrustworthy).
 
     Returns
     -------
@@ -113,12 +117,19 @@ def estimator_level(period, error_indicator_warn):
     indicator = period.max_error_indicator
     if indicator > error_indicator_warn:
         reasons.append(f'error indicator {indicator:.3g}')
+    if period.max_nonlinearity > nonlinearity_warn:
+        reasons.append(f'linear estimate not valid: nonlinearity indicator '
+                       f'{period.max_nonlinearity:.3g} above {nonlinearity_warn:g} (near '
+                       'resonance, the amplitude detunes the links)')
     return (WARN, ', '.join(reasons)) if reasons else (OK, 'ok')
 
 
 def estimator_status(period, values, model_facts):
     """
-    Report the estimator: update times, flags and error indicator of the period, and its model.
+    Report the estimator: update times, flags, error and validity indicators, and its model.
+
+    'nonlinearity_max' is the largest validity indicator of the period (NaN when the model
+    has no indicator tables or no sample came), 'nonlinearity_threshold' the WARN threshold.
 
     Parameters
     ----------
@@ -140,7 +151,10 @@ def estimator_status(period, values, model_facts):
     flags = [flag.name for flag in SampleFlag if flag and period.flags & flag]
     level, message = estimator_level(period, values['diagnostics.error_indicator_warn'])
     return status('estimator', level, message, {
-        'error_indicator_max': period.max_error_indicator, 'update_us_median': median,
+        'error_indicator_max': period.max_error_indicator,
+        'nonlinearity_max': (period.max_nonlinearity if math.isfinite(period.max_nonlinearity)
+                             else math.nan),
+        'nonlinearity_threshold': VALIDITY_THRESHOLD, 'update_us_median': median,
         'update_us_p99': p99, 'samples_in_period': period.valid, 'flags': ' '.join(flags),
         **model_facts})
 

@@ -165,13 +165,14 @@ class PeriodStats:
     last_out_of_bound: str = ''
     update_ns: list = dataclasses.field(default_factory=list)
     max_error_indicator: float = 0.0
+    max_nonlinearity: float = -math.inf     # validity indicator (NaN samples left out)
     max_criterion: list = dataclasses.field(default_factory=lambda: [0.0] * 4)
     near_zero: list = dataclasses.field(default_factory=lambda: [False] * 4)
     flags: int = 0
 
     def add_sample(self, sample):
         """
-        Count a published sample: its flags, error indicator and joint criteria.
+        Count a published sample: its flags, error and validity indicators, joint criteria.
 
         Parameters
         ----------
@@ -182,6 +183,8 @@ class PeriodStats:
         self.valid += 1
         self.flags |= sample.flags
         self.max_error_indicator = max(self.max_error_indicator, sample.error_indicator)
+        if sample.nonlinearity > self.max_nonlinearity:
+            self.max_nonlinearity = sample.nonlinearity
         for j, value in enumerate(sample.criterion):
             if value > self.max_criterion[j]:
                 self.max_criterion[j] = value

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..core.estimation.streaming import StreamingEstimator
 from ..core.numerics import RPM
+from ..core.validity import is_valid
 
 # Speeds of Cho 1992's deflection plots [rpm]: the accuracy checks use them.
 PAPER_RPM = (269.0, 391.0)
@@ -103,6 +104,7 @@ def run_estimate(model, rpm, seconds=3.0, rate_hz=1000.0, jitter=0.0, warm_start
     -------
     dict
         JSON-ready: crank_deg, lever_tip and coupler_mid {dx_m, dy_m}, error_indicator,
+        nonlinearity (core.validity.is_valid of the samples' validity indicator),
         us_per_sample_median, us_per_sample_p99, samples, flags seen.
 
     """
@@ -118,6 +120,7 @@ def run_estimate(model, rpm, seconds=3.0, rate_hz=1000.0, jitter=0.0, warm_start
         'coupler_mid': {'dx_m': [s.coupler_mid[0] for s in chosen],
                         'dy_m': [s.coupler_mid[1] for s in chosen]},
         'error_indicator_max': max(s.error_indicator for s in chosen),
+        'nonlinearity': is_valid([s.nonlinearity for s in chosen]),
         'us_per_sample_median': median,
         'us_per_sample_p99': p99,
         'samples': len(samples),

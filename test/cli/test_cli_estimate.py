@@ -6,7 +6,7 @@ import math
 import time
 
 from flexlink_ros.cli import main as cli
-from flexlink_ros.core import options as core_options
+from flexlink_ros.core import options as core_options, validity
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.numerics import relative_rms, RPM
 from flexlink_ros.core.reduction import build, cells
@@ -248,3 +248,18 @@ def test_plan_says_when_the_fixed_choices_leave_no_candidate(toy, monkeypatch, c
     out = capsys.readouterr().out
     assert 'fixed in every candidate: rigid crank yes' in out
     assert 'choice: none of the candidates meets the tolerance; leave out the fixed' in out
+
+
+def test_estimate_json_says_whether_the_estimate_is_valid(capsys, tmp_path):
+    """The real model (rigid crank and bearings, small): valid at 269 rpm, not at 405."""
+    summaries = {}
+    for rpm in ('269', '405'):
+        code = cli.main(['estimate', '--rpm', rpm, '--seconds', '1.5', '--bearings', 'rigid',
+                         '--rigid-crank', '--elements-per-link', '4', '--grid-size', '64',
+                         '--cache-dir', str(tmp_path), '--json'])
+        assert code == 0
+        summaries[rpm] = json.loads(capsys.readouterr().out)['nonlinearity']
+    assert summaries['269']['valid'] is True and summaries['405']['valid'] is False
+    assert (summaries['269']['indicator_max'] < validity.VALIDITY_THRESHOLD
+            < summaries['405']['indicator_max'])
+    assert summaries['269']['threshold'] == validity.VALIDITY_THRESHOLD

@@ -3,6 +3,7 @@
 import json
 
 from flexlink_ros.cli import main as cli
+from flexlink_ros.core import validity
 import numpy as np
 import pytest
 
@@ -103,3 +104,21 @@ def test_simulate_with_stiffness_damping(capsys):
     assert runs['1e-4']['floquet_spectral_radius'] < runs['0']['floquet_spectral_radius']
     code, out, _ = _run(capsys, *common[:-1], '--stiffness-damping', '1e-4')
     assert code == 0 and 'stiffness damping 0.0001 s' in out
+
+
+def test_simulate_json_says_whether_the_linear_response_is_valid(capsys):
+    """The validity indicator over the revolution: valid at 269 rpm, not at 405 (rigid)."""
+    summaries = {}
+    for rpm in ('269', '405'):
+        code, out, _ = _run(capsys, 'simulate', '--rpm', rpm, '--rigid-crank', '--bearings',
+                            'rigid', '--elements-per-link', '4', '--points-per-rev', '60',
+                            '--json')
+        assert code == 0
+        summaries[rpm] = json.loads(out)['nonlinearity']
+    assert summaries['269']['valid'] is True and summaries['405']['valid'] is False
+    assert (summaries['269']['indicator_max'] < validity.VALIDITY_THRESHOLD
+            < summaries['405']['indicator_max'])
+    assert summaries['405']['threshold'] == validity.VALIDITY_THRESHOLD
+    code, out, _ = _run(capsys, 'simulate', '--rpm', '405', '--rigid-crank', '--bearings',
+                        'rigid', '--elements-per-link', '4', '--points-per-rev', '60')
+    assert 'linear estimate NOT valid' in out

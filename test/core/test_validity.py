@@ -12,6 +12,7 @@ Validity indicator (flexlink_ros/core/validity.py, issue 14 item 4): independent
 """
 
 import dataclasses
+import inspect
 import math
 
 from flexlink_ros.core import validity
@@ -151,9 +152,13 @@ def test_candidate_load_ratio(linkage, responses):
 
 
 def test_is_valid_summary():
-    assert validity.is_valid(np.array([0.0, 0.01])) == {'indicator_max': 0.01, 'valid': True}
+    assert inspect.signature(validity.is_valid).parameters['threshold'].default \
+        is validity.VALIDITY_THRESHOLD
+    assert validity.is_valid(np.array([0.0, 0.01])) == {'indicator_max': 0.01, 'valid': True,
+                                                        'threshold': validity.VALIDITY_THRESHOLD}
     assert validity.is_valid(np.array([1.0]))['valid'] is False
-    assert validity.is_valid(np.array([]))['valid'] is True
+    assert validity.is_valid(np.array([]))['valid'] is None
+    assert validity.is_valid(np.array([math.nan, 0.7]))['valid'] is False
 
 
 def test_rigid_crank_only_flexible_links(mech):

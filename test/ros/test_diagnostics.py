@@ -1,8 +1,22 @@
-"""/diagnostics of nodes in namespaces: named after each node, distinct, also while inactive."""
+"""
+/diagnostics: the estimator's validity WARN; nodes in namespaces named apart, also inactive.
 
+The validity indicator (core/validity.py) graded from a period's counts, and a real node fed
+real JointState messages at 269 rpm (valid) and 405 rpm (not valid: WARN with the value).
+"""
+
+import inspect
+import math
+import time
+
+from flexlink_ros.core import validity
+from flexlink_ros.core.estimation.sample import Sample
 from flexlink_ros.names import NODE_NAME, READY_MESSAGE
+from flexlink_ros.ros import diagnostics
+from flexlink_ros.ros.messages import OK, WARN
+from flexlink_ros.ros.node_model import PeriodStats
 import test_node
-from test_node import NodeProcess, READY_TIMEOUT_S, spin_until
+from test_node import DISCOVERY_TIMEOUT_S, joint_state, NodeProcess, READY_TIMEOUT_S, spin_until
 
 processes = test_node.processes   # fixtures of test_node, used here by name
 ros = test_node.ros
@@ -63,3 +77,101 @@ def test_two_namespaced_nodes_report_distinct_diagnostics_also_while_inactive(
     assert inactive[f'{second}: input'][:2] == (
         DiagnosticStatus.STALE, 'inactive: not subscribed to /robot2/joint_states')
     assert plain.stop() == 0 and managed.stop() == 0
+
+
+def _sample(nonlinearity):
+    return Sample(stamp_ns=0, crank_angle=0.0, crank_speed=40.0, crank_accel=0.0,
+                  lever_tip=(0.0, 0.0), coupler_mid=(0.0, 0.0), reaction_n=(1.0,) * 4,
+                  gamma_dot=(0.0,) * 4, criterion=(0.0,) * 4, near_zero=(False,) * 4,
+                  error_indicator=0.0, flags=0, message='', modal=(),
+                  nonlinearity=nonlinearity)
+
+
+def test_estimator_warns_when_the_validity_indicator_passes_the_threshold():
+    # the threshold is core.validity's constant, not a copy of it
+    default = inspect.signature(diagnostics.estimator_level).parameters['nonlinearity_warn']
+    assert default.default is validity.VALIDITY_THRESHOLD
+    period = PeriodStats()
+    period.add_sample(_sample(math.nan))            # a model without the tables
+    assert diagnostics.estimator_level(period, 0.05) == (OK, 'ok')
+    values = {'diagnostics.error_indicator_warn': 0.05}
+    keys = {kv.key: kv.value for kv in diagnostics.estimator_status(period, values, {}).values}
+    assert keys['nonlinearity_max'] == 'nan'
+    assert keys['nonlinearity_threshold'] == f'{validity.VALIDITY_THRESHOLD:.6g}'
+    period.add_sample(_sample(0.9 * validity.VALIDITY_THRESHOLD))
+    assert diagnostics.estimator_level(period, 0.05) == (OK, 'ok')
+    period.add_sample(_sample(1.5 * validity.VALIDITY_THRESHOLD))
+    period.add_sample(_sample(math.nan))
+    level, message = diagnostics.estimator_level(period, 0.05)
+    assert level == WARN and 'linear estimate not valid' in message
+    status = diagnostics.estimator_status(period, values, {})
+    keys = {kv.key: kv.value for kv in status.values}
+    assert float(keys['nonlinearity_max']) == 1.5 * validity.VALIDITY_THRESHOLD
+
+
+def _feed(publisher, executor, rpm, first_ns, count=500):
+    """Publish ``count`` crank samples at ``rpm``, 1 kHz stamps, paced at about that rate."""
+    speed = rpm * math.pi / 30.0
+    start = time.monotonic()
+    for n in range(count):
+        angle = math.remainder(speed * n * 1e-3, 2.0 * math.pi)
+        publisher.publish(joint_state(first_ns + n * 1_000_000, ['crank'], [angle], [speed]))
+        delay = start + (n + 1) * 1e-3 - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+        if n % 50 == 0:
+            executor.spin_once(timeout_sec=0.0)
+
+
+def test_node_estimator_warns_past_the_validity_threshold(tmp_path, processes, ros):
+    """A small rigid model (rigid crank and bearings): OK at 269 rpm, WARN at 405 rpm."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from geometry_msgs.msg import Vector3Stamped
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import JointState
+
+    node = NodeProcess(tmp_path, 'diagnostics.period_s:=0.1', 'model.bearings:=rigid',
+                       'model.rigid_crank:=true', 'model.grid_size:=64',
+                       f'model.cache_dir:={tmp_path}')
+    processes.append(node)
+    node.wait_for(READY_MESSAGE, READY_TIMEOUT_S)
+    test_node, executor = ros
+    qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+    publisher = test_node.create_publisher(JointState, 'joint_states', qos)
+    outputs, statuses = [], []
+    test_node.create_subscription(Vector3Stamped, f'/{NODE_NAME}/lever_tip/deflection',
+                                  outputs.append, qos)
+
+    def on_diagnostics(message):
+        for item in message.status:
+            if item.name == f'/{NODE_NAME}: estimator':
+                keys = {kv.key: kv.value for kv in item.values}
+                statuses.append((int(keys.get('samples_in_period', 0)), item.level,
+                                 item.message, float(keys.get('nonlinearity_max', 'nan'))))
+
+    test_node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 100)
+    spin_until(executor, lambda: publisher.get_subscription_count() > 0, DISCOVERY_TIMEOUT_S,
+               'discovery')
+    verdicts = {}
+    # The second speed starts 10 s later in stamps: the estimator restarts (warm) there.
+    for rpm, first_ns in ((269.0, 10**18), (405.0, 10**18 + 10**10)):
+        before = len(outputs)
+        _feed(publisher, executor, rpm, first_ns)
+        spin_until(executor, lambda: len(outputs) >= before + 500, 30.0, 'the outputs')
+        seen = len(statuses)
+        # a period without samples: every sample of this speed has been reported
+        spin_until(executor, lambda: any(not entry[0] for entry in statuses[seen:]), 10.0,
+                   'a period after the last sample')
+        verdicts[rpm] = [entry[1:] for entry in statuses if entry[0]]
+        statuses[:] = []
+    print(verdicts)
+    # (a period may WARN for other reasons, never for the validity)
+    assert verdicts[269.0] and all('nonlinearity' not in message
+                                   and value < validity.VALIDITY_THRESHOLD
+                                   for _, message, value in verdicts[269.0]), verdicts[269.0]
+    warned = [(value, message) for level, message, value in verdicts[405.0] if level == WARN]
+    assert warned, verdicts[405.0]
+    for value, message in warned:
+        assert value > validity.VALIDITY_THRESHOLD
+        assert 'linear estimate not valid: nonlinearity indicator' in message
+    assert node.stop() == 0

@@ -71,10 +71,11 @@ def replay(model, stamps_ns, angles, speeds=None,
     -------
     dict of str to ndarray
         'crank_angle', 'crank_speed', 'crank_accel' (m,); 'lever_tip', 'coupler_mid' (m, 2)
-        [m]; 'modal' (m, r); 'force', 'force_dot' (m, joints, 2) and 'rms2' (m, joints): the
-        tabulated joint reactions at the model's (clipped) crank state; 'orbit' for the next
-        call; 'stopped': the index of the sample that went out of bound (the rows after it
-        are not computed), or None; 'resume' for a call on the samples that follow.
+        [m]; 'modal', 'velocity' (m, r): q and q'; 'force', 'force_dot' (m, joints, 2) and
+        'rms2' (m, joints): the tabulated joint reactions at the model's (clipped) crank
+        state; 'orbit' for the next call; 'stopped': the index of the sample that went out of
+        bound (the rows after it are not computed), or None; 'resume' for a call on the
+        samples that follow.
 
     """
     stamps_ns = np.asarray(stamps_ns, dtype=np.int64)
@@ -111,6 +112,7 @@ def replay(model, stamps_ns, angles, speeds=None,
 def _allocate(result, count, size):
     """Add the per-row outputs to a replay's ``result`` (NaN); return (modal, records)."""
     modal = np.full((count, size), math.nan)
+    result['velocity'] = np.full((count, size), math.nan)
     records = np.full((count, RECORD_SIZE), math.nan)
     outputs, joints = len(OUTPUT_NAMES), len(JOINT_NAMES)
     joint = records[:, 2 * outputs:]
@@ -136,6 +138,7 @@ def _replay_rows(estimator, stamps_ns, angles, speeds, motion, result, on_rows, 
         if sample.flags & OUT_OF_BOUND:
             return _stop(result, n, on_rows)
         modal[n] = sample.modal
+        result['velocity'][n] = estimator.state[modal.shape[1]:]
         records[n] = estimator.last_record
     # A non-finite filter output ends the steps before it (the stepper must not see it).
     finite = np.all(np.isfinite(motion[prefix:]), axis=1)
@@ -143,7 +146,8 @@ def _replay_rows(estimator, stamps_ns, angles, speeds, motion, result, on_rows, 
     rows = _row_table(estimator, stamps_ns, motion, slice(prefix, last), previous_ns)
     if on_rows is not None:
         on_rows(result, prefix)
-    stopped = _step_chunks(estimator, rows, prefix, (modal, records), result, on_rows)
+    stopped = _step_chunks(estimator, rows, prefix, (modal, records, result['velocity']),
+                           result, on_rows)
     if stopped is not None:
         return _stop(result, stopped, on_rows)
     if last < count:
@@ -168,10 +172,10 @@ def _step_chunks(estimator, rows, prefix, outputs, result, on_rows):
     """
     Step through ``rows`` in chunks of REPLAY_CHUNK; return the first row that failed, or None.
 
-    ``outputs`` = (modal, records) of the replay, filled from row ``prefix`` on; a row fails
-    when its step is singular or non-finite or its deflection is beyond the bound.
+    ``outputs`` = (modal, records, velocity) of the replay, filled from row ``prefix`` on; a
+    row fails when its step is singular or non-finite or its deflection is beyond the bound.
     """
-    modal, records = outputs
+    modal, records, velocity = outputs
     r = estimator.model.size
     channels = len(OUTPUT_NAMES)
     states = np.empty((min(REPLAY_CHUNK, rows.shape[0]), 2 * r))
@@ -184,6 +188,7 @@ def _step_chunks(estimator, rows, prefix, outputs, result, on_rows):
         except ValueError:              # singular or non-finite step: found below
             pass
         modal[done] = states[:chunk.shape[0], :r]
+        velocity[done] = states[:chunk.shape[0], r:]
         good = np.all(np.isfinite(states[:chunk.shape[0]]), axis=1) & np.all(
             np.abs(records[done, :channels]) <= estimator.deflection_bound_m, axis=1)
         if not np.all(good):
@@ -195,7 +200,7 @@ def _step_chunks(estimator, rows, prefix, outputs, result, on_rows):
 
 def _stop(result, row, on_rows):
     """Mark ``row`` out of bound (NaN) in a replay's result; the rows before it are final."""
-    for key in ('lever_tip', 'coupler_mid', 'modal', 'force', 'force_dot', 'rms2'):
+    for key in ('lever_tip', 'coupler_mid', 'modal', 'velocity', 'force', 'force_dot', 'rms2'):
         result[key][row:] = math.nan
     result['stopped'] = row
     if on_rows is not None:

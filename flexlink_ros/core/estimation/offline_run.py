@@ -13,6 +13,7 @@ import time
 import numpy as np
 
 from .gate import DEFAULT_RESET_GAP_S, InputGate, plan_rows
+from .nonlinearity import NonlinearityIndicator
 from .offline import replay
 from .sample import SampleFlag
 from .step import REACTION_FLOOR_FRACTION
@@ -27,7 +28,7 @@ PLAN_WINDOW = 4096
 FIRST_PLAN_WINDOW = 64
 # The per-sample arrays of an estimate (besides 'flags').
 _ESTIMATE_KEYS = OUTPUT_POINTS + ('crank_angle', 'crank_speed', 'modal', 'reaction_n',
-                                  'gamma_dot', 'criterion')
+                                  'gamma_dot', 'criterion', 'nonlinearity')
 
 
 def criteria_batch(model, angles, speeds, accels,
@@ -123,8 +124,8 @@ def allocate_estimate(model, count):
     result = {key: np.zeros((count, 2)) for key in OUTPUT_POINTS}
     for key in ('reaction_n', 'gamma_dot', 'criterion'):
         result[key] = np.zeros((count, len(JOINT_NAMES)))
-    result['crank_angle'] = np.zeros(count)
-    result['crank_speed'] = np.zeros(count)
+    for key in ('crank_angle', 'crank_speed', 'nonlinearity'):
+        result[key] = np.zeros(count)
     result['modal'] = np.zeros((count, model.size))
     result['flags'] = np.zeros(count, dtype=np.int64)
     return result
@@ -162,8 +163,8 @@ def estimate_offline(model, stamps_ns, angles, speeds, warm_start=True, result=N
     -------
     dict of ndarray
         'lever_tip', 'coupler_mid' (m, 2) [m]; 'reaction_n', 'gamma_dot', 'criterion' (m, 4);
-        'crank_angle', 'crank_speed' (m,); 'modal' (m, r); 'flags' (m,); 'criteria_available'
-        (bool); 'segments', 'outliers', 'out_of_bound' (int).
+        'crank_angle', 'crank_speed', 'nonlinearity' (validity indicator) (m,); 'modal' (m, r);
+        'flags' (m,); 'criteria_available' (bool); 'segments', 'outliers', 'out_of_bound'.
 
     """
     count = len(stamps_ns)
@@ -188,7 +189,7 @@ class _OfflineRun:
     def __init__(self, model, stamps_ns, angles, speeds, warm_start, result, progress):
         self.model, self.stamps_ns, self.angles, self.speeds = model, stamps_ns, angles, speeds
         self.warm_start, self.result, self.progress = warm_start, result, progress
-        self.count = stamps_ns.size
+        self.count, self.nonlinearity = stamps_ns.size, NonlinearityIndicator(model)
         self.available = bool(np.any(model.force_moments))
         self.tables = step_tables(model)    # built once, not per segment
         self.orbit = None   # carried across segments, as one streaming estimator carries it
@@ -321,11 +322,13 @@ class _OfflineRun:
         reaction, gamma_dot, criterion, _, self.available = criteria_batch(
             model, out['crank_angle'][rows], model_speed, model_accel, blocks=blocks)
         target = self.chosen[rows]
+        nonlinearity = self.nonlinearity.batch(out['crank_angle'][rows], model_speed, model_accel,
+                                               out['modal'][rows], out['velocity'][rows])
         for key, values in (('lever_tip', out['lever_tip'][rows]),
                             ('coupler_mid', out['coupler_mid'][rows]),
                             ('crank_angle', out['crank_angle'][rows]),
                             ('crank_speed', out['crank_speed'][rows]),
-                            ('modal', out['modal'][rows]),
+                            ('modal', out['modal'][rows]), ('nonlinearity', nonlinearity),
                             ('reaction_n', reaction),
                             ('gamma_dot', gamma_dot), ('criterion', criterion)):
             self.result[key][target] = values
@@ -361,10 +364,7 @@ class BackgroundEstimate:
     """
 
     def __init__(self, run_estimate, result):
-        self.result = result
-        self.seconds = None
-        self._done = 0
-        self._error = None
+        self.result, self.seconds, self._done, self._error = result, None, 0, None
         self._condition = threading.Condition()
         self._thread = threading.Thread(target=self._run, args=(run_estimate,),
                                         name='replay-estimate', daemon=True)

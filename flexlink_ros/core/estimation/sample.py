@@ -63,6 +63,11 @@ class Sample:
         Warning text, empty if none.
     modal : tuple of float
         Reduced coordinates q (for :meth:`StreamingEstimator.link_shapes`).
+    nonlinearity : float
+        Validity indicator of the linear estimate (:mod:`core.validity`: the detuning ratio,
+        frequency shift of the elastic axial force over the distance to resonance); above
+        :data:`core.validity.VALIDITY_THRESHOLD` the estimate cannot be trusted. NaN when the
+        model cannot compute it.
 
     """
 
@@ -80,9 +85,11 @@ class Sample:
     flags: int
     message: str
     modal: tuple
+    nonlinearity: float = math.nan
 
 
-def sample_from_record(stamp_ns, crank, deflection, correction, criteria, flags, message, modal):
+def sample_from_record(stamp_ns, crank, deflection, correction, criteria, flags, message, modal,
+                       nonlinearity=math.nan):
     """
     Return the estimate of a sample from its record's values and its criteria.
 
@@ -103,6 +110,8 @@ def sample_from_record(stamp_ns, crank, deflection, correction, criteria, flags,
         Warning text, empty if none.
     modal : tuple of float
         Reduced coordinates q.
+    nonlinearity : float
+        Validity indicator (NaN if the model cannot compute it).
 
     """
     size = math.sqrt(sum([d * d for d in deflection]))
@@ -114,7 +123,7 @@ def sample_from_record(stamp_ns, crank, deflection, correction, criteria, flags,
         near_zero=criteria[3],
         error_indicator=math.sqrt(sum([c * c for c in correction]))
         / max(size, ERROR_INDICATOR_FLOOR_M),
-        flags=flags, message=message, modal=modal)
+        flags=flags, message=message, modal=modal, nonlinearity=nonlinearity)
 
 
 def nan_sample(stamp_ns, crank, flags, message, size):

@@ -21,6 +21,7 @@ from . import tables
 from .crank_filter import CompiledCrankRateFilter, CrankRateFilter, DEFAULT_FIT_TIME_CONSTANT_S
 from .gate import DEFAULT_RESET_GAP_S, InputGate
 from .native import compiled_step_available, RECORD_SIZE, ROW_SIZE
+from .nonlinearity import NonlinearityIndicator
 from .sample import (CLIPPED_ACCEL, CLIPPED_SPEED, LARGE_STEP, nan_sample, NO_CRITERIA,
                      OUT_OF_BOUND, REPEATED, sample_from_record, SPEED_FROM_ANGLE)
 from .step import CompiledStep, MAX_SUBSTEP_NS, NumpyStep
@@ -126,6 +127,7 @@ class StreamingEstimator:
         self._warm = WarmStart(warm_start_limiter)
         self._bound_warning = ThrottledWarning(LOGGER)
         self.deflection_bound_m = self._tables.deflection_bound(model, DEFLECTION_SAFETY_FACTOR)
+        self.nonlinearity = NonlinearityIndicator(model)
 
     @property
     def compiled(self):
@@ -151,6 +153,9 @@ class StreamingEstimator:
     @orbit.setter
     def orbit(self, orbit):
         self._warm.orbit = orbit
+
+    state = property(lambda self: self._stepper.z[:2 * self._tables.size],
+                     doc="The model state (q, q') of the newest sample (a view).")
 
     @property
     def last_record(self):
@@ -363,10 +368,12 @@ class StreamingEstimator:
             return self._out_of_bound(
                 stamp_ns, angle, speed, accel, flags,
                 f'deflection {largest:.6g} m beyond the bound {self.deflection_bound_m:.6g} m')
+        state = self.state
         sample = sample_from_record(
             stamp_ns, (angle, speed, accel), deflection, correction, criteria,
-            flags | self._base_flags, message,
-            tuple(self._stepper.z[:self._tables.size].tolist()))
+            flags | self._base_flags, message, tuple(state[:self._tables.size].tolist()),
+            self.nonlinearity(angle, speed, min(max(accel, -self.accel_limit), self.accel_limit),
+                              state))
         self._last = sample
         self.samples += 1
         return sample

@@ -111,6 +111,9 @@ class ReducedModel:
         Modal damping ratio.
     info : dict
         Options and diagnostics (JSON-serialisable).
+    nonlinearity : dict of str to ndarray, or None
+        Tables of the validity indicator (:mod:`.nonlinearity_tables`); None for a model
+        built without them.
 
     """
 
@@ -121,6 +124,7 @@ class ReducedModel:
     speed_max: float
     zeta: float
     info: dict = dataclasses.field(default_factory=dict)
+    nonlinearity: dict = None
 
     @property
     def grid_size(self):
@@ -141,12 +145,13 @@ class ReducedModel:
     def nbytes(self):
         """Return the memory of the arrays [bytes]."""
         return (self.table.nbytes + self.shape_table.nbytes + self.basis.nbytes
-                + self.force_moments.nbytes)
+                + self.force_moments.nbytes
+                + sum(a.nbytes for a in (self.nonlinearity or {}).values()))
 
     def to_arrays(self):
         """Arrays and metadata for :func:`core.cache.save_cache`."""
         arrays = {'table': self.table, 'shape_table': self.shape_table, 'basis': self.basis,
-                  'force_moments': self.force_moments}
+                  'force_moments': self.force_moments, **(self.nonlinearity or {})}
         meta = {'speed_max': self.speed_max, 'zeta': self.zeta, 'info': self.info}
         return arrays, meta
 
@@ -156,7 +161,9 @@ class ReducedModel:
         return cls(table=arrays['table'], shape_table=arrays['shape_table'],
                    basis=arrays['basis'], force_moments=arrays['force_moments'],
                    speed_max=float(meta['speed_max']), zeta=float(meta['zeta']),
-                   info=dict(meta.get('info', {})))
+                   info=dict(meta.get('info', {})),
+                   nonlinearity={name: array for name, array in arrays.items()
+                                 if name.startswith('nonlinearity_')} or None)
 
     def cell(self, theta):
         """Cell index and position t in [0, 1) of crank angles (any range); vectorised."""

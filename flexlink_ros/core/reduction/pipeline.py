@@ -16,6 +16,7 @@ from .basis import FrozenSamples
 from .build import reduce_samples
 from .build_progress import BuildProgress
 from .model import ReducedModel
+from .nonlinearity_tables import nonlinearity_tables, NONLINEARITY_VERSION
 from .. import dynamics
 from ..fe import linkage as assembly
 from ..fe.stiffness_damping import stiffness_damping_terms
@@ -66,7 +67,8 @@ def model_for_mechanism(mechanism, options=None, cache_dir=None, use_cache=True,
         return build_model(mechanism, options, progress).to_arrays()
 
     arrays, meta, _ = store.load_or_build(path, key, build)
-    return ReducedModel.from_arrays(arrays, meta)
+    return with_nonlinearity(ReducedModel.from_arrays(arrays, meta), mechanism, options,
+                             None if path is None else f'{path[:-4]}-nonlinearity.npz', key)
 
 
 def build_model(mechanism, options, progress=None):
@@ -85,6 +87,24 @@ def build_model(mechanism, options, progress=None):
                                  'mechanism': mechanism.name, 'criteria': criteria_source})
     tracker.finish()
     return model
+
+
+def with_nonlinearity(model, mechanism, options, path, key):
+    """
+    Return the model with the validity indicator's tables (:mod:`.nonlinearity_tables`).
+
+    Cached in a file of their own beside the model's (``path``; None: built, not cached),
+    keyed by the model's key and :data:`NONLINEARITY_VERSION`: the model's own file and key
+    are those of a model without the tables.
+    """
+    def build():
+        linkage = assembly.FlexibleLinkage(fe_mechanism(mechanism, options), options)
+        samples = frozen_samples_for(mechanism, options)
+        return nonlinearity_tables(linkage, samples, model, options.speed_max), {}
+
+    arrays, _, _ = store.load_or_build(
+        path, store.cache_key('nonlinearity-tables', NONLINEARITY_VERSION, key), build)
+    return dataclasses.replace(model, nonlinearity=arrays)
 
 
 def fe_mechanism(mechanism, options):
