@@ -228,19 +228,26 @@ def simulate_command(args):
             model, speed, steps=(steps // 4, steps // 2, steps), reference_steps=4 * steps,
             points=math.gcd(steps // 4, points), **kwargs)
     result['wall_s'] = time.perf_counter() - started
-    text = (f'{mech.name} at {rpm:g} rpm, {method}'
+    return emit(result, _simulate_text(mech, model, args, result), args.json)
+
+
+def _simulate_text(mech, model, args, result):
+    """Return the plain-text report of ``simulate`` (the JSON's figures, in mm)."""
+    p2p, count = result['peak_to_peak_m'], result['modes']
+    p2p = (*p2p['lever_tip'], *p2p['coupler_mid'])
+    text = (f'{mech.name} at {result["rpm"]:g} rpm, {result["method"]}'
             + (f' ({count} modes{", static correction" if args.static_correction else ""})'
-               if method == 'modal' else '')
+               if result['method'] == 'modal' else '')
             + f', {model.size} DOFs, bearings {args.bearings}, rigid crank {args.rigid_crank}'
             + (f', stiffness damping {model.options.stiffness_damping:g} s'
                if model.options.stiffness_damping else '') + '\n'
             f'peak-to-peak [mm]: lever tip dX {1e3 * p2p[0]:.4f} dY {1e3 * p2p[1]:.4f}, '
             f'coupler mid dX {1e3 * p2p[2]:.4f} dY {1e3 * p2p[3]:.4f}\n'
-            f'Floquet spectral radius {response.info["spectral_radius"]:.4f}, '
+            f'Floquet spectral radius {result["floquet_spectral_radius"]:.4f}, '
             f'wall {result["wall_s"]:.2f} s\n' + nonlinearity_line(result['nonlinearity']))
     if 'convergence' in result:
         conv = result['convergence']
         text += ('\nstep check: max error [m] ' + ', '.join(
             f'{s}: {e:.3g}' for s, e in zip(conv['steps'], conv['max_error_m']))
             + ' (observed order ' + ', '.join(f'{o:.2f}' for o in conv['observed_order']) + ')')
-    return emit(result, text, args.json)
+    return text
