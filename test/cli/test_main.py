@@ -47,8 +47,9 @@ def test_flexlink_version_prints_it_and_exits_0(capsys):
 
 
 def test_ros_args_sections_are_split_off_as_rclpy_does():
-    tool, ros = cli.split_ros_args(['replay', 'bag', '--ros-args', '-r', '__ns:=/r1', '--',
-                                     '--publish', '--ros-args', '-r', 'a:=b'])
+    argv = ['replay', 'bag', '--ros-args', '-r', '__ns:=/r1', '--', '--publish',
+            '--ros-args', '-r', 'a:=b']
+    tool, ros = cli.split_ros_args(argv)
     assert tool == ['replay', 'bag', '--publish']
     assert ros == ['-r', '__ns:=/r1', '-r', 'a:=b']
     assert cli.split_ros_args(['mcap-info', 'run1']) == (['mcap-info', 'run1'], [])
