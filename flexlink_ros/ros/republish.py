@@ -22,14 +22,24 @@ from .playback_schedule import CLOCK, pass_events
 
 DISCOVERY_TIMEOUT_S = 10.0
 ACK_TIMEOUT_S = 5.0      # a reliable subscriber gets the last messages before the process ends
+SIGNAL_CHECK_S = 0.1     # longest sleep between two looks at the context (SIGINT shuts it down)
 
 
-def _wait_for_subscribers(publishers, timeout_s):
-    """Return once every publisher has a subscriber, or after ``timeout_s``."""
+def _wait_for_subscribers(rclpy, publishers, timeout_s):
+    """Return once every publisher has a subscriber, after ``timeout_s``, or at a signal."""
     deadline = time.monotonic() + timeout_s
-    while (any(p.get_subscription_count() == 0 for p in publishers)
-           and time.monotonic() < deadline):
+    while (rclpy.ok() and time.monotonic() < deadline
+           and any(p.get_subscription_count() == 0 for p in publishers)):
         time.sleep(0.05)
+
+
+def _sleep_until(rclpy, wall):
+    """Sleep until monotonic time ``wall`` in short steps, so that a signal ends it soon."""
+    while rclpy.ok():
+        delay = wall - time.monotonic()
+        if delay <= 0:
+            return
+        time.sleep(min(delay, SIGNAL_CHECK_S))
 
 
 def relative_topic(topic):
@@ -51,9 +61,7 @@ def _play_pass(rclpy, publishers, samples, options, counts, progress):
     start_wall = time.monotonic()
     for wall_s, kind, value in pass_events(samples['log_ns'], options['rate'],
                                            options['clock_hz'], options['clock_per_message']):
-        delay = start_wall + wall_s - time.monotonic()
-        if delay > 0:
-            time.sleep(delay)
+        _sleep_until(rclpy, start_wall + wall_s)
         if not rclpy.ok():
             return False
         if kind == CLOCK:
@@ -62,6 +70,7 @@ def _play_pass(rclpy, publishers, samples, options, counts, progress):
             continue
         joint_states.publish(data[value])
         counts['published'] += 1
+        counts['pass_position'] = value + 1
         if progress is not None:
             progress(value)
     return True
@@ -96,12 +105,13 @@ def publish_recording(samples, topic, options, progress=None):
         (list of str, the arguments after ``--ros-args``), optionally
         'discovery_timeout_s'.
     progress : callable, optional
-        ``progress(n)`` after each message and ``progress(count, force=True)`` at the end.
+        ``progress(n)`` after each message and ``progress(n, force=True)`` at the end.
 
     Returns
     -------
     dict
-        'published', 'clock_messages', 'passes' (started), 'interrupted', 'topic' (the
+        'published', 'clock_messages', 'passes' (started), 'pass_position' (messages into
+        the last pass), 'interrupted', 'topic' (the
         resolved, remapped name), 'node' (its fully qualified name), 'publish_s' (wall time).
 
     """
@@ -109,7 +119,8 @@ def publish_recording(samples, topic, options, progress=None):
     from rclpy.duration import Duration
     from rclpy.executors import ExternalShutdownException
 
-    counts = {'published': 0, 'clock_messages': 0, 'passes': 0, 'interrupted': True,
+    counts = {'published': 0, 'clock_messages': 0, 'passes': 0, 'pass_position': 0,
+              'interrupted': True,
               'topic': None, 'node': None, 'publish_s': 0.0}
     start = time.monotonic()
     try:
@@ -118,7 +129,7 @@ def publish_recording(samples, topic, options, progress=None):
             publishers = _create_publishers(node, topic, options)
             counts.update(topic=publishers[0].topic_name,
                           node=node.get_fully_qualified_name())
-            _wait_for_subscribers([p for p in publishers if p is not None],
+            _wait_for_subscribers(rclpy, [p for p in publishers if p is not None],
                                   options.get('discovery_timeout_s', DISCOVERY_TIMEOUT_S))
             start = time.monotonic()
             passes = options['passes']
@@ -133,5 +144,5 @@ def publish_recording(samples, topic, options, progress=None):
         pass
     counts['publish_s'] = time.monotonic() - start
     if progress is not None:
-        progress(len(samples['data']), force=True)
+        progress(counts['pass_position'], force=True)
     return counts
