@@ -21,6 +21,7 @@ from .playback_schedule import CLOCK, pass_events
 
 
 DISCOVERY_TIMEOUT_S = 10.0
+CLOCK_DISCOVERY_S = 1.0  # after the JointState subscriber: /clock may have none (no sim time)
 ACK_TIMEOUT_S = 5.0      # a reliable subscriber gets the last messages before the process ends
 SIGNAL_CHECK_S = 0.1     # longest sleep between two looks at the context (SIGINT shuts it down)
 
@@ -129,8 +130,10 @@ def publish_recording(samples, topic, options, progress=None):
             publishers = _create_publishers(node, topic, options)
             counts.update(topic=publishers[0].topic_name,
                           node=node.get_fully_qualified_name())
-            _wait_for_subscribers(rclpy, [p for p in publishers if p is not None],
+            _wait_for_subscribers(rclpy, publishers[:1],
                                   options.get('discovery_timeout_s', DISCOVERY_TIMEOUT_S))
+            if publishers[1] is not None:    # /clock listeners, if any, are found by now
+                _wait_for_subscribers(rclpy, publishers[1:], CLOCK_DISCOVERY_S)
             start = time.monotonic()
             passes = options['passes']
             for _ in (itertools.count() if passes == 0 else range(passes)):
