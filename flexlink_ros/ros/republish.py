@@ -21,6 +21,7 @@ from .playback_schedule import CLOCK, pass_events
 
 
 DISCOVERY_TIMEOUT_S = 10.0
+HISTORY_DEPTH = 1000     # the node's qos.depth default
 CLOCK_DISCOVERY_S = 1.0  # after the JointState subscriber: /clock may have none (no sim time)
 ACK_TIMEOUT_S = 5.0      # a reliable subscriber gets the last messages before the process ends
 SIGNAL_CHECK_S = 0.1     # longest sleep between two looks at the context (SIGINT shuts it down)
@@ -81,7 +82,8 @@ def _create_publishers(node, topic, options):
     """Create the JointState publisher and, with a clock, the /clock one (ClockQoS)."""
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-    joint_states = node.create_publisher(JointState, relative_topic(topic), 100)
+    # A reliable subscriber that falls behind by up to a second (1 kHz) loses nothing.
+    joint_states = node.create_publisher(JointState, relative_topic(topic), HISTORY_DEPTH)
     clock = None
     if options['clock_hz'] > 0 or options['clock_per_message']:
         # rclcpp's ClockQoS: best effort, keep last 1, as rclpy's time source subscribes.
