@@ -187,7 +187,7 @@ def run_replay(args):
 def playback_options(args):
     """Return :func:`ros.republish.publish_recording`'s options from the parsed flags."""
     passes = args.loop_count if args.loop_count is not None else (0 if args.loop else 1)
-    return {'rate': args.rate, 'clock_hz': args.clock, 'passes': passes,
+    return {'rate': args.rate, 'clock_hz': args.clock or 0.0, 'passes': passes,
             'clock_per_message': args.clock_topics_all,
             'ros_args': list(getattr(args, 'ros_args', None) or [])}
 
@@ -197,7 +197,7 @@ def _check_arguments(args):
     if not args.out and not args.publish:
         raise ValueError('give `--out` and/or `--publish`')
     playback_flags = [flag for flag, given in (
-        ('--clock', args.clock > 0), ('--clock-topics-all', args.clock_topics_all),
+        ('--clock', args.clock is not None), ('--clock-topics-all', args.clock_topics_all),
         ('--loop', args.loop), ('--loop-count', args.loop_count is not None),
         ('--ros-args', bool(getattr(args, 'ros_args', None)))) if given]
     if playback_flags and not args.publish:
@@ -211,7 +211,7 @@ def _check_arguments(args):
             raise ValueError(f'`--out` {exc}') from None
     if not args.rate > 0:
         raise ValueError(f'`--rate` must be positive, got {args.rate}')
-    if not args.clock >= 0:
+    if args.clock is not None and not args.clock > 0:
         raise ValueError(f'`--clock` must be a positive frequency [Hz], got {args.clock}')
     if args.markers_every_n < 0:
         raise ValueError(f'`--markers-every-n` must be >= 0, got {args.markers_every_n}')
@@ -298,7 +298,7 @@ def register(subparsers):
     parser.add_argument('--rate', '--publish-speed', type=float, default=1.0, dest='rate',
                         help='playback speed factor of --publish, > 0 (2: twice as fast; '
                         '--publish-speed is the older name)')
-    parser.add_argument('--clock', type=float, nargs='?', const=DEFAULT_CLOCK_HZ, default=0.0,
+    parser.add_argument('--clock', type=float, nargs='?', const=DEFAULT_CLOCK_HZ,
                         metavar='HZ', help='with --publish, publish /clock from the '
                         f"recording's time at HZ of wall time (default {DEFAULT_CLOCK_HZ:g}, "
                         'as ros2 bag play --clock)')

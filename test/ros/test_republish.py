@@ -181,6 +181,8 @@ def test_playback_flags_need_publish_and_a_positive_rate(bag):
     assert result.returncode == 1 and '`--clock`, `--loop` need `--publish`' in result.stderr
     result = run('--publish', '--rate', '0')
     assert result.returncode == 1 and '`--rate` must be positive' in result.stderr
+    result = run('--publish', '--clock', '0')
+    assert result.returncode == 1 and '`--clock` must be a positive frequency' in result.stderr
     result = run('--publish', '--loop-count', '0')
     assert result.returncode == 1 and '`--loop-count` must be >= 1' in result.stderr
     result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'mcap-info',
