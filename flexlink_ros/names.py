@@ -18,7 +18,10 @@ FIRST_INPUT_MESSAGE = 'first crank sample'
 DEFAULT_FRAME_ID = 'linkage_ground'
 # Output topics relative to the node's namespace (~ = the node's private namespace).
 TOPICS = {'lever_tip': '~/lever_tip/deflection', 'coupler_mid': '~/coupler_mid/deflection',
-          'criteria': '~/joint_criteria', 'markers': '~/markers', 'diagnostics': '/diagnostics'}
+          'criteria': '~/joint_criteria', 'quality': '~/quality', 'markers': '~/markers',
+          'diagnostics': '/diagnostics'}
+# Entries of the per-sample quality message (~/quality), both dimensionless.
+QUALITY_NAMES = ('error_indicator', 'nonlinearity')
 
 JOINT_STATE = 'sensor_msgs/msg/JointState'
 VECTOR3_STAMPED = 'geometry_msgs/msg/Vector3Stamped'

@@ -8,7 +8,8 @@ import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 # Explicit paths: with none, the linters walk the working directory (.venv/ and build/ too).
-PATHS = [str(ROOT / 'flexlink_ros'), str(ROOT / 'test'), str(ROOT / 'setup.py')]
+PATHS = [str(ROOT / 'flexlink_ros'), str(ROOT / 'test'), str(ROOT / 'launch'),
+         str(ROOT / 'setup.py')]
 
 
 @pytest.mark.flake8

@@ -12,7 +12,9 @@ import pytest
 REPO = pathlib.Path(__file__).resolve().parents[1]
 VENV_BIN = pathlib.Path(sys.executable).parent
 EXECUTABLES = ('flexlink', 'crank_driver')
-SOURCES = ('package.xml', 'setup.py', 'setup.cfg', 'resource', 'config', 'flexlink_ros')
+SOURCES = ('package.xml', 'setup.py', 'setup.cfg', 'resource', 'config', 'launch',
+           'flexlink_ros')
+LAUNCH_FILES = {'flexlink.launch.py', 'flexlink_lifecycle.launch.py'}
 
 
 def copy_source(destination):
@@ -71,6 +73,7 @@ def test_colcon_build_resolves_like_ros2_run(tmp_path):
     assert (share / 'package.xml').is_file()
     shipped = {p.name for p in (REPO / 'config').glob('*.yaml')}
     assert shipped and {p.name for p in (share / 'config').glob('*.yaml')} == shipped
+    assert {p.name for p in (share / 'launch').glob('*.py')} == LAUNCH_FILES
     for exe, line in zip(EXECUTABLES, lines[2:]):
         name, code, usage = line.split(' ', 2)
         assert (name, code) == (exe, '0') and usage.startswith('usage:')
@@ -97,6 +100,7 @@ def test_pip_install_puts_scripts_and_share_files_in_the_prefix(tmp_path):
     share = prefix / 'share' / 'flexlink_ros'
     assert (share / 'package.xml').is_file()
     assert (share / 'config' / 'crank_driver.yaml').is_file()
+    assert {p.name for p in (share / 'launch').glob('*.py')} == LAUNCH_FILES
     assert (prefix / 'share' / 'ament_index' / 'resource_index' / 'packages' /
             'flexlink_ros').is_file()
     site = prefix / pathlib.Path(sysconfig.get_path('purelib')).relative_to(sys.prefix)

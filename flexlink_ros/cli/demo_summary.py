@@ -1,8 +1,8 @@
 """
 What a flexlink_node recording holds: the summary `flexlink demo` prints.
 
-Read the recording (input, outputs, diagnostics; markers skipped), tally it per topic and
-joint, and return one dict: counts, rates, peak-to-peak deflections, criterion peaks,
+Read the recording (input, outputs, diagnostics; markers and quality skipped), tally it per
+topic and joint, and return one dict: counts, rates, peak-to-peak deflections, criterion peaks,
 latencies and the estimator's update times.
 """
 
@@ -85,7 +85,7 @@ def _read_recording(bag):
     read = {'input_log': {}, 'output_log': {}, 'input_stamps': [], 'criteria': [],
             'deflections': {'lever_tip': [], 'coupler_mid': []}, 'diagnostics': []}
     for topic, type_name, log_ns, _, data in iter_recording(bag):
-        if topic.endswith('/markers'):
+        if topic.endswith(('/markers', '/quality')):   # ~/quality: a JointState, not input
             continue
         message = _decode(type_name, data)
         if topic == '/diagnostics':

@@ -7,14 +7,16 @@
                    [--centrifugal] [--shapes] [--json]
     flexlink simulate --mechanism config/cho1992.yaml --rpm 391 [--rigid-crank]
                    [--bearings rigid|flexible] [--method full|modal] [--modes N]
-                   [--static-correction] [--damping-ratio Z] [--points-per-rev P]
+                   [--static-correction] [--damping-ratio Z] [--stiffness-damping BETA_S]
+                   [--points-per-rev P]
                    [--steps-per-rev S] [--check-convergence] [--json]
 
 ``modes`` JSON: ``crank_deg``, ``frequencies_hz`` (per angle, per mode), ``dominant_link``,
 ``strain_share`` (crank, coupler, lever, springs), ``range_hz`` (min and max per mode),
 optional ``shapes``. ``simulate`` JSON: ``crank_deg``, ``lever_tip`` and ``coupler_mid``
 (``dx_m``, ``dy_m``: ground-frame elastic deflection over one steady revolution),
-``peak_to_peak_m``, ``floquet_spectral_radius``, ``wall_s``, optional ``convergence``.
+``peak_to_peak_m``, ``floquet_spectral_radius``, ``damping_ratio``, ``stiffness_damping_s``
+(beta [s]), ``wall_s``, optional ``convergence``.
 """
 
 import dataclasses
@@ -24,7 +26,7 @@ import time
 import numpy as np
 
 from .main import degree_range, emit
-from .model_args import add_model_arguments
+from .model_args import add_model_arguments, add_stiffness_damping_argument, stiffness_damping
 from ..core.fe import linkage as assembly, modes, simulate
 from ..core.mechanism_file import load_mechanism
 from ..core.options import ModelOptions
@@ -66,6 +68,7 @@ def register(subparsers):
                         help='add the residual flexibility of the discarded modes (modal)')
     parser.add_argument('--damping-ratio', default=None,
                         help='modal damping ratio (default: the mechanism file)')
+    add_stiffness_damping_argument(parser)
     parser.add_argument('--points-per-rev', default=str(simulate.DEFAULT_POINTS),
                         help=f'output points per revolution (default {simulate.DEFAULT_POINTS})')
     parser.add_argument('--steps-per-rev', default=str(simulate.DEFAULT_STEPS),
@@ -114,7 +117,8 @@ def build_model(args):
                          f'got {args.bearings!r}')
     options = ModelOptions.full_model(rigid_crank=args.rigid_crank, bearings=args.bearings,
                                       geometric_stiffness=not args.no_geometric_stiffness,
-                                      gravity=not args.no_gravity)
+                                      gravity=not args.no_gravity,
+                                      stiffness_damping=stiffness_damping(args))
     return mech, assembly.FlexibleLinkage(mech, options)
 
 
@@ -198,7 +202,8 @@ def simulate_command(args):
               'floquet_spectral_radius': response.info['spectral_radius'],
               'rpm': rpm, 'method': method, 'modes': count,
               'static_correction': args.static_correction,
-              'damping_ratio': response.info['zeta'], 'steps_per_rev': steps,
+              'damping_ratio': response.info['zeta'],
+              'stiffness_damping_s': response.info['stiffness_damping_s'], 'steps_per_rev': steps,
               'stages': stages, 'options': _options_record(model), 'mechanism': mech.name,
               'solve_s': response.info['wall_s']}
     if args.check_convergence:
@@ -212,7 +217,9 @@ def simulate_command(args):
     text = (f'{mech.name} at {rpm:g} rpm, {method}'
             + (f' ({count} modes{", static correction" if args.static_correction else ""})'
                if method == 'modal' else '')
-            + f', {model.size} DOFs, bearings {args.bearings}, rigid crank {args.rigid_crank}\n'
+            + f', {model.size} DOFs, bearings {args.bearings}, rigid crank {args.rigid_crank}'
+            + (f', stiffness damping {model.options.stiffness_damping:g} s'
+               if model.options.stiffness_damping else '') + '\n'
             f'peak-to-peak [mm]: lever tip dX {1e3 * p2p[0]:.4f} dY {1e3 * p2p[1]:.4f}, '
             f'coupler mid dX {1e3 * p2p[2]:.4f} dY {1e3 * p2p[3]:.4f}\n'
             f'Floquet spectral radius {response.info["spectral_radius"]:.4f}, '

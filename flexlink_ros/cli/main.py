@@ -36,6 +36,7 @@ COMMANDS = {
     'kinematics': 'flexlink_ros.cli.rigid',
     'criteria': 'flexlink_ros.cli.rigid',
     'design-spring': 'flexlink_ros.cli.rigid',
+    'validate': 'flexlink_ros.cli.validate',
 }
 # A subcommand's function takes the parsed args and returns an exit code.
 COMMAND_MODULES = tuple(dict.fromkeys(COMMANDS.values()))

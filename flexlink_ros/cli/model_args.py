@@ -12,6 +12,7 @@ studies, flexible for the estimator, as the node). ``--elements`` is accepted wh
 import argparse
 import sys
 
+from ..core.mechanism_file import stiffness_damping_from_file
 from ..core.numerics import RPM
 from ..core.options import ModelOptions
 from ..core.reduction import pipeline
@@ -84,6 +85,26 @@ def add_model_arguments(parser, bearings_default, elements_help, elements_alias=
                         help='leave out the geometric stiffness of the axial forces (A.4)')
 
 
+def add_stiffness_damping_argument(parser):
+    """Add ``--stiffness-damping BETA_S`` (simulate, estimate, plan, bench, replay)."""
+    parser.add_argument('--stiffness-damping', type=float, default=None, metavar='BETA_S',
+                        help='stiffness-proportional damping beta [s] on the link-frame strain '
+                        'rates and c = beta k on the bearing springs, added to the modal '
+                        "damping ratio (to match the Exudyn peer's beta alone set that ratio "
+                        'to 0: damping_ratio in the mechanism file, or --damping-ratio 0 for '
+                        "simulate) (default: the mechanism file's stiffness_damping_s, else 0)")
+
+
+def stiffness_damping(args):
+    """Beta [s]: ``--stiffness-damping``, else the mechanism file's, else 0 (flag > file)."""
+    value = getattr(args, 'stiffness_damping', None)
+    if value is None:
+        return stiffness_damping_from_file(args.mechanism)
+    if not value >= 0.0 or value == float('inf'):
+        raise ValueError(f'`--stiffness-damping` must be >= 0 [s], got {value!r}')
+    return float(value)
+
+
 def add_reduced_arguments(parser):
     """
     Add the flags of the reduced model and its input: sizes, sample rate, cache, JSON.
@@ -121,6 +142,7 @@ def add_estimator_arguments(parser):
     """
     add_model_arguments(parser, 'flexible', "the node's 4 with a flexible crank, the "
                         "mechanism file's with a rigid crank")
+    add_stiffness_damping_argument(parser)
     add_reduced_arguments(parser)
 
 
@@ -155,6 +177,7 @@ def model_options(args, **overrides):
             values[name] = value
     if getattr(args, 'rpm_max', None):
         values['speed_max'] = max(ModelOptions.speed_max, 1.05 * args.rpm_max * RPM)
+    values['stiffness_damping'] = stiffness_damping(args)
     values.update(overrides)
     return ModelOptions(**values)
 

@@ -32,13 +32,15 @@ MAX_FILE_BYTES = 64 * 1024  # the shipped files are about 1.5 kB
 MAX_YAML_DEPTH = 8  # the schema nests 3 deep (links.crank.length_m)
 MAX_NAME_CHARS = 128
 MAX_SOURCE_CHARS = 4096
+MAX_STIFFNESS_DAMPING_S = 1.0  # beta [s]; the peer's is 1e-4 s (1 s overdamps f > 0.3 Hz)
 PACKAGE = 'flexlink_ros'
 # Marker of a package in an ament prefix (the ament resource index).
 AMENT_PACKAGE_MARKERS = pathlib.Path('share', 'ament_index', 'resource_index', 'packages')
 
 _TOP_KEYS = {'name', 'source', 'ground_length_m', 'material', 'links', 'joint_masses_kg',
              'bearings', 'input_shaft', 'gravity_m_s2', 'damping_ratio',
-             'elements_per_link', 'branch', 'spring', 'crank_speed_rpm'}
+             'elements_per_link', 'branch', 'spring', 'crank_speed_rpm',
+             'stiffness_damping_s'}
 _LINK_KEYS = {'length_m', 'mass_kg', 'inertia_kg_m2', 'area_m2', 'second_moment_m4'}
 _MATERIAL_KEYS = {'youngs_modulus_pa', 'density_kg_m3'}
 _BEARING_KEYS = {'stiffness_n_m', 'joints', 'mass_split'}
@@ -201,6 +203,12 @@ def _model_options_from(data):
     return zeta, elements, branch
 
 
+def _stiffness_damping_from(data):
+    """Stiffness damping beta [s] of 'stiffness_damping_s' (0 if not given; not in Mechanism)."""
+    return _number(data, 'stiffness_damping_s', '', positive=False, required=False,
+                   default=0.0, minimum=0.0, maximum=MAX_STIFFNESS_DAMPING_S)
+
+
 def _spring_from(data):
     """Return the coupler-lever Spring of the 'spring' section, or None."""
     if data.get('spring') is None:
@@ -246,6 +254,7 @@ def mechanism_from_dict(data):
     shaft_k = _shaft_from(data)
     gravity = _gravity_from(data)
     zeta, elements, branch = _model_options_from(data)
+    _stiffness_damping_from(data)   # checked here; read by stiffness_damping_from_file
     spring = _spring_from(data)
     rpm = _number(data, 'crank_speed_rpm', '', required=False)
     return Mechanism(
@@ -365,10 +374,26 @@ def read_yaml_bounded(path, limit=MAX_FILE_BYTES):
         raise MechanismError(str(path), f'not valid YAML: {reason}') from None
 
 
-def load_mechanism(path_or_name):
-    """Load and validate a mechanism YAML file (see :func:`mechanism_from_dict`)."""
+def _read_mapping(path_or_name):
+    """Find, read and parse a mechanism file into its top-level mapping."""
     path = find_config(str(path_or_name))
     data = read_yaml_bounded(path)
     if not isinstance(data, dict):
         raise MechanismError(str(path), 'expected a YAML mapping at the top level')
-    return mechanism_from_dict(data)
+    return data
+
+
+def load_mechanism(path_or_name):
+    """Load and validate a mechanism YAML file (see :func:`mechanism_from_dict`)."""
+    return mechanism_from_dict(_read_mapping(path_or_name))
+
+
+def stiffness_damping_from_file(path_or_name):
+    """
+    Return a (validated) mechanism file's ``stiffness_damping_s`` [s], 0.0 if it has none.
+
+    The default of ``--stiffness-damping`` and of the node's ``model.stiffness_damping``.
+    """
+    data = _read_mapping(path_or_name)
+    mechanism_from_dict(data)
+    return _stiffness_damping_from(data)

@@ -1,6 +1,7 @@
 """Modelling options shared by the FE assembly, the reduced model, the node and the CLI."""
 
 import dataclasses
+import math
 
 MODEL_VERSION = 3
 # Default (modes, static) per (bearing model, rigid crank), from flexlink plan on Cho 1992
@@ -23,7 +24,8 @@ class ModelOptions:
     One set of options from the node's parameters or the CLI's flags down to the assembly.
     The defaults are the node's (rigid crank, flexible bearings); :meth:`full_model` gives
     the full-order studies' defaults (flexible crank, pinned bearings). Every field but
-    ``gravity`` is part of the reduced model's cache key (:meth:`cache_fields`).
+    ``gravity`` is part of the reduced model's cache key (:meth:`cache_fields`;
+    ``stiffness_damping`` only when it is not 0).
 
     Parameters
     ----------
@@ -46,6 +48,11 @@ class ModelOptions:
         Largest |crank speed| served [rad/s].
     gravity : bool
         Include gravity (``mechanism.gravity``) in loads and axial forces.
+    stiffness_damping : float
+        Stiffness-proportional (Kelvin-Voigt) damping beta [s] on the link-frame strain rates
+        and c = beta k on the bearing springs (:mod:`core.fe.stiffness_damping`), on top of
+        the mechanism's modal ``damping_ratio``; 0 leaves it out. Part of the cache key only
+        when non-zero, so the keys of models without it stay as they were.
 
     """
 
@@ -58,6 +65,7 @@ class ModelOptions:
     geometric_stiffness: bool = True
     speed_max: float = 65.0
     gravity: bool = True
+    stiffness_damping: float = 0.0
 
     def __post_init__(self):
         if self.bearings not in ('flexible', 'rigid'):
@@ -72,6 +80,10 @@ class ModelOptions:
             raise ValueError(f'`grid_size` must be >= 8, got {self.grid_size}')
         if not self.speed_max > 0.0:
             raise ValueError(f'`speed_max` must be positive, got {self.speed_max}')
+        beta = float(self.stiffness_damping)
+        if not (math.isfinite(beta) and beta >= 0.0):
+            raise ValueError(f'`stiffness_damping` must be >= 0 [s], got {beta}')
+        object.__setattr__(self, 'stiffness_damping', beta)
 
     @classmethod
     def full_model(cls, **changes):
@@ -79,7 +91,14 @@ class ModelOptions:
         return cls(**{'rigid_crank': False, 'bearings': 'rigid', **changes})
 
     def cache_fields(self):
-        """Return the fields identifying a reduced model, in declaration order (no ``gravity``)."""
+        """
+        Return the fields identifying a reduced model, in declaration order (no ``gravity``).
+
+        ``stiffness_damping`` is left out when it is 0, so a model without it keeps the key it
+        had before the field existed.
+        """
         fields = dataclasses.asdict(self)
         del fields['gravity']
+        if not fields['stiffness_damping']:
+            del fields['stiffness_damping']
         return fields

@@ -8,13 +8,18 @@ stamped with the input's stamp, frame = the ground frame, SI units):
 - joint criteria: ``sensor_msgs/JointState`` with name = [O2, A, B, O4] and, per joint,
   position = |dgamma/dt| / R [rad/(s N)] (the Earles-Wu criterion), velocity = dgamma/dt
   [rad/s], effort = R [N] (reaction force magnitude);
+- per-sample quality: ``sensor_msgs/JointState`` with name = [error_indicator, nonlinearity]
+  and position = the two indicators (dimensionless; NaN = not available), velocity and effort
+  empty (:func:`quality_message`);
 - the deformed linkage: ``visualization_msgs/MarkerArray``;
 - health and per-joint levels: ``diagnostic_msgs/DiagnosticArray``.
 
 Also the ``rcl_interfaces/ParameterDescriptor`` of a parameter table's entry.
 """
 
+import functools
 import math
+import struct
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -24,7 +29,8 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 
 from ..errors import InputRejected
-from ..names import JOINT_NAMES
+from ..io import cdr
+from ..names import JOINT_NAMES, QUALITY_NAMES
 
 OK, WARN, ERROR, STALE = (DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR,
                           DiagnosticStatus.STALE)
@@ -118,6 +124,61 @@ def criteria_message(stamp, frame_id, ratio, gamma_dot, force):
     msg.velocity = [float(v) for v in gamma_dot]
     msg.effort = [float(v) for v in force]
     return msg
+
+
+def quality_message(stamp, frame_id, error_indicator, nonlinearity):
+    """
+    Return the JointState carrying the quality indicators of one estimate.
+
+    A JointState because it is a standard stamped message with named entries: a consumer
+    pairs it with the estimate of the same stamp (message_filters), a plot selects an entry by
+    index (``position[0]``), and further indicators can be added by name.
+
+    Parameters
+    ----------
+    stamp : builtin_interfaces.msg.Time
+        Stamp of the input (and of the estimate).
+    frame_id : str
+        Ground frame.
+    error_indicator : float
+        Size of the residual-flexibility correction relative to the deflection
+        (core/estimation/sample.py) [-]: large means the reduced basis misses response.
+    nonlinearity : float
+        The nonlinearity indicator (core/validity.py) [-]: the amplitude-dependent frequency
+        shift in units of the distance to resonance; NaN where the estimator does not compute it.
+
+    """
+    msg = JointState()
+    msg.header = Header(stamp=stamp, frame_id=frame_id)
+    msg.name = list(QUALITY_NAMES)
+    msg.position = [float(error_indicator), float(nonlinearity)]
+    return msg
+
+
+# Two doubles the template of a frame's quality message holds where the indicators go.
+_QUALITY_SENTINELS = (1.0e300 + 3e285, 1.0e300 + 7e285)
+_QUALITY_VALUES = struct.Struct('<2d')
+_STAMP = struct.Struct('<iI')
+
+
+@functools.lru_cache(maxsize=16)
+def _quality_template(frame):
+    template = cdr.serialize_message(quality_message(Time(), frame.decode(),
+                                                     *_QUALITY_SENTINELS))
+    return template, template.index(_QUALITY_VALUES.pack(*_QUALITY_SENTINELS))
+
+
+def quality_cdr(sec, nanosec, frame, error_indicator, nonlinearity):
+    """
+    Return the CDR of :func:`quality_message` (frame as UTF-8 bytes), byte-identical to it.
+
+    The per-sample path: the layout is fixed by the frame, so a template is patched (~1 us).
+    """
+    template, offset = _quality_template(frame)
+    out = bytearray(template)
+    _STAMP.pack_into(out, cdr.ENCAPSULATION_SIZE, sec, nanosec)
+    _QUALITY_VALUES.pack_into(out, offset, error_indicator, nonlinearity)
+    return bytes(out)
 
 
 def joint_level(ratio, flagged, warn, error):

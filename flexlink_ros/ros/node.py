@@ -7,8 +7,10 @@ with the input's stamp, in frame ``frame_id`` (SI units, see ros/messages.py):
 
 - ``~/lever_tip/deflection``, ``~/coupler_mid/deflection``: ``geometry_msgs/Vector3Stamped``;
 - ``~/joint_criteria``: ``sensor_msgs/JointState`` (O2, A, B, O4; position = |dgamma/dt|/R);
+- ``~/quality``: ``sensor_msgs/JointState`` (error_indicator, nonlinearity; dimensionless);
 - ``~/markers``: ``visualization_msgs/MarkerArray``, every ``markers.every_n``-th sample;
-- ``/diagnostics``: ``diagnostic_msgs/DiagnosticArray`` every ``diagnostics.period_s``.
+- ``/diagnostics``: ``diagnostic_msgs/DiagnosticArray`` every ``diagnostics.period_s`` (steady
+  time: also on ``use_sim_time`` without ``/clock``, which is warned about, ros/sim_time.py).
 
 Inputs and outputs are optionally recorded to MCAP (``record.*``). A message that cannot be
 used (malformed or oversized CDR, NaN, missing joint, empty arrays, an outlier) is counted by

@@ -12,7 +12,7 @@ import math
 from . import parameters
 from .messages import crank_from_joint_state
 from ..core.estimation.sample import SampleFlag
-from ..core.mechanism_file import load_mechanism
+from ..core.mechanism_file import load_mechanism, stiffness_damping_from_file
 from ..core.reduction.pipeline import model_for_mechanism
 from ..errors import InputRejected, MalformedCdr
 from ..io import cdr
@@ -101,7 +101,7 @@ def publishable(sample):
     return None
 
 
-def load_node_model(values, warn):
+def load_node_model(values, warn, progress=None):
     """
     Load the mechanism and its reduced model (cached, else built).
 
@@ -113,6 +113,8 @@ def load_node_model(values, warn):
         Parameter name -> value.
     warn : callable
         Called with a warning sentence.
+    progress : callable or None
+        ``progress(done, total, what)`` while the model is built (not on a cache hit).
 
     Returns
     -------
@@ -126,7 +128,9 @@ def load_node_model(values, warn):
     mechanism = load_mechanism(values['mechanism'])
     if values['damping_ratio'] != mechanism.damping_ratio:
         mechanism = dataclasses.replace(mechanism, damping_ratio=values['damping_ratio'])
-    options = parameters.model_options(values)
+    file_beta = (stiffness_damping_from_file(values['mechanism'])
+                 if values['model.stiffness_damping'] < 0 else 0.0)
+    options = parameters.model_options(values, file_beta)
     notes = []
     if values['model.modes'] == 0 and values['model.tolerance'] < DEFAULT_MODEL_TOLERANCE:
         notes.append(f'the default model was planned for {DEFAULT_MODEL_TOLERANCE:g} relative '
@@ -134,7 +138,7 @@ def load_node_model(values, warn):
                      f'{values["model.tolerance"]:g}` and set model.modes')
         warn(notes[-1])
     cache_dir = values['model.cache_dir'] or None
-    model = model_for_mechanism(mechanism, options, cache_dir=cache_dir)
+    model = model_for_mechanism(mechanism, options, cache_dir=cache_dir, progress=progress)
     return model, options, notes
 
 

@@ -76,6 +76,11 @@ PARAMETERS = (
     ParameterSpec('model.geometric_stiffness', True,
                   'Include geometric stiffness from the rigid-body axial forces',
                   read_only=True),
+    ParameterSpec('model.stiffness_damping', -1.0,
+                  'Stiffness-proportional damping beta [s] on the link-frame strain rates and '
+                  'c = beta k on the bearing springs, added to damping_ratio (set that to 0 '
+                  "for beta alone, as the Exudyn peer); -1 = the mechanism file's "
+                  'stiffness_damping_s (0 if none)', low=-1.0, high=1.0, read_only=True),
     ParameterSpec('model.cache_dir', '', 'Directory of precomputed-model cache files '
                   '(empty: ~/.cache/flexlink_ros)', read_only=True, max_bytes=PATH_MAX_BYTES),
     ParameterSpec('model.warm_start', True,
@@ -239,7 +244,7 @@ def markdown_table():
     return '\n'.join(rows)
 
 
-def model_options(values):
+def model_options(values, file_stiffness_damping=0.0):
     """
     Select the modelling options by parameter values.
 
@@ -247,6 +252,9 @@ def model_options(values):
     ----------
     values : dict
         Parameter name -> value (:data:`PARAMETERS`).
+    file_stiffness_damping : float
+        The mechanism file's ``stiffness_damping_s`` [s], used where
+        ``model.stiffness_damping`` is negative (-1: not set).
 
     Returns
     -------
@@ -255,11 +263,13 @@ def model_options(values):
     """
     modes = values['model.modes'] or None   # 0: the planned default for the bearing model
     static = None if values['model.static'] < 0 else values['model.static']
+    beta = values.get('model.stiffness_damping', -1.0)
     return ModelOptions(modes=modes, static=static, grid_size=values['model.grid_size'],
                         elements_per_link=values['model.elements_per_link'] or None,
                         rigid_crank=values['model.rigid_crank'],
                         bearings=values['model.bearings'],
-                        geometric_stiffness=values['model.geometric_stiffness'])
+                        geometric_stiffness=values['model.geometric_stiffness'],
+                        stiffness_damping=file_stiffness_damping if beta < 0 else beta)
 
 
 def default_model_options(**overrides):

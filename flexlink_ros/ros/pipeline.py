@@ -3,8 +3,9 @@ The work of flexlink_node, shared by the plain and the managed (lifecycle) node.
 
 :class:`EstimatorPipeline` declares the parameters, loads the model, creates the publishers,
 subscribes to the crank's JointState, runs the estimator on every message, publishes (and
-records) the outputs as CDR and publishes ``/diagnostics`` on a timer. It is a mixin: the node
-classes in :mod:`.node` combine it with rclpy's ``Node`` or ``LifecycleNode``.
+records, :mod:`.node_recording`) the outputs as CDR and publishes ``/diagnostics`` on a timer
+of the steady clock (so also on simulated time without ``/clock``, :mod:`.sim_time`). It is a
+mixin: the node classes in :mod:`.node` combine it with rclpy's ``Node`` or ``LifecycleNode``.
 """
 
 import time
@@ -13,7 +14,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Vector3Stamped
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
-from rclpy import logging as rclpy_logging
+from rclpy.clock import Clock, ClockType
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
 from rclpy.subscription import RCLError
@@ -21,31 +22,34 @@ from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
 from . import diagnostics, parameters
-from .messages import diagnostics_message, joint_level
+from .messages import diagnostics_message, joint_level, ns_to_stamp, quality_cdr
 from .node_model import (crank_sample, load_node_model, one_line, PeriodStats, publishable,
                          SKIP_KINDS, Totals)
+from .node_recording import NodeRecording
 from .overrides import declare_table
+from .progress_log import ProgressLog
 from .runtime import is_shutdown_error
+from .sim_time import ClockWatch, LogTime
 from .startup import check_startup_signal
 from ..core.estimation.sample import SampleFlag
 from ..core.estimation.streaming import StreamingEstimator
-from ..errors import FlexlinkError, InputRejected, OutlierSample, RecorderError
+from ..errors import FlexlinkError, InputRejected, OutlierSample
 from ..io import cdr
 from ..io.markers import MarkerEncoder
-from ..io.recorder import McapRecorder
-from ..names import FIRST_INPUT_MESSAGE, NODE_NAME, READY_MESSAGE, TOPICS
+from ..names import FIRST_INPUT_MESSAGE, READY_MESSAGE, TOPICS
 
 WARN_THROTTLE_S = 1.0  # at most one warning per second per kind of bad input
 # Message type of each output (keys of names.TOPICS).
 # /diagnostics is a plain publisher, created with the node: a managed node reports while
 # unconfigured and inactive too.
 OUTPUT_TYPES = {'lever_tip': Vector3Stamped, 'coupler_mid': Vector3Stamped,
-                'criteria': JointState, 'markers': MarkerArray}
-PER_SAMPLE_OUTPUTS = ('lever_tip', 'coupler_mid', 'criteria')   # with the input's QoS
+                'criteria': JointState, 'quality': JointState, 'markers': MarkerArray}
+PER_SAMPLE_OUTPUTS = ('lever_tip', 'coupler_mid', 'criteria', 'quality')   # the input's QoS
+NAN = float('nan')
 OTHER_OUTPUT_DEPTH = 10   # history depth of markers and /diagnostics
 
 
-class EstimatorPipeline:
+class EstimatorPipeline(NodeRecording):
     """The node's work, shared by the plain and the managed (lifecycle) node."""
 
     def _declare(self):
@@ -57,6 +61,8 @@ class EstimatorPipeline:
         self.estimator = self.recorder = self.subscription = self._timer = None
         self.publishers_ = {}
         self._clock = self.get_clock()
+        self._log_time = LogTime()
+        self._clock_watch = ClockWatch(self.get_logger().warning, self.get_logger().info)
         self._deserialize = lambda data: deserialize_message(data, JointState)
         self._serialize = serialize_message
         self._frame = self.values['frame_id'].encode()
@@ -74,7 +80,8 @@ class EstimatorPipeline:
         log = self.get_logger()
         start = time.perf_counter()
         check_startup_signal()
-        self.model, self.options, self.notes = load_node_model(values, log.warning)
+        self.model, self.options, self.notes = load_node_model(values, log.warning,
+                                                               ProgressLog(log.info))
         check_startup_signal()
         self.criteria_source = self.model.info.get('criteria', 'unknown')
         log.info(f'model: {self.model.size} coordinates, {self.model.grid_size} grid cells, '
@@ -129,7 +136,8 @@ class EstimatorPipeline:
         if self._timer is not None:
             self.destroy_timer(self._timer)
         self._timer = self.create_timer(self.values['diagnostics.period_s'],
-                                        self._publish_diagnostics)
+                                        self._publish_diagnostics,
+                                        clock=Clock(clock_type=ClockType.STEADY_TIME))
 
     def _deactivate(self):
         """Stop receiving (the model, publishers, recording and /diagnostics stay)."""
@@ -170,57 +178,6 @@ class EstimatorPipeline:
         if period_changed and self._timer is not None:
             self._start_diagnostics_timer()
 
-    # -- recording ------------------------------------------------------------------------
-
-    def _open_recorder(self, qos):
-        values = self.values
-        path = values['record.path'] or time.strftime('flexlink_%Y%m%d_%H%M%S')
-        # The recorder never overwrites: a re-configure records next to the earlier takes.
-        self._takes = getattr(self, '_takes', {})
-        take = self._takes[path] = self._takes.get(path, 0) + 1
-        if take > 1:
-            stem, dot, suffix = path.rpartition('.') if path.endswith('.mcap') else (path, '', '')
-            path = f'{stem}_{take}{dot}{suffix}'
-        recorder = McapRecorder(path, split_size_bytes=values['record.max_bytes'],
-                                split_duration_s=values['record.max_duration_s'])
-        # Topics first: if opening fails, writes to them are then dropped as failed,
-        # not refused as undeclared.
-        recorder.add_topic(self.resolve_topic_name(values['input_topic']), JointState, [qos])
-        for publisher in self.publishers_.values():
-            recorder.add_topic(publisher.topic_name, publisher.msg_type,
-                               [publisher.qos_profile])
-        try:
-            recorder.open()
-        except RecorderError as exc:
-            self.get_logger().error(f'recording disabled: {exc}')
-        return recorder
-
-    def _record(self, topic, message, log_time_ns):
-        if self.recorder is None:
-            return
-        try:
-            # rclpy's bytes are exact here: none of the types has a float64[] (which can
-            # be empty); only the input and the per-sample outputs are exact CDR anyway.
-            self.recorder.enqueue(topic, message if isinstance(message, bytes)
-                                  else self._serialize(message), log_time_ns)
-        except RecorderError as exc:
-            self.get_logger().error(f'recording stopped, estimation goes on: {exc}')
-
-    def close(self):
-        """Close the recording (idempotent); returns its status or None."""
-        if self.recorder is None or self.recorder.state.value == 'closed':
-            return None
-        # Not the node's logger: after shutdown its /rosout publisher is gone.
-        log = rclpy_logging.get_logger(f'{NODE_NAME}.recorder')
-        try:
-            status = self.recorder.close()
-        except RecorderError as exc:
-            log.error(str(exc))
-            status = self.recorder.status()
-        log.info(f'recording closed: {status["message_count"]} messages in '
-                 f'{status["path"]} ({status["state"]})')
-        return status
-
     # -- the per-message path -------------------------------------------------------------
 
     def _on_joint_state(self, data):
@@ -231,7 +188,7 @@ class EstimatorPipeline:
                          f'{cdr.MAX_MESSAGE_BYTES}')
             return
         if self.recorder is not None:
-            self._record(self.input_topic, data, receive_ns)
+            self._record_input(data, receive_ns)
         try:
             self._estimate(data)
         except Exception as exc:    # last resort: no message may stop the node
@@ -307,7 +264,9 @@ class EstimatorPipeline:
             ('lever_tip', cdr.vector3_stamped_cdr(sec, nanosec, frame, *sample.lever_tip)),
             ('coupler_mid', cdr.vector3_stamped_cdr(sec, nanosec, frame, *sample.coupler_mid)),
             ('criteria', cdr.criteria_cdr(sec, nanosec, frame, sample.criterion,
-                                          sample.gamma_dot, sample.reaction_n))]
+                                          sample.gamma_dot, sample.reaction_n)),
+            ('quality', quality_cdr(sec, nanosec, frame, sample.error_indicator,
+                                    getattr(sample, 'nonlinearity', NAN)))]
         published = self._publish(outputs)
         if published and self.totals.published % self.values['markers.every_n'] == 0:
             markers = [('markers', self._markers(stamp_ns, sample))]
@@ -315,7 +274,7 @@ class EstimatorPipeline:
             outputs += markers
         self.totals.published += 1
         if self.recorder is not None:   # recorded even if shut down meanwhile: the input was
-            log_ns = self._clock.now().nanoseconds
+            log_ns = self._log_time(self._clock.now().nanoseconds, stamp_ns)
             for key, data in outputs:
                 self._record(self.output_topics[key], data, log_ns)
 
@@ -383,8 +342,10 @@ class EstimatorPipeline:
                                             else self.recorder.status())]
 
     def _publish_diagnostics(self):
-        now = self._clock.now()
-        message = diagnostics_message(now.to_msg(), self.diagnostic_statuses())
+        clock_ns = self._clock.now().nanoseconds
+        self._clock_watch.check(self.get_parameter('use_sim_time').value, clock_ns)
+        now_ns = self._log_time(clock_ns)     # not 0 on simulated time without /clock
+        message = diagnostics_message(ns_to_stamp(now_ns), self.diagnostic_statuses())
         publisher = self._diagnostics_publisher
         try:
             publisher.publish(message)
@@ -392,4 +353,4 @@ class EstimatorPipeline:
             if not is_shutdown_error(exc, self.context):
                 raise
             return
-        self._record(publisher.topic_name, message, now.nanoseconds)
+        self._record(publisher.topic_name, message, now_ns)

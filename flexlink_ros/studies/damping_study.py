@@ -1,18 +1,20 @@
 """
-Study: the full-order periodic response with stiffness-proportional damping against the peer.
+Study: full order and streaming estimate with stiffness-proportional damping against the peer.
 
-Issue 14, item 3. The package's full-order reference (:func:`core.simulate.periodic_response`)
-knows only modal damping; this study runs the same equation with the objective beta damping of
-:mod:`core.stiffness_damping` instead (``damping='objective'``), or with the naive ``beta K U'``
-(``'naive'``), or modal zeta (``'modal'``), and compares it with the nonlinear Exudyn peer
+Issue 14, item 3. The full-order reference (:func:`core.fe.simulate.periodic_response`) runs
+with the objective beta damping of :mod:`core.fe.stiffness_damping` and zeta = 0
+(``damping='objective'``), with the naive ``beta K U'`` (``'naive'``) or with modal zeta
+(``'modal'``); the streaming estimate runs on the reduced model with the same beta
+(:func:`streaming_response`). Both are compared with the nonlinear Exudyn peer
 (:mod:`studies.peer_exudyn`, same beta convention) in the issue's matched conventions: rigid
 crank with a rigid pivot (the package's ``rigid_crank``: the crank is not modelled, pin A is a
 fixed point, the O2 bearing spring drops out; the peer prescribes the crank), bearing springs at
 A, B, O4 with c = beta k, joint masses split 50/50 (``mass_placement='split'``; the package's
 ``joint_mass_split`` 0.5: the crank's share at A and the ground's at O4 are inert in both).
 
-The full-order response is :func:`core.simulate.periodic_response` with the stage matrices of
-:func:`core.stiffness_damping.system_matrices` passed in (``matrices``).
+The full-order response is :func:`core.fe.simulate.periodic_response` with ``beta`` (its own
+objective stiffness damping, zeta = 0) or ``zeta`` (beta = 0); the naive form passes its stage
+matrices in (``matrices``).
 
 Run: ``python -m flexlink_ros.studies.damping_study [--elements 8] [--gravity] [--rpm 269]``.
 
@@ -26,7 +28,14 @@ objective beta, no gravity          2.8 %       3.3 %
 objective beta, gravity             2.8 %       3.8 %
 modal zeta = 0.02, no gravity       2.9 %       4.4 %
 modal zeta = 0.02, gravity          2.9 %       4.9 %
+streaming, beta, no gravity         2.8 %       3.3 %
+streaming, beta, gravity            2.7 %       3.7 %
+streaming, zeta 0.02, no gravity    2.9 %       4.4 %
+streaming, zeta 0.02, gravity       2.8 %       4.8 %
 ================================  ==========  ===========
+
+("streaming": the node's estimator, :func:`streaming_response`, on the reduced model of
+:func:`matched_reduced_model`, r = 18; 0.1-0.2 % RMS off the full order.)
 
 (the issue: 2.9 / 3.4 %; 4 elements: 2.8 / 3.4 %). At 391 rpm (inside the 385-405 rpm band
 where the issue finds amplitude-dependent detuning) the linear model is 52 / 97 % off with beta
@@ -44,6 +53,7 @@ import math
 import numpy as np
 
 from .peer_exudyn import compare, peer_response, revolution_slice
+from ..core.estimation.offline import replay
 from ..core.fe.linkage import FlexibleLinkage
 from ..core.fe.simulate import periodic_response
 from ..core.fe.stiffness_damping import (element_resultants, link_local_rate,
@@ -51,6 +61,7 @@ from ..core.fe.stiffness_damping import (element_resultants, link_local_rate,
 from ..core.mechanism import Mechanism
 from ..core.mechanism_file import load_mechanism
 from ..core.options import ModelOptions
+from ..core.reduction import pipeline
 
 DAMPING = ('objective', 'naive', 'modal')
 OUTPUT_KEYS = ('lever_tip_dx', 'lever_tip_dy', 'coupler_mid_dx', 'coupler_mid_dy')
@@ -65,15 +76,11 @@ def matched_model(mechanism='cho1992', elements=8, gravity=False, bearings='flex
                                                          gravity=gravity))
 
 
-def _matrices(model, angles, speed, beta, damping, zeta):
-    """Stage matrices M, C, K, R for one damping choice (the study's own dispatch)."""
-    if damping == 'objective':
-        return system_matrices(model, angles, speed, beta)
-    if damping == 'naive':
-        mass, c, k, load = system_matrices(model, angles, speed, beta)
-        _, d_beta = stiffness_damping_terms(model, angles, speed, beta)
-        return mass, c, k - d_beta, load      # beta K U' only, no D_beta U
-    return system_matrices(model, angles, speed, 0.0, zeta=zeta)
+def _naive_matrices(model, angles, speed, beta):
+    """Stage matrices M, C, K, R with the naive ``beta K U'`` (no D_beta U, no modal zeta)."""
+    mass, c, k, load = system_matrices(model, angles, speed, beta)
+    _, d_beta = stiffness_damping_terms(model, angles, speed, beta)
+    return mass, c, k - d_beta, load
 
 
 def full_order_response(model, speed, beta=1e-4, damping='objective', zeta=0.02, steps=720,
@@ -81,7 +88,8 @@ def full_order_response(model, speed, beta=1e-4, damping='objective', zeta=0.02,
     """
     Periodic full-order response with beta (or modal) damping.
 
-    :func:`core.simulate.periodic_response` ('full') with this study's stage matrices.
+    :func:`core.fe.simulate.periodic_response` ('full'): ``beta`` with zeta = 0 (objective),
+    ``zeta`` with beta = 0 (modal), or this study's naive stage matrices.
 
     Returns
     -------
@@ -92,13 +100,59 @@ def full_order_response(model, speed, beta=1e-4, damping='objective', zeta=0.02,
     """
     if damping not in DAMPING:
         raise ValueError(f'`damping` must be one of {DAMPING}, got {damping!r}')
-    response = periodic_response(
-        model, speed, method='full', steps=steps, points=points, stages=stages,
-        start_angle=start_angle,
-        matrices=lambda angles: _matrices(model, angles, speed, beta, damping, zeta))
+    kwargs = {'objective': {'zeta': 0.0, 'beta': beta},
+              'modal': {'zeta': zeta, 'beta': 0.0},
+              'naive': {'matrices': lambda angles: _naive_matrices(model, angles, speed,
+                                                                   beta)}}[damping]
+    response = periodic_response(model, speed, method='full', steps=steps, points=points,
+                                 stages=stages, start_angle=start_angle, **kwargs)
     out = {'crank_angle': response.crank_angle, 'displacement': response.displacement,
            'velocity': response.velocity, 'spectral_radius': response.info['spectral_radius']}
     out.update(zip(OUTPUT_KEYS, response.outputs.T))
+    return out
+
+
+def matched_reduced_model(mechanism='cho1992', elements=8, gravity=False, beta=1e-4,
+                          use_cache=True, zeta=0.0):
+    """
+    Build the streaming estimator's reduced model in the peer's matched conventions.
+
+    Rigid crank, bearing springs, joint masses split 50/50, modal ``zeta`` (0: the node's
+    ``damping_ratio: 0.0``) and stiffness damping ``beta`` (``model.stiffness_damping``),
+    the default sizes for this bearing and crank model.
+    """
+    mech = mechanism if isinstance(mechanism, Mechanism) else load_mechanism(mechanism)
+    mech = dataclasses.replace(mech, joint_mass_split=0.5, damping_ratio=float(zeta))
+    options = ModelOptions(rigid_crank=True, bearings='flexible', geometric_stiffness=True,
+                           gravity=gravity, elements_per_link=elements, stiffness_damping=beta)
+    return pipeline.model_for_mechanism(mech, options, use_cache=use_cache)
+
+
+def streaming_response(model, speed, revolutions=3, points=120, oversample=2):
+    """
+    Run the streaming estimate at constant crank speed: its last revolution on the grid.
+
+    :func:`core.estimation.offline.replay` (the streaming step over a whole signal, warm
+    start at the first sample) fed ``points * oversample`` samples per revolution of the
+    exact crank angle and speed; every ``oversample``-th sample of the last revolution lands
+    on the grid ``2 pi i / points`` from crank angle 0 (as :func:`full_order_response`).
+
+    Returns
+    -------
+    dict
+        'crank_angle' (points,) and the four OUTPUT_KEYS [m].
+
+    """
+    per_rev = points * oversample
+    count = revolutions * per_rev + 1
+    step = 2.0 * math.pi / per_rev
+    angles = step * np.arange(count)
+    stamps = np.round(angles / abs(speed) * 1e9).astype(np.int64)
+    run = replay(model, stamps, np.sign(speed) * angles, np.full(count, float(speed)))
+    last = slice(count - 1 - per_rev, count - 1, oversample)
+    values = np.concatenate([run['lever_tip'][last], run['coupler_mid'][last]], axis=1)
+    out = {'crank_angle': np.sign(speed) * angles[:per_rev:oversample]}
+    out.update(zip(OUTPUT_KEYS, values.T))
     return out
 
 
@@ -154,6 +208,20 @@ def point_rms(peer, linear):
     return out
 
 
+def streaming_lines(peer, speed, elements, gravity, beta, zeta):
+    """Lines of :func:`main` for the streaming estimate: beta (zeta 0), then modal zeta."""
+    lines = []
+    for label, b, z in ((f'streaming beta {beta:g}', beta, 0.0),
+                        (f'streaming zeta {zeta:g}', 0.0, zeta)):
+        # Not cached: the cache key leaves out ModelOptions.gravity (core/options.py).
+        model = matched_reduced_model('cho1992', elements, gravity, b, use_cache=False, zeta=z)
+        both = point_rms(peer, streaming_response(model, speed))
+        lines.append(f'  {label:22s} relative RMS per point (dX, dY together): lever tip '
+                     f"{100 * both['lever_tip']:.1f} %, coupler mid "
+                     f"{100 * both['coupler_mid']:.1f} % (r = {model.size})")
+    return lines
+
+
 def main(argv=None):
     """Print the package's beta-damped full order (objective, naive, modal) against the peer."""
     parser = argparse.ArgumentParser(prog='python -m flexlink_ros.studies.damping_study',
@@ -192,11 +260,14 @@ def main(argv=None):
                   + '; '.join(f'link {k}: ' + ' '.join(f'{x:.0f}' for x in
                                                        np.abs(v).max(axis=0))
                               for k, v in spur.items()))
+    print('\n'.join(streaming_lines(peer, speed, args.elements, args.gravity, args.beta,
+                                    args.zeta)))
     return 0
 
 
-__all__ = ['DAMPING', 'matched_model', 'full_order_response', 'spurious_axial_force',
-           'compare_with_peer', 'point_rms', 'main']
+__all__ = ['DAMPING', 'matched_model', 'full_order_response', 'matched_reduced_model',
+           'streaming_response', 'spurious_axial_force', 'compare_with_peer', 'point_rms',
+           'streaming_lines', 'main']
 
 
 if __name__ == '__main__':

@@ -86,3 +86,20 @@ def test_unknown_bearings_are_refused_with_the_choices(capsys):
     _, err = capsys.readouterr()
     assert exit_info.value.code == 2
     assert '--bearings' in err and "'flexible', 'rigid'" in err
+
+
+def test_simulate_with_stiffness_damping(capsys):
+    """--stiffness-damping reaches the full order: reported, and it damps the response."""
+    common = ('simulate', '--rpm', '269', '--rigid-crank', '--bearings', 'flexible',
+              '--elements', '2', '--points-per-rev', '12', '--steps-per-rev', '120',
+              '--damping-ratio', '0', '--json')
+    runs = {}
+    for beta in ('0', '1e-4'):
+        code, out, _ = _run(capsys, *common, '--stiffness-damping', beta)
+        assert code == 0
+        runs[beta] = json.loads(out)
+    assert runs['1e-4']['stiffness_damping_s'] == 1e-4
+    assert runs['0']['stiffness_damping_s'] == 0.0
+    assert runs['1e-4']['floquet_spectral_radius'] < runs['0']['floquet_spectral_radius']
+    code, out, _ = _run(capsys, *common[:-1], '--stiffness-damping', '1e-4')
+    assert code == 0 and 'stiffness damping 0.0001 s' in out

@@ -35,8 +35,9 @@ def test_demo_runs_records_and_summarises(tmp_path):
     # About 3 s at 1 kHz after the first sample (a loaded machine may miss driver ticks).
     assert inputs > 1500 and summary['input_rate_hz'] > 500
     for name in ('/flexlink_node/lever_tip/deflection', '/flexlink_node/coupler_mid/deflection',
-                 '/flexlink_node/joint_criteria'):
+                 '/flexlink_node/joint_criteria', '/flexlink_node/quality'):
         assert topics[name] == inputs     # one estimate per sample, none lost in the node
+    assert summary['samples'] == summary['outputs'] == inputs
     assert inputs // 10 <= topics['/flexlink_node/markers'] <= inputs // 10 + 1
     assert topics['/diagnostics'] >= 2
     lever, coupler = summary['peak_to_peak_um']['lever_tip'], \

@@ -1,6 +1,10 @@
 """The model flags every model subcommand shares: spellings, choices, defaults, help."""
 
+import pathlib
+
 from flexlink_ros.cli import main as cli
+from flexlink_ros.cli import model_args
+from flexlink_ros.core.mechanism_file import find_config
 import pytest
 
 # Each model subcommand with the arguments it requires.
@@ -51,3 +55,30 @@ def test_elements_is_a_deprecated_spelling_of_elements_per_link(command, capsys)
     assert capsys.readouterr().err == ''
     assert old == new and new.elements_per_link == 3
     assert '--elements ' not in cli.build_parser([command]).format_help()
+
+
+@pytest.mark.parametrize('command', ['estimate', 'plan', 'bench', 'replay', 'simulate'])
+def test_stiffness_damping_flag_beats_the_file_beats_zero(command, tmp_path, capsys):
+    required = MODEL_COMMANDS[command]
+    damped = tmp_path / 'damped.yaml'
+    damped.write_text(pathlib.Path(find_config('cho1992')).read_text()
+                      + 'stiffness_damping_s: 2.0e-4\n')
+    assert model_args.stiffness_damping(parse(command, *required)) == 0.0
+    assert model_args.stiffness_damping(
+        parse(command, *required, '--mechanism', str(damped))) == 2e-4
+    args = parse(command, *required, '--mechanism', str(damped), '--stiffness-damping', '0')
+    assert model_args.stiffness_damping(args) == 0.0
+    args = parse(command, *required, '--stiffness-damping', '1e-4')
+    assert model_args.stiffness_damping(args) == 1e-4
+    if command != 'simulate':
+        assert model_args.model_options(args).stiffness_damping == 1e-4
+    with pytest.raises(ValueError, match='--stiffness-damping'):
+        model_args.stiffness_damping(parse(command, *required, '--stiffness-damping', '-1'))
+    with pytest.raises(SystemExit):
+        parse(command, '--help')
+    text = ' '.join(capsys.readouterr().out.split())
+    assert '--stiffness-damping BETA_S' in text and 'stiffness_damping_s' in text
+
+
+def test_modes_has_no_stiffness_damping_flag():
+    assert '--stiffness-damping' not in cli.build_parser(['modes']).format_help()

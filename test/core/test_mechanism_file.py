@@ -12,7 +12,7 @@ from flexlink_ros.core.mechanism import MAX_ELEMENTS_PER_LINK
 from flexlink_ros.core.mechanism_file import (ament_share_directory, find_config,
                                               load_mechanism, MAX_FILE_BYTES, MAX_NAME_CHARS,
                                               MAX_SOURCE_CHARS, MAX_YAML_DEPTH,
-                                              mechanism_from_dict)
+                                              mechanism_from_dict, stiffness_damping_from_file)
 from flexlink_ros.errors import MechanismError
 import pytest
 import yaml
@@ -46,6 +46,8 @@ def test_papers_tables_load():
     (lambda d: d.update(elements_per_link=0), 'elements_per_link'),
     (lambda d: d['bearings'].update(joints=['O2', 'Q']), 'bearings.joints'),
     (lambda d: d.update(gravity_m_s2=[0.0]), 'gravity_m_s2'),
+    (lambda d: d.update(stiffness_damping_s=-1e-4), 'stiffness_damping_s'),
+    (lambda d: d.update(stiffness_damping_s=2.0), 'stiffness_damping_s'),
 ])
 def test_bad_fields_are_named(config_dir, edit, field):
     data = _cho(config_dir)
@@ -225,3 +227,20 @@ def test_find_config_falls_back_to_the_prefix_and_the_source_tree(tmp_path, monk
 def test_find_config_returns_an_existing_path_unchanged(config_dir):
     path = config_dir / 'kang1990.yaml'
     assert find_config(str(path)) == path
+
+
+def test_stiffness_damping_key_gives_the_default_beta_without_changing_the_mechanism(
+        config_dir, tmp_path):
+    data = _cho(config_dir)
+    data['stiffness_damping_s'] = 1e-4
+    path = tmp_path / 'damped.yaml'
+    path.write_text(yaml.safe_dump(data))
+    assert stiffness_damping_from_file(path) == 1e-4
+    assert stiffness_damping_from_file('cho1992') == 0.0
+    # beta is a model option, not part of the Mechanism (nor of its key): same mechanism.
+    assert load_mechanism(path) == load_mechanism('cho1992')
+    assert load_mechanism(path).key() == load_mechanism('cho1992').key()
+    data['stiffness_damping_s'] = 'abc'
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(MechanismError, match='stiffness_damping_s'):
+        stiffness_damping_from_file(path)

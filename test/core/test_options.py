@@ -43,16 +43,26 @@ def test_cache_fields_exclude_gravity_and_keep_the_declaration_order():
     options = ModelOptions(gravity=False, grid_size=64)
     fields = options.cache_fields()
     names = [f.name for f in dataclasses.fields(ModelOptions)]
-    assert list(fields) == [n for n in names if n != 'gravity']
+    assert list(fields) == [n for n in names if n not in ('gravity', 'stiffness_damping')]
     assert 'gravity' not in fields and fields['grid_size'] == 64
     # gravity alone does not change the key; any other field does
     assert ModelOptions(gravity=True).cache_fields() == ModelOptions(gravity=False).cache_fields()
     assert ModelOptions(speed_max=30.0).cache_fields() != ModelOptions().cache_fields()
 
 
+def test_stiffness_damping_is_in_the_cache_fields_only_when_set():
+    # beta = 0 keeps the fields (and the cache keys) of the options before beta existed
+    assert 'stiffness_damping' not in ModelOptions(stiffness_damping=0.0).cache_fields()
+    fields = ModelOptions(stiffness_damping=1e-4).cache_fields()
+    assert fields['stiffness_damping'] == 1e-4 and list(fields)[-1] == 'stiffness_damping'
+    assert ModelOptions(stiffness_damping=1).stiffness_damping == 1.0
+
+
 @pytest.mark.parametrize('changes', [
     {'bearings': 'springs'}, {'modes': 0}, {'static': -1}, {'grid_size': 7},
-    {'speed_max': 0.0}, {'speed_max': -5.0}, {'speed_max': float('nan')}])
+    {'speed_max': 0.0}, {'speed_max': -5.0}, {'speed_max': float('nan')},
+    {'stiffness_damping': -1e-4}, {'stiffness_damping': float('nan')},
+    {'stiffness_damping': float('inf')}])
 def test_invalid_values_are_refused(changes):
     with pytest.raises(ValueError):
         ModelOptions(**changes)

@@ -74,3 +74,21 @@ def test_joint_levels():
     assert rm.joint_level(500.0, False, 10.0, 100.0) == rm.ERROR
     assert rm.joint_level(1.0, True, 10.0, 100.0) == rm.ERROR
     assert rm.joint_level(math.nan, False, 10.0, 100.0) == rm.ERROR
+
+
+def test_quality_cdr_is_the_quality_message_read_back_by_rclpy_and_rosbags():
+    from rosbags.typesys import get_typestore, Stores
+    from flexlink_ros.io.cdr import serialize_message as exact_cdr
+    stamp = rm.ns_to_stamp(1_700_000_000_123_456_789)
+    data = rm.quality_cdr(stamp.sec, stamp.nanosec, b'linkage_ground', 0.031, math.nan)
+    assert data == exact_cdr(rm.quality_message(stamp, 'linkage_ground', 0.031, math.nan))
+    message = deserialize_message(data, JointState)
+    assert list(message.name) == ['error_indicator', 'nonlinearity']
+    assert message.position[0] == 0.031 and math.isnan(message.position[1])
+    assert (message.header.stamp, message.header.frame_id) == (stamp, 'linkage_ground')
+    assert len(message.velocity) == len(message.effort) == 0
+    # rosbags refuses CDR of any other length than the message's (exact bytes).
+    decoded = get_typestore(Stores.ROS2_HUMBLE).deserialize_cdr(data, 'sensor_msgs/msg/JointState')
+    assert decoded.position[0] == 0.031 and decoded.header.stamp.nanosec == 123_456_789
+    other = rm.quality_cdr(1, 2, b'frame_b', 0.5, 0.25)     # another frame: its own template
+    assert deserialize_message(other, JointState).position.tolist() == [0.5, 0.25]

@@ -4,7 +4,9 @@ import pathlib
 import subprocess
 import sys
 
+from flexlink_ros.core.mechanism_file import find_config
 from flexlink_ros.ros import parameters as node_params
+from flexlink_ros.ros.node_model import load_node_model
 import pytest
 import yaml
 
@@ -112,3 +114,32 @@ def test_node_help_lists_every_parameter():
     assert [spec.name for spec in node_params.PARAMETERS] == [
         name for name in listed if name in {spec.name for spec in node_params.PARAMETERS}]
     assert 'diagnostics.hardware_id (default ' in done.stdout
+
+
+def test_stiffness_damping_parameter_beats_the_mechanism_file(tmp_path):
+    values = node_params.defaults()
+    assert values['model.stiffness_damping'] == -1.0      # -1: the mechanism file's value
+    assert node_params.model_options(values).stiffness_damping == 0.0
+    assert node_params.model_options(values, 2e-4).stiffness_damping == 2e-4
+    for beta in (0.0, 1e-4):
+        values['model.stiffness_damping'] = beta
+        assert node_params.model_options(values, 2e-4).stiffness_damping == beta
+    assert node_params.validate_parameter('model.stiffness_damping', 1e-4) is None
+    assert '>= -1' in node_params.validate_parameter('model.stiffness_damping', -2.0)
+    assert '<= 1' in node_params.validate_parameter('model.stiffness_damping', 2.0)
+    assert '[s]' in node_params.SPECS['model.stiffness_damping'].description
+
+
+def test_node_model_takes_the_mechanism_files_stiffness_damping(tmp_path):
+    damped = tmp_path / 'damped.yaml'
+    damped.write_text(pathlib.Path(find_config('cho1992')).read_text()
+                      + 'stiffness_damping_s: 2.0e-4\n')
+    values = {**node_params.defaults(), 'mechanism': str(damped), 'model.rigid_crank': True,
+              'model.grid_size': 16, 'model.modes': 2, 'model.static': 0,
+              'model.elements_per_link': 2, 'model.cache_dir': str(tmp_path)}
+    model, options, _ = load_node_model(values, lambda note: None)
+    assert options.stiffness_damping == 2e-4
+    assert model.info['options']['stiffness_damping'] == 2e-4
+    values['model.stiffness_damping'] = 0.0
+    _, options, _ = load_node_model(values, lambda note: None)
+    assert options.stiffness_damping == 0.0

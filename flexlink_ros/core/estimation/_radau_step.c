@@ -22,7 +22,7 @@
 
 #define FIRST_MC 4      /* M and C start at monomial 1: weights[4:] */
 #define GROUPS_C 4      /* C: monomials 1, w2, w, w4 (node rows V, S each) */
-#define GROUPS_KF 3     /* K, f: monomials a, 1, w2 */
+#define GROUPS_KF_MAX 4 /* K, f: monomials a, 1, w2; and w with stiffness damping (kf_groups) */
 #define ROWS_ALL 28     /* all seven monomials x 4 (powers of t, or Hermite weights) */
 #define OUTPUTS 4       /* deflection channels (reduced.OUTPUT_NAMES) */
 #define JOINT_WIDTH 20  /* reactions (4 x 2), their rates (4 x 2), squared RMS (4) */
@@ -35,7 +35,7 @@ static const double TWO_PI = 6.283185307179586;
 static const double PI = 3.141592653589793;     /* math.pi */
 
 typedef struct {
-    Py_ssize_t r, cells, mass_groups, out_rows, joint_rows;
+    Py_ssize_t r, cells, mass_groups, kf_groups, out_rows, joint_rows;
     const float *mass, *damping;    /* float32, node tables: see tables._StepTables */
     const double *kf, *out, *joint, *g0;
     double cells_per_radian, c1;
@@ -175,11 +175,11 @@ static void load(Step *s, int slot, double angle, double w, double a)
                       s->mass_groups, r2, r2, blocks);
     combine_nodes_f32(s->hermite + FIRST_MC, s->damping + k * damping_node,
                       s->damping + k1 * damping_node, GROUPS_C, r2, r2, blocks + r2);
-    /* [K | f] from the kf table (monomials a, 1, w2) */
-    const Py_ssize_t kf_width = r2 + r, kf_node = 2 * GROUPS_KF * kf_width;
+    /* [K | f] from the kf table (monomials a, 1, w2, and w with stiffness damping) */
+    const Py_ssize_t kf_width = r2 + r, kf_node = 2 * s->kf_groups * kf_width;
     const double *lo = s->kf + k * kf_node, *hi = s->kf + k1 * kf_node;
-    combine_nodes(s->hermite, lo, hi, GROUPS_KF, kf_width, r2, blocks + 2 * r2);
-    combine_nodes(s->hermite, lo + r2, hi + r2, GROUPS_KF, kf_width, r, s->loads + slot * r);
+    combine_nodes(s->hermite, lo, hi, s->kf_groups, kf_width, r2, blocks + 2 * r2);
+    combine_nodes(s->hermite, lo + r2, hi + r2, s->kf_groups, kf_width, r, s->loads + slot * r);
 }
 
 /* The record of the crank state prev at the state z (tables._StepTables.record). */
@@ -522,7 +522,8 @@ static PyObject *advance(PyObject *module, PyObject *args)
     }
     if (get_typed_buffer(objects[0], &mass, 0, "mass", -1, "f") != 0
         || (s.mass_groups = rows_of(&mass, 2 * r2, cells, GROUPS_C, "mass")) < 0
-        || get_buffer(objects[2], &kf, 0, "kf", cells * 2 * GROUPS_KF * (r2 + r)) != 0
+        || get_buffer(objects[2], &kf, 0, "kf", -1) != 0
+        || (s.kf_groups = rows_of(&kf, 2 * (r2 + r), cells, GROUPS_KF_MAX, "kf")) < 0
         || get_buffer(objects[3], &out, 0, "out", -1) != 0
         || (s.out_rows = rows_of(&out, OUTPUTS * (r + 1), cells, ROWS_ALL, "out")) < 0
         || get_buffer(objects[4], &joint, 0, "joint", -1) != 0

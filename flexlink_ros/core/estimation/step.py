@@ -238,7 +238,7 @@ class NumpyStep:
         self._combine_nodes(hermite, k, first, tables.mass_groups, tables.mass, flat[:r2])
         self._combine_nodes(hermite, k, first, tables.GROUPS_C, tables.damping,
                             flat[r2:2 * r2])
-        self._combine_nodes(hermite, k, 0, tables.GROUPS_KF, tables.kf,
+        self._combine_nodes(hermite, k, 0, tables.kf_groups, tables.kf,
                             flat[2 * r2:3 * r2 + r])
 
     def _load_stages(self, angle, speed, accel, advance):

@@ -20,6 +20,7 @@ POWERS = (-2, -1, 0, 1, 2)   # G(h) is a Laurent polynomial in h
 FIRST_MC = 1                 # M and C start at monomial 1
 GROUPS_C = 4                 # C: monomials 1, w2, w, w4
 GROUPS_KF = 3                # K, f: monomials a, 1, w2
+GROUPS_KF_DAMPED = 4         # ... and w: stiffness damping's D_beta = w Kb1 in K
 # Speeds 0 ... speed_max at which the quasi-static deflection is evaluated.
 QUASI_STATIC_SPEEDS = 5
 
@@ -41,7 +42,7 @@ def _check_layout(model, stages):
     if CELL_POWERS != 4:
         raise ValueError('the step tables are written for cubic cells')
     for name, stop in (('M', 1 + GROUPS_C), ('C', 1 + GROUPS_C),
-                       ('K', GROUPS_KF), ('f', GROUPS_KF)):
+                       ('K', GROUPS_KF_DAMPED), ('f', GROUPS_KF)):
         if np.any(_block(model, name)[:, 4 * stop:] != 0.0):
             raise ValueError(f'{name} uses monomials beyond the first {stop}: '
                              'update _StepTables')
@@ -69,6 +70,17 @@ def _nodes(model, name, first_group, groups):
     return cells[:, :, :2].reshape(n_cells, 2 * groups, -1)
 
 
+def kf_groups(model):
+    """
+    Monomial groups of the [K | f] node table: 3 (a, 1, w2), or 4 with stiffness damping.
+
+    A model built with stiffness-proportional damping (core/fe/stiffness_damping.py) has
+    ``D_beta = w Kb1`` in K's monomial-w rows; without it those rows are zero and the table
+    keeps its 3 groups (the same bytes and the same step as before).
+    """
+    return GROUPS_KF_DAMPED if _rows_used(model, 'K') > 4 * GROUPS_KF else GROUPS_KF
+
+
 def build_node_tables(model):
     """Return (mass_groups, mass, damping, kf): the node tables of M, C and [K | f]."""
     mass_groups = -(-(_rows_used(model, 'M', 4 * FIRST_MC)) // 4)
@@ -77,8 +89,9 @@ def build_node_tables(model):
     # float64 (float32 there moves them by 1e-3: the static directions are stiff).
     mass = np.ascontiguousarray(_nodes(model, 'M', FIRST_MC, mass_groups), dtype=np.float32)
     damping = np.ascontiguousarray(_nodes(model, 'C', FIRST_MC, GROUPS_C), dtype=np.float32)
+    groups = kf_groups(model)
     kf = np.ascontiguousarray(np.concatenate(
-        [_nodes(model, 'K', 0, GROUPS_KF), _nodes(model, 'f', 0, GROUPS_KF)], axis=2))
+        [_nodes(model, 'K', 0, groups), _nodes(model, 'f', 0, groups)], axis=2))
     return mass_groups, mass, damping, kf
 
 
@@ -165,7 +178,8 @@ class _StepTables:
     node x (monomial, V/S) x width. ``out`` (the output operator [O | corr], outputs x
     (r + 1), leading rows used) and ``joint`` [reactions F (joints x 2), their time
     derivative (joints x 2), squared cycle-RMS reaction (joints)] stay per cell in power form
-    (rows ``monomial * 4 + power``; small, read once per sample).
+    (rows ``monomial * 4 + power``; small, read once per sample). With stiffness damping
+    ``kf`` has a fourth group, w (``kf_groups``).
     Two samples' [M, C, K, F] (F an r x r block holding f in its first r entries) in
     alternating slots times a 8 x 8 coefficient matrix G(h) give, in one product, the
     Radau IIA block matrix and the right-hand-side operator on (q, v).
@@ -186,6 +200,7 @@ class _StepTables:
         _check_layout(model, stages)
         self.size = model.size
         self.mass_groups, self.mass, self.damping, self.kf = build_node_tables(model)
+        self.kf_groups = self.kf.shape[1] // 2
         self.out_rows, self.out, self.joint = build_output_tables(model)
         self.g_stack = build_step_coefficients(stages)
         # The compiled step's convention: the sample in slot 0, stage 1 in slot 1.
@@ -284,7 +299,7 @@ def system_blocks(model, tables, theta, w, a):
         for out, table, groups in ((mass, tables.mass, slice(first, after)),
                                    (damping, tables.damping,
                                     slice(first, first + tables.GROUPS_C)),
-                                   (kf, tables.kf, slice(0, tables.GROUPS_KF))):
+                                   (kf, tables.kf, slice(0, tables.kf_groups))):
             node = weights[group, groups]
             out[group] = (node[:, :, 0].reshape(group.size, -1) @ table[k]
                           + node[:, :, 1].reshape(group.size, -1) @ table[k1])

@@ -33,6 +33,11 @@ moving/ground-frame coordinates. The static (residual-flexibility) correction ad
 the output points, the quasi-static response of the discarded modes to the load the modal
 part sees: ``U_r = (K_f^-1 - Phi Lambda^-1 Phi^T) (R - C_c U_m' - K_c U_m)`` with
 K_f = K + K_G.
+
+Stiffness-proportional damping (issue 14, item 3). With ``beta`` > 0 the objective
+Kelvin-Voigt damping of :mod:`core.fe.stiffness_damping` is added at every stage:
+``C_beta U' + D_beta U`` with ``C_beta = beta K`` on the damping and ``D_beta = w Kb1`` on the
+stiffness, on top of the modal zeta (set zeta = 0 for beta alone, the peer's convention).
 """
 
 import dataclasses
@@ -42,6 +47,7 @@ import numpy as np
 import scipy.linalg
 
 from .modes import modal_damping
+from .stiffness_damping import stiffness_damping_terms
 from ..integrators import RadauIIA
 
 METHODS = ('full', 'modal')
@@ -98,17 +104,21 @@ def frozen_eigen(system, speed, accel=0.0):
     return values, shapes
 
 
-def _stage_matrices(model, angles, speed, zeta, damped=None):
+def _stage_matrices(model, angles, speed, zeta, damped=None, beta=0.0):
     """
-    M, C_c + C_d, K + K_G + K_c, R at angles, and the frozen eigenpairs.
+    M, C_c + C_d (+ C_beta), K + K_G + K_c (+ D_beta), R at angles, and the frozen eigenpairs.
 
-    ``damped``: number of lowest frozen modes that carry modal damping (all if None).
+    ``damped``: number of lowest frozen modes that carry modal damping (all if None);
+    ``beta``: stiffness-proportional damping [s] (:mod:`core.fe.stiffness_damping`).
     """
     system = model.assemble(angles)
     mass, gyro, stiffness, load = system.evaluate(speed, 0.0)
     values, shapes = frozen_eigen(system, speed)
     damped = slice(None, damped)
     damping = gyro + modal_damping(mass, values[:, damped], shapes[:, :, damped], zeta)
+    if beta:
+        c_beta, d_beta = stiffness_damping_terms(model, angles, speed, beta)
+        damping, stiffness = damping + c_beta, stiffness + d_beta
     return mass, damping, stiffness, load, values, shapes
 
 
@@ -125,7 +135,7 @@ def _check(model, speed, method, modes, steps, points):
 
 def periodic_response(model, speed, method='full', modes=None, static_correction=False,
                       steps=DEFAULT_STEPS, points=DEFAULT_POINTS, stages=DEFAULT_STAGES,
-                      zeta=None, start_angle=0.0, matrices=None):
+                      zeta=None, start_angle=0.0, matrices=None, beta=None):
     """
     Periodic steady state over one revolution at constant crank speed.
 
@@ -154,6 +164,9 @@ def periodic_response(model, speed, method='full', modes=None, static_correction
     matrices : callable or None
         ``matrices(angles) -> (M, C, K, R)`` at an array of crank angles, in place of the
         model's own (modal damping ``zeta``) for the 'full' method: another damping model.
+    beta : float or None
+        Stiffness-proportional damping [s] added to the modal zeta (zeta = 0 for beta alone);
+        None for ``model.options.stiffness_damping``.
 
     Returns
     -------
@@ -168,13 +181,15 @@ def periodic_response(model, speed, method='full', modes=None, static_correction
     run = _Run(integrator=RadauIIA(stages), speed=speed, h=2.0 * np.pi / abs(speed) / steps,
                steps=steps, stride=steps // points, size=modes if modal else model.size,
                modal=modal, start_angle=start_angle,
-               zeta=model.mechanism.damping_ratio if zeta is None else float(zeta))
+               zeta=model.mechanism.damping_ratio if zeta is None else float(zeta),
+               beta=_beta(model, beta))
     q, v, saved = _propagate(model, run, matrices)
     monodromy, disp, vel = _periodic_states(q, v, saved, modal)
     out_angles = start_angle + speed * run.h * run.stride * np.arange(points)
     corrected = modal and static_correction and run.size < model.size
     if corrected:
-        disp = disp + _residual_flexibility(model, out_angles, speed, disp, vel, run.size)
+        disp = disp + _residual_flexibility(model, out_angles, speed, disp, vel, run.size,
+                                            run.beta)
     outputs = np.einsum('kon,kn->ko', model.output_operator(out_angles), disp)
     multipliers = np.linalg.eigvals(monodromy)
     multipliers = multipliers[np.argsort(-np.abs(multipliers))]
@@ -182,6 +197,7 @@ def periodic_response(model, speed, method='full', modes=None, static_correction
             'static_correction': bool(corrected),
             'steps': steps, 'points': points, 'stages': stages,
             'zeta': run.zeta if matrices is None else None,
+            'stiffness_damping_s': run.beta if matrices is None else None,
             'speed_rad_s': float(speed), 'dofs': model.size,
             'spectral_radius': float(np.abs(multipliers[0])),
             'wall_s': time.perf_counter() - started}
@@ -202,6 +218,16 @@ class _Run:
     modal: bool
     start_angle: float
     zeta: float
+    beta: float = 0.0
+
+
+def _beta(model, beta):
+    """Return a run's stiffness-proportional damping [s]: ``beta``, else the model's option."""
+    value = getattr(model.options, 'stiffness_damping', 0.0) if beta is None else beta
+    value = float(value)
+    if not (np.isfinite(value) and value >= 0.0):
+        raise ValueError(f'`beta` must be >= 0 [s], got {beta!r}')
+    return value
 
 
 def _chunk_matrices(model, run, chunk, matrices):
@@ -209,7 +235,7 @@ def _chunk_matrices(model, run, chunk, matrices):
     angles = run.start_angle + run.speed * run.h * (chunk[:, None] + run.integrator.c[None, :])
     stages = run.integrator.c.shape[0]
     stage = (_stage_matrices(model, angles.ravel(), run.speed, run.zeta,
-                             run.size if run.modal else None)
+                             run.size if run.modal else None, run.beta)
              if matrices is None else matrices(angles.ravel()))
     return [x.reshape((len(chunk), stages) + x.shape[1:]) for x in stage]
 
@@ -292,12 +318,20 @@ def _periodic_states(q, v, saved, modal):
     return monodromy, disp, vel
 
 
-def _residual_flexibility(model, angles, speed, disp, vel, kept):
-    """(K_f^-1 - Phi_N Lambda_N^-1 Phi_N^T)(R - C_c U' - K_c U) at output angles, (P, n)."""
+def _residual_flexibility(model, angles, speed, disp, vel, kept, beta=0.0):
+    """
+    (K_f^-1 - Phi_N Lambda_N^-1 Phi_N^T)(R - C_c U' - K_c U) at output angles, (P, n).
+
+    With ``beta`` the load also loses the damping force ``C_beta U' + D_beta U``.
+    """
     system = model.assemble(angles)
     values, shapes = frozen_eigen(system, speed)
-    load = (system.load_at(speed) - np.einsum('kij,kj->ki', speed * system.gyroscopic, vel)
-            - np.einsum('kij,kj->ki', system.coupling_at(speed), disp))
+    damping, coupling = speed * system.gyroscopic, system.coupling_at(speed)
+    if beta:
+        c_beta, d_beta = stiffness_damping_terms(model, angles, speed, beta)
+        damping, coupling = damping + c_beta, coupling + d_beta
+    load = (system.load_at(speed) - np.einsum('kij,kj->ki', damping, vel)
+            - np.einsum('kij,kj->ki', coupling, disp))
     dropped = shapes[:, :, kept:]
     modal_load = np.einsum('kim,ki->km', dropped, load)
     return np.einsum('kim,km->ki', dropped, modal_load / values[:, kept:])

@@ -55,8 +55,6 @@ form. Modal damping is then usually off (zeta = 0): beta alone gives every froze
 import numpy as np
 
 from .beam import beam_stiffness
-from .modes import modal_damping
-from .simulate import frozen_eigen
 
 # +90 degree rotation (I_s of Eq. 21).
 _S = np.array([[0.0, -1.0], [1.0, 0.0]])
@@ -236,12 +234,13 @@ def rigid_rotation_velocity(model, displacement, rate):
     return out
 
 
-def system_matrices(model, crank_angle, speed, beta, accel=0.0, zeta=0.0):
+def system_matrices(model, crank_angle, speed, beta, accel=0.0):
     """
     M, C, K, R of the full-order equation with beta damping, in ``FrozenSystem.evaluate`` form.
 
-    ``M U'' + C U' + K U = R`` with ``C = w C1 + C_beta (+ modal zeta)`` and
-    ``K = K + K_G + K_c + D_beta`` at crank speed w and acceleration a.
+    ``M U'' + C U' + K U = R`` with ``C = w C1 + C_beta`` and ``K = K + K_G + K_c + D_beta``
+    at crank speed w and acceleration a (no modal damping: :func:`core.fe.simulate.
+    periodic_response` adds both, ``beta`` and ``zeta``).
 
     Parameters
     ----------
@@ -253,8 +252,6 @@ def system_matrices(model, crank_angle, speed, beta, accel=0.0, zeta=0.0):
         Crank speed w [rad/s] and acceleration a [rad/s^2].
     beta : float
         Stiffness-proportional damping [s].
-    zeta : float
-        Modal damping ratio added on top (0: beta only).
 
     Returns
     -------
@@ -266,11 +263,7 @@ def system_matrices(model, crank_angle, speed, beta, accel=0.0, zeta=0.0):
     system = model.assemble(theta)
     mass, gyro, stiffness, load = system.evaluate(speed, accel)
     c_beta, d_beta = stiffness_damping_terms(model, theta, speed, beta)
-    damping = gyro + c_beta
-    if zeta:
-        values, shapes = frozen_eigen(system, speed, accel)
-        damping = damping + modal_damping(mass, values, shapes, zeta)
-    return mass, damping, stiffness + d_beta, load
+    return mass, gyro + c_beta, stiffness + d_beta, load
 
 
 __all__ = ['link_local_rate', 'link_damping_matrices', 'bearing_damping_matrix',

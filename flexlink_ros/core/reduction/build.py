@@ -48,6 +48,9 @@ def project_system(pieces, samples, basis, speed_max, damping_speeds):
     for piece in AFFINE_PIECES:
         pieces['K'][piece] = project(samples.stiffness[piece])
         pieces['f'][piece] = samples.load[piece] @ basis
+    if 'w' in samples.stiffness:
+        # Stiffness damping's D_beta = w Kb1 (core/fe/stiffness_damping.py): monomial w.
+        pieces['K']['w'] = project(samples.stiffness['w'])
     pieces['out']['1'] = samples.outputs @ basis
 
 

@@ -14,9 +14,11 @@ import scipy.linalg
 from . import store
 from .basis import FrozenSamples
 from .build import reduce_samples
+from .build_progress import BuildProgress
 from .model import ReducedModel
 from .. import dynamics
 from ..fe import linkage as assembly
+from ..fe.stiffness_damping import stiffness_damping_terms
 from ..options import MODEL_VERSION, ModelOptions
 
 # Points per beam element where link shapes are tabulated (3 elements: 10 points per link).
@@ -30,7 +32,7 @@ def model_key(mechanism, options):
                            options.cache_fields(), {'criteria': True})
 
 
-def model_for_mechanism(mechanism, options=None, cache_dir=None, use_cache=True):
+def model_for_mechanism(mechanism, options=None, cache_dir=None, use_cache=True, progress=None):
     """
     Return the reduced model of a mechanism: from a verified cache file, or built (and cached).
 
@@ -44,6 +46,9 @@ def model_for_mechanism(mechanism, options=None, cache_dir=None, use_cache=True)
         Cache directory (None: core.store.default_cache_dir()).
     use_cache : bool
         False builds without reading or writing a cache.
+    progress : callable or None
+        ``progress(done, total, what)`` while a model is built (not called on a cache hit);
+        see :class:`.build_progress.BuildProgress`.
 
     Returns
     -------
@@ -58,21 +63,28 @@ def model_for_mechanism(mechanism, options=None, cache_dir=None, use_cache=True)
         path = f'{directory}/{mechanism.name}-{key[:16]}.npz'
 
     def build():
-        return build_model(mechanism, options).to_arrays()
+        return build_model(mechanism, options, progress).to_arrays()
 
     arrays, meta, _ = store.load_or_build(path, key, build)
     return ReducedModel.from_arrays(arrays, meta)
 
 
-def build_model(mechanism, options):
-    """Precompute the reduced model of a mechanism (full-order pieces from core/assembly.py)."""
-    samples = frozen_samples_for(mechanism, options)
+def build_model(mechanism, options, progress=None):
+    """
+    Precompute the reduced model of a mechanism (full-order pieces from core/assembly.py).
+
+    ``progress(done, total, what)``, if given, follows the build (:mod:`.build_progress`).
+    """
+    tracker = BuildProgress(progress, options.grid_size)
+    samples = tracker.follow(frozen_samples_for(mechanism, options))
     angles = 2.0 * np.pi * np.arange(options.grid_size) / options.grid_size
     forces, criteria_source = reaction_pieces(mechanism, angles)
-    return reduce_samples(samples, options.modes, options.static, options.speed_max,
-                          mechanism.damping_ratio, forces=forces,
-                          info={'options': options.cache_fields(),
-                                'mechanism': mechanism.name, 'criteria': criteria_source})
+    model = reduce_samples(samples, options.modes, options.static, options.speed_max,
+                           mechanism.damping_ratio, forces=forces,
+                           info={'options': options.cache_fields(),
+                                 'mechanism': mechanism.name, 'criteria': criteria_source})
+    tracker.finish()
+    return model
 
 
 def fe_mechanism(mechanism, options):
@@ -108,7 +120,11 @@ def frozen_samples_for(mechanism, options, points_per_element=SHAPE_POINTS_PER_E
     Full-order affine pieces of the flexible model (core/assembly.py) on the crank-angle grid.
 
     The frozen eigenproblem and the modal damping use ``K + K_G(w, a)`` as core/modes.py does
-    (no centrifugal term); the equations of motion add the rotating-frame terms K_c.
+    (no centrifugal term); the equations of motion add the rotating-frame terms K_c. With
+    ``options.stiffness_damping`` (beta > 0) the objective Kelvin-Voigt damping of
+    core/fe/stiffness_damping.py is added: ``C_beta = beta K`` to the damping and
+    ``D_beta = w Kb1`` as the stiffness piece 'w' (linear in the crank speed). With beta = 0
+    nothing changes (no piece 'w', the same damping).
 
     """
     mechanism = fe_mechanism(mechanism, options)
@@ -121,10 +137,16 @@ def frozen_samples_for(mechanism, options, points_per_element=SHAPE_POINTS_PER_E
                  'w2': system.coupling['w2'] + system.geometric['w2']}
     positions, operator = linkage.shape_operator(angles, points_per_element)
     zeta = mechanism.damping_ratio
+    beta = options.stiffness_damping
+    beta_damping = None
+    if beta:
+        # D_beta at unit crank speed is Kb1: the stiffness piece of monomial w.
+        beta_damping, stiffness['w'] = stiffness_damping_terms(linkage, angles, 1.0, beta)
 
     def damping(k, w):
         stiff = frozen['1'][k] + w * w * frozen['w2'][k]
-        return modal_damping_matrix(system.mass[k], stiff, zeta)
+        modal = modal_damping_matrix(system.mass[k], stiff, zeta)
+        return modal if beta_damping is None else modal + beta_damping[k]
 
     return FrozenSamples(mass=system.mass, gyroscopic=system.gyroscopic, stiffness=stiffness,
                          load=dict(system.load), outputs=linkage.output_operator(angles),

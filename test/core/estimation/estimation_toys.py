@@ -1,5 +1,7 @@
 """Shared inputs of the estimation tests: sample times, the toy model and its forces, feeds."""
 
+import dataclasses
+
 from flexlink_ros.core.estimation.native import compiled_step_available
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.reduction import build, cells
@@ -64,6 +66,31 @@ def toy_model():
     samples = toy_samples(grid=64)
     forces, _ = toy_forces(64)
     return build.reduce_samples(samples, modes=4, static=2, speed_max=SPEED_MAX, zeta=ZETA,
+                                forces=forces)
+
+
+def toy_damped_model(beta=2e-4):
+    """
+    Build the toy model with stiffness damping: C_beta = beta K_1, D_beta = w Kb1 ('w' piece).
+
+    Kb1 is an angle-dependent, non-symmetric beta-scaled matrix, as the linkage's
+    ``beta sum g1_L T K_L D1^T`` (core/fe/stiffness_damping.py).
+    """
+    samples = toy_samples(grid=64)
+    grid = samples.grid_size
+    theta = 2 * np.pi * np.arange(grid) / grid
+    rng = np.random.default_rng(9)
+    rotation = rng.normal(size=(samples.dofs, samples.dofs)) * 30.0
+    stiffness = dict(samples.stiffness)
+    stiffness['w'] = beta * np.array([(1.0 + 0.5 * np.cos(t)) * rotation for t in theta])
+    modal = samples.damping
+
+    def damping(k, w):
+        return modal(k, w) + beta * samples.stiffness['1'][k]
+
+    damped = dataclasses.replace(samples, stiffness=stiffness, damping=damping)
+    forces, _ = toy_forces(grid)
+    return build.reduce_samples(damped, modes=4, static=2, speed_max=SPEED_MAX, zeta=ZETA,
                                 forces=forces)
 
 

@@ -19,9 +19,18 @@ def toy_model():
     return toys.toy_model()
 
 
-def test_fused_step_equals_the_reference_radau_step(toy_model):
+@pytest.fixture(scope='module')
+def damped_toy_model():
+    return toys.toy_damped_model()
+
+
+@pytest.mark.parametrize('damped', [False, True])
+def test_fused_step_equals_the_reference_radau_step(toy_model, damped_toy_model, damped):
     # The per-sample algebra (stacked tables, transformed unknowns) against RadauIIA.step
     # with the same stage matrices (stage 1 at the crank state interpolated to c_1 h).
+    # ``damped``: the model's K has the stiffness damping's monomial w (read from its table).
+    if damped:
+        toy_model = damped_toy_model
     est = StreamingEstimator(toy_model, warm_start=False)
     rng = np.random.default_rng(1)
     stamp, angle, speed = 0, 1.0, 30.0
@@ -53,11 +62,15 @@ def test_fused_step_equals_the_reference_radau_step(toy_model):
                                    atol=1e-8 * np.max(np.abs(q_new)))
 
 
-@pytest.mark.parametrize('with_speed', [True, False])
-def test_compiled_step_equals_numpy_step(toy_model, with_speed):
+@pytest.mark.parametrize('with_speed,damped', [(True, False), (False, False), (True, True)])
+def test_compiled_step_equals_numpy_step(toy_model, damped_toy_model, with_speed, damped):
     # Jitter, drops, gaps that take sub-steps (7 and 40 ms), a reset (stamp back) and a
     # speed beyond the model's range: every branch of the step runs on both paths.
+    # ``damped``: stiffness damping, K's fourth monomial group (w) in the [K | f] table.
     compiled_or_skip()
+    if damped:
+        toy_model = damped_toy_model
+        assert StreamingEstimator(toy_model)._tables.kf_groups == 4
     times = sample_times(1000.0, 0.4, 0.5, 0.05, seed=21)
     times = np.concatenate([times, times[-1] + 0.007 + times[:200],
                             times[-1] + 0.247 + times[:200], times[-1] + 0.1 + times[:100]])

@@ -3,6 +3,7 @@
 import dataclasses
 import pathlib
 
+from flexlink_ros.core.fe import stiffness_damping as sd
 from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.fe.modes import modal_damping
 from flexlink_ros.core.fe.simulate import frozen_eigen, periodic_response, step_convergence
@@ -146,3 +147,67 @@ def test_bad_arguments(cho):
         periodic_response(model, 10.0, steps=100, points=30)
     with pytest.raises(ValueError, match='speed'):
         periodic_response(model, 0.0)
+
+
+BETA = 1e-4
+
+
+def _beta_model(cho, bearings='flexible', elements=3, beta=0.0):
+    options = ModelOptions.full_model(rigid_crank=True, bearings=bearings, gravity=False,
+                                      stiffness_damping=beta)
+    return FlexibleLinkage(_small(cho, elements), options)
+
+
+@pytest.mark.parametrize('bearings', ['rigid', 'flexible'])
+def test_beta_free_response_decays_at_beta_omega_squared_over_two(cho, bearings):
+    """
+    Floquet multipliers (the unloaded one-revolution map) of the lowest modes with beta only.
+
+    Each frozen mode's amplitude decays at ``beta omega_i^2 / 2`` (zeta_i = beta omega_i / 2),
+    so at a slow crank (adiabatic, Coriolis negligible) ``-ln |mu_i|`` is
+    ``beta / 2`` times the integral of omega_i^2 over the revolution. Without beta (zeta = 0)
+    the multipliers have modulus 1: the decay is beta's.
+    """
+    model = _beta_model(cho, bearings)
+    speed, steps = 20.0 * RPM, 1440
+    damped = periodic_response(model, speed, steps=steps, points=24, stages=3, zeta=0.0,
+                               beta=BETA)
+    angles = 2.0 * np.pi * np.arange(steps) / steps
+    values, _ = frozen_eigen(model.assemble(angles), speed)
+    expected = 0.5 * BETA * values[:, :2].mean(axis=0) * (2.0 * np.pi / speed)
+    measured = -np.log(np.abs(damped.floquet_multipliers[[0, 2]]))   # complex pairs
+    assert np.allclose(measured, expected, rtol=0.01)
+    assert expected[0] > 3.0   # a real decay (a factor e^-3 or more per revolution)
+    undamped = periodic_response(model, speed, steps=steps, points=24, stages=3, zeta=0.0,
+                                 beta=0.0)
+    assert np.abs(undamped.floquet_multipliers[:4]) == pytest.approx(1.0, abs=0.01)
+
+
+def test_beta_from_options_matches_the_objective_stage_matrices(cho):
+    """beta=None reads model.options.stiffness_damping; equal to passing C_beta, D_beta in."""
+    from_options = _beta_model(cho, beta=BETA)
+    speed = 269.0 * RPM
+    run = periodic_response(from_options, speed, steps=240, points=24, zeta=0.0)
+    assert run.info['stiffness_damping_s'] == BETA
+    plain = _beta_model(cho)
+    given = periodic_response(
+        plain, speed, steps=240, points=24,
+        matrices=lambda angles: sd.system_matrices(plain, angles, speed, BETA))
+    assert np.allclose(run.outputs, given.outputs, rtol=0.0,
+                       atol=1e-9 * np.abs(given.outputs).max())
+    undamped = periodic_response(plain, speed, steps=240, points=24, zeta=0.0)
+    assert undamped.info['stiffness_damping_s'] == 0.0
+    # beta changes the response (a real damping, not a rounding)
+    assert np.abs(undamped.outputs - run.outputs).max() > 0.01 * np.abs(run.outputs).max()
+    with pytest.raises(ValueError, match='beta'):
+        periodic_response(plain, speed, steps=240, points=24, beta=-1e-4)
+
+
+def test_beta_modal_response_with_all_modes_equals_full_order(cho):
+    model = _beta_model(cho, beta=BETA)
+    speed = 269.0 * RPM
+    full = periodic_response(model, speed, steps=240, points=24, zeta=0.0)
+    modal = periodic_response(model, speed, 'modal', modes=model.size, steps=240, points=24,
+                              zeta=0.0)
+    assert np.allclose(modal.outputs, full.outputs, rtol=0.0,
+                       atol=1e-8 * np.abs(full.outputs).max())

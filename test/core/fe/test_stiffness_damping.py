@@ -196,3 +196,29 @@ def test_system_matrices_add_beta_terms_to_evaluate():
     c_beta, d_beta = sd.stiffness_damping_terms(model, theta, w, BETA)
     assert np.array_equal(mass, m0) and np.array_equal(load, r0)
     assert np.allclose(damping, c0 + c_beta) and np.allclose(stiffness, k0 + d_beta)
+
+
+def test_system_terms_are_the_link_shares_at_the_mechanism_rates_and_vanish_co_moving():
+    """
+    The assembled C_beta, D_beta (simulate's) are the link shares at w_L = g1_L w plus beta K_b.
+
+    So the system force is the sum of the link forces, each zero for a deformed shape carried
+    along rigidly with its link frame; with every frame turning at one rate (a rigid rotation
+    of the deformed linkage: the only co-moving state of all links together) the whole
+    system's element force and power are zero, the naive form's power is not.
+    """
+    model = _model(4, 'flexible', rigid_crank=False)
+    theta, w = np.array([1.0]), 25.0
+    c_sys, d_sys = sd.stiffness_damping_terms(model, theta, w, BETA)
+    angle, g1, _, _ = model.kinematic_coefficients(theta)
+    c_sum = sd.bearing_damping_matrix(model, BETA)[None].copy()
+    d_sum = np.zeros_like(c_sys)
+    for link in model.links:
+        c, d = sd.link_damping_matrices(model, link, angle[link], g1[link] * w, BETA)
+        c_sum, d_sum = c_sum + c, d_sum + d
+    assert np.allclose(c_sys, c_sum, rtol=1e-12, atol=0.0)
+    assert np.allclose(d_sys, d_sum, rtol=1e-12, atol=1e-12 * np.abs(d_sys).max())
+    U = _static(model)
+    Ud = sd.rigid_rotation_velocity(model, U, w)
+    right, naive = _rotating_forces(model, theta[0], U, Ud, w)
+    assert abs(float(np.sum(Ud * right))) <= 1e-12 * float(np.sum(Ud * naive))

@@ -2,6 +2,8 @@
 
 import pathlib
 
+from flexlink_ros.core.estimation.tables import kf_groups
+from flexlink_ros.core.fe import stiffness_damping as sd
 from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.fe.modes import solve_frozen_modes
 from flexlink_ros.core.mechanism_file import load_mechanism
@@ -107,3 +109,47 @@ def test_model_keys_are_pinned():
     mechanism = load_mechanism('cho1992')
     for options, key in PINNED_KEYS:
         assert model_key(mechanism, options) == key, options
+
+
+# model_key of cho1992 with the default options before stiffness damping existed.
+DEFAULT_KEY_BEFORE_BETA = '40c1da2cef355000da1b9509d518ea309436fd0d9c350c56bd3c078732b71bae'
+
+
+def test_stiffness_damping_keys_only_when_set():
+    mechanism = load_mechanism(CONFIG / 'cho1992.yaml')
+    assert model_key(mechanism, ModelOptions()) == DEFAULT_KEY_BEFORE_BETA
+    assert model_key(mechanism, ModelOptions(stiffness_damping=0.0)) == DEFAULT_KEY_BEFORE_BETA
+    assert 'stiffness_damping' not in ModelOptions().cache_fields()
+    keys = {model_key(mechanism, ModelOptions(stiffness_damping=beta)) for beta in (1e-4, 2e-4)}
+    assert len(keys) == 2 and DEFAULT_KEY_BEFORE_BETA not in keys
+
+
+def test_stiffness_damping_tables_are_the_projected_c_beta_and_d_beta():
+    """C gains V^T beta K V, K gains w V^T Kb1 V (monomial w); beta = 0 adds no piece."""
+    mechanism = load_mechanism(CONFIG / 'cho1992.yaml')
+    beta, grid, k, w = 1e-4, 16, 5, 40.0
+    options = {'grid_size': grid, 'gravity': False, 'elements_per_link': 3}
+    plain = frozen_samples_for(mechanism, ModelOptions(**options))
+    damped = frozen_samples_for(mechanism, ModelOptions(stiffness_damping=beta, **options))
+    assert set(plain.stiffness) == {'1', 'a', 'w2'}
+    linkage = FlexibleLinkage(fe_mechanism(mechanism, ModelOptions(**options)),
+                              ModelOptions(**options))
+    theta = np.array([2 * np.pi * k / grid])
+    c_beta, d_beta = sd.stiffness_damping_terms(linkage, theta, w, beta)
+    np.testing.assert_allclose(w * damped.stiffness['w'][k], d_beta[0], rtol=1e-12, atol=0.0)
+    np.testing.assert_allclose(damped.damping(k, w) - plain.damping(k, w), c_beta[0],
+                               rtol=1e-9, atol=1e-9 * np.abs(c_beta).max())
+    models = [reduce_samples(s, 4, 2, speed_max=60.0, zeta=mechanism.damping_ratio)
+              for s in (plain, damped)]
+    # The basis does not see the damping: the same V, so the tables differ by the projections.
+    np.testing.assert_array_equal(models[0].basis, models[1].basis)
+    basis = models[0].basis
+    blocks = [system_blocks(m, m.evaluate(theta[0], w, 0.0)) for m in models]
+    expected_c = basis.T @ c_beta[0] @ basis
+    expected_k = basis.T @ d_beta[0] @ basis
+    np.testing.assert_allclose(blocks[1][1][0] - blocks[0][1][0], expected_c,
+                               rtol=1e-6, atol=1e-6 * np.abs(expected_c).max())
+    np.testing.assert_allclose(blocks[1][2][0] - blocks[0][2][0], expected_k,
+                               rtol=1e-6, atol=1e-6 * np.abs(expected_k).max())
+    assert np.abs(expected_k).max() > 0.0
+    assert kf_groups(models[0]) == 3 and kf_groups(models[1]) == 4

@@ -1,0 +1,106 @@
+"""
+`flexlink validate` (cli/validate.py): the real command at a reduced size (4 elements per link).
+
+One speed as JSON with a chart and a peer cache, the same as text from the cache, a two-speed
+sweep where the validity flag turns, and the one-line errors (no speed, no exudyn).
+"""
+
+import json
+import struct
+import subprocess
+import sys
+
+from flexlink_ros.cli import main as cli
+from flexlink_ros.studies.peer_model import exudyn_available
+import pytest
+
+needs_exudyn = pytest.mark.skipif(not exudyn_available(),
+                                  reason="exudyn is not installed (pip install '.[peer]')")
+
+SMALL = ('--elements-per-link', '4', '--no-gravity')
+
+
+def png_size(path):
+    """Width and height [px] from a PNG file's header; asserts it is a PNG."""
+    data = path.read_bytes()
+    assert data[:8] == b'\x89PNG\r\n\x1a\n' and data[12:16] == b'IHDR'
+    return struct.unpack('>II', data[16:24])
+
+
+def _run(capsys, *argv):
+    code = cli.main(['validate', *argv])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+@pytest.fixture(scope='module')
+def cache(tmp_path_factory):
+    return tmp_path_factory.mktemp('peer-cache')
+
+
+@needs_exudyn
+def test_one_speed_as_json_then_as_text_from_the_cache(capsys, cache, tmp_path):
+    png = tmp_path / 'validate.png'
+    code, out, _ = _run(capsys, '--peer', 'exudyn', '--rpm', '391', *SMALL, '--cache',
+                        str(cache), '--chart', str(png), '--json')
+    assert code == 0
+    result = json.loads(out)
+    (record,) = result['records']
+    assert result['peer'] == 'exudyn' and result['flag_turns'] == []
+    assert 'series' not in record and record['rpm'] == 391.0
+    models = record['models']
+    assert set(models) == {'linear', 'second_order', 'dynamic'}
+    # rigid bearings: the lever tip is second order; the dynamic pass fixes the coupler
+    assert models['linear']['lever_tip_dy']['p2p_error'] < -0.9
+    assert abs(models['second_order']['lever_tip_dy']['p2p_error']) < 0.1
+    assert (record['point_rms_error']['dynamic']['coupler_mid']
+            < 0.5 * record['point_rms_error']['second_order']['coupler_mid'])
+    width, height = png_size(png)
+    assert width > 1000 and height > 300
+    assert len(list(cache.iterdir())) == 1
+    code, text, _ = _run(capsys, '--rpm', '391', *SMALL, '--cache', str(cache))
+    assert code == 0 and len(list(cache.iterdir())) == 1
+    lines = text.splitlines()
+    assert lines[0].startswith('391 rpm, rigid bearings, gravity off, 4 elements per link')
+    peer = lines[2].split()
+    assert peer[:4] == ['Exudyn', 'peer', 'p2p', '[um]'] and len(peer) == 8
+    tip = models['linear']['lever_tip_dx']['peer_p2p'] * 1e6
+    assert float(peer[4]) == pytest.approx(tip, abs=0.051)   # the same peer run, reused
+    labels = [line[:30].strip() for line in lines[3:12]]
+    assert labels[0] == 'linear p2p [um]' and labels[3] == 'linear + 2nd order p2p [um]'
+    assert labels[8] == '+ dynamic pass rel RMS'
+    assert lines[-1].startswith('validity indicator') and lines[-1].endswith('valid')
+
+
+@needs_exudyn
+def test_sweep_shows_where_the_flag_turns(capsys, cache, tmp_path):
+    png = tmp_path / 'sweep.png'
+    code, out, _ = _run(capsys, '--sweep', '269:405:136', *SMALL, '--cache', str(cache),
+                        '--chart', str(png))
+    assert code == 0
+    lines = out.splitlines()
+    rows = {line.split()[0]: line.split() for line in lines[2:4]}
+    assert rows['269'][-2:] == ['yes', 'yes']        # valid, second order within targets
+    assert rows['405'][-2:] == ['NO', 'NO']          # flagged, and off the peer
+    assert lines[4] == 'flag turns: NOT valid from 405 rpm (after 269)'
+    assert lines[-1] == f'chart: {png}' and png_size(png)[1] > 500
+
+
+def test_no_speed_is_a_one_line_error(capsys):
+    if not exudyn_available():
+        pytest.skip('exudyn is not installed')
+    code, out, err = _run(capsys, '--no-gravity')
+    assert code == 1 and out == ''
+    assert err.strip() == ('flexlink validate: error: give crank speeds with --rpm R [R ...] '
+                           'or --sweep START:STOP:STEP')
+
+
+def test_without_exudyn_the_error_names_the_extra():
+    code = ('import sys; sys.modules["exudyn"] = None\n'
+            'from flexlink_ros.cli import main\n'
+            'sys.exit(main.main(["validate", "--rpm", "269"]))\n')
+    run = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                         timeout=120)
+    assert run.returncode == 1 and run.stdout == ''
+    assert run.stderr.startswith('flexlink validate: error: the Exudyn peer is not installed')
+    assert "pip install '.[peer]'" in run.stderr and len(run.stderr.splitlines()) == 1
