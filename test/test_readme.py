@@ -91,6 +91,9 @@ RUN = {
 _COLCON = ('needs a ROS 2 distro (ros2 run, colcon): '
            'test/test_packaging.py::test_colcon_build_resolves_like_ros2_run builds the package '
            'with colcon and resolves the executables as ros2 run does')
+_LAUNCH = ('needs ros2 launch (a ROS 2 distro; launch and launch_ros are not on PyPI): '
+           'test/test_launch_files.py builds each launch description and, where launch_ros '
+           'is importable, runs it')
 _PUBLISH = ('publishes into a live ROS graph (waits up to 10 s for a subscriber): '
             'test/ros/test_republish.py runs replay --publish with subscribers')
 SKIPPED = {
@@ -113,6 +116,13 @@ SKIPPED = {
     'ros2 run flexlink_ros flexlink_node --ros-args -r __ns:=/robot2 --params-file '
     'install/flexlink_ros/share/flexlink_ros/config/flexlink_node.yaml '
     '-p diagnostics.hardware_id:=linkage_2': _COLCON,
+    'ros2 launch flexlink_ros flexlink.launch.py': _LAUNCH,
+    'ros2 launch flexlink_ros flexlink.launch.py driver:=true namespace:=robot1': _LAUNCH,
+    'ros2 launch flexlink_ros flexlink.launch.py mechanism:=kang1990 params_file:=my_node.yaml':
+        _LAUNCH,
+    'ros2 launch flexlink_ros flexlink_lifecycle.launch.py driver:=true': _LAUNCH,
+    'ros2 launch flexlink_ros flexlink_lifecycle.launch.py autostart:=false': _LAUNCH,
+    'ros2 launch flexlink_ros flexlink.launch.py --show-args': _LAUNCH,
     'flexlink replay other_bag --topic /robot/joint_states --joint crank_joint --publish':
         _PUBLISH,
     'flexlink replay run1 --publish --clock --rate 2 --loop --ros-args -r __ns:=/robot1':
