@@ -13,12 +13,18 @@ import sys
 import threading
 
 from flexlink_ros.io.recorder import McapRecorder
+from flexlink_ros.names import READY_MESSAGE
 from flexlink_ros.ros import messages as ros_messages
 from flexlink_ros.ros.playback_schedule import ticks_in_pass
+from mcap.reader import make_reader
 import numpy as np
 import pytest
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
+import test_node
+from test_node import NodeProcess, READY_TIMEOUT_S
+
+processes = test_node.processes   # every process a test starts, killed at its end
 
 START = 1_700_000_000_000_000_000
 COUNT = 201                      # 100 Hz for 2 s
@@ -82,10 +88,11 @@ def bag(tmp_path_factory):
 class Listener:
     """The listener process; ``lines`` collects its stdout lines as they come."""
 
-    def __init__(self, tmp_path, topic, expected):
+    def __init__(self, processes, tmp_path, topic, expected):
         self.out = tmp_path / f'received_{topic.replace("/", "_")}.json'
         self.process = subprocess.Popen([sys.executable, '-c', LISTENER, topic, str(self.out),
                                          str(expected)], stdout=subprocess.PIPE, text=True)
+        processes.append(self.process)
         self.lines, self.seen = [], threading.Condition()
         threading.Thread(target=self._read, daemon=True).start()
         self.wait_for('ready')
@@ -109,11 +116,13 @@ class Listener:
                 [ns for kind, ns in events if kind == 'clock'])
 
 
-def replay(bag, *flags):
+def replay(processes, bag, *flags):
     """Start `flexlink replay BAG --publish --json FLAGS`."""
-    return subprocess.Popen([sys.executable, '-m', 'flexlink_ros.cli.main', 'replay', str(bag),
-                             '--publish', '--json', *flags], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env=dict(os.environ))
+    command = [sys.executable, '-m', 'flexlink_ros.cli.main', 'replay', str(bag), '--publish',
+               '--json', *flags]
+    processes.append(subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                      text=True, env=dict(os.environ)))
+    return processes[-1]
 
 
 def finished(process):
@@ -122,9 +131,9 @@ def finished(process):
     return json.loads(stdout)
 
 
-def test_clock_at_rate_4_under_a_remapped_namespace(bag, tmp_path):
-    listener = Listener(tmp_path, '/robot1/joint_states', COUNT)
-    result = finished(replay(bag, '--clock', '--rate', '4',
+def test_clock_at_rate_4_under_a_remapped_namespace(bag, tmp_path, processes):
+    listener = Listener(processes, tmp_path, '/robot1/joint_states', COUNT)
+    result = finished(replay(processes, bag, '--clock', '--rate', '4',
                              '--ros-args', '-r', '__ns:=/robot1'))
     stamps, clocks = listener.received()
     played = result['playback']
@@ -143,11 +152,11 @@ def test_clock_at_rate_4_under_a_remapped_namespace(bag, tmp_path):
     assert LOG_NS[0] <= min(clocks) and max(clocks) <= LOG_NS[-1]
 
 
-def test_a_loop_bounded_to_two_passes_with_a_clock_per_message_and_a_topic_remapping(bag,
-                                                                                     tmp_path):
-    listener = Listener(tmp_path, '/robot2/crank_states', 2 * COUNT)
-    result = finished(replay(bag, '--loop', '--loop-count', '2', '--clock-topics-all',
-                             '--rate', '4', '--ros-args', '-r',
+def test_a_loop_bounded_to_two_passes_with_a_clock_per_message_and_a_topic_remapping(
+        bag, tmp_path, processes):
+    listener = Listener(processes, tmp_path, '/robot2/crank_states', 2 * COUNT)
+    result = finished(replay(processes, bag, '--loop', '--loop-count', '2',
+                             '--clock-topics-all', '--rate', '4', '--ros-args', '-r',
                              'joint_states:=/robot2/crank_states'))
     stamps, clocks = listener.received()
     played = result['playback']
@@ -160,9 +169,9 @@ def test_a_loop_bounded_to_two_passes_with_a_clock_per_message_and_a_topic_remap
     assert np.count_nonzero(np.diff(clocks) < 0) <= 1           # back once, at the loop
 
 
-def test_sigint_ends_an_endless_loop_with_a_summary_and_exit_code_0(bag, tmp_path):
-    listener = Listener(tmp_path, '/joint_states', 0)
-    process = replay(bag, '--loop', '--rate', '4')
+def test_sigint_ends_an_endless_loop_with_a_summary_and_exit_code_0(bag, tmp_path, processes):
+    listener = Listener(processes, tmp_path, '/joint_states', 0)
+    process = replay(processes, bag, '--loop', '--rate', '4')
     listener.wait_for('wrapped')         # the second pass has begun
     process.send_signal(signal.SIGINT)
     result = finished(process)
@@ -189,3 +198,27 @@ def test_playback_flags_need_publish_and_a_positive_rate(bag):
                              str(bag), '--ros-args', '-r', '__ns:=/x'], capture_output=True,
                             text=True, timeout=60)
     assert result.returncode == 2 and 'takes no --ros-args' in result.stderr
+
+
+def test_a_sim_time_node_in_the_namespace_records_on_the_recordings_clock(
+        bag, tmp_path, processes):
+    """The use of --clock: a node on use_sim_time takes its log times from the playback."""
+    rerun = tmp_path / 'rerun.mcap'
+    node = NodeProcess(tmp_path, 'use_sim_time:=true', 'record.enabled:=true',
+                       f'record.path:={rerun}', ros_args=('-r', '__ns:=/robot1'))
+    processes.append(node)
+    node.wait_for(READY_MESSAGE, READY_TIMEOUT_S)
+    result = finished(replay(processes, bag, '--clock', '--rate', '2',
+                             '--ros-args', '-r', '__ns:=/robot1'))
+    assert result['playback']['published'] == COUNT
+    assert node.stop(signal.SIGINT) == 0
+    with open(rerun, 'rb') as stream:
+        log_ns = np.array([message.log_time for _, _, message in
+                           make_reader(stream).iter_messages(topics=['/robot1/joint_states'])])
+    assert log_ns.size == COUNT
+    # The recording's time, not the wall clock (years later) and never 0: the /clock tick
+    # before each message (50 ms of the recording apart at rate 2, 40 Hz), or the input's
+    # stamp (200 us before its log time) until the first tick has come.
+    assert np.all((log_ns >= LOG_NS[0] - 200_000) & (log_ns <= LOG_NS[-1]))
+    on_ticks = (log_ns - LOG_NS[0]) % 50_000_000 == 0
+    assert on_ticks.sum() > COUNT // 2 and on_ticks[-1]
