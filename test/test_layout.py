@@ -229,7 +229,6 @@ WITHOUT_OWN_TEST_FILE = {
     'cli/mcap_record.py',
     'ros/node_model.py',
     'ros/pipeline.py',
-    'ros/republish.py',
     'ros/startup.py',
 }
 

@@ -109,6 +109,31 @@ def _command_module(argv):
     return COMMANDS.get(argv[0])
 
 
+def split_ros_args(argv):
+    """
+    Split ``argv`` into the tool's arguments and the ROS arguments, as rclpy does.
+
+    Every ``--ros-args`` starts a section of ROS arguments that ends at a lone ``--`` or at
+    the end; those sections go to rclpy (remappings, ``__ns``), the rest to the parser.
+
+    Returns
+    -------
+    tool_args, ros_args : list of str
+
+    """
+    tool_args, ros_args, in_ros = [], [], False
+    for arg in argv:
+        if arg == '--ros-args':
+            in_ros = True
+        elif in_ros and arg == '--':
+            in_ros = False
+        elif in_ros:
+            ros_args.append(arg)
+        else:
+            tool_args.append(arg)
+    return tool_args, ros_args
+
+
 def build_parser(argv=None):
     """
     Build the argument parser with every registered subcommand.
@@ -152,9 +177,12 @@ def main(argv=None):
         The exit code.
 
     """
-    argv = sys.argv[1:] if argv is None else list(argv)
+    argv, ros_args = split_ros_args(sys.argv[1:] if argv is None else list(argv))
     parser = build_parser(argv)
     args = parser.parse_args(argv)
+    if ros_args and not getattr(args, 'takes_ros_args', False):
+        parser.error(f'`flexlink {args.command}` takes no --ros-args')
+    args.ros_args = ros_args
     try:
         return args.func(args)
     except BrokenPipeError:

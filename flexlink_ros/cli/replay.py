@@ -8,7 +8,10 @@ skipped and listed, :mod:`io.recording`), runs the estimator over them in batche
 new MCAP with the input and the node's output topics, each output stamped with its input's
 stamp and logged at the input's log time (:mod:`io.replay_writer`). ``--publish``
 republishes the input with its recorded timing for live subscribers (a running
-flexlink_node, Foxglove, RViz; :mod:`ros.republish`).
+flexlink_node, Foxglove, RViz; :mod:`ros.republish`), with the flags of ``ros2 bag play``:
+``--rate R``, ``--clock [HZ]`` and ``--clock-topics-all`` (``/clock`` from the recording's
+time), ``--loop`` (``--loop-count N`` bounds it), and ROS arguments after ``--ros-args``
+(remappings, ``__ns``).
 
 Like the node, a sample whose stamp goes back or jumps by more than the estimator's reset gap
 starts a new segment (the state restarts), an exactly repeated sample repeats the previous
@@ -39,6 +42,7 @@ from ..io.recording import choose_input_topic, damage_note, scan_recording
 from ..io.replay_writer import write_replay
 from ..names import DEFAULT_FRAME_ID, NODE_NAME, OUTPUT_POINTS, output_topics
 from ..ros.messages import OK
+from ..ros.playback_schedule import DEFAULT_CLOCK_HZ
 from ..ros.republish import publish_recording
 
 
@@ -174,22 +178,41 @@ def run_replay(args):
     _peak_to_peak(estimate, result)
     if args.publish:
         with Progress(f'publishing {topic}', count, unit='msg') as progress:
-            result['published'] = publish_recording(samples, topic, args.publish_speed,
-                                                    progress=progress)
+            played = publish_recording(samples, topic, playback_options(args),
+                                       progress=progress)
+        result.update(published=played['published'], playback=played)
     return result
+
+
+def playback_options(args):
+    """Return :func:`ros.republish.publish_recording`'s options from the parsed flags."""
+    passes = args.loop_count if args.loop_count is not None else (0 if args.loop else 1)
+    return {'rate': args.rate, 'clock_hz': args.clock or 0.0, 'passes': passes,
+            'clock_per_message': args.clock_topics_all,
+            'ros_args': list(getattr(args, 'ros_args', None) or [])}
 
 
 def _check_arguments(args):
     """Refuse bad flags before any reading (``--out`` with the recorder's own test)."""
     if not args.out and not args.publish:
         raise ValueError('give `--out` and/or `--publish`')
+    playback_flags = [flag for flag, given in (
+        ('--clock', args.clock is not None), ('--clock-topics-all', args.clock_topics_all),
+        ('--loop', args.loop), ('--loop-count', args.loop_count is not None),
+        ('--ros-args', bool(getattr(args, 'ros_args', None)))) if given]
+    if playback_flags and not args.publish:
+        raise ValueError(f"{', '.join(f'`{f}`' for f in playback_flags)} need `--publish`")
+    if args.loop_count is not None and args.loop_count < 1:
+        raise ValueError(f'`--loop-count` must be >= 1, got {args.loop_count}')
     if args.out:
         try:    # before the estimate, with the recorder's own test (links not followed)
             refuse_existing(pathlib.Path(args.out))
         except FileExistsError as exc:
             raise ValueError(f'`--out` {exc}') from None
-    if not args.publish_speed > 0:
-        raise ValueError(f'`--publish-speed` must be positive, got {args.publish_speed}')
+    if not args.rate > 0:
+        raise ValueError(f'`--rate` must be positive, got {args.rate}')
+    if args.clock is not None and not args.clock > 0:
+        raise ValueError(f'`--clock` must be a positive frequency [Hz], got {args.clock}')
     if args.markers_every_n < 0:
         raise ValueError(f'`--markers-every-n` must be >= 0, got {args.markers_every_n}')
 
@@ -231,9 +254,18 @@ def summary_text(result):
                  f"{result['times_real_time']:.0f}x real time")
     if 'output' in result:
         lines.append(f"  wrote {result['output']}")
-    if 'published' in result:
-        lines.append(f"  republished {result['published']} messages on {result['topic']}")
+    if 'playback' in result:
+        lines.append(playback_text(result['playback']))
     return '\n'.join(lines)
+
+
+def playback_text(played):
+    """Summarise a ``--publish`` playback in one line."""
+    text = (f"  republished {played['published']} messages on {played['topic']} "
+            f"({played['passes']} pass(es), {played['publish_s']:.2f} s")
+    if played['clock_messages']:
+        text += f", {played['clock_messages']} /clock messages"
+    return text + (', interrupted)' if played['interrupted'] else ')')
 
 
 def _replay_command(args):
@@ -244,8 +276,11 @@ def _replay_command(args):
 
 def register(subparsers):
     """Add the replay subcommand."""
-    parser = subparsers.add_parser('replay', help='recompute deflections and criteria from '
-                                   'the JointState of a recording into a new MCAP')
+    parser = subparsers.add_parser(
+        'replay', help='recompute deflections and criteria from the JointState of a '
+        'recording into a new MCAP', epilog='With --publish, everything after --ros-args '
+        '(up to a lone --) goes to the replay node as ROS arguments, e.g. --ros-args '
+        '-r joint_states:=/robot1/joint_states or -r __ns:=/robot1.')
     parser.add_argument('input', help='rosbag2 MCAP file or bag directory')
     parser.add_argument('--out', help='output .mcap file or bag directory (must not exist)')
     parser.add_argument('--topic', help='input JointState topic (default: the one carrying '
@@ -260,7 +295,18 @@ def register(subparsers):
                         help='start from the static deflection, not the periodic state')
     parser.add_argument('--publish', action='store_true',
                         help='republish the input with its recorded timing')
-    parser.add_argument('--publish-speed', type=float, default=1.0,
-                        help='time scale of --publish (2 = twice as fast)')
+    parser.add_argument('--rate', '--publish-speed', type=float, default=1.0, dest='rate',
+                        help='playback speed factor of --publish, > 0 (2: twice as fast; '
+                        '--publish-speed is the older name)')
+    parser.add_argument('--clock', type=float, nargs='?', const=DEFAULT_CLOCK_HZ,
+                        metavar='HZ', help='with --publish, publish /clock from the '
+                        f"recording's time at HZ of wall time (default {DEFAULT_CLOCK_HZ:g}, "
+                        'as ros2 bag play --clock)')
+    parser.add_argument('--clock-topics-all', action='store_true',
+                        help='with --publish, publish /clock just before every message')
+    parser.add_argument('--loop', action='store_true',
+                        help='with --publish, play again from the start until interrupted')
+    parser.add_argument('--loop-count', type=int, metavar='N',
+                        help='with --publish, play N times in all, then stop')
     add_estimator_arguments(parser)
-    parser.set_defaults(func=_replay_command)
+    parser.set_defaults(func=_replay_command, takes_ros_args=True)

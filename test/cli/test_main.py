@@ -44,3 +44,12 @@ def test_flexlink_version_prints_it_and_exits_0(capsys):
     run = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', '--version'],
                          capture_output=True, text=True, cwd=ROOT)
     assert run.returncode == 0 and run.stdout == f'flexlink {flexlink_ros.__version__}\n'
+
+
+def test_ros_args_sections_are_split_off_as_rclpy_does():
+    argv = ['replay', 'bag', '--ros-args', '-r', '__ns:=/r1', '--', '--publish',
+            '--ros-args', '-r', 'a:=b']
+    tool, ros = cli.split_ros_args(argv)
+    assert tool == ['replay', 'bag', '--publish']
+    assert ros == ['-r', '__ns:=/r1', '-r', 'a:=b']
+    assert cli.split_ros_args(['mcap-info', 'run1']) == (['mcap-info', 'run1'], [])

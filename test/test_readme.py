@@ -1,0 +1,236 @@
+"""
+Every README command that runs this package, run as the README gives it, or skipped with a reason.
+
+The commands are read from README.md at test time: every command of a fenced ``bash`` block
+(continuation lines joined, comments dropped, split at ``&&``, ``;`` and a trailing ``&``) and
+every command in the first column of the `flexlink` tool table. A command invokes the package
+when its program is ``flexlink``, ``flexlink_node`` or ``crank_driver`` (bare or under
+``.venv/bin/``), ``python -m flexlink_ros…``, or ``ros2 run|launch flexlink_ros``. Each such
+command is either in ``RUN`` (run with the installed console scripts of the venv running this
+test, ``.venv/bin/`` rewritten to it, in a temporary working directory holding what the README
+says is there, e.g. the ``run1`` recording; exit code 0 and what the README says it prints or
+writes asserted) or in ``SKIPPED`` with the reason (a ROS graph, a ROS distro, minutes of
+work) and the test that covers it. A command in neither fails the test, so a new README
+command is either run or consciously skipped.
+
+"From a fresh venv": CI (``bash .ci/run`` on a clean clone) runs ``make test``, which creates
+the venv from nothing, installs the pinned requirements and the package (``make install``:
+console scripts in ``.venv/bin``), and runs this test with that venv's Python; locally, run
+``make install`` first so the console scripts are the worktree's code.
+"""
+
+import dataclasses
+import math
+import pathlib
+import re
+import shlex
+import shutil
+import subprocess
+import sys
+
+from flexlink_ros.io.recorder import McapRecorder
+from flexlink_ros.ros import messages as ros_messages
+import pytest
+from rclpy.serialization import serialize_message
+from sensor_msgs.msg import JointState
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+README = ROOT / 'README.md'
+VENV_BIN = pathlib.Path(sys.executable).parent
+SCRIPTS = ('flexlink', 'flexlink_node', 'crank_driver')
+
+
+@dataclasses.dataclass
+class Run:
+    """How a README command is run and what its README text promises."""
+
+    prints: tuple = ()            # fragments of stdout
+    creates: tuple = ()           # paths relative to the working directory
+    setup: str = ''               # 'run1' (a closed recording) or 'run1 killed' (no metadata)
+    argv: tuple = ()              # the command lines run instead, where the README has a synopsis
+
+
+RUN = {
+    # Recording, replay, Foxglove: `run1` is the node's recording (record.path:=run1).
+    'flexlink mcap-info run1':
+        Run(('run1: 1000 messages over 0.999 s', '/joint_states', 'sensor_msgs/msg/JointState'),
+            setup='run1'),
+    'flexlink mcap-recover run1/run1_0.mcap':
+        Run(('recovered 1000 messages', 'into run1_0.recovered.mcap'),
+            creates=('run1_0.recovered.mcap',), setup='run1'),
+    'flexlink replay run1 --out rerun.mcap':
+        Run(('1000 samples on /joint_states', 'wrote rerun.mcap'), creates=('rerun.mcap',),
+            setup='run1'),
+    'flexlink reindex run1':     # "after the recorder was killed": no metadata.yaml yet
+        Run(('run1/metadata.yaml: 1 files, 1000 messages',), creates=('run1/metadata.yaml',),
+            setup='run1 killed'),
+    # The `flexlink` tool table.
+    'flexlink kinematics --mechanism kang1990 --crank-deg 0:360:30':
+        Run(('dead centres', 'transmission angle', 'coupler', 'lever')),
+    'flexlink criteria --mechanism kang1990 [--spring K THETA0_DEG]':
+        Run(('true max', 'grid max', 'min R'), argv=(
+            'flexlink criteria --mechanism kang1990',
+            'flexlink criteria --mechanism kang1990 --spring 20 279.14')),
+    'flexlink design-spring --mechanism kang1990':
+        Run(('design  K =', 'objective')),
+    'flexlink beam --bc cantilever --segments 6 --method tmm3':
+        Run(('cantilever beam, tmm3, 6 segments', 'omega [rad/s]', 'exact [rad/s]')),
+    'flexlink modes --mechanism cho1992 --crank-deg 0:360:5':
+        Run(('frozen modes', 'f1 [Hz]')),
+    'flexlink simulate --mechanism cho1992 --rpm 391 --method full':
+        Run(('at 391 rpm, full', 'peak-to-peak')),
+    'flexlink estimate --mechanism cho1992 --rpm 391 --jitter 0.3':
+        Run(('at 391 rpm', 'jitter 0.3', 'lever tip', 'update')),
+    # Named in the prose; run here too if a fenced block shows them.
+    'flexlink --version': Run(('flexlink ',)),
+    'flexlink_node --help': Run(('parameters (--ros-args -p name:=value',)),
+    '.venv/bin/flexlink_node --help': Run(('parameters (--ros-args -p name:=value',)),
+    'crank_driver --help': Run(('speed_rpm',)),
+}
+
+_COLCON = ('needs a ROS 2 distro (ros2 run, colcon): '
+           'test/test_packaging.py::test_colcon_build_resolves_like_ros2_run builds the package '
+           'with colcon and resolves the executables as ros2 run does')
+_LAUNCH = ('needs ros2 launch (a ROS 2 distro; launch and launch_ros are not on PyPI): '
+           'test/test_launch_files.py builds each launch description and, where launch_ros '
+           'is importable, runs it')
+_PUBLISH = ('publishes into a live ROS graph (waits up to 10 s for a subscriber): '
+            'test/ros/test_republish.py runs replay --publish with subscribers')
+SKIPPED = {
+    '.venv/bin/crank_driver --ros-args -p speed_rpm:=391.0':
+        'runs until stopped, publishing into a ROS graph: test/ros/test_crank_driver.py and '
+        'make demo (test/cli/test_demo.py) run it',
+    '.venv/bin/flexlink_node --ros-args -p record.enabled:=true -p record.path:=run1':
+        'runs until stopped and needs a crank driver: '
+        'test/ros/test_node.py::test_node_end_to_end records from one',
+    'ros2 run flexlink_ros crank_driver --ros-args -p profile:=sweep -p sweep.max_rpm:=600.0':
+        _COLCON,
+    'ros2 run flexlink_ros flexlink_node --ros-args --params-file '
+    'install/flexlink_ros/share/flexlink_ros/config/flexlink_node.yaml': _COLCON,
+    'ros2 run flexlink_ros flexlink_node --managed': _COLCON,
+    'ros2 run flexlink_ros crank_driver --ros-args -r __ns:=/robot1 --params-file '
+    'install/flexlink_ros/share/flexlink_ros/config/crank_driver.yaml': _COLCON,
+    'ros2 run flexlink_ros flexlink_node --ros-args -r __ns:=/robot1 --params-file '
+    'install/flexlink_ros/share/flexlink_ros/config/flexlink_node.yaml '
+    '-p diagnostics.hardware_id:=linkage_1': _COLCON,
+    'ros2 run flexlink_ros flexlink_node --ros-args -r __ns:=/robot2 --params-file '
+    'install/flexlink_ros/share/flexlink_ros/config/flexlink_node.yaml '
+    '-p diagnostics.hardware_id:=linkage_2': _COLCON,
+    'ros2 launch flexlink_ros flexlink.launch.py': _LAUNCH,
+    'ros2 launch flexlink_ros flexlink.launch.py driver:=true namespace:=robot1': _LAUNCH,
+    'ros2 launch flexlink_ros flexlink.launch.py mechanism:=kang1990 params_file:=my_node.yaml':
+        _LAUNCH,
+    'ros2 launch flexlink_ros flexlink_lifecycle.launch.py driver:=true': _LAUNCH,
+    'ros2 launch flexlink_ros flexlink_lifecycle.launch.py autostart:=false': _LAUNCH,
+    'ros2 launch flexlink_ros flexlink.launch.py --show-args': _LAUNCH,
+    'flexlink replay other_bag --topic /robot/joint_states --joint crank_joint --publish':
+        _PUBLISH,
+    'flexlink replay run1 --publish --clock --rate 2 --loop --ros-args -r __ns:=/robot1':
+        _PUBLISH + '; an endless loop, ended by Ctrl-C as test_republish.py '
+        '::test_sigint_ends_an_endless_loop_with_a_summary_and_exit_code_0 does',
+    'flexlink replay run1 --publish --clock-topics-all --loop-count 3 '
+    '--ros-args -r joint_states:=/robot1/joint_states': _PUBLISH,
+    'flexlink plan --mechanism cho1992 --rpm-max 391 --tolerance 0.01':
+        'about 2 minutes of full-order references: test/studies/test_plan.py plans small cases',
+    'flexlink bench': 'minutes of benchmarks (the estimator, offline and full-order)',
+    'flexlink node-bench': 'starts nodes on a ROS graph and measures for minutes',
+    'flexlink report --out out/report': 'about 4 minutes (every chart)',
+    'flexlink demo': 'starts crank_driver and flexlink_node on a ROS graph: '
+                     'test/cli/test_demo.py::test_demo_runs_records_and_summarises runs it',
+}
+
+
+def _simple_commands(line):
+    """Split one shell line (comment dropped) into its simple commands."""
+    line = re.sub(r'(^|\s)#.*$', '', line).strip()
+    for part in re.split(r'&&|;|(?<![&|])&(?!&)', line):
+        if part.strip():
+            yield ' '.join(part.split())
+
+
+def fenced_commands(text):
+    """Yield every simple command of the fenced ``bash`` blocks of ``text``."""
+    for block in re.findall(r'^```bash\n(.*?)^```', text, flags=re.M | re.S):
+        for line in block.replace('\\\n', ' ').splitlines():
+            yield from _simple_commands(line)
+
+
+def table_commands(text):
+    """Yield the commands in the first column of the `flexlink` tool table."""
+    section = text.split('## The `flexlink` tool', 1)[-1].split('\n## ', 1)[0]
+    for row in re.findall(r'^\| (.*?) \|', section, flags=re.M):
+        yield from (span for span in re.findall(r'`([^`]+)`', row)
+                    if span.startswith('flexlink'))
+
+
+def invokes_package(command):
+    """Whether ``command`` runs this package (see the module docstring)."""
+    words = [w for w in command.split() if not re.match(r'^[A-Z_][A-Z0-9_]*=', w)]
+    if not words:
+        return False
+    program = words[0].rsplit('/', 1)[-1]
+    if program in SCRIPTS:
+        return True
+    if re.match(r'python[0-9.]*$', program):
+        return len(words) > 2 and words[1] == '-m' and words[2].startswith('flexlink_ros')
+    return program == 'ros2' and len(words) > 2 and words[1] in ('run', 'launch') \
+        and words[2] == 'flexlink_ros'
+
+
+def readme_commands():
+    """Every README command that invokes the package, once each, in README order."""
+    text = README.read_text()
+    found = [c for c in (*fenced_commands(text), *table_commands(text)) if invokes_package(c)]
+    return list(dict.fromkeys(found))
+
+
+def _program_argv(command):
+    """Return ``command``'s argv with the program taken from the venv running this test."""
+    argv = shlex.split(command)
+    program = argv[0].rsplit('/', 1)[-1]
+    if program in SCRIPTS:
+        return [str(VENV_BIN / program), *argv[1:]]
+    return [sys.executable, *argv[1:]]    # python -m flexlink_ros…
+
+
+@pytest.fixture(scope='module')
+def run1(tmp_path_factory):
+    """Write ``run1`` as ``flexlink_node -p record.path:=run1`` does: 1 s of 1 kHz crank."""
+    path = tmp_path_factory.mktemp('readme') / 'run1'
+    speed = 391.0 * 2.0 * math.pi / 60.0
+    with McapRecorder(path) as recorder:
+        recorder.add_topic('/joint_states', JointState)
+        for k in range(1000):
+            stamp = 1_700_000_000_000_000_000 + k * 1_000_000
+            message = JointState(name=['crank'], velocity=[speed],
+                                 position=[math.remainder(speed * k * 1e-3, 2 * math.pi)])
+            message.header.stamp = ros_messages.ns_to_stamp(stamp)
+            recorder.write('/joint_states', serialize_message(message), stamp + 200_000)
+    return path
+
+
+def test_readme_commands_are_found():
+    commands = readme_commands()
+    assert 'flexlink replay run1 --out rerun.mcap' in commands
+    assert 'flexlink kinematics --mechanism kang1990 --crank-deg 0:360:30' in commands
+    assert not any(invokes_package(c) for c in ('make demo', 'cd ~/ws', 'export A=1'))
+
+
+@pytest.mark.parametrize('command', readme_commands())
+def test_readme_command(command, tmp_path, run1):
+    if command in SKIPPED:
+        pytest.skip(SKIPPED[command])
+    assert command in RUN, f'README command neither run nor listed in SKIPPED: {command!r}'
+    case = RUN[command]
+    if case.setup:
+        shutil.copytree(run1, tmp_path / 'run1')
+        if case.setup == 'run1 killed':
+            (tmp_path / 'run1' / 'metadata.yaml').unlink()
+    for line in case.argv or (command,):
+        result = subprocess.run(_program_argv(line), cwd=tmp_path, capture_output=True,
+                                text=True, timeout=300)
+        assert result.returncode == 0, (line, result.stderr[-2000:])
+        for fragment in case.prints:
+            assert fragment in result.stdout, (line, fragment, result.stdout[-2000:])
+    for created in case.creates:
+        assert (tmp_path / created).is_file(), created
