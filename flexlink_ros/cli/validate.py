@@ -17,6 +17,7 @@ turns. The peer is the optional extra ``pip install '.[peer]'`` (exudyn). The co
 import argparse
 
 from .main import emit
+from .progress import Progress
 from ..report.validation import plot_validation
 from ..studies import validation
 
@@ -70,8 +71,13 @@ def validate_command(args):
         elements_per_link=args.elements_per_link, bearings=args.bearings,
         gravity=args.gravity, zeta=args.zeta, revolutions=args.revolutions,
         stiffness_damping=args.stiffness_damping, cache=args.cache)
-    records = [validation.validate_speed(args.mechanism, rpm, settings)
-               for rpm in sorted(set(speeds))]
+    records = []
+    speeds = sorted(set(speeds))
+    with Progress('validate', total=len(speeds), unit='speed') as progress:
+        for rpm in speeds:
+            progress(len(records), what=f'{rpm:g} rpm: peer, linear, dynamic pass')
+            records.append(validation.validate_speed(args.mechanism, rpm, settings))
+        progress(len(records), what='done')
     sweep = bool(args.sweep)
     if args.chart:
         plot_validation(records, args.chart, sweep=sweep or None)

@@ -41,9 +41,11 @@ def cache(tmp_path_factory):
 @needs_exudyn
 def test_one_speed_as_json_then_as_text_from_the_cache(capsys, cache, tmp_path):
     png = tmp_path / 'validate.png'
-    code, out, _ = _run(capsys, '--peer', 'exudyn', '--rpm', '391', *SMALL, '--cache',
-                        str(cache), '--chart', str(png), '--json')
+    code, out, err = _run(capsys, '--peer', 'exudyn', '--rpm', '391', *SMALL, '--cache',
+                          str(cache), '--chart', str(png), '--json')
     assert code == 0
+    # progress goes to stderr (a plain line at the end when it is not a terminal)
+    assert 'validate: 100%' in err and '1/1' in err
     result = json.loads(out)
     (record,) = result['records']
     assert result['peer'] == 'exudyn' and result['flag_turns'] == []
