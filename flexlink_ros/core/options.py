@@ -46,6 +46,10 @@ class ModelOptions:
         Largest |crank speed| served [rad/s].
     gravity : bool
         Include gravity (``mechanism.gravity``) in loads and axial forces.
+    order : int
+        1: the linear KED outputs of the paper; 2: plus the second-order motion of the bent
+        links' chord shortening (core/fe/second_order_*.py; the reduced model then carries its
+        tables). 1 here, the library's linear model; the node and the CLI default to 2.
 
     """
 
@@ -58,6 +62,7 @@ class ModelOptions:
     geometric_stiffness: bool = True
     speed_max: float = 65.0
     gravity: bool = True
+    order: int = 1
 
     def __post_init__(self):
         if self.bearings not in ('flexible', 'rigid'):
@@ -70,6 +75,8 @@ class ModelOptions:
                              f'{self.static}')
         if self.grid_size < 8:
             raise ValueError(f'`grid_size` must be >= 8, got {self.grid_size}')
+        if self.order not in (1, 2):
+            raise ValueError(f'`order` must be 1 or 2, got {self.order!r}')
         if not self.speed_max > 0.0:
             raise ValueError(f'`speed_max` must be positive, got {self.speed_max}')
 
@@ -79,7 +86,14 @@ class ModelOptions:
         return cls(**{'rigid_crank': False, 'bearings': 'rigid', **changes})
 
     def cache_fields(self):
-        """Return the fields identifying a reduced model, in declaration order (no ``gravity``)."""
+        """
+        Return the fields identifying a reduced model, in declaration order (no ``gravity``).
+
+        ``order`` only when it is 2 (its tables are extra content): an order-1 model keeps the
+        key it had before the field existed, so its cache files still load.
+        """
         fields = dataclasses.asdict(self)
         del fields['gravity']
+        if self.order == 1:
+            del fields['order']
         return fields

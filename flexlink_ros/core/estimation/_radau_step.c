@@ -30,6 +30,9 @@
 #define POWERS 5        /* h^-2 .. h^2 */
 #define ROW_FIELDS 6    /* h, count, angle, speed, accel, advance */
 #define RELEASE_GIL_ROWS 64
+#define SO_SCALARS 22   /* second order: cos, sin of 3 link angles, kappa 4 x 4 */
+#define SO_TRIG 6       /* kappa's first scalar */
+#define SO_FORMS 4      /* bending sums: crank, coupler, lever, coupler's half */
 
 static const double TWO_PI = 6.283185307179586;
 static const double PI = 3.141592653589793;     /* math.pi */
@@ -48,6 +51,11 @@ typedef struct {
     double *operator;   /* outputs x (r + 1): [O | corr] of the record */
     double weights[ROWS_ALL];   /* power form: the record's per-cell tables */
     double hermite[ROWS_ALL];   /* Hermite form: the node tables */
+    /* second-order outputs (core/reduction/second_order_tables.py); so_terms 0: order 1 */
+    Py_ssize_t so_rows, so_slots, so_gathers, so_terms;
+    const double *so_scalars, *so_v, *so_gather_coef, *so_form_value;
+    const int *so_gather, *so_form;     /* (slot, row, scalar or -1), (form, slot, slot) */
+    double *so_y, *so_z;                /* scratch: rows of V q, the links' (v, phi) */
 } Step;
 
 /* x86-64 with GCC: AVX2/FMA clones of the step and of the kernels it calls (the table
@@ -182,6 +190,38 @@ static void load(Step *s, int slot, double angle, double w, double a)
     combine_nodes(s->hermite, lo + r2, hi + r2, GROUPS_KF, kf_width, r, s->loads + slot * r);
 }
 
+/*
+ * Add the second-order outputs of q at cell k (weights set) to out[0 .. OUTPUTS - 1]:
+ * SecondOrderForms (second_order_tables.py) in the same steps, per sample.
+ */
+static void second_order(Step *s, Py_ssize_t k, const double *q, double *restrict out)
+{
+    const double *cell = s->so_scalars + k * 4 * SO_SCALARS;
+    const double *w = s->weights + 4;       /* monomial 1: powers of t */
+    double sc[SO_SCALARS], sums[SO_FORMS] = {0.0, 0.0, 0.0, 0.0};
+    for (int j = 0; j < SO_SCALARS; j++)
+        sc[j] = w[0] * cell[j] + w[1] * cell[SO_SCALARS + j] + w[2] * cell[2 * SO_SCALARS + j]
+                + w[3] * cell[3 * SO_SCALARS + j];
+    for (Py_ssize_t i = 0; i < s->so_rows; i++)
+        s->so_y[i] = dot(s->so_v + i * s->r, q, s->r);
+    memset(s->so_z, 0, (size_t)s->so_slots * sizeof(double));
+    for (Py_ssize_t p = 0; p < s->so_gathers; p++) {
+        const int *g = s->so_gather + 3 * p;
+        const double trig = g[2] < 0 ? 1.0 : sc[g[2]];
+        s->so_z[g[0]] += s->so_gather_coef[p] * trig * s->so_y[g[1]];
+    }
+    for (Py_ssize_t p = 0; p < s->so_terms; p++) {
+        const int *f = s->so_form + 3 * p;
+        sums[f[0]] += s->so_form_value[p] * s->so_z[f[1]] * s->so_z[f[2]];
+    }
+    for (int o = 0; o < OUTPUTS; o++) {
+        double add = 0.0;
+        for (int f = 0; f < SO_FORMS; f++)
+            add += sc[SO_TRIG + SO_FORMS * o + f] * (0.5 * sums[f]);
+        out[o] += add;
+    }
+}
+
 /* The record of the crank state prev at the state z (tables._StepTables.record). */
 static void record(Step *s, const double *z, const double *prev, double *restrict out)
 {
@@ -194,6 +234,8 @@ static void record(Step *s, const double *z, const double *prev, double *restric
         out[o] = dot(row, z, r) + row[r];
         out[OUTPUTS + o] = row[r];
     }
+    if (s->so_terms > 0)
+        second_order(s, k, z, out);
     combine(s->weights, s->joint + k * s->joint_rows * JOINT_WIDTH, s->joint_rows, JOINT_WIDTH,
             JOINT_WIDTH, out + 2 * OUTPUTS);
 }
@@ -442,13 +484,13 @@ STEP_CLONES static int radau_step(Step *s, double *z, double *prev, double h, do
 static int get_typed_buffer(PyObject *object, Py_buffer *view, int writable, const char *name,
                             Py_ssize_t count, const char *format)
 {
-    const Py_ssize_t size = format[0] == 'f' ? 4 : 8;
+    const Py_ssize_t size = format[0] == 'f' || format[0] == 'i' ? 4 : 8;
     int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
     if (PyObject_GetBuffer(object, view, flags) != 0)
         return -1;
     if (view->itemsize != size || view->format == NULL || strcmp(view->format, format) != 0) {
         PyErr_Format(PyExc_TypeError, "`%s` must hold %s", name,
-                     size == 4 ? "float32" : "float64");
+                     format[0] == 'i' ? "int32" : size == 4 ? "float32" : "float64");
         PyBuffer_Release(view);
         return -1;
     }
@@ -469,7 +511,7 @@ static int get_buffer(PyObject *object, Py_buffer *view, int writable, const cha
 
 PyDoc_STRVAR(advance_doc,
 "advance(mass, damping, kf, out, joint, g0, cells_per_radian, c1, z, prev, rows, states,\n"
-"        records)\n"
+"        records, second=None)\n"
 "\n"
 "Advance the modal state z = [q, v, 1] through the sample rows (h, sub-steps, angle,\n"
 "speed, acceleration, advance; 6 values each), 2-stage Radau IIA, as\n"
@@ -477,7 +519,59 @@ PyDoc_STRVAR(advance_doc,
 "rest float64). prev (angle, speed,\n"
 "acceleration of the last step) is updated; states (rows x 2 r, or empty) receives\n"
 "z[:2 r] after each row; records (rows x 28, or 28 for the last row only) the sample's\n"
-"record (native.RECORD_SIZE).");
+"record (native.RECORD_SIZE). second: None (order 1) or the six arrays of\n"
+"second_order_tables.ARRAY_NAMES (int32 index arrays, the rest float64); their\n"
+"second-order outputs are added to the record's deflections.");
+
+#define SO_ARRAYS 6
+
+/* The second-order tables into s (checked: every index within its array), or -1. */
+static int take_second(PyObject *second, Py_buffer *views, Step *s)
+{
+    const Py_ssize_t r = s->r;
+    PyObject *o[SO_ARRAYS];
+    if (second == NULL || second == Py_None)
+        return 0;
+    if (!PyArg_ParseTuple(second, "OOOOOO;`second` must be a tuple of six arrays", &o[0], &o[1],
+                          &o[2], &o[3], &o[4], &o[5]))
+        return -1;
+    if (get_buffer(o[0], &views[0], 0, "second_scalars", s->cells * 4 * SO_SCALARS) != 0
+        || get_buffer(o[1], &views[1], 0, "second_rows", -1) != 0
+        || get_typed_buffer(o[2], &views[2], 0, "second_gather", -1, "i") != 0
+        || get_buffer(o[3], &views[3], 0, "second_gather_coef", views[2].len / 4 / 3) != 0
+        || get_typed_buffer(o[4], &views[4], 0, "second_form", -1, "i") != 0
+        || get_buffer(o[5], &views[5], 0, "second_form_value", views[4].len / 4 / 3) != 0)
+        return -1;
+    s->so_rows = views[1].len / 8 / r;
+    s->so_gathers = views[3].len / 8;
+    s->so_terms = views[5].len / 8;
+    const int *gather = views[2].buf, *form = views[4].buf;
+    int bad = s->so_rows * r * 8 != views[1].len || views[2].len != 12 * s->so_gathers
+              || views[4].len != 12 * s->so_terms;
+    s->so_slots = 0;
+    for (Py_ssize_t p = 0; p < s->so_gathers && !bad; p++) {
+        bad = gather[3 * p] < 0 || gather[3 * p + 1] < 0 || gather[3 * p + 1] >= s->so_rows
+              || gather[3 * p + 2] < -1 || gather[3 * p + 2] >= SO_SCALARS;
+        if (gather[3 * p] >= s->so_slots)
+            s->so_slots = gather[3 * p] + 1;
+    }
+    for (Py_ssize_t p = 0; p < s->so_terms && !bad; p++)
+        bad = form[3 * p] < 0 || form[3 * p] >= SO_FORMS || form[3 * p + 1] < 0
+              || form[3 * p + 2] < 0 || form[3 * p + 1] >= s->so_slots
+              || form[3 * p + 2] >= s->so_slots;
+    if (bad) {
+        PyErr_SetString(PyExc_ValueError, "`second` tables do not match the model size or "
+                        "hold an index out of range");
+        return -1;
+    }
+    s->so_scalars = views[0].buf;
+    s->so_v = views[1].buf;
+    s->so_gather = gather;
+    s->so_gather_coef = views[3].buf;
+    s->so_form = form;
+    s->so_form_value = views[5].buf;
+    return 0;
+}
 
 /* Rows (row groups) per grid cell or node of a table (at most `most`), or -1 with an exception set. */
 static Py_ssize_t rows_of(const Py_buffer *view, Py_ssize_t per_row, Py_ssize_t cells,
@@ -493,15 +587,17 @@ static Py_ssize_t rows_of(const Py_buffer *view, Py_ssize_t per_row, Py_ssize_t 
 
 static PyObject *advance(PyObject *module, PyObject *args)
 {
-    PyObject *objects[13];
+    PyObject *objects[14] = {NULL};
     double cells_per_radian, c1;
     (void)module;
-    if (!PyArg_ParseTuple(args, "OOOOOOddOOOOO", &objects[0], &objects[1], &objects[2],
+    if (!PyArg_ParseTuple(args, "OOOOOOddOOOOO|O", &objects[0], &objects[1], &objects[2],
                           &objects[3], &objects[4], &objects[5], &cells_per_radian, &c1,
-                          &objects[8], &objects[9], &objects[10], &objects[11], &objects[12]))
+                          &objects[8], &objects[9], &objects[10], &objects[11], &objects[12],
+                          &objects[13]))
         return NULL;
     Py_buffer mass = {0}, damping = {0}, kf = {0}, out = {0}, joint = {0}, g0 = {0}, z = {0},
               prev = {0}, rows = {0}, states = {0}, records = {0};
+    Py_buffer second[SO_ARRAYS] = {{0}};
     PyObject *result = NULL;
     double *scratch = NULL;
     Step s;
@@ -558,8 +654,10 @@ static PyObject *advance(PyObject *module, PyObject *args)
     s.g0 = g0.buf;
     s.cells_per_radian = cells_per_radian;
     s.c1 = c1;
-    scratch = malloc(sizeof(double)
-                     * (size_t)(6 * r2 + 2 * r + 12 * r + n * n + n + OUTPUTS * (r + 1)));
+    if (take_second(objects[13], second, &s) != 0)
+        goto done;
+    scratch = malloc(sizeof(double) * (size_t)(6 * r2 + 2 * r + 12 * r + n * n + n
+                                               + OUTPUTS * (r + 1) + s.so_rows + s.so_slots + 1));
     if (scratch == NULL) {
         PyErr_NoMemory();
         goto done;
@@ -570,6 +668,8 @@ static PyObject *advance(PyObject *module, PyObject *args)
     s.matrix = s.products + 12 * r;
     s.rhs = s.matrix + n * n;
     s.operator = s.rhs + n;
+    s.so_y = s.operator + OUTPUTS * (r + 1);
+    s.so_z = s.so_y + s.so_rows;
 
     double *zv = z.buf, *pv = prev.buf, *state_out = states.len ? states.buf : NULL;
     double *record_out = records.buf;
@@ -622,6 +722,8 @@ done:
     PyBuffer_Release(&rows);
     PyBuffer_Release(&states);
     PyBuffer_Release(&records);
+    for (int i = 0; i < SO_ARRAYS; i++)
+        PyBuffer_Release(&second[i]);
     return result;
 }
 

@@ -11,7 +11,7 @@ import dataclasses
 import numpy as np
 import scipy.linalg
 
-from . import store
+from . import second_order_tables, store
 from .basis import FrozenSamples
 from .build import reduce_samples
 from .model import ReducedModel
@@ -69,10 +69,15 @@ def build_model(mechanism, options):
     samples = frozen_samples_for(mechanism, options)
     angles = 2.0 * np.pi * np.arange(options.grid_size) / options.grid_size
     forces, criteria_source = reaction_pieces(mechanism, angles)
-    return reduce_samples(samples, options.modes, options.static, options.speed_max,
-                          mechanism.damping_ratio, forces=forces,
-                          info={'options': options.cache_fields(),
-                                'mechanism': mechanism.name, 'criteria': criteria_source})
+    model = reduce_samples(samples, options.modes, options.static, options.speed_max,
+                           mechanism.damping_ratio, forces=forces,
+                           info={'options': options.cache_fields(),
+                                 'mechanism': mechanism.name, 'criteria': criteria_source})
+    if options.order == 1:
+        return model
+    linkage = assembly.FlexibleLinkage(fe_mechanism(mechanism, options), options)
+    return dataclasses.replace(model, second_order=second_order_tables.build_tables(
+        linkage, model.basis, options.grid_size))
 
 
 def fe_mechanism(mechanism, options):
