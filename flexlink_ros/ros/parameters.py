@@ -76,6 +76,9 @@ PARAMETERS = (
     ParameterSpec('model.geometric_stiffness', True,
                   'Include geometric stiffness from the rigid-body axial forces',
                   read_only=True),
+    ParameterSpec('model.order', 2, "Order of the outputs: 1 = the paper's linear KED; 2 = plus "
+                  "the second-order motion of the bent links' chord shortening (lever tip, "
+                  'coupler mid-point, markers)', low=1, high=2, read_only=True),
     ParameterSpec('model.cache_dir', '', 'Directory of precomputed-model cache files '
                   '(empty: ~/.cache/flexlink_ros)', read_only=True, max_bytes=PATH_MAX_BYTES),
     ParameterSpec('model.warm_start', True,
@@ -259,7 +262,8 @@ def model_options(values):
                         elements_per_link=values['model.elements_per_link'] or None,
                         rigid_crank=values['model.rigid_crank'],
                         bearings=values['model.bearings'],
-                        geometric_stiffness=values['model.geometric_stiffness'])
+                        geometric_stiffness=values['model.geometric_stiffness'],
+                        order=values['model.order'])
 
 
 def default_model_options(**overrides):

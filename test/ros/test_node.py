@@ -29,7 +29,7 @@ def test_model_options_follow_the_parameters():
     values = node_params.defaults()
     options = node_params.model_options(values)
     # 0 modes: the planned default, for the flexible crank of the node's default scene.
-    assert options == ModelOptions(rigid_crank=False, elements_per_link=4)
+    assert options == ModelOptions(rigid_crank=False, elements_per_link=4, order=2)
     assert (options.modes, options.static) == DEFAULT_SIZES['flexible', False]
     values.update({'model.modes': 6, 'model.bearings': 'rigid', 'model.rigid_crank': False,
                    'model.geometric_stiffness': False, 'model.static': 0,

@@ -383,7 +383,15 @@ class StreamingEstimator:
         Returns
         -------
         positions, deflections : ndarray, shape (3, points, 2)
-            Ground frame [m].
+            Ground frame [m]; with a model of order 2 the deflections include the joints'
+            second-order motion (each chord carried to its ends' second-order positions).
 
         """
-        return self.model.shapes(sample.crank_angle, np.array(sample.modal))
+        modal = np.array(sample.modal)
+        positions, deflections = self.model.shapes(sample.crank_angle, modal)
+        second = self._tables.second
+        if second is not None:
+            cells, t = self.model.cell(sample.crank_angle)
+            deflections = deflections + second.link_motion(cells, t, modal[None],
+                                                           deflections.shape[1])[0]
+        return positions, deflections

@@ -58,12 +58,12 @@ def scalar_samples(mechanism, theta, links):
 
 
 def _transverse(pieces):
-    """The (v, phi) rows of a link's gather pieces (3, 3 (e + 1), n): every node's, in order."""
+    """Return the (v, phi) rows of a link's gather pieces (3, 3 (e + 1), n), in node order."""
     return pieces[:, [a for a in range(pieces.shape[1]) if a % 3], :]
 
 
 def _gather_entries(linkage, used):
-    """(slot, row of y, scalar or -1, coefficient) per nonzero of the links' (v, phi) gather."""
+    """Return (slot, row of y, scalar or -1, coefficient) per nonzero of the (v, phi) gather."""
     entries, first, count = [], {}, 0
     for link in linkage.links:
         pieces = _transverse(gather_harmonics(linkage, link))
@@ -77,7 +77,7 @@ def _gather_entries(linkage, used):
 
 
 def _form_entries(linkage, first):
-    """(form, slot i, slot j, value) of the upper band of each G on the (v, phi) DOFs."""
+    """Return (form, slot i, slot j, value) of the upper band of each G on the (v, phi) DOFs."""
     forms = link_forms(linkage)
     entries = []
     for form, link in enumerate(FORM_LINKS):
@@ -158,12 +158,12 @@ class SecondOrderForms:
         np.add.at(self.g, (form[:, 0], form[:, 1], form[:, 2]), value)
 
     def spline_scalars(self, cells, t):
-        """The SCALARS at grid cells ``cells`` and positions ``t`` in them: (m, SCALARS)."""
+        """Return the SCALARS (m, SCALARS) at grid cells ``cells``, positions ``t`` in them."""
         powers = np.asarray(t, dtype=float)[..., None] ** np.arange(CELL_POWERS)
         return np.einsum('mp,mps->ms', np.atleast_2d(powers), self.scalars[np.atleast_1d(cells)])
 
     def sums(self, scalars, q):
-        """Bending sums S_j (m, len(FORMS)) of reduced states q (m, r) at their scalars."""
+        """Return the bending sums S_j (m, len(FORMS)) of states q (m, r) at their scalars."""
         y = np.atleast_2d(q) @ self.rows.T
         z = np.zeros((y.shape[0], self.slots))
         for trig, dense in self.gathers.items():
@@ -172,9 +172,21 @@ class SecondOrderForms:
         return 0.5 * np.einsum('mi,fij,mj->mf', z, self.g, z)
 
     def outputs(self, scalars, sums):
-        """Second-order outputs (m, len(OUTPUT_NAMES)) [m]: kappa S."""
+        """Return the second-order outputs kappa S, shape (m, len(OUTPUT_NAMES)) [m]."""
         kappa = scalars[:, TRIG_SCALARS:].reshape(-1, len(OUTPUT_NAMES), len(FORMS))
         return np.einsum('mof,mf->mo', kappa, sums)
+
+    def link_motion(self, cells, t, q, points):
+        """
+        Second-order motion of the drawn link points at cells, positions and states.
+
+        Returns
+        -------
+        ndarray, shape (m, 3, points, 2)
+            :func:`link_point_motion` of :meth:`joint_motion` [m].
+
+        """
+        return link_point_motion(*self.joint_motion(self.spline_scalars(cells, t), q), points)
 
     def joint_motion(self, scalars, q):
         """
