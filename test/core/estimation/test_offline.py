@@ -89,7 +89,10 @@ def test_node_default_model_meets_its_budget_against_the_scene_reference(cho):
     options = node_params.default_model_options()
     assert not options.rigid_crank and options.geometric_stiffness
     model = pipeline.model_for_mechanism(cho, options)
-    scene = plan.scene_options(cho, core_options.ModelOptions(bearings=options.bearings))
+    # The node's default order (2) on both sides: the reference adds the second order too.
+    scene = plan.scene_options(cho, core_options.ModelOptions(bearings=options.bearings,
+                                                              order=options.order))
+    assert options.order == 2 and scene.order == 2
     rpm = 391.0
     period = 60.0 / rpm
     stamps, angles, speeds = synthetic.synthetic_signal(rpm, 2.0 * period, 1000.0, 0.3, 3)
