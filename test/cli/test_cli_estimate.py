@@ -248,3 +248,17 @@ def test_plan_says_when_the_fixed_choices_leave_no_candidate(toy, monkeypatch, c
     out = capsys.readouterr().out
     assert 'fixed in every candidate: rigid crank yes' in out
     assert 'choice: none of the candidates meets the tolerance; leave out the fixed' in out
+
+
+def test_estimate_json_says_the_order_and_order_2_moves_the_lever_tip(capsys, tmp_path):
+    # Cho 1992, rigid crank and bearings (the lever tip moves mostly by second order).
+    common = ['estimate', '--rpm', '391', '--seconds', '0.4', '--rigid-crank', '--bearings',
+              'rigid', '--grid-size', '32', '--cache-dir', str(tmp_path), '--json']
+    runs = {}
+    for order in (1, 2):
+        assert cli.main(common + ['--order', str(order)]) == 0
+        runs[order] = json.loads(capsys.readouterr().out)
+        assert runs[order]['order'] == order
+    p2p = {order: np.ptp(np.array(run['lever_tip']['dy_m'])) for order, run in runs.items()}
+    assert p2p[2] > 3.0 * p2p[1]
+    assert len(list(tmp_path.glob('*.npz'))) == 2       # one model per order

@@ -43,7 +43,9 @@ def test_cache_fields_exclude_gravity_and_keep_the_declaration_order():
     options = ModelOptions(gravity=False, grid_size=64)
     fields = options.cache_fields()
     names = [f.name for f in dataclasses.fields(ModelOptions)]
-    assert list(fields) == [n for n in names if n != 'gravity']
+    assert list(fields) == [n for n in names if n not in ('gravity', 'order')]
+    # order 1 (the default) leaves the key as before the field; order 2 is part of it
+    assert list(ModelOptions(order=2).cache_fields()) == [n for n in names if n != 'gravity']
     assert 'gravity' not in fields and fields['grid_size'] == 64
     # gravity alone does not change the key; any other field does
     assert ModelOptions(gravity=True).cache_fields() == ModelOptions(gravity=False).cache_fields()
@@ -52,7 +54,8 @@ def test_cache_fields_exclude_gravity_and_keep_the_declaration_order():
 
 @pytest.mark.parametrize('changes', [
     {'bearings': 'springs'}, {'modes': 0}, {'static': -1}, {'grid_size': 7},
-    {'speed_max': 0.0}, {'speed_max': -5.0}, {'speed_max': float('nan')}])
+    {'speed_max': 0.0}, {'speed_max': -5.0}, {'speed_max': float('nan')}, {'order': 0},
+    {'order': 3}])
 def test_invalid_values_are_refused(changes):
     with pytest.raises(ValueError):
         ModelOptions(**changes)

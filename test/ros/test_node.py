@@ -321,6 +321,7 @@ def test_driver_to_node_and_sigkill_leaves_a_recoverable_file(tmp_path, processe
 @pytest.mark.parametrize('parameter, reason', [
     ('diagnostics.criterion_warn:=5000.0', 'must not exceed'),
     ('damping_ratio:=2.0', 'out of range'),         # refused by the descriptor's range
+    ('model.order:=3', 'out of range'),             # 1 (linear KED) or 2 only
     ('qos.depth:=2.5', 'expecting type'),           # refused by the parameter's type
     ('frame_id:=' + 'x' * 300, 'frame_id must be at most 256 bytes, got 300'),
     ("frame_id:=''", 'frame_id must not be empty'),
