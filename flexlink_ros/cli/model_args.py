@@ -7,8 +7,9 @@ The model flags every model subcommand shares, and the options and model they gi
 ``--no-geometric-stiffness``; ``--order {1,2}`` (default 2: the linear outputs plus the
 second-order motion of the bent links; 1: the paper's linear KED) where the outputs are
 published (simulate and the estimator's subcommands). Only the default bearings differ (as
-before: rigid for the FE studies, flexible for the estimator, as the node). ``--elements`` is accepted where it was
-(simulate, modes) as a deprecated spelling of ``--elements-per-link``.
+before: rigid for the FE studies, flexible for the estimator, as the node). ``--elements``
+is accepted where it was (simulate, modes) as a deprecated spelling of
+``--elements-per-link``.
 """
 
 import argparse

@@ -328,10 +328,11 @@ def main(argv=None):
         results.append({'case': label, **entry})
         if not args.json:
             u, r = entry['update_ns'], entry['rows_ns']
-            print(f"{label:38s} r={entry['size']:2d}  update {u[1] / 1e3:6.2f} / "
-                  f"{u[2] / 1e3:6.2f} us (order 1 / 2), second order "
-                  f"{u['second_order_ns'] / 1e3:+.2f} us; batched step {r[1] / 1e3:6.2f} / "
-                  f"{r[2] / 1e3:6.2f} us, second order {r['second_order_ns'] / 1e3:+.2f} us")
+            size, u_second, r_second = entry['size'], u['second_order_ns'], r['second_order_ns']
+            print(f'{label:38s} r={size:2d}  update {u[1] / 1e3:6.2f} / {u[2] / 1e3:6.2f} us '
+                  f'(order 1 / 2), second order {u_second / 1e3:+.2f} us; batched step '
+                  f'{r[1] / 1e3:6.2f} / {r[2] / 1e3:6.2f} us, second order '
+                  f'{r_second / 1e3:+.2f} us')
     if args.json:
         print(json.dumps(results, indent=1))
     return 0

@@ -6,9 +6,9 @@ Linear KED and linear + second order against the nonlinear Exudyn peer (issue 14
 the peer's peak-to-peak of the four outputs, the package's linear full-order response and the
 same plus the second-order motion of :mod:`core.fe.second_order_full` (p2p error and relative
 RMS against the peer), and the streaming estimate of order 2 (the reduced model with its
-second-order tables, default basis, streamed by core/estimation as the node does). ``--cost`` prints the multiply-adds per sample of
-the streaming form for the reduced models, and ``--bench`` times it compiled (needs a C
-compiler).
+second-order tables, default basis, streamed by core/estimation as the node does).
+``--cost`` prints the multiply-adds per sample of the streaming form for the reduced models,
+and ``--bench`` times it compiled (needs a C compiler).
 """
 
 import argparse
@@ -22,10 +22,10 @@ from . import second_order_bench
 from .peer_exudyn import compare, peak_to_peak, peer_response
 from .peer_linear import linear_model
 from .peer_model import DEFAULT_ELEMENTS, OUTPUT_KEYS, resolve_mechanism
+from ..core.estimation.offline import replay
 from ..core.fe.linkage import FlexibleLinkage
 from ..core.fe.second_order_full import corrected_response
 from ..core.fe.second_order_geometry import FORMS
-from ..core.estimation.offline import replay
 from ..core.fe.second_order_reduced import factored_forms, step_cost
 from ..core.fe.simulate import periodic_response
 from ..core.options import DEFAULT_SIZES, ModelOptions
@@ -222,8 +222,8 @@ def main(argv=None):
     return 0
 
 
-__all__ = ['TARGETS', 'STREAM_TARGETS', 'run_case', 'reduced_response', 'meets_targets', 'format_record',
-           'reduced_costs', 'main']
+__all__ = ['TARGETS', 'STREAM_TARGETS', 'run_case', 'reduced_response', 'meets_targets',
+           'format_record', 'reduced_costs', 'main']
 
 
 if __name__ == '__main__':

@@ -13,8 +13,8 @@ from flexlink_ros.ros import messages as ros_messages
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 import numpy as np
-from recorder_helpers import STEP_NS, T0_NS
 from rclpy.serialization import deserialize_message
+from recorder_helpers import STEP_NS, T0_NS
 from rosbags.highlevel import AnyReader
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
@@ -95,7 +95,8 @@ def test_replay_markers_of_an_order_2_model_draw_the_joints_second_order_motion(
     exaggeration = 50.0
     drawn = {}
     for name, source_model in (('second', model), ('linear', linear)):
-        source = MarkerSource(source_model, 'linkage_ground', exaggeration, 5, [ros_messages.OK] * 4)
+        source = MarkerSource(source_model, 'linkage_ground', exaggeration, 5,
+                              [ros_messages.OK] * 4)
         rows = source.rows(stamps, angles, modal)
         drawn[name] = [deserialize_message(row.tobytes(), MarkerArray) for row in rows]
     forms = SecondOrderForms(model.second_order)
