@@ -8,7 +8,9 @@
  *     monomial * h00, h10, h01, h11 on nodes k and k + 1);
  *   - the step matrix and the operator on (q, v) from the 8 x 8 coefficient matrix
  *     G(h) = sum_p h^p g[p] (slot 0 = the sample, slot 1 = stage 1, see tables._StepTables);
- *   - the 2 r x 2 r system solved by LU with partial pivoting, z = (q, v) += dz.
+ *   - the 2 r x 2 r system solved by LU with partial pivoting, z = (q, v) += dz;
+ *   - the record: linear outputs, and with a model of order 2 their second-order part
+ *     (the factored quadratic form of core/reduction/second_order_tables.py).
  * A sample whose step is split into sub-steps (MAX_SUBSTEP_NS) is advanced here too,
  * with the crank state linear between the samples, as NumpyStep._sub_steps does.
  *
