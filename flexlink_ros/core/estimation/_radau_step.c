@@ -521,57 +521,62 @@ PyDoc_STRVAR(advance_doc,
 "rest float64). prev (angle, speed,\n"
 "acceleration of the last step) is updated; states (rows x 2 r, or empty) receives\n"
 "z[:2 r] after each row; records (rows x 28, or 28 for the last row only) the sample's\n"
-"record (native.RECORD_SIZE). second: None (order 1) or the six arrays of\n"
-"second_order_tables.ARRAY_NAMES (int32 index arrays, the rest float64); their\n"
-"second-order outputs are added to the record's deflections.");
+"record (native.RECORD_SIZE). second: None (order 1) or (values float64, index int32) of\n"
+"SecondOrderForms.packed (second_order_tables.py); their second-order outputs are added\n"
+"to the record's deflections.");
 
-#define SO_ARRAYS 6
+#define SO_BUFFERS 2
 
-/* The second-order tables into s (checked: every index within its array), or -1. */
+/* The second-order tables (values, index: SecondOrderForms.packed) into s, checked: every
+   count matches the buffers and every index lies within its array; or -1. */
 static int take_second(PyObject *second, Py_buffer *views, Step *s)
 {
     const Py_ssize_t r = s->r;
-    PyObject *o[SO_ARRAYS];
+    PyObject *values_obj, *index_obj;
     if (second == NULL || second == Py_None)
         return 0;
-    if (!PyArg_ParseTuple(second, "OOOOOO;`second` must be a tuple of six arrays", &o[0], &o[1],
-                          &o[2], &o[3], &o[4], &o[5]))
+    if (!PyArg_ParseTuple(second, "OO;`second` must be (values, index)", &values_obj,
+                          &index_obj))
         return -1;
-    if (get_buffer(o[0], &views[0], 0, "second_scalars", s->cells * 4 * SO_SCALARS) != 0
-        || get_buffer(o[1], &views[1], 0, "second_rows", -1) != 0
-        || get_typed_buffer(o[2], &views[2], 0, "second_gather", -1, "i") != 0
-        || get_buffer(o[3], &views[3], 0, "second_gather_coef", views[2].len / 4 / 3) != 0
-        || get_typed_buffer(o[4], &views[4], 0, "second_form", -1, "i") != 0
-        || get_buffer(o[5], &views[5], 0, "second_form_value", views[4].len / 4 / 3) != 0)
+    if (get_buffer(values_obj, &views[0], 0, "second values", -1) != 0
+        || get_typed_buffer(index_obj, &views[1], 0, "second index", -1, "i") != 0)
         return -1;
-    s->so_rows = views[1].len / 8 / r;
-    s->so_gathers = views[3].len / 8;
-    s->so_terms = views[5].len / 8;
-    const int *gather = views[2].buf, *form = views[4].buf;
-    int bad = s->so_rows * r * 8 != views[1].len || views[2].len != 12 * s->so_gathers
-              || views[4].len != 12 * s->so_terms;
+    const int *index = views[1].buf;
+    const Py_ssize_t count = views[1].len / 4;
+    int bad = count < 3 || index[0] < 0 || index[1] < 0 || index[2] < 0;
+    if (!bad) {
+        s->so_rows = index[0];
+        s->so_gathers = index[1];
+        s->so_terms = index[2];
+        bad = count != 3 + 3 * (s->so_gathers + s->so_terms)
+              || views[0].len / 8 != s->cells * 4 * SO_SCALARS + s->so_rows * r
+                                     + s->so_gathers + s->so_terms;
+    }
+    const int *gather = index + 3, *form = gather + 3 * (bad ? 0 : s->so_gathers);
     s->so_slots = 0;
-    for (Py_ssize_t p = 0; p < s->so_gathers && !bad; p++) {
+    for (Py_ssize_t p = 0; !bad && p < s->so_gathers; p++) {
         bad = gather[3 * p] < 0 || gather[3 * p + 1] < 0 || gather[3 * p + 1] >= s->so_rows
               || gather[3 * p + 2] < -1 || gather[3 * p + 2] >= SO_SCALARS;
         if (gather[3 * p] >= s->so_slots)
             s->so_slots = gather[3 * p] + 1;
     }
-    for (Py_ssize_t p = 0; p < s->so_terms && !bad; p++)
+    for (Py_ssize_t p = 0; !bad && p < s->so_terms; p++)
         bad = form[3 * p] < 0 || form[3 * p] >= SO_FORMS || form[3 * p + 1] < 0
               || form[3 * p + 2] < 0 || form[3 * p + 1] >= s->so_slots
               || form[3 * p + 2] >= s->so_slots;
     if (bad) {
+        s->so_rows = s->so_gathers = s->so_terms = s->so_slots = 0;
         PyErr_SetString(PyExc_ValueError, "`second` tables do not match the model size or "
                         "hold an index out of range");
         return -1;
     }
-    s->so_scalars = views[0].buf;
-    s->so_v = views[1].buf;
+    const double *values = views[0].buf;
+    s->so_scalars = values;
+    s->so_v = values + s->cells * 4 * SO_SCALARS;
+    s->so_gather_coef = s->so_v + s->so_rows * r;
+    s->so_form_value = s->so_gather_coef + s->so_gathers;
     s->so_gather = gather;
-    s->so_gather_coef = views[3].buf;
     s->so_form = form;
-    s->so_form_value = views[5].buf;
     return 0;
 }
 
@@ -599,7 +604,7 @@ static PyObject *advance(PyObject *module, PyObject *args)
         return NULL;
     Py_buffer mass = {0}, damping = {0}, kf = {0}, out = {0}, joint = {0}, g0 = {0}, z = {0},
               prev = {0}, rows = {0}, states = {0}, records = {0};
-    Py_buffer second[SO_ARRAYS] = {{0}};
+    Py_buffer second[SO_BUFFERS] = {{0}};
     PyObject *result = NULL;
     double *scratch = NULL;
     Step s;
@@ -724,7 +729,7 @@ done:
     PyBuffer_Release(&rows);
     PyBuffer_Release(&states);
     PyBuffer_Release(&records);
-    for (int i = 0; i < SO_ARRAYS; i++)
+    for (int i = 0; i < SO_BUFFERS; i++)
         PyBuffer_Release(&second[i]);
     return result;
 }

@@ -14,7 +14,7 @@ from ..integrators import RADAU_TABLEAUX
 from ..numerics import TWO_PI
 from ..reduction.cells import CELL_POWERS, monomial_values, MONOMIALS
 from ..reduction.model import cell_groups
-from ..reduction.second_order_tables import ARRAY_NAMES, SecondOrderForms
+from ..reduction.second_order_tables import SecondOrderForms
 from ...names import OUTPUT_NAMES
 
 POWERS = (-2, -1, 0, 1, 2)   # G(h) is a Laurent polynomial in h
@@ -168,8 +168,8 @@ class _StepTables:
     derivative (joints x 2), squared cycle-RMS reaction (joints)] stay per cell in power form
     (rows ``monomial * 4 + power``; small, read once per sample).
     ``second`` (a model of order 2) evaluates the second-order outputs the record adds to the
-    deflections (:class:`~core.reduction.second_order_tables.SecondOrderForms`); ``second_arrays``
-    are its arrays in the compiled step's order (None for order 1).
+    deflections (:class:`~core.reduction.second_order_tables.SecondOrderForms`); ``second_packed``
+    are its arrays as the compiled step takes them (None for order 1).
     Two samples' [M, C, K, F] (F an r x r block holding f in its first r entries) in
     alternating slots times a 8 x 8 coefficient matrix G(h) give, in one product, the
     Radau IIA block matrix and the right-hand-side operator on (q, v).
@@ -195,10 +195,10 @@ class _StepTables:
         # The compiled step's convention: the sample in slot 0, stage 1 in slot 1.
         self.g0 = np.ascontiguousarray(self.g_stack[0])
         self._bounds = {}
-        self.second = self.second_arrays = None
+        self.second = self.second_packed = None
         if model.second_order is not None:
             self.second = SecondOrderForms(model.second_order)
-            self.second_arrays = tuple(self.second.arrays[name] for name in ARRAY_NAMES)
+            self.second_packed = self.second.packed()
 
     def deflection_bound(self, model, safety_factor):
         """

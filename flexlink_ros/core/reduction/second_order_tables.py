@@ -176,6 +176,23 @@ class SecondOrderForms:
         kappa = scalars[:, TRIG_SCALARS:].reshape(-1, len(OUTPUT_NAMES), len(FORMS))
         return np.einsum('mof,mf->mo', kappa, sums)
 
+    def packed(self):
+        """
+        Return the arrays in the compiled step's form: (values float64, index int32).
+
+        ``index`` = [m rows of V, P gather entries, T form terms], the gather (P x 3), the form
+        (T x 3); ``values`` = the scalars' spline coefficients, the rows of V (m x r), the
+        gather coefficients, the form values. Two buffers a call, not six.
+        """
+        a = self.arrays
+        counts = [a['second_rows'].shape[0], a['second_gather'].shape[0],
+                  a['second_form'].shape[0]]
+        index = np.concatenate([np.array(counts), a['second_gather'].ravel(),
+                                a['second_form'].ravel()]).astype(np.int32)
+        values = np.concatenate([a['second_scalars'].ravel(), a['second_rows'].ravel(),
+                                 a['second_gather_coef'], a['second_form_value']])
+        return np.ascontiguousarray(values), np.ascontiguousarray(index)
+
     def link_motion(self, cells, t, q, points):
         """
         Second-order motion of the drawn link points at cells, positions and states.

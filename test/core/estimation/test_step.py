@@ -130,20 +130,26 @@ def test_compiled_step_rejects_bad_second_order_tables():
                             step.cells_per_radian, STAGE1, step.z, step.previous, row,
                             np.empty(0), est.last_record, second)
 
-    arrays = list(t.second_arrays)
+    values, index = t.second_packed
     z_before = step.z.copy()
-    bad_index = arrays[2].copy()
-    bad_index[0, 1] = arrays[1].shape[0]      # a row of V q beyond the table
+    bad_index = index.copy()
+    bad_index[3 + 1] = index[0]              # the first gather reads a row beyond V's rows
     with pytest.raises(ValueError, match='out of range'):
-        call(tuple(arrays[:2] + [bad_index] + arrays[3:]))
+        call((values, bad_index))
+    bad_count = index.copy()
+    bad_count[2] += 1                        # one form term more than the buffers hold
+    with pytest.raises(ValueError, match='out of range'):
+        call((values, bad_count))
+    with pytest.raises(ValueError, match='out of range'):
+        call((values[:-1], index))
     with pytest.raises(TypeError, match='int32'):
-        call(tuple(arrays[:2] + [arrays[2].astype(np.int64)] + arrays[3:]))
-    with pytest.raises(ValueError, match='second_scalars'):
-        call(tuple([arrays[0][:-1]] + arrays[1:]))
-    with pytest.raises(TypeError, match='six arrays'):
-        call(tuple(arrays[:5]))
+        call((values, index.astype(np.int64)))
+    with pytest.raises(TypeError, match='float64'):
+        call((values.astype(np.float32), index))
+    with pytest.raises(TypeError, match='values, index'):
+        call((values,))
     np.testing.assert_array_equal(step.z, z_before)
-    call(tuple(arrays))
+    call((values, index))
     assert np.all(np.isfinite(est.last_record))
 
 
