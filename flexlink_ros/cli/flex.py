@@ -8,8 +8,8 @@
     flexlink simulate --mechanism config/cho1992.yaml --rpm 391 [--rigid-crank]
                    [--bearings rigid|flexible] [--method full|modal] [--modes N]
                    [--static-correction] [--damping-ratio Z] [--stiffness-damping BETA_S]
-                   [--points-per-rev P]
-                   [--steps-per-rev S] [--check-convergence] [--json]
+                   [--points-per-rev P] [--steps-per-rev S] [--check-convergence]
+                   [--order 1|2] [--json]
 
 ``modes`` JSON: ``crank_deg``, ``frequencies_hz`` (per angle, per mode), ``dominant_link``,
 ``strain_share`` (crank, coupler, lever, springs), ``range_hz`` (min and max per mode),
@@ -17,7 +17,11 @@ optional ``shapes``. ``simulate`` JSON: ``crank_deg``, ``lever_tip`` and ``coupl
 (``dx_m``, ``dy_m``: ground-frame elastic deflection over one steady revolution),
 ``peak_to_peak_m``, ``floquet_spectral_radius``, ``damping_ratio``, ``stiffness_damping_s``
 (beta [s]), ``nonlinearity`` (``indicator_max``, ``valid``, ``threshold``: the validity
-indicator of core/validity.py over the revolution), ``wall_s``, optional ``convergence``.
+indicator of core/validity.py over the revolution of the linear response), ``wall_s``,
+optional ``convergence``, ``order`` and, at order 2 (the default),
+``linear_peak_to_peak_m`` (the outputs are the linear response plus its second-order
+part, :func:`core.fe.second_order_full.corrected_response`, for the modal response from
+its reconstructed nodal vectors; the convergence check is of the linear response).
 """
 
 import dataclasses
@@ -27,9 +31,11 @@ import time
 import numpy as np
 
 from .main import degree_range, emit
-from .model_args import add_model_arguments, add_stiffness_damping_argument, stiffness_damping
+from .model_args import add_model_arguments, add_order_argument, \
+    add_stiffness_damping_argument, stiffness_damping
 from ..core import validity
 from ..core.fe import linkage as assembly, modes, simulate
+from ..core.fe.second_order_full import corrected_response
 from ..core.mechanism_file import load_mechanism
 from ..core.options import ModelOptions
 from ..errors import FlexlinkError
@@ -80,6 +86,7 @@ def register(subparsers):
                         help='Radau IIA stages: 2 (order 3, default) or 3 (order 5)')
     parser.add_argument('--check-convergence', action='store_true',
                         help='also report the error at 1/4, 1/2 and 1x the steps against 4x')
+    add_order_argument(parser)
     parser.set_defaults(func=simulate_command)
 
 
@@ -182,6 +189,16 @@ def nonlinearity_line(summary):
             f'{summary["threshold"]:g}): linear estimate {verdict}')
 
 
+def _ordered_outputs(model, response, order):
+    """Return the outputs of ``order`` (2: plus the second order) and their JSON entries."""
+    if order == 1:
+        return response.outputs, {'order': 1}
+    linear = response.peak_to_peak
+    return corrected_response(model, response)['total'], {
+        'order': 2, 'linear_peak_to_peak_m': {'lever_tip': linear[:2],
+                                              'coupler_mid': linear[2:]}}
+
+
 def simulate_command(args):
     """Periodic steady-state response at constant speed; returns the exit code."""
     started = time.perf_counter()
@@ -204,8 +221,8 @@ def simulate_command(args):
               'stages': stages, 'zeta': zeta}
     response = _guard_geometric(simulate.periodic_response, model, speed, steps=steps,
                                 points=points, **kwargs)
-    out = response.outputs
-    p2p = response.peak_to_peak
+    out, extra = _ordered_outputs(model, response, args.order)
+    p2p = out.max(axis=0) - out.min(axis=0)
     result = {'crank_deg': np.mod(np.degrees(response.crank_angle), 360.0),
               'lever_tip': {'dx_m': out[:, 0], 'dy_m': out[:, 1]},
               'coupler_mid': {'dx_m': out[:, 2], 'dy_m': out[:, 3]},
@@ -219,7 +236,7 @@ def simulate_command(args):
               'solve_s': response.info['wall_s'],
               'nonlinearity': validity.is_valid(validity.nonlinearity_indicator(
                   model, response.displacement, response.crank_angle, speed,
-                  zeta=response.info['zeta']))}
+                  zeta=response.info['zeta'])), **extra}
     if args.check_convergence:
         if steps % 4:
             raise ValueError('--check-convergence needs steps-per-rev divisible by 4')
@@ -240,7 +257,7 @@ def _simulate_text(mech, model, args, result):
                if result['method'] == 'modal' else '')
             + f', {model.size} DOFs, bearings {args.bearings}, rigid crank {args.rigid_crank}'
             + (f', stiffness damping {model.options.stiffness_damping:g} s'
-               if model.options.stiffness_damping else '') + '\n'
+               if model.options.stiffness_damping else '') + f', order {args.order}\n'
             f'peak-to-peak [mm]: lever tip dX {1e3 * p2p[0]:.4f} dY {1e3 * p2p[1]:.4f}, '
             f'coupler mid dX {1e3 * p2p[2]:.4f} dY {1e3 * p2p[3]:.4f}\n'
             f'Floquet spectral radius {result["floquet_spectral_radius"]:.4f}, '

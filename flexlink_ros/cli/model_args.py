@@ -4,9 +4,12 @@ The model flags every model subcommand shares, and the options and model they gi
 ``simulate``/``modes`` (full-order FE) and ``estimate``/``plan``/``bench``/``replay``
 (reduced model) take the same spellings: ``--mechanism``, ``--rigid-crank`` /
 ``--flexible-crank``, ``--bearings {flexible,rigid}``, ``--elements-per-link N`` and
-``--no-geometric-stiffness``. Only the default bearings differ (as before: rigid for the FE
-studies, flexible for the estimator, as the node). ``--elements`` is accepted where it was
-(simulate, modes) as a deprecated spelling of ``--elements-per-link``.
+``--no-geometric-stiffness``; ``--order {1,2}`` (default 2: the linear outputs plus the
+second-order motion of the bent links; 1: the paper's linear KED) where the outputs are
+published (simulate and the estimator's subcommands). Only the default bearings differ (as
+before: rigid for the FE studies, flexible for the estimator, as the node). ``--elements``
+is accepted where it was (simulate, modes) as a deprecated spelling of
+``--elements-per-link``.
 """
 
 import argparse
@@ -19,6 +22,9 @@ from ..core.reduction import pipeline
 from ..ros import parameters as node_params
 
 BEARINGS = ('flexible', 'rigid')
+# Output order of the published deflections, and the default of the flag (the node's too).
+ORDERS = (1, 2)
+DEFAULT_ORDER = 2
 
 
 class DeprecatedAlias(argparse.Action):
@@ -105,6 +111,22 @@ def stiffness_damping(args):
     return float(value)
 
 
+def add_order_argument(parser):
+    """
+    Add ``--order {1,2}``: the linear KED outputs, or plus their second-order part.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser
+        A subcommand's parser.
+
+    """
+    parser.add_argument('--order', type=int, choices=ORDERS, default=DEFAULT_ORDER,
+                        help='1: the linear KED outputs of the paper; 2: plus the '
+                        "second-order motion of the bent links' chord shortening "
+                        '(default: %(default)s)')
+
+
 def add_reduced_arguments(parser):
     """
     Add the flags of the reduced model and its input: sizes, sample rate, cache, JSON.
@@ -143,6 +165,7 @@ def add_estimator_arguments(parser):
     add_model_arguments(parser, 'flexible', "the node's 4 with a flexible crank, the "
                         "mechanism file's with a rigid crank")
     add_stiffness_damping_argument(parser)
+    add_order_argument(parser)
     add_reduced_arguments(parser)
 
 
@@ -171,7 +194,7 @@ def model_options(args, **overrides):
     values = {'rigid_crank': rigid_crank, 'bearings': args.bearings,
               'geometric_stiffness': not args.no_geometric_stiffness,
               'elements_per_link': None if rigid_crank else node_elements}
-    for name in ('modes', 'static', 'grid_size', 'elements_per_link'):
+    for name in ('modes', 'static', 'grid_size', 'elements_per_link', 'order'):
         value = getattr(args, name, None)
         if value is not None:
             values[name] = value

@@ -53,6 +53,10 @@ class ModelOptions:
         and c = beta k on the bearing springs (:mod:`core.fe.stiffness_damping`), on top of
         the mechanism's modal ``damping_ratio``; 0 leaves it out. Part of the cache key only
         when non-zero, so the keys of models without it stay as they were.
+    order : int
+        1: the linear KED outputs of the paper; 2: plus the second-order motion of the bent
+        links' chord shortening (core/fe/second_order_*.py; the reduced model then carries its
+        tables). 1 here, the library's linear model; the node and the CLI default to 2.
 
     """
 
@@ -66,6 +70,7 @@ class ModelOptions:
     speed_max: float = 65.0
     gravity: bool = True
     stiffness_damping: float = 0.0
+    order: int = 1
 
     def __post_init__(self):
         if self.bearings not in ('flexible', 'rigid'):
@@ -78,6 +83,8 @@ class ModelOptions:
                              f'{self.static}')
         if self.grid_size < 8:
             raise ValueError(f'`grid_size` must be >= 8, got {self.grid_size}')
+        if self.order not in (1, 2):
+            raise ValueError(f'`order` must be 1 or 2, got {self.order!r}')
         if not self.speed_max > 0.0:
             raise ValueError(f'`speed_max` must be positive, got {self.speed_max}')
         beta = float(self.stiffness_damping)
@@ -94,13 +101,16 @@ class ModelOptions:
         """
         Return the fields identifying a reduced model, in declaration order.
 
-        ``gravity`` is left out when it is on and ``stiffness_damping`` when it is 0, so a
-        default model keeps the key it had before these fields existed; a model built without
-        gravity has loads of its own and must not share that key.
+        ``gravity`` is left out when it is on, ``stiffness_damping`` when it is 0 and ``order``
+        when it is 1, so a default model keeps the key it had before these fields existed (its
+        cache files still load); a model built without gravity has loads of its own, and one of
+        order 2 carries extra tables, so neither may share that key.
         """
         fields = dataclasses.asdict(self)
         if fields['gravity']:
             del fields['gravity']
         if not fields['stiffness_damping']:
             del fields['stiffness_damping']
+        if self.order == 1:
+            del fields['order']
         return fields

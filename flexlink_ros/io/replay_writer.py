@@ -11,6 +11,7 @@ import numpy as np
 
 from .markers import criteria_rows, MarkerEncoder, rows_to_bytes, vector3_stamped_rows
 from .recorder import McapRecorder
+from ..core.reduction.second_order_tables import SecondOrderForms
 from ..names import JOINT_STATE, MARKER_ARRAY, OUTPUT_POINTS, VECTOR3_STAMPED
 
 # Samples per batch of write_replay (a progress report between batches).
@@ -48,6 +49,9 @@ class MarkerSource:
         resample = np.stack([np.interp(target, source, unit) for unit in np.eye(source.size)],
                             axis=1)
         self.table = np.einsum('ts,nclsdr->ncltdr', resample, table)
+        # A model of order 2 draws the joints' second-order motion too.
+        self.second = (None if model.second_order is None
+                       else SecondOrderForms(model.second_order))
 
     def rows(self, stamps_ns, angles, modal):
         """
@@ -73,6 +77,8 @@ class MarkerSource:
         values = np.einsum('mp,mpltdr->mltdr', powers, self.table[cells])
         positions = values[..., -1]
         deflections = np.einsum('mltdr,mr->mltd', values[..., :-1], modal)
+        if self.second is not None:
+            deflections += self.second.link_motion(cells, t, modal, deflections.shape[2])
         joints = positions[:, (0, 0, 1, 2), (0, -1, -1, 0)]
         return self.encoder.encode_rows(stamps_ns, positions, deflections, self.exaggeration,
                                         joints, self.levels)

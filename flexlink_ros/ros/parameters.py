@@ -81,6 +81,9 @@ PARAMETERS = (
                   'c = beta k on the bearing springs, added to damping_ratio (set that to 0 '
                   "for beta alone, as the Exudyn peer); -1 = the mechanism file's "
                   'stiffness_damping_s (0 if none)', low=-1.0, high=1.0, read_only=True),
+    ParameterSpec('model.order', 2, "Order of the outputs: 1 = the paper's linear KED; 2 = plus "
+                  "the second-order motion of the bent links' chord shortening (lever tip, "
+                  'coupler mid-point, markers)', low=1, high=2, read_only=True),
     ParameterSpec('model.cache_dir', '', 'Directory of precomputed-model cache files '
                   '(empty: ~/.cache/flexlink_ros)', read_only=True, max_bytes=PATH_MAX_BYTES),
     ParameterSpec('model.warm_start', True,
@@ -269,7 +272,8 @@ def model_options(values, file_stiffness_damping=0.0):
                         rigid_crank=values['model.rigid_crank'],
                         bearings=values['model.bearings'],
                         geometric_stiffness=values['model.geometric_stiffness'],
-                        stiffness_damping=file_stiffness_damping if beta < 0 else beta)
+                        stiffness_damping=file_stiffness_damping if beta < 0 else beta,
+                        order=values['model.order'])
 
 
 def default_model_options(**overrides):

@@ -284,10 +284,10 @@ def node_model_options():
     -------
     ModelOptions
         Flexible crank with 4 elements per link, flexible bearings, geometric stiffness,
-        default sizes (a test keeps it equal to the node's parameters).
+        default sizes, second-order outputs (a test keeps it equal to the node's parameters).
 
     """
-    return ModelOptions(rigid_crank=False, elements_per_link=4)
+    return ModelOptions(rigid_crank=False, elements_per_link=4, order=2)
 
 
 def estimator_report_data(mechanism, options, progress=None):

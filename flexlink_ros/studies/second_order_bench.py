@@ -8,24 +8,37 @@ rotation of the end-node translations, the bands of G and the 4 x 4 output combi
 checked against :func:`core.second_order.factored_second_order` at the grid angles (where the
 spline equals its samples) before it is timed. Needs a C compiler; nothing here is used by the
 package at run time.
+
+:func:`streaming_overhead` times what the second order costs in the package's own compiled
+step (core/estimation/_radau_step.c): the in-process streaming update and the batched step
+of an order-1 and an order-2 model of the same options, in alternating rounds, medians.
+``python -m flexlink_ros.studies.second_order_bench`` prints both for the node's default
+model and the rigid-crank ones.
 """
 
+import argparse
 import ctypes
+import dataclasses
+import json
+import math
 import pathlib
 import shutil
 import subprocess
 import tempfile
+import time
 
 import numpy as np
 
+from ..core.estimation.streaming import StreamingEstimator
 from ..core.fe.linkage import FlexibleLinkage
 from ..core.fe.second_order_full import link_forms
 from ..core.fe.second_order_geometry import output_coefficients
 from ..core.fe.second_order_reduced import factored_forms, factored_second_order, gather_harmonics
 from ..core.kinematics import solve_kinematics
+from ..core.mechanism_file import load_mechanism
 from ..core.options import ModelOptions
 from ..core.reduction.cells import periodic_cell_coefficients
-from ..core.reduction.pipeline import fe_mechanism
+from ..core.reduction.pipeline import fe_mechanism, model_for_mechanism
 
 SCALARS = 22    # cos, sin of the three link angles, then kappa (4 x 4), per grid node
 GRID = 128
@@ -235,4 +248,98 @@ def time_factored(mechanism, bearings, rigid_crank, size, samples=20000, repeat=
     return ns
 
 
-__all__ = ['KERNEL', 'kernel_data', 'time_factored']
+def _update_round(estimator, speed, samples, start):
+    """Median ns of ``samples`` streaming updates at 1 kHz, constant speed, after ``start``."""
+    times = np.empty(samples)
+    clock = time.perf_counter_ns
+    for n in range(samples):
+        stamp = start + n + 1
+        angle = speed * stamp * 1e-3
+        before = clock()
+        estimator.update(stamp * 1_000_000, angle, speed)
+        times[n] = clock() - before
+    return float(np.median(times))
+
+
+def _rows_round(estimator, speed, samples):
+    """Ns (CPU) per row of the batched compiled step (the offline replay's path), one call."""
+    angles = np.mod(speed * 1e-3 * (np.arange(samples) + 1.0), 2.0 * math.pi)
+    rows = np.column_stack([np.full(samples, 1e-3), np.ones(samples), angles,
+                            np.full(samples, speed), np.zeros(samples),
+                            np.full(samples, speed * 1e-3)])
+    records = np.empty((samples, estimator.last_record.size))
+    # CPU time of the process: a batch of milliseconds is preempted on a loaded machine.
+    before = time.process_time_ns()
+    estimator.step_rows(rows, np.empty(0), records)
+    return (time.process_time_ns() - before) / samples
+
+
+def streaming_overhead(mechanism, options, rpm=391.0, rounds=9, samples=3000):
+    """
+    Time the second order in the compiled step: order 1 against order 2, alternating rounds.
+
+    Each round runs ``samples`` in-process updates (StreamingEstimator.update, the node's
+    call) on an order-1 and then an order-2 model of the same ``options`` (warm-started at
+    ``rpm``), and one batched step of as many rows (step_rows, the replay's call).
+
+    Returns
+    -------
+    dict
+        'update_ns' and 'rows_ns': median over the rounds per order, and their difference
+        'second_order_ns' (median of the per-round differences); 'size' r.
+
+    """
+    models = {order: model_for_mechanism(mechanism, dataclasses.replace(options, order=order))
+              for order in (1, 2)}
+    speed = rpm * math.pi / 30.0
+    estimators = {order: StreamingEstimator(model) for order, model in models.items()}
+    for estimator in estimators.values():
+        estimator.update(0, 0.0, speed)
+    update = {1: [], 2: []}
+    rows = {1: [], 2: []}
+    for k in range(rounds):
+        for order, estimator in estimators.items():
+            update[order].append(_update_round(estimator, speed, samples, k * samples))
+            rows[order].append(_rows_round(estimator, speed, samples))
+    out = {'size': models[2].size, 'compiled': estimators[2].compiled}
+    for name, values in (('update_ns', update), ('rows_ns', rows)):
+        out[name] = {order: float(np.median(v)) for order, v in values.items()}
+        out[name]['second_order_ns'] = float(np.median(np.subtract(values[2], values[1])))
+    return out
+
+
+def main(argv=None):
+    """Print :func:`streaming_overhead` for the node's default and the rigid-crank models."""
+    parser = argparse.ArgumentParser(prog='python -m flexlink_ros.studies.second_order_bench',
+                                     description=__doc__.strip().splitlines()[0])
+    parser.add_argument('--mechanism', default='cho1992')
+    parser.add_argument('--rounds', type=int, default=9)
+    parser.add_argument('--samples', type=int, default=3000)
+    parser.add_argument('--json', action='store_true')
+    args = parser.parse_args(argv)
+    mechanism = load_mechanism(args.mechanism)
+    cases = [('node default (flexible crank, 4 el.)',
+              ModelOptions(rigid_crank=False, elements_per_link=4)),
+             ('rigid crank, flexible bearings', ModelOptions()),
+             ('rigid crank, rigid bearings', ModelOptions(bearings='rigid'))]
+    results = []
+    for label, options in cases:
+        entry = streaming_overhead(mechanism, options, rounds=args.rounds, samples=args.samples)
+        results.append({'case': label, **entry})
+        if not args.json:
+            u, r = entry['update_ns'], entry['rows_ns']
+            size, u_second, r_second = entry['size'], u['second_order_ns'], r['second_order_ns']
+            print(f'{label:38s} r={size:2d}  update {u[1] / 1e3:6.2f} / {u[2] / 1e3:6.2f} us '
+                  f'(order 1 / 2), second order {u_second / 1e3:+.2f} us; batched step '
+                  f'{r[1] / 1e3:6.2f} / {r[2] / 1e3:6.2f} us, second order '
+                  f'{r_second / 1e3:+.2f} us')
+    if args.json:
+        print(json.dumps(results, indent=1))
+    return 0
+
+
+__all__ = ['KERNEL', 'kernel_data', 'time_factored', 'streaming_overhead', 'main']
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

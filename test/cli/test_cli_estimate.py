@@ -263,3 +263,18 @@ def test_estimate_json_says_whether_the_estimate_is_valid(capsys, tmp_path):
     assert (summaries['269']['indicator_max'] < validity.VALIDITY_THRESHOLD
             < summaries['405']['indicator_max'])
     assert summaries['269']['threshold'] == validity.VALIDITY_THRESHOLD
+
+
+def test_estimate_json_says_the_order_and_order_2_moves_the_lever_tip(capsys, tmp_path):
+    # Cho 1992, rigid crank and bearings (the lever tip moves mostly by second order).
+    common = ['estimate', '--rpm', '391', '--seconds', '0.4', '--rigid-crank', '--bearings',
+              'rigid', '--grid-size', '32', '--cache-dir', str(tmp_path), '--json']
+    runs = {}
+    for order in (1, 2):
+        assert cli.main(common + ['--order', str(order)]) == 0
+        runs[order] = json.loads(capsys.readouterr().out)
+        assert runs[order]['order'] == order
+    p2p = {order: np.ptp(np.array(run['lever_tip']['dy_m'])) for order, run in runs.items()}
+    assert p2p[2] > 3.0 * p2p[1]
+    models = [p for p in tmp_path.glob('*.npz') if not p.stem.endswith('-nonlinearity')]
+    assert len(models) == 2       # one model per order

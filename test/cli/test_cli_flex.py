@@ -122,3 +122,28 @@ def test_simulate_json_says_whether_the_linear_response_is_valid(capsys):
     code, out, _ = _run(capsys, 'simulate', '--rpm', '405', '--rigid-crank', '--bearings',
                         'rigid', '--elements-per-link', '4', '--points-per-rev', '60')
     assert 'linear estimate NOT valid' in out
+
+
+def test_simulate_order_1_is_linear_and_order_2_adds_the_second_order(capsys):
+    # Rigid bearings: joint B (the lever tip) moves mostly by the links' chord shortening.
+    common = ('simulate', '--rpm', '391', '--rigid-crank', '--bearings', 'rigid',
+              '--elements-per-link', '2', '--points-per-rev', '24', '--steps-per-rev', '240',
+              '--json')
+    runs = {}
+    for order in ('1', '2'):
+        code, out, _ = _run(capsys, *common, '--order', order)
+        assert code == 0
+        runs[order] = json.loads(out)
+        assert runs[order]['order'] == int(order)
+    linear, second = runs['1'], runs['2']
+    assert 'linear_peak_to_peak_m' not in linear
+    assert second['linear_peak_to_peak_m'] == linear['peak_to_peak_m']
+    tip = {k: np.hypot(*(np.array(r['lever_tip'][c]) for c in ('dx_m', 'dy_m')))
+           for k, r in runs.items()}
+    assert np.ptp(tip['2']) > 3.0 * np.ptp(tip['1'])
+    # The coupler mid-point moves mostly linearly: order 2 changes it by a few per cent.
+    mid = [np.ptp(r['coupler_mid']['dy_m']) for r in (linear, second)]
+    assert mid[1] == pytest.approx(mid[0], rel=0.1) and mid[1] != mid[0]
+    with pytest.raises(SystemExit):
+        _run(capsys, *common, '--order', '3')
+    assert 'invalid choice' in capsys.readouterr().err

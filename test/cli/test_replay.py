@@ -68,6 +68,7 @@ def test_replay_equals_the_streaming_estimator(tmp_path, model):
     summary = json.loads(result.stdout)
     assert summary['samples'] == stamps.size and summary['skipped'] == 2
     assert summary['segments'] == 2 and summary['topic'] == '/joint_states'
+    assert summary['order'] == model.order == 2       # the default: second-order outputs
 
     estimator = StreamingEstimator(model)
     expected = {s: estimator.update(s, a, speed) for s, a in zip(stamps.tolist(), angles)}

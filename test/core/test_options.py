@@ -43,12 +43,16 @@ def test_cache_fields_keep_the_declaration_order_and_name_gravity_only_when_off(
     options = ModelOptions(grid_size=64)
     fields = options.cache_fields()
     names = [f.name for f in dataclasses.fields(ModelOptions)]
-    assert list(fields) == [n for n in names if n not in ('gravity', 'stiffness_damping')]
+    optional = ('gravity', 'stiffness_damping', 'order')
+    assert list(fields) == [n for n in names if n not in optional]
     assert fields['grid_size'] == 64
     # a model without gravity has other loads: its own key; the default's key is unchanged
     weightless = ModelOptions(gravity=False, grid_size=64).cache_fields()
     assert weightless['gravity'] is False and weightless != fields
-    assert list(weightless) == [n for n in names if n != 'stiffness_damping']
+    assert list(weightless) == [n for n in names if n not in optional[1:]]
+    # order 1 (the default) leaves the key as before the field; order 2 is part of it
+    assert list(ModelOptions(order=2).cache_fields()) == [
+        n for n in names if n not in optional[:2]]
     assert ModelOptions(speed_max=30.0).cache_fields() != ModelOptions().cache_fields()
 
 
@@ -64,7 +68,7 @@ def test_stiffness_damping_is_in_the_cache_fields_only_when_set():
     {'bearings': 'springs'}, {'modes': 0}, {'static': -1}, {'grid_size': 7},
     {'speed_max': 0.0}, {'speed_max': -5.0}, {'speed_max': float('nan')},
     {'stiffness_damping': -1e-4}, {'stiffness_damping': float('nan')},
-    {'stiffness_damping': float('inf')}])
+    {'stiffness_damping': float('inf')}, {'order': 0}, {'order': 3}])
 def test_invalid_values_are_refused(changes):
     with pytest.raises(ValueError):
         ModelOptions(**changes)

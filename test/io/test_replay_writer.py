@@ -1,15 +1,23 @@
 """replay_writer: the input and its recomputed outputs interleaved per sample in a bag."""
 
+import dataclasses
+
+from flexlink_ros.core.mechanism_file import load_mechanism
+from flexlink_ros.core.options import ModelOptions
+from flexlink_ros.core.reduction.pipeline import model_for_mechanism
+from flexlink_ros.core.reduction.second_order_tables import SecondOrderForms
 from flexlink_ros.io.msg_schema import serialize_exact
-from flexlink_ros.io.replay_writer import write_replay
+from flexlink_ros.io.replay_writer import MarkerSource, write_replay
 from flexlink_ros.names import JOINT_NAMES, output_topics
 from flexlink_ros.ros import messages as ros_messages
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 import numpy as np
+from rclpy.serialization import deserialize_message
 from recorder_helpers import STEP_NS, T0_NS
 from rosbags.highlevel import AnyReader
 from sensor_msgs.msg import JointState
+from visualization_msgs.msg import MarkerArray
 
 COUNT = 6
 OUTLIER = 2     # its estimate is NaN: the input is kept, no outputs
@@ -72,3 +80,36 @@ def test_replay_bag_holds_each_input_then_its_outputs(tmp_path):
         assert {c.topic: c.msgcount for c in reader.connections} == {
             '/joint_states': COUNT, topics['lever_tip']: COUNT - 1,
             topics['coupler_mid']: COUNT - 1, topics['criteria']: COUNT - 1}
+
+
+def test_replay_markers_of_an_order_2_model_draw_the_joints_second_order_motion():
+    # The lever's deformed end (joint B) moves by the second-order lever tip, drawn
+    # exaggerated; the model's linear deflections are the same in both drawings.
+    model = model_for_mechanism(load_mechanism('cho1992'),
+                                ModelOptions(bearings='rigid', grid_size=32, order=2))
+    linear = dataclasses.replace(model, second_order=None)
+    rng = np.random.default_rng(3)
+    angles = rng.uniform(0.0, 2.0 * np.pi, 4)
+    modal = rng.standard_normal((4, model.size)) * 1e-3
+    stamps = T0_NS + STEP_NS * np.arange(4)
+    exaggeration = 50.0
+    drawn = {}
+    for name, source_model in (('second', model), ('linear', linear)):
+        source = MarkerSource(source_model, 'linkage_ground', exaggeration, 5,
+                              [ros_messages.OK] * 4)
+        rows = source.rows(stamps, angles, modal)
+        drawn[name] = [deserialize_message(row.tobytes(), MarkerArray) for row in rows]
+    forms = SecondOrderForms(model.second_order)
+    cells, t = model.cell(angles)
+    _, d_b = forms.joint_motion(forms.spline_scalars(cells, t), modal)
+    assert np.abs(d_b).max() > 0.0
+    for k in range(4):
+        ends = {}
+        for name, array in drawn.items():
+            lever = [m for m in array[k].markers if m.ns.endswith('/deformed') and m.id == 2][0]
+            ends[name] = np.array([lever.points[-1].x, lever.points[-1].y])
+            start = np.array([lever.points[0].x, lever.points[0].y])
+            ends[name + '_start'] = start
+        np.testing.assert_allclose(ends['second'] - ends['linear'], exaggeration * d_b[k],
+                                   rtol=1e-9, atol=1e-12)
+        np.testing.assert_array_equal(ends['second_start'], ends['linear_start'])   # O4

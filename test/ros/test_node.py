@@ -29,7 +29,7 @@ def test_model_options_follow_the_parameters():
     values = node_params.defaults()
     options = node_params.model_options(values)
     # 0 modes: the planned default, for the flexible crank of the node's default scene.
-    assert options == ModelOptions(rigid_crank=False, elements_per_link=4)
+    assert options == ModelOptions(rigid_crank=False, elements_per_link=4, order=2)
     assert (options.modes, options.static) == DEFAULT_SIZES['flexible', False]
     values.update({'model.modes': 6, 'model.bearings': 'rigid', 'model.rigid_crank': False,
                    'model.geometric_stiffness': False, 'model.static': 0,
@@ -321,6 +321,7 @@ def test_driver_to_node_and_sigkill_leaves_a_recoverable_file(tmp_path, processe
 @pytest.mark.parametrize('parameter, reason', [
     ('diagnostics.criterion_warn:=5000.0', 'must not exceed'),
     ('damping_ratio:=2.0', 'out of range'),         # refused by the descriptor's range
+    ('model.order:=3', 'out of range'),             # 1 (linear KED) or 2 only
     ('qos.depth:=2.5', 'expecting type'),           # refused by the parameter's type
     ('frame_id:=' + 'x' * 300, 'frame_id must be at most 256 bytes, got 300'),
     ("frame_id:=''", 'frame_id must not be empty'),

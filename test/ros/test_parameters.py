@@ -27,10 +27,22 @@ def test_defaults_are_valid():
     ('frame_id', 3, 'type str'),
     ('no.such.parameter', 1, 'unknown'),
     ('frame_id', '', 'frame_id must not be empty'),
+    ('model.order', 0, '>= 1'),
+    ('model.order', 3, '<= 2'),
+    ('model.order', 1.5, 'type int'),
 ])
 def test_bad_values_give_reasons(name, value, fragment):
     reason = node_params.validate_parameter(name, value, node_params.defaults())
     assert reason is not None and fragment in reason
+
+
+def test_model_order_accepts_1_and_2_and_reaches_the_model_options():
+    for order in (1, 2):
+        assert node_params.validate_parameter('model.order', order) is None
+        assert node_params.default_model_options(order=order).order == order
+    spec = node_params.SPECS['model.order']
+    assert (spec.default, spec.low, spec.high, spec.read_only) == (2, 1, 2, True)
+    assert 'linear' in spec.description
 
 
 def test_integer_accepted_for_float():

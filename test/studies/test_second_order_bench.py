@@ -3,6 +3,7 @@
 import shutil
 
 from flexlink_ros.core.mechanism_file import load_mechanism
+from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.studies import second_order_bench
 import pytest
 
@@ -23,3 +24,13 @@ def test_compiled_factored_kernel_agrees_and_is_timed(mech):
     """
     ns = second_order_bench.time_factored(mech, 'flexible', False, 26, samples=2000, repeat=5)
     assert 0.0 < ns < 20000.0
+
+
+def test_streaming_overhead_times_both_orders_of_the_package_step(mech, capsys):
+    """Order 1 and order 2 of the same options, both timed (no timed assertion)."""
+    entry = second_order_bench.streaming_overhead(mech, ModelOptions(bearings='rigid'),
+                                                  rounds=2, samples=200)
+    assert entry['size'] == 6
+    for name in ('update_ns', 'rows_ns'):
+        assert entry[name][1] > 0.0 and entry[name][2] > 0.0
+        assert 'second_order_ns' in entry[name]

@@ -8,7 +8,9 @@
  *     monomial * h00, h10, h01, h11 on nodes k and k + 1);
  *   - the step matrix and the operator on (q, v) from the 8 x 8 coefficient matrix
  *     G(h) = sum_p h^p g[p] (slot 0 = the sample, slot 1 = stage 1, see tables._StepTables);
- *   - the 2 r x 2 r system solved by LU with partial pivoting, z = (q, v) += dz.
+ *   - the 2 r x 2 r system solved by LU with partial pivoting, z = (q, v) += dz;
+ *   - the record: linear outputs, and with a model of order 2 their second-order part
+ *     (the factored quadratic form of core/reduction/second_order_tables.py).
  * A sample whose step is split into sub-steps (MAX_SUBSTEP_NS) is advanced here too,
  * with the crank state linear between the samples, as NumpyStep._sub_steps does.
  *
@@ -30,6 +32,9 @@
 #define POWERS 5        /* h^-2 .. h^2 */
 #define ROW_FIELDS 6    /* h, count, angle, speed, accel, advance */
 #define RELEASE_GIL_ROWS 64
+#define SO_SCALARS 22   /* second order: cos, sin of 3 link angles, kappa 4 x 4 */
+#define SO_TRIG 6       /* kappa's first scalar */
+#define SO_FORMS 4      /* bending sums: crank, coupler, lever, coupler's half */
 
 static const double TWO_PI = 6.283185307179586;
 static const double PI = 3.141592653589793;     /* math.pi */
@@ -48,6 +53,11 @@ typedef struct {
     double *operator;   /* outputs x (r + 1): [O | corr] of the record */
     double weights[ROWS_ALL];   /* power form: the record's per-cell tables */
     double hermite[ROWS_ALL];   /* Hermite form: the node tables */
+    /* second-order outputs (core/reduction/second_order_tables.py); so_terms 0: order 1 */
+    Py_ssize_t so_rows, so_slots, so_gathers, so_terms;
+    const double *so_scalars, *so_v, *so_gather_coef, *so_form_value;
+    const int *so_gather, *so_form;     /* (slot, row, scalar or -1), (form, slot, slot) */
+    double *so_y, *so_z;                /* scratch: rows of V q, the links' (v, phi) */
 } Step;
 
 /* x86-64 with GCC: AVX2/FMA clones of the step and of the kernels it calls (the table
@@ -182,6 +192,38 @@ static void load(Step *s, int slot, double angle, double w, double a)
     combine_nodes(s->hermite, lo + r2, hi + r2, s->kf_groups, kf_width, r, s->loads + slot * r);
 }
 
+/*
+ * Add the second-order outputs of q at cell k (weights set) to out[0 .. OUTPUTS - 1]:
+ * SecondOrderForms (second_order_tables.py) in the same steps, per sample.
+ */
+static void second_order(Step *s, Py_ssize_t k, const double *q, double *restrict out)
+{
+    const double *cell = s->so_scalars + k * 4 * SO_SCALARS;
+    const double *w = s->weights + 4;       /* monomial 1: powers of t */
+    double sc[SO_SCALARS], sums[SO_FORMS] = {0.0, 0.0, 0.0, 0.0};
+    for (int j = 0; j < SO_SCALARS; j++)
+        sc[j] = w[0] * cell[j] + w[1] * cell[SO_SCALARS + j] + w[2] * cell[2 * SO_SCALARS + j]
+                + w[3] * cell[3 * SO_SCALARS + j];
+    for (Py_ssize_t i = 0; i < s->so_rows; i++)
+        s->so_y[i] = dot(s->so_v + i * s->r, q, s->r);
+    memset(s->so_z, 0, (size_t)s->so_slots * sizeof(double));
+    for (Py_ssize_t p = 0; p < s->so_gathers; p++) {
+        const int *g = s->so_gather + 3 * p;
+        const double trig = g[2] < 0 ? 1.0 : sc[g[2]];
+        s->so_z[g[0]] += s->so_gather_coef[p] * trig * s->so_y[g[1]];
+    }
+    for (Py_ssize_t p = 0; p < s->so_terms; p++) {
+        const int *f = s->so_form + 3 * p;
+        sums[f[0]] += s->so_form_value[p] * s->so_z[f[1]] * s->so_z[f[2]];
+    }
+    for (int o = 0; o < OUTPUTS; o++) {
+        double add = 0.0;
+        for (int f = 0; f < SO_FORMS; f++)
+            add += sc[SO_TRIG + SO_FORMS * o + f] * (0.5 * sums[f]);
+        out[o] += add;
+    }
+}
+
 /* The record of the crank state prev at the state z (tables._StepTables.record). */
 static void record(Step *s, const double *z, const double *prev, double *restrict out)
 {
@@ -194,6 +236,8 @@ static void record(Step *s, const double *z, const double *prev, double *restric
         out[o] = dot(row, z, r) + row[r];
         out[OUTPUTS + o] = row[r];
     }
+    if (s->so_terms > 0)
+        second_order(s, k, z, out);
     combine(s->weights, s->joint + k * s->joint_rows * JOINT_WIDTH, s->joint_rows, JOINT_WIDTH,
             JOINT_WIDTH, out + 2 * OUTPUTS);
 }
@@ -442,13 +486,13 @@ STEP_CLONES static int radau_step(Step *s, double *z, double *prev, double h, do
 static int get_typed_buffer(PyObject *object, Py_buffer *view, int writable, const char *name,
                             Py_ssize_t count, const char *format)
 {
-    const Py_ssize_t size = format[0] == 'f' ? 4 : 8;
+    const Py_ssize_t size = format[0] == 'f' || format[0] == 'i' ? 4 : 8;
     int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
     if (PyObject_GetBuffer(object, view, flags) != 0)
         return -1;
     if (view->itemsize != size || view->format == NULL || strcmp(view->format, format) != 0) {
         PyErr_Format(PyExc_TypeError, "`%s` must hold %s", name,
-                     size == 4 ? "float32" : "float64");
+                     format[0] == 'i' ? "int32" : size == 4 ? "float32" : "float64");
         PyBuffer_Release(view);
         return -1;
     }
@@ -469,7 +513,7 @@ static int get_buffer(PyObject *object, Py_buffer *view, int writable, const cha
 
 PyDoc_STRVAR(advance_doc,
 "advance(mass, damping, kf, out, joint, g0, cells_per_radian, c1, z, prev, rows, states,\n"
-"        records)\n"
+"        records, second=None)\n"
 "\n"
 "Advance the modal state z = [q, v, 1] through the sample rows (h, sub-steps, angle,\n"
 "speed, acceleration, advance; 6 values each), 2-stage Radau IIA, as\n"
@@ -477,7 +521,64 @@ PyDoc_STRVAR(advance_doc,
 "rest float64). prev (angle, speed,\n"
 "acceleration of the last step) is updated; states (rows x 2 r, or empty) receives\n"
 "z[:2 r] after each row; records (rows x 28, or 28 for the last row only) the sample's\n"
-"record (native.RECORD_SIZE).");
+"record (native.RECORD_SIZE). second: None (order 1) or (values float64, index int32) of\n"
+"SecondOrderForms.packed (second_order_tables.py); their second-order outputs are added\n"
+"to the record's deflections.");
+
+#define SO_BUFFERS 2
+
+/* The second-order tables (values, index: SecondOrderForms.packed) into s, checked: every
+   count matches the buffers and every index lies within its array; or -1. */
+static int take_second(PyObject *second, Py_buffer *views, Step *s)
+{
+    const Py_ssize_t r = s->r;
+    PyObject *values_obj, *index_obj;
+    if (second == NULL || second == Py_None)
+        return 0;
+    if (!PyArg_ParseTuple(second, "OO;`second` must be (values, index)", &values_obj,
+                          &index_obj))
+        return -1;
+    if (get_buffer(values_obj, &views[0], 0, "second values", -1) != 0
+        || get_typed_buffer(index_obj, &views[1], 0, "second index", -1, "i") != 0)
+        return -1;
+    const int *index = views[1].buf;
+    const Py_ssize_t count = views[1].len / 4;
+    int bad = count < 3 || index[0] < 0 || index[1] < 0 || index[2] < 0;
+    if (!bad) {
+        s->so_rows = index[0];
+        s->so_gathers = index[1];
+        s->so_terms = index[2];
+        bad = count != 3 + 3 * (s->so_gathers + s->so_terms)
+              || views[0].len / 8 != s->cells * 4 * SO_SCALARS + s->so_rows * r
+                                     + s->so_gathers + s->so_terms;
+    }
+    const int *gather = index + 3, *form = gather + 3 * (bad ? 0 : s->so_gathers);
+    s->so_slots = 0;
+    for (Py_ssize_t p = 0; !bad && p < s->so_gathers; p++) {
+        bad = gather[3 * p] < 0 || gather[3 * p + 1] < 0 || gather[3 * p + 1] >= s->so_rows
+              || gather[3 * p + 2] < -1 || gather[3 * p + 2] >= SO_SCALARS;
+        if (gather[3 * p] >= s->so_slots)
+            s->so_slots = gather[3 * p] + 1;
+    }
+    for (Py_ssize_t p = 0; !bad && p < s->so_terms; p++)
+        bad = form[3 * p] < 0 || form[3 * p] >= SO_FORMS || form[3 * p + 1] < 0
+              || form[3 * p + 2] < 0 || form[3 * p + 1] >= s->so_slots
+              || form[3 * p + 2] >= s->so_slots;
+    if (bad) {
+        s->so_rows = s->so_gathers = s->so_terms = s->so_slots = 0;
+        PyErr_SetString(PyExc_ValueError, "`second` tables do not match the model size or "
+                        "hold an index out of range");
+        return -1;
+    }
+    const double *values = views[0].buf;
+    s->so_scalars = values;
+    s->so_v = values + s->cells * 4 * SO_SCALARS;
+    s->so_gather_coef = s->so_v + s->so_rows * r;
+    s->so_form_value = s->so_gather_coef + s->so_gathers;
+    s->so_gather = gather;
+    s->so_form = form;
+    return 0;
+}
 
 /* Rows (row groups) per grid cell or node of a table (at most `most`), or -1 with an exception set. */
 static Py_ssize_t rows_of(const Py_buffer *view, Py_ssize_t per_row, Py_ssize_t cells,
@@ -493,15 +594,17 @@ static Py_ssize_t rows_of(const Py_buffer *view, Py_ssize_t per_row, Py_ssize_t 
 
 static PyObject *advance(PyObject *module, PyObject *args)
 {
-    PyObject *objects[13];
+    PyObject *objects[14] = {NULL};
     double cells_per_radian, c1;
     (void)module;
-    if (!PyArg_ParseTuple(args, "OOOOOOddOOOOO", &objects[0], &objects[1], &objects[2],
+    if (!PyArg_ParseTuple(args, "OOOOOOddOOOOO|O", &objects[0], &objects[1], &objects[2],
                           &objects[3], &objects[4], &objects[5], &cells_per_radian, &c1,
-                          &objects[8], &objects[9], &objects[10], &objects[11], &objects[12]))
+                          &objects[8], &objects[9], &objects[10], &objects[11], &objects[12],
+                          &objects[13]))
         return NULL;
     Py_buffer mass = {0}, damping = {0}, kf = {0}, out = {0}, joint = {0}, g0 = {0}, z = {0},
               prev = {0}, rows = {0}, states = {0}, records = {0};
+    Py_buffer second[SO_BUFFERS] = {{0}};
     PyObject *result = NULL;
     double *scratch = NULL;
     Step s;
@@ -559,8 +662,10 @@ static PyObject *advance(PyObject *module, PyObject *args)
     s.g0 = g0.buf;
     s.cells_per_radian = cells_per_radian;
     s.c1 = c1;
-    scratch = malloc(sizeof(double)
-                     * (size_t)(6 * r2 + 2 * r + 12 * r + n * n + n + OUTPUTS * (r + 1)));
+    if (take_second(objects[13], second, &s) != 0)
+        goto done;
+    scratch = malloc(sizeof(double) * (size_t)(6 * r2 + 2 * r + 12 * r + n * n + n
+                                               + OUTPUTS * (r + 1) + s.so_rows + s.so_slots + 1));
     if (scratch == NULL) {
         PyErr_NoMemory();
         goto done;
@@ -571,6 +676,8 @@ static PyObject *advance(PyObject *module, PyObject *args)
     s.matrix = s.products + 12 * r;
     s.rhs = s.matrix + n * n;
     s.operator = s.rhs + n;
+    s.so_y = s.operator + OUTPUTS * (r + 1);
+    s.so_z = s.so_y + s.so_rows;
 
     double *zv = z.buf, *pv = prev.buf, *state_out = states.len ? states.buf : NULL;
     double *record_out = records.buf;
@@ -623,6 +730,8 @@ done:
     PyBuffer_Release(&rows);
     PyBuffer_Release(&states);
     PyBuffer_Release(&records);
+    for (int i = 0; i < SO_BUFFERS; i++)
+        PyBuffer_Release(&second[i]);
     return result;
 }
 

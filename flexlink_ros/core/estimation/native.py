@@ -31,7 +31,8 @@ FIT_COUNT = 8           # offset of a fit's sample count
 MODE_SPEED = 1.0        # FILTER_MODE of a filter fed measured speeds
 
 # A sample's record (the compiled step's output; its numpy twin is _StepTables.record):
-# deflections with the residual correction (outputs), the correction alone (outputs), joint
+# deflections with the residual correction and, for a model of order 2, the second-order
+# motion (outputs), the correction alone (outputs), joint
 # reactions (joints x 2), their time derivative (joints x 2) and squared cycle-RMS reactions
 # (joints).
 RECORD_SIZE = 2 * len(OUTPUT_NAMES) + 5 * len(JOINT_NAMES)

@@ -48,7 +48,7 @@ class Sample:
         Wrapped angle [rad] in [0, 2 pi), speed [rad/s], acceleration [rad/s^2].
     lever_tip, coupler_mid : tuple of float
         Elastic deflection (dx, dy) of the lever's upper end and the coupler's mid-point in
-        the ground frame [m].
+        the ground frame [m] (with the second-order motion when the model's order is 2).
     reaction_n, gamma_dot, criterion : tuple of float
         Per joint (O2, A, B, O4): rigid-body reaction magnitude R [N], rate of its direction
         [rad/s], and the Earles-Wu criterion |gamma-dot / R| [rad/(s N)].

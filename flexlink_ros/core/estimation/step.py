@@ -310,7 +310,7 @@ class CompiledStep(NumpyStep):
         t = self.tables
         self._kernel.advance(t.mass, t.damping, t.kf, t.out, t.joint, t.g0,
                              self.cells_per_radian, STAGE1, self.z, self.previous, rows,
-                             states, records)
+                             states, records, t.second_packed)
 
     def criteria(self, record, near_zero_fraction):
         """

@@ -5,10 +5,10 @@ Streaming estimation of the linkage's elastic response, one crank sample at a ti
 (:class:`~.gate.InputGate`), turns it into the crank's unwrapped angle, speed and acceleration
 (:class:`~.crank_filter.CrankRateFilter`), advances the reduced model (core/reduction) by one
 Radau IIA step (:mod:`.step`, compiled where built) and returns a :class:`~.sample.Sample`
-with the deflections, the joint criteria and flags.
-Hostile input: implausible samples are refused (:class:`OutlierSample`, the state untouched);
-an estimate beyond the model's deflection bound, or a non-finite one, is flagged OUT_OF_BOUND
-(NaN deflections) and the next sample restarts.
+with the deflections, the joint criteria, the validity indicator and flags. Implausible
+samples are refused (:class:`OutlierSample`, the state untouched); an estimate beyond the
+model's deflection bound, or a non-finite one, is flagged OUT_OF_BOUND (NaN deflections) and
+the next sample restarts.
 """
 
 import dataclasses
@@ -129,10 +129,8 @@ class StreamingEstimator:
         self.deflection_bound_m = self._tables.deflection_bound(model, DEFLECTION_SAFETY_FACTOR)
         self.nonlinearity = NonlinearityIndicator(model)
 
-    @property
-    def compiled(self):
-        """Tell whether this estimator steps with the compiled kernel."""
-        return self._stepper.compiled
+    compiled = property(lambda self: self._stepper.compiled,
+                        doc='Whether this estimator steps with the compiled kernel.')
 
     warm_start_limiter = property(lambda self: self._warm.limiter,
                                   doc='Rate limit of the warm starts that shoot.')
@@ -155,7 +153,7 @@ class StreamingEstimator:
         self._warm.orbit = orbit
 
     state = property(lambda self: self._stepper.z[:2 * self._tables.size],
-                     doc="The model state (q, q') of the newest sample (a view).")
+                     doc="(q, q') of the newest sample (a view).")
 
     @property
     def last_record(self):
@@ -390,7 +388,13 @@ class StreamingEstimator:
         Returns
         -------
         positions, deflections : ndarray, shape (3, points, 2)
-            Ground frame [m].
+            Ground frame [m]; at order 2 with the joints' second-order motion.
 
         """
-        return self.model.shapes(sample.crank_angle, np.array(sample.modal))
+        modal = np.array(sample.modal)
+        positions, deflections = self.model.shapes(sample.crank_angle, modal)
+        if self._tables.second is not None:
+            cells, t = self.model.cell(sample.crank_angle)
+            deflections = deflections + self._tables.second.link_motion(
+                cells, t, modal[None], deflections.shape[1])[0]
+        return positions, deflections

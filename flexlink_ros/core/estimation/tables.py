@@ -14,6 +14,7 @@ from ..integrators import RADAU_TABLEAUX
 from ..numerics import TWO_PI
 from ..reduction.cells import CELL_POWERS, monomial_values, MONOMIALS
 from ..reduction.model import cell_groups
+from ..reduction.second_order_tables import SecondOrderForms
 from ...names import OUTPUT_NAMES
 
 POWERS = (-2, -1, 0, 1, 2)   # G(h) is a Laurent polynomial in h
@@ -180,6 +181,9 @@ class _StepTables:
     derivative (joints x 2), squared cycle-RMS reaction (joints)] stay per cell in power form
     (rows ``monomial * 4 + power``; small, read once per sample). With stiffness damping
     ``kf`` has a fourth group, w (``kf_groups``).
+    ``second`` (a model of order 2) evaluates the second-order outputs the record adds to the
+    deflections (:class:`~core.reduction.second_order_tables.SecondOrderForms`); ``second_packed``
+    are its arrays as the compiled step takes them (None for order 1).
     Two samples' [M, C, K, F] (F an r x r block holding f in its first r entries) in
     alternating slots times a 8 x 8 coefficient matrix G(h) give, in one product, the
     Radau IIA block matrix and the right-hand-side operator on (q, v).
@@ -206,6 +210,10 @@ class _StepTables:
         # The compiled step's convention: the sample in slot 0, stage 1 in slot 1.
         self.g0 = np.ascontiguousarray(self.g_stack[0])
         self._bounds = {}
+        self.second = self.second_packed = None
+        if model.second_order is not None:
+            self.second = SecondOrderForms(model.second_order)
+            self.second_packed = self.second.packed()
 
     def deflection_bound(self, model, safety_factor):
         """
@@ -254,6 +262,11 @@ class _StepTables:
         out[:outputs] += operator[:, r]
         out[outputs:2 * outputs] = operator[:, r]
         np.dot(weights, self.joint[k], out=out[2 * outputs:])
+        if self.second is not None:
+            # Monomial 1's row weights are the powers of t (MONOMIALS[1] == '1').
+            scalars = np.dot(weights[CELL_POWERS:2 * CELL_POWERS], self.second.scalars[k])[None]
+            out[:outputs] += self.second.outputs(
+                scalars, self.second.sums(scalars, z[None, :r]))[0]
 
 
 def step_tables(model):

@@ -114,6 +114,9 @@ class ReducedModel:
     nonlinearity : dict of str to ndarray, or None
         Tables of the validity indicator (:mod:`.nonlinearity_tables`); None for a model
         built without them.
+    second_order : dict of str to ndarray or None
+        Tables of the second-order outputs (:mod:`.second_order_tables`, names ``second_*``)
+        of a model of order 2; None: the linear outputs only (order 1).
 
     """
 
@@ -125,6 +128,7 @@ class ReducedModel:
     zeta: float
     info: dict = dataclasses.field(default_factory=dict)
     nonlinearity: dict = None
+    second_order: object = None
 
     @property
     def grid_size(self):
@@ -144,26 +148,34 @@ class ReducedModel:
     @property
     def nbytes(self):
         """Return the memory of the arrays [bytes]."""
+        second = sum(a.nbytes for a in (self.second_order or {}).values())
         return (self.table.nbytes + self.shape_table.nbytes + self.basis.nbytes
-                + self.force_moments.nbytes
+                + self.force_moments.nbytes + second
                 + sum(a.nbytes for a in (self.nonlinearity or {}).values()))
 
     def to_arrays(self):
         """Arrays and metadata for :func:`core.cache.save_cache`."""
         arrays = {'table': self.table, 'shape_table': self.shape_table, 'basis': self.basis,
-                  'force_moments': self.force_moments, **(self.nonlinearity or {})}
+                  'force_moments': self.force_moments, **(self.nonlinearity or {}),
+                  **(self.second_order or {})}
         meta = {'speed_max': self.speed_max, 'zeta': self.zeta, 'info': self.info}
         return arrays, meta
 
     @classmethod
     def from_arrays(cls, arrays, meta):
         """Inverse of :meth:`to_arrays`."""
+        second = {name: array for name, array in arrays.items() if name.startswith('second_')}
         return cls(table=arrays['table'], shape_table=arrays['shape_table'],
                    basis=arrays['basis'], force_moments=arrays['force_moments'],
                    speed_max=float(meta['speed_max']), zeta=float(meta['zeta']),
-                   info=dict(meta.get('info', {})),
+                   info=dict(meta.get('info', {})), second_order=second or None,
                    nonlinearity={name: array for name, array in arrays.items()
                                  if name.startswith('nonlinearity_')} or None)
+
+    @property
+    def order(self):
+        """Return 2 when the model carries the second-order tables, else 1."""
+        return 1 if self.second_order is None else 2
 
     def cell(self, theta):
         """Cell index and position t in [0, 1) of crank angles (any range); vectorised."""

@@ -11,7 +11,7 @@ import dataclasses
 import numpy as np
 import scipy.linalg
 
-from . import store
+from . import second_order_tables, store
 from .basis import FrozenSamples
 from .build import reduce_samples
 from .build_progress import BuildProgress
@@ -85,6 +85,10 @@ def build_model(mechanism, options, progress=None):
                            mechanism.damping_ratio, forces=forces,
                            info={'options': options.cache_fields(),
                                  'mechanism': mechanism.name, 'criteria': criteria_source})
+    if options.order == 2:
+        linkage = assembly.FlexibleLinkage(fe_mechanism(mechanism, options), options)
+        model = dataclasses.replace(model, second_order=second_order_tables.build_tables(
+            linkage, model.basis, options.grid_size))
     tracker.finish()
     return model
 

@@ -17,6 +17,7 @@ from .periodic import periodic_response
 from .pipeline import fe_mechanism, frozen_samples_for
 from ..fe import linkage as assembly
 from ..fe import simulate
+from ..fe.second_order_full import corrected_response
 
 # Grid points and steps per revolution of the full-order reference.
 REFERENCE_GRID = 256
@@ -41,7 +42,9 @@ def reference_response(mechanism, options, speed, angles, steps=REFERENCE_STEPS)
     mechanism : Mechanism
         The linkage.
     options : ModelOptions
-        Only the physical options (elements, rigid crank, bearings, geometric stiffness).
+        Only the physical options (elements, rigid crank, bearings, geometric stiffness) and
+        the order (2: plus the second-order outputs of the full-order response,
+        :func:`core.fe.second_order_full.corrected_response`).
     speed : float
         Crank speed [rad/s], non-zero.
     angles : ndarray, shape (m,)
@@ -75,6 +78,8 @@ def _reference_revolution(mechanism, options, speed, steps):
     linkage = assembly.FlexibleLinkage(fe_mechanism(mechanism, options), options)
     result = simulate.periodic_response(linkage, speed, method='full', steps=steps,
                                         points=steps // REFERENCE_POINT_STRIDE)
+    if options.order == 2:
+        return corrected_response(linkage, result)['total'], 'core.simulate full order + 2nd'
     return result.outputs, 'core.simulate full order'
 
 

@@ -4,7 +4,8 @@ import dataclasses
 
 from flexlink_ros.core.estimation.native import compiled_step_available
 from flexlink_ros.core.mechanism_file import load_mechanism
-from flexlink_ros.core.reduction import build, cells
+from flexlink_ros.core.options import ModelOptions
+from flexlink_ros.core.reduction import build, cells, pipeline
 from flexlink_ros.core.reduction import model as tables
 from flexlink_ros.core.reduction import periodic
 from flexlink_ros.errors import OutlierSample
@@ -59,6 +60,12 @@ def toy_forces(grid):
 def cho1992():
     """Load the Cho 1992 mechanism of the package's configuration."""
     return load_mechanism(CONFIG / 'cho1992.yaml')
+
+
+def cho_second_order_model(bearings='rigid', grid_size=32):
+    """Cho 1992 reduced model of order 2 (rigid crank, the default sizes), cached."""
+    return pipeline.model_for_mechanism(
+        cho1992(), ModelOptions(bearings=bearings, grid_size=grid_size, order=2))
 
 
 def toy_model():

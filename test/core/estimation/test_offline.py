@@ -89,7 +89,10 @@ def test_node_default_model_meets_its_budget_against_the_scene_reference(cho):
     options = node_params.default_model_options()
     assert not options.rigid_crank and options.geometric_stiffness
     model = pipeline.model_for_mechanism(cho, options)
-    scene = plan.scene_options(cho, core_options.ModelOptions(bearings=options.bearings))
+    # The node's default order (2) on both sides: the reference adds the second order too.
+    scene = plan.scene_options(cho, core_options.ModelOptions(bearings=options.bearings,
+                                                              order=options.order))
+    assert options.order == 2 and scene.order == 2
     rpm = 391.0
     period = 60.0 / rpm
     stamps, angles, speeds = synthetic.synthetic_signal(rpm, 2.0 * period, 1000.0, 0.3, 3)
@@ -105,3 +108,24 @@ def test_node_default_model_meets_its_budget_against_the_scene_reference(cho):
     rigid_scene = dataclasses.replace(scene, rigid_crank=True, elements_per_link=4)
     rigid = reduction_reference.reference_response(cho, rigid_scene, speed, angles[mask])
     assert numerics_relative_rms(rigid['coupler_mid'], reference['coupler_mid']) > 0.2
+
+
+def test_order_2_replay_equals_streaming_and_its_numpy_replay():
+    """The offline estimate of order 2: the streamed numbers, compiled equal to numpy."""
+    model = toys.cho_second_order_model('flexible')
+    times = sample_times(1000.0, 0.5, 0.3, 0.05, seed=8)
+    stamps = np.round(times * 1e9).astype(np.int64)
+    speed = 269.0 * np.pi / 30.0
+    angles, speeds = speed * times, np.full(times.size, speed)
+    fast = replay(model, stamps, angles, speeds)
+    slow = replay(model, stamps, angles, speeds, compiled=False)
+    est = StreamingEstimator(model)
+    streamed = [est.update(int(s), float(a), speed) for s, a in zip(stamps, angles)]
+    for key in ('lever_tip', 'coupler_mid'):
+        scale = np.max(np.abs(slow[key]))
+        np.testing.assert_allclose(fast[key], slow[key], rtol=0.0, atol=1e-9 * scale)
+        np.testing.assert_allclose(fast[key], [getattr(s, key) for s in streamed],
+                                   rtol=1e-7, atol=1e-12)
+    linear = replay(dataclasses.replace(model, second_order=None), stamps, angles, speeds)
+    np.testing.assert_array_equal(linear['modal'], fast['modal'])
+    assert not np.array_equal(linear['lever_tip'], fast['lever_tip'])

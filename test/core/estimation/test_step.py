@@ -1,5 +1,7 @@
 """The per-sample step: against the reference Radau IIA step, compiled against numpy."""
 
+import dataclasses
+
 import estimation_toys as toys
 from estimation_toys import compiled_or_skip, sample_times, samples_fields
 from flexlink_ros.core.estimation import native
@@ -91,6 +93,77 @@ def test_compiled_step_equals_numpy_step(toy_model, damped_toy_model, with_speed
         scale = max(np.max(np.abs(values)), 1e-30)
         np.testing.assert_allclose(compiled[name], values, rtol=0.0, atol=1e-9 * scale,
                                    err_msg=name)
+
+
+@pytest.mark.parametrize('bearings', ['rigid', 'flexible'])
+def test_compiled_step_equals_numpy_step_with_the_second_order(bearings):
+    """Order 2: the record's second-order outputs, compiled and numpy, equal to rounding."""
+    compiled_or_skip()
+    model = toys.cho_second_order_model(bearings)
+    times = sample_times(1000.0, 0.3, 0.5, 0.05, seed=4)
+    times = np.concatenate([times, times[-1] + 0.011 + times[:100]])  # sub-steps too
+    speed = 391.0 * np.pi / 30.0
+    runs = {}
+    for compiled in (True, False):
+        est = StreamingEstimator(model, compiled=compiled)
+        runs[compiled] = samples_fields([est.update(int(round(t * 1e9)), speed * t, speed)
+                                         for t in times])
+        assert est._tables.second is not None
+    for name, values in runs[False].items():
+        scale = max(np.max(np.abs(values)), 1e-30)
+        np.testing.assert_allclose(runs[True][name], values, rtol=0.0, atol=1e-9 * scale,
+                                   err_msg=name)
+    # The same model without its second-order tables: the difference is the second order,
+    # the numpy forms of the record's modal state, and the linear part is unchanged.
+    linear = StreamingEstimator(dataclasses.replace(model, second_order=None))
+    est = StreamingEstimator(model)
+    forms = est._tables.second
+    for t in times[:300]:
+        a, b = (e.update(int(round(t * 1e9)), speed * t, speed) for e in (est, linear))
+        np.testing.assert_array_equal(a.modal, b.modal)
+        cells, cell_t = model.cell(a.crank_angle)
+        scalars = forms.spline_scalars(cells, cell_t)
+        second = forms.outputs(scalars, forms.sums(scalars, np.array(a.modal)[None]))[0]
+        np.testing.assert_allclose(np.array(a.lever_tip + a.coupler_mid),
+                                   np.array(b.lever_tip + b.coupler_mid) + second,
+                                   rtol=1e-12, atol=1e-15)
+    assert np.abs(second[:2]).max() > 1e-7      # B moves by microns
+
+
+def test_compiled_step_rejects_bad_second_order_tables():
+    compiled_or_skip()
+    model = toys.cho_second_order_model('rigid')
+    est = StreamingEstimator(model)
+    est.update(0, 0.0, 30.0)
+    step, t = est._stepper, est._stepper.tables
+    row = np.array([1e-3, 1.0, 0.03, 30.0, 0.0, 0.03])
+
+    def call(second):
+        native.impl.advance(t.mass, t.damping, t.kf, t.out, t.joint, t.g0,
+                            step.cells_per_radian, STAGE1, step.z, step.previous, row,
+                            np.empty(0), est.last_record, second)
+
+    values, index = t.second_packed
+    z_before = step.z.copy()
+    bad_index = index.copy()
+    bad_index[3 + 1] = index[0]              # the first gather reads a row beyond V's rows
+    with pytest.raises(ValueError, match='out of range'):
+        call((values, bad_index))
+    bad_count = index.copy()
+    bad_count[2] += 1                        # one form term more than the buffers hold
+    with pytest.raises(ValueError, match='out of range'):
+        call((values, bad_count))
+    with pytest.raises(ValueError, match='out of range'):
+        call((values[:-1], index))
+    with pytest.raises(TypeError, match='int32'):
+        call((values, index.astype(np.int64)))
+    with pytest.raises(TypeError, match='float64'):
+        call((values.astype(np.float32), index))
+    with pytest.raises(TypeError, match='values, index'):
+        call((values,))
+    np.testing.assert_array_equal(step.z, z_before)
+    call((values, index))
+    assert np.all(np.isfinite(est.last_record))
 
 
 @pytest.mark.parametrize('compiled', [False, True])

@@ -1,5 +1,6 @@
 """Reduced models of a mechanism: FE pieces, the veering, cache keys."""
 
+import dataclasses
 import pathlib
 
 from flexlink_ros.core.estimation.tables import kf_groups
@@ -13,6 +14,7 @@ from flexlink_ros.core.reduction.build import reduce_samples
 from flexlink_ros.core.reduction.model import system_blocks
 from flexlink_ros.core.reduction.pipeline import (fe_mechanism, frozen_samples_for,
                                                   model_for_mechanism, model_key)
+from flexlink_ros.core.reduction.second_order_tables import ARRAY_NAMES
 from flexlink_ros.studies import flex_events, flex_frequencies
 import numpy as np
 import scipy.linalg
@@ -153,3 +155,32 @@ def test_stiffness_damping_tables_are_the_projected_c_beta_and_d_beta():
                                rtol=1e-6, atol=1e-6 * np.abs(expected_k).max())
     assert np.abs(expected_k).max() > 0.0
     assert kf_groups(models[0]) == 3 and kf_groups(models[1]) == 4
+
+
+def test_order_2_has_its_own_key_and_order_1_keeps_the_pinned_ones():
+    # Order 1 is the field's default and leaves the key as it was (existing caches load);
+    # order 2 adds tables, so it needs a key of its own.
+    mechanism = load_mechanism('cho1992')
+    for options, key in PINNED_KEYS:
+        assert model_key(mechanism, dataclasses.replace(options, order=1)) == key
+        assert model_key(mechanism, dataclasses.replace(options, order=2)) != key
+
+
+def test_order_2_model_round_trips_through_the_cache_and_order_1_has_no_tables(tmp_path):
+    mechanism = load_mechanism('cho1992')
+    options = ModelOptions(bearings='rigid', grid_size=16, order=2)
+    built = model_for_mechanism(mechanism, options, cache_dir=tmp_path)
+    assert built.order == 2 and set(built.second_order) == set(ARRAY_NAMES)
+    loaded = model_for_mechanism(mechanism, options, cache_dir=tmp_path)
+    assert loaded.order == 2
+    for name in ARRAY_NAMES:
+        np.testing.assert_array_equal(loaded.second_order[name], built.second_order[name])
+        assert loaded.second_order[name].dtype == built.second_order[name].dtype
+    linear = model_for_mechanism(mechanism, dataclasses.replace(options, order=1),
+                                 cache_dir=tmp_path)
+    assert linear.order == 1 and linear.second_order is None
+    # The linear tables are the same bits whatever the order.
+    np.testing.assert_array_equal(linear.table, loaded.table)
+    np.testing.assert_array_equal(linear.basis, loaded.basis)
+    models = [p for p in tmp_path.glob('*.npz') if not p.stem.endswith('-nonlinearity')]
+    assert len(models) == 2     # one per order (each beside its validity-indicator tables)
