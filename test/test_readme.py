@@ -132,6 +132,9 @@ SKIPPED = {
     '--ros-args -r joint_states:=/robot1/joint_states': _PUBLISH,
     'flexlink plan --mechanism cho1992 --rpm-max 391 --tolerance 0.01':
         'about 2 minutes of full-order references: test/studies/test_plan.py plans small cases',
+    'flexlink validate --peer exudyn --rpm 269 391 --chart out/validate.png':
+        'about a minute of peer and full-order runs at 8 elements per link: '
+        'test/cli/test_cli_validate.py runs it at 4',
     'flexlink bench': 'minutes of benchmarks (the estimator, offline and full-order)',
     'flexlink node-bench': 'starts nodes on a ROS graph and measures for minutes',
     'flexlink report --out out/report': 'about 4 minutes (every chart)',
