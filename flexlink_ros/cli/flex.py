@@ -9,7 +9,7 @@
                    [--bearings rigid|flexible] [--method full|modal] [--modes N]
                    [--static-correction] [--damping-ratio Z] [--stiffness-damping BETA_S]
                    [--points-per-rev P] [--steps-per-rev S] [--check-convergence]
-                   [--order 1|2] [--json]
+                   [--order 1|2] [--second-order dynamic|quasi-static] [--json]
 
 ``modes`` JSON: ``crank_deg``, ``frequencies_hz`` (per angle, per mode), ``dominant_link``,
 ``strain_share`` (crank, coupler, lever, springs), ``range_hz`` (min and max per mode),
@@ -18,10 +18,12 @@ optional ``shapes``. ``simulate`` JSON: ``crank_deg``, ``lever_tip`` and ``coupl
 ``peak_to_peak_m``, ``floquet_spectral_radius``, ``damping_ratio``, ``stiffness_damping_s``
 (beta [s]), ``nonlinearity`` (``indicator_max``, ``valid``, ``threshold``: the validity
 indicator of core/validity.py over the revolution of the linear response), ``wall_s``,
-optional ``convergence``, ``order`` and, at order 2 (the default),
-``linear_peak_to_peak_m`` (the outputs are the linear response plus its second-order
-part, :func:`core.fe.second_order_full.corrected_response`, for the modal response from
-its reconstructed nodal vectors; the convergence check is of the linear response).
+optional ``convergence``, ``order`` and, at order 2 (the default), ``second_order`` and
+``linear_peak_to_peak_m``: the outputs are the linear response plus its second-order part,
+by the dynamic pass (:func:`core.fe.second_order_dynamic.dynamic_pass`, ``--method full``) or
+quasi-static (:func:`core.fe.second_order_full.corrected_response`, the estimator's; for the
+modal response from its reconstructed nodal vectors); the convergence check is of the linear
+response.
 """
 
 import dataclasses
@@ -35,6 +37,7 @@ from .model_args import add_model_arguments, add_order_argument, \
     add_stiffness_damping_argument, stiffness_damping
 from ..core import validity
 from ..core.fe import linkage as assembly, modes, simulate
+from ..core.fe.second_order_dynamic import dynamic_pass, MIN_POINTS
 from ..core.fe.second_order_full import corrected_response
 from ..core.mechanism_file import load_mechanism
 from ..core.options import ModelOptions
@@ -87,6 +90,11 @@ def register(subparsers):
     parser.add_argument('--check-convergence', action='store_true',
                         help='also report the error at 1/4, 1/2 and 1x the steps against 4x')
     add_order_argument(parser)
+    parser.add_argument('--second-order', choices=SECOND_ORDER_KINDS, default=None,
+                        help='how order 2 is computed: dynamic (one more solve loaded by the '
+                        'second-order terms, so their motion carries its inertia; --method '
+                        'full, at least 24 points per revolution) or quasi-static (the '
+                        "estimator's correction) (default: dynamic where it applies)")
     parser.set_defaults(func=simulate_command)
 
 
@@ -189,14 +197,24 @@ def nonlinearity_line(summary):
             f'{summary["threshold"]:g}): linear estimate {verdict}')
 
 
-def _ordered_outputs(model, response, order):
-    """Return the outputs of ``order`` (2: plus the second order) and their JSON entries."""
-    if order == 1:
+SECOND_ORDER_KINDS = ('dynamic', 'quasi-static')
+
+
+def _ordered_outputs(model, response, args, steps, stages):
+    """Return the outputs of ``args.order`` (2: plus the second order) and their JSON entries."""
+    if args.order == 1:
         return response.outputs, {'order': 1}
+    kind = args.second_order
+    if kind is None:
+        full = response.info['method'] == 'full' and len(response.crank_angle) >= MIN_POINTS
+        kind = 'dynamic' if full else 'quasi-static'
+    if kind == 'dynamic':
+        total = dynamic_pass(model, response, steps=steps, stages=stages)['total']
+    else:
+        total = corrected_response(model, response)['total']
     linear = response.peak_to_peak
-    return corrected_response(model, response)['total'], {
-        'order': 2, 'linear_peak_to_peak_m': {'lever_tip': linear[:2],
-                                              'coupler_mid': linear[2:]}}
+    return total, {'order': 2, 'second_order': kind,
+                   'linear_peak_to_peak_m': {'lever_tip': linear[:2], 'coupler_mid': linear[2:]}}
 
 
 def simulate_command(args):
@@ -221,7 +239,7 @@ def simulate_command(args):
               'stages': stages, 'zeta': zeta}
     response = _guard_geometric(simulate.periodic_response, model, speed, steps=steps,
                                 points=points, **kwargs)
-    out, extra = _ordered_outputs(model, response, args.order)
+    out, extra = _ordered_outputs(model, response, args, steps, stages)
     p2p = out.max(axis=0) - out.min(axis=0)
     result = {'crank_deg': np.mod(np.degrees(response.crank_angle), 360.0),
               'lever_tip': {'dx_m': out[:, 0], 'dy_m': out[:, 1]},
@@ -257,7 +275,9 @@ def _simulate_text(mech, model, args, result):
                if result['method'] == 'modal' else '')
             + f', {model.size} DOFs, bearings {args.bearings}, rigid crank {args.rigid_crank}'
             + (f', stiffness damping {model.options.stiffness_damping:g} s'
-               if model.options.stiffness_damping else '') + f', order {args.order}\n'
+               if model.options.stiffness_damping else '')
+            + f', order {args.order}' + (f' ({result["second_order"]})' if args.order == 2 else '')
+            + '\n'
             f'peak-to-peak [mm]: lever tip dX {1e3 * p2p[0]:.4f} dY {1e3 * p2p[1]:.4f}, '
             f'coupler mid dX {1e3 * p2p[2]:.4f} dY {1e3 * p2p[3]:.4f}\n'
             f'Floquet spectral radius {result["floquet_spectral_radius"]:.4f}, '

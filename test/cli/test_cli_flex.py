@@ -147,3 +147,26 @@ def test_simulate_order_1_is_linear_and_order_2_adds_the_second_order(capsys):
     with pytest.raises(SystemExit):
         _run(capsys, *common, '--order', '3')
     assert 'invalid choice' in capsys.readouterr().err
+
+
+def test_simulate_order_2_is_the_dynamic_pass_for_the_full_order(capsys):
+    """Full order: the dynamic second-order pass by default; quasi-static on request."""
+    common = ('simulate', '--rpm', '391', '--rigid-crank', '--bearings', 'rigid',
+              '--elements-per-link', '2', '--points-per-rev', '24', '--steps-per-rev', '240',
+              '--json')
+    runs = {}
+    for kind in (None, 'quasi-static'):
+        code, out, _ = _run(capsys, *common, *(('--second-order', kind) if kind else ()))
+        assert code == 0
+        runs[kind] = json.loads(out)
+    assert runs[None]['second_order'] == 'dynamic'
+    assert runs['quasi-static']['second_order'] == 'quasi-static'
+    assert runs[None]['linear_peak_to_peak_m'] == runs['quasi-static']['linear_peak_to_peak_m']
+    dynamic, quasi = (np.array(runs[k]['coupler_mid']['dy_m']) for k in (None, 'quasi-static'))
+    # the pass adds the inertia of the second-order motion: a change, not a new response
+    assert 0.0 < np.abs(dynamic - quasi).max() < 0.2 * np.ptp(quasi)
+    code, out, err = _run(capsys, 'simulate', '--rpm', '391', '--rigid-crank', '--bearings',
+                          'rigid', '--elements-per-link', '2', '--method', 'modal', '--modes',
+                          '4', '--points-per-rev', '24', '--steps-per-rev', '240',
+                          '--second-order', 'dynamic')
+    assert code != 0 and 'full-order linear state' in err
