@@ -255,6 +255,7 @@ def summary_text(result):
         value = result['peak_to_peak_um'][key]
         lines.append(f'  {label:<36} {value[0]:>10.1f}  {value[1]:>10.1f}' if value
                      else f'  {label:<36} no data')
+    lines.extend(_quality_lines(result['quality']))
     if result['criteria_max']:
         lines.append('Earles-Wu criterion |dgamma/dt|/R    max [rad/(s N)]   R there [N]  '
                      'median R [N]')
@@ -305,3 +306,18 @@ def register(subparsers):
                         help='directory for the recording (default demo_out/)')
     parser.add_argument('--json', action='store_true', help='print one JSON object')
     parser.set_defaults(func=_demo_command)
+
+
+def _quality_lines(quality):
+    """Say the largest error indicator and whether the estimates can be trusted (~/quality)."""
+    if quality is None:
+        return ['quality: no ~/quality messages recorded']
+    verdict = quality['nonlinearity']
+    if verdict['valid'] is None:
+        validity = 'validity indicator not available for this model'
+    else:
+        validity = (f"validity indicator max {verdict['indicator_max']:.3g} (threshold "
+                    f"{verdict['threshold']:g}): "
+                    + ('valid' if verdict['valid'] else 'NOT valid: near a resonance the '
+                       'amplitude detunes the links (README: where the estimate holds)'))
+    return [f"quality: error indicator max {quality['error_indicator_max']:.3g}; {validity}"]

@@ -1,9 +1,10 @@
 """
 What a flexlink_node recording holds: the summary `flexlink demo` prints.
 
-Read the recording (input, outputs, diagnostics; markers and quality skipped), tally it per
+Read the recording (input, outputs, quality, diagnostics; markers skipped), tally it per
 topic and joint, and return one dict: counts, rates, peak-to-peak deflections, criterion peaks,
-latencies and the estimator's update times.
+the largest quality indicators with the validity verdict, latencies and the estimator's update
+times.
 """
 
 import pathlib
@@ -11,6 +12,7 @@ import pathlib
 import numpy as np
 
 from .mcap import mcap_info
+from ..core.validity import is_valid
 from ..io.msg_schema import message_class
 from ..io.recording import iter_recording
 from ..names import JOINT_NAMES, JOINT_STATE
@@ -36,8 +38,9 @@ def summarise_recording(bag):
     dict
         path, files, bytes, complete, topics (name -> count), input_rate_hz, input_span_s,
         samples, outputs, peak_to_peak_um {lever_tip, coupler_mid: [dx, dy]},
-        criteria_max (joint -> value) or None, criteria_reason, latency_us {median, p99},
-        update_us {median, p99}.
+        criteria_max (joint -> value) or None, criteria_reason, quality {error_indicator_max,
+        nonlinearity: core.validity.is_valid of the largest nonlinearity indicator} or None,
+        latency_us {median, p99}, update_us {median, p99}.
 
     """
     info = mcap_info(bag)
@@ -59,6 +62,7 @@ def summarise_recording(bag):
         'outputs': len(read['deflections']['lever_tip']),
         'peak_to_peak_um': peak,
         **_criteria_summary(np.array(read['criteria']), source),
+        'quality': _quality_summary(read['quality']),
         'latency_us': ({'median': float(np.median(latency) / 1e3),
                         'p99': float(np.percentile(latency, 99) / 1e3)}
                        if latency.size else None),
@@ -78,16 +82,20 @@ def _read_recording(bag):
     dict
         ``input_log`` and ``output_log`` (header stamp -> log time [ns], first of each),
         ``input_stamps``, ``deflections`` (lever_tip, coupler_mid -> list of (dx, dy)),
-        ``criteria`` (rows: criteria of the 4 joints, then their reactions) and
-        ``diagnostics`` (messages).
+        ``criteria`` (rows: criteria of the 4 joints, then their reactions), ``quality``
+        (rows: error indicator, nonlinearity indicator) and ``diagnostics`` (messages).
 
     """
     read = {'input_log': {}, 'output_log': {}, 'input_stamps': [], 'criteria': [],
-            'deflections': {'lever_tip': [], 'coupler_mid': []}, 'diagnostics': []}
+            'deflections': {'lever_tip': [], 'coupler_mid': []}, 'diagnostics': [],
+            'quality': []}
     for topic, type_name, log_ns, _, data in iter_recording(bag):
-        if topic.endswith(('/markers', '/quality')):   # ~/quality: a JointState, not input
+        if topic.endswith('/markers'):
             continue
         message = _decode(type_name, data)
+        if topic.endswith('/quality'):     # a JointState too: not the input
+            read['quality'].append(list(message.position))
+            continue
         if topic == '/diagnostics':
             read['diagnostics'].append(message)
             continue
@@ -116,6 +124,15 @@ def _estimator_diagnostics(diagnostics):
                   if kv.key == key and kv.value != 'nan']
         update[key] = values
     return source, update
+
+
+def _quality_summary(rows):
+    """Return the largest error indicator and the validity verdict of the estimates, or None."""
+    if not rows:
+        return None
+    values = np.array(rows, dtype=float)
+    return {'error_indicator_max': float(np.nanmax(values[:, 0])),
+            'nonlinearity': is_valid(values[:, 1])}
 
 
 def _criteria_summary(criteria, source):

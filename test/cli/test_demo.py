@@ -51,7 +51,13 @@ def test_demo_runs_records_and_summarises(tmp_path):
         assert all(value > 0 for value in summary['reaction_median_n'].values())
         assert 'Earles-Wu criterion' in cli_demo.summary_text(summary)
     assert summary['latency_us']['median'] > 0 and summary['update_us']['median'] > 0
+    # The default model at 391 rpm is near its coupler and lever resonances (README, "where
+    # the estimate holds"): the ~/quality record says so.
+    verdict = summary['quality']['nonlinearity']
+    assert verdict['valid'] is False and verdict['indicator_max'] > verdict['threshold']
+    assert 0.0 <= summary['quality']['error_indicator_max'] < 0.5
     text = cli_demo.summary_text(summary)
+    assert 'validity indicator max' in text and 'NOT valid' in text
     for fragment in ('peak-to-peak', 'lever tip', 'coupler mid-point', 'Foxglove',
                      'estimator update per sample', summary['path']):
         assert fragment in text
