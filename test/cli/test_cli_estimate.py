@@ -26,7 +26,7 @@ from toy_system import toy_samples, ZETA
 TOY_CACHE = {}
 
 
-def toy_model(mechanism, options=None, cache_dir=None, use_cache=True):
+def toy_model(mechanism, options=None, cache_dir=None, use_cache=True, progress=None):
     options = options or core_options.ModelOptions()
     key = (min(options.modes, 6), min(options.static, 2), options.grid_size)
     if key not in TOY_CACHE:
