@@ -40,9 +40,10 @@ def output_topics(node_name):
     Returns
     -------
     dict
-        ``lever_tip``, ``coupler_mid``, ``criteria``, ``markers`` -> absolute topic name.
+        ``lever_tip``, ``coupler_mid``, ``criteria``, ``quality``, ``markers`` -> absolute
+        topic name.
 
     """
     base = '/' + node_name.strip('/')
-    keys = ('lever_tip', 'coupler_mid', 'criteria', 'markers')
+    keys = ('lever_tip', 'coupler_mid', 'criteria', 'quality', 'markers')
     return {key: base + TOPICS[key][1:] for key in keys}

@@ -5,18 +5,19 @@ import pytest
 
 
 @pytest.mark.parametrize('node', ['/ns/node', 'ns/node', '/ns/node/'])
-def test_output_topics_are_the_four_topics_under_the_node(node):
+def test_output_topics_are_the_five_topics_under_the_node(node):
     assert names.output_topics(node) == {
         'lever_tip': '/ns/node/lever_tip/deflection',
         'coupler_mid': '/ns/node/coupler_mid/deflection',
         'criteria': '/ns/node/joint_criteria',
+        'quality': '/ns/node/quality',
         'markers': '/ns/node/markers'}
 
 
 def test_the_default_node_publishes_private_topics_and_global_diagnostics():
     topics = names.output_topics(names.NODE_NAME)
     assert all(topic.startswith('/flexlink_node/') for topic in topics.values())
-    assert len(set(topics.values())) == 4
+    assert len(set(topics.values())) == 5
     assert names.TOPICS['diagnostics'] == '/diagnostics'   # not under the node
 
 

@@ -15,6 +15,7 @@ is accepted where it was (simulate, modes) as a deprecated spelling of
 import argparse
 import sys
 
+from .progress import OnDemandProgress
 from ..core.mechanism_file import stiffness_damping_from_file
 from ..core.numerics import RPM
 from ..core.options import ModelOptions
@@ -25,6 +26,8 @@ BEARINGS = ('flexible', 'rigid')
 # Output order of the published deflections, and the default of the flag (the node's too).
 ORDERS = (1, 2)
 DEFAULT_ORDER = 2
+# The prefix of the model build's progress on stderr.
+BUILD_LABEL = 'building the model (cached afterwards)'
 
 
 class DeprecatedAlias(argparse.Action):
@@ -209,6 +212,9 @@ def load_model(mechanism, options, args):
     """
     Load the cached (or freshly built) reduced model for the command line.
 
+    A build shows its percentage on stderr (:class:`.progress.OnDemandProgress`); a cached
+    model loads silently.
+
     Parameters
     ----------
     mechanism : Mechanism
@@ -223,5 +229,6 @@ def load_model(mechanism, options, args):
     ReducedModel
 
     """
-    return pipeline.model_for_mechanism(mechanism, options, cache_dir=args.cache_dir,
-                                        use_cache=not args.no_cache)
+    with OnDemandProgress(BUILD_LABEL) as progress:
+        return pipeline.model_for_mechanism(mechanism, options, cache_dir=args.cache_dir,
+                                            use_cache=not args.no_cache, progress=progress)

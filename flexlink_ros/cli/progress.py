@@ -82,6 +82,12 @@ class Progress:
         if force:
             self.close()
 
+    def show(self):
+        """Write the state now as a plain line (the bar redraws itself)."""
+        with self.lock:
+            if self.bar is None and not self.closed:
+                self._write_line()
+
     def line(self):
         """Return the state as one plain line: count, percentage, elapsed, rate, step."""
         text = tqdm.format_meter(self.done, self.total, time.monotonic() - self.started,
@@ -123,4 +129,47 @@ class Progress:
 
     def __exit__(self, *exc_info):
         """Close it: the last state is written whatever happened."""
+        self.close()
+
+
+class OnDemandProgress:
+    """
+    A :class:`Progress` opened at the first report: a job that reports nothing shows nothing.
+
+    For the model build (``progress(percent, 100, what)``, called only while a model is
+    built): a cold cache shows the build's percentage, a cached model loads silently.
+
+    Parameters
+    ----------
+    label : str
+        What is in progress (the line's prefix).
+    unit : str
+        What is counted.
+
+    """
+
+    def __init__(self, label, unit='%'):
+        self.label, self.unit = label, unit
+        self.progress = None
+
+    def __call__(self, done, total=None, what=None):
+        """Report ``done`` of ``total`` (whole units), opening the progress at the first."""
+        first = self.progress is None
+        if first:
+            self.progress = Progress(self.label, total, unit=self.unit)
+        self.progress(int(done), total, what)
+        if first:     # a plain line at once: the build has started
+            self.progress.show()
+
+    def close(self):
+        """Write the last state, if there was any report."""
+        if self.progress is not None:
+            self.progress.close()
+
+    def __enter__(self):
+        """Return the progress itself."""
+        return self
+
+    def __exit__(self, *exc_info):
+        """Close it."""
         self.close()

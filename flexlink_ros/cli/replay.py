@@ -5,8 +5,9 @@ Reads the crank ``sensor_msgs/JointState`` messages of any rosbag2 MCAP (a bare 
 a bag directory, or a truncated or damaged file: every intact chunk is used, damaged ones are
 skipped and listed, :mod:`io.recording`), runs the estimator over them in batches
 (:mod:`core.estimation.offline_run`, the same numbers as the streaming node), and writes a
-new MCAP with the input and the node's output topics, each output stamped with its input's
-stamp and logged at the input's log time (:mod:`io.replay_writer`). ``--publish``
+new MCAP with the input and the node's output topics (deflections, criteria, the per-sample
+quality ``~/quality`` and markers, the bytes the node records), each output stamped with its
+input's stamp and logged at the input's log time (:mod:`io.replay_writer`). ``--publish``
 republishes the input with its recorded timing for live subscribers (a running
 flexlink_node, Foxglove, RViz; :mod:`ros.republish`), with the flags of ``ros2 bag play``:
 ``--rate R``, ``--clock [HZ]`` and ``--clock-topics-all`` (``/clock`` from the recording's
@@ -40,7 +41,7 @@ from ..io.joint_states import read_crank_samples
 from ..io.recorder_files import refuse_existing
 from ..io.recording import choose_input_topic, damage_note, scan_recording
 from ..io.replay_writer import write_replay
-from ..names import DEFAULT_FRAME_ID, NODE_NAME, OUTPUT_POINTS, output_topics
+from ..names import DEFAULT_FRAME_ID, NODE_NAME, OUTPUT_POINTS, output_topics, QUALITY_NAMES
 from ..ros.messages import OK
 from ..ros.playback_schedule import DEFAULT_CLOCK_HZ
 from ..ros.republish import publish_recording
@@ -134,6 +135,18 @@ def _peak_to_peak(estimate, result):
                                              ).tolist() if values.size else [math.nan] * 2)
 
 
+def _quality(estimate, result):
+    """Add the per-sample quality of the estimated samples: count and largest indicators."""
+    estimated = (np.all(np.isfinite(estimate['lever_tip']), axis=1)
+                 & np.all(np.isfinite(estimate['coupler_mid']), axis=1))
+    quality = {'messages': int(np.count_nonzero(estimated))}
+    for key in QUALITY_NAMES:
+        values = estimate[key][estimated]
+        values = values[np.isfinite(values)]
+        quality[f'{key}_max'] = float(values.max()) if values.size else None
+    result['quality'] = quality
+
+
 def run_replay(args):
     """
     Read, estimate, write and/or publish.
@@ -176,6 +189,7 @@ def run_replay(args):
     result['samples_per_s'] = count / total if total > 0 else math.inf
     result['times_real_time'] = span_s / total if total > 0 else math.inf
     _peak_to_peak(estimate, result)
+    _quality(estimate, result)
     if args.publish:
         with Progress(f'publishing {topic}', count, unit='msg') as progress:
             played = publish_recording(samples, topic, playback_options(args),
@@ -247,6 +261,7 @@ def summary_text(result):
     lines.append('  coupler mid peak-to-peak dx '
                  f"{result['coupler_mid_peak_to_peak_um'][0]:10.1f} um  dy "
                  f"{result['coupler_mid_peak_to_peak_um'][1]:10.1f} um")
+    lines.append(quality_text(result['quality']))
     if not result['criteria_available']:
         lines.append('  criteria unavailable: the model has no joint-reaction data '
                      '(written as zeros)')
@@ -257,6 +272,14 @@ def summary_text(result):
     if 'playback' in result:
         lines.append(playback_text(result['playback']))
     return '\n'.join(lines)
+
+
+def quality_text(quality):
+    """Summarise the per-sample quality messages in one line."""
+    largest = ', '.join(f"{name.replace('_', ' ')} max "
+                        + ('n/a' if quality[f'{name}_max'] is None
+                           else f"{quality[f'{name}_max']:.3g}") for name in QUALITY_NAMES)
+    return f"  quality: {quality['messages']} messages ({largest})"
 
 
 def playback_text(played):

@@ -129,7 +129,8 @@ def estimator_status(period, values, model_facts):
     Report the estimator: update times, flags, error and validity indicators, and its model.
 
     'nonlinearity_max' is the largest validity indicator of the period (NaN when the model
-    has no indicator tables or no sample came), 'nonlinearity_threshold' the WARN threshold.
+    has no indicator tables or no sample came), 'nonlinearity_threshold' the WARN threshold
+    (``diagnostics.nonlinearity_warn``).
 
     Parameters
     ----------
@@ -149,12 +150,14 @@ def estimator_status(period, values, model_facts):
     median = float(np.median(durations)) if durations.size else math.nan
     p99 = float(np.percentile(durations, 99)) if durations.size else math.nan
     flags = [flag.name for flag in SampleFlag if flag and period.flags & flag]
-    level, message = estimator_level(period, values['diagnostics.error_indicator_warn'])
+    level, message = estimator_level(period, values['diagnostics.error_indicator_warn'],
+                                     values['diagnostics.nonlinearity_warn'])
     return status('estimator', level, message, {
         'error_indicator_max': period.max_error_indicator,
         'nonlinearity_max': (period.max_nonlinearity if math.isfinite(period.max_nonlinearity)
                              else math.nan),
-        'nonlinearity_threshold': VALIDITY_THRESHOLD, 'update_us_median': median,
+        'nonlinearity_threshold': values['diagnostics.nonlinearity_warn'],
+        'update_us_median': median,
         'update_us_p99': p99, 'samples_in_period': period.valid, 'flags': ' '.join(flags),
         **model_facts})
 

@@ -11,6 +11,7 @@ import math
 from typing import Optional
 
 from ..core.options import ModelOptions
+from ..core.validity import VALIDITY_THRESHOLD
 
 
 @dataclasses.dataclass(frozen=True)
@@ -113,6 +114,9 @@ PARAMETERS = (
     ParameterSpec('diagnostics.error_indicator_warn', 0.05,
                   "WARN when the estimator's error indicator exceeds this (relative)",
                   low=0.0, high=10.0),
+    ParameterSpec('diagnostics.nonlinearity_warn', VALIDITY_THRESHOLD,
+                  "WARN when the period's nonlinearity (validity) indicator exceeds this "
+                  '(the linear estimate is not valid above it)', low=0.01, high=100.0),
     ParameterSpec('diagnostics.period_s', 1.0, 'Period of /diagnostics [s]',
                   low=0.01, high=60.0),
     ParameterSpec('diagnostics.hardware_id', 'flexlink',
@@ -149,6 +153,7 @@ RUN_TIME_EFFECT = {
     'diagnostics.stale_input_s': 'the next /diagnostics',
     'diagnostics.min_rate_hz': 'the next /diagnostics',
     'diagnostics.error_indicator_warn': 'the next /diagnostics',
+    'diagnostics.nonlinearity_warn': 'the next /diagnostics',
     'diagnostics.period_s': 'the diagnostics timer is restarted with the new period',
     'diagnostics.hardware_id': 'the next /diagnostics',
 }

@@ -3,9 +3,12 @@
 import dataclasses
 import json
 import math
+import subprocess
+import sys
 import time
 
 from flexlink_ros.cli import main as cli
+from flexlink_ros.cli.model_args import BUILD_LABEL
 from flexlink_ros.core import options as core_options, validity
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.numerics import relative_rms, RPM
@@ -23,7 +26,7 @@ from toy_system import toy_samples, ZETA
 TOY_CACHE = {}
 
 
-def toy_model(mechanism, options=None, cache_dir=None, use_cache=True):
+def toy_model(mechanism, options=None, cache_dir=None, use_cache=True, progress=None):
     options = options or core_options.ModelOptions()
     key = (min(options.modes, 6), min(options.static, 2), options.grid_size)
     if key not in TOY_CACHE:
@@ -278,3 +281,19 @@ def test_estimate_json_says_the_order_and_order_2_moves_the_lever_tip(capsys, tm
     assert p2p[2] > 3.0 * p2p[1]
     models = [p for p in tmp_path.glob('*.npz') if not p.stem.endswith('-nonlinearity')]
     assert len(models) == 2       # one model per order
+
+
+def test_estimate_shows_the_model_build_on_stderr_only_when_it_builds(tmp_path):
+    command = [sys.executable, '-m', 'flexlink_ros.cli.main', 'estimate', '--rpm', '200',
+               '--seconds', '0.2', '--grid-size', '32', '--json', '--cache-dir', str(tmp_path)]
+    cold = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    assert cold.returncode == 0, cold.stderr
+    assert json.loads(cold.stdout)['samples'] > 0            # stdout: the JSON alone
+    lines = [line for line in cold.stderr.splitlines() if line.startswith(BUILD_LABEL)]
+    assert len(lines) >= 2                                    # the start, then the end
+    assert ' 100%' in lines[-1] and lines[-1].endswith('model built')
+    assert ' 100%' not in lines[0]
+    warm = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    assert warm.returncode == 0, warm.stderr
+    assert json.loads(warm.stdout)['samples'] == json.loads(cold.stdout)['samples']
+    assert BUILD_LABEL not in warm.stderr and '%' not in warm.stderr   # cached: silent

@@ -12,7 +12,7 @@ import termios
 import time
 
 from flexlink_ros.cli import progress as progress_module
-from flexlink_ros.cli.progress import Progress
+from flexlink_ros.cli.progress import OnDemandProgress, Progress
 from flexlink_ros.cli.report import _section_progress
 from flexlink_ros.report.criteria import plot_criteria
 from flexlink_ros.report.estimator import plot_estimator
@@ -85,3 +85,16 @@ def test_a_report_section_with_its_own_steps_reports_them_within_the_report():
     assert calls == [(3, 4, 'Streaming estimator: timing round 1 of 3 (5/16)')]
     assert _section_progress(plot_criteria, calls.append, 0, 4, 'criteria') == {}
     assert _section_progress(plot_estimator, None, 0, 4, 'estimator') == {}
+
+
+def test_on_demand_progress_is_silent_without_reports_and_shows_a_build(capsys):
+    with OnDemandProgress('building') as progress:
+        pass                                  # a cached model: nothing reported
+    assert capsys.readouterr().err == ''
+    with OnDemandProgress('building') as progress:
+        progress(5.0, 100, 'assembled')
+        progress(57.9, 100, 'basis')
+        progress(100.0, 100, 'model built')
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 2 and lines[0].startswith('building:   5%')
+    assert lines[1].startswith('building: 100%') and lines[1].endswith('model built')

@@ -16,6 +16,7 @@ from geometry_msgs.msg import Vector3Stamped
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
+from rosbags.highlevel import AnyReader
 from sensor_msgs.msg import JointState
 
 RPM = 2.0 * math.pi / 60.0
@@ -98,7 +99,34 @@ def test_replay_equals_the_streaming_estimator(tmp_path, model):
     assert criteria_seen == bool(np.any(model.force_moments))
     assert counts == {'/joint_states': 701, '/flexlink_node/lever_tip/deflection': 701,
                       '/flexlink_node/coupler_mid/deflection': 701,
-                      '/flexlink_node/joint_criteria': 701, '/flexlink_node/markers': 15}
+                      '/flexlink_node/joint_criteria': 701, '/flexlink_node/quality': 701,
+                      '/flexlink_node/markers': 15}
+    assert summary['quality']['messages'] == 701
+    assert summary['output_topics']['/flexlink_node/quality'] == 701
+    check_quality(out, expected)
+
+
+def check_quality(out, expected):
+    """Quality of every estimate, read by rosbags: input stamps, the node's values and bytes."""
+    seen = []
+    with AnyReader([out]) as reader:
+        connections = [c for c in reader.connections if c.topic == '/flexlink_node/quality']
+        assert [c.msgtype for c in connections] == ['sensor_msgs/msg/JointState']
+        for connection, log_ns, data in reader.messages(connections=connections):
+            message = reader.deserialize(data, connection.msgtype)
+            stamp = message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
+            assert log_ns == stamp + 200_000 and message.header.frame_id == 'linkage_ground'
+            assert list(message.name) == ['error_indicator', 'nonlinearity']
+            sample = expected[stamp]
+            error, nonlinearity = message.position.tolist()
+            assert error == pytest.approx(sample.error_indicator, rel=1e-5, abs=1e-12)
+            assert nonlinearity == pytest.approx(sample.nonlinearity, rel=1e-5, abs=1e-12)
+            # the bytes the node publishes and records for these values
+            assert bytes(data) == ros_messages.quality_cdr(
+                message.header.stamp.sec, message.header.stamp.nanosec, b'linkage_ground',
+                error, nonlinearity)
+            seen.append(stamp)
+    assert seen == sorted(expected) and any(expected[s].error_indicator > 0 for s in seen)
 
 
 def test_replay_refuses_missing_topic_and_existing_output(tmp_path):

@@ -7,8 +7,8 @@ from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction.pipeline import model_for_mechanism
 from flexlink_ros.core.reduction.second_order_tables import SecondOrderForms
 from flexlink_ros.io.msg_schema import serialize_exact
-from flexlink_ros.io.replay_writer import MarkerSource, write_replay
-from flexlink_ros.names import JOINT_NAMES, output_topics
+from flexlink_ros.io.replay_writer import MarkerSource, quality_rows, write_replay
+from flexlink_ros.names import JOINT_NAMES, output_topics, QUALITY_NAMES
 from flexlink_ros.ros import messages as ros_messages
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
@@ -36,6 +36,9 @@ def replay_inputs():
     estimate = {key: rng.normal(size=(COUNT, 2)) for key in ('lever_tip', 'coupler_mid')}
     estimate.update({key: rng.normal(size=(COUNT, 4))
                      for key in ('criterion', 'gamma_dot', 'reaction_n')})
+    estimate['error_indicator'] = rng.uniform(0.0, 0.1, COUNT)
+    estimate['nonlinearity'] = rng.uniform(0.0, 0.5, COUNT)
+    estimate['nonlinearity'][1] = np.nan      # not available: written as NaN, as the node
     estimate['lever_tip'][OUTLIER] = np.nan
     return samples, estimate
 
@@ -47,17 +50,18 @@ def test_replay_bag_holds_each_input_then_its_outputs(tmp_path):
     status = write_replay(tmp_path / 'replay', samples, estimate, '/joint_states', topics,
                           'linkage_ground', None, markers_every_n=0,
                           progress=lambda n, force=False: progress.append((n, force)))
-    assert status['state'] == 'closed' and status['message_count'] == 1 + 4 * (COUNT - 1)
+    assert status['state'] == 'closed' and status['message_count'] == 1 + 5 * (COUNT - 1)
     assert progress == [(COUNT, False), (COUNT, True)]
     with open(status['files'][0], 'rb') as stream:
         decoded = [(channel.topic, message, msg) for _, channel, message, msg in make_reader(
             stream, decoder_factories=[DecoderFactory()]).iter_decoded_messages(
                 log_time_order=False)]
     order = [topic for topic, _, _ in decoded]
-    per_sample = ['/joint_states', topics['lever_tip'], topics['coupler_mid'], topics['criteria']]
+    per_sample = ['/joint_states', topics['lever_tip'], topics['coupler_mid'], topics['criteria'],
+                  topics['quality']]
     assert order == per_sample * OUTLIER + ['/joint_states'] + \
         per_sample * (COUNT - OUTLIER - 1)
-    rows = iter(k for k in range(COUNT) for _ in range(1 if k == OUTLIER else 4))
+    rows = iter(k for k in range(COUNT) for _ in range(1 if k == OUTLIER else 5))
     for (topic, message, msg), k in zip(decoded, rows):
         assert message.log_time == samples['log_ns'][k]
         stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
@@ -67,7 +71,11 @@ def test_replay_bag_holds_each_input_then_its_outputs(tmp_path):
             assert list(msg.position) == [0.1 * k]
             continue
         assert message.publish_time == message.log_time and msg.header.frame_id == 'linkage_ground'
-        if topic == topics['criteria']:
+        if topic == topics['quality']:
+            assert list(msg.name) == list(QUALITY_NAMES) and not msg.velocity and not msg.effort
+            np.testing.assert_array_equal(
+                msg.position, [estimate['error_indicator'][k], estimate['nonlinearity'][k]])
+        elif topic == topics['criteria']:
             assert list(msg.name) == list(JOINT_NAMES)
             assert list(msg.position) == estimate['criterion'][k].tolist()
             assert list(msg.velocity) == estimate['gamma_dot'][k].tolist()
@@ -79,7 +87,19 @@ def test_replay_bag_holds_each_input_then_its_outputs(tmp_path):
     with AnyReader([tmp_path / 'replay']) as reader:
         assert {c.topic: c.msgcount for c in reader.connections} == {
             '/joint_states': COUNT, topics['lever_tip']: COUNT - 1,
-            topics['coupler_mid']: COUNT - 1, topics['criteria']: COUNT - 1}
+            topics['coupler_mid']: COUNT - 1, topics['criteria']: COUNT - 1,
+            topics['quality']: COUNT - 1}
+
+
+def test_quality_rows_are_the_bytes_the_node_publishes():
+    stamps = np.array([T0_NS, 1_700_000_000_999_999_999, 5])
+    error = np.array([0.031, 0.0, 2.5])
+    nonlinearity = np.array([np.nan, 0.25, 1e-3])
+    for frame in (b'linkage_ground', b'odd'):    # the frame's length moves the values
+        rows = quality_rows(stamps, frame, error, nonlinearity)
+        for row, stamp, e, n in zip(rows, stamps.tolist(), error, nonlinearity):
+            sec, nanosec = divmod(stamp, 1_000_000_000)
+            assert row.tobytes() == ros_messages.quality_cdr(sec, nanosec, frame, e, n)
 
 
 def test_replay_markers_of_an_order_2_model_draw_the_joints_second_order_motion():

@@ -94,7 +94,8 @@ def test_estimator_warns_when_the_validity_indicator_passes_the_threshold():
     period = PeriodStats()
     period.add_sample(_sample(math.nan))            # a model without the tables
     assert diagnostics.estimator_level(period, 0.05) == (OK, 'ok')
-    values = {'diagnostics.error_indicator_warn': 0.05}
+    values = {'diagnostics.error_indicator_warn': 0.05,
+              'diagnostics.nonlinearity_warn': validity.VALIDITY_THRESHOLD}
     keys = {kv.key: kv.value for kv in diagnostics.estimator_status(period, values, {}).values}
     assert keys['nonlinearity_max'] == 'nan'
     assert keys['nonlinearity_threshold'] == f'{validity.VALIDITY_THRESHOLD:.6g}'
@@ -107,6 +108,13 @@ def test_estimator_warns_when_the_validity_indicator_passes_the_threshold():
     status = diagnostics.estimator_status(period, values, {})
     keys = {kv.key: kv.value for kv in status.values}
     assert float(keys['nonlinearity_max']) == 1.5 * validity.VALIDITY_THRESHOLD
+    assert status.level == WARN
+    # the parameter diagnostics.nonlinearity_warn sets the threshold
+    values['diagnostics.nonlinearity_warn'] = 2.0 * validity.VALIDITY_THRESHOLD
+    status = diagnostics.estimator_status(period, values, {})
+    keys = {kv.key: kv.value for kv in status.values}
+    assert status.level == OK and float(keys['nonlinearity_threshold']) == values[
+        'diagnostics.nonlinearity_warn']
 
 
 def _feed(publisher, executor, rpm, first_ns, count=500):
@@ -123,18 +131,18 @@ def _feed(publisher, executor, rpm, first_ns, count=500):
             executor.spin_once(timeout_sec=0.0)
 
 
-def test_node_estimator_warns_past_the_validity_threshold(tmp_path, processes, ros):
-    """A small rigid model (rigid crank and bearings): OK at 269 rpm, WARN at 405 rpm."""
+# A small rigid model (rigid crank and bearings), diagnostics every 0.1 s.
+RIGID_NODE = ('diagnostics.period_s:=0.1', 'model.bearings:=rigid', 'model.rigid_crank:=true',
+              'model.grid_size:=64')
+
+
+def _watch(ros):
+    """Publish crank input to the node; collect its lever tip outputs and estimator statuses."""
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import Vector3Stamped
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import JointState
 
-    node = NodeProcess(tmp_path, 'diagnostics.period_s:=0.1', 'model.bearings:=rigid',
-                       'model.rigid_crank:=true', 'model.grid_size:=64',
-                       f'model.cache_dir:={tmp_path}')
-    processes.append(node)
-    node.wait_for(READY_MESSAGE, READY_TIMEOUT_S)
     test_node, executor = ros
     qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
     publisher = test_node.create_publisher(JointState, 'joint_states', qos)
@@ -147,14 +155,15 @@ def test_node_estimator_warns_past_the_validity_threshold(tmp_path, processes, r
             if item.name == f'/{NODE_NAME}: estimator':
                 keys = {kv.key: kv.value for kv in item.values}
                 statuses.append((int(keys.get('samples_in_period', 0)), item.level,
-                                 item.message, float(keys.get('nonlinearity_max', 'nan'))))
+                                 item.message, float(keys.get('nonlinearity_max', 'nan')),
+                                 float(keys.get('nonlinearity_threshold', 'nan'))))
 
     test_node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 100)
     spin_until(executor, lambda: publisher.get_subscription_count() > 0, DISCOVERY_TIMEOUT_S,
                'discovery')
-    verdicts = {}
-    # The second speed starts 10 s later in stamps: the estimator restarts (warm) there.
-    for rpm, first_ns in ((269.0, 10**18), (405.0, 10**18 + 10**10)):
+
+    def verdicts(rpm, first_ns):
+        """Feed 500 samples at ``rpm``; (level, message, indicator, threshold) per period."""
         before = len(outputs)
         _feed(publisher, executor, rpm, first_ns)
         spin_until(executor, lambda: len(outputs) >= before + 500, 30.0, 'the outputs')
@@ -162,16 +171,65 @@ def test_node_estimator_warns_past_the_validity_threshold(tmp_path, processes, r
         # a period without samples: every sample of this speed has been reported
         spin_until(executor, lambda: any(not entry[0] for entry in statuses[seen:]), 10.0,
                    'a period after the last sample')
-        verdicts[rpm] = [entry[1:] for entry in statuses if entry[0]]
+        found = [entry[1:] for entry in statuses if entry[0]]
         statuses[:] = []
-    print(verdicts)
+        return found
+
+    return verdicts
+
+
+def test_node_estimator_warns_past_the_validity_threshold(tmp_path, processes, ros):
+    """OK at 269 rpm, WARN at 405 rpm (the default threshold)."""
+    node = NodeProcess(tmp_path, *RIGID_NODE, f'model.cache_dir:={tmp_path}')
+    processes.append(node)
+    node.wait_for(READY_MESSAGE, READY_TIMEOUT_S)
+    verdicts = _watch(ros)
+    # The second speed starts 10 s later in stamps: the estimator restarts (warm) there.
+    found = {rpm: verdicts(rpm, first_ns)
+             for rpm, first_ns in ((269.0, 10**18), (405.0, 10**18 + 10**10))}
+    print(found)
     # (a period may WARN for other reasons, never for the validity)
-    assert verdicts[269.0] and all('nonlinearity' not in message
-                                   and value < validity.VALIDITY_THRESHOLD
-                                   for _, message, value in verdicts[269.0]), verdicts[269.0]
-    warned = [(value, message) for level, message, value in verdicts[405.0] if level == WARN]
-    assert warned, verdicts[405.0]
+    assert found[269.0] and all('nonlinearity' not in message
+                                and value < validity.VALIDITY_THRESHOLD
+                                for _, message, value, _ in found[269.0]), found[269.0]
+    warned = [(value, message) for level, message, value, _ in found[405.0] if level == WARN]
+    assert warned, found[405.0]
     for value, message in warned:
         assert value > validity.VALIDITY_THRESHOLD
         assert 'linear estimate not valid: nonlinearity indicator' in message
+    assert node.stop() == 0
+
+
+def test_node_nonlinearity_warn_parameter_sets_the_threshold_at_run_time(
+        tmp_path, processes, ros):
+    """At 269 rpm (OK by default): WARN below a low threshold; raised at run time: no WARN."""
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+
+    low = 0.02
+    node = NodeProcess(tmp_path, *RIGID_NODE, f'diagnostics.nonlinearity_warn:={low}',
+                       f'model.cache_dir:={tmp_path}')
+    processes.append(node)
+    node.wait_for(READY_MESSAGE, READY_TIMEOUT_S)
+    verdicts = _watch(ros)
+    found = verdicts(269.0, 10**18)
+    print(found)
+    warned = [entry for entry in found if 'nonlinearity indicator' in entry[1]]
+    assert warned and all(level == WARN and low < value < validity.VALIDITY_THRESHOLD
+                          and threshold == low for level, _, value, threshold in warned)
+    test_node, executor = ros
+    client = AsyncParameterClient(test_node, NODE_NAME)
+    spin_until(executor, client.services_are_ready, DISCOVERY_TIMEOUT_S, 'parameter services')
+
+    def set_threshold(value):
+        future = client.set_parameters([Parameter('diagnostics.nonlinearity_warn',
+                                                  value=value)])
+        spin_until(executor, future.done, 10.0, 'setting diagnostics.nonlinearity_warn')
+        return future.result().results[0]
+
+    assert not set_threshold(0.001).successful            # below the range
+    assert set_threshold(100.0).successful
+    found = verdicts(269.0, 10**18 + 10**10)
+    assert found and all('nonlinearity' not in message and threshold == 100.0
+                         for _, message, _, threshold in found), found
     assert node.stop() == 0

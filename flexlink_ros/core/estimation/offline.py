@@ -71,8 +71,9 @@ def replay(model, stamps_ns, angles, speeds=None,
     -------
     dict of str to ndarray
         'crank_angle', 'crank_speed', 'crank_accel' (m,); 'lever_tip', 'coupler_mid' (m, 2)
-        [m]; 'modal', 'velocity' (m, r): q and q'; 'force', 'force_dot' (m, joints, 2) and
-        'rms2' (m, joints): the tabulated joint reactions at the model's (clipped) crank
+        [m]; 'correction' (m, 4): the residual correction alone [m] (the error indicator's
+        numerator); 'modal', 'velocity' (m, r): q and q'; 'force', 'force_dot' (m, joints,
+        2) and 'rms2' (m, joints): the tabulated joint reactions at the model's (clipped) crank
         state; 'orbit' for the next call; 'stopped': the index of the sample that went out of
         bound (the rows after it are not computed), or None; 'resume' for a call on the
         samples that follow.
@@ -117,7 +118,8 @@ def _allocate(result, count, size):
     outputs, joints = len(OUTPUT_NAMES), len(JOINT_NAMES)
     joint = records[:, 2 * outputs:]
     result.update({'lever_tip': records[:, 0:2], 'coupler_mid': records[:, 2:4],
-                   'modal': modal, 'force': joint[:, :2 * joints].reshape(count, joints, 2),
+                   'correction': records[:, outputs:2 * outputs], 'modal': modal,
+                   'force': joint[:, :2 * joints].reshape(count, joints, 2),
                    'force_dot': joint[:, 2 * joints:4 * joints].reshape(count, joints, 2),
                    'rms2': joint[:, 4 * joints:]})
     return modal, records

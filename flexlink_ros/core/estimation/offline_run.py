@@ -15,7 +15,7 @@ import numpy as np
 from .gate import DEFAULT_RESET_GAP_S, InputGate, plan_rows
 from .nonlinearity import NonlinearityIndicator
 from .offline import replay
-from .sample import SampleFlag
+from .sample import error_indicator_rows, SampleFlag
 from .step import REACTION_FLOOR_FRACTION
 from .streaming import DEFAULT_ACCEL_LIMIT, DEFAULT_NEAR_ZERO_FRACTION
 from .tables import step_tables
@@ -28,7 +28,7 @@ PLAN_WINDOW = 4096
 FIRST_PLAN_WINDOW = 64
 # The per-sample arrays of an estimate (besides 'flags').
 _ESTIMATE_KEYS = OUTPUT_POINTS + ('crank_angle', 'crank_speed', 'modal', 'reaction_n',
-                                  'gamma_dot', 'criterion', 'nonlinearity')
+                                  'gamma_dot', 'criterion', 'nonlinearity', 'error_indicator')
 
 
 def criteria_batch(model, angles, speeds, accels,
@@ -124,7 +124,7 @@ def allocate_estimate(model, count):
     result = {key: np.zeros((count, 2)) for key in OUTPUT_POINTS}
     for key in ('reaction_n', 'gamma_dot', 'criterion'):
         result[key] = np.zeros((count, len(JOINT_NAMES)))
-    for key in ('crank_angle', 'crank_speed', 'nonlinearity'):
+    for key in ('crank_angle', 'crank_speed', 'nonlinearity', 'error_indicator'):
         result[key] = np.zeros(count)
     result['modal'] = np.zeros((count, model.size))
     result['flags'] = np.zeros(count, dtype=np.int64)
@@ -163,8 +163,9 @@ def estimate_offline(model, stamps_ns, angles, speeds, warm_start=True, result=N
     -------
     dict of ndarray
         'lever_tip', 'coupler_mid' (m, 2) [m]; 'reaction_n', 'gamma_dot', 'criterion' (m, 4);
-        'crank_angle', 'crank_speed', 'nonlinearity' (validity indicator) (m,); 'modal' (m, r);
-        'flags' (m,); 'criteria_available' (bool); 'segments', 'outliers', 'out_of_bound'.
+        'crank_angle', 'crank_speed', 'nonlinearity' (validity indicator), 'error_indicator'
+        (m,); 'modal' (m, r); 'flags' (m,); 'criteria_available' (bool); 'segments',
+        'outliers', 'out_of_bound'.
 
     """
     count = len(stamps_ns)
@@ -324,13 +325,12 @@ class _OfflineRun:
         target = self.chosen[rows]
         nonlinearity = self.nonlinearity.batch(out['crank_angle'][rows], model_speed, model_accel,
                                                out['modal'][rows], out['velocity'][rows])
-        for key, values in (('lever_tip', out['lever_tip'][rows]),
-                            ('coupler_mid', out['coupler_mid'][rows]),
-                            ('crank_angle', out['crank_angle'][rows]),
-                            ('crank_speed', out['crank_speed'][rows]),
-                            ('modal', out['modal'][rows]), ('nonlinearity', nonlinearity),
-                            ('reaction_n', reaction),
-                            ('gamma_dot', gamma_dot), ('criterion', criterion)):
+        error = error_indicator_rows(*(out[k][rows] for k in OUTPUT_POINTS + ('correction',)))
+        for key in OUTPUT_POINTS + ('crank_angle', 'crank_speed', 'modal'):
+            self.result[key][target] = out[key][rows]
+        for key, values in (('nonlinearity', nonlinearity), ('error_indicator', error),
+                            ('reaction_n', reaction), ('gamma_dot', gamma_dot),
+                            ('criterion', criterion)):
             self.result[key][target] = values
         self.done = upto
         self.finish_until(self.stop if upto == self.chosen.size else int(self.chosen[upto]))

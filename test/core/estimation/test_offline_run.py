@@ -135,3 +135,5 @@ def test_offline_estimate_equals_streaming_through_outliers_and_out_of_bound(
                                    atol=1e-12)
         np.testing.assert_allclose(result['coupler_mid'][n], sample.coupler_mid, rtol=1e-7,
                                    atol=1e-12)
+        # the quality the node publishes with each estimate (~/quality)
+        assert result['error_indicator'][n] == pytest.approx(sample.error_indicator, rel=1e-6)

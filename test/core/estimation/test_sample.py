@@ -4,7 +4,9 @@ import dataclasses
 import math
 
 from flexlink_ros.core.estimation import sample
-from flexlink_ros.core.estimation.sample import nan_sample, sample_from_record, SampleFlag
+from flexlink_ros.core.estimation.sample import error_indicator_rows, nan_sample, \
+    sample_from_record, SampleFlag
+import numpy as np
 import pytest
 
 CRITERIA = ((10.0, 20.0, 30.0, 40.0), (0.1, 0.2, 0.3, 0.4), (0.01, 0.01, 0.01, 0.01),
@@ -61,3 +63,14 @@ def test_samples_have_fixed_fields():
         'stamp_ns', 'crank_angle', 'crank_speed', 'crank_accel']
     with pytest.raises(AttributeError):
         out.extra = 1          # slots: no stray attributes
+
+
+def test_error_indicator_rows_are_the_samples_indicators_to_the_last_bit():
+    rng = np.random.default_rng(7)
+    deflection = rng.normal(size=(50, 4)) * np.logspace(-8, -3, 50)[:, None]   # floor too
+    correction = rng.normal(size=(50, 4)) * 1e-6
+    rows = error_indicator_rows(deflection[:, :2], deflection[:, 2:], correction)
+    for row, d, c in zip(rows.tolist(), deflection.tolist(), correction.tolist()):
+        crank, criteria = (0.0, 0.0, 0.0), ((0.0,) * 4,) * 3 + ((False,) * 4,)
+        assert row == sample_from_record(0, crank, d, c, criteria, 0, '', (), math.nan
+                                         ).error_indicator
