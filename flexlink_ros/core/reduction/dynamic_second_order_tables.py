@@ -21,7 +21,9 @@ element. :func:`build_tables` makes the plain arrays (names ``dynamic_*``);
 import numpy as np
 
 from .cells import CELL_POWERS, periodic_cell_coefficients
+from .pipeline import fe_mechanism
 from ..fe.beam import beam_geometric_stiffness
+from ..fe.linkage import FlexibleLinkage
 from ..fe.second_order_reduced import gather_harmonics
 from ..kinematics import solve_kinematics
 from ..numerics import TWO_PI
@@ -83,6 +85,12 @@ def build_tables(linkage, basis, grid_size):
             'dynamic_link_values': np.array(values, dtype=float),
             'dynamic_unit': np.array(units, dtype=float),
             'dynamic_scalars': periodic_cell_coefficients(np.hstack([trig, forces]))}
+
+
+def load_for_model(mechanism, options, model):
+    """Return the :class:`DynamicLoad` of a reduced model built with ``options`` (not cached)."""
+    linkage = FlexibleLinkage(fe_mechanism(mechanism, options), options)
+    return DynamicLoad(build_tables(linkage, model.basis, model.grid_size))
 
 
 class DynamicLoad:
