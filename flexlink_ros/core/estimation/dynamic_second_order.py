@@ -140,14 +140,16 @@ def steady_revolution(model, load, speed, samples=720, revolutions=10, keep_quas
     Parameters
     ----------
     model : ReducedModel
-        Order 2 with ``keep_quasi_static`` (outputs linear + quasi-static + O (q2 - K_r^-1
-        f2_eigenstrain)), order 1 without (linear + O q2).
+        The reduced model.
     load : DynamicLoad
         The model's dynamic load tables.
     speed : float
         Crank speed [rad/s].
     samples, revolutions : int
         Samples per revolution (crank angles 2 pi k / samples) and revolutions streamed.
+    keep_quasi_static : bool
+        True (``model`` of order 2): outputs linear + quasi-static + O (q2 - K_r^-1
+        f2_eigenstrain); False (order 1): linear + O q2.
 
     Returns
     -------
