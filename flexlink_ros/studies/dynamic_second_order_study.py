@@ -50,7 +50,7 @@ def _p2p_errors(outputs, reference):
 
 def accuracy(mechanism, rpm, elements, sizes_list, revolutions=10, peer=False):
     """
-    The streamed pass and the quasi-static estimate against the full-order pass (and the peer).
+    Compare the streamed pass and the quasi-static estimate with the full-order pass (and peer).
 
     Returns
     -------
