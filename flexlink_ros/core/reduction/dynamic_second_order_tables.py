@@ -137,7 +137,10 @@ class DynamicLoad:
         (the basis misses most of the static axial stretch F_r / EA: from V q alone, N - F_r is
         off by F_r).
         """
-        scalars = self.spline_scalars(angle)
+        return self.load_at_scalars(q, self.spline_scalars(angle), speed, accel, static_q)
+
+    def load_at_scalars(self, q, scalars, speed, accel, static_q=None):
+        """:meth:`load` with the spline's scalars at the crank angle given."""
         trig = 2 * self.link_count
         coef = scalars[trig:].reshape(FORCE_MONOMIALS, self.elements)
         rigid = coef[0] + speed * speed * coef[1] + accel * coef[2]
