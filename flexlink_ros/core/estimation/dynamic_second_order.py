@@ -9,10 +9,21 @@ state z2 = (q2, q2') advanced by the SAME 2-stage Radau IIA step as the linear s
 M, C, K at the same stage times, so the stage system's LU factors of the linear step serve
 both; only the right-hand side differs), loaded by ``f2 = V^T F2(V q)`` at the two stages
 (:class:`core.reduction.dynamic_second_order_tables.DynamicLoad`). The stages' linear q comes
-from the linear step's own stage values (:func:`stage_positions`). The outputs are the linear
-record (its output operator on q, with the residual correction) plus the operator on q2; on a
-model of order 2 the quasi-static correction the record adds is kept as well (``keep_quasi_
-static``), otherwise the record is replaced: q2 carries the shortening itself.
+from the linear step's own stage values (:func:`stage_positions`).
+
+Outputs. On a model of order 2 (``keep_quasi_static``) the record keeps the quasi-static
+correction and adds the output operator on ``q2 - K_r^-1 f2_eigenstrain`` (the mode-
+acceleration split: the basis cannot hold the chord shortening, which the quasi-static forms
+give exactly; q2 adds the rest). On a model of order 1 the outputs are linear + O q2 (the
+full-order pass's 'total'), which misses the lever tip by 68-92 % for that reason.
+
+Two things the reduced state does not hold, measured against the full-order pass (391 rpm,
+gravity, rigid crank and bearings, 8 elements per link; studies/dynamic_second_order_study.py):
+the static axial stretch (the elastic axial force of V q alone is off by the rigid-body force
+F_r, 25 N against 1.5 N at 4 elements per link: the reference is therefore the axial force of
+the reduced static response K_r^-1 f_r at each stage), and, on the default basis (4 modes + 2 static, r = 6), the
+dynamic increment itself (coupler mid-point +3.5 / +5.4 % p2p, worse than the quasi-static
++3.4 / +4.7 %); 8 + 4 (r = 12) brings it to +0.6 / +1.0 %.
 """
 
 import numpy as np
