@@ -21,9 +21,9 @@ Two things the reduced state does not hold, measured against the full-order pass
 gravity, rigid crank and bearings, 8 elements per link; studies/dynamic_second_order_study.py):
 the static axial stretch (the elastic axial force of V q alone is off by the rigid-body force
 F_r, 25 N against 1.5 N at 4 elements per link: the reference is therefore the axial force of
-the reduced static response K_r^-1 f_r at each stage), and, on the default basis (4 modes + 2 static, r = 6), the
-dynamic increment itself (coupler mid-point +3.5 / +5.4 % p2p, worse than the quasi-static
-+3.4 / +4.7 %); 8 + 4 (r = 12) brings it to +0.6 / +1.0 %.
+the reduced static response K_r^-1 f_r at each stage), and, on the default basis (4 modes +
+2 static, r = 6), the dynamic increment itself (coupler mid-point +3.5 / +5.4 % p2p, worse
+than the quasi-static +3.4 / +4.7 %); 8 + 4 (r = 12) brings it to +0.6 / +1.0 %.
 """
 
 import numpy as np
