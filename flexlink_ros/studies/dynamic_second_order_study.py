@@ -18,6 +18,7 @@ import time
 
 import numpy as np
 
+from .dynamic_second_order_bench import time_pass
 from .peer_exudyn import compare, peer_response
 from .peer_model import OUTPUT_KEYS
 from ..core.estimation import native
@@ -125,13 +126,16 @@ def _cpu_per_row(step, rows):
     return (time.process_time_ns() - before) / rows.shape[0]
 
 
-def cost(mechanism, rpm, elements, sizes_list, rounds=5, samples=400):
+def cost(mechanism, rpm, elements, sizes_list, rounds=5, samples=400, kernel_samples=20000):
     """
     Per-sample CPU time [ns], medians over alternating rounds, per basis.
 
     'numpy' / 'numpy_dynamic': the numpy step without and with the pass (1 kHz rows at
     constant speed); 'compiled': the package's compiled order-2 step (the batched rows of the
-    replay) of the same model. Returns a list of dicts with 'r' and these medians.
+    replay) of the same model; with ``kernel_samples`` (0: left out, it needs a C compiler)
+    'kernel' and 'kernel_tabulated': the pass's own work compiled, with and without the
+    static solves (:func:`.dynamic_second_order_bench.time_pass`). Returns a list of dicts with
+    'r' and these times.
     """
     speed = rpm * math.pi / 30.0
     rows = _rows(speed, samples)
@@ -156,8 +160,12 @@ def cost(mechanism, rpm, elements, sizes_list, rounds=5, samples=400):
             before = time.process_time_ns()
             estimator.step_rows(_rows(speed, samples), np.empty(0), records)
             times['compiled'].append((time.process_time_ns() - before) / samples)
-        out.append({'sizes': list(sizes), 'r': model.size,
-                    **{name: float(np.median(v)) for name, v in times.items()}})
+        entry = {'sizes': list(sizes), 'r': model.size,
+                 **{name: float(np.median(v)) for name, v in times.items()}}
+        if kernel_samples:
+            entry['kernel'] = time_pass(load, kernel_samples, solves=True)[0]
+            entry['kernel_tabulated'] = time_pass(load, kernel_samples, solves=False)[0]
+        out.append(entry)
     return out
 
 
@@ -205,6 +213,9 @@ def format_result(result):
         lines.append(f"  r={entry['r']:2d} per sample: numpy {entry['numpy'] / 1e3:7.1f} us, "
                      f"numpy + pass {entry['numpy_dynamic'] / 1e3:7.1f} us, compiled order 2 "
                      f"{entry['compiled'] / 1e3:6.2f} us")
+        if 'kernel' in entry:
+            lines.append(f"       the pass compiled {entry['kernel'] / 1e3:5.2f} us "
+                         f"({entry['kernel_tabulated'] / 1e3:5.2f} us without the static solves)")
     return '\n'.join(lines)
 
 
