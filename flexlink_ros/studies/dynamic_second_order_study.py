@@ -2,16 +2,18 @@
 Does the dynamic second-order pass fit the streaming estimator? Accuracy and cost (issue 14).
 
 ``python -m flexlink_ros.studies.dynamic_second_order_study [--rpm 391] [--elements 8]
-[--sizes 4,2 8,4] [--peer] [--json]`` streams the numpy prototype of the pass
-(core/estimation/dynamic_second_order.py) at constant speed (rigid crank, rigid bearings,
-gravity) per basis size and prints its coupler and lever p2p against the full-order pass
-(core/fe/second_order_dynamic.py) and, with ``--peer``, against the Exudyn peer, next to the
-quasi-static estimate of the same model. ``--cost`` times, in alternating rounds, the numpy
-step with and without the pass and the compiled order-2 step of each basis (the pass's
-extra work in a compiled step is at least that of the larger basis it needs).
+[--sizes 4,2 8,4] [--peer] [--cost] [--no-gravity] [--json]`` streams the numpy prototype of
+the pass (core/estimation/dynamic_second_order.py) at constant speed (rigid crank, rigid
+bearings, gravity unless ``--no-gravity``) per basis size and prints its coupler and lever
+p2p against the full-order pass (core/fe/second_order_dynamic.py) and, with ``--peer``,
+against the Exudyn peer, next to the quasi-static estimate of the same model. ``--cost``
+times, in alternating rounds, the numpy step with and without the pass and the compiled
+order-2 step of each basis, and the pass's own work compiled
+(:mod:`.dynamic_second_order_bench`).
 """
 
 import argparse
+import dataclasses
 import json
 import math
 import time
@@ -49,7 +51,7 @@ def _p2p_errors(outputs, reference):
     return (np.ptp(outputs, axis=0) / np.ptp(reference, axis=0) - 1.0).tolist()
 
 
-def accuracy(mechanism, rpm, elements, sizes_list, revolutions=10, peer=False):
+def accuracy(mechanism, rpm, elements, sizes_list, revolutions=10, peer=False, gravity=True):
     """
     Compare the streamed pass and the quasi-static estimate with the full-order pass (and peer).
 
@@ -59,8 +61,11 @@ def accuracy(mechanism, rpm, elements, sizes_list, revolutions=10, peer=False):
         'full_order': p2p [m] of the full-order pass, and its quasi-static and linear p2p
         errors; per basis 'r', 'dynamic' and 'quasi_static' p2p errors against the full-order
         pass; with ``peer`` the 'peer' p2p errors of every response (OUTPUT_KEYS order).
+        ``gravity`` False: the mechanism's gravity set to zero (in the peer too).
 
     """
+    if not gravity:
+        mechanism = dataclasses.replace(mechanism, gravity=(0.0, 0.0))
     speed = rpm * math.pi / 30.0
     options = case_options(rpm, elements, sizes_list[0])
     linkage = FlexibleLinkage(fe_mechanism(mechanism, options), options)
@@ -69,7 +74,7 @@ def accuracy(mechanism, rpm, elements, sizes_list, revolutions=10, peer=False):
     quasi_static = corrected_response(linkage, linear)['total']
     responses = {'full linear': linear.outputs, 'full quasi-static': quasi_static,
                  'full dynamic': full['total']}
-    out = {'rpm': rpm, 'elements': elements,
+    out = {'rpm': rpm, 'elements': elements, 'gravity': bool(gravity),
            'full_order': {'p2p': np.ptp(full['total'], axis=0).tolist(),
                           'quasi_static': _p2p_errors(quasi_static, full['total']),
                           'linear': _p2p_errors(linear.outputs, full['total'])},
@@ -89,7 +94,7 @@ def accuracy(mechanism, rpm, elements, sizes_list, revolutions=10, peer=False):
                              'dynamic': _p2p_errors(step[True], full['total']),
                              'quasi_static': _p2p_errors(step[False], full['total'])})
     if peer:
-        reference = peer_response(mechanism, rpm, elements_per_link=elements, gravity=True)
+        reference = peer_response(mechanism, rpm, elements_per_link=elements, gravity=gravity)
         out['peer'] = {name: [compare(reference, _as_response(linear.crank_angle, values))[key]
                               ['p2p_error'] for key in OUTPUT_KEYS]
                        for name, values in responses.items()}
@@ -180,11 +185,13 @@ def main(argv=None):
     parser.add_argument('--sizes', nargs='+', default=['4,2', '8,4'])
     parser.add_argument('--peer', action='store_true')
     parser.add_argument('--cost', action='store_true')
+    parser.add_argument('--no-gravity', action='store_true')
     parser.add_argument('--json', action='store_true')
     args = parser.parse_args(argv)
     mechanism = load_mechanism(args.mechanism)
     sizes = [tuple(int(v) for v in s.split(',')) for s in args.sizes]
-    result = {'accuracy': accuracy(mechanism, args.rpm, args.elements, sizes, peer=args.peer)}
+    result = {'accuracy': accuracy(mechanism, args.rpm, args.elements, sizes, peer=args.peer,
+                                   gravity=not args.no_gravity)}
     if args.cost:
         result['cost'] = cost(mechanism, args.rpm, args.elements, sizes)
     if args.json:
@@ -197,7 +204,8 @@ def main(argv=None):
 def format_result(result):
     """Format :func:`main`'s result as text (p2p errors in %, costs in us)."""
     acc = result['accuracy']
-    lines = [f"{acc['rpm']:.0f} rpm, {acc['elements']} elements per link, gravity; p2p error "
+    lines = [f"{acc['rpm']:.0f} rpm, {acc['elements']} elements per link, gravity "
+             f"{'on' if acc.get('gravity', True) else 'off'}; p2p error "
              f"against the full-order dynamic pass ({', '.join(OUTPUT_KEYS)}), %:"]
 
     def pct(values):
