@@ -68,6 +68,10 @@ class DynamicSecondOrderStep(NumpyStep):
     keep_quasi_static : bool
         Keep the quasi-static correction of an order-2 model's record (False: a model of order
         1 is expected, the outputs are linear(q) + O q2).
+    static_axial : bool
+        Take the elastic axial force against the reduced static response K_r^-1 f_r at each
+        stage (True) or against the tabulated rigid-body force F_r (False: the basis misses
+        the static axial stretch, so that is off by about F_r).
 
     """
 
