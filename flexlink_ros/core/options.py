@@ -57,6 +57,12 @@ class ModelOptions:
         1: the linear KED outputs of the paper; 2: plus the second-order motion of the bent
         links' chord shortening (core/fe/second_order_*.py; the reduced model then carries its
         tables). 1 here, the library's linear model; the node and the CLI default to 2.
+    soft_modes : int
+        The estimator's second reduction onto the p lowest modes (core/reduction/soft_basis.py):
+        -1 (default) the smallest p at a usable spectral gap, or all r coordinates where the
+        model has none (recorded in ``info['soft']``); p > 0 exactly p (refused without a gap
+        there); 0 steps all r coordinates. Not part of the cache key: the soft tables are made
+        from the cached reduced model when it is loaded.
 
     """
 
@@ -71,6 +77,7 @@ class ModelOptions:
     gravity: bool = True
     stiffness_damping: float = 0.0
     order: int = 1
+    soft_modes: int = -1
 
     def __post_init__(self):
         if self.bearings not in ('flexible', 'rigid'):
@@ -85,6 +92,9 @@ class ModelOptions:
             raise ValueError(f'`grid_size` must be >= 8, got {self.grid_size}')
         if self.order not in (1, 2):
             raise ValueError(f'`order` must be 1 or 2, got {self.order!r}')
+        if int(self.soft_modes) < -1:
+            raise ValueError(f'`soft_modes` must be -1, 0 or positive, got {self.soft_modes}')
+        object.__setattr__(self, 'soft_modes', int(self.soft_modes))
         if not self.speed_max > 0.0:
             raise ValueError(f'`speed_max` must be positive, got {self.speed_max}')
         beta = float(self.stiffness_damping)
@@ -107,6 +117,7 @@ class ModelOptions:
         order 2 carries extra tables, so neither may share that key.
         """
         fields = dataclasses.asdict(self)
+        del fields['soft_modes']
         if fields['gravity']:
             del fields['gravity']
         if not fields['stiffness_damping']:

@@ -35,12 +35,20 @@
 #define SO_SCALARS 22   /* second order: cos, sin of 3 link angles, kappa 4 x 4 */
 #define SO_TRIG 6       /* kappa's first scalar */
 #define SO_FORMS 4      /* bending sums: crank, coupler, lever, coupler's half */
+#define LIFT_BUFFERS 4  /* the soft basis's lift: phi, dphi, residual, lifted */
 
 static const double TWO_PI = 6.283185307179586;
 static const double PI = 3.141592653589793;     /* math.pi */
 
 typedef struct {
     Py_ssize_t r, cells, mass_groups, kf_groups, out_rows, joint_rows;
+    /* the soft basis (soft_tables.py): the step's r is p; the record's is rr, the lift
+       q = Phi eta + residual, q' = Phi eta' + w Phi' eta from power-form cell tables, and
+       the damping table holds [C | D] with D added as w D to K. rr == r, lift NULL: none. */
+    Py_ssize_t rr;
+    const double *lift_phi, *lift_dphi, *lift_residual;
+    double *lifted;     /* [q, q', 1] of the reduced model (2 rr + 1) */
+    double *frame;      /* scratch: Phi, Phi' (rr x p each) */
     const float *mass, *damping;    /* float32, node tables: see tables._StepTables */
     const double *kf, *out, *joint, *g0;
     double cells_per_radian, c1;
@@ -48,10 +56,12 @@ typedef struct {
     double *blocks;     /* [slot][m] r x r, m = M, C, K; slot 0 sample, 1 stage 1 */
     double *loads;      /* [slot] r */
     double *products;   /* [slot][m][l] r: X_{slot,m} z_l */
+    double *transport;  /* D of the soft basis (r x r) */
     double *matrix;     /* 2r x 2r */
     double *rhs;        /* 2r */
     double *operator;   /* outputs x (r + 1): [O | corr] of the record */
     double weights[ROWS_ALL];   /* power form: the record's per-cell tables */
+    Py_ssize_t cells_index;     /* the cell of the last lift */
     double hermite[ROWS_ALL];   /* Hermite form: the node tables */
     /* second-order outputs (core/reduction/second_order_tables.py); so_terms 0: order 1 */
     Py_ssize_t so_rows, so_slots, so_gathers, so_terms;
@@ -180,16 +190,27 @@ static void load(Step *s, int slot, double angle, double w, double a)
     const Py_ssize_t k = evaluate(s, angle, w, a, s->weights, s->hermite);
     const Py_ssize_t k1 = k + 1 < s->cells ? k + 1 : 0;
     double *blocks = s->blocks + (Py_ssize_t)slot * 3 * r2;
-    const Py_ssize_t mass_node = 2 * s->mass_groups * r2, damping_node = 2 * GROUPS_C * r2;
+    const Py_ssize_t damping_stride = s->lift_phi != NULL ? 2 * r2 : r2;
+    const Py_ssize_t mass_node = 2 * s->mass_groups * r2,
+                     damping_node = 2 * GROUPS_C * damping_stride;
     combine_nodes_f32(s->hermite + FIRST_MC, s->mass + k * mass_node, s->mass + k1 * mass_node,
                       s->mass_groups, r2, r2, blocks);
     combine_nodes_f32(s->hermite + FIRST_MC, s->damping + k * damping_node,
-                      s->damping + k1 * damping_node, GROUPS_C, r2, r2, blocks + r2);
+                      s->damping + k1 * damping_node, GROUPS_C, damping_stride, r2, blocks + r2);
+    if (s->lift_phi != NULL)
+        combine_nodes_f32(s->hermite + FIRST_MC, s->damping + k * damping_node + r2,
+                          s->damping + k1 * damping_node + r2, GROUPS_C, damping_stride, r2,
+                          s->transport);
     /* [K | f] from the kf table (monomials a, 1, w2, and w with stiffness damping) */
     const Py_ssize_t kf_width = r2 + r, kf_node = 2 * s->kf_groups * kf_width;
     const double *lo = s->kf + k * kf_node, *hi = s->kf + k1 * kf_node;
     combine_nodes(s->hermite, lo, hi, s->kf_groups, kf_width, r2, blocks + 2 * r2);
     combine_nodes(s->hermite, lo + r2, hi + r2, s->kf_groups, kf_width, r, s->loads + slot * r);
+    if (s->lift_phi != NULL) {
+        double *stiffness = blocks + 2 * r2;
+        for (Py_ssize_t j = 0; j < r2; j++)
+            stiffness[j] += w * s->transport[j];
+    }
 }
 
 /*
@@ -205,7 +226,7 @@ static void second_order(Step *s, Py_ssize_t k, const double *q, double *restric
         sc[j] = w[0] * cell[j] + w[1] * cell[SO_SCALARS + j] + w[2] * cell[2 * SO_SCALARS + j]
                 + w[3] * cell[3 * SO_SCALARS + j];
     for (Py_ssize_t i = 0; i < s->so_rows; i++)
-        s->so_y[i] = dot(s->so_v + i * s->r, q, s->r);
+        s->so_y[i] = dot(s->so_v + i * s->rr, q, s->rr);
     memset(s->so_z, 0, (size_t)s->so_slots * sizeof(double));
     for (Py_ssize_t p = 0; p < s->so_gathers; p++) {
         const int *g = s->so_gather + 3 * p;
@@ -224,11 +245,40 @@ static void second_order(Step *s, Py_ssize_t k, const double *q, double *restric
     }
 }
 
-/* The record of the crank state prev at the state z (tables._StepTables.record). */
-static void record(Step *s, const double *z, const double *prev, double *restrict out)
+/* The lifted state [q, q', 1] of the soft state z at the crank state prev into s->lifted
+   (SoftLift.state); the weights of prev are set. Returns the cell. */
+static Py_ssize_t lift(Step *s, const double *z, const double *prev)
 {
-    const Py_ssize_t r = s->r, width = OUTPUTS * (r + 1);
-    Py_ssize_t k = evaluate(s, prev[0], prev[1], prev[2], s->weights, s->hermite);
+    const Py_ssize_t p = s->r, rr = s->rr, width = rr * p;
+    const Py_ssize_t k = evaluate(s, prev[0], prev[1], prev[2], s->weights, s->hermite);
+    double *frame = s->frame, *first = s->frame + width, *q = s->lifted, *v = s->lifted + rr;
+    combine(s->weights + 4, s->lift_phi + k * 4 * width, 4, width, width, frame);
+    combine(s->weights + 4, s->lift_dphi + k * 4 * width, 4, width, width, first);
+    combine(s->weights, s->lift_residual + k * 12 * rr, 12, rr, rr, q);
+    for (Py_ssize_t i = 0; i < rr; i++) {
+        q[i] += dot(frame + i * p, z, p);
+        v[i] = dot(frame + i * p, z + p, p) + prev[1] * dot(first + i * p, z, p);
+    }
+    s->lifted[2 * rr] = 1.0;
+    s->cells_index = k;
+    return k;
+}
+
+/* The record of the crank state prev at the state z (tables._StepTables.record); with the
+   soft basis, of its lift (computed here unless `lifted` says it is). */
+static void record(Step *s, const double *z, const double *prev, double *restrict out,
+                   int lifted)
+{
+    const Py_ssize_t r = s->rr, width = OUTPUTS * (r + 1);
+    Py_ssize_t k;
+    if (s->lift_phi == NULL)
+        k = evaluate(s, prev[0], prev[1], prev[2], s->weights, s->hermite);
+    else if (lifted)
+        k = s->cells_index;
+    else
+        k = lift(s, z, prev);
+    if (s->lift_phi != NULL)
+        z = s->lifted;
     double *op = s->operator;
     combine(s->weights, s->out + k * s->out_rows * width, s->out_rows, width, width, op);
     for (int o = 0; o < OUTPUTS; o++) {
@@ -531,7 +581,7 @@ PyDoc_STRVAR(advance_doc,
    count matches the buffers and every index lies within its array; or -1. */
 static int take_second(PyObject *second, Py_buffer *views, Step *s)
 {
-    const Py_ssize_t r = s->r;
+    const Py_ssize_t r = s->rr;
     PyObject *values_obj, *index_obj;
     if (second == NULL || second == Py_None)
         return 0;
@@ -580,6 +630,33 @@ static int take_second(PyObject *second, Py_buffer *views, Step *s)
     return 0;
 }
 
+/* The soft basis's lift (phi, dphi, residual, lifted: SoftLift.packed and the lifted state)
+   into s, its sizes checked against the step's r = p and the grid; or -1. */
+static int take_lift(PyObject *lift_tuple, Py_buffer *views, Step *s)
+{
+    PyObject *objects[LIFT_BUFFERS];
+    if (!PyArg_ParseTuple(lift_tuple, "OOOO;`lift` must be (phi, dphi, residual, lifted)",
+                          &objects[0], &objects[1], &objects[2], &objects[3]))
+        return -1;
+    if (get_buffer(objects[3], &views[3], 1, "lifted", -1) != 0)
+        return -1;
+    const Py_ssize_t rr = (views[3].len / 8 - 1) / 2, p = s->r;
+    if (rr < 1 || views[3].len / 8 != 2 * rr + 1) {
+        PyErr_SetString(PyExc_ValueError, "`lifted` must have 2 r + 1 values");
+        return -1;
+    }
+    if (get_buffer(objects[0], &views[0], 0, "phi", s->cells * 4 * rr * p) != 0
+        || get_buffer(objects[1], &views[1], 0, "dphi", s->cells * 4 * rr * p) != 0
+        || get_buffer(objects[2], &views[2], 0, "residual", s->cells * 12 * rr) != 0)
+        return -1;
+    s->rr = rr;
+    s->lift_phi = views[0].buf;
+    s->lift_dphi = views[1].buf;
+    s->lift_residual = views[2].buf;
+    s->lifted = views[3].buf;
+    return 0;
+}
+
 /* Rows (row groups) per grid cell or node of a table (at most `most`), or -1 with an exception set. */
 static Py_ssize_t rows_of(const Py_buffer *view, Py_ssize_t per_row, Py_ssize_t cells,
                           Py_ssize_t most, const char *name)
@@ -594,16 +671,17 @@ static Py_ssize_t rows_of(const Py_buffer *view, Py_ssize_t per_row, Py_ssize_t 
 
 static PyObject *advance(PyObject *module, PyObject *args)
 {
-    PyObject *objects[14] = {NULL};
+    PyObject *objects[15] = {NULL};
     double cells_per_radian, c1;
     (void)module;
-    if (!PyArg_ParseTuple(args, "OOOOOOddOOOOO|O", &objects[0], &objects[1], &objects[2],
+    if (!PyArg_ParseTuple(args, "OOOOOOddOOOOO|OO", &objects[0], &objects[1], &objects[2],
                           &objects[3], &objects[4], &objects[5], &cells_per_radian, &c1,
                           &objects[8], &objects[9], &objects[10], &objects[11], &objects[12],
-                          &objects[13]))
+                          &objects[13], &objects[14]))
         return NULL;
     Py_buffer mass = {0}, damping = {0}, kf = {0}, out = {0}, joint = {0}, g0 = {0}, z = {0},
               prev = {0}, rows = {0}, states = {0}, records = {0};
+    Py_buffer lift_views[LIFT_BUFFERS] = {{0}};
     Py_buffer second[SO_BUFFERS] = {{0}};
     PyObject *result = NULL;
     double *scratch = NULL;
@@ -616,19 +694,27 @@ static PyObject *advance(PyObject *module, PyObject *args)
         PyErr_SetString(PyExc_ValueError, "`z` must have 2 r + 1 values");
         goto done;
     }
+    const int soft = objects[14] != NULL && objects[14] != Py_None;
+    const Py_ssize_t damping_width = soft ? 2 * r2 : r2;
     if (get_typed_buffer(objects[1], &damping, 0, "damping", -1, "f") != 0)
         goto done;
-    const Py_ssize_t cells = damping.len / 4 / (2 * GROUPS_C * r2);
-    if (cells < 1 || damping.len / 4 != cells * 2 * GROUPS_C * r2) {
+    const Py_ssize_t cells = damping.len / 4 / (2 * GROUPS_C * damping_width);
+    if (cells < 1 || damping.len / 4 != cells * 2 * GROUPS_C * damping_width) {
         PyErr_SetString(PyExc_ValueError, "`damping` does not match the size of `z`");
         goto done;
     }
+    s.r = r;
+    s.rr = r;
+    s.cells = cells;
+    if (soft && take_lift(objects[14], lift_views, &s) != 0)
+        goto done;
+    const Py_ssize_t rr = s.rr;
     if (get_typed_buffer(objects[0], &mass, 0, "mass", -1, "f") != 0
         || (s.mass_groups = rows_of(&mass, 2 * r2, cells, GROUPS_C, "mass")) < 0
         || get_buffer(objects[2], &kf, 0, "kf", -1) != 0
         || (s.kf_groups = rows_of(&kf, 2 * (r2 + r), cells, GROUPS_KF_MAX, "kf")) < 0
         || get_buffer(objects[3], &out, 0, "out", -1) != 0
-        || (s.out_rows = rows_of(&out, OUTPUTS * (r + 1), cells, ROWS_ALL, "out")) < 0
+        || (s.out_rows = rows_of(&out, OUTPUTS * (rr + 1), cells, ROWS_ALL, "out")) < 0
         || get_buffer(objects[4], &joint, 0, "joint", -1) != 0
         || (s.joint_rows = rows_of(&joint, JOINT_WIDTH, cells, ROWS_ALL, "joint")) < 0
         || get_buffer(objects[5], &g0, 0, "g0", POWERS * 64) != 0
@@ -643,7 +729,7 @@ static PyObject *advance(PyObject *module, PyObject *args)
     if (get_buffer(objects[11], &states, 1, "states", -1) != 0
         || get_buffer(objects[12], &records, 1, "records", -1) != 0)
         goto done;
-    if (states.len != 0 && states.len / 8 != count * n) {
+    if (states.len != 0 && states.len / 8 != count * 2 * rr) {
         PyErr_SetString(PyExc_ValueError, "`states` must be empty or rows x 2 r");
         goto done;
     }
@@ -665,7 +751,8 @@ static PyObject *advance(PyObject *module, PyObject *args)
     if (take_second(objects[13], second, &s) != 0)
         goto done;
     scratch = malloc(sizeof(double) * (size_t)(6 * r2 + 2 * r + 12 * r + n * n + n
-                                               + OUTPUTS * (r + 1) + s.so_rows + s.so_slots + 1));
+                                               + OUTPUTS * (rr + 1) + s.so_rows + s.so_slots + 1
+                                               + r2 + 2 * rr * r));
     if (scratch == NULL) {
         PyErr_NoMemory();
         goto done;
@@ -676,8 +763,10 @@ static PyObject *advance(PyObject *module, PyObject *args)
     s.matrix = s.products + 12 * r;
     s.rhs = s.matrix + n * n;
     s.operator = s.rhs + n;
-    s.so_y = s.operator + OUTPUTS * (r + 1);
+    s.so_y = s.operator + OUTPUTS * (rr + 1);
     s.so_z = s.so_y + s.so_rows;
+    s.transport = s.so_z + s.so_slots + 1;
+    s.frame = s.transport + r2;
 
     double *zv = z.buf, *pv = prev.buf, *state_out = states.len ? states.buf : NULL;
     double *record_out = records.buf;
@@ -704,10 +793,16 @@ static PyObject *advance(PyObject *module, PyObject *args)
             failed = radau_step(&s, zv, pv, sub_h, angle, w, a, sub_step) != 0;
         if (failed)
             break;
+        const int wanted = every_record || m == count - 1;
+        int lifted = 0;
+        if (soft && (wanted || state_out != NULL)) {
+            lift(&s, zv, pv);
+            lifted = 1;
+        }
         if (state_out != NULL)
-            memcpy(state_out + m * n, zv, (size_t)n * sizeof(double));
-        if (every_record || m == count - 1)
-            record(&s, zv, pv, record_out + (every_record ? m * RECORD_SIZE : 0));
+            memcpy(state_out + m * 2 * rr, soft ? s.lifted : zv, (size_t)(2 * rr) * sizeof(double));
+        if (wanted)
+            record(&s, zv, pv, record_out + (every_record ? m * RECORD_SIZE : 0), lifted);
     }
     if (released != NULL)
         PyEval_RestoreThread(released);
@@ -732,6 +827,8 @@ done:
     PyBuffer_Release(&records);
     for (int i = 0; i < SO_BUFFERS; i++)
         PyBuffer_Release(&second[i]);
+    for (int i = 0; i < LIFT_BUFFERS; i++)
+        PyBuffer_Release(&lift_views[i]);
     return result;
 }
 

@@ -89,12 +89,18 @@ class NumpyStep:
     def __init__(self, model, tables):
         if MONOMIALS != ('a', '1', 'w2', 'w', 'w4', 'wa', 'w3'):
             raise ValueError('monomial order changed: update NumpyStep.evaluate')
-        r = model.size
+        r = tables.size
         self.tables = tables
         self.grid_size = model.grid_size
         self.cells_per_radian = model.grid_size / TWO_PI
-        self.z = np.zeros(2 * r + 1)        # [q, v, 1]
+        self.z = np.zeros(2 * r + 1)        # [q, v, 1] (soft basis: [eta, eta', 1])
         self.z[2 * r] = 1.0
+        # The reduced model's [q, v, 1]: z itself, or lifted from the soft coordinates.
+        self.lifted = self.z
+        if tables.lift is not None:
+            self.lifted = np.zeros(2 * tables.record_size + 1)
+            self.lifted[-1] = 1.0
+        self._damping = np.zeros(tables.damping.shape[2])
         self.previous = np.zeros(3)         # crank state (angle, speed, accel) of the last step
         # [M, C, K, F] of stage 1 and of the sample, in alternating slots.
         self._stored = np.zeros((2, 4, r * r))
@@ -102,6 +108,18 @@ class NumpyStep:
         self._parity = 0
         self._weights = np.zeros(CELL_POWERS * len(MONOMIALS))
         self._hermite = np.zeros((2, 2 * len(MONOMIALS)))
+
+    @property
+    def state(self):
+        """Return (q, q') of the reduced model at the newest sample (a view)."""
+        return self.lifted[:-1]
+
+    def _record(self, crank, record):
+        """Write the record of the state at crank state (angle, speed, accel)."""
+        weights, _, k = self.evaluate(*crank)
+        if self.tables.lift is not None:
+            self.tables.lift.state(weights, k, self.z, crank[1], self.lifted)
+        self.tables.record(weights, k, self.lifted, record)
 
     def evaluate(self, angle, speed, accel):
         """
@@ -156,8 +174,7 @@ class NumpyStep:
         r = q0.size
         self.z[:r] = q0
         self.z[r:2 * r] = v0
-        weights, _, k = self.evaluate(*crank)
-        self.tables.record(weights, k, self.z, record)
+        self._record(crank, record)
         self.previous[:] = crank
 
     def advance(self, rows, states, records):
@@ -174,16 +191,14 @@ class NumpyStep:
             Rows x RECORD_SIZE, or one record (of the last row).
 
         """
-        tables = self.tables
         rows = rows.reshape(-1, native.ROW_SIZE).tolist()
         every = records.ndim == 2
         for n, (h, splits, angle, w, a, step) in enumerate(rows):
             self._sub_steps(h, int(splits), angle, w, a, step)
-            if every or n == len(rows) - 1:
-                weights, _, k = self.evaluate(angle, w, a)
-                tables.record(weights, k, self.z, records[n] if every else records)
+            if every or n == len(rows) - 1 or states.size:
+                self._record((angle, w, a), records[n] if every else records)
             if states.size:
-                states[n] = self.z[:states.shape[1]]
+                states[n] = self.lifted[:states.shape[1]]
 
     def criteria(self, record, near_zero_fraction):
         """
@@ -229,17 +244,20 @@ class NumpyStep:
             np.dot(hermite[0, rows], table[k], out=out)
             out += np.dot(hermite[1, rows], table[0])
 
-    def _load(self, slot, hermite, k):
+    def _load(self, slot, hermite, k, speed):
         """Write M, C and [K, f] of the node tables at (Hermite weights, cell k) into a slot."""
         tables, r = self.tables, self.tables.size
         r2 = r * r
         flat = self._flat[slot]
         first = tables.FIRST_MC
         self._combine_nodes(hermite, k, first, tables.mass_groups, tables.mass, flat[:r2])
-        self._combine_nodes(hermite, k, first, tables.GROUPS_C, tables.damping,
-                            flat[r2:2 * r2])
+        self._combine_nodes(hermite, k, first, tables.GROUPS_C, tables.damping, self._damping)
+        flat[r2:2 * r2] = self._damping[:r2]
         self._combine_nodes(hermite, k, 0, tables.kf_groups, tables.kf,
                             flat[2 * r2:3 * r2 + r])
+        if tables.lift is not None:
+            # The soft basis's damping table holds [C | D]: w D joins the stiffness.
+            flat[2 * r2:3 * r2] += speed * self._damping[r2:]
 
     def _load_stages(self, angle, speed, accel, advance):
         """Load stage 1 (crank state interpolated to c_1 h) and the sample into the slots."""
@@ -252,11 +270,12 @@ class NumpyStep:
             stage_angle -= TWO_PI
         elif stage_angle < 0.0:
             stage_angle += TWO_PI
-        _, hermite, k = self.evaluate(stage_angle, previous[1] + c1 * (speed - previous[1]),
+        stage_speed = previous[1] + c1 * (speed - previous[1])
+        _, hermite, k = self.evaluate(stage_angle, stage_speed,
                                       previous[2] + c1 * (accel - previous[2]))
-        self._load(1 - parity, hermite, k)
+        self._load(1 - parity, hermite, k, stage_speed)
         _, hermite, k = self.evaluate(angle, speed, accel)
-        self._load(parity, hermite, k)
+        self._load(parity, hermite, k, speed)
         self.previous[:] = (angle, speed, accel)
         return parity
 
@@ -292,6 +311,7 @@ class CompiledStep(NumpyStep):
             raise RuntimeError('the compiled step (core/estimation/_radau_step.c) is not built')
         super().__init__(model, tables)
         self._kernel = native.impl
+        self._lift_tables = None if tables.lift is None else tables.lift.packed()
 
     def advance(self, rows, states, records):
         """
@@ -308,9 +328,10 @@ class CompiledStep(NumpyStep):
 
         """
         t = self.tables
+        lift = None if t.lift is None else (*self._lift_tables, self.lifted)
         self._kernel.advance(t.mass, t.damping, t.kf, t.out, t.joint, t.g0,
                              self.cells_per_radian, STAGE1, self.z, self.previous, rows,
-                             states, records, t.second_packed)
+                             states, records, t.second_packed, lift)
 
     def criteria(self, record, near_zero_fraction):
         """

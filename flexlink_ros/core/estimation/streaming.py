@@ -112,7 +112,7 @@ class StreamingEstimator:
         if len(JOINT_NAMES) != 4:
             raise ValueError('the criteria path is written for four joints')
         self._tables = tables.step_tables(model) if step_tables is None else step_tables
-        if (self._tables.size, self._tables.mass.shape[0]) != (model.size, model.grid_size):
+        if (self._tables.size, self._tables.mass.shape[0]) != (model.step_size, model.grid_size):
             raise ValueError('`step_tables` do not match the model (size and grid)')
         self._stepper = (CompiledStep if compiled else NumpyStep)(model, self._tables)
         self._record = np.zeros(RECORD_SIZE)
@@ -152,8 +152,8 @@ class StreamingEstimator:
     def orbit(self, orbit):
         self._warm.orbit = orbit
 
-    state = property(lambda self: self._stepper.z[:2 * self._tables.size],
-                     doc="(q, q') of the newest sample (a view).")
+    state = property(lambda self: self._stepper.state,
+                     doc="(q, q') of the newest sample (a view; the reduced model's r).")
 
     @property
     def last_record(self):
@@ -369,7 +369,7 @@ class StreamingEstimator:
         state = self.state
         sample = sample_from_record(
             stamp_ns, (angle, speed, accel), deflection, correction, criteria,
-            flags | self._base_flags, message, tuple(state[:self._tables.size].tolist()),
+            flags | self._base_flags, message, tuple(state[:self.model.size].tolist()),
             self.nonlinearity(angle, speed, min(max(accel, -self.accel_limit), self.accel_limit),
                               state))
         self._last = sample

@@ -15,6 +15,7 @@ from ..numerics import TWO_PI
 from ..reduction.cells import CELL_POWERS, monomial_values, MONOMIALS
 from ..reduction.model import cell_groups
 from ..reduction.second_order_tables import SecondOrderForms
+from ..reduction.soft_tables import SoftLift
 from ...names import OUTPUT_NAMES
 
 POWERS = (-2, -1, 0, 1, 2)   # G(h) is a Laurent polynomial in h
@@ -202,8 +203,14 @@ class _StepTables:
 
     def __init__(self, model, stages=2):
         _check_layout(model, stages)
-        self.size = model.size
-        self.mass_groups, self.mass, self.damping, self.kf = build_node_tables(model)
+        self.size, self.record_size = model.step_size, model.size
+        self.lift = None
+        if model.soft is None:
+            self.mass_groups, self.mass, self.damping, self.kf = build_node_tables(model)
+        else:
+            self.lift = SoftLift(model.soft)
+            self.mass_groups, self.mass, self.damping, self.kf = 1, *(
+                model.soft[f'soft_{name}'] for name in ('mass', 'damping', 'kf'))
         self.kf_groups = self.kf.shape[1] // 2
         self.out_rows, self.out, self.joint = build_output_tables(model)
         self.g_stack = build_step_coefficients(stages)
@@ -255,7 +262,7 @@ class _StepTables:
             The record, written in place.
 
         """
-        r = self.size
+        r = self.record_size
         operator = np.dot(weights[:self.out_rows], self.out[k]).reshape(-1, r + 1)
         outputs = operator.shape[0]
         np.dot(operator[:, :r], z[:r], out=out[:outputs])
@@ -295,7 +302,7 @@ def system_blocks(model, tables, theta, w, a):
         Crank acceleration [rad/s^2].
 
     """
-    r = model.size
+    r = tables.size
     theta = np.asarray(theta, dtype=float)
     cells, t = model.cell(theta)
     basis = np.stack(hermite_basis(t), axis=-1)
@@ -304,7 +311,7 @@ def system_blocks(model, tables, theta, w, a):
     # (angle, monomial, node k / k + 1, V / S)
     weights = (monomials[:, :, None] * basis[:, None, :]).reshape(theta.size, -1, 2, 2)
     mass = np.empty((theta.size, r * r))
-    damping = np.empty((theta.size, r * r))
+    damping = np.empty((theta.size, tables.damping.shape[2]))
     kf = np.empty((theta.size, r * r + r))
     first, after = tables.FIRST_MC, tables.FIRST_MC + tables.mass_groups
     for k, group in cell_groups(cells):
@@ -317,7 +324,11 @@ def system_blocks(model, tables, theta, w, a):
             out[group] = (node[:, :, 0].reshape(group.size, -1) @ table[k]
                           + node[:, :, 1].reshape(group.size, -1) @ table[k1])
     shape = (theta.size, r, r)
-    return (mass.reshape(shape), damping.reshape(shape), kf[:, :r * r].reshape(shape),
+    stiffness = kf[:, :r * r]
+    if tables.lift is not None:
+        # The soft basis's damping table holds [C | D]: the step adds w D to K.
+        stiffness = stiffness + float(w) * damping[:, r * r:]
+    return (mass.reshape(shape), damping[:, :r * r].reshape(shape), stiffness.reshape(shape),
             kf[:, r * r:])
 
 
@@ -339,13 +350,15 @@ def quasi_static_peak(model, tables):
         :func:`step_tables` of the model.
 
     """
-    r = model.size
+    r = tables.record_size
     theta = np.arange(model.grid_size) / (model.grid_size / TWO_PI)
     operator_rows = np.zeros(tables.out_rows)
     peak = 0.0
     for w in np.linspace(0.0, float(model.speed_max), QUASI_STATIC_SPEEDS).tolist():
         _, _, stiffness, load = system_blocks(model, tables, theta, w, 0.0)
         q = np.linalg.solve(stiffness, load[..., None])[..., 0]
+        if tables.lift is not None:
+            q = tables.lift.nodes(q, w)
         # Power 0 of each monomial (a, 1, w2, w, w4, wa, w3): the node's operator.
         monomials = (0.0, 1.0, w * w, w, w ** 4, 0.0, w ** 3)
         operator_rows[0::4] = monomials[:operator_rows[0::4].size]

@@ -189,5 +189,5 @@ class WarmStart:
             q0, v0 = self.periodic_state(model, blocks, angle, speed)
         else:
             _, _, stiffness, load = blocks(np.array([angle]), speed, accel)
-            q0, v0 = np.linalg.solve(stiffness[0], load[0]), np.zeros(model.size)
+            q0, v0 = np.linalg.solve(stiffness[0], load[0]), np.zeros(model.step_size)
         return q0, v0, flags

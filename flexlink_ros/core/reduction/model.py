@@ -117,6 +117,10 @@ class ReducedModel:
     second_order : dict of str to ndarray or None
         Tables of the second-order outputs (:mod:`.second_order_tables`, names ``second_*``)
         of a model of order 2; None: the linear outputs only (order 1).
+    soft : dict of str to ndarray or None
+        The step's tables on the soft basis (:mod:`.soft_tables`, names ``soft_*``): the
+        estimator steps p coordinates and lifts them to the r of this model; None: it steps
+        all r.
 
     """
 
@@ -129,6 +133,7 @@ class ReducedModel:
     info: dict = dataclasses.field(default_factory=dict)
     nonlinearity: dict = None
     second_order: object = None
+    soft: object = None
 
     @property
     def grid_size(self):
@@ -141,6 +146,13 @@ class ReducedModel:
         return self.basis.shape[1]
 
     @property
+    def step_size(self):
+        """Return the coordinates the estimator steps: p with the soft basis, else r."""
+        if self.soft is None:
+            return self.size
+        return self.soft['soft_phi'].shape[2] // self.size
+
+    @property
     def layout(self):
         """Return the column layout of ``table``."""
         return TableLayout(self.size)
@@ -149,6 +161,7 @@ class ReducedModel:
     def nbytes(self):
         """Return the memory of the arrays [bytes]."""
         second = sum(a.nbytes for a in (self.second_order or {}).values())
+        second += sum(a.nbytes for a in (self.soft or {}).values())
         return (self.table.nbytes + self.shape_table.nbytes + self.basis.nbytes
                 + self.force_moments.nbytes + second
                 + sum(a.nbytes for a in (self.nonlinearity or {}).values()))

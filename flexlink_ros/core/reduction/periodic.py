@@ -46,7 +46,7 @@ def periodic_response(model, speed, start_angle=0.0, steps=720, stages=2, blocks
         Reduced coordinates and velocities.
 
     """
-    size = model.size
+    size = model.step_size
     if blocks is None:
         blocks = lambda theta, w, a: system_blocks(model, model.evaluate(theta, w, a))  # noqa
     if speed == 0.0:

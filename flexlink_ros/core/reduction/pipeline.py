@@ -7,6 +7,7 @@ frozen modes and the rigid-body joint reactions of core/dynamics.py.
 """
 
 import dataclasses
+import logging
 
 import numpy as np
 import scipy.linalg
@@ -17,10 +18,14 @@ from .build import reduce_samples
 from .build_progress import BuildProgress
 from .model import ReducedModel
 from .nonlinearity_tables import nonlinearity_tables, NONLINEARITY_VERSION
+from .soft_tables import soft_tables
 from .. import dynamics
 from ..fe import linkage as assembly
 from ..fe.stiffness_damping import stiffness_damping_terms
 from ..options import MODEL_VERSION, ModelOptions
+from ...errors import FlexlinkError
+
+LOGGER = logging.getLogger(__name__)
 
 # Points per beam element where link shapes are tabulated (3 elements: 10 points per link).
 SHAPE_POINTS_PER_ELEMENT = 3
@@ -67,8 +72,9 @@ def model_for_mechanism(mechanism, options=None, cache_dir=None, use_cache=True,
         return build_model(mechanism, options, progress).to_arrays()
 
     arrays, meta, _ = store.load_or_build(path, key, build)
-    return with_nonlinearity(ReducedModel.from_arrays(arrays, meta), mechanism, options,
-                             None if path is None else f'{path[:-4]}-nonlinearity.npz', key)
+    model = with_nonlinearity(ReducedModel.from_arrays(arrays, meta), mechanism, options,
+                              None if path is None else f'{path[:-4]}-nonlinearity.npz', key)
+    return with_soft_basis(model, options.soft_modes)
 
 
 def build_model(mechanism, options, progress=None):
@@ -109,6 +115,32 @@ def with_nonlinearity(model, mechanism, options, path, key):
     arrays, _, _ = store.load_or_build(
         path, store.cache_key('nonlinearity-tables', NONLINEARITY_VERSION, key), build)
     return dataclasses.replace(model, nonlinearity=arrays)
+
+
+def with_soft_basis(model, soft_modes):
+    """
+    Return the model with the soft-basis step tables (:mod:`.soft_tables`), as asked.
+
+    ``soft_modes`` as :class:`~core.options.ModelOptions` takes it: -1 uses the smallest
+    usable gap, or none (with the reason in ``info['soft']``); p > 0 refuses a model without
+    a gap there (FlexlinkError); 0 leaves the model as it is.
+    """
+    if soft_modes == 0:
+        return dataclasses.replace(model, info={**model.info, 'soft': {'used': False,
+                                                                       'reason': 'off'}})
+    try:
+        soft = soft_tables(model, soft_modes)
+    except FlexlinkError as exc:
+        if soft_modes > 0:
+            raise
+        LOGGER.warning('stepping all %d coordinates: %s', model.size, exc)
+        return dataclasses.replace(model, info={**model.info, 'soft': {'used': False,
+                                                                       'reason': str(exc)}})
+    gap = soft.pop('soft_gap')
+    size = soft['soft_phi'].shape[2] // model.size
+    info = {**model.info, 'soft': {'used': True, 'size': size,
+                                   'gap_ratio': float(gap[size - 1])}}
+    return dataclasses.replace(model, soft=soft, info=info)
 
 
 def fe_mechanism(mechanism, options):

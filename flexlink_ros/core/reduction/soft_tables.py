@@ -1,0 +1,272 @@
+"""
+The reduced model's soft-basis tables: the step's system in p coordinates and its lift.
+
+With the reduced coordinates q = Phi(theta) eta (:mod:`.soft_basis`), theta' = w and
+theta'' = a, ::
+
+    q'  = Phi eta' + w Phi' eta
+    q'' = Phi eta'' + 2 w Phi' eta' + (w^2 Phi'' + a Phi') eta
+
+so the reduced system M q'' + C q' + K q = f, projected on Phi, becomes (:func:`transport_terms`)
+::
+
+    Phi^T M Phi eta'' + (Phi^T C Phi + 2 w Phi^T M Phi') eta'
+        + (Phi^T K Phi + a Phi^T M Phi' + w^2 Phi^T M Phi'' + w Phi^T C Phi') eta = Phi^T f
+
+with the exact transport terms; C (damping and Coriolis) keeps its monomials (1, w^2, w,
+w^4) in the step's damping table, whose second half holds D = Phi^T C Phi' so that the step
+adds w D to the stiffness. What Phi leaves out responds quasi-statically: the residual
+``(K^-1 - Phi (Phi^T K Phi)^-1 Phi^T) f`` per load monomial (a, 1, w^2) is added to the
+lifted coordinates q = Phi eta + residual, whose size (through the outputs) the estimator
+already reports as its error indicator.
+
+Every table is projected at the grid nodes from the reduced model's node values (which are
+exact samples: its cubic spline passes through them) and splined again, so the soft
+stiffness is not polluted by interpolating the stiff directions between nodes.
+"""
+
+import numpy as np
+
+from .cells import MONOMIALS, periodic_cell_coefficients
+from .soft_basis import align_modes, angle_derivatives, choose_soft_size, gap_ratios, \
+    lowest_modes
+
+# The step's monomial groups of each node table (the order of MONOMIALS).
+SOFT_DAMPING_MONOMIALS = ('1', 'w2', 'w', 'w4')
+SOFT_KF_MONOMIALS = ('a', '1', 'w2', 'w')
+# Load monomials of the residual (quasi-static) correction.
+RESIDUAL_MONOMIALS = ('a', '1', 'w2')
+SOFT_PREFIX = 'soft_'
+
+
+def node_values(model, name):
+    """Return {monomial: node values (N, ...)} of a block of a reduced model's table."""
+    layout, table = model.layout, model.table
+    values = {}
+    for index, monomial in enumerate(MONOMIALS):
+        block = layout.block(table[:, 4 * index], name)
+        if np.any(block != 0.0):
+            values[monomial] = block
+    return values
+
+
+def _hermite_nodes(values):
+    """Node values and slopes (cell units) of the periodic cubic spline: (N, 2, ...)."""
+    coefficients = periodic_cell_coefficients(values)
+    return coefficients[:, :2]
+
+
+def transport_terms(mass, frame, first, second):
+    """
+    Return the projected inertia's transport terms of q = Phi(theta) eta.
+
+    Parameters
+    ----------
+    mass : ndarray, shape (N, r, r)
+        Reduced mass at the nodes.
+    frame, first, second : ndarray, shape (N, r, p)
+        Phi and its first and second derivative in theta at the nodes.
+
+    Returns
+    -------
+    coriolis, accel, centripetal : ndarray, shape (N, p, p)
+        ``2 Phi^T M Phi'`` (times w, on eta'), ``Phi^T M Phi'`` (times a, on eta) and
+        ``Phi^T M Phi''`` (times w^2, on eta).
+
+    """
+    inertia_first = np.einsum('nri,nrs,nsj->nij', frame, mass, first)
+    inertia_second = np.einsum('nri,nrs,nsj->nij', frame, mass, second)
+    return 2.0 * inertia_first, inertia_first, inertia_second
+
+
+def _project(frame, matrix, right=None):
+    """Phi^T X Phi (or Phi^T X right) per node."""
+    return np.einsum('nri,nrs,nsj->nij', frame, matrix, frame if right is None else right)
+
+
+def soft_system(model, frame, first, second):
+    """
+    Return the soft system's node values per monomial: M, C, D (= Phi^T C Phi'), K, f.
+
+    Parameters
+    ----------
+    model : ReducedModel
+        The reduced model (its node values).
+    frame, first, second : ndarray, shape (N, r, p)
+        Phi and its derivatives in theta at the nodes.
+
+    Returns
+    -------
+    dict
+        'M', 'C', 'D', 'K': {monomial: (N, p, p)}; 'f': {monomial: (N, p)}.
+
+    """
+    mass = node_values(model, 'M')['1']
+    coriolis, accel, centripetal = transport_terms(mass, frame, first, second)
+    damping = node_values(model, 'C')
+    system = {'M': {'1': _project(frame, mass)},
+              'C': {m: _project(frame, damping[m]) if m in damping else 0.0
+                    for m in SOFT_DAMPING_MONOMIALS},
+              'D': {m: _project(frame, damping[m], first) if m in damping else 0.0
+                    for m in SOFT_DAMPING_MONOMIALS},
+              'K': {m: _project(frame, value) for m, value in node_values(model, 'K').items()},
+              'f': {m: np.einsum('nri,nr->ni', frame, value)
+                    for m, value in node_values(model, 'f').items()}}
+    system['C']['w'] = system['C']['w'] + coriolis
+    system['K']['a'] = system['K'].get('a', 0.0) + accel
+    system['K']['w2'] = system['K'].get('w2', 0.0) + centripetal
+    return system
+
+
+def residual_coordinates(model, frame):
+    """
+    Return the quasi-static response of what Phi leaves out, per load monomial: (N, r) each.
+
+    ``(K^-1 - Phi (Phi^T K Phi)^-1 Phi^T) f_m`` with K at w = a = 0.
+    """
+    stiffness = node_values(model, 'K')['1']
+    loads = node_values(model, 'f')
+    reduced = _project(frame, stiffness)
+    residual = {}
+    for monomial in RESIDUAL_MONOMIALS:
+        if monomial not in loads:
+            continue
+        load = loads[monomial]
+        full = np.linalg.solve(stiffness, load[..., None])[..., 0]
+        kept = np.linalg.solve(reduced, np.einsum('nri,nr->ni', frame, load)[..., None])[..., 0]
+        residual[monomial] = full - np.einsum('nri,ni->nr', frame, kept)
+    return residual
+
+
+def _stack(pieces, monomials, shape):
+    """Stack {monomial: values} in ``monomials`` order (zeros where absent): (N, groups, ...)."""
+    return np.stack([np.broadcast_to(pieces.get(m, 0.0), shape) for m in monomials], axis=1)
+
+
+def _node_table(pieces, monomials, shape, dtype):
+    """Hermite node table (N, groups * 2, width) of pieces over monomials."""
+    stacked = _stack(pieces, monomials, shape).reshape(shape[0], len(monomials), -1)
+    nodes = _hermite_nodes(stacked.reshape(shape[0], -1)).reshape(
+        shape[0], 2, len(monomials), -1)
+    return np.ascontiguousarray(nodes.transpose(0, 2, 1, 3).reshape(
+        shape[0], 2 * len(monomials), -1), dtype=dtype)
+
+
+def soft_tables(model, size=-1, accel_limit=5000.0):
+    """
+    Build the soft-basis tables of a reduced model (arrays named ``soft_*``).
+
+    Parameters
+    ----------
+    model : ReducedModel
+        The reduced model.
+    size : int
+        p (-1: the smallest with a usable spectral gap, :func:`.soft_basis.choose_soft_size`).
+    accel_limit : float
+        Acceleration range of the gap check [rad/s^2].
+
+    Returns
+    -------
+    dict of str to ndarray
+        'soft_mass' (N, 2, p p) and 'soft_damping' (N, 8, 2 p p: [C | D]) float32 node
+        tables, 'soft_kf' (N, 2 groups, p p + p) float64 node table, the lift's power-form
+        cell tables 'soft_phi' and 'soft_dphi' (N, 4, r p: Phi and dPhi/dtheta) and
+        'soft_residual' (N, 12, r: monomials a, 1, w2 times powers of t), and 'soft_gap'
+        (the worst frequency ratio at the gap, the gap ratios at every size).
+
+    Raises
+    ------
+    FlexlinkError
+        No usable spectral gap (or none at ``size``).
+
+    """
+    mass = node_values(model, 'M')['1']
+    stiffness = node_values(model, 'K')
+    ratios = gap_ratios(mass, stiffness, float(model.speed_max), float(accel_limit))
+    size = choose_soft_size(ratios, size)
+    _, modes = lowest_modes(mass, stiffness['1'], size)
+    frame = align_modes(mass, modes)
+    first, second = angle_derivatives(frame)
+    system = soft_system(model, frame, first, second)
+    nodes, r = frame.shape[:2]
+    square = (nodes, size, size)
+    damping = np.concatenate([_stack(system['C'], SOFT_DAMPING_MONOMIALS, square),
+                              _stack(system['D'], SOFT_DAMPING_MONOMIALS, square)], axis=2)
+    kf_monomials = SOFT_KF_MONOMIALS if 'w' in node_values(model, 'K') else SOFT_KF_MONOMIALS[:3]
+    kf = np.concatenate([_stack(system['K'], kf_monomials, square).reshape(nodes, len(
+        kf_monomials), -1), _stack(system['f'], kf_monomials, (nodes, size))], axis=2)
+    residual = residual_coordinates(model, frame)
+    residual_rows = periodic_cell_coefficients(_stack(residual, RESIDUAL_MONOMIALS, (nodes, r)))
+    return {
+        'soft_mass': _node_table({'1': system['M']['1']}, ('1',), square, np.float32),
+        'soft_damping': _node_table(dict(enumerate(damping.transpose(1, 0, 2, 3))),
+                                    range(len(SOFT_DAMPING_MONOMIALS)),
+                                    (nodes, 2 * size, size), np.float32),
+        'soft_kf': _node_table(dict(enumerate(kf.transpose(1, 0, 2))), range(len(kf_monomials)),
+                               (nodes, size * size + size), np.float64),
+        'soft_phi': periodic_cell_coefficients(frame.reshape(nodes, -1)),
+        'soft_dphi': periodic_cell_coefficients(first.reshape(nodes, -1)),
+        'soft_residual': np.ascontiguousarray(residual_rows.transpose(0, 2, 1, 3).reshape(
+            nodes, 4 * len(RESIDUAL_MONOMIALS), r)),
+        'soft_gap': np.sqrt(ratios)}
+
+
+class SoftLift:
+    """
+    The lift from the soft coordinates to the reduced model's: q = Phi eta + residual.
+
+    ``q' = Phi eta' + w Phi' eta`` (the residual's rate is left out: it is quasi-static and
+    feeds only the validity indicator). Reads the ``soft_phi``, ``soft_dphi`` and
+    ``soft_residual`` cell tables of :func:`soft_tables` with the step's row weights
+    (monomial times t^p, MONOMIALS order).
+
+    Parameters
+    ----------
+    soft : dict of str to ndarray
+        :func:`soft_tables`.
+
+    """
+
+    def __init__(self, soft):
+        self.phi, self.dphi = soft['soft_phi'], soft['soft_dphi']
+        self.residual = soft['soft_residual']
+        self.record_size = self.residual.shape[2]
+        self.size = self.phi.shape[2] // self.record_size
+
+    def packed(self):
+        """Return (phi, dphi, residual) as the compiled step takes them."""
+        return (np.ascontiguousarray(self.phi), np.ascontiguousarray(self.dphi),
+                np.ascontiguousarray(self.residual))
+
+    def state(self, weights, k, z, speed, out):
+        """
+        Write the lifted state [q, q', 1] of z = [eta, eta', 1] at cell k into ``out``.
+
+        Parameters
+        ----------
+        weights : ndarray
+            Row weights at the crank state (monomial times t^p).
+        k : int
+            Grid cell.
+        z : ndarray
+            Soft state [eta, eta', 1].
+        speed : float
+            Crank speed [rad/s].
+        out : ndarray
+            2 r + 1 values, written in place.
+
+        """
+        r, p = self.record_size, self.size
+        powers = weights[4:8]                   # monomial '1': the powers of t
+        frame = np.dot(powers, self.phi[k]).reshape(r, p)
+        first = np.dot(powers, self.dphi[k]).reshape(r, p)
+        out[:r] = frame @ z[:p] + np.dot(weights[:4 * len(RESIDUAL_MONOMIALS)], self.residual[k])
+        out[r:2 * r] = frame @ z[p:2 * p] + speed * (first @ z[:p])
+        out[2 * r] = 1.0
+
+    def nodes(self, eta, speed):
+        """Return q at the grid nodes of soft coordinates ``eta`` (N, p), at a = 0."""
+        r, p = self.record_size, self.size
+        frame = self.phi[:, 0].reshape(-1, r, p)
+        residual = self.residual[:, 4] + speed * speed * self.residual[:, 8]
+        return np.einsum('nrp,np->nr', frame, eta) + residual
