@@ -59,9 +59,9 @@ class ModelOptions:
         tables). 1 here, the library's linear model; the node and the CLI default to 2.
     soft_modes : int
         The estimator's second reduction onto the p lowest modes (core/reduction/soft_basis.py):
-        -1 (default) the smallest p at a usable spectral gap, or all r coordinates where the
-        model has none (recorded in ``info['soft']``); p > 0 exactly p (refused without a gap
-        there); 0 steps all r coordinates. Not part of the cache key: the soft tables are made
+        -1 the smallest p at a usable spectral gap, or all r coordinates where the model has
+        none (recorded in ``info['soft']``); p > 0 exactly p (refused without a gap there); 0
+        (default) steps all r coordinates. Not part of the cache key: the soft tables are made
         from the cached reduced model when it is loaded.
 
     """
@@ -77,7 +77,7 @@ class ModelOptions:
     gravity: bool = True
     stiffness_damping: float = 0.0
     order: int = 1
-    soft_modes: int = -1
+    soft_modes: int = 0
 
     def __post_init__(self):
         if self.bearings not in ('flexible', 'rigid'):

@@ -139,7 +139,8 @@ def with_soft_basis(model, soft_modes):
     gap = soft.pop('soft_gap')
     size = soft['soft_phi'].shape[2] // model.size
     info = {**model.info, 'soft': {'used': True, 'size': size,
-                                   'gap_ratio': float(gap[size - 1])}}
+                                   'gap_ratio': float(gap[size - 1]) if size < gap.size + 1
+                                   else None}}
     return dataclasses.replace(model, soft=soft, info=info)
 
 

@@ -171,7 +171,7 @@ def choose_soft_size(ratios, requested=-1, min_ratio=MIN_GAP_RATIO):
     ratios : ndarray, shape (r - 1,)
         :func:`gap_ratios` (eigenvalue ratios).
     requested : int
-        p wanted (-1: the smallest usable).
+        p wanted (-1: the smallest usable; r, all modes, needs no gap).
     min_ratio : float
         Smallest frequency ratio at the gap.
 
@@ -182,6 +182,8 @@ def choose_soft_size(ratios, requested=-1, min_ratio=MIN_GAP_RATIO):
 
     """
     usable = np.flatnonzero(ratios >= min_ratio ** 2) + 1
+    if requested == ratios.size + 1:
+        return int(requested)               # every mode: a change of coordinates, no gap
     if requested > 0:
         if requested > ratios.size or requested not in usable:
             found = (f'{np.sqrt(ratios[requested - 1]):.3g}' if requested <= ratios.size

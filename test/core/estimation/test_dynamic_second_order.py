@@ -32,7 +32,7 @@ def case():
     mech = load_mechanism('cho1992')
     # The default (4, 2) basis misses the pass (see the module's notes); (6, 4) holds it.
     options = ModelOptions(bearings='rigid', elements_per_link=4, modes=6, static=4, order=2,
-                           grid_size=64, speed_max=1.05 * SPEED)
+                           grid_size=64, speed_max=1.05 * SPEED, soft_modes=0)
     model = pipeline.model_for_mechanism(mech, options, use_cache=False)
     return mech, options, model, load_for_model(mech, options, model)
 
