@@ -77,7 +77,7 @@ class ModelOptions:
     gravity: bool = True
     stiffness_damping: float = 0.0
     order: int = 1
-    soft_modes: int = 0
+    soft_modes: int = -1
 
     def __post_init__(self):
         if self.bearings not in ('flexible', 'rigid'):

@@ -252,12 +252,21 @@ static Py_ssize_t lift(Step *s, const double *z, const double *prev)
     const Py_ssize_t p = s->r, rr = s->rr, width = rr * p;
     const Py_ssize_t k = evaluate(s, prev[0], prev[1], prev[2], s->weights, s->hermite);
     double *frame = s->frame, *first = s->frame + width, *q = s->lifted, *v = s->lifted + rr;
-    combine(s->weights + 4, s->lift_phi + k * 4 * width, 4, width, width, frame);
+    combine(s->weights, s->lift_phi + k * 16 * width, 16, width, width, frame);
     combine(s->weights + 4, s->lift_dphi + k * 4 * width, 4, width, width, first);
     combine(s->weights, s->lift_residual + k * 12 * rr, 12, rr, rr, q);
+    /* the residual's rate along the crank angle: d/dtheta of the power form */
+    double rates[12];
+    for (int m = 0; m < 3; m++) {
+        rates[4 * m] = 0.0;
+        for (int power = 1; power < 4; power++)
+            rates[4 * m + power] = s->weights[4 * m + power - 1] * (double)power
+                                   * s->cells_per_radian;
+    }
+    combine(rates, s->lift_residual + k * 12 * rr, 12, rr, rr, v);
     for (Py_ssize_t i = 0; i < rr; i++) {
         q[i] += dot(frame + i * p, z, p);
-        v[i] = dot(frame + i * p, z + p, p) + prev[1] * dot(first + i * p, z, p);
+        v[i] = dot(frame + i * p, z + p, p) + prev[1] * (dot(first + i * p, z, p) + v[i]);
     }
     s->lifted[2 * rr] = 1.0;
     s->cells_index = k;
@@ -645,7 +654,7 @@ static int take_lift(PyObject *lift_tuple, Py_buffer *views, Step *s)
         PyErr_SetString(PyExc_ValueError, "`lifted` must have 2 r + 1 values");
         return -1;
     }
-    if (get_buffer(objects[0], &views[0], 0, "phi", s->cells * 4 * rr * p) != 0
+    if (get_buffer(objects[0], &views[0], 0, "phi", s->cells * 16 * rr * p) != 0
         || get_buffer(objects[1], &views[1], 0, "dphi", s->cells * 4 * rr * p) != 0
         || get_buffer(objects[2], &views[2], 0, "residual", s->cells * 12 * rr) != 0)
         return -1;

@@ -22,7 +22,7 @@ from ...errors import FlexlinkError
 # The smallest frequency ratio between the highest kept and the lowest dropped mode at which a
 # second reduction is sound (eigenvalue ratio MIN_GAP_RATIO^2). The default model has 3.07
 # at p = 16 and below 1.45 at every smaller p.
-MIN_GAP_RATIO = 2.0
+MIN_GAP_RATIO = 3.0
 
 
 def lowest_modes(mass, stiffness, count):

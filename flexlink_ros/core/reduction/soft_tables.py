@@ -36,6 +36,8 @@ SOFT_DAMPING_MONOMIALS = ('1', 'w2', 'w', 'w4')
 SOFT_KF_MONOMIALS = ('a', '1', 'w2', 'w')
 # Load monomials of the residual (quasi-static) correction.
 RESIDUAL_MONOMIALS = ('a', '1', 'w2')
+# Monomials of the lift's frame (:func:`coupled_frame`): the first four of MONOMIALS.
+LIFT_MONOMIALS = ('a', '1', 'w2', 'w')
 SOFT_PREFIX = 'soft_'
 
 
@@ -138,9 +140,60 @@ def residual_coordinates(model, frame):
     return residual
 
 
+def coupled_frame(model, frame, first):
+    """
+    Return the lift's frame per monomial: Phi, and the stiff response to the soft motion.
+
+    The soft motion loads the left-out directions, which K_0's modes decouple only at rest:
+    through ``a K_a + w^2 K_w2`` (geometric and rotating-frame stiffness) and through the
+    damping and Coriolis forces of the frame's turning, ``C(w) w Phi' eta`` (the stiff
+    directions' modal damping is large). Their quasi-static response ``-R (...)`` (R = K_0^-1
+    - Phi (Phi^T K_0 Phi)^-1 Phi^T) is mostly axial stretch: small in the outputs, but the
+    elastic axial force the validity indicator reads (without it the indicator is 15-30 %
+    low on the default model). The damping fit's w^2 and w^4 terms add w^3 and w^5 terms
+    below 0.3 % of the w term at speed_max; they are left out.
+
+    Parameters
+    ----------
+    model : ReducedModel
+        The reduced model (its node values).
+    frame, first : ndarray, shape (N, r, p)
+        Phi and dPhi/dtheta at the nodes.
+
+    Returns
+    -------
+    dict of str to ndarray, shape (N, r, p)
+        Per LIFT_MONOMIALS: '1': Phi; 'a': -R K_a Phi; 'w2': -R (K_w2 Phi + G Phi');
+        'w': -R (C_1 Phi' + K_w Phi) (K_w: stiffness damping).
+
+    """
+    stiffness = node_values(model, 'K')
+    damping = node_values(model, 'C')
+    inverse = np.linalg.inv(stiffness['1'])
+    reduced_inverse = np.linalg.inv(_project(frame, stiffness['1']))
+    residual = inverse - np.einsum('nri,nij,nsj->nrs', frame, reduced_inverse, frame)
+    load = {'a': [(stiffness.get('a'), frame)],
+            'w2': [(stiffness.get('w2'), frame), (damping.get('w'), first)],
+            'w': [(stiffness.get('w'), frame), (damping.get('1'), first)]}
+    coupled = {'1': frame}
+    for monomial, terms in load.items():
+        coupled[monomial] = -sum(np.einsum('nrs,nst,ntj->nrj', residual, matrix, basis)
+                                 for matrix, basis in terms if matrix is not None)
+    return coupled
+
+
 def _stack(pieces, monomials, shape):
     """Stack {monomial: values} in ``monomials`` order (zeros where absent): (N, groups, ...)."""
     return np.stack([np.broadcast_to(pieces.get(m, 0.0), shape) for m in monomials], axis=1)
+
+
+def _power_rows(pieces, shape, monomials):
+    """Power-form cell table (N, 4 len(monomials), width): rows monomial * 4 + power."""
+    flat = {m: np.reshape(value, shape) for m, value in pieces.items()}
+    rows = periodic_cell_coefficients(_stack(flat, monomials, shape).reshape(
+        shape[0], len(monomials), -1))
+    return np.ascontiguousarray(rows.transpose(0, 2, 1, 3).reshape(
+        shape[0], 4 * len(monomials), -1))
 
 
 def _node_table(pieces, monomials, shape, dtype):
@@ -170,7 +223,8 @@ def soft_tables(model, size=-1, accel_limit=5000.0):
     dict of str to ndarray
         'soft_mass' (N, 2, p p) and 'soft_damping' (N, 8, 2 p p: [C | D]) float32 node
         tables, 'soft_kf' (N, 2 groups, p p + p) float64 node table, the lift's power-form
-        cell tables 'soft_phi' and 'soft_dphi' (N, 4, r p: Phi and dPhi/dtheta) and
+        cell tables 'soft_phi' (N, 16, r p: :func:`coupled_frame` per monomial a, 1, w2, w
+        times powers of t), 'soft_dphi' (N, 4, r p: dPhi/dtheta) and
         'soft_residual' (N, 12, r: monomials a, 1, w2 times powers of t), and 'soft_gap'
         (the worst frequency ratio at the gap, the gap ratios at every size).
 
@@ -196,7 +250,6 @@ def soft_tables(model, size=-1, accel_limit=5000.0):
     kf = np.concatenate([_stack(system['K'], kf_monomials, square).reshape(nodes, len(
         kf_monomials), -1), _stack(system['f'], kf_monomials, (nodes, size))], axis=2)
     residual = residual_coordinates(model, frame)
-    residual_rows = periodic_cell_coefficients(_stack(residual, RESIDUAL_MONOMIALS, (nodes, r)))
     return {
         'soft_mass': _node_table({'1': system['M']['1']}, ('1',), square, np.float32),
         'soft_damping': _node_table(dict(enumerate(damping.transpose(1, 0, 2, 3))),
@@ -204,10 +257,10 @@ def soft_tables(model, size=-1, accel_limit=5000.0):
                                     (nodes, 2 * size, size), np.float32),
         'soft_kf': _node_table(dict(enumerate(kf.transpose(1, 0, 2))), range(len(kf_monomials)),
                                (nodes, size * size + size), np.float64),
-        'soft_phi': periodic_cell_coefficients(frame.reshape(nodes, -1)),
+        'soft_phi': _power_rows(coupled_frame(model, frame, first), (nodes, r * size),
+                                LIFT_MONOMIALS),
         'soft_dphi': periodic_cell_coefficients(first.reshape(nodes, -1)),
-        'soft_residual': np.ascontiguousarray(residual_rows.transpose(0, 2, 1, 3).reshape(
-            nodes, 4 * len(RESIDUAL_MONOMIALS), r)),
+        'soft_residual': _power_rows(residual, (nodes, r), RESIDUAL_MONOMIALS),
         'soft_gap': np.sqrt(ratios)}
 
 
@@ -215,10 +268,11 @@ class SoftLift:
     """
     The lift from the soft coordinates to the reduced model's: q = Phi eta + residual.
 
-    ``q' = Phi eta' + w Phi' eta`` (the residual's rate is left out: it is quasi-static and
-    feeds only the validity indicator). Reads the ``soft_phi``, ``soft_dphi`` and
-    ``soft_residual`` cell tables of :func:`soft_tables` with the step's row weights
-    (monomial times t^p, MONOMIALS order).
+    ``q' = Phi eta' + w Phi' eta + w residual'`` (the residual's rate along the crank angle;
+    its rate through the speed and acceleration is left out). The stiff coordinates' rates
+    matter where they meet their large damping (the validity indicator's mode-acceleration
+    form). Reads the ``soft_phi``, ``soft_dphi`` and ``soft_residual`` cell tables of
+    :func:`soft_tables` with the step's row weights (monomial times t^p, MONOMIALS order).
 
     Parameters
     ----------
@@ -238,7 +292,15 @@ class SoftLift:
         return (np.ascontiguousarray(self.phi), np.ascontiguousarray(self.dphi),
                 np.ascontiguousarray(self.residual))
 
-    def state(self, weights, k, z, speed, out):
+    @staticmethod
+    def rate_weights(weights, cells_per_radian):
+        """Return d/dtheta of power-form row weights (monomial times p t^(p - 1) per rad)."""
+        rows = weights[:4 * len(RESIDUAL_MONOMIALS)].reshape(-1, 4)
+        rates = np.zeros_like(rows)
+        rates[:, 1:] = rows[:, :3] * (np.arange(1, 4) * cells_per_radian)
+        return rates.ravel()
+
+    def state(self, weights, k, z, speed, out, cells_per_radian):
         """
         Write the lifted state [q, q', 1] of z = [eta, eta', 1] at cell k into ``out``.
 
@@ -254,19 +316,24 @@ class SoftLift:
             Crank speed [rad/s].
         out : ndarray
             2 r + 1 values, written in place.
+        cells_per_radian : float
+            Grid cells per radian (for the residual's rate).
 
         """
         r, p = self.record_size, self.size
         powers = weights[4:8]                   # monomial '1': the powers of t
-        frame = np.dot(powers, self.phi[k]).reshape(r, p)
+        rows = weights[:4 * len(RESIDUAL_MONOMIALS)]
+        coupled = np.dot(weights[:4 * len(LIFT_MONOMIALS)], self.phi[k]).reshape(r, p)
         first = np.dot(powers, self.dphi[k]).reshape(r, p)
-        out[:r] = frame @ z[:p] + np.dot(weights[:4 * len(RESIDUAL_MONOMIALS)], self.residual[k])
-        out[r:2 * r] = frame @ z[p:2 * p] + speed * (first @ z[:p])
+        out[:r] = coupled @ z[:p] + np.dot(rows, self.residual[k])
+        rate = np.dot(self.rate_weights(weights, cells_per_radian), self.residual[k])
+        out[r:2 * r] = coupled @ z[p:2 * p] + speed * (first @ z[:p] + rate)
         out[2 * r] = 1.0
 
     def nodes(self, eta, speed):
         """Return q at the grid nodes of soft coordinates ``eta`` (N, p), at a = 0."""
         r, p = self.record_size, self.size
-        frame = self.phi[:, 0].reshape(-1, r, p)
+        frame = (self.phi[:, 4] + speed * speed * self.phi[:, 8]
+                 + speed * self.phi[:, 12]).reshape(-1, r, p)
         residual = self.residual[:, 4] + speed * speed * self.residual[:, 8]
         return np.einsum('nrp,np->nr', frame, eta) + residual
