@@ -35,7 +35,7 @@
 #define SO_SCALARS 22   /* second order: cos, sin of 3 link angles, kappa 4 x 4 */
 #define SO_TRIG 6       /* kappa's first scalar */
 #define SO_FORMS 4      /* bending sums: crank, coupler, lever, coupler's half */
-#define LIFT_BUFFERS 4  /* the soft basis's lift: phi, dphi, residual, lifted */
+#define LIFT_BUFFERS 5  /* the soft basis's lift: phi, dphi, residual, lifted, history */
 
 static const double TWO_PI = 6.283185307179586;
 static const double PI = 3.141592653589793;     /* math.pi */
@@ -48,6 +48,7 @@ typedef struct {
     Py_ssize_t rr;
     const double *lift_phi, *lift_dphi, *lift_residual;
     double *lifted;     /* [q, q', 1] of the reduced model (2 rr + 1) */
+    double *history;    /* stage 1 by interpolation in time, or NULL: [count, h, X_n, X_n-1] */
     double *frame;      /* scratch: Phi, Phi' (rr x p each) */
     const float *mass, *damping;    /* float32, node tables: see tables._StepTables */
     const double *kf, *out, *joint, *g0;
@@ -441,15 +442,68 @@ static double python_mod(double x, double y)
     return mod;
 }
 
+/* Slot 0's [M, C, K | f] into a history entry. */
+static void history_copy(Step *s, double *entry)
+{
+    const Py_ssize_t r = s->r, r2 = r * r;
+    memcpy(entry, s->blocks, (size_t)(3 * r2) * sizeof(double));
+    memcpy(entry + 3 * r2, s->loads, (size_t)r * sizeof(double));
+}
+
+/*
+ * Stage 1 (slot 1) and the sample (slot 0) of a step of h from prev to (angle, w, a): both
+ * from the tables, or (with a history) only the sample, stage 1 by interpolation in time
+ * through the last two samples' evaluations and the new one (quadratic; linear with one,
+ * after the previous sample is evaluated on a fresh start): NumpyStep._load_stages.
+ */
+static void load_stages(Step *s, const double *prev, double h, double angle, double w, double a,
+                        double advance)
+{
+    const double c1 = s->c1;
+    if (s->history == NULL) {
+        load(s, 1, wrap_once(prev[0] + c1 * advance), prev[1] + c1 * (w - prev[1]),
+             prev[2] + c1 * (a - prev[2]));
+        load(s, 0, angle, w, a);
+        return;
+    }
+    const Py_ssize_t r = s->r, matrices = 3 * r * r, width = matrices + r;
+    double *count = s->history, *last = s->history + 2, *before = last + width;
+    if (*count < 1.0) {
+        load(s, 0, prev[0], prev[1], prev[2]);
+        history_copy(s, last);
+        *count = 1.0;
+    }
+    load(s, 0, angle, w, a);
+    double weights[3];  /* on X_n-1, X_n, X_n+1 at t_n + c1 h (Lagrange) */
+    if (*count >= 2.0) {
+        const double back = s->history[1], x = c1 * h;
+        weights[0] = x * (x - h) / (back * (back + h));
+        weights[1] = (x + back) * (h - x) / (back * h);
+        weights[2] = (x + back) * x / ((h + back) * h);
+    }
+    else {
+        weights[0] = 0.0;
+        weights[1] = 1.0 - c1;
+        weights[2] = c1;
+    }
+    double *stage = s->blocks + matrices, *stage_load = s->loads + r;
+    for (Py_ssize_t j = 0; j < matrices; j++)
+        stage[j] = weights[0] * before[j] + weights[1] * last[j] + weights[2] * s->blocks[j];
+    for (Py_ssize_t j = 0; j < r; j++)
+        stage_load[j] = weights[0] * before[matrices + j] + weights[1] * last[matrices + j]
+                        + weights[2] * s->loads[j];
+    memcpy(before, last, (size_t)width * sizeof(double));
+    history_copy(s, last);
+    s->history[1] = h;
+    *count = *count >= 2.0 ? 2.0 : *count + 1.0;
+}
+
 /* One Radau IIA step of h to crank state (angle, w, a) from prev (NumpyStep._step). */
 STEP_CLONES static int radau_step(Step *s, double *z, double *prev, double h, double angle, double w,
                       double a, double advance)
 {
     const Py_ssize_t r = s->r, r2 = r * r, n = 2 * r;
-    const double c1 = s->c1;
-    load(s, 1, wrap_once(prev[0] + c1 * advance), prev[1] + c1 * (w - prev[1]),
-         prev[2] + c1 * (a - prev[2]));
-    load(s, 0, angle, w, a);
+    load_stages(s, prev, h, angle, w, a, advance);
     prev[0] = angle;
     prev[1] = w;
     prev[2] = a;
@@ -643,9 +697,10 @@ static int take_second(PyObject *second, Py_buffer *views, Step *s)
    into s, its sizes checked against the step's r = p and the grid; or -1. */
 static int take_lift(PyObject *lift_tuple, Py_buffer *views, Step *s)
 {
-    PyObject *objects[LIFT_BUFFERS];
-    if (!PyArg_ParseTuple(lift_tuple, "OOOO;`lift` must be (phi, dphi, residual, lifted)",
-                          &objects[0], &objects[1], &objects[2], &objects[3]))
+    PyObject *objects[LIFT_BUFFERS] = {NULL};
+    if (!PyArg_ParseTuple(lift_tuple, "OOOO|O;`lift` must be (phi, dphi, residual, lifted[, "
+                          "history])", &objects[0], &objects[1], &objects[2], &objects[3],
+                          &objects[4]))
         return -1;
     if (get_buffer(objects[3], &views[3], 1, "lifted", -1) != 0)
         return -1;
@@ -663,6 +718,11 @@ static int take_lift(PyObject *lift_tuple, Py_buffer *views, Step *s)
     s->lift_dphi = views[1].buf;
     s->lift_residual = views[2].buf;
     s->lifted = views[3].buf;
+    if (objects[4] != NULL && objects[4] != Py_None) {
+        if (get_buffer(objects[4], &views[4], 1, "history", 2 + 2 * (3 * p * p + p)) != 0)
+            return -1;
+        s->history = views[4].buf;
+    }
     return 0;
 }
 

@@ -67,9 +67,10 @@ def test_fft_derivatives_of_a_trigonometric_polynomial():
 
 
 def test_gap_choice_takes_the_smallest_usable_gap_and_refuses_others():
-    _, mass, stiffness = _turning_family([1.0, 1.5, 10.0, 11.0], turns=1)
+    # eigenvalue ratios 1.5, 13.3, 1.1: frequency ratios 1.22, 3.65 (usable), 1.05
+    _, mass, stiffness = _turning_family([1.0, 1.5, 20.0, 22.0], turns=1)
     ratios = soft_basis.gap_ratios(mass, {'1': stiffness}, 10.0, 100.0)
-    np.testing.assert_allclose(ratios, [1.5, 10.0 / 1.5, 1.1], rtol=1e-10)
+    np.testing.assert_allclose(ratios, [1.5, 20.0 / 1.5, 1.1], rtol=1e-10)
     assert soft_basis.choose_soft_size(ratios) == 2
     assert soft_basis.choose_soft_size(ratios, requested=2) == 2
     with pytest.raises(FlexlinkError, match='after mode 1'):
