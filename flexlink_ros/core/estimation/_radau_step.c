@@ -46,7 +46,7 @@ typedef struct {
        q = Phi eta + residual, q' = Phi eta' + w Phi' eta from power-form cell tables, and
        the damping table holds [C | D] with D added as w D to K. rr == r, lift NULL: none. */
     Py_ssize_t rr;
-    const double *lift_phi, *lift_dphi, *lift_residual;
+    const float *lift_phi, *lift_dphi, *lift_residual;    /* float32 node tables */
     double *lifted;     /* [q, q', 1] of the reduced model (2 rr + 1) */
     double *history;    /* stage 1 by interpolation in time, or NULL: [count, h, X_n, X_n-1] */
     double *frame;      /* scratch: Phi, Phi' (rr x p each) */
@@ -252,19 +252,24 @@ static Py_ssize_t lift(Step *s, const double *z, const double *prev)
 {
     const Py_ssize_t p = s->r, rr = s->rr, width = rr * p;
     const Py_ssize_t k = evaluate(s, prev[0], prev[1], prev[2], s->weights, s->hermite);
+    const Py_ssize_t k1 = k + 1 < s->cells ? k + 1 : 0;
     double *frame = s->frame, *first = s->frame + width, *q = s->lifted, *v = s->lifted + rr;
-    combine(s->weights, s->lift_phi + k * 16 * width, 16, width, width, frame);
-    combine(s->weights + 4, s->lift_dphi + k * 4 * width, 4, width, width, first);
-    combine(s->weights, s->lift_residual + k * 12 * rr, 12, rr, rr, q);
-    /* the residual's rate along the crank angle: d/dtheta of the power form */
+    /* float32 Hermite node tables: phi (a, 1, w2, w), dphi (1), residual (a, 1, w2) */
+    combine_nodes_f32(s->hermite, s->lift_phi + k * 8 * width, s->lift_phi + k1 * 8 * width,
+                      4, width, width, frame);
+    combine_nodes_f32(s->hermite + 4, s->lift_dphi + k * 2 * width,
+                      s->lift_dphi + k1 * 2 * width, 1, width, width, first);
+    combine_nodes_f32(s->hermite, s->lift_residual + k * 6 * rr,
+                      s->lift_residual + k1 * 6 * rr, 3, rr, rr, q);
+    /* the residual's rate along the crank angle: d/dtheta of the Hermite weights */
+    const double t = s->weights[5], slope = 6.0 * t * t - 6.0 * t;
+    const double basis_rate[4] = {slope, 3.0 * t * t - 4.0 * t + 1.0, -slope, 3.0 * t * t - 2.0 * t};
     double rates[12];
-    for (int m = 0; m < 3; m++) {
-        rates[4 * m] = 0.0;
-        for (int power = 1; power < 4; power++)
-            rates[4 * m + power] = s->weights[4 * m + power - 1] * (double)power
-                                   * s->cells_per_radian;
-    }
-    combine(rates, s->lift_residual + k * 12 * rr, 12, rr, rr, v);
+    for (int m = 0; m < 3; m++)
+        for (int i = 0; i < 4; i++)
+            rates[4 * m + i] = s->weights[4 * m] * basis_rate[i] * s->cells_per_radian;
+    combine_nodes_f32(rates, s->lift_residual + k * 6 * rr, s->lift_residual + k1 * 6 * rr, 3,
+                      rr, rr, v);
     for (Py_ssize_t i = 0; i < rr; i++) {
         q[i] += dot(frame + i * p, z, p);
         v[i] = dot(frame + i * p, z + p, p) + prev[1] * (dot(first + i * p, z, p) + v[i]);
@@ -709,9 +714,9 @@ static int take_lift(PyObject *lift_tuple, Py_buffer *views, Step *s)
         PyErr_SetString(PyExc_ValueError, "`lifted` must have 2 r + 1 values");
         return -1;
     }
-    if (get_buffer(objects[0], &views[0], 0, "phi", s->cells * 16 * rr * p) != 0
-        || get_buffer(objects[1], &views[1], 0, "dphi", s->cells * 4 * rr * p) != 0
-        || get_buffer(objects[2], &views[2], 0, "residual", s->cells * 12 * rr) != 0)
+    if (get_typed_buffer(objects[0], &views[0], 0, "phi", s->cells * 8 * rr * p, "f") != 0
+        || get_typed_buffer(objects[1], &views[1], 0, "dphi", s->cells * 2 * rr * p, "f") != 0
+        || get_typed_buffer(objects[2], &views[2], 0, "residual", s->cells * 6 * rr, "f") != 0)
         return -1;
     s->rr = rr;
     s->lift_phi = views[0].buf;

@@ -126,9 +126,9 @@ class NumpyStep:
 
     def _record(self, crank, record):
         """Write the record of the state at crank state (angle, speed, accel)."""
-        weights, _, k = self.evaluate(*crank)
+        weights, hermite, k = self.evaluate(*crank)
         if self.tables.lift is not None:
-            self.tables.lift.state(weights, k, self.z, crank[1], self.lifted,
+            self.tables.lift.state(weights, hermite, k, self.z, crank[1], self.lifted,
                                    self.cells_per_radian)
         self.tables.record(weights, k, self.lifted, record)
 

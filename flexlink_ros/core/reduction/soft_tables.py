@@ -184,16 +184,10 @@ def coupled_frame(model, frame, first):
 
 def _stack(pieces, monomials, shape):
     """Stack {monomial: values} in ``monomials`` order (zeros where absent): (N, groups, ...)."""
-    return np.stack([np.broadcast_to(pieces.get(m, 0.0), shape) for m in monomials], axis=1)
-
-
-def _power_rows(pieces, shape, monomials):
-    """Power-form cell table (N, 4 len(monomials), width): rows monomial * 4 + power."""
-    flat = {m: np.reshape(value, shape) for m, value in pieces.items()}
-    rows = periodic_cell_coefficients(_stack(flat, monomials, shape).reshape(
-        shape[0], len(monomials), -1))
-    return np.ascontiguousarray(rows.transpose(0, 2, 1, 3).reshape(
-        shape[0], 4 * len(monomials), -1))
+    def value(monomial):
+        piece = pieces.get(monomial, 0.0)
+        return np.reshape(piece, shape) if np.size(piece) == np.prod(shape) else piece
+    return np.stack([np.broadcast_to(value(m), shape) for m in monomials], axis=1)
 
 
 def _node_table(pieces, monomials, shape, dtype):
@@ -257,22 +251,23 @@ def soft_tables(model, size=-1, accel_limit=5000.0):
                                     (nodes, 2 * size, size), np.float32),
         'soft_kf': _node_table(dict(enumerate(kf.transpose(1, 0, 2))), range(len(kf_monomials)),
                                (nodes, size * size + size), np.float64),
-        'soft_phi': _power_rows(coupled_frame(model, frame, first), (nodes, r * size),
-                                LIFT_MONOMIALS),
-        'soft_dphi': periodic_cell_coefficients(first.reshape(nodes, -1)),
-        'soft_residual': _power_rows(residual, (nodes, r), RESIDUAL_MONOMIALS),
+        'soft_phi': _node_table(coupled_frame(model, frame, first), LIFT_MONOMIALS,
+                                (nodes, r * size), np.float32),
+        'soft_dphi': _node_table({'1': first}, ('1',), (nodes, r * size), np.float32),
+        'soft_residual': _node_table(residual, RESIDUAL_MONOMIALS, (nodes, r), np.float32),
         'soft_gap': np.sqrt(ratios)}
 
 
 class SoftLift:
     """
-    The lift from the soft coordinates to the reduced model's: q = Phi eta + residual.
+    The lift from the soft coordinates to the reduced model's: q = Phi_c eta + residual.
 
-    ``q' = Phi eta' + w Phi' eta + w residual'`` (the residual's rate along the crank angle;
+    ``q' = Phi_c eta' + w Phi' eta + w residual'`` (the residual's rate along the crank angle;
     its rate through the speed and acceleration is left out). The stiff coordinates' rates
     matter where they meet their large damping (the validity indicator's mode-acceleration
-    form). Reads the ``soft_phi``, ``soft_dphi`` and ``soft_residual`` cell tables of
-    :func:`soft_tables` with the step's row weights (monomial times t^p, MONOMIALS order).
+    form). Reads the float32 Hermite node tables ``soft_phi``, ``soft_dphi`` and
+    ``soft_residual`` of :func:`soft_tables` with the step's Hermite weights (monomial times
+    h00, h10 on node k and h01, h11 on node k + 1, MONOMIALS order), as the step reads M.
 
     Parameters
     ----------
@@ -289,25 +284,24 @@ class SoftLift:
 
     def packed(self):
         """Return (phi, dphi, residual) as the compiled step takes them."""
-        return (np.ascontiguousarray(self.phi), np.ascontiguousarray(self.dphi),
-                np.ascontiguousarray(self.residual))
+        return self.phi, self.dphi, self.residual
 
-    @staticmethod
-    def rate_weights(weights, cells_per_radian):
-        """Return d/dtheta of power-form row weights (monomial times p t^(p - 1) per rad)."""
-        rows = weights[:4 * len(RESIDUAL_MONOMIALS)].reshape(-1, 4)
-        rates = np.zeros_like(rows)
-        rates[:, 1:] = rows[:, :3] * (np.arange(1, 4) * cells_per_radian)
-        return rates.ravel()
+    def _nodes(self, table, hermite, k, groups):
+        """Hermite weights times the node rows of cell k (nodes k and k + 1)."""
+        k1 = (k + 1) % table.shape[0]
+        return (np.dot(hermite[0, :2 * groups], table[k])
+                + np.dot(hermite[1, :2 * groups], table[k1]))
 
-    def state(self, weights, k, z, speed, out, cells_per_radian):
+    def state(self, weights, hermite, k, z, speed, out, cells_per_radian):
         """
         Write the lifted state [q, q', 1] of z = [eta, eta', 1] at cell k into ``out``.
 
         Parameters
         ----------
         weights : ndarray
-            Row weights at the crank state (monomial times t^p).
+            Power-form row weights at the crank state (monomial times t^p).
+        hermite : ndarray, shape (2, 2 len(MONOMIALS))
+            Hermite weights at the crank state (NumpyStep.evaluate).
         k : int
             Grid cell.
         z : ndarray
@@ -321,19 +315,31 @@ class SoftLift:
 
         """
         r, p = self.record_size, self.size
-        powers = weights[4:8]                   # monomial '1': the powers of t
-        rows = weights[:4 * len(RESIDUAL_MONOMIALS)]
-        coupled = np.dot(weights[:4 * len(LIFT_MONOMIALS)], self.phi[k]).reshape(r, p)
-        first = np.dot(powers, self.dphi[k]).reshape(r, p)
-        out[:r] = coupled @ z[:p] + np.dot(rows, self.residual[k])
-        rate = np.dot(self.rate_weights(weights, cells_per_radian), self.residual[k])
-        out[r:2 * r] = coupled @ z[p:2 * p] + speed * (first @ z[:p] + rate)
+        coupled = self._nodes(self.phi, hermite, k, len(LIFT_MONOMIALS)).reshape(r, p)
+        first = self._nodes(self.dphi, hermite[:, 2:], k, 1).reshape(r, p)
+        out[:r] = coupled @ z[:p] + self._nodes(self.residual, hermite, k,
+                                                len(RESIDUAL_MONOMIALS))
+        out[r:2 * r] = coupled @ z[p:2 * p] + speed * (
+            first @ z[:p] + self._nodes(self.residual, self.rate_weights(weights,
+                                                                         cells_per_radian),
+                                        k, len(RESIDUAL_MONOMIALS)))
         out[2 * r] = 1.0
+
+    @staticmethod
+    def rate_weights(weights, cells_per_radian):
+        """Return d/dtheta of the Hermite weights at power-form weights ``weights`` [per rad]."""
+        monomials, t = weights[0::4], weights[5]      # power 0 of each; t of monomial '1'
+        slope = 6.0 * t * t - 6.0 * t
+        rates = np.empty((2, 2 * monomials.size))
+        rates[0, 0::2], rates[0, 1::2] = monomials * slope, monomials * (3 * t * t - 4 * t + 1)
+        rates[1, 0::2], rates[1, 1::2] = -monomials * slope, monomials * (3 * t * t - 2 * t)
+        return rates * cells_per_radian
 
     def nodes(self, eta, speed):
         """Return q at the grid nodes of soft coordinates ``eta`` (N, p), at a = 0."""
         r, p = self.record_size, self.size
-        frame = (self.phi[:, 4] + speed * speed * self.phi[:, 8]
-                 + speed * self.phi[:, 12]).reshape(-1, r, p)
-        residual = self.residual[:, 4] + speed * speed * self.residual[:, 8]
+        # Node values (V rows) of monomials 1, w2, w: rows 2, 4, 6 of (a, 1, w2, w) x (V, S).
+        frame = (self.phi[:, 2] + speed * speed * self.phi[:, 4]
+                 + speed * self.phi[:, 6]).astype(float).reshape(-1, r, p)
+        residual = self.residual[:, 2] + speed * speed * self.residual[:, 4]
         return np.einsum('nrp,np->nr', frame, eta) + residual
