@@ -252,3 +252,52 @@ def test_compiled_criteria_give_the_python_criteria_bit_for_bit(toy_model):
         got = native.impl.criteria(record, estimator.near_zero_fraction,
                                    REACTION_FLOOR_FRACTION)
         assert got == expected
+
+
+@pytest.mark.parametrize('compiled', [False, True])
+def test_soft_step_stage_interpolation_follows_exact_stages(compiled):
+    """Stage 1 by quadratic interpolation in time against stage 1 from the tables."""
+    if compiled:
+        compiled_or_skip()
+    model = toys.cho_second_order_model('flexible')
+    assert model.soft is not None and model.step_size < model.size
+    times = sample_times(1000.0, 0.4, 0.3, 0.05, seed=5)
+    times = np.concatenate([times, times[-1] + 0.011 + times[:100]])  # sub-steps too
+    speed = 391.0 * np.pi / 30.0
+    runs = {}
+    for interpolate in (True, False):
+        est = StreamingEstimator(model, compiled=compiled)
+        est._stepper = type(est._stepper)(model, est._tables, interpolate_stages=interpolate)
+        assert (est._stepper.history is not None) == interpolate
+        runs[interpolate] = np.array([
+            est.update(int(round(t * 1e9)), speed * t, speed).lever_tip for t in times])
+    scale = np.abs(runs[False]).max()
+    difference = np.abs(runs[True] - runs[False]).max()
+    assert 0.0 < difference < 1e-3 * scale
+
+
+def test_compiled_soft_step_rejects_bad_lift_tables():
+    compiled_or_skip()
+    model = toys.cho_second_order_model('flexible')
+    est = StreamingEstimator(model)
+    est.update(0, 0.0, 30.0)
+    step, t = est._stepper, est._stepper.tables
+    row = np.array([1e-3, 1.0, 0.03, 30.0, 0.0, 0.03])
+    phi, dphi, residual = t.lift.packed()
+
+    def call(lift):
+        native.impl.advance(t.mass, t.damping, t.kf, t.out, t.joint, t.g0,
+                            step.cells_per_radian, STAGE1, step.z, step.previous, row,
+                            np.empty(0), est.last_record, t.second_packed, lift)
+
+    with pytest.raises(ValueError, match='phi'):
+        call((phi[:-1], dphi, residual, step.lifted))
+    with pytest.raises(TypeError, match='float32'):
+        call((phi.astype(float), dphi, residual, step.lifted))
+    with pytest.raises(ValueError, match='lifted'):
+        call((phi, dphi, residual, step.lifted[:-1]))
+    with pytest.raises(ValueError, match='history'):
+        call((phi, dphi, residual, step.lifted, step.history[:-1]))
+    z = step.z.copy()
+    call((phi, dphi, residual, step.lifted, step.history))
+    assert not np.array_equal(step.z, z)
