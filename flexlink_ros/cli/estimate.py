@@ -26,6 +26,7 @@ from .progress import Progress
 from ..core.mechanism_file import load_mechanism
 from ..core.numerics import RPM
 from ..core.options import ModelOptions
+from ..core.reduction.soft_basis import soft_basis_text
 from ..report.estimator import plot_error_vs_cost
 from ..studies.bench import run_bench
 from ..studies.plan import plan_table, run_plan
@@ -49,6 +50,7 @@ def _estimate(args):
             f'  coupler mid |d| max {1e3 * coupler.max():.4f} mm\n'
             f'  update {result["us_per_sample_median"]:.1f} us median, '
             f'{result["us_per_sample_p99"]:.1f} us p99 (r = {model.size}, '
+            f'{soft_basis_text(model)}, '
             f'{model.grid_size} grid cells)\n  ' + nonlinearity_line(result['nonlinearity']))
     return emit(result, text, args.json)
 

@@ -175,7 +175,8 @@ def run_replay(args):
               'skipped': samples['skipped'], 'skipped_reasons': samples['skipped_reasons'],
               'damaged': [{'file': f, 'offset': o, 'reason': r} for f, o, r in damaged],
               'span_s': span_s, 'read_s': read_s,
-              'model': {'size': model.size, 'grid_size': model.grid_size,
+              'model': {'size': model.size, 'step_size': model.step_size,
+                        'soft_basis': model.info.get('soft'), 'grid_size': model.grid_size,
                         'options': str(options)}, 'order': model.order, 'notes': []}
     if args.out:
         result['write_s'] = times['write_s']

@@ -88,3 +88,15 @@ def test_the_gap_is_checked_where_speed_and_acceleration_soften_the_stiffness():
     fast = soft_basis.gap_ratios(mass, pieces, 10.0, 0.0)
     assert at_rest[1] == pytest.approx(10.0 / 1.5)
     assert fast[1] == pytest.approx(2.0 / 1.5)
+
+
+def test_soft_basis_text_says_how_the_model_is_stepped():
+    class Model:
+        step_size = 16
+        info = {'soft': {'used': True, 'size': 16, 'gap_ratio': 3.0778}}
+
+    assert soft_basis.soft_basis_text(Model()) == 'stepped on 16 soft modes (gap 3.08x)'
+    Model.info = {'soft': {'used': False, 'reason': 'off'}}
+    assert soft_basis.soft_basis_text(Model()) == 'stepped in all of them (off)'
+    Model.info = {}
+    assert soft_basis.soft_basis_text(Model()) == 'stepped in all of them'
