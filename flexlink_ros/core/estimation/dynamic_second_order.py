@@ -119,7 +119,7 @@ class DynamicSecondOrderStep(NumpyStep):
         stage = ((previous[0] + STAGE1 * advance) % TWO_PI,
                  previous[1] + STAGE1 * (speed - previous[1]),
                  previous[2] + STAGE1 * (accel - previous[2]))
-        parity = self._load_stages(angle, speed, accel, advance)
+        parity = self._load_stages(h, angle, speed, accel, advance)
         inv = 1.0 / h
         g = np.dot(np.array((inv * inv, inv, 1.0, h, h * h)), tables.g_stack[parity])
         blocks = np.dot(g.reshape(8, 8), self._stored.reshape(8, r * r))
