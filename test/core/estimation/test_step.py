@@ -174,13 +174,14 @@ def test_non_finite_step_is_flagged_and_the_next_sample_restarts(toy_model, comp
     est = StreamingEstimator(toy_model, compiled=compiled)
     for n in range(5):
         est.update(n * 10**6, 0.4 + 0.02 * n, 20.0)
+    # In place: the compiled update holds the table arrays the estimator was built with.
     kf = est._tables.kf
-    est._tables.kf = kf.copy()
-    est._tables.kf[..., 0] = np.nan
+    column = kf[..., 0].copy()
+    kf[..., 0] = np.nan
     bad = est.update(5 * 10**6, 0.5, 20.0)
     assert bad.flags & SampleFlag.OUT_OF_BOUND and 'non-finite' in bad.message
     assert np.all(np.isnan(bad.lever_tip + bad.coupler_mid))
-    est._tables.kf = kf
+    kf[..., 0] = column
     after = est.update(6 * 10**6, 0.52, 20.0)
     assert after.flags & SampleFlag.RESET and not after.flags & SampleFlag.OUT_OF_BOUND
     assert np.all(np.isfinite(after.lever_tip + after.coupler_mid))
