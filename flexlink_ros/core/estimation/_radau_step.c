@@ -1060,7 +1060,12 @@ enum {
     FALLBACK_STEP, FALLBACK_BOUND
 };
 enum { FLAG_LARGE_STEP, FLAG_CLIPPED_SPEED, FLAG_CLIPPED_ACCEL, FLAG_SPEED_FROM_ANGLE, FLAGS };
-#define SAMPLE_FIELDS 15    /* sample.Sample's fields, in order */
+#define SAMPLE_FIELDS 15
+/* sample.Sample's fields, in the order new_sample fills them (checked against the class) */
+static const char *const SAMPLE_NAMES[SAMPLE_FIELDS] = {
+    "stamp_ns", "crank_angle", "crank_speed", "crank_accel", "lever_tip", "coupler_mid",
+    "reaction_n", "gamma_dot", "criterion", "near_zero", "error_indicator", "flags", "message",
+    "modal", "nonlinearity"};
 
 typedef struct {
     PyObject_HEAD
@@ -1069,6 +1074,7 @@ typedef struct {
     Py_buffer z, prev, filter, record, context, indicator;  /* indicator: none without tables */
     double *saved;                  /* z, prev and the filter on entry */
     PyObject *sample_type, *empty;
+    Py_ssize_t slots[SAMPLE_FIELDS];    /* Sample's slot offsets; slots[0] < 0: call Sample */
     /* the estimator's and its gate's parameters */
     double speed_max, accel_limit, large_step_s, reset_gap_s, speed_bound, jump_accel,
            jump_allowance, angle_allowance, near_zero_fraction, floor_fraction,
@@ -1156,8 +1162,11 @@ EXACT_ARITHMETIC static double error_indicator(const double *record, double floo
     return sqrt(correction2) / (floor > size ? floor : size);
 }
 
-/* The Sample of the new state (record, z) at crank (angle, speed, accel): sample.Sample
-   called with its fields in order, as sample_from_record fills them. */
+/*
+ * The Sample of the new state (record, z) at crank (angle, speed, accel), its fields as
+ * sample_from_record fills them: written into the slots of a new instance (what the
+ * dataclass's __init__ does, without its Python frame: about 0.2 us), or Sample called.
+ */
 static PyObject *new_sample(Update *u, long long stamp, const double *crank, long flags,
                             double indicator)
 {
@@ -1180,8 +1189,17 @@ static PyObject *new_sample(Update *u, long long stamp, const double *crank, lon
     int complete = 1;
     for (int i = 0; i < SAMPLE_FIELDS; i++)
         complete &= fields[i] != NULL;
-    if (complete)
+    if (complete && u->slots[0] >= 0) {
+        PyTypeObject *type = (PyTypeObject *)u->sample_type;
+        sample = type->tp_alloc(type, 0);
+        for (int i = 0; sample != NULL && i < SAMPLE_FIELDS; i++)
+            *(PyObject **)((char *)sample + u->slots[i]) = fields[i];    /* takes the ref */
+        if (sample != NULL)
+            return sample;
+    }
+    else if (complete) {
         sample = PyObject_Vectorcall(u->sample_type, fields, SAMPLE_FIELDS, NULL);
+    }
     for (int i = 0; i < SAMPLE_FIELDS; i++)
         Py_XDECREF(fields[i]);
     return sample;
@@ -1314,6 +1332,42 @@ static void update_dealloc(Update *u)
     Py_TYPE(u)->tp_free((PyObject *)u);
 }
 
+/*
+ * Take the Sample class: its fields (`fields`, in order) must be SAMPLE_NAMES. Where each is
+ * a plain slot (a member descriptor of an object) and nothing runs after __init__, note the
+ * slots' offsets; otherwise samples are made by calling the class.
+ */
+static int take_sample_type(Update *u, PyObject *sample_type, PyObject *fields)
+{
+    int same = PyTuple_Check(fields) && PyTuple_GET_SIZE(fields) == SAMPLE_FIELDS;
+    for (int i = 0; same && i < SAMPLE_FIELDS; i++) {
+        PyObject *name = PyTuple_GET_ITEM(fields, i);
+        same = PyUnicode_Check(name) && PyUnicode_CompareWithASCIIString(name, SAMPLE_NAMES[i])
+                                        == 0;
+    }
+    if (!same || !PyType_Check(sample_type)) {
+        PyErr_SetString(PyExc_ValueError, "`sample_type` must be a class with the fields of "
+                        "sample.Sample, in order");
+        return -1;
+    }
+    u->sample_type = Py_NewRef(sample_type);
+    u->slots[0] = -1;
+    int plain = !PyObject_HasAttrString(sample_type, "__post_init__");
+    for (int i = 0; plain && i < SAMPLE_FIELDS; i++) {
+        PyObject *slot = PyObject_GetAttrString(sample_type, SAMPLE_NAMES[i]);
+        plain = slot != NULL && Py_IS_TYPE(slot, &PyMemberDescr_Type)
+                && ((PyMemberDescrObject *)slot)->d_member->type == T_OBJECT_EX
+                && !(((PyMemberDescrObject *)slot)->d_member->flags & READONLY);
+        if (plain)
+            u->slots[i] = ((PyMemberDescrObject *)slot)->d_member->offset;
+        Py_XDECREF(slot);
+    }
+    PyErr_Clear();
+    if (!plain)
+        u->slots[0] = -1;
+    return 0;
+}
+
 /* The validity indicator's (context, table), checked; none if `indicator` is None. */
 static int take_indicator(Update *u, PyObject *indicator)
 {
@@ -1367,32 +1421,31 @@ static PyObject *update_new(PyTypeObject *type, PyObject *args, PyObject *kwargs
 {
     static char *keywords[] = {
         "tables", "second", "cells_per_radian", "c1", "z", "prev", "filter", "record",
-        "indicator", "sample_type", "speed_max", "accel_limit", "large_step_s", "reset_gap_s",
+        "indicator", "sample_type", "sample_fields", "speed_max", "accel_limit", "large_step_s", "reset_gap_s",
         "speed_bound", "jump_accel", "jump_allowance", "angle_allowance",
         "near_zero_fraction", "floor_fraction", "deflection_bound", "error_floor",
         "max_substep_ns", "base_flags", "flags", NULL};
-    PyObject *tables, *second, *state[4], *indicator, *sample_type;
+    PyObject *tables, *second, *state[4], *indicator, *sample_type, *sample_fields;
     double cells_per_radian, c1;
     Update *u = (Update *)type->tp_alloc(type, 0);
     if (u == NULL)
         return NULL;
     if (!PyArg_ParseTupleAndKeywords(
-            args, kwargs, "$OOddOOOOOOddddddddddddLl(llll):Update", keywords, &tables,
+            args, kwargs, "$OOddOOOOOOOddddddddddddLl(llll):Update", keywords, &tables,
             &second, &cells_per_radian, &c1, &state[0], &state[1], &state[2], &state[3],
-            &indicator, &sample_type, &u->speed_max, &u->accel_limit, &u->large_step_s,
+            &indicator, &sample_type, &sample_fields, &u->speed_max, &u->accel_limit, &u->large_step_s,
             &u->reset_gap_s, &u->speed_bound, &u->jump_accel, &u->jump_allowance,
             &u->angle_allowance, &u->near_zero_fraction, &u->floor_fraction,
             &u->deflection_bound, &u->error_floor, &u->max_substep_ns, &u->base_flags,
             &u->flags[0], &u->flags[1], &u->flags[2], &u->flags[3])
         || take_state(u, tables, second, cells_per_radian, c1, state) != 0
-        || take_indicator(u, indicator) != 0)
+        || take_indicator(u, indicator) != 0
+        || take_sample_type(u, sample_type, sample_fields) != 0)
         goto fail;
-    if (!PyCallable_Check(sample_type) || !(u->max_substep_ns > 0)) {
-        PyErr_SetString(PyExc_ValueError, "`sample_type` must be callable and "
-                        "`max_substep_ns` positive");
+    if (!(u->max_substep_ns > 0)) {
+        PyErr_SetString(PyExc_ValueError, "`max_substep_ns` must be positive");
         goto fail;
     }
-    u->sample_type = Py_NewRef(sample_type);
     u->empty = PyUnicode_FromString("");
     if (u->empty == NULL)
         goto fail;
@@ -1427,6 +1480,8 @@ static PyMemberDef update_members[] = {
      "Why the last sample() returned None (FALLBACK_* of _radau_step.c; 0: it did not)."},
     {"taken", T_LONGLONG, offsetof(Update, taken), READONLY,
      "Samples this path estimated."},
+    {"fills_slots", T_PYSSIZET, offsetof(Update, slots), READONLY,
+     "Offset of the first slot Samples are written into (>= 0), or -1: Sample is called."},
     {"deflection_bound", T_DOUBLE, offsetof(Update, deflection_bound), 0,
      "The estimator's deflection bound [m] (StreamingEstimator.deflection_bound_m)."},
     {NULL, 0, 0, 0, NULL},
@@ -1439,7 +1494,7 @@ static PyTypeObject UpdateType = {
     .tp_dealloc = (destructor)update_dealloc,
     .tp_flags = Py_TPFLAGS_DEFAULT,
     .tp_doc = "Update(*, tables, second, cells_per_radian, c1, z, prev, filter, record, "
-              "indicator, sample_type, <the estimator's parameters>)\n\n"
+              "indicator, sample_type, sample_fields, <the estimator's parameters>)\n\n"
               "StreamingEstimator.update of an ordinary sample in one call "
               "(core/estimation/compiled_update.py builds it).",
     .tp_methods = update_methods,

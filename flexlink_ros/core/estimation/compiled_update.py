@@ -17,6 +17,7 @@ again (:meth:`arm`) after the Python path accepted a sample with nothing pending
 outlier, no deferred warm start).
 """
 
+import dataclasses
 import math
 
 from . import native
@@ -109,6 +110,7 @@ class CompiledUpdate:
             cells_per_radian=stepper.cells_per_radian, c1=STAGE1, z=stepper.z,
             prev=stepper.previous, filter=rate_filter.state, record=record,
             indicator=nonlinearity.kernel_tables, sample_type=Sample,
+            sample_fields=tuple(field.name for field in dataclasses.fields(Sample)),
             speed_max=limits['speed_max'], accel_limit=limits['accel_limit'],
             large_step_s=limits['large_step_s'], reset_gap_s=gate.reset_gap_s,
             speed_bound=gate.speed_bound, jump_accel=gate.jump_accel,
@@ -149,6 +151,9 @@ class CompiledUpdate:
                      doc='Whether the compiled path takes the next sample.')
     taken = property(lambda self: self._kernel.taken,
                      doc='Samples the compiled path estimated.')
+    fills_slots = property(lambda self: self._kernel.fills_slots >= 0,
+                           doc='Whether Samples are written into their slots (else Sample is '
+                               'called).')
     fallback = property(lambda self: FALLBACK_REASONS[self._kernel.fallback],
                         doc="Why the last sample went to the Python path ('none' if not).")
 

@@ -11,9 +11,11 @@ took the ordinary samples while each kind of fallback happened. Against the nump
 samples agree to rounding, as the compiled step does (test_step.py).
 """
 
+import dataclasses
 import math
 
 from estimation_toys import cho_second_order_model, compiled_or_skip, SPEED, toy_model
+from flexlink_ros.core.estimation import compiled_update
 from flexlink_ros.core.estimation.compiled_update import (CompiledUpdate, FALLBACK_REASONS,
                                                           PythonUpdate)
 from flexlink_ros.core.estimation.native import RECORD_SIZE
@@ -165,6 +167,30 @@ def test_compiled_update_equals_the_python_path_event_by_event(model):
     for flag in ('RESET', 'OUTLIER', 'REPEATED', 'LARGE_STEP', 'CLIPPED_SPEED',
                  'CLIPPED_ACCEL', 'SPEED_FROM_ANGLE', 'OUT_OF_BOUND', 'WARM_START'):
         assert flags & SampleFlag[flag], flag
+
+
+def test_samples_are_made_as_the_class_makes_them(model, monkeypatch):
+    """Written into Sample's slots; a class with a __post_init__ is called (it runs)."""
+    events = _signal(seed=5, seconds=0.1)
+    estimator = StreamingEstimator(model)
+    assert estimator._compiled.fills_slots
+    plain = [estimator.update(*event) for event in events]
+    made = []
+
+    @dataclasses.dataclass(slots=True)
+    class Counted(Sample):
+
+        def __post_init__(self):
+            made.append(self.stamp_ns)
+
+    monkeypatch.setattr(compiled_update, 'Sample', Counted)
+    counted = StreamingEstimator(model)
+    assert not counted._compiled.fills_slots
+    samples = [counted.update(*event) for event in events]
+    assert counted._compiled.taken == len(events) - 1 == len(made)
+    assert all(type(s) is Counted for s in samples[1:])
+    for got, expected in zip(samples, plain):
+        _assert_same(got, expected, {})
 
 
 def test_compiled_update_equals_the_numpy_step_to_rounding(model):
