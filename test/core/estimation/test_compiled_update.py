@@ -71,12 +71,12 @@ def _events(model):
     out += [('event', e) for e in _shift(tail[40:80], 10**9)]               # gap: restart
     step = model.speed_max + 5.0                                           # speed step
     out += [('event', e) for e in _shift(tail[80:130], 10**9, speed_offset=step)]
-    out += [('event', e) for e in _shift(tail[130:170], 10**9, speed='none')]  # no speed
-    regime = _shift(tail[170:230], 10**9, angle=2.0)                        # a new regime
-    out += [('event', e) for e in regime]
-    fast = [(s, a, 1.3 * model.speed_max) for s, a, _ in _shift(tail[230:260], 10**9, 2.0)]
+    # A restart without speeds (the warm start deferred to the third sample), a new regime.
+    out += [('event', e) for e in _shift(tail[130:170], 2 * 10**9, speed='none')]
+    out += [('event', e) for e in _shift(tail[170:230], 2 * 10**9, angle=2.0)]
+    fast = [(s, a, 1.3 * model.speed_max) for s, a, _ in _shift(tail[230:260], 2 * 10**9, 2.0)]
     out += [('event', e) for e in fast]                                     # beyond speed_max
-    later = _shift(tail[260:], 10**9, angle=2.0)
+    later = _shift(tail[260:], 2 * 10**9, angle=2.0)
     out += [('event', (np.int64(later[0][0]), np.float64(later[0][1]), later[0][2]))]
     out += [('event', (float(later[1][0]), later[1][1], math.nan))]       # float stamp, NaN
     out += [('event', e) for e in later[2:30]]
@@ -164,6 +164,8 @@ def test_compiled_update_equals_the_python_path_event_by_event(model):
     flags = 0
     for sample in samples:
         flags |= sample.flags
+    deferred = SampleFlag.WARM_START | SampleFlag.SPEED_FROM_ANGLE
+    assert any(sample.flags & deferred == deferred for sample in samples)
     for flag in ('RESET', 'OUTLIER', 'REPEATED', 'LARGE_STEP', 'CLIPPED_SPEED',
                  'CLIPPED_ACCEL', 'SPEED_FROM_ANGLE', 'OUT_OF_BOUND', 'WARM_START'):
         assert flags & SampleFlag[flag], flag
