@@ -56,10 +56,21 @@ def compiled_update(estimator, stepper, gate, record, base_flags):
     return CompiledUpdate(stepper, rate_filter, gate, nonlinearity, record, limits)
 
 
+def use_python_path(estimator):
+    """Send every sample of a StreamingEstimator to the Python path (comparisons, benchmarks)."""
+    estimator._compiled = PythonUpdate()
+
+
+def compiled_samples(estimator):
+    """Count the samples of a StreamingEstimator that the compiled path estimated."""
+    return estimator._compiled.taken
+
+
 class PythonUpdate:
     """Stands in for :class:`CompiledUpdate` where it cannot serve: every sample goes to Python."""
 
     compiled = False
+    taken = 0
 
     @staticmethod
     def sample(stamp_ns, crank_angle, crank_speed):

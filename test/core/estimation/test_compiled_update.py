@@ -17,7 +17,7 @@ import math
 from estimation_toys import cho_second_order_model, compiled_or_skip, SPEED, toy_model
 from flexlink_ros.core.estimation import compiled_update
 from flexlink_ros.core.estimation.compiled_update import (CompiledUpdate, FALLBACK_REASONS,
-                                                          PythonUpdate)
+                                                          use_python_path)
 from flexlink_ros.core.estimation.native import RECORD_SIZE
 from flexlink_ros.core.estimation.sample import Sample, SampleFlag
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
@@ -92,7 +92,7 @@ def _estimator(model, compiled_update):
     limiter = WarmStartLimiter(burst=1000.0, clock=lambda: 0.0)   # deterministic warm starts
     estimator = StreamingEstimator(model, warm_start_limiter=limiter)
     if not compiled_update:
-        estimator._compiled = PythonUpdate()
+        use_python_path(estimator)
     return estimator
 
 
