@@ -6,15 +6,15 @@ a jittered signal at ``rpm`` on two estimators of one model: one with the compil
 (core/estimation/compiled_update.py: the whole update of an ordinary sample in one C call),
 one whose every sample takes the Python path around the same compiled step; which of the two
 goes first alternates from round to round. A third estimator times the batched step of as
-many rows (step_rows, the replay's call; median over chunks of CHUNK rows, which keep the
-GIL as a single sample does). The update minus the batched step is what the estimator adds
-around the step. Both estimators' samples are checked to agree before anything is reported.
+many rows (step_rows, the replay's call: the rows the updates build, so the same step work;
+median over chunks of CHUNK rows, which keep the GIL as a single sample does). The update
+minus the batched step is what the estimator adds around the step. Both estimators' last
+samples of each round are checked to agree before anything is reported.
 ``python -m flexlink_ros.studies.update_bench`` prints it for the node's default model.
 """
 
 import argparse
 import json
-import math
 import time
 
 import numpy as np
@@ -22,6 +22,7 @@ import numpy as np
 from .bench import node_model_options
 from .synthetic import synthetic_signal
 from ..core.estimation.compiled_update import compiled_samples, use_python_path
+from ..core.estimation.step import MAX_SUBSTEP_NS
 from ..core.estimation.streaming import StreamingEstimator
 from ..core.mechanism_file import load_mechanism
 from ..core.reduction.pipeline import model_for_mechanism
@@ -44,24 +45,34 @@ def _update_round(estimator, signal):
     return np.array(times[SETTLE:]) * 1e-3, sample
 
 
-def _rows_round(estimator, speed, rows, angle):
+def step_rows_of(estimator, stamps_ns, angles, speeds):
     """
-    Time the batched step over chunks of CHUNK rows at constant speed from crank ``angle``.
+    Return the step rows update() builds for the samples after the first of a clean signal.
 
-    Returns the median [us] per row and the crank angle reached.
+    The estimator's kind of crank filter over the signal, clipped as the model sees it (the
+    offline replay builds its rows the same way): the batched step then does the updates'
+    own step work.
     """
+    stamps_ns = np.asarray(stamps_ns, dtype=np.int64)
+    motion = type(estimator.rate_filter)(estimator.rate_filter.time_constant_s).signal(
+        (stamps_ns - stamps_ns[0]) * 1e-9, np.asarray(angles), np.asarray(speeds))[1:]
+    dt_ns = np.diff(stamps_ns)
+    speed_max = estimator.model.speed_max
+    return np.column_stack([dt_ns * 1e-9, -(-dt_ns // MAX_SUBSTEP_NS), motion[:, 0],
+                            np.clip(motion[:, 1], -speed_max, speed_max),
+                            np.clip(motion[:, 2], -estimator.accel_limit, estimator.accel_limit),
+                            motion[:, 3]])
+
+
+def _rows_round(estimator, rows):
+    """Median [us] per row of the batched step through ``rows`` in chunks of CHUNK rows."""
     per_row = []
-    for _ in range(max(1, rows // CHUNK)):
-        angles = np.mod(angle + speed * 1e-3 * np.arange(1, CHUNK + 1), 2.0 * math.pi)
-        table = np.column_stack([np.full(CHUNK, 1e-3), np.ones(CHUNK), angles,
-                                 np.full(CHUNK, speed), np.zeros(CHUNK),
-                                 np.full(CHUNK, speed * 1e-3)])
-        records = np.empty((CHUNK, estimator.last_record.size))
+    records = np.empty((CHUNK, estimator.last_record.size))
+    for first in range(0, rows.shape[0] - CHUNK + 1, CHUNK):
         before = time.perf_counter_ns()
-        estimator.step_rows(table, np.empty(0), records)
+        estimator.step_rows(rows[first:first + CHUNK], np.empty(0), records)
         per_row.append((time.perf_counter_ns() - before) * 1e-3 / CHUNK)
-        angle = float(angles[-1])
-    return float(np.median(per_row)), angle
+    return float(np.median(per_row))
 
 
 def _check_agree(compiled, python):
@@ -98,13 +109,15 @@ def update_overhead(model, rpm=391.0, rounds=9, samples=3000, jitter=0.3):
 
     """
     signal = synthetic_signal(rpm, rounds * samples / 1000.0 + 1.0, 1000.0, jitter, seed=0)
-    signal = [values.tolist() for values in signal]
-    fast, python, rows = (StreamingEstimator(model) for _ in range(3))
+    fast, python, batched = (StreamingEstimator(model) for _ in range(3))
     use_python_path(python)
-    speed = rpm * math.pi / 30.0
-    rows.update(0, 0.0, speed)
+    first = (int(signal[0][0]), float(signal[1][0]), float(signal[2][0]))
+    for estimator in (fast, python, batched):
+        estimator.update(*first)
+    rows = step_rows_of(batched, *signal)
+    signal = [values[1:].tolist() for values in signal]
     timed = {'compiled': [], 'python': []}
-    steps, angle = [], 0.0
+    steps = []
     for k in range(rounds):
         part = [values[k * samples:(k + 1) * samples] for values in signal]
         order = (('compiled', fast), ('python', python))
@@ -113,8 +126,7 @@ def update_overhead(model, rpm=391.0, rounds=9, samples=3000, jitter=0.3):
             times, results[name] = _update_round(estimator, part)
             timed[name].append((float(np.median(times)), float(np.percentile(times, 99))))
         _check_agree(results['compiled'], results['python'])
-        step, angle = _rows_round(rows, speed, samples, angle)
-        steps.append(step)
+        steps.append(_rows_round(batched, rows[k * samples:(k + 1) * samples]))
     step = float(np.median(steps))
     out = {'step_us': step, 'taken': compiled_samples(fast), 'samples': fast.samples,
            'around_step_us': {}}
