@@ -1263,8 +1263,10 @@ EXACT_ARITHMETIC static PyObject *advance_sample(Update *u, long long stamp, dou
                                                                        : clipped);
     }
     PyObject *sample = new_sample(u, stamp, crank, flags, indicator);
-    if (sample == NULL)
+    if (sample == NULL) {       /* no memory: raise with the state as it was */
+        Py_DECREF(fall_back(u, FALLBACK_NONE));
         return NULL;
+    }
     u->last_stamp = stamp;
     u->last_angle = angle;
     u->last_speed = speed;

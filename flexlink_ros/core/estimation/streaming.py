@@ -5,10 +5,11 @@ Streaming estimation of the linkage's elastic response, one crank sample at a ti
 (:class:`~.gate.InputGate`), turns it into the crank's unwrapped angle, speed and acceleration
 (:class:`~.crank_filter.CrankRateFilter`), advances the reduced model (core/reduction) by one
 Radau IIA step (:mod:`.step`, compiled where built) and returns a :class:`~.sample.Sample`
-with the deflections, the joint criteria, the validity indicator and flags. Implausible
-samples are refused (:class:`OutlierSample`, the state untouched); an estimate beyond the
-model's deflection bound, or a non-finite one, is flagged OUT_OF_BOUND (NaN deflections) and
-the next sample restarts.
+with the deflections, the joint criteria, the validity indicator and flags (all of it in one
+compiled call for an ordinary sample: :mod:`.compiled_update`). Implausible samples are
+refused (:class:`OutlierSample`, the state untouched); an estimate beyond the model's
+deflection bound, or a non-finite one, is flagged OUT_OF_BOUND (NaN deflections) and the
+next sample restarts.
 """
 
 import dataclasses
