@@ -1135,7 +1135,8 @@ EXACT_ARITHMETIC static int gate_passes(const Update *u, long long stamp, double
     return !(advance > u->speed_bound * dt + u->angle_allowance);
 }
 
-/* A tuple of n floats, or NULL with an exception set. */
+/* A tuple of n floats, or NULL with an exception set. Not tracked by the garbage collector
+   (floats cannot form a cycle; the collector would untrack it at its first pass). */
 static PyObject *float_tuple(const double *values, Py_ssize_t n)
 {
     PyObject *tuple = PyTuple_New(n);
@@ -1146,7 +1147,26 @@ static PyObject *float_tuple(const double *values, Py_ssize_t n)
         else
             PyTuple_SET_ITEM(tuple, i, value);
     }
+    if (tuple != NULL)
+        PyObject_GC_UnTrack(tuple);
     return tuple;
+}
+
+/* The tuple of four bools of the near-zero flags (bit j: joint j), kept per flag pattern. */
+static PyObject *near_zero_tuple(const int *near)
+{
+    static PyObject *patterns[16];
+    const int bits = (near[0] != 0) | (near[1] != 0) << 1 | (near[2] != 0) << 2
+                     | (near[3] != 0) << 3;
+    if (patterns[bits] == NULL) {
+        patterns[bits] = PyTuple_Pack(4, near[0] ? Py_True : Py_False,
+                                      near[1] ? Py_True : Py_False,
+                                      near[2] ? Py_True : Py_False,
+                                      near[3] ? Py_True : Py_False);
+        if (patterns[bits] == NULL)
+            return NULL;
+    }
+    return Py_NewRef(patterns[bits]);
 }
 
 /* sample_from_record's error indicator: |correction| / max(|deflection|, floor), summed
@@ -1180,8 +1200,7 @@ static PyObject *new_sample(Update *u, long long stamp, const double *crank, lon
         PyFloat_FromDouble(crank[1]), PyFloat_FromDouble(crank[2]), float_tuple(record, 2),
         float_tuple(record + 2, 2), float_tuple(reactions[0], 4), float_tuple(reactions[1], 4),
         float_tuple(reactions[2], 4),
-        PyTuple_Pack(4, near[0] ? Py_True : Py_False, near[1] ? Py_True : Py_False,
-                     near[2] ? Py_True : Py_False, near[3] ? Py_True : Py_False),
+        near_zero_tuple(near),
         PyFloat_FromDouble(error_indicator(record, u->error_floor)),
         PyLong_FromLong(flags | u->base_flags), Py_NewRef(u->empty),
         float_tuple(u->z.buf, u->step.r), PyFloat_FromDouble(indicator)};
