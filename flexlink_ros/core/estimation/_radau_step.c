@@ -13,6 +13,12 @@
  *     (the factored quadratic form of core/reduction/second_order_tables.py).
  * A sample whose step is split into sub-steps (MAX_SUBSTEP_NS) is advanced here too,
  * with the crank state linear between the samples, as NumpyStep._sub_steps does.
+ * Batched rows (advance) and the streaming update both enter the step through step_sample.
+ *
+ * Also here: the crank-rate filter (CrankRateFilter.update), the joint criteria, and Update,
+ * the whole StreamingEstimator.update of an ordinary sample in one call (gate, filter, step,
+ * record, criteria, bound, validity indicator of _nonlinearity.h, the Sample), with the
+ * Python path (core/estimation/compiled_update.py) taking every other sample.
  *
  * No numpy headers: arrays come through the buffer protocol (C-contiguous float64).
  */
