@@ -13,9 +13,11 @@ samples agree to rounding, as the compiled step does (test_step.py).
 
 import dataclasses
 import math
+import pathlib
+import re
 
 from estimation_toys import cho_second_order_model, compiled_or_skip, SPEED, toy_model
-from flexlink_ros.core.estimation import compiled_update
+from flexlink_ros.core.estimation import compiled_update, native
 from flexlink_ros.core.estimation.compiled_update import (CompiledUpdate, FALLBACK_REASONS,
                                                           use_python_path)
 from flexlink_ros.core.estimation.native import RECORD_SIZE
@@ -243,3 +245,18 @@ def test_compiled_update_refuses_buffers_that_do_not_fit(model):
 
         with pytest.raises(ValueError, match='context'):
             build(nonlinearity=OtherIndicator())
+
+
+def test_fallback_reasons_and_flags_are_the_c_enums_in_order():
+    """FALLBACK_REASONS names enum FALLBACK_* of _radau_step.c; the flags go in FLAG_* order."""
+    source = pathlib.Path(native.__file__).with_name('_radau_step.c').read_text()
+    reasons = re.search(r'enum\s*{\s*(FALLBACK_NONE[^}]*)}', source).group(1)
+    names = [name.strip()[len('FALLBACK_'):].lower().replace('_', ' ')
+             for name in reasons.split(',')]
+    assert tuple(names) == FALLBACK_REASONS
+    flags = re.search(r'enum\s*{\s*(FLAG_LARGE_STEP[^}]*)}', source).group(1)
+    assert [name.strip() for name in flags.split(',')] == [
+        'FLAG_LARGE_STEP', 'FLAG_CLIPPED_SPEED', 'FLAG_CLIPPED_ACCEL', 'FLAG_SPEED_FROM_ANGLE',
+        'FLAGS']
+    built = pathlib.Path(compiled_update.__file__).read_text()
+    assert 'flags=(LARGE_STEP, CLIPPED_SPEED, CLIPPED_ACCEL, SPEED_FROM_ANGLE)' in built
