@@ -1319,12 +1319,17 @@ static PyObject *update_sample(Update *u, PyObject *const *args, Py_ssize_t narg
 static PyObject *update_arm(Update *u, PyObject *args)
 {
     PyObject *speed_object;
-    if (!PyArg_ParseTuple(args, "LdOL", &u->last_stamp, &u->last_angle, &speed_object,
-                          &u->stamp0))
+    long long stamp, stamp0;
+    double angle;
+    if (!PyArg_ParseTuple(args, "LdOL", &stamp, &angle, &speed_object, &stamp0))
         return NULL;
-    u->last_speed = speed_object == Py_None ? NAN : PyFloat_AsDouble(speed_object);
+    const double speed = speed_object == Py_None ? NAN : PyFloat_AsDouble(speed_object);
     if (PyErr_Occurred())
         return NULL;
+    u->last_stamp = stamp;
+    u->last_angle = angle;
+    u->last_speed = speed;
+    u->stamp0 = stamp0;
     u->armed = 1;
     Py_RETURN_NONE;
 }

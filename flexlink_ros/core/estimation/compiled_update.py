@@ -152,7 +152,10 @@ class CompiledUpdate:
             The crank filter's time origin (the estimate's start) [ns].
 
         """
-        self._kernel.arm(*reference, stamp0_ns)
+        try:
+            self._kernel.arm(*reference, stamp0_ns)
+        except OverflowError:   # stamps beyond int64: the Python path keeps them
+            self._kernel.disarm()
 
     def disarm(self):
         """Leave every sample to the Python path until :meth:`arm`."""

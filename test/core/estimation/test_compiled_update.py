@@ -197,6 +197,18 @@ def test_samples_are_made_as_the_class_makes_them(model, monkeypatch):
         _assert_same(got, expected, {})
 
 
+def test_stamps_beyond_int64_stay_on_the_python_path(model):
+    """The Python path takes integers of any size; the compiled path leaves them to it."""
+    start = 2**63 + 10**9
+    events = [(start + s - START_NS, a, w) for s, a, w in _signal(seed=6, seconds=0.05)]
+    estimator, python = StreamingEstimator(model), _estimator(model, False)
+    samples = [estimator.update(*event) for event in events]
+    assert not estimator._compiled.armed and estimator._compiled.taken == 0
+    assert samples[-1].stamp_ns == events[-1][0]
+    for got, expected in zip(samples, [python.update(*event) for event in events]):
+        _assert_same(got, expected, {})
+
+
 def test_compiled_update_equals_the_numpy_step_to_rounding(model):
     events = _signal(seed=8, seconds=0.4)
     events += _shift(_signal(seed=9, seconds=0.2), 5 * 10**8, speed='none')
