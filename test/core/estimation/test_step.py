@@ -5,6 +5,7 @@ import dataclasses
 import estimation_toys as toys
 from estimation_toys import compiled_or_skip, sample_times, samples_fields
 from flexlink_ros.core.estimation import native
+from flexlink_ros.core.estimation.compiled_update import use_python_path
 from flexlink_ros.core.estimation.native import compiled_step_available, RECORD_SIZE
 from flexlink_ros.core.estimation.sample import SampleFlag
 from flexlink_ros.core.estimation.step import (joint_criteria, MAX_SUBSTEP_NS,
@@ -174,13 +175,14 @@ def test_non_finite_step_is_flagged_and_the_next_sample_restarts(toy_model, comp
     est = StreamingEstimator(toy_model, compiled=compiled)
     for n in range(5):
         est.update(n * 10**6, 0.4 + 0.02 * n, 20.0)
+    # In place: the compiled update holds the table arrays the estimator was built with.
     kf = est._tables.kf
-    est._tables.kf = kf.copy()
-    est._tables.kf[..., 0] = np.nan
+    column = kf[..., 0].copy()
+    kf[..., 0] = np.nan
     bad = est.update(5 * 10**6, 0.5, 20.0)
     assert bad.flags & SampleFlag.OUT_OF_BOUND and 'non-finite' in bad.message
     assert np.all(np.isnan(bad.lever_tip + bad.coupler_mid))
-    est._tables.kf = kf
+    kf[..., 0] = column
     after = est.update(6 * 10**6, 0.52, 20.0)
     assert after.flags & SampleFlag.RESET and not after.flags & SampleFlag.OUT_OF_BOUND
     assert np.all(np.isfinite(after.lever_tip + after.coupler_mid))
@@ -268,6 +270,7 @@ def test_soft_step_stage_interpolation_follows_exact_stages(compiled):
     for interpolate in (True, False):
         est = StreamingEstimator(model, compiled=compiled)
         est._stepper = type(est._stepper)(model, est._tables, interpolate_stages=interpolate)
+        use_python_path(est)        # the compiled update holds the first step's arrays
         assert (est._stepper.history is not None) == interpolate
         runs[interpolate] = np.array([
             est.update(int(round(t * 1e9)), speed * t, speed).lever_tip for t in times])
