@@ -63,6 +63,7 @@ typedef struct {
     double *frame;      /* scratch: Phi, Phi' (rr x p each) */
     const float *mass, *damping;    /* float32, node tables: see tables._StepTables */
     const double *kf, *out, *joint, *g0;
+    const float *kf32;  /* the soft basis's [K | f] node table (float32; kf is NULL then) */
     double cells_per_radian, c1;
     /* scratch */
     double *blocks;     /* [slot][m] r x r, m = M, C, K; slot 0 sample, 1 stage 1 */
@@ -215,9 +216,18 @@ static void load(Step *s, int slot, double angle, double w, double a)
                           s->transport);
     /* [K | f] from the kf table (monomials a, 1, w2, and w with stiffness damping) */
     const Py_ssize_t kf_width = r2 + r, kf_node = 2 * s->kf_groups * kf_width;
-    const double *lo = s->kf + k * kf_node, *hi = s->kf + k1 * kf_node;
-    combine_nodes(s->hermite, lo, hi, s->kf_groups, kf_width, r2, blocks + 2 * r2);
-    combine_nodes(s->hermite, lo + r2, hi + r2, s->kf_groups, kf_width, r, s->loads + slot * r);
+    if (s->kf32 != NULL) {
+        const float *lo = s->kf32 + k * kf_node, *hi = s->kf32 + k1 * kf_node;
+        combine_nodes_f32(s->hermite, lo, hi, s->kf_groups, kf_width, r2, blocks + 2 * r2);
+        combine_nodes_f32(s->hermite, lo + r2, hi + r2, s->kf_groups, kf_width, r,
+                          s->loads + slot * r);
+    }
+    else {
+        const double *lo = s->kf + k * kf_node, *hi = s->kf + k1 * kf_node;
+        combine_nodes(s->hermite, lo, hi, s->kf_groups, kf_width, r2, blocks + 2 * r2);
+        combine_nodes(s->hermite, lo + r2, hi + r2, s->kf_groups, kf_width, r,
+                      s->loads + slot * r);
+    }
     if (s->lift_phi != NULL) {
         double *stiffness = blocks + 2 * r2;
         for (Py_ssize_t j = 0; j < r2; j++)
@@ -796,7 +806,8 @@ static int step_open(Step *s, Py_ssize_t r, PyObject *const *tables, PyObject *s
     const Py_ssize_t rr = s->rr;
     if (get_typed_buffer(tables[VIEW_MASS], &views[VIEW_MASS], 0, "mass", -1, "f") != 0
         || (s->mass_groups = rows_of(&views[VIEW_MASS], 2 * r2, cells, GROUPS_C, "mass")) < 0
-        || get_buffer(tables[VIEW_KF], &views[VIEW_KF], 0, "kf", -1) != 0
+        || get_typed_buffer(tables[VIEW_KF], &views[VIEW_KF], 0, "kf", -1, soft ? "f" : "d")
+           != 0
         || (s->kf_groups = rows_of(&views[VIEW_KF], 2 * (r2 + r), cells, GROUPS_KF_MAX, "kf"))
            < 0
         || get_buffer(tables[VIEW_OUT], &views[VIEW_OUT], 0, "out", -1) != 0
@@ -811,7 +822,8 @@ static int step_open(Step *s, Py_ssize_t r, PyObject *const *tables, PyObject *s
     s->cells = cells;
     s->mass = views[VIEW_MASS].buf;
     s->damping = views[VIEW_DAMPING].buf;
-    s->kf = views[VIEW_KF].buf;
+    s->kf = soft ? NULL : views[VIEW_KF].buf;
+    s->kf32 = soft ? views[VIEW_KF].buf : NULL;
     s->out = views[VIEW_OUT].buf;
     s->joint = views[VIEW_JOINT].buf;
     s->g0 = views[VIEW_G0].buf;

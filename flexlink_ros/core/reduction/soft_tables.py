@@ -215,8 +215,9 @@ def soft_tables(model, size=-1, accel_limit=5000.0):
     Returns
     -------
     dict of str to ndarray
-        'soft_mass' (N, 2, p p) and 'soft_damping' (N, 8, 2 p p: [C | D]) float32 node
-        tables, 'soft_kf' (N, 2 groups, p p + p) float64 node table, the lift's power-form
+        'soft_mass' (N, 2, p p), 'soft_damping' (N, 8, 2 p p: [C | D]) and 'soft_kf' (N,
+        2 groups, p p + p) float32 node tables (the soft basis has no stiff directions: the
+        outputs move by < 1e-6 of their size), the lift's power-form
         cell tables 'soft_phi' (N, 16, r p: :func:`coupled_frame` per monomial a, 1, w2, w
         times powers of t), 'soft_dphi' (N, 4, r p: dPhi/dtheta) and
         'soft_residual' (N, 12, r: monomials a, 1, w2 times powers of t), and 'soft_gap'
@@ -250,7 +251,7 @@ def soft_tables(model, size=-1, accel_limit=5000.0):
                                     range(len(SOFT_DAMPING_MONOMIALS)),
                                     (nodes, 2 * size, size), np.float32),
         'soft_kf': _node_table(dict(enumerate(kf.transpose(1, 0, 2))), range(len(kf_monomials)),
-                               (nodes, size * size + size), np.float64),
+                               (nodes, size * size + size), np.float32),
         'soft_phi': _node_table(coupled_frame(model, frame, first), LIFT_MONOMIALS,
                                 (nodes, r * size), np.float32),
         'soft_dphi': _node_table({'1': first}, ('1',), (nodes, r * size), np.float32),
