@@ -24,6 +24,7 @@ from .dynamic_second_order_bench import time_pass
 from .peer_exudyn import compare, peer_response
 from .peer_model import OUTPUT_KEYS
 from ..core.estimation import native
+from ..core.estimation.dynamic_pass_kernel import DynamicPassKernel
 from ..core.estimation.dynamic_second_order import DynamicSecondOrderStep, steady_revolution
 from ..core.estimation.step import NumpyStep
 from ..core.estimation.streaming import StreamingEstimator
@@ -82,12 +83,12 @@ def accuracy(mechanism, rpm, elements, sizes_list, revolutions=10, peer=False, g
     for sizes in sizes_list:
         options = case_options(rpm, elements, sizes)
         model = model_for_mechanism(mechanism, options)
-        load = load_for_model(mechanism, options, model)
+        kernel = DynamicPassKernel(load_for_model(mechanism, options, model).arrays)
         step = {}
         for keep in (True, False):
-            # keep_quasi_static=False with a zero load: the plain quasi-static estimate
-            used = load if keep else _ZeroLoad(model.size)
-            step[keep] = steady_revolution(model, used, speed, SAMPLES, revolutions, True)[1]
+            # a zero load: the plain quasi-static estimate
+            used = kernel if keep else _ZeroLoad(model.size)
+            step[keep] = steady_revolution(model, used, speed, SAMPLES, revolutions)[1]
         responses[f'r={model.size} dynamic'] = step[True]
         responses[f'r={model.size} quasi-static'] = step[False]
         out['bases'].append({'sizes': list(sizes), 'r': model.size,
@@ -102,13 +103,13 @@ def accuracy(mechanism, rpm, elements, sizes_list, revolutions=10, peer=False, g
 
 
 class _ZeroLoad:
-    """A load of zero (the step then is the plain step: q2 stays zero)."""
+    """Loads of zero (the step then is the plain step: q2 stays zero)."""
 
     def __init__(self, size):
-        self.zero = np.zeros(size)
+        self.zero = np.zeros((3, size))
 
-    def load(self, q, angle, speed, accel, static_q=None):
-        return self.zero, self.zero
+    def __call__(self, stored, slots, states, angles):
+        return self.zero
 
 
 def _as_response(angles, values):
@@ -135,7 +136,7 @@ def cost(mechanism, rpm, elements, sizes_list, rounds=5, samples=400, kernel_sam
     """
     Per-sample CPU time [ns], medians over alternating rounds, per basis.
 
-    'numpy' / 'numpy_dynamic': the numpy step without and with the pass (1 kHz rows at
+    'numpy' / 'numpy_dynamic' / 'dynamic': the numpy step without and with the pass (its loads in numpy, then compiled; 1 kHz rows at
     constant speed); 'compiled': the package's compiled order-2 step (the batched rows of the
     replay) of the same model; with ``kernel_samples`` (0: left out, it needs a C compiler)
     'kernel' and 'kernel_tabulated': the pass's own work compiled, with and without the
@@ -153,7 +154,9 @@ def cost(mechanism, rpm, elements, sizes_list, rounds=5, samples=400, kernel_sam
         estimator.update(0, 0.0, speed)
         load = load_for_model(mechanism, options, model)
         steps = {'numpy': NumpyStep(model, shared),
-                 'numpy_dynamic': DynamicSecondOrderStep(model, shared, load, True)}
+                 'numpy_dynamic': DynamicSecondOrderStep(
+                     model, shared, DynamicPassKernel(load.arrays, compiled=False)),
+                 'dynamic': DynamicSecondOrderStep(model, shared, DynamicPassKernel(load.arrays))}
         for step in steps.values():
             step.start(np.zeros(model.size), np.zeros(model.size), (0.0, speed, 0.0),
                        np.empty(native.RECORD_SIZE))

@@ -117,6 +117,9 @@ class ReducedModel:
     second_order : dict of str to ndarray or None
         Tables of the second-order outputs (:mod:`.second_order_tables`, names ``second_*``)
         of a model of order 2; None: the linear outputs only (order 1).
+    dynamic_second_order : dict of str to ndarray or None
+        Tables of the dynamic second-order pass (:mod:`.dynamic_second_order_tables`, names
+        ``dynamic_*``) of a model built with ``second_order='dynamic'``; None otherwise.
 
     """
 
@@ -129,6 +132,7 @@ class ReducedModel:
     info: dict = dataclasses.field(default_factory=dict)
     nonlinearity: dict = None
     second_order: object = None
+    dynamic_second_order: object = None
 
     @property
     def grid_size(self):
@@ -148,7 +152,8 @@ class ReducedModel:
     @property
     def nbytes(self):
         """Return the memory of the arrays [bytes]."""
-        second = sum(a.nbytes for a in (self.second_order or {}).values())
+        second = sum(a.nbytes for a in ({**(self.second_order or {}),
+                                         **(self.dynamic_second_order or {})}).values())
         return (self.table.nbytes + self.shape_table.nbytes + self.basis.nbytes
                 + self.force_moments.nbytes + second
                 + sum(a.nbytes for a in (self.nonlinearity or {}).values()))
@@ -157,7 +162,7 @@ class ReducedModel:
         """Arrays and metadata for :func:`core.cache.save_cache`."""
         arrays = {'table': self.table, 'shape_table': self.shape_table, 'basis': self.basis,
                   'force_moments': self.force_moments, **(self.nonlinearity or {}),
-                  **(self.second_order or {})}
+                  **(self.second_order or {}), **(self.dynamic_second_order or {})}
         meta = {'speed_max': self.speed_max, 'zeta': self.zeta, 'info': self.info}
         return arrays, meta
 
@@ -169,6 +174,8 @@ class ReducedModel:
                    basis=arrays['basis'], force_moments=arrays['force_moments'],
                    speed_max=float(meta['speed_max']), zeta=float(meta['zeta']),
                    info=dict(meta.get('info', {})), second_order=second or None,
+                   dynamic_second_order={name: array for name, array in arrays.items()
+                                         if name.startswith('dynamic_')} or None,
                    nonlinearity={name: array for name, array in arrays.items()
                                  if name.startswith('nonlinearity_')} or None)
 

@@ -11,7 +11,7 @@ import dataclasses
 import numpy as np
 import scipy.linalg
 
-from . import second_order_tables, store
+from . import dynamic_second_order_tables, second_order_tables, store
 from .basis import FrozenSamples
 from .build import reduce_samples
 from .build_progress import BuildProgress
@@ -89,6 +89,10 @@ def build_model(mechanism, options, progress=None):
         linkage = assembly.FlexibleLinkage(fe_mechanism(mechanism, options), options)
         model = dataclasses.replace(model, second_order=second_order_tables.build_tables(
             linkage, model.basis, options.grid_size))
+        if options.second_order == 'dynamic':
+            model = dataclasses.replace(
+                model, dynamic_second_order=dynamic_second_order_tables.build_tables(
+                    linkage, model.basis, options.grid_size))
     tracker.finish()
     return model
 

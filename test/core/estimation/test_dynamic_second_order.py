@@ -6,10 +6,12 @@ the streamed pass against the full-order pass (core/fe/second_order_dynamic.py) 
 model at 391 rpm with gravity (rigid crank, rigid bearings, 4 elements per link).
 """
 
+import dataclasses
 import math
 
 from flexlink_ros.core.estimation import dynamic_second_order as dyn
 from flexlink_ros.core.estimation import native
+from flexlink_ros.core.estimation.dynamic_pass_kernel import DynamicPassKernel
 from flexlink_ros.core.estimation.step import NumpyStep, STAGE1
 from flexlink_ros.core.estimation.tables import step_tables
 from flexlink_ros.core.fe.linkage import FlexibleLinkage
@@ -19,7 +21,6 @@ from flexlink_ros.core.fe.simulate import periodic_response
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction import pipeline
-from flexlink_ros.core.reduction.dynamic_second_order_tables import load_for_model
 import numpy as np
 import pytest
 
@@ -32,9 +33,9 @@ def case():
     mech = load_mechanism('cho1992')
     # The default (4, 2) basis misses the pass (see the module's notes); (6, 4) holds it.
     options = ModelOptions(bearings='rigid', elements_per_link=4, modes=6, static=4, order=2,
-                           grid_size=64, speed_max=1.05 * SPEED)
+                           grid_size=64, speed_max=1.05 * SPEED, second_order='dynamic')
     model = pipeline.model_for_mechanism(mech, options, use_cache=False)
-    return mech, options, model, load_for_model(mech, options, model)
+    return mech, options, model, DynamicPassKernel(model.dynamic_second_order)
 
 
 def test_stage_positions_are_the_radau_stage_values():
@@ -52,7 +53,7 @@ def test_linear_state_is_the_plain_steps(case):
     _, _, model, load = case
     shared = step_tables(model)
     plain = NumpyStep(model, shared)
-    dynamic = dyn.DynamicSecondOrderStep(model, shared, load, keep_quasi_static=True)
+    dynamic = dyn.DynamicSecondOrderStep(model, shared, load)
     rng = np.random.default_rng(2)
     q0, v0 = rng.standard_normal(model.size) * 1e-4, rng.standard_normal(model.size) * 1e-2
     records = np.zeros((2, 40, native.RECORD_SIZE))
@@ -86,3 +87,17 @@ def test_streamed_pass_follows_the_full_order_pass(case):
     # ... where the quasi-static correction alone is 3.4 / 4.7 % off the pass's coupler
     quasi_static = np.ptp(corrected_response(linkage, linear)['total'], axis=0)
     assert np.all(np.abs(quasi_static[2:] / p2p_full[2:] - 1.0) > 0.025)
+
+
+def test_step_for_model_picks_the_pass_only_for_a_dynamic_model(case):
+    mech, options, model, _ = case
+    shared = step_tables(model)
+    assert isinstance(dyn.step_for_model(model, shared, compiled=False),
+                      dyn.DynamicSecondOrderStep)
+    plain = dataclasses.replace(model, dynamic_second_order=None)
+    step = dyn.step_for_model(plain, shared, compiled=False)
+    assert type(step) is NumpyStep
+    with pytest.raises(ValueError, match='order 2'):
+        dyn.DynamicSecondOrderStep(dataclasses.replace(model, second_order=None),
+                                   step_tables(dataclasses.replace(model, second_order=None)),
+                                   None)
