@@ -124,9 +124,10 @@ class ModelOptions:
         Return the fields identifying a reduced model, in declaration order.
 
         ``gravity`` is left out when it is on, ``stiffness_damping`` when it is 0, ``order``
-        when it is 1 and ``second_order`` when it is 'quasi-static', so a default model keeps the key it had before these fields existed (its
-        cache files still load); a model built without gravity has loads of its own, and one of
-        order 2 carries extra tables, so neither may share that key.
+        when it is 1 and ``second_order`` when it is 'quasi-static', so a default model keeps
+        the key it had before these fields existed (its cache files still load); a model built
+        without gravity has loads of its own, and one of order 2 (or with the dynamic pass)
+        carries extra tables, so none may share that key.
         """
         fields = dataclasses.asdict(self)
         if fields['gravity']:

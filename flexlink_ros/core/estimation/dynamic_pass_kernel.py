@@ -66,7 +66,11 @@ class DynamicPassKernel:
         angles : tuple of float
             The crank angles of stage 1 and of the sample [rad].
 
-        The returned array is reused by the next call.
+        Returns
+        -------
+        ndarray
+            Reused by the next call.
+
         """
         if self.compiled:
             impl.loads(self.context, self.load.pieces, self.load.arrays['dynamic_unit'],

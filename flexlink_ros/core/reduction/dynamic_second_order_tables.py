@@ -14,8 +14,8 @@ N_e = EA (u_2 - u_1) / l - F_r(theta, w, a) with the rigid-body axial force F_r 
 monomials (1 (gravity), w^2, a), and the reduced load is ``f2 = sum_L (B^L)^T f^L``: per link
 three constant (3 (e + 1)) x r matrices, the 6 x 6 unit geometric stiffness of its elements,
 and a periodic spline of the link angles' cos and sin and of F_r's three coefficients per
-element. :func:`build_tables` makes the plain arrays (names ``dynamic_*``, part of a model built with
-``second_order='dynamic'``); :class:`DynamicLoad` evaluates f2 in numpy (the twin of the
+element. :func:`build_tables` makes the plain arrays (names ``dynamic_*``, part of a model
+built with ``second_order='dynamic'``); :class:`DynamicLoad` evaluates f2 in numpy (the twin of the
 compiled loads, core/estimation/_dynamic_second_order.c).
 """
 
