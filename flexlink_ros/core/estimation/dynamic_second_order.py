@@ -41,18 +41,28 @@ from ..numerics import TWO_PI
 RADAU_A = np.asarray(RADAU_TABLEAUX[2][0], dtype=float)
 
 
-def stage_positions(h, q, v, dq, dv):
+def stage_weights(a=RADAU_A):
     """
-    Radau IIA stage-1 position of the linear state from the step's increment (dq, dv).
+    Return (g1, g2): ``Q_1 = q + c_1 h v + g1 (dq - h v) + g2 h dv`` for any step h.
 
     With stage accelerations X_j, ``dq = h v + h^2 sum_j (A^2)_2j X_j`` and
-    ``dv = h sum_j A_2j X_j``; solving for X gives ``Q_1 = q + c_1 h v + h^2 sum_j (A^2)_1j X_j``
-    (the stage values the stage equations M X + C V + K Q = f were solved for).
+    ``dv = h sum_j A_2j X_j``; solving for X gives ``Q_1 = q + c_1 h v + h^2 sum_j
+    (A^2)_1j X_j`` (the stage values the stage equations M X + C V + K Q = f were solved
+    for), whose weights on (dq - h v) and h dv do not depend on h.
     """
-    a, a2 = RADAU_A, RADAU_A @ RADAU_A
-    d2 = np.array([[h * h * a2[1, 0], h * h * a2[1, 1]], [h * a[1, 0], h * a[1, 1]]])
-    x = np.linalg.solve(d2, np.vstack([dq - h * v, dv]))
-    return q + STAGE1 * h * v + h * h * (a2[0, 0] * x[0] + a2[0, 1] * x[1])
+    a2 = a @ a
+    weights = np.linalg.solve(np.array([[a2[1, 0], a[1, 0]], [a2[1, 1], a[1, 1]]]),
+                              a2[0, :2])
+    return float(weights[0]), float(weights[1])
+
+
+STAGE_WEIGHTS = stage_weights()
+
+
+def stage_positions(h, q, v, dq, dv):
+    """Radau IIA stage-1 position of the linear state from the step's increment (dq, dv)."""
+    g1, g2 = STAGE_WEIGHTS
+    return q + (STAGE1 - g1) * h * v + g1 * dq + g2 * h * dv
 
 
 class DynamicSecondOrderStep(NumpyStep):
