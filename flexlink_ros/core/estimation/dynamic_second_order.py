@@ -31,7 +31,7 @@ import numpy as np
 from scipy.linalg import lapack
 
 from . import native
-from .dynamic_pass_kernel import DynamicPassKernel
+from .dynamic_pass_kernel import dynamic_pass_compiled_available, DynamicPassKernel, impl
 from .step import CompiledStep, NumpyStep, STAGE1
 from .tables import step_tables, system_blocks
 from .warm_start import WarmStart
@@ -57,6 +57,7 @@ def stage_weights(a=RADAU_A):
 
 
 STAGE_WEIGHTS = stage_weights()
+ONE_ROW = np.zeros(1, dtype=int)      # the last step of a single row without sub-steps
 
 
 def stage_positions(h, q, v, dq, dv):
@@ -145,15 +146,122 @@ class DynamicSecondOrderStep(NumpyStep):
         self.z2 += increment2
 
 
+class CompiledDynamicStep(CompiledStep):
+    """
+    :class:`CompiledStep` (the linear state and its records) with z2 advanced in C.
+
+    The linear step is the package's compiled one, unchanged; after it, per step,
+    ``_dynamic_second_order.advance`` repeats :meth:`DynamicSecondOrderStep._step`'s
+    arithmetic for z2 (M, C, [K | f] at the two stages from the same node tables, the same
+    G(h) block system, the loads of :class:`.dynamic_pass_kernel.DynamicPassKernel`) and
+    the records' deflections add the output operator on q2 - K_r^-1 f2_eigenstrain. Rows
+    with sub-steps are split here first (as :meth:`NumpyStep._sub_steps` does), so that z2
+    sees every linear sub-step.
+
+    Parameters
+    ----------
+    model : ReducedModel
+        The reduced model, of order 2, with its dynamic tables.
+    tables : _StepTables
+        Its step tables.
+
+    """
+
+    def __init__(self, model, tables):
+        super().__init__(model, tables)
+        if tables.second is None:
+            raise ValueError('the dynamic pass adds to the quasi-static correction: '
+                             'use a model of order 2')
+        self.kernel = DynamicPassKernel(model.dynamic_second_order)
+        if not self.kernel.compiled:
+            raise RuntimeError('the compiled pass (_dynamic_second_order.c) is not built')
+        t = tables
+        self._step_context = np.array([
+            t.size, model.grid_size, self.cells_per_radian, t.mass_groups, t.kf_groups,
+            t.out_rows, STAGE1, *STAGE_WEIGHTS, t.FIRST_MC, t.GROUPS_C], dtype=float)
+        self._out = np.ascontiguousarray(t.out)
+        self.z2 = np.zeros(2 * model.size)
+        self.static2 = np.zeros(model.size)
+        # the linear state and crank state before a call's rows; one row's buffers
+        self._z_start, self._previous = np.zeros(2 * model.size), np.zeros(3)
+        self._one_state, self._one_increment = np.zeros((1, 2 * model.size)), np.zeros((1, 4))
+
+    def start(self, q0, v0, crank, record):
+        """Set the linear state (q2 = 0) and write its record (see NumpyStep.start)."""
+        self.z2[:] = 0.0
+        self.static2[:] = 0.0
+        super().start(q0, v0, crank, record)
+
+    def advance(self, rows, states, records):
+        """Advance the linear state (compiled step), then z2 through the same steps."""
+        rows = rows.reshape(-1, native.ROW_SIZE)
+        r = self.tables.size
+        self._z_start[:] = self.z[:2 * r]
+        self._previous[:] = self.previous
+        steps, last = split_sub_steps(rows, self._previous)
+        every = records.ndim == 2
+        if steps.shape[0] == 1:
+            step_states, increments = self._one_state, self._one_increment
+        else:
+            step_states = np.empty((steps.shape[0], 2 * r))
+            increments = np.empty((steps.shape[0], 4))
+        step_records = records
+        if steps is not rows and every:
+            step_records = np.empty((steps.shape[0], native.RECORD_SIZE))
+        super().advance(steps, step_states, step_records)
+        if step_records is not records:
+            records[:] = step_records[last]
+        k, t = self.kernel, self.tables
+        impl.advance(k.context, k.load.pieces, k.load.arrays['dynamic_unit'], k.load.scalars,
+                     self._step_context, t.mass, t.damping, t.kf, t.g0, self._out, steps,
+                     self._z_start, self._previous, step_states, self.z2, self.static2,
+                     increments)
+        if every:
+            records[:, :4] += increments[last]
+        else:
+            records[:4] += increments[-1]
+        if states.size:
+            states[:] = step_states[last, :states.shape[1]]
+
+
+def split_sub_steps(rows, previous):
+    """
+    Return (steps, last): rows with sub-steps split into single steps, and each row's last.
+
+    As :meth:`NumpyStep._sub_steps` takes them: ``count`` equal steps over h, the crank state
+    linear between the samples. ``rows`` itself when no row has sub-steps.
+    """
+    if rows.shape[0] == 1 and rows[0, 1] <= 1.0:
+        return rows, ONE_ROW
+    counts = rows[:, 1].astype(int)
+    if np.all(counts <= 1):
+        return rows, np.arange(rows.shape[0])
+    steps = []
+    angle0, speed0, accel0 = previous.tolist()
+    for (h, count, angle, speed, accel, advance) in rows.tolist():
+        count = max(int(count), 1)
+        for i in range(1, count):
+            f = i / count
+            steps.append((h / count, 1.0, (angle0 + advance * f) % TWO_PI,
+                          speed0 + f * (speed - speed0), accel0 + f * (accel - accel0),
+                          advance / count))
+        steps.append((h / count, 1.0, angle, speed, accel, advance / count))
+        angle0, speed0, accel0 = angle, speed, accel
+    return np.array(steps), np.cumsum(np.maximum(counts, 1)) - 1
+
+
 def step_for_model(model, tables, compiled):
     """
     Return the streaming step of a model: with the dynamic pass if it has its tables.
 
     The compiled step (:class:`CompiledStep`) where ``compiled``, else :class:`NumpyStep`;
-    a model built with ``second_order='dynamic'`` gets :class:`DynamicSecondOrderStep`, whose
-    linear step is numpy and whose pass loads are compiled where built (``compiled``).
+    a model built with ``second_order='dynamic'`` gets :class:`CompiledDynamicStep` where
+    ``compiled`` and both extensions are built, else :class:`DynamicSecondOrderStep` (numpy,
+    its twin).
     """
     if model.dynamic_second_order is not None:
+        if compiled and dynamic_pass_compiled_available():
+            return CompiledDynamicStep(model, tables)
         return DynamicSecondOrderStep(model, tables,
                                       DynamicPassKernel(model.dynamic_second_order, compiled))
     return (CompiledStep if compiled else NumpyStep)(model, tables)

@@ -11,6 +11,7 @@ import math
 
 from flexlink_ros.core.estimation import dynamic_second_order as dyn
 from flexlink_ros.core.estimation import native
+from flexlink_ros.core.estimation.dynamic_pass_kernel import dynamic_pass_compiled_available
 from flexlink_ros.core.estimation.dynamic_pass_kernel import DynamicPassKernel
 from flexlink_ros.core.estimation.offline_run import estimate_offline
 from flexlink_ros.core.estimation.step import NumpyStep, STAGE1
@@ -96,6 +97,9 @@ def test_step_for_model_picks_the_pass_only_for_a_dynamic_model(case):
     shared = step_tables(model)
     assert isinstance(dyn.step_for_model(model, shared, compiled=False),
                       dyn.DynamicSecondOrderStep)
+    if native.compiled_step_available() and dynamic_pass_compiled_available():
+        step = dyn.step_for_model(model, shared, compiled=True)
+        assert type(step) is dyn.CompiledDynamicStep and step.compiled
     plain = dataclasses.replace(model, dynamic_second_order=None)
     step = dyn.step_for_model(plain, shared, compiled=False)
     assert type(step) is NumpyStep
@@ -115,7 +119,7 @@ def test_streaming_estimator_and_offline_replay_publish_the_pass(case):
     angles = np.mod(SPEED * times + 0.3, 2 * math.pi)
     speeds = np.full(stamps.size, SPEED)
     streaming = StreamingEstimator(model)
-    assert isinstance(streaming._stepper, dyn.DynamicSecondOrderStep)
+    assert isinstance(streaming._stepper, (dyn.DynamicSecondOrderStep, dyn.CompiledDynamicStep))
     samples = [streaming.update(s, a, SPEED) for s, a in zip(stamps.tolist(), angles)]
     streamed = np.array([sample.lever_tip + sample.coupler_mid for sample in samples])
     offline = estimate_offline(model, stamps, angles, speeds)
@@ -128,3 +132,40 @@ def test_streaming_estimator_and_offline_replay_publish_the_pass(case):
                       for s, a in zip(stamps.tolist(), angles)])
     difference = np.abs(quasi - streamed[:, 2:]).max() / np.abs(quasi).max()
     assert 1e-3 < difference < 0.2, difference
+
+
+@pytest.mark.skipif(not (native.compiled_step_available() and dynamic_pass_compiled_available()),
+                    reason='the compiled steps (_radau_step.c, _dynamic_second_order.c) are not '
+                    'built')
+def test_compiled_dynamic_step_equals_the_numpy_step(case):
+    """Rows with a gap (sub-steps), speed and acceleration changes; every record and the last."""
+    _, _, model, kernel = case
+    shared = step_tables(model)
+    steps = (dyn.DynamicSecondOrderStep(model, shared, DynamicPassKernel(
+        model.dynamic_second_order, compiled=False)), dyn.CompiledDynamicStep(model, shared))
+    rng = np.random.default_rng(2)
+    q0, v0 = rng.standard_normal(model.size) * 1e-4, rng.standard_normal(model.size) * 1e-2
+    count = 60
+    h = np.full(count, 2 * math.pi / SPEED / SAMPLES)
+    h[20] = 0.005                    # a gap: three sub-steps
+    advance = SPEED * h
+    rows = np.column_stack([h, np.where(np.arange(count) == 20, 3.0, 1.0),
+                            np.mod(np.cumsum(advance), 2 * math.pi),
+                            SPEED + np.linspace(0.0, 3.0, count), np.linspace(0.0, 50.0, count),
+                            advance])
+    records = np.zeros((2, count, native.RECORD_SIZE))
+    states = np.zeros((2, 30, 2 * model.size))
+    for n, step in enumerate(steps):
+        step.start(q0, v0, (0.0, SPEED, 0.0), records[n, 0])
+        step.advance(rows[:30], states[n], records[n, :30])
+        for m in range(30, count):   # one row at a time, the last record only, as update()
+            step.advance(rows[m], np.empty(0), records[n, m])
+    numpy_step, compiled = steps
+    assert np.abs(numpy_step.z2).max() > 0.0
+    np.testing.assert_allclose(compiled.z2, numpy_step.z2, rtol=1e-10,
+                               atol=1e-12 * np.abs(numpy_step.z2).max())
+    np.testing.assert_allclose(compiled.static2, numpy_step.static2, rtol=1e-9,
+                               atol=1e-12 * np.abs(numpy_step.static2).max())
+    np.testing.assert_allclose(states[1], states[0], rtol=1e-10, atol=1e-14)
+    scale = np.abs(records[0, :, :4]).max()
+    np.testing.assert_allclose(records[1], records[0], rtol=1e-9, atol=1e-10 * scale)
