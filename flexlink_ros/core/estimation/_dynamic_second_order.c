@@ -395,22 +395,32 @@ static int second_increment(int r, const double *g0, double h, const double *slo
         g[e] = acc;
     }
     /* g[(c * 4 + l) * 8 + slot * 4 + m]: block (c, l) = sum g * matrix m of the slot */
-    for (int c = 0; c < 2; c++)
-        for (int l = 0; l < 4; l++)
-            for (int i = 0; i < r; i++)
-                for (int k = 0; k < r; k++) {
+    double *block = system + n * n;       /* r r scratch after the system */
+    for (int c = 0; c < 2; c++) {
+        for (int i = 0; i < r; i++)
+            dz[c * r + i] = loads[c * r + i];
+        for (int l = 0; l < 4; l++) {
+            const double *gl = g + (c * 4 + l) * 8;
+            const double w[6] = {gl[0], gl[1], gl[2], gl[4], gl[5], gl[6]};
+            const double *m0 = slots, *m1 = slots + r2, *m2 = slots + 2 * r2;
+            const double *m3 = slots + slot_size, *m4 = m3 + r2, *m5 = m3 + 2 * r2;
+            for (int e = 0; e < r2; e++)
+                block[e] = w[0] * m0[e] + w[1] * m1[e] + w[2] * m2[e] + w[3] * m3[e]
+                           + w[4] * m4[e] + w[5] * m5[e];
+            for (int i = 0; i < r; i++) {
+                const double *row = block + i * r;
+                if (l < 2) {
+                    memcpy(system + (c * r + i) * n + l * r, row, sizeof(double) * r);
+                } else {
+                    const double *x = z2 + (l - 2) * r;
                     double acc = 0.0;
-                    for (int slot = 0; slot < 2; slot++)
-                        for (int m = 0; m < 3; m++)
-                            acc += g[(c * 4 + l) * 8 + slot * 4 + m]
-                                   * slots[slot * slot_size + m * r2 + i * r + k];
-                    if (l < 2)
-                        system[(c * r + i) * n + l * r + k] = acc;
-                    else if (l == 2)
-                        dz[c * r + i] = acc * z2[k] + (k ? dz[c * r + i] : loads[c * r + i]);
-                    else
-                        dz[c * r + i] += acc * z2[r + k];
+                    for (int k = 0; k < r; k++)
+                        acc += row[k] * x[k];
+                    dz[c * r + i] += acc;
                 }
+            }
+        }
+    }
     return solve(n, system, dz, dz);
 }
 
@@ -482,12 +492,12 @@ static PyObject *advance(PyObject *self, PyObject *const *args, Py_ssize_t nargs
             goto release;
         }
     const int slot_size = 3 * r2 + r;
-    work = PyMem_Malloc(sizeof(double) * (2 * slot_size + 4 * r2 + 8 * r));
+    work = PyMem_Malloc(sizeof(double) * (2 * slot_size + 5 * r2 + 8 * r));
     if (work == NULL) {
         PyErr_NoMemory();
         goto release;
     }
-    double *slots = work, *system = slots + 2 * slot_size, *loads = system + 4 * r2;
+    double *slots = work, *system = slots + 2 * slot_size, *loads = system + 5 * r2;
     double *dz = loads + 2 * r, *points = dz + 2 * r, *x = points + 2 * r;
     const double *rows = views[10].buf, *z_start = views[11].buf, *states = views[13].buf;
     const double *previous = views[12].buf;
