@@ -142,7 +142,7 @@ def register(subparsers):
                                    'elements; --rigid-crank/--flexible-crank and '
                                    '--no-geometric-stiffness fix those choices in every '
                                    'candidate (otherwise the plan tries both)')
-    add_estimator_arguments(parser)
+    add_estimator_arguments(parser, second_order=False)
     parser.set_defaults(rigid_crank=None)   # None: the plan chooses the crank model
     parser.add_argument('--rpm-max', type=float, required=True, help='largest speed [rpm]')
     parser.add_argument('--tolerance', type=float, default=0.01,

@@ -136,9 +136,9 @@ def add_second_order_argument(parser):
     parser.add_argument('--second-order', choices=SECOND_ORDER_PASSES, default=None,
                         help='how order 2 is computed: quasi-static (the chord shortening of '
                         'the linear shapes) or dynamic (also the inertia of the second-order '
-                        'motion: one more reduced state per sample, a larger basis by default, '
-                        'about 50x the step cost; lever tip and coupler mid-point only) '
-                        '(default: quasi-static)')
+                        'motion: a second reduced state per sample, on a larger basis by '
+                        'default, about +20 us per sample; the lever tip and coupler '
+                        'mid-point) (default: quasi-static)')
 
 
 def add_reduced_arguments(parser):
@@ -166,7 +166,7 @@ def add_reduced_arguments(parser):
     parser.add_argument('--json', action='store_true', help='print one JSON object')
 
 
-def add_estimator_arguments(parser):
+def add_estimator_arguments(parser, second_order=True):
     """
     Add the flags of the estimator's subcommands (estimate, plan, bench, replay).
 
@@ -174,13 +174,16 @@ def add_estimator_arguments(parser):
     ----------
     parser : argparse.ArgumentParser
         A subcommand's parser.
+    second_order : bool
+        Also ``--second-order`` (not on plan, whose reference is quasi-static).
 
     """
     add_model_arguments(parser, 'flexible', "the node's 4 with a flexible crank, the "
                         "mechanism file's with a rigid crank")
     add_stiffness_damping_argument(parser)
     add_order_argument(parser)
-    add_second_order_argument(parser)
+    if second_order:
+        add_second_order_argument(parser)
     add_reduced_arguments(parser)
 
 

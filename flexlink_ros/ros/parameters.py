@@ -87,9 +87,9 @@ PARAMETERS = (
                   'coupler mid-point, markers)', low=1, high=2, read_only=True),
     ParameterSpec('model.second_order', 'quasi-static', 'How order 2 is computed: '
                   'quasi-static (the chord shortening of the linear shapes) or dynamic (also '
-                  'the inertia of the second-order motion, one more reduced state per sample: '
-                  'more accurate near 400 rpm, a larger basis and about 50x the step cost; '
-                  'lever tip and coupler mid-point only, the markers stay quasi-static)',
+                  'the inertia of that motion: a second reduced state per sample, on a larger '
+                  'basis by default; about +20 us per sample; the lever tip and coupler '
+                  'mid-point, the markers stay quasi-static)',
                   choices=('quasi-static', 'dynamic'), read_only=True,
                   max_bytes=NAME_MAX_BYTES),
     ParameterSpec('model.cache_dir', '', 'Directory of precomputed-model cache files '
