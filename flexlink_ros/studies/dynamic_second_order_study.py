@@ -1,9 +1,9 @@
 """
-Does the dynamic second-order pass fit the streaming estimator? Accuracy and cost (issue 14).
+The dynamic second-order pass per basis size: accuracy and cost of its step (issue 14).
 
 ``python -m flexlink_ros.studies.dynamic_second_order_study [--rpm 391] [--elements 8]
-[--sizes 4,2 8,4] [--peer] [--cost] [--no-gravity] [--json]`` streams the numpy prototype of
-the pass (core/estimation/dynamic_second_order.py) at constant speed (rigid crank, rigid
+[--sizes 4,2 8,4] [--peer] [--cost] [--no-gravity] [--json]`` streams the numpy step of the
+pass (core/estimation/dynamic_second_order.py) at constant speed (rigid crank, rigid
 bearings, gravity unless ``--no-gravity``) per basis size and prints its coupler and lever
 p2p against the full-order pass (core/fe/second_order_dynamic.py) and, with ``--peer``,
 against the Exudyn peer, next to the quasi-static estimate of the same model. ``--cost``
