@@ -27,6 +27,10 @@ setup(
                  Extension('flexlink_ros.core.estimation._nonlinearity',
                            ['flexlink_ros/core/estimation/_nonlinearity.c'],
                            depends=['flexlink_ros/core/estimation/_nonlinearity.h'],
+                           extra_compile_args=['-O3']),
+                 # the dynamic second-order pass's loads per sample (numpy twin where not built)
+                 Extension('flexlink_ros.core.estimation._dynamic_second_order',
+                           ['flexlink_ros/core/estimation/_dynamic_second_order.c'],
                            extra_compile_args=['-O3'])],
     install_requires=['setuptools'],
     # The geometrically nonlinear peer the linear model is checked against (studies/).

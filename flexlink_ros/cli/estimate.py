@@ -41,10 +41,12 @@ def _estimate(args):
     result = run_estimate(model, args.rpm, args.seconds, args.rate_hz, args.jitter,
                           not args.no_warm_start, args.seed)
     result['order'] = model.order
+    result['second_order'] = options.second_order if model.order == 2 else None
     lever = np.hypot(result['lever_tip']['dx_m'], result['lever_tip']['dy_m'])
     coupler = np.hypot(result['coupler_mid']['dx_m'], result['coupler_mid']['dy_m'])
     text = (f'{mechanism.name} at {args.rpm:g} rpm, {args.rate_hz:g} Hz '
-            f'(jitter {args.jitter:g}), {result["samples"]} samples, order {model.order}; '
+            f'(jitter {args.jitter:g}), {result["samples"]} samples, order {model.order}'
+            + (' (dynamic pass)' if options.second_order == 'dynamic' else '') + '; '
             'last revolution:\n'
             f'  lever tip |d| max   {1e3 * lever.max():.4f} mm\n'
             f'  coupler mid |d| max {1e3 * coupler.max():.4f} mm\n'
@@ -142,7 +144,7 @@ def register(subparsers):
                                    'elements; --rigid-crank/--flexible-crank and '
                                    '--no-geometric-stiffness fix those choices in every '
                                    'candidate (otherwise the plan tries both)')
-    add_estimator_arguments(parser)
+    add_estimator_arguments(parser, second_order=False)
     parser.set_defaults(rigid_crank=None)   # None: the plan chooses the crank model
     parser.add_argument('--rpm-max', type=float, required=True, help='largest speed [rpm]')
     parser.add_argument('--tolerance', type=float, default=0.01,

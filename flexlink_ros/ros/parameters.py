@@ -85,6 +85,13 @@ PARAMETERS = (
     ParameterSpec('model.order', 2, "Order of the outputs: 1 = the paper's linear KED; 2 = plus "
                   "the second-order motion of the bent links' chord shortening (lever tip, "
                   'coupler mid-point, markers)', low=1, high=2, read_only=True),
+    ParameterSpec('model.second_order', 'quasi-static', 'How order 2 is computed: '
+                  'quasi-static (the chord shortening of the linear shapes) or dynamic (also '
+                  'the inertia of that motion: a second reduced state per sample, on a larger '
+                  'basis by default; about +20 us per sample; the lever tip and coupler '
+                  'mid-point, the markers stay quasi-static)',
+                  choices=('quasi-static', 'dynamic'), read_only=True,
+                  max_bytes=NAME_MAX_BYTES),
     ParameterSpec('model.cache_dir', '', 'Directory of precomputed-model cache files '
                   '(empty: ~/.cache/flexlink_ros)', read_only=True, max_bytes=PATH_MAX_BYTES),
     ParameterSpec('model.warm_start', True,
@@ -278,7 +285,8 @@ def model_options(values, file_stiffness_damping=0.0):
                         bearings=values['model.bearings'],
                         geometric_stiffness=values['model.geometric_stiffness'],
                         stiffness_damping=file_stiffness_damping if beta < 0 else beta,
-                        order=values['model.order'])
+                        order=values['model.order'],
+                        second_order=values.get('model.second_order', 'quasi-static'))
 
 
 def default_model_options(**overrides):

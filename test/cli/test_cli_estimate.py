@@ -297,3 +297,23 @@ def test_estimate_shows_the_model_build_on_stderr_only_when_it_builds(tmp_path):
     assert warm.returncode == 0, warm.stderr
     assert json.loads(warm.stdout)['samples'] == json.loads(cold.stdout)['samples']
     assert BUILD_LABEL not in warm.stderr and '%' not in warm.stderr   # cached: silent
+
+
+def test_estimate_second_order_dynamic_has_its_model_and_moves_the_coupler(capsys, tmp_path):
+    # Cho 1992, rigid crank and bearings, small: the dynamic pass is an opt-in of its own model
+    common = ['estimate', '--rpm', '391', '--seconds', '0.5', '--rigid-crank', '--bearings',
+              'rigid', '--grid-size', '32', '--elements-per-link', '3', '--cache-dir',
+              str(tmp_path), '--json']
+    runs = {}
+    for flags in ([], ['--second-order', 'quasi-static'], ['--second-order', 'dynamic']):
+        assert cli.main(common + flags) == 0
+        runs[tuple(flags)] = json.loads(capsys.readouterr().out)
+    quasi, dynamic = runs[()], runs[('--second-order', 'dynamic')]
+    assert quasi['second_order'] == 'quasi-static' and dynamic['second_order'] == 'dynamic'
+    assert runs[('--second-order', 'quasi-static')]['coupler_mid'] == quasi['coupler_mid']
+    p2p = [np.ptp(np.array(run['coupler_mid']['dy_m'])) for run in (quasi, dynamic)]
+    assert 1e-3 < abs(p2p[1] / p2p[0] - 1.0) < 0.2, p2p
+    models = [p for p in tmp_path.glob('*.npz') if not p.stem.endswith('-nonlinearity')]
+    assert len(models) == 2       # quasi-static (the default key) and dynamic
+    assert cli.main(common + ['--order', '1', '--second-order', 'dynamic']) == 1
+    assert "'dynamic' needs `order` 2" in capsys.readouterr().err

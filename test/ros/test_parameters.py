@@ -155,3 +155,16 @@ def test_node_model_takes_the_mechanism_files_stiffness_damping(tmp_path):
     values['model.stiffness_damping'] = 0.0
     _, options, _ = load_node_model(values, lambda note: None)
     assert options.stiffness_damping == 0.0
+
+
+def test_second_order_parameter_selects_the_dynamic_pass():
+    values = node_params.defaults()
+    assert values['model.second_order'] == 'quasi-static'
+    assert node_params.model_options(values) == node_params.default_model_options()
+    assert 'second_order' not in node_params.model_options(values).cache_fields()
+    values.update({'model.second_order': 'dynamic', 'model.rigid_crank': True,
+                   'model.bearings': 'rigid'})
+    options = node_params.model_options(values)
+    assert options.second_order == 'dynamic' and (options.modes, options.static) == (8, 4)
+    assert node_params.validate_parameter('model.second_order', 'full') is not None
+    assert node_params.validate_parameter('model.second_order', 'dynamic') is None

@@ -35,7 +35,8 @@ def compiled_update(estimator, stepper, gate, record, base_flags):
     Return the compiled update of an estimator, or a :class:`PythonUpdate` where it cannot serve.
 
     It needs the compiled step and filter, and the validity indicator compiled or absent (its
-    Python form differs in the last bits).
+    Python form differs in the last bits); a model with the dynamic second-order pass steps
+    on the Python path (its own compiled step).
 
     Parameters
     ----------
@@ -47,7 +48,8 @@ def compiled_update(estimator, stepper, gate, record, base_flags):
     """
     rate_filter, nonlinearity = estimator.rate_filter, estimator.nonlinearity
     if not (native.impl is not None and stepper.compiled and hasattr(rate_filter, 'state')
-            and (nonlinearity.compiled or not nonlinearity.available)):
+            and (nonlinearity.compiled or not nonlinearity.available)
+            and estimator.model.dynamic_second_order is None):     # its pass: Python path
         return PythonUpdate()
     limits = {'speed_max': float(estimator.model.speed_max),
               'accel_limit': estimator.accel_limit, 'large_step_s': estimator.large_step_s,

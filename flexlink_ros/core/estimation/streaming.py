@@ -21,12 +21,13 @@ import numpy as np
 from . import tables
 from .compiled_update import compiled_update
 from .crank_filter import CompiledCrankRateFilter, CrankRateFilter, DEFAULT_FIT_TIME_CONSTANT_S
+from .dynamic_second_order import step_for_model
 from .gate import DEFAULT_RESET_GAP_S, InputGate
 from .native import compiled_step_available, RECORD_SIZE, ROW_SIZE
 from .nonlinearity import NonlinearityIndicator
 from .sample import (CLIPPED_ACCEL, CLIPPED_SPEED, LARGE_STEP, nan_sample, NO_CRITERIA,
                      OUT_OF_BOUND, REPEATED, sample_from_record, SPEED_FROM_ANGLE)
-from .step import CompiledStep, MAX_SUBSTEP_NS, NumpyStep
+from .step import MAX_SUBSTEP_NS
 from .throttled_log import ThrottledWarning
 from .warm_start import WarmStart
 from ...errors import FlexlinkError, OutlierSample
@@ -80,8 +81,7 @@ class StreamingEstimator:
     deflection_bound_m : float
         Largest |deflection component| published as a number [m]: DEFLECTION_SAFETY_FACTOR
         / (2 zeta) times the largest quasi-static deflection over the grid at constant
-        speeds up to speed_max (:meth:`quasi_static_peak`). Beyond it a sample is
-        OUT_OF_BOUND.
+        speeds up to speed_max (:meth:`quasi_static_peak`); beyond it OUT_OF_BOUND.
     outliers, out_of_bound, warm_starts, cold_starts : int
         Samples refused as outliers, estimates out of bound (or non-finite), warm starts
         that shot, and warm starts the rate limit turned into cold starts.
@@ -116,7 +116,7 @@ class StreamingEstimator:
         self._tables = tables.step_tables(model) if step_tables is None else step_tables
         if (self._tables.size, self._tables.mass.shape[0]) != (model.step_size, model.grid_size):
             raise ValueError('`step_tables` do not match the model (size and grid)')
-        self._stepper = (CompiledStep if compiled else NumpyStep)(model, self._tables)
+        self._stepper = step_for_model(model, self._tables, compiled)   # dynamic: its own
         self._record = np.zeros(RECORD_SIZE)
         self._row = np.zeros(ROW_SIZE)  # the step row: h, sub-steps, crank state, advance
         self._no_states = np.empty(0)
