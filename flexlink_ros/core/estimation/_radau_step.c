@@ -55,7 +55,7 @@ typedef struct {
     Py_ssize_t r, cells, mass_groups, kf_groups, out_rows, joint_rows;
     /* the soft basis (soft_tables.py): the step's r is p; the record's is rr, the lift
        q = Phi eta + residual, q' = Phi eta' + w Phi' eta from power-form cell tables, and
-       the damping table holds [C | D] with D added as w D to K. rr == r, lift NULL: none. */
+       [K | f] in float32 (kf32). rr == r, lift NULL: none. */
     Py_ssize_t rr;
     const float *lift_phi, *lift_dphi, *lift_residual;    /* float32 node tables */
     double *lifted;     /* [q, q', 1] of the reduced model (2 rr + 1) */
@@ -69,7 +69,6 @@ typedef struct {
     double *blocks;     /* [slot][m] r x r, m = M, C, K; slot 0 sample, 1 stage 1 */
     double *loads;      /* [slot] r */
     double *products;   /* [slot][m][l] r: X_{slot,m} z_l */
-    double *transport;  /* D of the soft basis (r x r) */
     double *matrix;     /* 2r x 2r */
     double *rhs;        /* 2r */
     double *operator;   /* outputs x (r + 1): [O | corr] of the record */
@@ -203,17 +202,11 @@ static void load(Step *s, int slot, double angle, double w, double a)
     const Py_ssize_t k = evaluate(s, angle, w, a, s->weights, s->hermite);
     const Py_ssize_t k1 = k + 1 < s->cells ? k + 1 : 0;
     double *blocks = s->blocks + (Py_ssize_t)slot * 3 * r2;
-    const Py_ssize_t damping_stride = s->lift_phi != NULL ? 2 * r2 : r2;
-    const Py_ssize_t mass_node = 2 * s->mass_groups * r2,
-                     damping_node = 2 * GROUPS_C * damping_stride;
+    const Py_ssize_t mass_node = 2 * s->mass_groups * r2, damping_node = 2 * GROUPS_C * r2;
     combine_nodes_f32(s->hermite + FIRST_MC, s->mass + k * mass_node, s->mass + k1 * mass_node,
                       s->mass_groups, r2, r2, blocks);
     combine_nodes_f32(s->hermite + FIRST_MC, s->damping + k * damping_node,
-                      s->damping + k1 * damping_node, GROUPS_C, damping_stride, r2, blocks + r2);
-    if (s->lift_phi != NULL)
-        combine_nodes_f32(s->hermite + FIRST_MC, s->damping + k * damping_node + r2,
-                          s->damping + k1 * damping_node + r2, GROUPS_C, damping_stride, r2,
-                          s->transport);
+                      s->damping + k1 * damping_node, GROUPS_C, r2, r2, blocks + r2);
     /* [K | f] from the kf table (monomials a, 1, w2, and w with stiffness damping) */
     const Py_ssize_t kf_width = r2 + r, kf_node = 2 * s->kf_groups * kf_width;
     if (s->kf32 != NULL) {
@@ -227,11 +220,6 @@ static void load(Step *s, int slot, double angle, double w, double a)
         combine_nodes(s->hermite, lo, hi, s->kf_groups, kf_width, r2, blocks + 2 * r2);
         combine_nodes(s->hermite, lo + r2, hi + r2, s->kf_groups, kf_width, r,
                       s->loads + slot * r);
-    }
-    if (s->lift_phi != NULL) {
-        double *stiffness = blocks + 2 * r2;
-        for (Py_ssize_t j = 0; j < r2; j++)
-            stiffness[j] += w * s->transport[j];
     }
 }
 
@@ -789,13 +777,12 @@ static int step_open(Step *s, Py_ssize_t r, PyObject *const *tables, PyObject *s
 {
     const Py_ssize_t r2 = r * r, n = 2 * r;
     const int soft = lift != NULL && lift != Py_None;
-    const Py_ssize_t damping_width = soft ? 2 * r2 : r2;    /* [C | D] on the soft basis */
     memset(s, 0, sizeof(*s));
     if (get_typed_buffer(tables[VIEW_DAMPING], &views[VIEW_DAMPING], 0, "damping", -1, "f")
         != 0)
         return -1;
-    const Py_ssize_t cells = views[VIEW_DAMPING].len / 4 / (2 * GROUPS_C * damping_width);
-    if (cells < 1 || views[VIEW_DAMPING].len / 4 != cells * 2 * GROUPS_C * damping_width) {
+    const Py_ssize_t cells = views[VIEW_DAMPING].len / 4 / (2 * GROUPS_C * r2);
+    if (cells < 1 || views[VIEW_DAMPING].len / 4 != cells * 2 * GROUPS_C * r2) {
         PyErr_SetString(PyExc_ValueError, "`damping` does not match the size of `z`");
         return -1;
     }
@@ -833,7 +820,7 @@ static int step_open(Step *s, Py_ssize_t r, PyObject *const *tables, PyObject *s
         return -1;
     s->blocks = malloc(sizeof(double) * (size_t)(6 * r2 + 2 * r + 12 * r + n * n + n
                                                  + OUTPUTS * (rr + 1) + s->so_rows
-                                                 + s->so_slots + 1 + r2 + 2 * rr * r));
+                                                 + s->so_slots + 1 + 2 * rr * r));
     if (s->blocks == NULL) {
         PyErr_NoMemory();
         return -1;
@@ -845,8 +832,7 @@ static int step_open(Step *s, Py_ssize_t r, PyObject *const *tables, PyObject *s
     s->operator = s->rhs + n;
     s->so_y = s->operator + OUTPUTS * (rr + 1);
     s->so_z = s->so_y + s->so_rows;
-    s->transport = s->so_z + s->so_slots + 1;
-    s->frame = s->transport + r2;
+    s->frame = s->so_z + s->so_slots + 1;
     return 0;
 }
 

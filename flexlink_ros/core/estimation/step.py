@@ -106,7 +106,6 @@ class NumpyStep:
         if tables.lift is not None:
             self.lifted = np.zeros(2 * tables.record_size + 1)
             self.lifted[-1] = 1.0
-        self._damping = np.zeros(tables.damping.shape[2])
         # Stage 1 by interpolation in time (the soft basis): [count, h, X_n, X_n-1].
         self.history = None
         if tables.lift is not None and interpolate_stages:
@@ -264,13 +263,10 @@ class NumpyStep:
         flat = self._flat[slot]
         first = tables.FIRST_MC
         self._combine_nodes(hermite, k, first, tables.mass_groups, tables.mass, flat[:r2])
-        self._combine_nodes(hermite, k, first, tables.GROUPS_C, tables.damping, self._damping)
-        flat[r2:2 * r2] = self._damping[:r2]
+        self._combine_nodes(hermite, k, first, tables.GROUPS_C, tables.damping,
+                            flat[r2:2 * r2])
         self._combine_nodes(hermite, k, 0, tables.kf_groups, tables.kf,
                             flat[2 * r2:3 * r2 + r])
-        if tables.lift is not None:
-            # The soft basis's damping table holds [C | D]: w D joins the stiffness.
-            flat[2 * r2:3 * r2] += speed * self._damping[r2:]
 
     def _pack(self, slot):
         """Return a slot's [M, C, K | f] as one history entry."""
