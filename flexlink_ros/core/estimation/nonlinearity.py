@@ -170,6 +170,14 @@ class NonlinearityIndicator:
         angles = np.asarray(crank_angles, dtype=float)
         if not self.available:
             return np.full(angles.shape, math.nan)
+        if self.compiled:       # the streaming update's kernel, row by row: the same doubles
+            out = np.empty(angles.size)
+            states = np.ascontiguousarray(np.concatenate([modal, velocity], axis=1), dtype=float)
+            kernel.indicator_rows(self._context, self._table, states, np.ascontiguousarray(
+                angles), *(np.ascontiguousarray(np.broadcast_to(np.asarray(v, dtype=float),
+                                                                angles.shape))
+                           for v in (speeds, accels)), out)
+            return out
         speeds = np.clip(np.asarray(speeds, dtype=float), -self._speed_max, self._speed_max)
         accels = np.broadcast_to(np.asarray(accels, dtype=float), speeds.shape)
         x = np.mod(angles, 2.0 * math.pi) * self._cell_scale

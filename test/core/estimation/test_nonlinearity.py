@@ -127,6 +127,10 @@ def test_per_sample_batch_and_offline_agree(models):
     np.testing.assert_allclose(batch, [s.nonlinearity for s in samples], rtol=1e-9, atol=1e-12)
     offline = offline_run.estimate_offline(model, stamps, angles, speeds)
     np.testing.assert_allclose(offline['nonlinearity'], batch, rtol=1e-6, atol=1e-9)
+    # the compiled batch (the offline replay's) and the numpy batch agree too
+    python = NonlinearityIndicator(model, compiled=False).batch(
+        state[:, 0], state[:, 1], state[:, 2], states[:, :model.size], states[:, model.size:])
+    np.testing.assert_allclose(batch, python, rtol=1e-12, atol=1e-15)
 
 
 def test_compiled_and_python_forms_agree(models):
