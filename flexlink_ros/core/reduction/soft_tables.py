@@ -79,14 +79,14 @@ def transport_terms(mass, frame, first, second):
         ``Phi^T M Phi''`` (times w^2, on eta).
 
     """
-    inertia_first = np.einsum('nri,nrs,nsj->nij', frame, mass, first)
-    inertia_second = np.einsum('nri,nrs,nsj->nij', frame, mass, second)
+    left = np.swapaxes(frame, 1, 2) @ mass
+    inertia_first, inertia_second = left @ first, left @ second
     return 2.0 * inertia_first, inertia_first, inertia_second
 
 
 def _project(frame, matrix, right=None):
     """Phi^T X Phi (or Phi^T X right) per node."""
-    return np.einsum('nri,nrs,nsj->nij', frame, matrix, frame if right is None else right)
+    return np.swapaxes(frame, 1, 2) @ matrix @ (frame if right is None else right)
 
 
 def soft_system(model, frame, first, second):
@@ -177,13 +177,13 @@ def coupled_frame(model, frame, first):
     damping = node_values(model, 'C')
     inverse = np.linalg.inv(stiffness['1'])
     reduced_inverse = np.linalg.inv(_project(frame, stiffness['1']))
-    residual = inverse - np.einsum('nri,nij,nsj->nrs', frame, reduced_inverse, frame)
+    residual = inverse - frame @ reduced_inverse @ np.swapaxes(frame, 1, 2)
     load = {'a': [(stiffness.get('a'), frame)],
             'w2': [(stiffness.get('w2'), frame), (damping.get('w'), first)],
             'w': [(stiffness.get('w'), frame), (damping.get('1'), first)]}
     coupled = {'1': frame}
     for monomial, terms in load.items():
-        coupled[monomial] = -sum(np.einsum('nrs,nst,ntj->nrj', residual, matrix, basis)
+        coupled[monomial] = -sum(residual @ matrix @ basis
                                  for matrix, basis in terms if matrix is not None)
     return coupled
 
