@@ -85,6 +85,11 @@ PARAMETERS = (
     ParameterSpec('model.order', 2, "Order of the outputs: 1 = the paper's linear KED; 2 = plus "
                   "the second-order motion of the bent links' chord shortening (lever tip, "
                   'coupler mid-point, markers)', low=1, high=2, read_only=True),
+    ParameterSpec('model.soft_modes', -1, 'The estimator steps the p lowest modes of the '
+                  'reduced model (a smooth basis at a checked spectral gap); -1 = the smallest '
+                  'p at a usable gap, or all coordinates where there is none (logged); 0 = all '
+                  'coordinates; p > 0 = exactly p (refused without a gap there)',
+                  low=-1, high=1000, read_only=True),
     ParameterSpec('model.cache_dir', '', 'Directory of precomputed-model cache files '
                   '(empty: ~/.cache/flexlink_ros)', read_only=True, max_bytes=PATH_MAX_BYTES),
     ParameterSpec('model.warm_start', True,
@@ -278,7 +283,8 @@ def model_options(values, file_stiffness_damping=0.0):
                         bearings=values['model.bearings'],
                         geometric_stiffness=values['model.geometric_stiffness'],
                         stiffness_damping=file_stiffness_damping if beta < 0 else beta,
-                        order=values['model.order'])
+                        order=values['model.order'],
+                        soft_modes=values.get('model.soft_modes', -1))
 
 
 def default_model_options(**overrides):

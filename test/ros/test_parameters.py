@@ -155,3 +155,12 @@ def test_node_model_takes_the_mechanism_files_stiffness_damping(tmp_path):
     values['model.stiffness_damping'] = 0.0
     _, options, _ = load_node_model(values, lambda note: None)
     assert options.stiffness_damping == 0.0
+
+
+def test_soft_modes_defaults_to_the_smallest_usable_gap_and_reaches_the_model_options():
+    spec = node_params.SPECS['model.soft_modes']
+    assert (spec.default, spec.low, spec.read_only) == (-1, -1, True)
+    assert node_params.default_model_options().soft_modes == -1
+    assert node_params.default_model_options(soft_modes=0).soft_modes == 0
+    assert node_params.validate_parameter('model.soft_modes', -2) is not None
+    assert 'spectral gap' in spec.description

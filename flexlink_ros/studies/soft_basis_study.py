@@ -1,0 +1,251 @@
+"""
+The estimator on the soft basis against the scene reference, beside the 26-coordinate step.
+
+Every case streams a synthetic crank signal through the estimator (:func:`offline.replay`,
+the same numbers as streaming) with the soft basis (``soft_modes = -1``: the smallest p at a
+usable gap) and without it (``soft_modes = 0``), and compares the outputs with the reference
+of the scene (:func:`studies.plan.scene_options`: 6 elements per link, flexible crank,
+geometric stiffness, full order, the model's output order): relative RMS over the last
+revolution at constant speed (with and without +-30 % sample jitter) and over a
+100 -> 600 rpm ramp.
+
+The ramp has no periodic full-order reference, so it gets its own, independent of the
+reduction (:func:`every_dof_options`): the scene's tables with every FE DOF kept (identity
+basis, as :func:`core.reduction.reference.unreduced_revolution` builds them) on a 256-point
+grid, stepped by the estimator at :data:`REFERENCE_RATE_HZ` (20x the signal's rate) over the
+same crank motion. It is first checked against :func:`reference_response` at constant speed
+(:func:`check_every_dof_reference`).
+
+``python -m flexlink_ros.studies.soft_basis_study`` prints the table.
+"""
+
+import argparse
+import dataclasses
+import math
+
+import numpy as np
+
+from .bench import configuration_error, node_model_options
+from .peer_model import resolve_mechanism
+from .plan import full_order_dofs, scene_options
+from .synthetic import last_revolution, synthetic_signal
+from ..core.estimation.offline import replay
+from ..core.numerics import relative_rms, RPM
+from ..core.reduction import pipeline
+from ..core.reduction import reference as reduction_reference
+
+# (label, rpm, jitter) of the constant-speed cases, and the issue's targets (relative RMS).
+STEADY_CASES = (('269 rpm', 269.0, 0.0), ('391 rpm', 391.0, 0.0),
+                ('269 rpm +-30 %', 269.0, 0.3), ('391 rpm +-30 %', 391.0, 0.3),
+                ('100 rpm', 100.0, 0.0), ('600 rpm', 600.0, 0.0))
+RAMP_LABEL = '100 -> 600 rpm ramp'
+TARGETS = {'269 rpm': 0.008, '391 rpm': 0.008, '269 rpm +-30 %': 0.010,
+           '391 rpm +-30 %': 0.010, '100 rpm': 0.02, '600 rpm': 0.02, RAMP_LABEL: 0.02}
+# The ramp: a revolution at the first speed, a linear ramp, a short hold at the last [s].
+RAMP_RPM = (100.0, 600.0)
+RAMP_SECONDS = 2.0
+RAMP_HOLD_S = 0.2
+# The every-DOF reference's grid and its step rate as a multiple of the signal's.
+REFERENCE_GRID = 256
+REFERENCE_RATE_FACTOR = 20
+REFERENCE_RATE_HZ = REFERENCE_RATE_FACTOR * 1000.0
+OUTPUTS = ('coupler_mid', 'lever_tip')
+
+
+def study_scene(options):
+    """Give the reference of the default model: the plan's scene with twice the elements."""
+    return scene_options(resolve_mechanism('cho1992'),
+                         dataclasses.replace(options, elements_per_link=None))
+
+
+def ramp_signal(rpm_start, rpm_end, ramp_s, rate_hz, hold_end_s=RAMP_HOLD_S):
+    """
+    Stamps, angles and speeds of a crank ramping linearly between two speeds.
+
+    One revolution at ``rpm_start``, a linear ramp over ``ramp_s`` seconds, ``hold_end_s``
+    at ``rpm_end``; sampled exactly at ``rate_hz`` (integer nanosecond steps), angles the
+    exact integral of the speed.
+
+    Returns
+    -------
+    stamps_ns : ndarray of int
+    angles, speeds : ndarray
+    ramp_start_s : float
+        When the ramp starts [s].
+
+    """
+    start, end = rpm_start * RPM, rpm_end * RPM
+    hold = 2.0 * math.pi / start
+    step_ns = int(round(1e9 / rate_hz))
+    stamps = np.arange(0, int((hold + ramp_s + hold_end_s) * 1e9), step_ns, dtype=np.int64)
+    t = stamps * 1e-9
+    ramp_t = np.clip(t - hold, 0.0, ramp_s)
+    accel = (end - start) / ramp_s
+    speeds = start + accel * ramp_t
+    angles = start * np.minimum(t, hold) + start * ramp_t + 0.5 * accel * ramp_t ** 2 \
+        + end * np.maximum(t - hold - ramp_s, 0.0)
+    return stamps, angles, speeds, hold
+
+
+def every_dof_options(mechanism, scene, grid_size=REFERENCE_GRID):
+    """Options of the scene's tables with every FE DOF kept (no reduction, no soft basis)."""
+    return dataclasses.replace(scene, modes=full_order_dofs(mechanism, scene), static=0,
+                               grid_size=grid_size, soft_modes=0)
+
+
+def _errors(estimate, reference, mask=slice(None)):
+    return {key: relative_rms(estimate[key][mask], reference[key]) for key in OUTPUTS}
+
+
+def check_every_dof_reference(mechanism, scene, reference_model, rpm, factor=REFERENCE_RATE_FACTOR):
+    """
+    Error of the every-DOF reference stepped at ``factor`` kHz against the periodic full order.
+
+    Returns
+    -------
+    dict
+        'coupler_mid', 'lever_tip': relative RMS over the last of two revolutions.
+
+    """
+    stamps, angles, speeds = synthetic_signal(rpm, 2.0 * 2.0 * math.pi / (rpm * RPM),
+                                              factor * 1000.0)
+    out = replay(reference_model, stamps, angles, speeds)
+    mask = last_revolution(stamps, rpm)
+    ref = reduction_reference.reference_response(mechanism, scene, rpm * RPM, angles[mask])
+    return _errors(out, ref, mask)
+
+
+def ramp_error(model, reference_model, ramp_s=RAMP_SECONDS, rate_hz=1000.0,
+               factor=REFERENCE_RATE_FACTOR):
+    """
+    Error of ``model`` at ``rate_hz`` over the ramp against the every-DOF reference.
+
+    The reference steps the same crank motion at ``factor`` times the rate; the samples from
+    the start of the ramp on are compared.
+
+    Returns
+    -------
+    dict
+        'coupler_mid', 'lever_tip': relative RMS.
+
+    """
+    fine = ramp_signal(*RAMP_RPM, ramp_s, factor * rate_hz)
+    reference = replay(reference_model, *fine[:3])
+    stamps, angles, speeds, ramp_start = ramp_signal(*RAMP_RPM, ramp_s, rate_hz)
+    count = min(stamps.size, (fine[0].size + factor - 1) // factor)
+    estimate = replay(model, stamps[:count], angles[:count], speeds[:count])
+    mask = stamps[:count] * 1e-9 >= ramp_start
+    return {key: relative_rms(estimate[key][mask], reference[key][::factor][:count][mask])
+            for key in OUTPUTS}
+
+
+def model_errors(mechanism, model, reference_options, cases, rate_hz=1000.0,
+                 reference_model=None, ramp_s=RAMP_SECONDS):
+    """
+    Errors of one model in every case: {label: {'coupler_mid', 'lever_tip'}}.
+
+    Constant-speed cases against :func:`reference_response` of ``reference_options``; the
+    ramp (if ``reference_model`` is given) against the every-DOF reference.
+    """
+    errors = {}
+    for label, rpm, jitter in cases:
+        row = configuration_error(mechanism, model, reference_options, rpm, rate_hz, jitter)
+        errors[label] = {'coupler_mid': row['error_coupler_mid'],
+                         'lever_tip': row['error_lever_tip']}
+    if reference_model is not None:
+        errors[RAMP_LABEL] = ramp_error(model, reference_model, ramp_s, rate_hz)
+    return errors
+
+
+def soft_pair(mechanism, options):
+    """The model of ``options`` with the soft basis (-1) and without (0): (soft, full)."""
+    soft = pipeline.model_for_mechanism(mechanism, dataclasses.replace(options, soft_modes=-1))
+    return soft, pipeline.with_soft_basis(dataclasses.replace(soft, soft=None), 0)
+
+
+def paper_scenes():
+    """The paper's rigid-crank scenes: (label, options) with flexible and rigid bearings."""
+    return [('rigid crank, flexible bearings (16 + 2)',
+             dataclasses.replace(node_model_options(), rigid_crank=True,
+                                 elements_per_link=None, modes=16, static=2)),
+            ('rigid crank, rigid bearings (4 + 2)',
+             dataclasses.replace(node_model_options(), rigid_crank=True,
+                                 elements_per_link=None, bearings='rigid', modes=4, static=2))]
+
+
+def run_study(mechanism=None, options=None, cases=STEADY_CASES, ramp_s=RAMP_SECONDS,
+              paper_cases=STEADY_CASES[:4], scene=None):
+    """
+    Measure the default model with and without the soft basis, and the paper's scenes.
+
+    Returns
+    -------
+    dict
+        'rows': list of {'label', 'soft' (model.info['soft']), 'size' (coordinates stepped),
+        'errors': {case: {'coupler_mid', 'lever_tip'}}}; 'reference_check' (the every-DOF
+        reference against the periodic full order at 391 and 600 rpm); 'scene'.
+
+    """
+    mechanism = mechanism or resolve_mechanism('cho1992')
+    options = options or node_model_options()
+    scene = scene or study_scene(options)
+    reference_model = None
+    check = {}
+    if ramp_s:
+        reference_model = pipeline.model_for_mechanism(
+            mechanism, every_dof_options(mechanism, scene))
+        check = {rpm: check_every_dof_reference(mechanism, scene, reference_model, rpm)
+                 for rpm in (RAMP_RPM[1], 391.0)}
+    rows = []
+    soft, full = soft_pair(mechanism, options)
+    for label, model in (('default, soft basis', soft), ('default, 26 coordinates', full)):
+        rows.append(_row(label, model, model_errors(mechanism, model, scene, cases,
+                                                    reference_model=reference_model,
+                                                    ramp_s=ramp_s)))
+    for label, paper in paper_scenes() if paper_cases else ():
+        soft, full = soft_pair(mechanism, paper)
+        for suffix, model in ((', soft basis', soft), (', all coordinates', full)):
+            rows.append(_row(label + suffix, model,
+                             model_errors(mechanism, model, paper, paper_cases)))
+    return {'rows': rows, 'reference_check': check, 'scene': dataclasses.asdict(scene)}
+
+
+def _row(label, model, errors):
+    return {'label': label, 'soft': dict(model.info.get('soft', {})),
+            'size': int(model.step_size), 'record_size': int(model.size), 'errors': errors}
+
+
+def study_table(result):
+    """Markdown table of :func:`run_study`: coupler mid-point / lever tip per case."""
+    cases = list(dict.fromkeys(c for row in result['rows'] for c in row['errors']))
+    lines = ['| model | stepped | ' + ' | '.join(cases) + ' |',
+             '|---|---|' + '---|' * len(cases)]
+    for row in result['rows']:
+        cells = []
+        for case in cases:
+            e = row['errors'].get(case)
+            cells.append('-' if e is None else
+                         f'{100 * e["coupler_mid"]:.2f} / {100 * e["lever_tip"]:.2f} %')
+        lines.append(f'| {row["label"]} | {row["size"]} | ' + ' | '.join(cells) + ' |')
+    lines.append('| target (coupler and lever) | | ' + ' | '.join(
+        f'<= {100 * TARGETS[c]:g} %' if c in TARGETS else '' for c in cases) + ' |')
+    for rpm, check in result['reference_check'].items():
+        lines.append(f'every-DOF ramp reference vs periodic full order at {rpm:g} rpm: '
+                     f'{100 * check["coupler_mid"]:.3f} / {100 * check["lever_tip"]:.3f} %')
+    return '\n'.join(lines)
+
+
+def main(argv=None):
+    """Print the study's table (``--no-ramp``, ``--no-paper`` leave parts out)."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
+    parser.add_argument('--no-ramp', action='store_true', help='leave out the ramp')
+    parser.add_argument('--no-paper', action='store_true',
+                        help="leave out the paper's rigid-crank scenes")
+    args = parser.parse_args(argv)
+    result = run_study(ramp_s=0.0 if args.no_ramp else RAMP_SECONDS,
+                       paper_cases=() if args.no_paper else STEADY_CASES[:4])
+    print(study_table(result))
+
+
+if __name__ == '__main__':
+    main()
