@@ -25,13 +25,16 @@ import math
 
 import numpy as np
 
-from .bench import configuration_error, node_model_options
+from .bench import node_model_options
 from .peer_model import resolve_mechanism
 from .plan import full_order_dofs, scene_options
 from .synthetic import last_revolution, synthetic_signal
 from ..core.estimation.offline import replay
 from ..core.numerics import relative_rms, RPM
+from ..core.options import ModelOptions
 from ..core.reduction import pipeline
+from ..core.reduction.soft_basis import lowest_modes
+from ..core.reduction.soft_tables import node_values
 from ..core.reduction import reference as reduction_reference
 
 # (label, rpm, jitter) of the constant-speed cases, and the issue's targets (relative RMS).
@@ -97,22 +100,33 @@ def _errors(estimate, reference, mask=slice(None)):
     return {key: relative_rms(estimate[key][mask], reference[key]) for key in OUTPUTS}
 
 
-def check_every_dof_reference(mechanism, scene, reference_model, rpm, factor=REFERENCE_RATE_FACTOR):
+def steady_error(mechanism, model, reference_options, rpm, rate_hz=1000.0, jitter=0.0,
+                 steps=reduction_reference.REFERENCE_STEPS):
     """
-    Error of the every-DOF reference stepped at ``factor`` kHz against the periodic full order.
+    Error of ``model`` over the last of two revolutions at ``rpm`` against the full order.
+
+    The estimator replays a synthetic signal (``jitter`` as :func:`synthetic_signal`) and its
+    last revolution is compared with :func:`reference_response` of ``reference_options``
+    (``steps`` per revolution) at the same crank angles.
 
     Returns
     -------
     dict
-        'coupler_mid', 'lever_tip': relative RMS over the last of two revolutions.
+        'coupler_mid', 'lever_tip': relative RMS.
 
     """
-    stamps, angles, speeds = synthetic_signal(rpm, 2.0 * 2.0 * math.pi / (rpm * RPM),
-                                              factor * 1000.0)
-    out = replay(reference_model, stamps, angles, speeds)
+    stamps, angles, speeds = synthetic_signal(rpm, 4.0 * math.pi / (rpm * RPM), rate_hz, jitter)
+    out = replay(model, stamps, angles, speeds)
     mask = last_revolution(stamps, rpm)
-    ref = reduction_reference.reference_response(mechanism, scene, rpm * RPM, angles[mask])
+    ref = reduction_reference.reference_response(mechanism, reference_options, rpm * RPM,
+                                                 angles[mask], steps)
     return _errors(out, ref, mask)
+
+
+def check_every_dof_reference(mechanism, scene, reference_model, rpm,
+                              factor=REFERENCE_RATE_FACTOR, steps=reduction_reference.REFERENCE_STEPS):
+    """Error of the every-DOF reference, stepped at ``factor`` kHz, against the periodic full order."""
+    return steady_error(mechanism, reference_model, scene, rpm, factor * 1000.0, steps=steps)
 
 
 def ramp_error(model, reference_model, ramp_s=RAMP_SECONDS, rate_hz=1000.0,
@@ -139,21 +153,23 @@ def ramp_error(model, reference_model, ramp_s=RAMP_SECONDS, rate_hz=1000.0,
             for key in OUTPUTS}
 
 
-def model_errors(mechanism, model, reference_options, cases, rate_hz=1000.0,
-                 reference_model=None, ramp_s=RAMP_SECONDS):
+def case_errors(mechanism, models, reference_options, cases, reference_model=None,
+                ramp_s=RAMP_SECONDS, steps=reduction_reference.REFERENCE_STEPS):
     """
-    Errors of one model in every case: {label: {'coupler_mid', 'lever_tip'}}.
+    Errors of each model in every case: {label: {case: {'coupler_mid', 'lever_tip'}}}.
 
-    Constant-speed cases against :func:`reference_response` of ``reference_options``; the
-    ramp (if ``reference_model`` is given) against the every-DOF reference.
+    ``models`` maps labels to models. Constant-speed cases (:func:`steady_error`, every
+    model on one reference per case) against ``reference_options``'s full order; the ramp
+    (if ``reference_model`` is given) against the every-DOF reference.
     """
-    errors = {}
-    for label, rpm, jitter in cases:
-        row = configuration_error(mechanism, model, reference_options, rpm, rate_hz, jitter)
-        errors[label] = {'coupler_mid': row['error_coupler_mid'],
-                         'lever_tip': row['error_lever_tip']}
+    errors = {label: {} for label in models}
+    for case, rpm, jitter in cases:
+        for label, model in models.items():
+            errors[label][case] = steady_error(mechanism, model, reference_options, rpm,
+                                               jitter=jitter, steps=steps)
     if reference_model is not None:
-        errors[RAMP_LABEL] = ramp_error(model, reference_model, ramp_s, rate_hz)
+        for label, model in models.items():
+            errors[label][RAMP_LABEL] = ramp_error(model, reference_model, ramp_s)
     return errors
 
 
@@ -174,7 +190,8 @@ def paper_scenes():
 
 
 def run_study(mechanism=None, options=None, cases=STEADY_CASES, ramp_s=RAMP_SECONDS,
-              paper_cases=STEADY_CASES[:4], scene=None):
+              paper_cases=STEADY_CASES[:4], scene=None,
+              steps=reduction_reference.REFERENCE_STEPS):
     """
     Measure the default model with and without the soft basis, and the paper's scenes.
 
@@ -193,21 +210,55 @@ def run_study(mechanism=None, options=None, cases=STEADY_CASES, ramp_s=RAMP_SECO
     check = {}
     if ramp_s:
         reference_model = pipeline.model_for_mechanism(
-            mechanism, every_dof_options(mechanism, scene))
-        check = {rpm: check_every_dof_reference(mechanism, scene, reference_model, rpm)
+            mechanism, every_dof_options(mechanism, scene, min(REFERENCE_GRID, 2 * options.grid_size)))
+        check = {rpm: check_every_dof_reference(mechanism, scene, reference_model, rpm,
+                                                steps=steps)
                  for rpm in (RAMP_RPM[1], 391.0)}
-    rows = []
     soft, full = soft_pair(mechanism, options)
-    for label, model in (('default, soft basis', soft), ('default, 26 coordinates', full)):
-        rows.append(_row(label, model, model_errors(mechanism, model, scene, cases,
-                                                    reference_model=reference_model,
-                                                    ramp_s=ramp_s)))
+    models = {'default, soft basis': soft, f'default, all {full.size} coordinates': full}
+    errors = case_errors(mechanism, models, scene, cases, reference_model, ramp_s, steps)
+    rows = [_row(label, model, errors[label]) for label, model in models.items()]
     for label, paper in paper_scenes() if paper_cases else ():
         soft, full = soft_pair(mechanism, paper)
-        for suffix, model in ((', soft basis', soft), (', all coordinates', full)):
-            rows.append(_row(label + suffix, model,
-                             model_errors(mechanism, model, paper, paper_cases)))
+        models = {label + ', soft basis': soft, label + ', all coordinates': full}
+        errors = case_errors(mechanism, models, paper, paper_cases, steps=steps)
+        rows += [_row(name, model, errors[name]) for name, model in models.items()]
     return {'rows': rows, 'reference_check': check, 'scene': dataclasses.asdict(scene)}
+
+
+def veering_options():
+    """
+    A model whose modes veer inside the soft subspace: flexible crank, rigid bearings.
+
+    4 elements per link, 8 + 4 directions, grid 64: p = 7 at a gap of 6.8x, and at 391 rpm
+    its two lowest modes swap order twice a revolution, there and back
+    (:func:`mode_order`).
+    """
+    return ModelOptions(bearings='rigid', rigid_crank=False, elements_per_link=4, grid_size=64)
+
+
+def mode_order(model, speed, count):
+    """
+    Follow each of the lowest ``count`` modes of node 0 around the revolution.
+
+    At every grid node, the modes of K(theta) + w^2 K_w2(theta) against M(theta) (the
+    frozen modes at crank speed ``speed``, no acceleration), and for each mode of node 0 the
+    index of the node's mode it overlaps most in the mass norm (|x_k^T M_k v|): a mode
+    that keeps its order keeps its index; a swap shows as the index changing.
+
+    Returns
+    -------
+    ndarray of int, shape (N, count)
+        The index of node 0's mode i at node k.
+
+    """
+    mass = node_values(model, 'M')['1']
+    pieces = node_values(model, 'K')
+    stiffness = pieces['1'] + speed * speed * pieces.get('w2', np.zeros_like(pieces['1']))
+    _, modes = lowest_modes(mass, stiffness, model.size)
+    start = modes[0][:, :count]
+    overlaps = np.abs(np.einsum('nri,nrs,sj->nij', modes, mass, start))
+    return np.argmax(overlaps, axis=1)
 
 
 def _row(label, model, errors):
