@@ -135,7 +135,7 @@ def physics_error(signals, scene, options, budget):
 
 def soft_candidates(options, model):
     """
-    The soft basis sizes a plan tries on ``model``, cheapest first: (soft_modes, model).
+    List the soft basis sizes a plan tries on ``model``, cheapest first: (soft_modes, model).
 
     ``options.soft_modes`` -1: every usable gap (:func:`studies.bench.usable_soft_sizes`),
     then all r coordinates (soft_modes 0); otherwise only the size asked for.

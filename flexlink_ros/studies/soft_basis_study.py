@@ -33,9 +33,9 @@ from ..core.estimation.offline import replay
 from ..core.numerics import relative_rms, RPM
 from ..core.options import ModelOptions
 from ..core.reduction import pipeline
+from ..core.reduction import reference as reduction_reference
 from ..core.reduction.soft_basis import lowest_modes
 from ..core.reduction.soft_tables import node_values
-from ..core.reduction import reference as reduction_reference
 
 # (label, rpm, jitter) of the constant-speed cases, and the issue's targets (relative RMS).
 STEADY_CASES = (('269 rpm', 269.0, 0.0), ('391 rpm', 391.0, 0.0),
@@ -124,8 +124,9 @@ def steady_error(mechanism, model, reference_options, rpm, rate_hz=1000.0, jitte
 
 
 def check_every_dof_reference(mechanism, scene, reference_model, rpm,
-                              factor=REFERENCE_RATE_FACTOR, steps=reduction_reference.REFERENCE_STEPS):
-    """Error of the every-DOF reference, stepped at ``factor`` kHz, against the periodic full order."""
+                              factor=REFERENCE_RATE_FACTOR,
+                              steps=reduction_reference.REFERENCE_STEPS):
+    """Measure the every-DOF reference stepped at ``factor`` kHz against the periodic one."""
     return steady_error(mechanism, reference_model, scene, rpm, factor * 1000.0, steps=steps)
 
 
@@ -174,13 +175,13 @@ def case_errors(mechanism, models, reference_options, cases, reference_model=Non
 
 
 def soft_pair(mechanism, options):
-    """The model of ``options`` with the soft basis (-1) and without (0): (soft, full)."""
+    """Give the model of ``options`` with the soft basis (-1) and without (0): (soft, full)."""
     soft = pipeline.model_for_mechanism(mechanism, dataclasses.replace(options, soft_modes=-1))
     return soft, pipeline.with_soft_basis(dataclasses.replace(soft, soft=None), 0)
 
 
 def paper_scenes():
-    """The paper's rigid-crank scenes: (label, options) with flexible and rigid bearings."""
+    """List the paper's rigid-crank scenes: (label, options), flexible and rigid bearings."""
     return [('rigid crank, flexible bearings (16 + 2)',
              dataclasses.replace(node_model_options(), rigid_crank=True,
                                  elements_per_link=None, modes=16, static=2)),
@@ -209,8 +210,9 @@ def run_study(mechanism=None, options=None, cases=STEADY_CASES, ramp_s=RAMP_SECO
     reference_model = None
     check = {}
     if ramp_s:
+        grid = min(REFERENCE_GRID, 2 * options.grid_size)
         reference_model = pipeline.model_for_mechanism(
-            mechanism, every_dof_options(mechanism, scene, min(REFERENCE_GRID, 2 * options.grid_size)))
+            mechanism, every_dof_options(mechanism, scene, grid))
         check = {rpm: check_every_dof_reference(mechanism, scene, reference_model, rpm,
                                                 steps=steps)
                  for rpm in (RAMP_RPM[1], 391.0)}
@@ -228,7 +230,7 @@ def run_study(mechanism=None, options=None, cases=STEADY_CASES, ramp_s=RAMP_SECO
 
 def veering_options():
     """
-    A model whose modes veer inside the soft subspace: flexible crank, rigid bearings.
+    Give a model whose modes veer inside the soft subspace: flexible crank, rigid bearings.
 
     4 elements per link, 8 + 4 directions, grid 64: p = 7 at a gap of 6.8x, and at 391 rpm
     its two lowest modes swap order twice a revolution, there and back
