@@ -40,6 +40,7 @@ def _estimate(args):
     result = run_estimate(model, args.rpm, args.seconds, args.rate_hz, args.jitter,
                           not args.no_warm_start, args.seed)
     result['order'] = model.order
+    result['soft'] = model.info.get('soft')
     lever = np.hypot(result['lever_tip']['dx_m'], result['lever_tip']['dy_m'])
     coupler = np.hypot(result['coupler_mid']['dx_m'], result['coupler_mid']['dy_m'])
     text = (f'{mechanism.name} at {args.rpm:g} rpm, {args.rate_hz:g} Hz '
@@ -49,7 +50,7 @@ def _estimate(args):
             f'  coupler mid |d| max {1e3 * coupler.max():.4f} mm\n'
             f'  update {result["us_per_sample_median"]:.1f} us median, '
             f'{result["us_per_sample_p99"]:.1f} us p99 (r = {model.size}, '
-            f'{model.grid_size} grid cells)\n  ' + nonlinearity_line(result['nonlinearity']))
+            f'{model.step_size} stepped, {model.grid_size} grid cells)\n  ' + nonlinearity_line(result['nonlinearity']))
     return emit(result, text, args.json)
 
 
