@@ -50,7 +50,8 @@ def _estimate(args):
             f'  coupler mid |d| max {1e3 * coupler.max():.4f} mm\n'
             f'  update {result["us_per_sample_median"]:.1f} us median, '
             f'{result["us_per_sample_p99"]:.1f} us p99 (r = {model.size}, '
-            f'{model.step_size} stepped, {model.grid_size} grid cells)\n  ' + nonlinearity_line(result['nonlinearity']))
+            f'{model.step_size} stepped, {model.grid_size} grid cells)\n  '
+            + nonlinearity_line(result['nonlinearity']))
     return emit(result, text, args.json)
 
 

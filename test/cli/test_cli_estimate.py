@@ -310,8 +310,7 @@ def test_estimate_shows_the_model_build_on_stderr_only_when_it_builds(tmp_path):
     assert BUILD_LABEL not in warm.stderr and '%' not in warm.stderr   # cached: silent
 
 
-def test_estimate_soft_modes_flag_chooses_the_step_and_refuses_a_size_without_a_gap(capsys,
-                                                                                   tmp_path):
+def test_estimate_soft_modes_flag_chooses_the_step_and_refuses_below_the_gap(capsys, tmp_path):
     # Cho 1992's rigid-crank scene with bearing springs (16 + 2), grid 32: one model file
     common = ['estimate', '--rpm', '391', '--seconds', '0.3', '--rigid-crank', '--grid-size',
               '32', '--cache-dir', str(tmp_path), '--json']
