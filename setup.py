@@ -18,12 +18,19 @@ setup(
     ],
     # The streaming estimator's per-sample step in C (plain C API, no numpy headers); the
     # package falls back to its numpy step when the extension is not built.
+    # Both include the validity indicator's kernel (_nonlinearity.h).
     ext_modules=[Extension('flexlink_ros.core.estimation._radau_step',
                            ['flexlink_ros/core/estimation/_radau_step.c'],
+                           depends=['flexlink_ros/core/estimation/_nonlinearity.h'],
                            extra_compile_args=['-O3']),
                  # the validity indicator per sample (its Python twin serves where not built)
                  Extension('flexlink_ros.core.estimation._nonlinearity',
                            ['flexlink_ros/core/estimation/_nonlinearity.c'],
+                           depends=['flexlink_ros/core/estimation/_nonlinearity.h'],
+                           extra_compile_args=['-O3']),
+                 # the dynamic second-order pass's loads per sample (numpy twin where not built)
+                 Extension('flexlink_ros.core.estimation._dynamic_second_order',
+                           ['flexlink_ros/core/estimation/_dynamic_second_order.c'],
                            extra_compile_args=['-O3'])],
     install_requires=['setuptools'],
     # The geometrically nonlinear peer the linear model is checked against (studies/).

@@ -26,6 +26,7 @@ from .progress import Progress
 from ..core.mechanism_file import load_mechanism
 from ..core.numerics import RPM
 from ..core.options import ModelOptions
+from ..core.reduction.soft_basis import soft_basis_text
 from ..report.estimator import plot_error_vs_cost
 from ..studies.bench import run_bench
 from ..studies.plan import plan_table, run_plan
@@ -41,17 +42,19 @@ def _estimate(args):
                           not args.no_warm_start, args.seed)
     result['order'] = model.order
     result['soft'] = model.info.get('soft')
+    result['second_order'] = options.second_order if model.order == 2 else None
     lever = np.hypot(result['lever_tip']['dx_m'], result['lever_tip']['dy_m'])
     coupler = np.hypot(result['coupler_mid']['dx_m'], result['coupler_mid']['dy_m'])
     text = (f'{mechanism.name} at {args.rpm:g} rpm, {args.rate_hz:g} Hz '
-            f'(jitter {args.jitter:g}), {result["samples"]} samples, order {model.order}; '
+            f'(jitter {args.jitter:g}), {result["samples"]} samples, order {model.order}'
+            + (' (dynamic pass)' if options.second_order == 'dynamic' else '') + '; '
             'last revolution:\n'
             f'  lever tip |d| max   {1e3 * lever.max():.4f} mm\n'
             f'  coupler mid |d| max {1e3 * coupler.max():.4f} mm\n'
             f'  update {result["us_per_sample_median"]:.1f} us median, '
             f'{result["us_per_sample_p99"]:.1f} us p99 (r = {model.size}, '
-            f'{model.step_size} stepped, {model.grid_size} grid cells)\n  '
-            + nonlinearity_line(result['nonlinearity']))
+            f'{soft_basis_text(model)}, '
+            f'{model.grid_size} grid cells)\n  ' + nonlinearity_line(result['nonlinearity']))
     return emit(result, text, args.json)
 
 
@@ -143,7 +146,7 @@ def register(subparsers):
                                    'elements; --rigid-crank/--flexible-crank and '
                                    '--no-geometric-stiffness fix those choices in every '
                                    'candidate (otherwise the plan tries both)')
-    add_estimator_arguments(parser)
+    add_estimator_arguments(parser, second_order=False)
     parser.set_defaults(rigid_crank=None)   # None: the plan chooses the crank model
     parser.add_argument('--rpm-max', type=float, required=True, help='largest speed [rpm]')
     parser.add_argument('--tolerance', type=float, default=0.01,

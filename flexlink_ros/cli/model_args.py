@@ -6,10 +6,11 @@ The model flags every model subcommand shares, and the options and model they gi
 ``--flexible-crank``, ``--bearings {flexible,rigid}``, ``--elements-per-link N`` and
 ``--no-geometric-stiffness``; ``--order {1,2}`` (default 2: the linear outputs plus the
 second-order motion of the bent links; 1: the paper's linear KED) where the outputs are
-published (simulate and the estimator's subcommands). Only the default bearings differ (as
-before: rigid for the FE studies, flexible for the estimator, as the node). ``--elements``
-is accepted where it was (simulate, modes) as a deprecated spelling of
-``--elements-per-link``.
+published (simulate and the estimator's subcommands), and for the estimator's
+``--second-order {quasi-static,dynamic}`` (simulate has its own, for the full-order method).
+Only the default bearings differ (as before: rigid for the FE studies, flexible for the
+estimator, as the node). ``--elements`` is accepted where it was (simulate, modes) as a
+deprecated spelling of ``--elements-per-link``.
 """
 
 import argparse
@@ -18,7 +19,7 @@ import sys
 from .progress import OnDemandProgress
 from ..core.mechanism_file import stiffness_damping_from_file
 from ..core.numerics import RPM
-from ..core.options import ModelOptions
+from ..core.options import ModelOptions, SECOND_ORDER_PASSES
 from ..core.reduction import pipeline
 from ..ros import parameters as node_params
 
@@ -130,6 +131,16 @@ def add_order_argument(parser):
                         '(default: %(default)s)')
 
 
+def add_second_order_argument(parser):
+    """Add ``--second-order {quasi-static,dynamic}`` (the estimator's; node model.second_order)."""
+    parser.add_argument('--second-order', choices=SECOND_ORDER_PASSES, default=None,
+                        help='how order 2 is computed: quasi-static (the chord shortening of '
+                        'the linear shapes) or dynamic (also the inertia of the second-order '
+                        'motion: a second reduced state per sample, on a larger basis by '
+                        'default, about +20 us per sample; the lever tip and coupler '
+                        'mid-point) (default: quasi-static)')
+
+
 def add_reduced_arguments(parser):
     """
     Add the flags of the reduced model and its input: sizes, sample rate, cache, JSON.
@@ -160,7 +171,7 @@ def add_reduced_arguments(parser):
     parser.add_argument('--json', action='store_true', help='print one JSON object')
 
 
-def add_estimator_arguments(parser):
+def add_estimator_arguments(parser, second_order=True):
     """
     Add the flags of the estimator's subcommands (estimate, plan, bench, replay).
 
@@ -168,12 +179,16 @@ def add_estimator_arguments(parser):
     ----------
     parser : argparse.ArgumentParser
         A subcommand's parser.
+    second_order : bool
+        Also ``--second-order`` (not on plan, whose reference is quasi-static).
 
     """
     add_model_arguments(parser, 'flexible', "the node's 4 with a flexible crank, the "
                         "mechanism file's with a rigid crank")
     add_stiffness_damping_argument(parser)
     add_order_argument(parser)
+    if second_order:
+        add_second_order_argument(parser)
     add_reduced_arguments(parser)
 
 
@@ -202,7 +217,8 @@ def model_options(args, **overrides):
     values = {'rigid_crank': rigid_crank, 'bearings': args.bearings,
               'geometric_stiffness': not args.no_geometric_stiffness,
               'elements_per_link': None if rigid_crank else node_elements}
-    for name in ('modes', 'static', 'grid_size', 'elements_per_link', 'order', 'soft_modes'):
+    for name in ('modes', 'static', 'grid_size', 'elements_per_link', 'order', 'soft_modes',
+                 'second_order'):
         value = getattr(args, name, None)
         if value is not None:
             values[name] = value

@@ -175,8 +175,10 @@ def run_replay(args):
               'skipped': samples['skipped'], 'skipped_reasons': samples['skipped_reasons'],
               'damaged': [{'file': f, 'offset': o, 'reason': r} for f, o, r in damaged],
               'span_s': span_s, 'read_s': read_s,
-              'model': {'size': model.size, 'grid_size': model.grid_size,
-                        'options': str(options)}, 'order': model.order, 'notes': []}
+              'model': {'size': model.size, 'step_size': model.step_size,
+                        'soft_basis': model.info.get('soft'), 'grid_size': model.grid_size,
+                        'options': str(options)}, 'order': model.order,
+              'second_order': options.second_order if model.order == 2 else None, 'notes': []}
     if args.out:
         result['write_s'] = times['write_s']
         result['output'] = times['status']['path']
@@ -248,7 +250,8 @@ def summary_text(result):
     lines = [f"{result['input']}: {result['samples']} samples on {result['topic']} "
              f"({result['skipped']} skipped, {result['outliers']} outlier(s), "
              f"{result['out_of_bound']} out of bound, {result['segments']} segment(s), "
-             f"{result['span_s']:.2f} s recorded; order {result['order']})"]
+             f"{result['span_s']:.2f} s recorded; order {result['order']}"
+             + (', dynamic pass' if result.get('second_order') == 'dynamic' else '') + ')']
     lines += [f'  skipped {n} messages: {why}' for why, n in result['skipped_reasons'].items()]
     lines += [f"  skipped damaged data in {d['file']}"
               + ('' if d['offset'] is None else f" at offset {d['offset']}")

@@ -14,6 +14,13 @@ MODEL_VERSION = 3
 # 6-element reference, 16 + 4 gave 16 %; with rigid bearings 8 + 4 at grid 256 gives 0.9 %.
 DEFAULT_SIZES = {('rigid', True): (4, 2), ('flexible', True): (16, 2),
                  ('rigid', False): (8, 4), ('flexible', False): (24, 2)}
+# Default (modes, static) with the dynamic second-order pass: the second-order motion needs
+# more directions than the linear one (rigid crank, rigid bearings, 391 rpm against the peer:
+# the coupler mid-point +5.0 % p2p with the pass on 4 + 2, +0.6 % on 8 + 4). Measured for
+# that case only; elsewhere the linear sizes with at least 8 modes and 4 static directions.
+DYNAMIC_SIZES = {key: (max(modes, 8), max(static, 4)) for key, (modes, static)
+                 in DEFAULT_SIZES.items()}
+SECOND_ORDER_PASSES = ('quasi-static', 'dynamic')
 
 
 @dataclasses.dataclass(frozen=True)
@@ -59,10 +66,17 @@ class ModelOptions:
         tables). 1 here, the library's linear model; the node and the CLI default to 2.
     soft_modes : int
         The estimator's second reduction onto the p lowest modes (core/reduction/soft_basis.py):
-        -1 the smallest p at a usable spectral gap, or all r coordinates where the model has
-        none (recorded in ``info['soft']``); p > 0 exactly p (refused without a gap there); 0
-        (default) steps all r coordinates. Not part of the cache key: the soft tables are made
-        from the cached reduced model when it is loaded.
+        -1 (default) the smallest p at a usable spectral gap, or all r coordinates where the
+        model has none (recorded in ``info['soft']``); p > 0 exactly p (refused without a gap
+        there); 0 steps all r coordinates (so does the dynamic second-order pass). Not part
+        of the cache key: the soft tables are made from the cached model when it is loaded.
+    second_order : str
+        At order 2, 'quasi-static' (the chord shortening of the linear state's shapes) or
+        'dynamic': also the dynamic second-order pass in the streaming step (a second reduced
+        state loaded by the second-order terms of the strain energy,
+        core/estimation/dynamic_second_order.py; its tables are part of the model), with
+        :data:`DYNAMIC_SIZES` when ``modes`` / ``static`` are None. Part of the cache key
+        only when 'dynamic'.
 
     """
 
@@ -78,11 +92,19 @@ class ModelOptions:
     stiffness_damping: float = 0.0
     order: int = 1
     soft_modes: int = -1
+    second_order: str = 'quasi-static'
 
     def __post_init__(self):
         if self.bearings not in ('flexible', 'rigid'):
             raise ValueError(f"`bearings` must be 'flexible' or 'rigid', got {self.bearings!r}")
-        modes, static = DEFAULT_SIZES[self.bearings, bool(self.rigid_crank)]
+        if self.second_order not in SECOND_ORDER_PASSES:
+            raise ValueError(f'`second_order` must be one of {SECOND_ORDER_PASSES}, got '
+                             f'{self.second_order!r}')
+        if self.second_order == 'dynamic' and self.order != 2:
+            raise ValueError("`second_order` 'dynamic' needs `order` 2 (it keeps the "
+                             'quasi-static correction and adds the dynamic increment)')
+        sizes = DYNAMIC_SIZES if self.second_order == 'dynamic' else DEFAULT_SIZES
+        modes, static = sizes[self.bearings, bool(self.rigid_crank)]
         object.__setattr__(self, 'modes', modes if self.modes is None else int(self.modes))
         object.__setattr__(self, 'static', static if self.static is None else int(self.static))
         if self.modes < 1 or self.static < 0:
@@ -111,10 +133,11 @@ class ModelOptions:
         """
         Return the fields identifying a reduced model, in declaration order.
 
-        ``gravity`` is left out when it is on, ``stiffness_damping`` when it is 0 and ``order``
-        when it is 1, so a default model keeps the key it had before these fields existed (its
-        cache files still load); a model built without gravity has loads of its own, and one of
-        order 2 carries extra tables, so neither may share that key.
+        ``gravity`` is left out when it is on, ``stiffness_damping`` when it is 0, ``order``
+        when it is 1 and ``second_order`` when it is 'quasi-static', so a default model keeps
+        the key it had before these fields existed (its cache files still load); a model built
+        without gravity has loads of its own, and one of order 2 (or with the dynamic pass)
+        carries extra tables, so none may share that key.
         """
         fields = dataclasses.asdict(self)
         del fields['soft_modes']
@@ -124,4 +147,6 @@ class ModelOptions:
             del fields['stiffness_damping']
         if self.order == 1:
             del fields['order']
+        if self.second_order == 'quasi-static':
+            del fields['second_order']
         return fields

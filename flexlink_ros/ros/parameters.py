@@ -90,6 +90,13 @@ PARAMETERS = (
                   'p at a usable gap, or all coordinates where there is none (logged); 0 = all '
                   'coordinates; p > 0 = exactly p (refused without a gap there)',
                   low=-1, high=1000, read_only=True),
+    ParameterSpec('model.second_order', 'quasi-static', 'How order 2 is computed: '
+                  'quasi-static (the chord shortening of the linear shapes) or dynamic (also '
+                  'the inertia of that motion: a second reduced state per sample, on a larger '
+                  'basis by default; about +20 us per sample; the lever tip and coupler '
+                  'mid-point, the markers stay quasi-static)',
+                  choices=('quasi-static', 'dynamic'), read_only=True,
+                  max_bytes=NAME_MAX_BYTES),
     ParameterSpec('model.cache_dir', '', 'Directory of precomputed-model cache files '
                   '(empty: ~/.cache/flexlink_ros)', read_only=True, max_bytes=PATH_MAX_BYTES),
     ParameterSpec('model.warm_start', True,
@@ -284,7 +291,8 @@ def model_options(values, file_stiffness_damping=0.0):
                         geometric_stiffness=values['model.geometric_stiffness'],
                         stiffness_damping=file_stiffness_damping if beta < 0 else beta,
                         order=values['model.order'],
-                        soft_modes=values.get('model.soft_modes', -1))
+                        soft_modes=values.get('model.soft_modes', -1),
+                        second_order=values.get('model.second_order', 'quasi-static'))
 
 
 def default_model_options(**overrides):

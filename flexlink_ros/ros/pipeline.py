@@ -33,6 +33,7 @@ from .sim_time import ClockWatch, LogTime
 from .startup import check_startup_signal
 from ..core.estimation.sample import SampleFlag
 from ..core.estimation.streaming import StreamingEstimator
+from ..core.reduction.soft_basis import soft_basis_text
 from ..errors import FlexlinkError, InputRejected, OutlierSample
 from ..io import cdr
 from ..io.markers import MarkerEncoder
@@ -84,13 +85,15 @@ class EstimatorPipeline(NodeRecording):
                                                                ProgressLog(log.info))
         check_startup_signal()
         self.criteria_source = self.model.info.get('criteria', 'unknown')
-        log.info(f'model: {self.model.size} coordinates, {self.model.grid_size} grid cells, '
+        log.info(f'model: {self.model.size} coordinates, {soft_basis_text(self.model)}, '
+                 f'{self.model.grid_size} grid cells, '
                  f'{self.options} ({time.perf_counter() - start:.2f} s); '
                  f'criteria: {self.criteria_source}')
         self.estimator = StreamingEstimator(self.model, warm_start=values['model.warm_start'])
         # The node only streams: the step tables serve it, the full table can go.
         self.model = self.estimator.release_model_table()
         self.model_facts = {'model_size': self.model.size, 'model_grid': self.model.grid_size,
+                            'model_step_size': self.model.step_size,
                             'model_options': str(self.options),
                             'criteria_source': self.criteria_source,
                             'notes': '; '.join(self.notes)}

@@ -1,9 +1,9 @@
 """
-Does the dynamic second-order pass fit the streaming estimator? Accuracy and cost (issue 14).
+The dynamic second-order pass per basis size: accuracy and cost of its step (issue 14).
 
 ``python -m flexlink_ros.studies.dynamic_second_order_study [--rpm 391] [--elements 8]
-[--sizes 4,2 8,4] [--peer] [--cost] [--no-gravity] [--json]`` streams the numpy prototype of
-the pass (core/estimation/dynamic_second_order.py) at constant speed (rigid crank, rigid
+[--sizes 4,2 8,4] [--peer] [--cost] [--no-gravity] [--json]`` streams the numpy step of the
+pass (core/estimation/dynamic_second_order.py) at constant speed (rigid crank, rigid
 bearings, gravity unless ``--no-gravity``) per basis size and prints its coupler and lever
 p2p against the full-order pass (core/fe/second_order_dynamic.py) and, with ``--peer``,
 against the Exudyn peer, next to the quasi-static estimate of the same model. ``--cost``
@@ -24,6 +24,7 @@ from .dynamic_second_order_bench import time_pass
 from .peer_exudyn import compare, peer_response
 from .peer_model import OUTPUT_KEYS
 from ..core.estimation import native
+from ..core.estimation.dynamic_pass_kernel import DynamicPassKernel
 from ..core.estimation.dynamic_second_order import DynamicSecondOrderStep, steady_revolution
 from ..core.estimation.step import NumpyStep
 from ..core.estimation.streaming import StreamingEstimator
@@ -83,12 +84,12 @@ def accuracy(mechanism, rpm, elements, sizes_list, revolutions=10, peer=False, g
     for sizes in sizes_list:
         options = case_options(rpm, elements, sizes)
         model = model_for_mechanism(mechanism, options)
-        load = load_for_model(mechanism, options, model)
+        kernel = DynamicPassKernel(load_for_model(mechanism, options, model).arrays)
         step = {}
         for keep in (True, False):
-            # keep_quasi_static=False with a zero load: the plain quasi-static estimate
-            used = load if keep else _ZeroLoad(model.size)
-            step[keep] = steady_revolution(model, used, speed, SAMPLES, revolutions, True)[1]
+            # a zero load: the plain quasi-static estimate
+            used = kernel if keep else _ZeroLoad(model.size)
+            step[keep] = steady_revolution(model, used, speed, SAMPLES, revolutions)[1]
         responses[f'r={model.size} dynamic'] = step[True]
         responses[f'r={model.size} quasi-static'] = step[False]
         out['bases'].append({'sizes': list(sizes), 'r': model.size,
@@ -103,13 +104,13 @@ def accuracy(mechanism, rpm, elements, sizes_list, revolutions=10, peer=False, g
 
 
 class _ZeroLoad:
-    """A load of zero (the step then is the plain step: q2 stays zero)."""
+    """Loads of zero (the step then is the plain step: q2 stays zero)."""
 
     def __init__(self, size):
-        self.zero = np.zeros(size)
+        self.zero = np.zeros((3, size))
 
-    def load(self, q, angle, speed, accel, static_q=None):
-        return self.zero, self.zero
+    def __call__(self, stored, slots, states, angles):
+        return self.zero
 
 
 def _as_response(angles, values):
@@ -136,7 +137,8 @@ def cost(mechanism, rpm, elements, sizes_list, rounds=5, samples=400, kernel_sam
     """
     Per-sample CPU time [ns], medians over alternating rounds, per basis.
 
-    'numpy' / 'numpy_dynamic': the numpy step without and with the pass (1 kHz rows at
+    'numpy' / 'numpy_dynamic' / 'dynamic': the numpy step without the pass, with it (its
+    loads in numpy), and with its loads compiled (the estimator's dynamic step; 1 kHz rows at
     constant speed); 'compiled': the package's compiled order-2 step (the batched rows of the
     replay) of the same model; with ``kernel_samples`` (0: left out, it needs a C compiler)
     'kernel' and 'kernel_tabulated': the pass's own work compiled, with and without the
@@ -154,7 +156,9 @@ def cost(mechanism, rpm, elements, sizes_list, rounds=5, samples=400, kernel_sam
         estimator.update(0, 0.0, speed)
         load = load_for_model(mechanism, options, model)
         steps = {'numpy': NumpyStep(model, shared),
-                 'numpy_dynamic': DynamicSecondOrderStep(model, shared, load, True)}
+                 'numpy_dynamic': DynamicSecondOrderStep(
+                     model, shared, DynamicPassKernel(load.arrays, compiled=False)),
+                 'dynamic': DynamicSecondOrderStep(model, shared, DynamicPassKernel(load.arrays))}
         for step in steps.values():
             step.start(np.zeros(model.size), np.zeros(model.size), (0.0, speed, 0.0),
                        np.empty(native.RECORD_SIZE))
@@ -220,7 +224,8 @@ def format_result(result):
         lines.append(f'  against the peer: {name:22s} {pct(values)}')
     for entry in result.get('cost', []):
         lines.append(f"  r={entry['r']:2d} per sample: numpy {entry['numpy'] / 1e3:7.1f} us, "
-                     f"numpy + pass {entry['numpy_dynamic'] / 1e3:7.1f} us, compiled order 2 "
+                     f"numpy + pass {entry['numpy_dynamic'] / 1e3:7.1f} us, "
+                     f"numpy + compiled pass {entry['dynamic'] / 1e3:7.1f} us, compiled order 2 "
                      f"{entry['compiled'] / 1e3:6.2f} us")
         if 'kernel' in entry:
             lines.append(f"       the pass compiled {entry['kernel'] / 1e3:5.2f} us "

@@ -329,3 +329,23 @@ def test_estimate_soft_modes_flag_chooses_the_step_and_refuses_below_the_gap(cap
     # a size below the gap is refused, with the reason
     assert cli.main(common + ['--soft-modes', '2']) == 1
     assert 'no spectral gap after mode 2' in capsys.readouterr().err
+
+
+def test_estimate_second_order_dynamic_has_its_model_and_moves_the_coupler(capsys, tmp_path):
+    # Cho 1992, rigid crank and bearings, small: the dynamic pass is an opt-in of its own model
+    common = ['estimate', '--rpm', '391', '--seconds', '0.5', '--rigid-crank', '--bearings',
+              'rigid', '--grid-size', '32', '--elements-per-link', '3', '--cache-dir',
+              str(tmp_path), '--json']
+    runs = {}
+    for flags in ([], ['--second-order', 'quasi-static'], ['--second-order', 'dynamic']):
+        assert cli.main(common + flags) == 0
+        runs[tuple(flags)] = json.loads(capsys.readouterr().out)
+    quasi, dynamic = runs[()], runs[('--second-order', 'dynamic')]
+    assert quasi['second_order'] == 'quasi-static' and dynamic['second_order'] == 'dynamic'
+    assert runs[('--second-order', 'quasi-static')]['coupler_mid'] == quasi['coupler_mid']
+    p2p = [np.ptp(np.array(run['coupler_mid']['dy_m'])) for run in (quasi, dynamic)]
+    assert 1e-3 < abs(p2p[1] / p2p[0] - 1.0) < 0.2, p2p
+    models = [p for p in tmp_path.glob('*.npz') if not p.stem.endswith('-nonlinearity')]
+    assert len(models) == 2       # quasi-static (the default key) and dynamic
+    assert cli.main(common + ['--order', '1', '--second-order', 'dynamic']) == 1
+    assert "'dynamic' needs `order` 2" in capsys.readouterr().err

@@ -95,3 +95,26 @@ def test_soft_modes_flag_reaches_the_model_options_and_is_documented(command, ca
         parse(command, '--help')
     text = ' '.join(capsys.readouterr().out.split())
     assert '--soft-modes P' in text and 'spectral gap' in text
+
+
+@pytest.mark.parametrize('command', ['estimate', 'bench', 'replay'])
+def test_second_order_flag_of_the_estimator_commands(command):
+    required = MODEL_COMMANDS[command]
+    # the default: quasi-static, the options (and the model's cache key) as without the flag
+    default = model_args.model_options(parse(command, *required))
+    assert default.second_order == 'quasi-static'
+    assert model_args.model_options(parse(command, *required, '--second-order',
+                                          'quasi-static')) == default
+    dynamic = model_args.model_options(parse(command, *required, '--second-order', 'dynamic',
+                                             '--rigid-crank', '--bearings', 'rigid'))
+    assert dynamic.second_order == 'dynamic' and (dynamic.modes, dynamic.static) == (8, 4)
+    with pytest.raises(SystemExit):
+        parse(command, *required, '--second-order', 'full')
+
+
+def test_plan_and_simulate_keep_their_second_order_meaning():
+    # plan compares against a quasi-static reference: no flag; simulate's is its own
+    assert '--second-order' not in cli.build_parser(['plan']).format_help()
+    args = parse('simulate', '--second-order', 'quasi-static')
+    assert args.second_order == 'quasi-static'
+    assert parse('simulate').second_order is None      # dynamic where it applies

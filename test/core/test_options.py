@@ -2,7 +2,7 @@
 
 import dataclasses
 
-from flexlink_ros.core.options import DEFAULT_SIZES, ModelOptions
+from flexlink_ros.core.options import DEFAULT_SIZES, DYNAMIC_SIZES, ModelOptions
 import pytest
 
 
@@ -42,8 +42,9 @@ def test_given_sizes_are_kept_as_ints():
 def test_cache_fields_keep_the_declaration_order_and_name_gravity_only_when_off():
     options = ModelOptions(grid_size=64)
     fields = options.cache_fields()
-    names = [f.name for f in dataclasses.fields(ModelOptions)]
-    optional = ('gravity', 'stiffness_damping', 'order')
+    # soft_modes is never in the key: the soft tables are made from the cached model
+    names = [f.name for f in dataclasses.fields(ModelOptions) if f.name != 'soft_modes']
+    optional = ('gravity', 'stiffness_damping', 'order', 'second_order')
     assert list(fields) == [n for n in names if n not in optional]
     assert fields['grid_size'] == 64
     # a model without gravity has other loads: its own key; the default's key is unchanged
@@ -52,8 +53,9 @@ def test_cache_fields_keep_the_declaration_order_and_name_gravity_only_when_off(
     assert list(weightless) == [n for n in names if n not in optional[1:]]
     # order 1 (the default) leaves the key as before the field; order 2 is part of it
     assert list(ModelOptions(order=2).cache_fields()) == [
-        n for n in names if n not in optional[:2]]
+        n for n in names if n not in optional[:2] + optional[3:]]
     assert ModelOptions(speed_max=30.0).cache_fields() != ModelOptions().cache_fields()
+    assert ModelOptions(soft_modes=0).cache_fields() == ModelOptions().cache_fields()
 
 
 def test_stiffness_damping_is_in_the_cache_fields_only_when_set():
@@ -68,7 +70,8 @@ def test_stiffness_damping_is_in_the_cache_fields_only_when_set():
     {'bearings': 'springs'}, {'modes': 0}, {'static': -1}, {'grid_size': 7},
     {'speed_max': 0.0}, {'speed_max': -5.0}, {'speed_max': float('nan')},
     {'stiffness_damping': -1e-4}, {'stiffness_damping': float('nan')},
-    {'stiffness_damping': float('inf')}, {'order': 0}, {'order': 3}])
+    {'stiffness_damping': float('inf')}, {'order': 0}, {'order': 3},
+    {'order': 2, 'second_order': 'full'}, {'order': 1, 'second_order': 'dynamic'}])
 def test_invalid_values_are_refused(changes):
     with pytest.raises(ValueError):
         ModelOptions(**changes)
@@ -77,3 +80,19 @@ def test_invalid_values_are_refused(changes):
 def test_options_are_frozen():
     with pytest.raises(dataclasses.FrozenInstanceError):
         ModelOptions().modes = 3
+
+
+def test_dynamic_second_order_has_its_sizes_and_key_and_quasi_static_keeps_both():
+    quasi = ModelOptions(bearings='rigid', order=2)
+    assert ModelOptions(bearings='rigid', order=2, second_order='quasi-static') == quasi
+    assert 'second_order' not in quasi.cache_fields() and (quasi.modes, quasi.static) == (4, 2)
+    dynamic = ModelOptions(bearings='rigid', order=2, second_order='dynamic')
+    # the pass needs more directions: the measured 8 + 4 with rigid bearings and crank
+    assert (dynamic.modes, dynamic.static) == DYNAMIC_SIZES['rigid', True] == (8, 4)
+    assert dynamic.cache_fields()['second_order'] == 'dynamic'
+    assert list(dynamic.cache_fields())[-1] == 'second_order'
+    # sizes given are kept
+    given = ModelOptions(bearings='rigid', order=2, second_order='dynamic', modes=6, static=3)
+    assert (given.modes, given.static) == (6, 3)
+    for key, (modes, static) in DEFAULT_SIZES.items():
+        assert DYNAMIC_SIZES[key][0] >= modes and DYNAMIC_SIZES[key][1] >= max(static, 4)

@@ -617,3 +617,53 @@ def test_run_time_parameters_take_effect(tmp_path, processes, ros):
     feed(3, stamp_step_ns=2 * 10**9)
     spin_until(executor, lambda: 'WARM_START' in flags_after(since), 10.0, 'a warm start')
     assert node_process.stop() == 0
+
+
+def test_node_publishes_the_dynamic_pass(tmp_path, processes):
+    """model.second_order:=dynamic: the node's recorded deflections are the replay's."""
+    from flexlink_ros.core.estimation.offline_run import estimate_offline
+    from rosbags.highlevel import AnyReader
+
+    params = {'model.second_order': 'dynamic', 'model.rigid_crank': True,
+              'model.bearings': 'rigid', 'model.elements_per_link': 3, 'model.grid_size': 32,
+              'model.cache_dir': str(tmp_path / 'cache')}
+    bag = tmp_path / 'bag'
+    node_process = NodeProcess(tmp_path, 'record.enabled:=true', f'record.path:={bag}',
+                               *(f'{name}:={value}' for name, value in params.items()))
+    processes.append(node_process)
+    node_process.wait_for(READY_MESSAGE, READY_TIMEOUT_S)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
+    driver = subprocess.Popen([sys.executable, '-m', 'flexlink_ros.ros.crank_driver', '--ros-args',
+                               '-p', 'speed_rpm:=391.0'], env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    processes.append(driver)
+    node_process.wait_for(FIRST_INPUT_MESSAGE, DISCOVERY_TIMEOUT_S)
+    time.sleep(1.5)    # recording time, not synchronisation
+    driver.send_signal(signal.SIGINT)
+    driver.wait(timeout=20)
+    assert node_process.stop(signal.SIGINT) == 0, node_process.log()
+    inputs, published = [], {}
+    with AnyReader([bag]) as reader:
+        for connection, _, raw in reader.messages():
+            if connection.topic == '/joint_states' or connection.topic.endswith('/deflection'):
+                message = reader.deserialize(raw, connection.msgtype)
+                stamp = message.header.stamp.sec * 10**9 + message.header.stamp.nanosec
+                if connection.topic == '/joint_states':
+                    inputs.append((stamp, message.position[0], message.velocity[0]))
+                else:
+                    published.setdefault(stamp, {})[connection.topic.split('/')[2]] = (
+                        message.vector.x, message.vector.y)
+    assert len(inputs) > 500
+    values = dict(node_params.defaults(), **params)
+    model, options, _ = load_node_model(values, lambda note: None)
+    assert options.second_order == 'dynamic' and model.dynamic_second_order is not None
+    stamps, angles, speeds = (np.array(column) for column in zip(*inputs))
+    offline = estimate_offline(model, stamps.astype(np.int64), angles, speeds)
+    worst, scale = 0.0, np.abs(offline['coupler_mid']).max()
+    for n, stamp in enumerate(stamps.tolist()):
+        if stamp in published and len(published[stamp]) == 2:
+            for name in ('lever_tip', 'coupler_mid'):
+                worst = max(worst, np.abs(np.subtract(published[stamp][name],
+                                                      offline[name][n])).max())
+    assert sum(len(p) == 2 for p in published.values()) > 500
+    assert worst < 1e-6 * scale, worst / scale

@@ -186,3 +186,16 @@ def test_node_model_warns_when_the_soft_basis_finds_no_gap(tmp_path):
     assert set(seen) == {True, False}
     values['model.soft_modes'] = 0                  # off on purpose: nothing to warn about
     assert load_node_model(values, lambda note: None)[2] == []
+
+
+def test_second_order_parameter_selects_the_dynamic_pass():
+    values = node_params.defaults()
+    assert values['model.second_order'] == 'quasi-static'
+    assert node_params.model_options(values) == node_params.default_model_options()
+    assert 'second_order' not in node_params.model_options(values).cache_fields()
+    values.update({'model.second_order': 'dynamic', 'model.rigid_crank': True,
+                   'model.bearings': 'rigid'})
+    options = node_params.model_options(values)
+    assert options.second_order == 'dynamic' and (options.modes, options.static) == (8, 4)
+    assert node_params.validate_parameter('model.second_order', 'full') is not None
+    assert node_params.validate_parameter('model.second_order', 'dynamic') is None

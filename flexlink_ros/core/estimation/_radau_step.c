@@ -13,14 +13,25 @@
  *     (the factored quadratic form of core/reduction/second_order_tables.py).
  * A sample whose step is split into sub-steps (MAX_SUBSTEP_NS) is advanced here too,
  * with the crank state linear between the samples, as NumpyStep._sub_steps does.
+ * Batched rows (advance) and the streaming update both enter the step through step_sample.
+ *
+ * Also here: the crank-rate filter (CrankRateFilter.update), the joint criteria, and Update,
+ * the whole StreamingEstimator.update of an ordinary sample in one call (gate, filter, step,
+ * record, criteria, bound, validity indicator of _nonlinearity.h, the Sample), with the
+ * Python path (core/estimation/compiled_update.py) taking every other sample.
  *
  * No numpy headers: arrays come through the buffer protocol (C-contiguous float64).
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
+#include <structmember.h>
+#include <limits.h>
 #include <math.h>
+#include <stddef.h>
 #include <stdlib.h>
 #include <string.h>
+
+#include "_nonlinearity.h"      /* the validity indicator, for the streaming update */
 
 #define FIRST_MC 4      /* M and C start at monomial 1: weights[4:] */
 #define GROUPS_C 4      /* C: monomials 1, w2, w, w4 (node rows V, S each) */
@@ -35,7 +46,7 @@
 #define SO_SCALARS 22   /* second order: cos, sin of 3 link angles, kappa 4 x 4 */
 #define SO_TRIG 6       /* kappa's first scalar */
 #define SO_FORMS 4      /* bending sums: crank, coupler, lever, coupler's half */
-#define LIFT_BUFFERS 4  /* the soft basis's lift: phi, dphi, residual, lifted */
+#define LIFT_BUFFERS 5  /* the soft basis's lift: phi, dphi, residual, lifted, history */
 
 static const double TWO_PI = 6.283185307179586;
 static const double PI = 3.141592653589793;     /* math.pi */
@@ -44,19 +55,20 @@ typedef struct {
     Py_ssize_t r, cells, mass_groups, kf_groups, out_rows, joint_rows;
     /* the soft basis (soft_tables.py): the step's r is p; the record's is rr, the lift
        q = Phi eta + residual, q' = Phi eta' + w Phi' eta from power-form cell tables, and
-       the damping table holds [C | D] with D added as w D to K. rr == r, lift NULL: none. */
+       [K | f] in float32 (kf32). rr == r, lift NULL: none. */
     Py_ssize_t rr;
-    const double *lift_phi, *lift_dphi, *lift_residual;
+    const float *lift_phi, *lift_dphi, *lift_residual;    /* float32 node tables */
     double *lifted;     /* [q, q', 1] of the reduced model (2 rr + 1) */
+    double *history;    /* stage 1 by interpolation in time, or NULL: [count, h, X_n, X_n-1] */
     double *frame;      /* scratch: Phi, Phi' (rr x p each) */
     const float *mass, *damping;    /* float32, node tables: see tables._StepTables */
     const double *kf, *out, *joint, *g0;
+    const float *kf32;  /* the soft basis's [K | f] node table (float32; kf is NULL then) */
     double cells_per_radian, c1;
     /* scratch */
     double *blocks;     /* [slot][m] r x r, m = M, C, K; slot 0 sample, 1 stage 1 */
     double *loads;      /* [slot] r */
     double *products;   /* [slot][m][l] r: X_{slot,m} z_l */
-    double *transport;  /* D of the soft basis (r x r) */
     double *matrix;     /* 2r x 2r */
     double *rhs;        /* 2r */
     double *operator;   /* outputs x (r + 1): [O | corr] of the record */
@@ -190,26 +202,24 @@ static void load(Step *s, int slot, double angle, double w, double a)
     const Py_ssize_t k = evaluate(s, angle, w, a, s->weights, s->hermite);
     const Py_ssize_t k1 = k + 1 < s->cells ? k + 1 : 0;
     double *blocks = s->blocks + (Py_ssize_t)slot * 3 * r2;
-    const Py_ssize_t damping_stride = s->lift_phi != NULL ? 2 * r2 : r2;
-    const Py_ssize_t mass_node = 2 * s->mass_groups * r2,
-                     damping_node = 2 * GROUPS_C * damping_stride;
+    const Py_ssize_t mass_node = 2 * s->mass_groups * r2, damping_node = 2 * GROUPS_C * r2;
     combine_nodes_f32(s->hermite + FIRST_MC, s->mass + k * mass_node, s->mass + k1 * mass_node,
                       s->mass_groups, r2, r2, blocks);
     combine_nodes_f32(s->hermite + FIRST_MC, s->damping + k * damping_node,
-                      s->damping + k1 * damping_node, GROUPS_C, damping_stride, r2, blocks + r2);
-    if (s->lift_phi != NULL)
-        combine_nodes_f32(s->hermite + FIRST_MC, s->damping + k * damping_node + r2,
-                          s->damping + k1 * damping_node + r2, GROUPS_C, damping_stride, r2,
-                          s->transport);
+                      s->damping + k1 * damping_node, GROUPS_C, r2, r2, blocks + r2);
     /* [K | f] from the kf table (monomials a, 1, w2, and w with stiffness damping) */
     const Py_ssize_t kf_width = r2 + r, kf_node = 2 * s->kf_groups * kf_width;
-    const double *lo = s->kf + k * kf_node, *hi = s->kf + k1 * kf_node;
-    combine_nodes(s->hermite, lo, hi, s->kf_groups, kf_width, r2, blocks + 2 * r2);
-    combine_nodes(s->hermite, lo + r2, hi + r2, s->kf_groups, kf_width, r, s->loads + slot * r);
-    if (s->lift_phi != NULL) {
-        double *stiffness = blocks + 2 * r2;
-        for (Py_ssize_t j = 0; j < r2; j++)
-            stiffness[j] += w * s->transport[j];
+    if (s->kf32 != NULL) {
+        const float *lo = s->kf32 + k * kf_node, *hi = s->kf32 + k1 * kf_node;
+        combine_nodes_f32(s->hermite, lo, hi, s->kf_groups, kf_width, r2, blocks + 2 * r2);
+        combine_nodes_f32(s->hermite, lo + r2, hi + r2, s->kf_groups, kf_width, r,
+                          s->loads + slot * r);
+    }
+    else {
+        const double *lo = s->kf + k * kf_node, *hi = s->kf + k1 * kf_node;
+        combine_nodes(s->hermite, lo, hi, s->kf_groups, kf_width, r2, blocks + 2 * r2);
+        combine_nodes(s->hermite, lo + r2, hi + r2, s->kf_groups, kf_width, r,
+                      s->loads + slot * r);
     }
 }
 
@@ -251,19 +261,24 @@ static Py_ssize_t lift(Step *s, const double *z, const double *prev)
 {
     const Py_ssize_t p = s->r, rr = s->rr, width = rr * p;
     const Py_ssize_t k = evaluate(s, prev[0], prev[1], prev[2], s->weights, s->hermite);
+    const Py_ssize_t k1 = k + 1 < s->cells ? k + 1 : 0;
     double *frame = s->frame, *first = s->frame + width, *q = s->lifted, *v = s->lifted + rr;
-    combine(s->weights, s->lift_phi + k * 16 * width, 16, width, width, frame);
-    combine(s->weights + 4, s->lift_dphi + k * 4 * width, 4, width, width, first);
-    combine(s->weights, s->lift_residual + k * 12 * rr, 12, rr, rr, q);
-    /* the residual's rate along the crank angle: d/dtheta of the power form */
+    /* float32 Hermite node tables: phi (a, 1, w2, w), dphi (1), residual (a, 1, w2) */
+    combine_nodes_f32(s->hermite, s->lift_phi + k * 8 * width, s->lift_phi + k1 * 8 * width,
+                      4, width, width, frame);
+    combine_nodes_f32(s->hermite + 4, s->lift_dphi + k * 2 * width,
+                      s->lift_dphi + k1 * 2 * width, 1, width, width, first);
+    combine_nodes_f32(s->hermite, s->lift_residual + k * 6 * rr,
+                      s->lift_residual + k1 * 6 * rr, 3, rr, rr, q);
+    /* the residual's rate along the crank angle: d/dtheta of the Hermite weights */
+    const double t = s->weights[5], slope = 6.0 * t * t - 6.0 * t;
+    const double basis_rate[4] = {slope, 3.0 * t * t - 4.0 * t + 1.0, -slope, 3.0 * t * t - 2.0 * t};
     double rates[12];
-    for (int m = 0; m < 3; m++) {
-        rates[4 * m] = 0.0;
-        for (int power = 1; power < 4; power++)
-            rates[4 * m + power] = s->weights[4 * m + power - 1] * (double)power
-                                   * s->cells_per_radian;
-    }
-    combine(rates, s->lift_residual + k * 12 * rr, 12, rr, rr, v);
+    for (int m = 0; m < 3; m++)
+        for (int i = 0; i < 4; i++)
+            rates[4 * m + i] = s->weights[4 * m] * basis_rate[i] * s->cells_per_radian;
+    combine_nodes_f32(rates, s->lift_residual + k * 6 * rr, s->lift_residual + k1 * 6 * rr, 3,
+                      rr, rr, v);
     for (Py_ssize_t i = 0; i < rr; i++) {
         q[i] += dot(frame + i * p, z, p);
         v[i] = dot(frame + i * p, z + p, p) + prev[1] * (dot(first + i * p, z, p) + v[i]);
@@ -441,15 +456,74 @@ static double python_mod(double x, double y)
     return mod;
 }
 
+/* The history's length (the soft basis's interpolated stage 1), or 0. */
+static Py_ssize_t history_size(const Step *s)
+{
+    return s->history == NULL ? 0 : 2 + 2 * (3 * s->r * s->r + s->r);
+}
+
+/* Slot 0's [M, C, K | f] into a history entry. */
+static void history_copy(Step *s, double *entry)
+{
+    const Py_ssize_t r = s->r, r2 = r * r;
+    memcpy(entry, s->blocks, (size_t)(3 * r2) * sizeof(double));
+    memcpy(entry + 3 * r2, s->loads, (size_t)r * sizeof(double));
+}
+
+/*
+ * Stage 1 (slot 1) and the sample (slot 0) of a step of h from prev to (angle, w, a): both
+ * from the tables, or (with a history) only the sample, stage 1 by interpolation in time
+ * through the last two samples' evaluations and the new one (quadratic; linear with one,
+ * after the previous sample is evaluated on a fresh start): NumpyStep._load_stages.
+ */
+static void load_stages(Step *s, const double *prev, double h, double angle, double w, double a,
+                        double advance)
+{
+    const double c1 = s->c1;
+    if (s->history == NULL) {
+        load(s, 1, wrap_once(prev[0] + c1 * advance), prev[1] + c1 * (w - prev[1]),
+             prev[2] + c1 * (a - prev[2]));
+        load(s, 0, angle, w, a);
+        return;
+    }
+    const Py_ssize_t r = s->r, matrices = 3 * r * r, width = matrices + r;
+    double *count = s->history, *last = s->history + 2, *before = last + width;
+    if (*count < 1.0) {
+        load(s, 0, prev[0], prev[1], prev[2]);
+        history_copy(s, last);
+        *count = 1.0;
+    }
+    load(s, 0, angle, w, a);
+    double weights[3];  /* on X_n-1, X_n, X_n+1 at t_n + c1 h (Lagrange) */
+    if (*count >= 2.0) {
+        const double back = s->history[1], x = c1 * h;
+        weights[0] = x * (x - h) / (back * (back + h));
+        weights[1] = (x + back) * (h - x) / (back * h);
+        weights[2] = (x + back) * x / ((h + back) * h);
+    }
+    else {
+        weights[0] = 0.0;
+        weights[1] = 1.0 - c1;
+        weights[2] = c1;
+    }
+    double *stage = s->blocks + matrices, *stage_load = s->loads + r;
+    for (Py_ssize_t j = 0; j < matrices; j++)
+        stage[j] = weights[0] * before[j] + weights[1] * last[j] + weights[2] * s->blocks[j];
+    for (Py_ssize_t j = 0; j < r; j++)
+        stage_load[j] = weights[0] * before[matrices + j] + weights[1] * last[matrices + j]
+                        + weights[2] * s->loads[j];
+    memcpy(before, last, (size_t)width * sizeof(double));
+    history_copy(s, last);
+    s->history[1] = h;
+    *count = *count >= 2.0 ? 2.0 : *count + 1.0;
+}
+
 /* One Radau IIA step of h to crank state (angle, w, a) from prev (NumpyStep._step). */
 STEP_CLONES static int radau_step(Step *s, double *z, double *prev, double h, double angle, double w,
                       double a, double advance)
 {
     const Py_ssize_t r = s->r, r2 = r * r, n = 2 * r;
-    const double c1 = s->c1;
-    load(s, 1, wrap_once(prev[0] + c1 * advance), prev[1] + c1 * (w - prev[1]),
-         prev[2] + c1 * (a - prev[2]));
-    load(s, 0, angle, w, a);
+    load_stages(s, prev, h, angle, w, a, advance);
     prev[0] = angle;
     prev[1] = w;
     prev[2] = a;
@@ -643,9 +717,10 @@ static int take_second(PyObject *second, Py_buffer *views, Step *s)
    into s, its sizes checked against the step's r = p and the grid; or -1. */
 static int take_lift(PyObject *lift_tuple, Py_buffer *views, Step *s)
 {
-    PyObject *objects[LIFT_BUFFERS];
-    if (!PyArg_ParseTuple(lift_tuple, "OOOO;`lift` must be (phi, dphi, residual, lifted)",
-                          &objects[0], &objects[1], &objects[2], &objects[3]))
+    PyObject *objects[LIFT_BUFFERS] = {NULL};
+    if (!PyArg_ParseTuple(lift_tuple, "OOOO|O;`lift` must be (phi, dphi, residual, lifted[, "
+                          "history])", &objects[0], &objects[1], &objects[2], &objects[3],
+                          &objects[4]))
         return -1;
     if (get_buffer(objects[3], &views[3], 1, "lifted", -1) != 0)
         return -1;
@@ -654,15 +729,20 @@ static int take_lift(PyObject *lift_tuple, Py_buffer *views, Step *s)
         PyErr_SetString(PyExc_ValueError, "`lifted` must have 2 r + 1 values");
         return -1;
     }
-    if (get_buffer(objects[0], &views[0], 0, "phi", s->cells * 16 * rr * p) != 0
-        || get_buffer(objects[1], &views[1], 0, "dphi", s->cells * 4 * rr * p) != 0
-        || get_buffer(objects[2], &views[2], 0, "residual", s->cells * 12 * rr) != 0)
+    if (get_typed_buffer(objects[0], &views[0], 0, "phi", s->cells * 8 * rr * p, "f") != 0
+        || get_typed_buffer(objects[1], &views[1], 0, "dphi", s->cells * 2 * rr * p, "f") != 0
+        || get_typed_buffer(objects[2], &views[2], 0, "residual", s->cells * 6 * rr, "f") != 0)
         return -1;
     s->rr = rr;
     s->lift_phi = views[0].buf;
     s->lift_dphi = views[1].buf;
     s->lift_residual = views[2].buf;
     s->lifted = views[3].buf;
+    if (objects[4] != NULL && objects[4] != Py_None) {
+        if (get_buffer(objects[4], &views[4], 1, "history", 2 + 2 * (3 * p * p + p)) != 0)
+            return -1;
+        s->history = views[4].buf;
+    }
     return 0;
 }
 
@@ -678,6 +758,125 @@ static Py_ssize_t rows_of(const Py_buffer *view, Py_ssize_t per_row, Py_ssize_t 
     return rows;
 }
 
+/* The buffers a Step holds while it is open (step_open, step_close). */
+enum {
+    VIEW_MASS, VIEW_DAMPING, VIEW_KF, VIEW_OUT, VIEW_JOINT, VIEW_G0, VIEW_SECOND,
+    VIEW_LIFT = VIEW_SECOND + SO_BUFFERS, STEP_VIEWS = VIEW_LIFT + LIFT_BUFFERS
+};
+#define STEP_TABLES 6   /* mass, damping, kf, out, joint, g0 */
+
+/*
+ * Open a step of a model of size r: its tables (mass, damping, kf, out, joint, g0; second
+ * None or SecondOrderForms.packed; lift None or the soft basis's (phi, dphi, residual,
+ * lifted[, history]): then r is p and out, joint, second are the reduced model's), checked
+ * against r and each other, into s with its scratch; 0, or -1 with an exception set.
+ * step_close releases it either way.
+ */
+static int step_open(Step *s, Py_ssize_t r, PyObject *const *tables, PyObject *second,
+                     PyObject *lift, double cells_per_radian, double c1, Py_buffer *views)
+{
+    const Py_ssize_t r2 = r * r, n = 2 * r;
+    const int soft = lift != NULL && lift != Py_None;
+    memset(s, 0, sizeof(*s));
+    if (get_typed_buffer(tables[VIEW_DAMPING], &views[VIEW_DAMPING], 0, "damping", -1, "f")
+        != 0)
+        return -1;
+    const Py_ssize_t cells = views[VIEW_DAMPING].len / 4 / (2 * GROUPS_C * r2);
+    if (cells < 1 || views[VIEW_DAMPING].len / 4 != cells * 2 * GROUPS_C * r2) {
+        PyErr_SetString(PyExc_ValueError, "`damping` does not match the size of `z`");
+        return -1;
+    }
+    s->r = s->rr = r;
+    s->cells = cells;
+    if (soft && take_lift(lift, views + VIEW_LIFT, s) != 0)
+        return -1;
+    const Py_ssize_t rr = s->rr;
+    if (get_typed_buffer(tables[VIEW_MASS], &views[VIEW_MASS], 0, "mass", -1, "f") != 0
+        || (s->mass_groups = rows_of(&views[VIEW_MASS], 2 * r2, cells, GROUPS_C, "mass")) < 0
+        || get_typed_buffer(tables[VIEW_KF], &views[VIEW_KF], 0, "kf", -1, soft ? "f" : "d")
+           != 0
+        || (s->kf_groups = rows_of(&views[VIEW_KF], 2 * (r2 + r), cells, GROUPS_KF_MAX, "kf"))
+           < 0
+        || get_buffer(tables[VIEW_OUT], &views[VIEW_OUT], 0, "out", -1) != 0
+        || (s->out_rows = rows_of(&views[VIEW_OUT], OUTPUTS * (rr + 1), cells, ROWS_ALL, "out"))
+           < 0
+        || get_buffer(tables[VIEW_JOINT], &views[VIEW_JOINT], 0, "joint", -1) != 0
+        || (s->joint_rows = rows_of(&views[VIEW_JOINT], JOINT_WIDTH, cells, ROWS_ALL, "joint"))
+           < 0
+        || get_buffer(tables[VIEW_G0], &views[VIEW_G0], 0, "g0", POWERS * 64) != 0)
+        return -1;
+    s->r = r;
+    s->cells = cells;
+    s->mass = views[VIEW_MASS].buf;
+    s->damping = views[VIEW_DAMPING].buf;
+    s->kf = soft ? NULL : views[VIEW_KF].buf;
+    s->kf32 = soft ? views[VIEW_KF].buf : NULL;
+    s->out = views[VIEW_OUT].buf;
+    s->joint = views[VIEW_JOINT].buf;
+    s->g0 = views[VIEW_G0].buf;
+    s->cells_per_radian = cells_per_radian;
+    s->c1 = c1;
+    if (take_second(second, views + VIEW_SECOND, s) != 0)
+        return -1;
+    s->blocks = malloc(sizeof(double) * (size_t)(6 * r2 + 2 * r + 12 * r + n * n + n
+                                                 + OUTPUTS * (rr + 1) + s->so_rows
+                                                 + s->so_slots + 1 + 2 * rr * r));
+    if (s->blocks == NULL) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    s->loads = s->blocks + 6 * r2;
+    s->products = s->loads + 2 * r;
+    s->matrix = s->products + 12 * r;
+    s->rhs = s->matrix + n * n;
+    s->operator = s->rhs + n;
+    s->so_y = s->operator + OUTPUTS * (rr + 1);
+    s->so_z = s->so_y + s->so_rows;
+    s->frame = s->so_z + s->so_slots + 1;
+    return 0;
+}
+
+/* Free a step's scratch and release its buffers (those not taken are empty). */
+static void step_close(Step *s, Py_buffer *views)
+{
+    free(s->blocks);
+    s->blocks = NULL;
+    for (int i = 0; i < STEP_VIEWS; i++)
+        PyBuffer_Release(&views[i]);
+}
+
+enum { SAMPLE_DONE = 0, SAMPLE_FAILED = -1, SAMPLE_BAD_ROW = -2 };
+
+/*
+ * Advance z = [q, v, 1] from the crank state prev through one sample row (h, sub-steps,
+ * angle, speed, accel, advance; ROW_FIELDS) and write its record (record_out NULL: none):
+ * the row's sub-steps with the crank state linear between the samples (NumpyStep._sub_steps),
+ * each one Radau IIA step. SAMPLE_DONE, SAMPLE_FAILED (singular or non-finite: z keeps the
+ * sub-steps done) or SAMPLE_BAD_ROW. The one entry of the batched replay (advance) and of the
+ * streaming update (Update.sample) into the step.
+ */
+static int step_sample(Step *s, double *z, double *prev, const double *row,
+                       double *record_out)
+{
+    const double h = row[0], angle = row[2], w = row[3], a = row[4], step = row[5];
+    const long splits = row[1] >= 1.0 && row[1] < 1e9 ? (long)row[1] : 0;
+    if (!(h > 0.0) || splits < 1)
+        return SAMPLE_BAD_ROW;
+    const double sub_h = h / (double)splits, sub_step = step / (double)splits;
+    const double angle0 = prev[0], w0 = prev[1], a0 = prev[2];
+    for (long i = 1; i < splits; i++) {
+        const double f = (double)i / (double)splits;
+        if (radau_step(s, z, prev, sub_h, python_mod(angle0 + step * f, TWO_PI),
+                       w0 + f * (w - w0), a0 + f * (a - a0), sub_step) != 0)
+            return SAMPLE_FAILED;
+    }
+    if (radau_step(s, z, prev, sub_h, angle, w, a, sub_step) != 0)
+        return SAMPLE_FAILED;
+    if (record_out != NULL)
+        record(s, z, prev, record_out, 0);      /* with the soft basis: lifted first */
+    return SAMPLE_DONE;
+}
+
 static PyObject *advance(PyObject *module, PyObject *args)
 {
     PyObject *objects[15] = {NULL};
@@ -688,45 +887,19 @@ static PyObject *advance(PyObject *module, PyObject *args)
                           &objects[8], &objects[9], &objects[10], &objects[11], &objects[12],
                           &objects[13], &objects[14]))
         return NULL;
-    Py_buffer mass = {0}, damping = {0}, kf = {0}, out = {0}, joint = {0}, g0 = {0}, z = {0},
-              prev = {0}, rows = {0}, states = {0}, records = {0};
-    Py_buffer lift_views[LIFT_BUFFERS] = {{0}};
-    Py_buffer second[SO_BUFFERS] = {{0}};
+    Py_buffer views[STEP_VIEWS] = {{0}};
+    Py_buffer z = {0}, prev = {0}, rows = {0}, states = {0}, records = {0};
     PyObject *result = NULL;
-    double *scratch = NULL;
     Step s;
     memset(&s, 0, sizeof(s));
     if (get_buffer(objects[8], &z, 1, "z", -1) != 0)
         return NULL;
-    const Py_ssize_t r = (z.len / 8 - 1) / 2, r2 = r * r, n = 2 * r;
+    const Py_ssize_t r = (z.len / 8 - 1) / 2;
     if (r < 1 || z.len / 8 != 2 * r + 1) {
         PyErr_SetString(PyExc_ValueError, "`z` must have 2 r + 1 values");
         goto done;
     }
-    const int soft = objects[14] != NULL && objects[14] != Py_None;
-    const Py_ssize_t damping_width = soft ? 2 * r2 : r2;
-    if (get_typed_buffer(objects[1], &damping, 0, "damping", -1, "f") != 0)
-        goto done;
-    const Py_ssize_t cells = damping.len / 4 / (2 * GROUPS_C * damping_width);
-    if (cells < 1 || damping.len / 4 != cells * 2 * GROUPS_C * damping_width) {
-        PyErr_SetString(PyExc_ValueError, "`damping` does not match the size of `z`");
-        goto done;
-    }
-    s.r = r;
-    s.rr = r;
-    s.cells = cells;
-    if (soft && take_lift(objects[14], lift_views, &s) != 0)
-        goto done;
-    const Py_ssize_t rr = s.rr;
-    if (get_typed_buffer(objects[0], &mass, 0, "mass", -1, "f") != 0
-        || (s.mass_groups = rows_of(&mass, 2 * r2, cells, GROUPS_C, "mass")) < 0
-        || get_buffer(objects[2], &kf, 0, "kf", -1) != 0
-        || (s.kf_groups = rows_of(&kf, 2 * (r2 + r), cells, GROUPS_KF_MAX, "kf")) < 0
-        || get_buffer(objects[3], &out, 0, "out", -1) != 0
-        || (s.out_rows = rows_of(&out, OUTPUTS * (rr + 1), cells, ROWS_ALL, "out")) < 0
-        || get_buffer(objects[4], &joint, 0, "joint", -1) != 0
-        || (s.joint_rows = rows_of(&joint, JOINT_WIDTH, cells, ROWS_ALL, "joint")) < 0
-        || get_buffer(objects[5], &g0, 0, "g0", POWERS * 64) != 0
+    if (step_open(&s, r, objects, objects[13], objects[14], cells_per_radian, c1, views) != 0
         || get_buffer(objects[9], &prev, 1, "prev", 3) != 0
         || get_buffer(objects[10], &rows, 0, "rows", -1) != 0)
         goto done;
@@ -738,6 +911,8 @@ static PyObject *advance(PyObject *module, PyObject *args)
     if (get_buffer(objects[11], &states, 1, "states", -1) != 0
         || get_buffer(objects[12], &records, 1, "records", -1) != 0)
         goto done;
+    const Py_ssize_t rr = s.rr;
+    const int soft = s.lift_phi != NULL;
     if (states.len != 0 && states.len / 8 != count * 2 * rr) {
         PyErr_SetString(PyExc_ValueError, "`states` must be empty or rows x 2 r");
         goto done;
@@ -747,97 +922,41 @@ static PyObject *advance(PyObject *module, PyObject *args)
         PyErr_SetString(PyExc_ValueError, "`records` must be rows x 28 or 28");
         goto done;
     }
-    s.r = r;
-    s.cells = cells;
-    s.mass = mass.buf;
-    s.damping = damping.buf;
-    s.kf = kf.buf;
-    s.out = out.buf;
-    s.joint = joint.buf;
-    s.g0 = g0.buf;
-    s.cells_per_radian = cells_per_radian;
-    s.c1 = c1;
-    if (take_second(objects[13], second, &s) != 0)
-        goto done;
-    scratch = malloc(sizeof(double) * (size_t)(6 * r2 + 2 * r + 12 * r + n * n + n
-                                               + OUTPUTS * (rr + 1) + s.so_rows + s.so_slots + 1
-                                               + r2 + 2 * rr * r));
-    if (scratch == NULL) {
-        PyErr_NoMemory();
-        goto done;
-    }
-    s.blocks = scratch;
-    s.loads = s.blocks + 6 * r2;
-    s.products = s.loads + 2 * r;
-    s.matrix = s.products + 12 * r;
-    s.rhs = s.matrix + n * n;
-    s.operator = s.rhs + n;
-    s.so_y = s.operator + OUTPUTS * (rr + 1);
-    s.so_z = s.so_y + s.so_rows;
-    s.transport = s.so_z + s.so_slots + 1;
-    s.frame = s.transport + r2;
-
     double *zv = z.buf, *pv = prev.buf, *state_out = states.len ? states.buf : NULL;
     double *record_out = records.buf;
     const double *row = rows.buf;
-    int failed = 0, bad_row = 0;
+    int outcome = SAMPLE_DONE;
     /* Batches (replay) let other threads run; a single sample keeps the GIL: getting it back
        can wait for another thread's switch interval (5 ms), far longer than the step. */
     PyThreadState *released = count >= RELEASE_GIL_ROWS ? PyEval_SaveThread() : NULL;
-    for (Py_ssize_t m = 0; m < count && !failed; m++, row += ROW_FIELDS) {
-        const double h = row[0], angle = row[2], w = row[3], a = row[4], step = row[5];
-        const long splits = row[1] >= 1.0 && row[1] < 1e9 ? (long)row[1] : 0;
-        if (!(h > 0.0) || splits < 1) {
-            failed = bad_row = 1;
+    for (Py_ssize_t m = 0; m < count; m++, row += ROW_FIELDS) {
+        double *record_m = every_record ? record_out + m * RECORD_SIZE
+                                        : (m == count - 1 ? record_out : NULL);
+        outcome = step_sample(&s, zv, pv, row, record_m);
+        if (outcome != SAMPLE_DONE)
             break;
-        }
-        const double sub_h = h / (double)splits, sub_step = step / (double)splits;
-        const double angle0 = pv[0], w0 = pv[1], a0 = pv[2];
-        for (long i = 1; i < splits && !failed; i++) {
-            const double f = (double)i / (double)splits;
-            failed = radau_step(&s, zv, pv, sub_h, python_mod(angle0 + step * f, TWO_PI),
-                                w0 + f * (w - w0), a0 + f * (a - a0), sub_step) != 0;
-        }
-        if (!failed)
-            failed = radau_step(&s, zv, pv, sub_h, angle, w, a, sub_step) != 0;
-        if (failed)
-            break;
-        const int wanted = every_record || m == count - 1;
-        int lifted = 0;
-        if (soft && (wanted || state_out != NULL)) {
-            lift(&s, zv, pv);
-            lifted = 1;
-        }
-        if (state_out != NULL)
-            memcpy(state_out + m * 2 * rr, soft ? s.lifted : zv, (size_t)(2 * rr) * sizeof(double));
-        if (wanted)
-            record(&s, zv, pv, record_out + (every_record ? m * RECORD_SIZE : 0), lifted);
+        if (state_out == NULL)
+            continue;
+        if (soft && record_m == NULL)
+            lift(&s, zv, pv);       /* (a record lifted the state already) */
+        memcpy(state_out + m * 2 * rr, soft ? s.lifted : zv, (size_t)(2 * rr) * sizeof(double));
     }
     if (released != NULL)
         PyEval_RestoreThread(released);
-    if (failed) {
-        PyErr_SetString(PyExc_ValueError, bad_row ? "a row has a non-positive step or no sub-steps"
-                                                  : "singular or non-finite Radau step");
+    if (outcome != SAMPLE_DONE) {
+        PyErr_SetString(PyExc_ValueError, outcome == SAMPLE_BAD_ROW
+                        ? "a row has a non-positive step or no sub-steps"
+                        : "singular or non-finite Radau step");
         goto done;
     }
     result = Py_NewRef(Py_None);
 done:
-    free(scratch);
-    PyBuffer_Release(&mass);
-    PyBuffer_Release(&damping);
-    PyBuffer_Release(&kf);
-    PyBuffer_Release(&out);
-    PyBuffer_Release(&joint);
-    PyBuffer_Release(&g0);
+    step_close(&s, views);
     PyBuffer_Release(&z);
     PyBuffer_Release(&prev);
     PyBuffer_Release(&rows);
     PyBuffer_Release(&states);
     PyBuffer_Release(&records);
-    for (int i = 0; i < SO_BUFFERS; i++)
-        PyBuffer_Release(&second[i]);
-    for (int i = 0; i < LIFT_BUFFERS; i++)
-        PyBuffer_Release(&lift_views[i]);
     return result;
 }
 
@@ -1053,24 +1172,18 @@ PyDoc_STRVAR(criteria_doc,
 "floor_fraction^2 of the cycle mean square, |gamma_dot| / R, and whether R is below\n"
 "near_zero_fraction of the cycle RMS (four-tuples).");
 
-EXACT_ARITHMETIC static PyObject *criteria_py(PyObject *module, PyObject *args)
+/* Per joint R, gamma_dot, |gamma_dot| / R and near zero of a record's joint part (v). */
+EXACT_ARITHMETIC static void joint_criteria(const double *v, double near_zero_fraction,
+                                            double floor_fraction, double *reactions,
+                                            double *gamma_dots, double *ratios, int *near)
 {
-    PyObject *record_object;
-    double near_zero_fraction, floor_fraction;
-    Py_buffer record_view = {0};
-    (void)module;
-    if (!PyArg_ParseTuple(args, "Odd", &record_object, &near_zero_fraction, &floor_fraction)
-        || get_buffer(record_object, &record_view, 0, "record", RECORD_SIZE) != 0)
-        return NULL;
-    const double *v = (const double *)record_view.buf + 2 * OUTPUTS;
     const double limit2 = near_zero_fraction * near_zero_fraction;
     const double floor2 = floor_fraction * floor_fraction;
-    double reactions[4] = {0.0}, gamma_dots[4] = {0.0}, ratios[4] = {0.0};
-    int near[4];
     for (int j = 0; j < 4; j++) {
         const double fx = v[2 * j], fy = v[2 * j + 1], rms2 = v[16 + j];
         double r2 = fx * fx + fy * fy;
         near[j] = r2 < limit2 * rms2;
+        reactions[j] = gamma_dots[j] = ratios[j] = 0.0;
         const double floored = floor2 * rms2;
         if (floored > r2)
             r2 = floored;
@@ -1082,6 +1195,21 @@ EXACT_ARITHMETIC static PyObject *criteria_py(PyObject *module, PyObject *args)
             ratios[j] = fabs(gamma_dot) / magnitude;
         }
     }
+}
+
+static PyObject *criteria_py(PyObject *module, PyObject *args)
+{
+    PyObject *record_object;
+    double near_zero_fraction, floor_fraction;
+    Py_buffer record_view = {0};
+    (void)module;
+    if (!PyArg_ParseTuple(args, "Odd", &record_object, &near_zero_fraction, &floor_fraction)
+        || get_buffer(record_object, &record_view, 0, "record", RECORD_SIZE) != 0)
+        return NULL;
+    double reactions[4], gamma_dots[4], ratios[4];
+    int near[4];
+    joint_criteria((const double *)record_view.buf + 2 * OUTPUTS, near_zero_fraction,
+                   floor_fraction, reactions, gamma_dots, ratios, near);
     PyBuffer_Release(&record_view);
     return Py_BuildValue("((dddd)(dddd)(dddd)(NNNN))", reactions[0], reactions[1],
                          reactions[2], reactions[3], gamma_dots[0], gamma_dots[1],
@@ -1089,6 +1217,506 @@ EXACT_ARITHMETIC static PyObject *criteria_py(PyObject *module, PyObject *args)
                          ratios[3], PyBool_FromLong(near[0]), PyBool_FromLong(near[1]),
                          PyBool_FromLong(near[2]), PyBool_FromLong(near[3]));
 }
+
+/* ---- the streaming update of an ordinary sample: StreamingEstimator.update in one call --- */
+
+/*
+ * Update.sample does what StreamingEstimator.update does for a sample the gate passes as a
+ * plain step: the gate's checks, the crank filter, the clipping and flags, the step row, the
+ * step (step_sample), the record, the criteria, the deflection bound, the validity indicator
+ * and the Sample. Anything else (no reference yet, a start, repeat, outlier or gap, a
+ * non-finite input or filter state, a failed step, an estimate beyond the bound) returns None
+ * with z, prev and the filter as they were on entry and the gate's reference unchanged, and
+ * the Python path takes the sample (core/estimation/compiled_update.py arms and disarms this
+ * path around it).
+ */
+
+/* Why the last sample was left to the Python path (Update.fallback). */
+enum {
+    FALLBACK_NONE, FALLBACK_NOT_ARMED, FALLBACK_INPUT, FALLBACK_GATE, FALLBACK_FILTER,
+    FALLBACK_STEP, FALLBACK_BOUND
+};
+enum { FLAG_LARGE_STEP, FLAG_CLIPPED_SPEED, FLAG_CLIPPED_ACCEL, FLAG_SPEED_FROM_ANGLE, FLAGS };
+#define SAMPLE_FIELDS 15
+/* sample.Sample's fields, in the order new_sample fills them (checked against the class) */
+static const char *const SAMPLE_NAMES[SAMPLE_FIELDS] = {
+    "stamp_ns", "crank_angle", "crank_speed", "crank_accel", "lever_tip", "coupler_mid",
+    "reaction_n", "gamma_dot", "criterion", "near_zero", "error_indicator", "flags", "message",
+    "modal", "nonlinearity"};
+
+typedef struct {
+    PyObject_HEAD
+    Step step;
+    Py_buffer views[STEP_VIEWS];
+    Py_buffer z, prev, filter, record, context, indicator;  /* indicator: none without tables */
+    double *saved;                  /* z, prev, the filter and the step's history on entry */
+    PyObject *sample_type, *empty;
+    Py_ssize_t slots[SAMPLE_FIELDS];    /* Sample's slot offsets; slots[0] < 0: call Sample */
+    /* the estimator's and its gate's parameters */
+    double speed_max, accel_limit, large_step_s, reset_gap_s, speed_bound, jump_accel,
+           jump_allowance, angle_allowance, near_zero_fraction, floor_fraction,
+           deflection_bound, error_floor;
+    long long max_substep_ns;
+    long base_flags, flags[FLAGS];
+    /* the gate's reference (the last accepted sample) and the filter's time origin */
+    int armed, fallback;
+    long long last_stamp, stamp0, taken;
+    double last_angle, last_speed;  /* speed NaN: none measured */
+} Update;
+
+/* a - b in *out, or 0 if it overflows. */
+static int difference(long long a, long long b, long long *out)
+{
+    if ((b > 0 && a < LLONG_MIN + b) || (b < 0 && a > LLONG_MAX + b))
+        return 0;
+    *out = a - b;
+    return 1;
+}
+
+/* The sample's stamp, angle and speed (NaN: None) as update() converts them; -1 if not a plain
+   case (no exception left set). */
+static int read_sample(PyObject *const *args, long long *stamp, double *angle, double *speed)
+{
+    int overflow = 0;
+    PyObject *index = PyLong_Check(args[0]) ? Py_NewRef(args[0])
+                      : PyIndex_Check(args[0]) ? PyNumber_Index(args[0]) : NULL;
+    if (index != NULL) {
+        *stamp = PyLong_AsLongLongAndOverflow(index, &overflow);
+        Py_DECREF(index);
+        *angle = PyFloat_AsDouble(args[1]);
+        *speed = args[2] == Py_None ? NAN : PyFloat_AsDouble(args[2]);
+    }
+    if (index == NULL || overflow || PyErr_Occurred()) {
+        PyErr_Clear();
+        return -1;
+    }
+    return isfinite(*angle) ? 0 : -1;
+}
+
+/* InputGate.decide's checks of a STEP after the reference (dt_ns: the interval); 0 if the
+   sample is anything else (a START, REPEATED or OUTLIER for the Python path). */
+EXACT_ARITHMETIC static int gate_passes(const Update *u, long long stamp, double angle,
+                                        double speed, long long *dt_ns)
+{
+    if (!isnan(speed) && !(fabs(speed) <= u->speed_bound))
+        return 0;
+    if (!difference(stamp, u->last_stamp, dt_ns))
+        return 0;
+    const double dt = (double)*dt_ns * 1e-9;
+    if (!(dt > 0.0) || dt > u->reset_gap_s)
+        return 0;
+    if (!isnan(speed) && !isnan(u->last_speed)
+        && fabs(speed - u->last_speed) > u->jump_accel * dt + u->jump_allowance)
+        return 0;
+    const double advance = fabs(python_mod(angle - u->last_angle + PI, TWO_PI) - PI);
+    return !(advance > u->speed_bound * dt + u->angle_allowance);
+}
+
+/* A tuple of n floats, or NULL with an exception set. Not tracked by the garbage collector
+   (floats cannot form a cycle; the collector would untrack it at its first pass). */
+static PyObject *float_tuple(const double *values, Py_ssize_t n)
+{
+    PyObject *tuple = PyTuple_New(n);
+    for (Py_ssize_t i = 0; tuple != NULL && i < n; i++) {
+        PyObject *value = PyFloat_FromDouble(values[i]);
+        if (value == NULL)
+            Py_CLEAR(tuple);
+        else
+            PyTuple_SET_ITEM(tuple, i, value);
+    }
+    if (tuple != NULL)
+        PyObject_GC_UnTrack(tuple);
+    return tuple;
+}
+
+/* The tuple of four bools of the near-zero flags (bit j: joint j), kept per flag pattern. */
+static PyObject *near_zero_tuple(const int *near)
+{
+    static PyObject *patterns[16];
+    const int bits = (near[0] != 0) | (near[1] != 0) << 1 | (near[2] != 0) << 2
+                     | (near[3] != 0) << 3;
+    if (patterns[bits] == NULL) {
+        patterns[bits] = PyTuple_Pack(4, near[0] ? Py_True : Py_False,
+                                      near[1] ? Py_True : Py_False,
+                                      near[2] ? Py_True : Py_False,
+                                      near[3] ? Py_True : Py_False);
+        if (patterns[bits] == NULL)
+            return NULL;
+    }
+    return Py_NewRef(patterns[bits]);
+}
+
+/* sample_from_record's error indicator: |correction| / max(|deflection|, floor), summed
+   left to right as its sum(). */
+EXACT_ARITHMETIC static double error_indicator(const double *record, double floor)
+{
+    double size2 = 0.0, correction2 = 0.0;
+    for (int o = 0; o < OUTPUTS; o++) {
+        size2 += record[o] * record[o];
+        correction2 += record[OUTPUTS + o] * record[OUTPUTS + o];
+    }
+    const double size = sqrt(size2);
+    return sqrt(correction2) / (floor > size ? floor : size);
+}
+
+/* The reduced model's [q, q'] of the newest sample: z, or its lift on the soft basis. */
+static const double *reduced_state(const Update *u)
+{
+    return u->step.lift_phi != NULL ? u->step.lifted : u->z.buf;
+}
+
+/*
+ * The Sample of the new state (record, z) at crank (angle, speed, accel), its fields as
+ * sample_from_record fills them: written into the slots of a new instance (what the
+ * dataclass's __init__ does, without its Python frame: about 0.2 us), or Sample called.
+ */
+static PyObject *new_sample(Update *u, long long stamp, const double *crank, long flags,
+                            double indicator)
+{
+    const double *record = u->record.buf;
+    double reactions[3][4];
+    int near[4];
+    joint_criteria(record + 2 * OUTPUTS, u->near_zero_fraction, u->floor_fraction,
+                   reactions[0], reactions[1], reactions[2], near);
+    PyObject *fields[SAMPLE_FIELDS] = {
+        PyLong_FromLongLong(stamp), PyFloat_FromDouble(crank[0]),
+        PyFloat_FromDouble(crank[1]), PyFloat_FromDouble(crank[2]), float_tuple(record, 2),
+        float_tuple(record + 2, 2), float_tuple(reactions[0], 4), float_tuple(reactions[1], 4),
+        float_tuple(reactions[2], 4),
+        near_zero_tuple(near),
+        PyFloat_FromDouble(error_indicator(record, u->error_floor)),
+        PyLong_FromLong(flags | u->base_flags), Py_NewRef(u->empty),
+        float_tuple(reduced_state(u), u->step.rr), PyFloat_FromDouble(indicator)};
+    PyObject *sample = NULL;
+    int complete = 1;
+    for (int i = 0; i < SAMPLE_FIELDS; i++)
+        complete &= fields[i] != NULL;
+    if (complete && u->slots[0] >= 0) {
+        PyTypeObject *type = (PyTypeObject *)u->sample_type;
+        sample = type->tp_alloc(type, 0);
+        for (int i = 0; sample != NULL && i < SAMPLE_FIELDS; i++)
+            *(PyObject **)((char *)sample + u->slots[i]) = fields[i];    /* takes the ref */
+        if (sample != NULL)
+            return sample;
+    }
+    else if (complete) {
+        sample = PyObject_Vectorcall(u->sample_type, fields, SAMPLE_FIELDS, NULL);
+    }
+    for (int i = 0; i < SAMPLE_FIELDS; i++)
+        Py_XDECREF(fields[i]);
+    return sample;
+}
+
+/* Put z, prev and the filter back as they were on entry; return None (the Python path). */
+static PyObject *fall_back(Update *u, int reason)
+{
+    const Py_ssize_t n = 2 * u->step.r + 1;
+    memcpy(u->z.buf, u->saved, (size_t)n * sizeof(double));
+    memcpy(u->prev.buf, u->saved + n, 3 * sizeof(double));
+    memcpy(u->filter.buf, u->saved + n + 3, FILTER_STATE * sizeof(double));
+    if (u->step.history != NULL)
+        memcpy(u->step.history, u->saved + n + 3 + FILTER_STATE,
+               (size_t)history_size(&u->step) * sizeof(double));
+    u->fallback = reason;
+    Py_RETURN_NONE;
+}
+
+/* StreamingEstimator._advance_to and _finish for a gated step; None to fall back. */
+EXACT_ARITHMETIC static PyObject *advance_sample(Update *u, long long stamp, double angle,
+                                                 double speed, long long dt_ns)
+{
+    const Py_ssize_t n = 2 * u->step.r + 1;
+    long long since;
+    if (!difference(stamp, u->stamp0, &since)) {
+        u->fallback = FALLBACK_GATE;
+        Py_RETURN_NONE;
+    }
+    memcpy(u->saved, u->z.buf, (size_t)n * sizeof(double));
+    memcpy(u->saved + n, u->prev.buf, 3 * sizeof(double));
+    memcpy(u->saved + n + 3, u->filter.buf, FILTER_STATE * sizeof(double));
+    if (u->step.history != NULL)
+        memcpy(u->saved + n + 3 + FILTER_STATE, u->step.history,
+               (size_t)history_size(&u->step) * sizeof(double));
+    double crank[4];        /* wrapped angle, speed, accel, advance */
+    filter_update(u->filter.buf, (double)since * 1e-9, angle, speed, crank);
+    const double dt = (double)dt_ns * 1e-9;
+    long flags = (isnan(speed) ? u->flags[FLAG_SPEED_FROM_ANGLE] : 0)
+                 | (dt > u->large_step_s ? u->flags[FLAG_LARGE_STEP] : 0);
+    if (!(isfinite(crank[0]) && isfinite(crank[1]) && isfinite(crank[2])))
+        return fall_back(u, FALLBACK_FILTER);
+    double row[ROW_FIELDS] = {dt, (double)(dt_ns / u->max_substep_ns
+                                           + (dt_ns % u->max_substep_ns != 0)),
+                              crank[0], crank[1], crank[2], crank[3]};
+    if (fabs(crank[1]) > u->speed_max) {
+        row[3] = copysign(u->speed_max, crank[1]);
+        flags |= u->flags[FLAG_CLIPPED_SPEED];
+    }
+    if (fabs(crank[2]) > u->accel_limit) {
+        row[4] = copysign(u->accel_limit, crank[2]);
+        flags |= u->flags[FLAG_CLIPPED_ACCEL];
+    }
+    if (step_sample(&u->step, u->z.buf, u->prev.buf, row, u->record.buf) != SAMPLE_DONE)
+        return fall_back(u, FALLBACK_STEP);
+    const double *record = u->record.buf;
+    double largest = fabs(record[0]);       /* max() of the deflections, NaN as max() does */
+    for (int o = 1; o < OUTPUTS; o++)
+        largest = fabs(record[o]) > largest ? fabs(record[o]) : largest;
+    if (!(largest <= u->deflection_bound))
+        return fall_back(u, FALLBACK_BOUND);
+    double indicator = NAN;
+    if (u->indicator.buf != NULL) {
+        const double clipped = -u->accel_limit > crank[2] ? -u->accel_limit : crank[2];
+        indicator = indicator_value(u->context.buf, u->indicator.buf, reduced_state(u), crank[0],
+                                    crank[1], u->accel_limit < clipped ? u->accel_limit
+                                                                       : clipped);
+    }
+    PyObject *sample = new_sample(u, stamp, crank, flags, indicator);
+    if (sample == NULL) {       /* no memory: raise with the state as it was */
+        Py_DECREF(fall_back(u, FALLBACK_NONE));
+        return NULL;
+    }
+    u->last_stamp = stamp;
+    u->last_angle = angle;
+    u->last_speed = speed;
+    u->taken++;
+    return sample;
+}
+
+static PyObject *update_sample(Update *u, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (nargs != 3) {
+        PyErr_SetString(PyExc_TypeError, "sample(stamp_ns, crank_angle, crank_speed)");
+        return NULL;
+    }
+    long long stamp, dt_ns;
+    double angle, speed;
+    u->fallback = !u->armed ? FALLBACK_NOT_ARMED
+                  : read_sample(args, &stamp, &angle, &speed) != 0 ? FALLBACK_INPUT
+                  : !gate_passes(u, stamp, angle, speed, &dt_ns) ? FALLBACK_GATE
+                  : FALLBACK_NONE;
+    if (u->fallback != FALLBACK_NONE)
+        Py_RETURN_NONE;
+    return advance_sample(u, stamp, angle, speed, dt_ns);
+}
+
+static PyObject *update_arm(Update *u, PyObject *args)
+{
+    PyObject *speed_object;
+    long long stamp, stamp0;
+    double angle;
+    if (!PyArg_ParseTuple(args, "LdOL", &stamp, &angle, &speed_object, &stamp0))
+        return NULL;
+    const double speed = speed_object == Py_None ? NAN : PyFloat_AsDouble(speed_object);
+    if (PyErr_Occurred())
+        return NULL;
+    u->last_stamp = stamp;
+    u->last_angle = angle;
+    u->last_speed = speed;
+    u->stamp0 = stamp0;
+    u->armed = 1;
+    Py_RETURN_NONE;
+}
+
+static PyObject *update_disarm(Update *u, PyObject *unused)
+{
+    (void)unused;
+    u->armed = 0;
+    Py_RETURN_NONE;
+}
+
+static PyObject *update_reference(Update *u, PyObject *unused)
+{
+    (void)unused;
+    if (isnan(u->last_speed))
+        return Py_BuildValue("(LdO)", u->last_stamp, u->last_angle, Py_None);
+    return Py_BuildValue("(Ldd)", u->last_stamp, u->last_angle, u->last_speed);
+}
+
+static void update_dealloc(Update *u)
+{
+    step_close(&u->step, u->views);
+    PyBuffer_Release(&u->z);
+    PyBuffer_Release(&u->prev);
+    PyBuffer_Release(&u->filter);
+    PyBuffer_Release(&u->record);
+    PyBuffer_Release(&u->context);
+    PyBuffer_Release(&u->indicator);
+    free(u->saved);
+    Py_XDECREF(u->sample_type);
+    Py_XDECREF(u->empty);
+    Py_TYPE(u)->tp_free((PyObject *)u);
+}
+
+/*
+ * Take the Sample class: its fields (`fields`, in order) must be SAMPLE_NAMES. Where each is
+ * a plain slot (a member descriptor of an object) and nothing runs after __init__, note the
+ * slots' offsets; otherwise samples are made by calling the class.
+ */
+static int take_sample_type(Update *u, PyObject *sample_type, PyObject *fields)
+{
+    int same = PyTuple_Check(fields) && PyTuple_GET_SIZE(fields) == SAMPLE_FIELDS;
+    for (int i = 0; same && i < SAMPLE_FIELDS; i++) {
+        PyObject *name = PyTuple_GET_ITEM(fields, i);
+        same = PyUnicode_Check(name) && PyUnicode_CompareWithASCIIString(name, SAMPLE_NAMES[i])
+                                        == 0;
+    }
+    if (!same || !PyType_Check(sample_type)) {
+        PyErr_SetString(PyExc_ValueError, "`sample_type` must be a class with the fields of "
+                        "sample.Sample, in order");
+        return -1;
+    }
+    u->sample_type = Py_NewRef(sample_type);
+    u->slots[0] = -1;
+    int plain = !PyObject_HasAttrString(sample_type, "__post_init__");
+    for (int i = 0; plain && i < SAMPLE_FIELDS; i++) {
+        PyObject *slot = PyObject_GetAttrString(sample_type, SAMPLE_NAMES[i]);
+        plain = slot != NULL && Py_IS_TYPE(slot, &PyMemberDescr_Type)
+                && ((PyMemberDescrObject *)slot)->d_member->type == T_OBJECT_EX
+                && !(((PyMemberDescrObject *)slot)->d_member->flags & READONLY);
+        if (plain)
+            u->slots[i] = ((PyMemberDescrObject *)slot)->d_member->offset;
+        Py_XDECREF(slot);
+    }
+    PyErr_Clear();
+    if (!plain)
+        u->slots[0] = -1;
+    return 0;
+}
+
+/* The validity indicator's (context, table), checked; none if `indicator` is None. */
+static int take_indicator(Update *u, PyObject *indicator)
+{
+    PyObject *context, *table;
+    if (indicator == Py_None)
+        return 0;
+    if (!PyArg_ParseTuple(indicator, "OO;`indicator` must be None or (context, table)",
+                          &context, &table)
+        || get_buffer(context, &u->context, 0, "context", -1) != 0)
+        return -1;
+    const double *values = u->context.buf;
+    const Py_ssize_t length = u->context.len / 8;
+    if (length < INDICATOR_HEADER || indicator_context_size(values, length) != length
+        || values[INDICATOR_SIZE] != (double)u->step.rr) {
+        PyErr_SetString(PyExc_ValueError, "`indicator` context does not fit the model");
+        return -1;
+    }
+    return get_buffer(table, &u->indicator, 0, "indicator table", indicator_table_size(values));
+}
+
+/* The step (tables, second, lift, cells_per_radian, c1) and the state buffers into u. */
+static int take_state(Update *u, PyObject *tables, PyObject *second, PyObject *lift,
+                      double cells_per_radian, double c1, PyObject *const *state)
+{
+    if (!PyTuple_Check(tables) || PyTuple_GET_SIZE(tables) != STEP_TABLES) {
+        PyErr_SetString(PyExc_TypeError, "`tables` must be (mass, damping, kf, out, joint, g0)");
+        return -1;
+    }
+    if (get_buffer(state[0], &u->z, 1, "z", -1) != 0)
+        return -1;
+    const Py_ssize_t r = (u->z.len / 8 - 1) / 2;
+    if (r < 1 || u->z.len / 8 != 2 * r + 1) {
+        PyErr_SetString(PyExc_ValueError, "`z` must have 2 r + 1 values");
+        return -1;
+    }
+    if (step_open(&u->step, r, &PyTuple_GET_ITEM(tables, 0), second, lift, cells_per_radian, c1,
+                  u->views) != 0
+        || get_buffer(state[1], &u->prev, 1, "prev", 3) != 0
+        || get_buffer(state[2], &u->filter, 1, "filter", FILTER_STATE) != 0
+        || get_buffer(state[3], &u->record, 1, "record", RECORD_SIZE) != 0)
+        return -1;
+    u->saved = malloc(sizeof(double) * (size_t)(2 * r + 1 + 3 + FILTER_STATE
+                                                + history_size(&u->step)));
+    if (u->saved == NULL) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    return 0;
+}
+
+static PyObject *update_new(PyTypeObject *type, PyObject *args, PyObject *kwargs)
+{
+    static char *keywords[] = {
+        "tables", "second", "lift", "cells_per_radian", "c1", "z", "prev", "filter", "record",
+        "indicator", "sample_type", "sample_fields", "speed_max", "accel_limit", "large_step_s", "reset_gap_s",
+        "speed_bound", "jump_accel", "jump_allowance", "angle_allowance",
+        "near_zero_fraction", "floor_fraction", "deflection_bound", "error_floor",
+        "max_substep_ns", "base_flags", "flags", NULL};
+    PyObject *tables, *second, *lift, *state[4], *indicator, *sample_type, *sample_fields;
+    double cells_per_radian, c1;
+    Update *u = (Update *)type->tp_alloc(type, 0);
+    if (u == NULL)
+        return NULL;
+    if (!PyArg_ParseTupleAndKeywords(
+            args, kwargs, "$OOOddOOOOOOOddddddddddddLl(llll):Update", keywords, &tables,
+            &second, &lift, &cells_per_radian, &c1, &state[0], &state[1], &state[2], &state[3],
+            &indicator, &sample_type, &sample_fields, &u->speed_max, &u->accel_limit, &u->large_step_s,
+            &u->reset_gap_s, &u->speed_bound, &u->jump_accel, &u->jump_allowance,
+            &u->angle_allowance, &u->near_zero_fraction, &u->floor_fraction,
+            &u->deflection_bound, &u->error_floor, &u->max_substep_ns, &u->base_flags,
+            &u->flags[0], &u->flags[1], &u->flags[2], &u->flags[3])
+        || take_state(u, tables, second, lift, cells_per_radian, c1, state) != 0
+        || take_indicator(u, indicator) != 0
+        || take_sample_type(u, sample_type, sample_fields) != 0)
+        goto fail;
+    if (!(u->max_substep_ns > 0)) {
+        PyErr_SetString(PyExc_ValueError, "`max_substep_ns` must be positive");
+        goto fail;
+    }
+    u->empty = PyUnicode_FromString("");
+    if (u->empty == NULL)
+        goto fail;
+    u->last_speed = NAN;
+    return (PyObject *)u;
+fail:
+    Py_DECREF(u);
+    return NULL;
+}
+
+static PyMethodDef update_methods[] = {
+    {"sample", (PyCFunction)(void (*)(void))update_sample, METH_FASTCALL,
+     "sample(stamp_ns, crank_angle, crank_speed) -> Sample or None\n\n"
+     "StreamingEstimator.update of an ordinary sample (armed, a plain step): the Sample, the\n"
+     "state advanced and the reference moved on; otherwise None, nothing changed (see\n"
+     "`fallback`), for the Python path."},
+    {"arm", (PyCFunction)update_arm, METH_VARARGS,
+     "arm(last_stamp_ns, last_angle, last_speed, stamp0_ns)\n\n"
+     "Take the gate's reference (the last accepted sample; speed None if it had none) and\n"
+     "the filter's time origin: sample() runs from here on."},
+    {"disarm", (PyCFunction)update_disarm, METH_NOARGS,
+     "disarm()\n\nsample() returns None until arm() is called again."},
+    {"reference", (PyCFunction)update_reference, METH_NOARGS,
+     "reference() -> (stamp_ns, angle, speed or None)\n\n"
+     "The gate's reference: the last sample accepted (by this path, or as armed)."},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyMemberDef update_members[] = {
+    {"armed", T_INT, offsetof(Update, armed), READONLY, "Whether sample() runs."},
+    {"fallback", T_INT, offsetof(Update, fallback), READONLY,
+     "Why the last sample() returned None (FALLBACK_* of _radau_step.c; 0: it did not)."},
+    {"taken", T_LONGLONG, offsetof(Update, taken), READONLY,
+     "Samples this path estimated."},
+    {"fills_slots", T_PYSSIZET, offsetof(Update, slots), READONLY,
+     "Offset of the first slot Samples are written into (>= 0), or -1: Sample is called."},
+    {"deflection_bound", T_DOUBLE, offsetof(Update, deflection_bound), 0,
+     "The estimator's deflection bound [m] (StreamingEstimator.deflection_bound_m)."},
+    {NULL, 0, 0, 0, NULL},
+};
+
+static PyTypeObject UpdateType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "flexlink_ros.core.estimation._radau_step.Update",
+    .tp_basicsize = sizeof(Update),
+    .tp_dealloc = (destructor)update_dealloc,
+    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_doc = "Update(*, tables, second, cells_per_radian, c1, z, prev, filter, record, "
+              "indicator, sample_type, sample_fields, <the estimator's parameters>)\n\n"
+              "StreamingEstimator.update of an ordinary sample in one call "
+              "(core/estimation/compiled_update.py builds it).",
+    .tp_methods = update_methods,
+    .tp_members = update_members,
+    .tp_new = update_new,
+};
 
 PyDoc_STRVAR(lu_solve_doc,
 "lu_solve(a, b)\n"
@@ -1140,5 +1768,10 @@ static struct PyModuleDef module_def = {
 
 PyMODINIT_FUNC PyInit__radau_step(void)
 {
-    return PyModule_Create(&module_def);
+    if (PyType_Ready(&UpdateType) < 0)
+        return NULL;
+    PyObject *module = PyModule_Create(&module_def);
+    if (module != NULL && PyModule_AddObjectRef(module, "Update", (PyObject *)&UpdateType) < 0)
+        Py_CLEAR(module);
+    return module;
 }

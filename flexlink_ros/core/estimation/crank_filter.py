@@ -318,6 +318,9 @@ class CompiledCrankRateFilter:
         state[native.FILTER_TC] = self.time_constant_s
         state[native.FILTER_MIN_SAMPLES] = MIN_FIT_SAMPLES
 
+    state = property(lambda self: self._state,
+                     doc='The state array (native.FILTER_*; the compiled update shares it).')
+
     @property
     def count(self):
         """Count the samples in the active fit since the last reset or change of input kind."""

@@ -90,6 +90,16 @@ class NonlinearityIndicator:
             list(zip(self._omega[i].tolist(), omega_step[i].tolist(), self._share[i].tolist(),
                      share_step[i].tolist())) for i in range(self._speeds2.size - 1)]
 
+    @property
+    def kernel_tables(self):
+        """
+        Return (context, table) of the compiled form, or None where it is not used.
+
+        The streaming estimator's compiled update evaluates the indicator from them in C
+        (_nonlinearity.h, the same kernel as the compiled form).
+        """
+        return (self._context, self._table) if self.compiled else None
+
     def __call__(self, crank_angle, speed, accel, state):
         """
         Return the indicator of one sample (NaN without tables or for a non-finite state).

@@ -81,12 +81,18 @@ class NumpyStep:
         The reduced model (its size and grid).
     tables : _StepTables
         :func:`tables.step_tables` of the model.
+    interpolate_stages : bool
+        With the soft basis, stage 1's matrices by quadratic interpolation in time through
+        the last two samples' and the new one's (one table evaluation per step); False
+        evaluates them at the stage (as the 26-coordinate step always does: its stiff
+        directions are not smooth enough in time for it). Checked against each other in
+        test_step.
 
     """
 
     compiled = False
 
-    def __init__(self, model, tables):
+    def __init__(self, model, tables, interpolate_stages=True):
         if MONOMIALS != ('a', '1', 'w2', 'w', 'w4', 'wa', 'w3'):
             raise ValueError('monomial order changed: update NumpyStep.evaluate')
         r = tables.size
@@ -100,7 +106,10 @@ class NumpyStep:
         if tables.lift is not None:
             self.lifted = np.zeros(2 * tables.record_size + 1)
             self.lifted[-1] = 1.0
-        self._damping = np.zeros(tables.damping.shape[2])
+        # Stage 1 by interpolation in time (the soft basis): [count, h, X_n, X_n-1].
+        self.history = None
+        if tables.lift is not None and interpolate_stages:
+            self.history = np.zeros(2 + 2 * (3 * r * r + r))
         self.previous = np.zeros(3)         # crank state (angle, speed, accel) of the last step
         # [M, C, K, F] of stage 1 and of the sample, in alternating slots.
         self._stored = np.zeros((2, 4, r * r))
@@ -116,9 +125,9 @@ class NumpyStep:
 
     def _record(self, crank, record):
         """Write the record of the state at crank state (angle, speed, accel)."""
-        weights, _, k = self.evaluate(*crank)
+        weights, hermite, k = self.evaluate(*crank)
         if self.tables.lift is not None:
-            self.tables.lift.state(weights, k, self.z, crank[1], self.lifted,
+            self.tables.lift.state(weights, hermite, k, self.z, crank[1], self.lifted,
                                    self.cells_per_radian)
         self.tables.record(weights, k, self.lifted, record)
 
@@ -175,6 +184,8 @@ class NumpyStep:
         r = q0.size
         self.z[:r] = q0
         self.z[r:2 * r] = v0
+        if self.history is not None:
+            self.history[0] = 0.0
         self._record(crank, record)
         self.previous[:] = crank
 
@@ -252,20 +263,53 @@ class NumpyStep:
         flat = self._flat[slot]
         first = tables.FIRST_MC
         self._combine_nodes(hermite, k, first, tables.mass_groups, tables.mass, flat[:r2])
-        self._combine_nodes(hermite, k, first, tables.GROUPS_C, tables.damping, self._damping)
-        flat[r2:2 * r2] = self._damping[:r2]
+        self._combine_nodes(hermite, k, first, tables.GROUPS_C, tables.damping,
+                            flat[r2:2 * r2])
         self._combine_nodes(hermite, k, 0, tables.kf_groups, tables.kf,
                             flat[2 * r2:3 * r2 + r])
-        if tables.lift is not None:
-            # The soft basis's damping table holds [C | D]: w D joins the stiffness.
-            flat[2 * r2:3 * r2] += speed * self._damping[r2:]
 
-    def _load_stages(self, angle, speed, accel, advance):
+    def _pack(self, slot):
+        """Return a slot's [M, C, K | f] as one history entry."""
+        r = self.tables.size
+        return np.concatenate((self._stored[slot, :3].ravel(), self._stored[slot, 3, :r]))
+
+    def _interpolate_stage(self, h, parity):
+        """Stage 1 from the history and the sample's slot (_radau_step.c's load_stages)."""
+        r, c1 = self.tables.size, STAGE1
+        history, width = self.history, 3 * r * r + r
+        last, before = history[2:2 + width], history[2 + width:]
+        if history[0] >= 2.0:
+            back, x = history[1], c1 * h
+            weights = (x * (x - h) / (back * (back + h)), (x + back) * (h - x) / (back * h),
+                       (x + back) * x / ((h + back) * h))
+        else:
+            weights = (0.0, 1.0 - c1, c1)
+        sample = self._pack(parity)
+        stage = weights[0] * before + weights[1] * last + weights[2] * sample
+        self._stored[1 - parity, :3] = stage[:3 * r * r].reshape(3, r * r)
+        self._stored[1 - parity, 3, :r] = stage[3 * r * r:]
+        before[:] = last
+        last[:] = sample
+        history[1] = h
+        history[0] = min(history[0] + 1.0, 2.0)
+
+    def _load_stages(self, h, angle, speed, accel, advance):
         """Load stage 1 (crank state interpolated to c_1 h) and the sample into the slots."""
         parity = 1 - self._parity
         self._parity = parity
         c1 = STAGE1
         previous = self.previous.tolist()
+        if self.history is not None:
+            if self.history[0] < 1.0:
+                _, hermite, k = self.evaluate(*previous)
+                self._load(parity, hermite, k, previous[1])
+                self.history[2:2 + self.history.size // 2 - 1] = self._pack(parity)
+                self.history[0] = 1.0
+            _, hermite, k = self.evaluate(angle, speed, accel)
+            self._load(parity, hermite, k, speed)
+            self._interpolate_stage(h, parity)
+            self.previous[:] = (angle, speed, accel)
+            return parity
         stage_angle = previous[0] + c1 * advance
         if stage_angle >= TWO_PI:
             stage_angle -= TWO_PI
@@ -284,7 +328,7 @@ class NumpyStep:
         """One Radau IIA step to the new crank state (the numpy twin of _radau_step.c)."""
         tables = self.tables
         r = tables.size
-        parity = self._load_stages(angle, speed, accel, advance)
+        parity = self._load_stages(h, angle, speed, accel, advance)
         inv = 1.0 / h
         g = np.dot(np.array((inv * inv, inv, 1.0, h, h * h)), tables.g_stack[parity])
         blocks = np.dot(g.reshape(8, 8), self._stored.reshape(8, r * r))
@@ -307,10 +351,10 @@ class CompiledStep(NumpyStep):
 
     compiled = True
 
-    def __init__(self, model, tables):
+    def __init__(self, model, tables, interpolate_stages=True):
         if native.impl is None:
             raise RuntimeError('the compiled step (core/estimation/_radau_step.c) is not built')
-        super().__init__(model, tables)
+        super().__init__(model, tables, interpolate_stages)
         self._kernel = native.impl
         self._lift_tables = None if tables.lift is None else tables.lift.packed()
 
@@ -329,7 +373,7 @@ class CompiledStep(NumpyStep):
 
         """
         t = self.tables
-        lift = None if t.lift is None else (*self._lift_tables, self.lifted)
+        lift = None if t.lift is None else (*self._lift_tables, self.lifted, self.history)
         self._kernel.advance(t.mass, t.damping, t.kf, t.out, t.joint, t.g0,
                              self.cells_per_radian, STAGE1, self.z, self.previous, rows,
                              states, records, t.second_packed, lift)

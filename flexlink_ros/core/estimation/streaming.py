@@ -5,10 +5,11 @@ Streaming estimation of the linkage's elastic response, one crank sample at a ti
 (:class:`~.gate.InputGate`), turns it into the crank's unwrapped angle, speed and acceleration
 (:class:`~.crank_filter.CrankRateFilter`), advances the reduced model (core/reduction) by one
 Radau IIA step (:mod:`.step`, compiled where built) and returns a :class:`~.sample.Sample`
-with the deflections, the joint criteria, the validity indicator and flags. Implausible
-samples are refused (:class:`OutlierSample`, the state untouched); an estimate beyond the
-model's deflection bound, or a non-finite one, is flagged OUT_OF_BOUND (NaN deflections) and
-the next sample restarts.
+with the deflections, the joint criteria, the validity indicator and flags (all of it in one
+compiled call for an ordinary sample: :mod:`.compiled_update`). Implausible samples are
+refused (:class:`OutlierSample`, the state untouched); an estimate beyond the model's
+deflection bound, or a non-finite one, is flagged OUT_OF_BOUND (NaN deflections) and the
+next sample restarts.
 """
 
 import dataclasses
@@ -18,13 +19,15 @@ import math
 import numpy as np
 
 from . import tables
+from .compiled_update import compiled_update
 from .crank_filter import CompiledCrankRateFilter, CrankRateFilter, DEFAULT_FIT_TIME_CONSTANT_S
+from .dynamic_second_order import step_for_model
 from .gate import DEFAULT_RESET_GAP_S, InputGate
 from .native import compiled_step_available, RECORD_SIZE, ROW_SIZE
 from .nonlinearity import NonlinearityIndicator
 from .sample import (CLIPPED_ACCEL, CLIPPED_SPEED, LARGE_STEP, nan_sample, NO_CRITERIA,
                      OUT_OF_BOUND, REPEATED, sample_from_record, SPEED_FROM_ANGLE)
-from .step import CompiledStep, MAX_SUBSTEP_NS, NumpyStep
+from .step import MAX_SUBSTEP_NS
 from .throttled_log import ThrottledWarning
 from .warm_start import WarmStart
 from ...errors import FlexlinkError, OutlierSample
@@ -78,8 +81,7 @@ class StreamingEstimator:
     deflection_bound_m : float
         Largest |deflection component| published as a number [m]: DEFLECTION_SAFETY_FACTOR
         / (2 zeta) times the largest quasi-static deflection over the grid at constant
-        speeds up to speed_max (:meth:`quasi_static_peak`). Beyond it a sample is
-        OUT_OF_BOUND.
+        speeds up to speed_max (:meth:`quasi_static_peak`); beyond it OUT_OF_BOUND.
     outliers, out_of_bound, warm_starts, cold_starts : int
         Samples refused as outliers, estimates out of bound (or non-finite), warm starts
         that shot, and warm starts the rate limit turned into cold starts.
@@ -114,7 +116,7 @@ class StreamingEstimator:
         self._tables = tables.step_tables(model) if step_tables is None else step_tables
         if (self._tables.size, self._tables.mass.shape[0]) != (model.step_size, model.grid_size):
             raise ValueError('`step_tables` do not match the model (size and grid)')
-        self._stepper = (CompiledStep if compiled else NumpyStep)(model, self._tables)
+        self._stepper = step_for_model(model, self._tables, compiled)   # dynamic: its own
         self._record = np.zeros(RECORD_SIZE)
         self._row = np.zeros(ROW_SIZE)  # the step row: h, sub-steps, crank state, advance
         self._no_states = np.empty(0)
@@ -126,46 +128,40 @@ class StreamingEstimator:
         self._gate = InputGate(self._speed_max, self.accel_limit, self.reset_gap_s)
         self._warm = WarmStart(warm_start_limiter)
         self._bound_warning = ThrottledWarning(LOGGER)
-        self.deflection_bound_m = self._tables.deflection_bound(model, DEFLECTION_SAFETY_FACTOR)
+        self._bound_m = self._tables.deflection_bound(model, DEFLECTION_SAFETY_FACTOR)
         self.nonlinearity = NonlinearityIndicator(model)
+        # The common path of update() in one compiled call where it can serve; else Python.
+        self._compiled = compiled_update(self, self._stepper, self._gate, self._record,
+                                         self._base_flags)
 
+    def _set_bound(self, bound_m):
+        self._bound_m = self._compiled.deflection_bound = bound_m
+
+    deflection_bound_m = property(lambda self: self._bound_m, _set_bound,
+                                  doc='The deflection bound [m] (see the class docstring).')
     compiled = property(lambda self: self._stepper.compiled,
                         doc='Whether this estimator steps with the compiled kernel.')
-
     warm_start_limiter = property(lambda self: self._warm.limiter,
                                   doc='Rate limit of the warm starts that shoot.')
-
     warm_starts = property(lambda self: self._warm.warm_starts, doc='Warm starts that shot.')
     cold_starts = property(lambda self: self._warm.cold_starts,
                            doc='Warm starts the rate limit turned into cold starts.')
 
-    @property
-    def orbit(self):
-        """
-        Return the kept periodic orbit: (speed, start angle, q, v) of the last shooting.
-
-        Given to another estimator of the model, it restarts there without shooting.
-        """
-        return self._warm.orbit
-
-    @orbit.setter
-    def orbit(self, orbit):
-        self._warm.orbit = orbit
-
+    orbit = property(lambda self: self._warm.orbit,
+                     lambda self, orbit: setattr(self._warm, 'orbit', orbit),
+                     doc='The kept periodic orbit: (speed, start angle, q, v) of the last '
+                         'shooting. Given to another estimator of the model, it restarts '
+                         'there without shooting.')
     state = property(lambda self: self._stepper.state,
                      doc="(q, q') of the newest sample (a view; the reduced model's r).")
-
-    @property
-    def last_record(self):
-        """
-        Record of the newest sample (RECORD_SIZE values; overwritten by the next sample).
-
-        Deflections, the residual correction, joint reactions, their rates and cycle RMS.
-        """
-        return self._record
+    last_record = property(lambda self: self._record,
+                           doc='Record of the newest sample (RECORD_SIZE values; overwritten '
+                               'by the next sample): deflections, the residual correction, '
+                               'joint reactions, their rates and cycle RMS.')
 
     def reset(self):
         """Forget the state; the next sample starts afresh."""
+        self._compiled.disarm()
         self._gate.reset()
         self._restart()
 
@@ -247,6 +243,12 @@ class StreamingEstimator:
             The sample is implausible (:class:`InputGate`); nothing of the state changed.
 
         """
+        sample = self._compiled.sample(stamp_ns, crank_angle, crank_speed)
+        if sample is not None:      # an ordinary sample, estimated in one compiled call
+            self._last = sample
+            self.samples += 1
+            return sample
+        self._compiled.fall_back(self._gate)        # the Python path: the gate's own state
         angle_in = float(crank_angle)
         if not math.isfinite(angle_in):
             raise ValueError(f'`crank_angle` must be finite, got {crank_angle!r}')
@@ -255,7 +257,10 @@ class StreamingEstimator:
             if math.isnan(crank_speed):
                 crank_speed = None
         stamp_ns = int(stamp_ns)
-        kind, flags, message = self._gate_sample(stamp_ns, angle_in, crank_speed)
+        kind, flags, message = self._gate.decide(stamp_ns, angle_in, crank_speed)
+        if kind == InputGate.OUTLIER:
+            self.outliers += 1
+            raise OutlierSample(message)
         if kind == InputGate.REPEATED:
             return dataclasses.replace(self._last, flags=self._last.flags | REPEATED,
                                        message=message)
@@ -265,14 +270,6 @@ class StreamingEstimator:
             self._restart()
             return self._start(stamp_ns, angle_in, crank_speed, flags, message)
         return self._advance_to(stamp_ns, angle_in, crank_speed, flags, message)
-
-    def _gate_sample(self, stamp_ns, angle, speed):
-        """Return the gate's (kind, flags, message); raise OutlierSample for an outlier."""
-        kind, flags, message = self._gate.decide(stamp_ns, angle, speed)
-        if kind == InputGate.OUTLIER:
-            self.outliers += 1
-            raise OutlierSample(message)
-        return kind, flags, message
 
     def _start(self, stamp_ns, angle_in, crank_speed, flags, message):
         """Start afresh at a sample: the filter's first sample, a warm or static state."""
@@ -374,6 +371,8 @@ class StreamingEstimator:
                               state))
         self._last = sample
         self.samples += 1
+        if not self._pending_warm_start:    # the gate accepted it with nothing pending
+            self._compiled.arm(self._gate.last, self._stamp0_ns)
         return sample
 
     def link_shapes(self, sample):

@@ -311,7 +311,7 @@ def system_blocks(model, tables, theta, w, a):
     # (angle, monomial, node k / k + 1, V / S)
     weights = (monomials[:, :, None] * basis[:, None, :]).reshape(theta.size, -1, 2, 2)
     mass = np.empty((theta.size, r * r))
-    damping = np.empty((theta.size, tables.damping.shape[2]))
+    damping = np.empty((theta.size, r * r))
     kf = np.empty((theta.size, r * r + r))
     first, after = tables.FIRST_MC, tables.FIRST_MC + tables.mass_groups
     for k, group in cell_groups(cells):
@@ -324,11 +324,7 @@ def system_blocks(model, tables, theta, w, a):
             out[group] = (node[:, :, 0].reshape(group.size, -1) @ table[k]
                           + node[:, :, 1].reshape(group.size, -1) @ table[k1])
     shape = (theta.size, r, r)
-    stiffness = kf[:, :r * r]
-    if tables.lift is not None:
-        # The soft basis's damping table holds [C | D]: the step adds w D to K.
-        stiffness = stiffness + float(w) * damping[:, r * r:]
-    return (mass.reshape(shape), damping[:, :r * r].reshape(shape), stiffness.reshape(shape),
+    return (mass.reshape(shape), damping.reshape(shape), kf[:, :r * r].reshape(shape),
             kf[:, r * r:])
 
 

@@ -14,14 +14,16 @@ N_e = EA (u_2 - u_1) / l - F_r(theta, w, a) with the rigid-body axial force F_r 
 monomials (1 (gravity), w^2, a), and the reduced load is ``f2 = sum_L (B^L)^T f^L``: per link
 three constant (3 (e + 1)) x r matrices, the 6 x 6 unit geometric stiffness of its elements,
 and a periodic spline of the link angles' cos and sin and of F_r's three coefficients per
-element. :func:`build_tables` makes the plain arrays (names ``dynamic_*``);
-:class:`DynamicLoad` evaluates f2 in numpy.
+element. :func:`build_tables` makes the plain arrays (names ``dynamic_*``, part of a model
+built with ``second_order='dynamic'``); :class:`DynamicLoad` evaluates f2 in numpy (the twin of the
+compiled loads, core/estimation/_dynamic_second_order.c).
 """
+
+import dataclasses
 
 import numpy as np
 
 from .cells import CELL_POWERS, periodic_cell_coefficients
-from .pipeline import fe_mechanism
 from ..fe.beam import beam_geometric_stiffness
 from ..fe.linkage import FlexibleLinkage
 from ..fe.second_order_reduced import gather_harmonics
@@ -88,8 +90,17 @@ def build_tables(linkage, basis, grid_size):
 
 
 def load_for_model(mechanism, options, model):
-    """Return the :class:`DynamicLoad` of a reduced model built with ``options`` (not cached)."""
-    linkage = FlexibleLinkage(fe_mechanism(mechanism, options), options)
+    """
+    Return the :class:`DynamicLoad` of a reduced model built with ``options``.
+
+    The model's own tables if it has them (``second_order='dynamic'``), else built (not
+    cached) for its basis.
+    """
+    if model.dynamic_second_order is not None:
+        return DynamicLoad(model.dynamic_second_order)
+    if options.elements_per_link is not None:
+        mechanism = dataclasses.replace(mechanism, elements_per_link=options.elements_per_link)
+    linkage = FlexibleLinkage(mechanism, options)
     return DynamicLoad(build_tables(linkage, model.basis, model.grid_size))
 
 

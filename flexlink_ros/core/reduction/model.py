@@ -121,6 +121,9 @@ class ReducedModel:
         The step's tables on the soft basis (:mod:`.soft_tables`, names ``soft_*``): the
         estimator steps p coordinates and lifts them to the r of this model; None: it steps
         all r.
+    dynamic_second_order : dict of str to ndarray or None
+        Tables of the dynamic second-order pass (:mod:`.dynamic_second_order_tables`, names
+        ``dynamic_*``) of a model built with ``second_order='dynamic'``; None otherwise.
 
     """
 
@@ -134,6 +137,7 @@ class ReducedModel:
     nonlinearity: dict = None
     second_order: object = None
     soft: object = None
+    dynamic_second_order: object = None
 
     @property
     def grid_size(self):
@@ -160,8 +164,9 @@ class ReducedModel:
     @property
     def nbytes(self):
         """Return the memory of the arrays [bytes]."""
-        second = sum(a.nbytes for a in (self.second_order or {}).values())
-        second += sum(a.nbytes for a in (self.soft or {}).values())
+        second = sum(a.nbytes for a in ({**(self.second_order or {}),
+                                         **(self.dynamic_second_order or {}),
+                                         **(self.soft or {})}).values())
         return (self.table.nbytes + self.shape_table.nbytes + self.basis.nbytes
                 + self.force_moments.nbytes + second
                 + sum(a.nbytes for a in (self.nonlinearity or {}).values()))
@@ -170,7 +175,7 @@ class ReducedModel:
         """Arrays and metadata for :func:`core.cache.save_cache`."""
         arrays = {'table': self.table, 'shape_table': self.shape_table, 'basis': self.basis,
                   'force_moments': self.force_moments, **(self.nonlinearity or {}),
-                  **(self.second_order or {})}
+                  **(self.second_order or {}), **(self.dynamic_second_order or {})}
         meta = {'speed_max': self.speed_max, 'zeta': self.zeta, 'info': self.info}
         return arrays, meta
 
@@ -182,6 +187,8 @@ class ReducedModel:
                    basis=arrays['basis'], force_moments=arrays['force_moments'],
                    speed_max=float(meta['speed_max']), zeta=float(meta['zeta']),
                    info=dict(meta.get('info', {})), second_order=second or None,
+                   dynamic_second_order={name: array for name, array in arrays.items()
+                                         if name.startswith('dynamic_')} or None,
                    nonlinearity={name: array for name, array in arrays.items()
                                  if name.startswith('nonlinearity_')} or None)
 

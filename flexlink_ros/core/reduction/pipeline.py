@@ -12,7 +12,7 @@ import logging
 import numpy as np
 import scipy.linalg
 
-from . import second_order_tables, store
+from . import dynamic_second_order_tables, second_order_tables, store
 from .basis import FrozenSamples
 from .build import reduce_samples
 from .build_progress import BuildProgress
@@ -95,6 +95,10 @@ def build_model(mechanism, options, progress=None):
         linkage = assembly.FlexibleLinkage(fe_mechanism(mechanism, options), options)
         model = dataclasses.replace(model, second_order=second_order_tables.build_tables(
             linkage, model.basis, options.grid_size))
+        if options.second_order == 'dynamic':
+            model = dataclasses.replace(
+                model, dynamic_second_order=dynamic_second_order_tables.build_tables(
+                    linkage, model.basis, options.grid_size))
     tracker.finish()
     return model
 
@@ -123,11 +127,17 @@ def with_soft_basis(model, soft_modes):
 
     ``soft_modes`` as :class:`~core.options.ModelOptions` takes it: -1 uses the smallest
     usable gap, or none (with the reason in ``info['soft']``); p > 0 refuses a model without
-    a gap there (FlexlinkError); 0 leaves the model as it is.
+    a gap there (FlexlinkError); 0 leaves the model as it is. A model with the dynamic
+    second-order pass keeps all its coordinates (the pass steps a second reduced state
+    beside them: core/estimation/dynamic_second_order.py).
     """
-    if soft_modes == 0:
+    if soft_modes == 0 or model.dynamic_second_order is not None:
+        reason = 'off' if soft_modes == 0 else 'the dynamic second-order pass'
+        if soft_modes > 0:
+            raise FlexlinkError('the soft basis and the dynamic second-order pass do not go '
+                                'together: the pass steps the reduced coordinates')
         return dataclasses.replace(model, info={**model.info, 'soft': {'used': False,
-                                                                       'reason': 'off'}})
+                                                                       'reason': reason}})
     try:
         soft = soft_tables(model, soft_modes)
     except FlexlinkError as exc:

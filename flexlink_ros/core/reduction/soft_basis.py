@@ -162,6 +162,17 @@ def gap_ratios(mass, stiffness_pieces, speed_max, accel_limit):
     return worst
 
 
+def soft_basis_text(model):
+    """Describe how a reduced model is stepped, e.g. 'stepped on 16 soft modes (gap 3.08x)'."""
+    soft = model.info.get('soft') or {}
+    if not soft.get('used'):
+        reason = soft.get('reason')
+        return 'stepped in all of them' + (f' ({reason})' if reason else '')
+    gap = soft.get('gap_ratio')
+    return (f'stepped on {model.step_size} soft modes'
+            + (f' (gap {gap:.2f}x)' if gap else ' (every mode)'))
+
+
 def choose_soft_size(ratios, requested=-1, min_ratio=MIN_GAP_RATIO):
     """
     Return the soft basis size p: the requested one if its gap is usable, else the smallest.

@@ -5,6 +5,7 @@ import dataclasses
 import estimation_toys as toys
 from estimation_toys import compiled_or_skip, sample_times, samples_fields
 from flexlink_ros.core.estimation import native
+from flexlink_ros.core.estimation.compiled_update import use_python_path
 from flexlink_ros.core.estimation.native import compiled_step_available, RECORD_SIZE
 from flexlink_ros.core.estimation.sample import SampleFlag
 from flexlink_ros.core.estimation.step import (joint_criteria, MAX_SUBSTEP_NS,
@@ -174,13 +175,14 @@ def test_non_finite_step_is_flagged_and_the_next_sample_restarts(toy_model, comp
     est = StreamingEstimator(toy_model, compiled=compiled)
     for n in range(5):
         est.update(n * 10**6, 0.4 + 0.02 * n, 20.0)
+    # In place: the compiled update holds the table arrays the estimator was built with.
     kf = est._tables.kf
-    est._tables.kf = kf.copy()
-    est._tables.kf[..., 0] = np.nan
+    column = kf[..., 0].copy()
+    kf[..., 0] = np.nan
     bad = est.update(5 * 10**6, 0.5, 20.0)
     assert bad.flags & SampleFlag.OUT_OF_BOUND and 'non-finite' in bad.message
     assert np.all(np.isnan(bad.lever_tip + bad.coupler_mid))
-    est._tables.kf = kf
+    kf[..., 0] = column
     after = est.update(6 * 10**6, 0.52, 20.0)
     assert after.flags & SampleFlag.RESET and not after.flags & SampleFlag.OUT_OF_BOUND
     assert np.all(np.isfinite(after.lever_tip + after.coupler_mid))
@@ -252,3 +254,53 @@ def test_compiled_criteria_give_the_python_criteria_bit_for_bit(toy_model):
         got = native.impl.criteria(record, estimator.near_zero_fraction,
                                    REACTION_FLOOR_FRACTION)
         assert got == expected
+
+
+@pytest.mark.parametrize('compiled', [False, True])
+def test_soft_step_stage_interpolation_follows_exact_stages(compiled):
+    """Stage 1 by quadratic interpolation in time against stage 1 from the tables."""
+    if compiled:
+        compiled_or_skip()
+    model = toys.cho_second_order_model('flexible')
+    assert model.soft is not None and model.step_size < model.size
+    times = sample_times(1000.0, 0.4, 0.3, 0.05, seed=5)
+    times = np.concatenate([times, times[-1] + 0.011 + times[:100]])  # sub-steps too
+    speed = 391.0 * np.pi / 30.0
+    runs = {}
+    for interpolate in (True, False):
+        est = StreamingEstimator(model, compiled=compiled)
+        est._stepper = type(est._stepper)(model, est._tables, interpolate_stages=interpolate)
+        use_python_path(est)        # the compiled update holds the first step's arrays
+        assert (est._stepper.history is not None) == interpolate
+        runs[interpolate] = np.array([
+            est.update(int(round(t * 1e9)), speed * t, speed).lever_tip for t in times])
+    scale = np.abs(runs[False]).max()
+    difference = np.abs(runs[True] - runs[False]).max()
+    assert 0.0 < difference < 1e-3 * scale
+
+
+def test_compiled_soft_step_rejects_bad_lift_tables():
+    compiled_or_skip()
+    model = toys.cho_second_order_model('flexible')
+    est = StreamingEstimator(model)
+    est.update(0, 0.0, 30.0)
+    step, t = est._stepper, est._stepper.tables
+    row = np.array([1e-3, 1.0, 0.03, 30.0, 0.0, 0.03])
+    phi, dphi, residual = t.lift.packed()
+
+    def call(lift):
+        native.impl.advance(t.mass, t.damping, t.kf, t.out, t.joint, t.g0,
+                            step.cells_per_radian, STAGE1, step.z, step.previous, row,
+                            np.empty(0), est.last_record, t.second_packed, lift)
+
+    with pytest.raises(ValueError, match='phi'):
+        call((phi[:-1], dphi, residual, step.lifted))
+    with pytest.raises(TypeError, match='float32'):
+        call((phi.astype(float), dphi, residual, step.lifted))
+    with pytest.raises(ValueError, match='lifted'):
+        call((phi, dphi, residual, step.lifted[:-1]))
+    with pytest.raises(ValueError, match='history'):
+        call((phi, dphi, residual, step.lifted, step.history[:-1]))
+    z = step.z.copy()
+    call((phi, dphi, residual, step.lifted, step.history))
+    assert not np.array_equal(step.z, z)

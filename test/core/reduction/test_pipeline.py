@@ -11,6 +11,8 @@ from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction.basis import frozen_modes
 from flexlink_ros.core.reduction.build import reduce_samples
+from flexlink_ros.core.reduction.dynamic_second_order_tables import ARRAY_NAMES as \
+    DYNAMIC_ARRAY_NAMES
 from flexlink_ros.core.reduction.model import system_blocks
 from flexlink_ros.core.reduction.pipeline import (fe_mechanism, frozen_samples_for,
                                                   model_for_mechanism, model_key)
@@ -184,3 +186,24 @@ def test_order_2_model_round_trips_through_the_cache_and_order_1_has_no_tables(t
     np.testing.assert_array_equal(linear.basis, loaded.basis)
     models = [p for p in tmp_path.glob('*.npz') if not p.stem.endswith('-nonlinearity')]
     assert len(models) == 2     # one per order (each beside its validity-indicator tables)
+
+
+def test_dynamic_second_order_has_its_own_key_and_tables_and_round_trips(tmp_path):
+    # quasi-static (the default) keeps the pinned keys; dynamic needs a key of its own
+    mechanism = load_mechanism('cho1992')
+    for options, key in PINNED_KEYS:
+        quasi = dataclasses.replace(options, order=2, second_order='quasi-static')
+        assert model_key(mechanism, quasi) == model_key(
+            mechanism, dataclasses.replace(options, order=2))
+        assert model_key(mechanism, dataclasses.replace(quasi, second_order='dynamic')) != \
+            model_key(mechanism, quasi)
+    options = ModelOptions(bearings='rigid', grid_size=16, order=2, elements_per_link=3,
+                           second_order='dynamic', modes=5, static=3)
+    built = model_for_mechanism(mechanism, options, cache_dir=tmp_path)
+    assert set(built.dynamic_second_order) == set(DYNAMIC_ARRAY_NAMES)
+    loaded = model_for_mechanism(mechanism, options, cache_dir=tmp_path)
+    for name in DYNAMIC_ARRAY_NAMES:
+        np.testing.assert_array_equal(loaded.dynamic_second_order[name],
+                                      built.dynamic_second_order[name])
+    assert model_for_mechanism(mechanism, dataclasses.replace(
+        options, second_order='quasi-static'), use_cache=False).dynamic_second_order is None

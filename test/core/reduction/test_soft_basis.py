@@ -67,9 +67,10 @@ def test_fft_derivatives_of_a_trigonometric_polynomial():
 
 
 def test_gap_choice_takes_the_smallest_usable_gap_and_refuses_others():
-    _, mass, stiffness = _turning_family([1.0, 1.5, 10.0, 11.0], turns=1)
+    # eigenvalue ratios 1.5, 13.3, 1.1: frequency ratios 1.22, 3.65 (usable), 1.05
+    _, mass, stiffness = _turning_family([1.0, 1.5, 20.0, 22.0], turns=1)
     ratios = soft_basis.gap_ratios(mass, {'1': stiffness}, 10.0, 100.0)
-    np.testing.assert_allclose(ratios, [1.5, 10.0 / 1.5, 1.1], rtol=1e-10)
+    np.testing.assert_allclose(ratios, [1.5, 20.0 / 1.5, 1.1], rtol=1e-10)
     assert soft_basis.choose_soft_size(ratios) == 2
     assert soft_basis.choose_soft_size(ratios, requested=2) == 2
     with pytest.raises(FlexlinkError, match='after mode 1'):
@@ -87,3 +88,15 @@ def test_the_gap_is_checked_where_speed_and_acceleration_soften_the_stiffness():
     fast = soft_basis.gap_ratios(mass, pieces, 10.0, 0.0)
     assert at_rest[1] == pytest.approx(10.0 / 1.5)
     assert fast[1] == pytest.approx(2.0 / 1.5)
+
+
+def test_soft_basis_text_says_how_the_model_is_stepped():
+    class Model:
+        step_size = 16
+        info = {'soft': {'used': True, 'size': 16, 'gap_ratio': 3.0778}}
+
+    assert soft_basis.soft_basis_text(Model()) == 'stepped on 16 soft modes (gap 3.08x)'
+    Model.info = {'soft': {'used': False, 'reason': 'off'}}
+    assert soft_basis.soft_basis_text(Model()) == 'stepped in all of them (off)'
+    Model.info = {}
+    assert soft_basis.soft_basis_text(Model()) == 'stepped in all of them'
