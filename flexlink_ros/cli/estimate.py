@@ -41,6 +41,7 @@ def _estimate(args):
     result = run_estimate(model, args.rpm, args.seconds, args.rate_hz, args.jitter,
                           not args.no_warm_start, args.seed)
     result['order'] = model.order
+    result['soft'] = model.info.get('soft')
     result['second_order'] = options.second_order if model.order == 2 else None
     lever = np.hypot(result['lever_tip']['dx_m'], result['lever_tip']['dy_m'])
     coupler = np.hypot(result['coupler_mid']['dx_m'], result['coupler_mid']['dy_m'])
@@ -85,16 +86,17 @@ def _plan(args):
 
 def _bench_lines(result):
     """Write the text of ``bench``: a row per configuration, numpy step, CPU ratio, targets."""
-    lines = [f'{"configuration":<22} {"r":>3} {"grid":>5} {"us p50":>7} {"us p99":>7} '
-             f'{"offline/s":>10} {"coupler":>9} {"lever":>9} {"MB":>6}']
+    lines = [f'{"configuration":<22} {"r":>3} {"p":>3} {"grid":>5} {"us p50":>7} '
+             f'{"us p99":>7} {"offline/s":>10} {"coupler":>9} {"lever":>9} {"MB":>6}']
     for row in result['configurations']:
-        lines.append(f'{row["label"]:<22} {row["size"]:>3} {row["grid_size"]:>5} '
+        lines.append(f'{row["label"]:<22} {row["size"]:>3} {row.get("step_size", "-"):>3} '
+                     f'{row["grid_size"]:>5} '
                      f'{row["us_per_sample"]:>7.1f} {row["us_per_sample_p99"]:>7.1f} '
                      f'{row["offline_samples_per_s"]:>10.0f} '
                      f'{row["error_coupler_mid"]:>9.2e} {row["error_lever_tip"]:>9.2e} '
                      f'{row["bytes"] / 1e6:>6.2f}')
     numpy_step = result['numpy_step']
-    lines.append(f'{"default, numpy step":<22} {"":>3} {"":>5} '
+    lines.append(f'{"default, numpy step":<22} {"":>3} {"":>3} {"":>5} '
                  f'{numpy_step["us_per_sample"]:>7.1f} {numpy_step["us_per_sample_p99"]:>7.1f} '
                  f'{numpy_step["offline_samples_per_s"]:>10.0f}   (the same numbers; '
                  + ('every row timed in interleaved rounds, best of 3)'

@@ -158,6 +158,11 @@ def add_reduced_arguments(parser):
                         help='basis directions from static responses (default: by bearings '
                         'and crank model)')
     parser.add_argument('--grid-size', type=int, help='crank-angle grid points (default: 128)')
+    parser.add_argument('--soft-modes', type=int, metavar='P',
+                        help='the estimator steps the P lowest modes of the reduced model '
+                        '(a smooth basis at a checked spectral gap; refused without a gap '
+                        'there); -1 (default): the smallest P at a usable gap, or all r '
+                        'coordinates where there is none; 0: all r coordinates')
     parser.add_argument('--rate-hz', type=float, default=1000.0,
                         help='sample rate [Hz] (default: %(default)s)')
     parser.add_argument('--cache-dir', default=None,
@@ -212,7 +217,8 @@ def model_options(args, **overrides):
     values = {'rigid_crank': rigid_crank, 'bearings': args.bearings,
               'geometric_stiffness': not args.no_geometric_stiffness,
               'elements_per_link': None if rigid_crank else node_elements}
-    for name in ('modes', 'static', 'grid_size', 'elements_per_link', 'order', 'second_order'):
+    for name in ('modes', 'static', 'grid_size', 'elements_per_link', 'order', 'soft_modes',
+                 'second_order'):
         value = getattr(args, name, None)
         if value is not None:
             values[name] = value

@@ -139,6 +139,12 @@ def load_node_model(values, warn, progress=None):
         warn(notes[-1])
     cache_dir = values['model.cache_dir'] or None
     model = model_for_mechanism(mechanism, options, cache_dir=cache_dir, progress=progress)
+    soft = model.info.get('soft') or {}
+    if options.soft_modes == -1 and not soft.get('used', True) \
+            and model.dynamic_second_order is None:
+        # model.soft_modes -1 found no usable spectral gap: say so where the node logs
+        notes.append(f'stepping all {model.size} coordinates: {soft.get("reason")}')
+        warn(notes[-1])
     return model, options, notes
 
 

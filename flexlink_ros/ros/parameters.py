@@ -85,6 +85,11 @@ PARAMETERS = (
     ParameterSpec('model.order', 2, "Order of the outputs: 1 = the paper's linear KED; 2 = plus "
                   "the second-order motion of the bent links' chord shortening (lever tip, "
                   'coupler mid-point, markers)', low=1, high=2, read_only=True),
+    ParameterSpec('model.soft_modes', -1, 'The estimator steps the p lowest modes of the '
+                  'reduced model (a smooth basis at a checked spectral gap); -1 = the smallest '
+                  'p at a usable gap, or all coordinates where there is none (logged); 0 = all '
+                  'coordinates; p > 0 = exactly p (refused without a gap there)',
+                  low=-1, high=1000, read_only=True),
     ParameterSpec('model.second_order', 'quasi-static', 'How order 2 is computed: '
                   'quasi-static (the chord shortening of the linear shapes) or dynamic (also '
                   'the inertia of that motion: a second reduced state per sample, on a larger '
@@ -286,6 +291,7 @@ def model_options(values, file_stiffness_damping=0.0):
                         geometric_stiffness=values['model.geometric_stiffness'],
                         stiffness_damping=file_stiffness_damping if beta < 0 else beta,
                         order=values['model.order'],
+                        soft_modes=values.get('model.soft_modes', -1),
                         second_order=values.get('model.second_order', 'quasi-static'))
 
 

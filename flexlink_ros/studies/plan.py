@@ -138,7 +138,9 @@ class _Search:
         row = {'stage': stage, 'options': dataclasses.asdict(options),
                'label': describe_physics(options), **extra}
         try:
-            row.update(evaluate_model(self.signals, self.scene, options, self.rate_hz))
+            row.update(evaluate_model(self.signals, self.scene, options, self.rate_hz,
+                                      self.tolerance))
+            row['options']['soft_modes'] = row['soft_modes']
         except (np.linalg.LinAlgError, ValueError) as exc:   # e.g. r above the FE DOFs
             row.update(dict.fromkeys(_NOT_BUILT), failed=str(exc))
         row['meets_tolerance'] = _meets(row, self.tolerance)
@@ -266,6 +268,11 @@ def run_plan(mechanism, base, rpm_max, tolerance, rate_hz=1000.0, speeds_rpm=Non
        every size tried). The grid matters on its own: with a flexible crank the angle
        interpolation of a 128-point grid leaves ~1 % on the coupler whatever the basis.
 
+    Every reduced model built is measured at each soft basis size p with a usable spectral
+    gap, then with all r coordinates (``base.soft_modes`` -1; a fixed p is kept), cheapest
+    first: the first within ``tolerance`` is the row's (its 'soft_modes' and 'step_size';
+    'soft_tried' lists every p tried), so p is chosen with the other sizes.
+
     Parameters
     ----------
     mechanism : Mechanism
@@ -333,6 +340,16 @@ def _fmt(value, spec, width):
     return f'{"-":>{width}}' if value is None else f'{value:>{width}{spec}}'
 
 
+def _soft_choice(row):
+    """Describe the chosen row's soft basis (the step's coordinates and model.soft_modes)."""
+    tried = ', '.join(f'{t["step_size"]}: {max(t["error_coupler_mid"], t["error_lever_tip"]):.2e}'
+                      for t in row.get('soft_tried', ()))
+    if row['options'].get('soft_modes', 0) == 0:
+        return f'all r coordinates stepped (soft_modes 0; tried {tried})'
+    return (f'soft basis p = {row["step_size"]} (soft_modes {row["options"]["soft_modes"]}; '
+            f'tried {tried})')
+
+
 def plan_table(result):
     """Text table of :func:`run_plan`'s rows."""
     ref = result['reference']
@@ -340,7 +357,7 @@ def plan_table(result):
     lines = [f'reference: {ref["label"]} ({ref["dofs"]} DOFs, {ref["source"]}, '
              f'{ref["seconds"]:.1f} s), speeds {speeds} rpm, tolerance {result["tolerance"]:g}',
              f'{"stage":<7} {"physics":<42} {"n":>3} {"modes":>5} {"stat":>4} {"grid":>4} '
-             f'{"r":>3} {"MB":>6} {"build s":>7} {"us":>6} {"phys c":>8} {"phys l":>8} '
+             f'{"r":>3} {"p":>3} {"MB":>6} {"build s":>7} {"us":>6} {"phys c":>8} {"phys l":>8} '
              f'{"trunc c":>8} {"trunc l":>8} {"coupler":>8} {"lever":>8} ok']
     if result.get('fixed'):
         lines.insert(1, 'fixed in every candidate: ' + ', '.join(
@@ -354,6 +371,7 @@ def plan_table(result):
             f'{_fmt(o["modes"] if built else None, "d", 5)} '
             f'{_fmt(o["static"] if built else None, "d", 4)} '
             f'{_fmt(o["grid_size"] if built else None, "d", 4)} {_fmt(row["size"], "d", 3)} '
+            f'{_fmt(row.get("step_size"), "d", 3)} '
             f'{_fmt(None if row["bytes"] is None else row["bytes"] / 1e6, ".1f", 6)} '
             f'{_fmt(row["build_s"], ".1f", 7)} {_fmt(row["us_per_sample"], ".0f", 6)} '
             f'{_fmt(row.get("physics_error_coupler_mid"), ".2e", 8)} '
@@ -367,7 +385,8 @@ def plan_table(result):
     if chosen:
         o = chosen['options']
         lines.append(f'choice: {chosen["label"]}, {o["modes"]} modes + {o["static"]} static, '
-                     f'grid {o["grid_size"]} (r = {chosen["size"]}): coupler '
+                     f'grid {o["grid_size"]} (r = {chosen["size"]}), '
+                     f'{_soft_choice(chosen)}: coupler '
                      f'{chosen["error_coupler_mid"]:.2e}, lever {chosen["error_lever_tip"]:.2e}, '
                      f'{chosen["us_per_sample"]:.0f} us/sample')
     else:

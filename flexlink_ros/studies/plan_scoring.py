@@ -9,6 +9,7 @@ import dataclasses
 import math
 import time
 
+from .bench import usable_soft_sizes
 from .synthetic import last_revolution, stream_timed, synthetic_signal, timing_summary
 from ..core.estimation.offline import replay
 from ..core.numerics import relative_rms, RPM
@@ -132,21 +133,30 @@ def physics_error(signals, scene, options, budget):
     return _max_errors(per_speed), speeds
 
 
-def evaluate_model(signals, scene, options, rate_hz):
+def soft_candidates(options, model):
     """
-    Build the reduced model of ``options`` and measure its cost and errors.
+    List the soft basis sizes a plan tries on ``model``, cheapest first: (soft_modes, model).
+
+    ``options.soft_modes`` -1: every usable gap (:func:`studies.bench.usable_soft_sizes`),
+    then all r coordinates (soft_modes 0); otherwise only the size asked for.
+    """
+    bare = dataclasses.replace(model, soft=None)
+    sizes = usable_soft_sizes(bare) + [0] if options.soft_modes == -1 else [options.soft_modes]
+    return [(p, pipeline.with_soft_basis(bare, p)) for p in sizes]
+
+
+def measure_model(signals, scene, options, model, rate_hz):
+    """
+    Cost and errors of one model on the plan's signals.
 
     Returns
     -------
     dict
-        size, bytes, build_s, us_per_sample (median streaming update), error_coupler_mid and
-        error_lever_tip (against the scene reference, max over the speeds), and
-        truncation_error_* (against the full-order model of its own physics).
+        us_per_sample (median streaming update), error_coupler_mid and error_lever_tip
+        (against the scene reference, max over the speeds), truncation_error_* (against the
+        full-order model of its own physics), step_size.
 
     """
-    start = time.perf_counter()
-    model = pipeline.model_for_mechanism(signals.mechanism, options, use_cache=False)
-    build_s = time.perf_counter() - start
     total, truncation = [], []
     for rpm in signals.speeds_rpm:
         estimate = signals.replay(model, rpm)
@@ -156,8 +166,41 @@ def evaluate_model(signals, scene, options, rate_hz):
     _, update_ns = stream_timed(model, stamps, angles, speeds)
     median, _ = timing_summary(update_ns)
     total, truncation = _max_errors(total), _max_errors(truncation)
-    return {'size': model.size, 'grid_size': model.grid_size, 'bytes': int(model.nbytes),
-            'build_s': build_s, 'us_per_sample': median,
+    return {'us_per_sample': median, 'step_size': int(model.step_size),
             'error_coupler_mid': total['coupler_mid'], 'error_lever_tip': total['lever_tip'],
             'truncation_error_coupler_mid': truncation['coupler_mid'],
             'truncation_error_lever_tip': truncation['lever_tip']}
+
+
+def evaluate_model(signals, scene, options, rate_hz, tolerance=None):
+    """
+    Build the reduced model of ``options`` and measure its cost and errors.
+
+    The soft basis size is chosen here (:func:`soft_candidates`, cheapest first): the first
+    within ``tolerance`` on both outputs, else the most accurate; every size tried is listed.
+
+    Returns
+    -------
+    dict
+        size, bytes, build_s, soft_modes (chosen; 0: all r coordinates), 'soft_tried' (per
+        size tried: soft_modes and :func:`measure_model`), and the chosen size's
+        :func:`measure_model`.
+
+    """
+    start = time.perf_counter()
+    model = pipeline.model_for_mechanism(signals.mechanism,
+                                         dataclasses.replace(options, soft_modes=0),
+                                         use_cache=False)
+    build_s = time.perf_counter() - start
+    tried = []
+    for soft_modes, candidate in soft_candidates(options, model):
+        tried.append({'soft_modes': soft_modes,
+                      **measure_model(signals, scene, options, candidate, rate_hz)})
+        if tolerance is not None and max(tried[-1]['error_coupler_mid'],
+                                         tried[-1]['error_lever_tip']) <= tolerance:
+            break
+    chosen = tried[-1] if tolerance is not None and max(
+        tried[-1]['error_coupler_mid'], tried[-1]['error_lever_tip']) <= tolerance else min(
+        tried, key=lambda row: max(row['error_coupler_mid'], row['error_lever_tip']))
+    return {'size': model.size, 'grid_size': model.grid_size,
+            'bytes': int(model.nbytes), 'build_s': build_s, **chosen, 'soft_tried': tried}

@@ -84,6 +84,19 @@ def test_modes_has_no_stiffness_damping_flag():
     assert '--stiffness-damping' not in cli.build_parser(['modes']).format_help()
 
 
+@pytest.mark.parametrize('command', ['estimate', 'plan', 'bench', 'replay'])
+def test_soft_modes_flag_reaches_the_model_options_and_is_documented(command, capsys):
+    required = MODEL_COMMANDS[command]
+    assert model_args.model_options(parse(command, *required)).soft_modes == -1
+    for value in (0, 16):
+        args = parse(command, *required, '--soft-modes', str(value))
+        assert model_args.model_options(args).soft_modes == value
+    with pytest.raises(SystemExit):
+        parse(command, '--help')
+    text = ' '.join(capsys.readouterr().out.split())
+    assert '--soft-modes P' in text and 'spectral gap' in text
+
+
 @pytest.mark.parametrize('command', ['estimate', 'bench', 'replay'])
 def test_second_order_flag_of_the_estimator_commands(command):
     required = MODEL_COMMANDS[command]

@@ -157,6 +157,37 @@ def test_node_model_takes_the_mechanism_files_stiffness_damping(tmp_path):
     assert options.stiffness_damping == 0.0
 
 
+def test_soft_modes_defaults_to_the_smallest_usable_gap_and_reaches_the_model_options():
+    spec = node_params.SPECS['model.soft_modes']
+    assert (spec.default, spec.low, spec.read_only) == (-1, -1, True)
+    assert node_params.default_model_options().soft_modes == -1
+    assert node_params.default_model_options(soft_modes=0).soft_modes == 0
+    assert node_params.validate_parameter('model.soft_modes', -2) is not None
+    assert 'spectral gap' in spec.description
+
+
+def test_node_model_warns_when_the_soft_basis_finds_no_gap(tmp_path):
+    values = {**node_params.defaults(), 'model.rigid_crank': True, 'model.grid_size': 16,
+              'model.elements_per_link': 2, 'model.cache_dir': str(tmp_path)}
+    seen = {}
+    for bearings, modes, static in (('rigid', 4, 2), ('flexible', 16, 2)):
+        values.update({'model.bearings': bearings, 'model.modes': modes,
+                       'model.static': static})
+        warnings = []
+        model, _, notes = load_node_model(values, warnings.append)
+        seen[model.info['soft']['used']] = notes
+        assert notes == warnings
+        if model.info['soft']['used']:
+            assert model.step_size < model.size and notes == []
+        else:
+            assert notes == [f'stepping all {model.size} coordinates: '
+                             f'{model.info["soft"]["reason"]}']
+            assert 'spectral gap' in notes[0]
+    assert set(seen) == {True, False}
+    values['model.soft_modes'] = 0                  # off on purpose: nothing to warn about
+    assert load_node_model(values, lambda note: None)[2] == []
+
+
 def test_second_order_parameter_selects_the_dynamic_pass():
     values = node_params.defaults()
     assert values['model.second_order'] == 'quasi-static'
