@@ -26,11 +26,13 @@ setup(
                  # the validity indicator per sample (its Python twin serves where not built)
                  Extension('flexlink_ros.core.estimation._nonlinearity',
                            ['flexlink_ros/core/estimation/_nonlinearity.c'],
-                           depends=['flexlink_ros/core/estimation/_nonlinearity.h'],
+                           depends=['flexlink_ros/core/estimation/_nonlinearity.h',
+                                    'flexlink_ros/core/estimation/_doubles.h'],
                            extra_compile_args=['-O3']),
                  # the dynamic second-order pass's loads per sample (numpy twin where not built)
                  Extension('flexlink_ros.core.estimation._dynamic_second_order',
                            ['flexlink_ros/core/estimation/_dynamic_second_order.c'],
+                           depends=['flexlink_ros/core/estimation/_doubles.h'],
                            extra_compile_args=['-O3'])],
     install_requires=['setuptools'],
     # The geometrically nonlinear peer the linear model is checked against (studies/).

@@ -28,6 +28,8 @@
 #include <math.h>
 #include <string.h>
 
+#include "_doubles.h"
+
 #define TWO_PI 6.283185307179586
 #define MAX_SIZE 64
 #define MAX_LINKS 8
@@ -153,20 +155,6 @@ static void point_load(const double *context, const double *pieces, const double
                 eigen[k] += part[a] * gather[a * r + k];
             }
     }
-}
-
-static int get_doubles(PyObject *object, Py_buffer *view, Py_ssize_t count, const char *what,
-                       int writable)
-{
-    if (PyObject_GetBuffer(object, view, writable ? PyBUF_WRITABLE : PyBUF_SIMPLE) < 0)
-        return -1;
-    if (view->len < count * (Py_ssize_t)sizeof(double)) {
-        PyErr_Format(PyExc_ValueError, "%s holds %zd bytes, needs %zd", what, view->len,
-                     count * (Py_ssize_t)sizeof(double));
-        PyBuffer_Release(view);
-        return -1;
-    }
-    return 0;
 }
 
 /* Check the context's sizes and that every link's gather rows fit. */
@@ -306,42 +294,32 @@ static void monomials(double w, double a, double *m)
     m[0] = a; m[1] = 1.0; m[2] = w2; m[3] = w; m[4] = w2 * w2; m[5] = w * a; m[6] = w2 * w;
 }
 
-/* One node table at (cell k, t): sum over groups of Hermite weights times value and slope. */
-static void combine_float(const float *table, int grid, int groups, int first, int width,
-                          const double *mono, int k, double t, double *out)
-{
-    const double t2 = t * t, t3 = t2 * t, h01 = t2 * (3.0 - 2.0 * t);
-    const double weights[2][2] = {{1.0 - h01, t - 2.0 * t2 + t3}, {h01, t3 - t2}};
-    const int nodes[2] = {k, k + 1 < grid ? k + 1 : 0};
-    for (int i = 0; i < width; i++)
-        out[i] = 0.0;
-    for (int n = 0; n < 2; n++)
-        for (int g = 0; g < groups; g++)
-            for (int j = 0; j < 2; j++) {
-                const double c = mono[first + g] * weights[n][j];
-                const float *row = table + ((Py_ssize_t)nodes[n] * 2 * groups + 2 * g + j) * width;
-                for (int i = 0; i < width; i++)
-                    out[i] += c * row[i];
-            }
-}
+/*
+ * One node table at (cell k, t): sum over groups of Hermite weights times value and slope
+ * (mono: the groups' monomial values, from the table's first group on).
+ */
+#define DEFINE_COMBINE(name, type)                                                          \
+    static void name(const type *table, int grid, int groups, int width, const double *mono, \
+                     int k, double t, double *out)                                          \
+    {                                                                                       \
+        const double t2 = t * t, t3 = t2 * t, h01 = t2 * (3.0 - 2.0 * t);                   \
+        const double weights[2][2] = {{1.0 - h01, t - 2.0 * t2 + t3}, {h01, t3 - t2}};      \
+        const int nodes[2] = {k, k + 1 < grid ? k + 1 : 0};                                 \
+        for (int i = 0; i < width; i++)                                                     \
+            out[i] = 0.0;                                                                   \
+        for (int n = 0; n < 2; n++)                                                         \
+            for (int g = 0; g < groups; g++)                                                \
+                for (int j = 0; j < 2; j++) {                                               \
+                    const double c = mono[g] * weights[n][j];                               \
+                    const type *row = table + ((Py_ssize_t)nodes[n] * 2 * groups + 2 * g + j) \
+                                              * width;                                      \
+                    for (int i = 0; i < width; i++)                                         \
+                        out[i] += c * row[i];                                               \
+                }                                                                           \
+    }
 
-static void combine_double(const double *table, int grid, int groups, int width,
-                           const double *mono, int k, double t, double *out)
-{
-    const double t2 = t * t, t3 = t2 * t, h01 = t2 * (3.0 - 2.0 * t);
-    const double weights[2][2] = {{1.0 - h01, t - 2.0 * t2 + t3}, {h01, t3 - t2}};
-    const int nodes[2] = {k, k + 1 < grid ? k + 1 : 0};
-    for (int i = 0; i < width; i++)
-        out[i] = 0.0;
-    for (int n = 0; n < 2; n++)
-        for (int g = 0; g < groups; g++)
-            for (int j = 0; j < 2; j++) {
-                const double c = mono[g] * weights[n][j];
-                const double *row = table + ((Py_ssize_t)nodes[n] * 2 * groups + 2 * g + j) * width;
-                for (int i = 0; i < width; i++)
-                    out[i] += c * row[i];
-            }
-}
+DEFINE_COMBINE(combine_float, float)
+DEFINE_COMBINE(combine_double, double)
 
 /* [M, C, K, f] at a crank state into a slot (M, C, K: r r each, then f: r). */
 static void load_slot(const StepTables *st, double angle, double w, double a, double *slot)
@@ -350,8 +328,8 @@ static void load_slot(const StepTables *st, double angle, double w, double a, do
     double mono[MONOMIAL_COUNT], t;
     monomials(w, a, mono);
     const int k = cell_of(st, angle, &t);
-    combine_float(st->mass, st->grid, st->mass_groups, st->first_mc, r2, mono, k, t, slot);
-    combine_float(st->damping, st->grid, st->groups_c, st->first_mc, r2, mono, k, t,
+    combine_float(st->mass, st->grid, st->mass_groups, r2, mono + st->first_mc, k, t, slot);
+    combine_float(st->damping, st->grid, st->groups_c, r2, mono + st->first_mc, k, t,
                   slot + r2);
     combine_double(st->kf, st->grid, st->kf_groups, r2 + r, mono, k, t, slot + 2 * r2);
 }

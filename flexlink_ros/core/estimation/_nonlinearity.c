@@ -17,20 +17,8 @@
 #include <Python.h>
 #include <math.h>
 
+#include "_doubles.h"
 #include "_nonlinearity.h"
-
-static int get_doubles(PyObject *object, Py_buffer *view, Py_ssize_t count, const char *what)
-{
-    if (PyObject_GetBuffer(object, view, PyBUF_SIMPLE) < 0)
-        return -1;
-    if (view->len < count * (Py_ssize_t)sizeof(double)) {
-        PyErr_Format(PyExc_ValueError, "%s holds %zd bytes, needs %zd", what, view->len,
-                     count * (Py_ssize_t)sizeof(double));
-        PyBuffer_Release(view);
-        return -1;
-    }
-    return 0;
-}
 
 static PyObject *indicator(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
@@ -46,7 +34,7 @@ static PyObject *indicator(PyObject *self, PyObject *const *args, Py_ssize_t nar
     if (PyErr_Occurred())
         return NULL;
     Py_buffer context_view, table_view, state_view;
-    if (get_doubles(args[0], &context_view, INDICATOR_HEADER, "context") < 0)
+    if (get_doubles(args[0], &context_view, INDICATOR_HEADER, "context", 0) < 0)
         return NULL;
     const double *context = context_view.buf;
     PyObject *result = NULL;
@@ -60,9 +48,9 @@ static PyObject *indicator(PyObject *self, PyObject *const *args, Py_ssize_t nar
         PyErr_SetString(PyExc_ValueError, "context: too short for its reference modes");
         goto release_context;
     }
-    if (get_doubles(args[1], &table_view, indicator_table_size(context), "table") < 0)
+    if (get_doubles(args[1], &table_view, indicator_table_size(context), "table", 0) < 0)
         goto release_context;
-    if (get_doubles(args[2], &state_view, 2 * (Py_ssize_t)context[INDICATOR_SIZE], "state") < 0)
+    if (get_doubles(args[2], &state_view, 2 * (Py_ssize_t)context[INDICATOR_SIZE], "state", 0) < 0)
         goto release_table;
     result = PyFloat_FromDouble(indicator_value(context, table_view.buf, state_view.buf, angle,
                                                 speed, accel));
@@ -85,7 +73,7 @@ static PyObject *indicator_rows(PyObject *self, PyObject *const *args, Py_ssize_
     }
     Py_buffer views[7] = {{0}};
     PyObject *result = NULL;
-    if (get_doubles(args[0], &views[0], INDICATOR_HEADER, "context") < 0)
+    if (get_doubles(args[0], &views[0], INDICATOR_HEADER, "context", 0) < 0)
         return NULL;
     const double *context = views[0].buf;
     const Py_ssize_t needed = indicator_context_size(
@@ -95,19 +83,15 @@ static PyObject *indicator_rows(PyObject *self, PyObject *const *args, Py_ssize_
         goto release;
     }
     const Py_ssize_t width = 2 * (Py_ssize_t)context[INDICATOR_SIZE];
-    if (get_doubles(args[6], &views[6], 0, "out") < 0)
+    if (get_doubles(args[6], &views[6], 0, "out", 1) < 0)
         goto release;
     const Py_ssize_t rows = views[6].len / (Py_ssize_t)sizeof(double);
-    if (get_doubles(args[1], &views[1], indicator_table_size(context), "table") < 0
-        || get_doubles(args[2], &views[2], rows * width, "states") < 0
-        || get_doubles(args[3], &views[3], rows, "angles") < 0
-        || get_doubles(args[4], &views[4], rows, "speeds") < 0
-        || get_doubles(args[5], &views[5], rows, "accels") < 0)
+    if (get_doubles(args[1], &views[1], indicator_table_size(context), "table", 0) < 0
+        || get_doubles(args[2], &views[2], rows * width, "states", 0) < 0
+        || get_doubles(args[3], &views[3], rows, "angles", 0) < 0
+        || get_doubles(args[4], &views[4], rows, "speeds", 0) < 0
+        || get_doubles(args[5], &views[5], rows, "accels", 0) < 0)
         goto release;
-    if (views[6].readonly) {
-        PyErr_SetString(PyExc_ValueError, "out must be writable");
-        goto release;
-    }
     const double *states = views[2].buf, *angles = views[3].buf, *speeds = views[4].buf,
                  *accels = views[5].buf;
     double *out = views[6].buf;
