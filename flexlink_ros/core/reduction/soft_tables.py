@@ -126,27 +126,30 @@ def soft_system(model, frame, first, second):
     return system
 
 
-def residual_coordinates(model, frame):
+def left_out_flexibility(model, frame):
+    """
+    Return R = K^-1 - Phi (Phi^T K Phi)^-1 Phi^T per node (K at w = a = 0): (N, r, r).
+
+    The static flexibility of the directions Phi leaves out (R K Phi = 0); the lift's
+    residual and its coupled frame are R times their loads.
+    """
+    stiffness = node_values(model, 'K')['1']
+    reduced_inverse = np.linalg.inv(_project(frame, stiffness))
+    return np.linalg.inv(stiffness) - frame @ reduced_inverse @ np.swapaxes(frame, 1, 2)
+
+
+def residual_coordinates(model, flexibility):
     """
     Return the quasi-static response of what Phi leaves out, per load monomial: (N, r) each.
 
-    ``(K^-1 - Phi (Phi^T K Phi)^-1 Phi^T) f_m`` with K at w = a = 0.
+    ``R f_m`` with R :func:`left_out_flexibility`.
     """
-    stiffness = node_values(model, 'K')['1']
     loads = node_values(model, 'f')
-    reduced = _project(frame, stiffness)
-    residual = {}
-    for monomial in RESIDUAL_MONOMIALS:
-        if monomial not in loads:
-            continue
-        load = loads[monomial]
-        full = np.linalg.solve(stiffness, load[..., None])[..., 0]
-        kept = np.linalg.solve(reduced, np.einsum('nri,nr->ni', frame, load)[..., None])[..., 0]
-        residual[monomial] = full - np.einsum('nri,ni->nr', frame, kept)
-    return residual
+    return {monomial: (flexibility @ loads[monomial][..., None])[..., 0]
+            for monomial in RESIDUAL_MONOMIALS if monomial in loads}
 
 
-def coupled_frame(model, frame, first):
+def coupled_frame(model, frame, first, flexibility):
     """
     Return the lift's frame per monomial: Phi, and the stiff response to the soft motion.
 
@@ -165,6 +168,8 @@ def coupled_frame(model, frame, first):
         The reduced model (its node values).
     frame, first : ndarray, shape (N, r, p)
         Phi and dPhi/dtheta at the nodes.
+    flexibility : ndarray, shape (N, r, r)
+        R, :func:`left_out_flexibility`.
 
     Returns
     -------
@@ -175,15 +180,12 @@ def coupled_frame(model, frame, first):
     """
     stiffness = node_values(model, 'K')
     damping = node_values(model, 'C')
-    inverse = np.linalg.inv(stiffness['1'])
-    reduced_inverse = np.linalg.inv(_project(frame, stiffness['1']))
-    residual = inverse - frame @ reduced_inverse @ np.swapaxes(frame, 1, 2)
     load = {'a': [(stiffness.get('a'), frame)],
             'w2': [(stiffness.get('w2'), frame), (damping.get('w'), first)],
             'w': [(stiffness.get('w'), frame), (damping.get('1'), first)]}
     coupled = {'1': frame}
     for monomial, terms in load.items():
-        coupled[monomial] = -sum(residual @ matrix @ basis
+        coupled[monomial] = -sum(flexibility @ matrix @ basis
                                  for matrix, basis in terms if matrix is not None)
     return coupled
 
@@ -247,14 +249,15 @@ def soft_tables(model, size=-1, accel_limit=5000.0):
     square = (nodes, size, size)
     kf = np.concatenate([_stack(system['K'], SOFT_KF_MONOMIALS, square).reshape(nodes, len(
         SOFT_KF_MONOMIALS), -1), _stack(system['f'], SOFT_KF_MONOMIALS, (nodes, size))], axis=2)
-    residual = residual_coordinates(model, frame)
+    flexibility = left_out_flexibility(model, frame)
+    residual = residual_coordinates(model, flexibility)
     return {
         'soft_mass': _node_table({'1': system['M']['1']}, ('1',), square, np.float32),
         'soft_damping': _node_table(system['C'], SOFT_DAMPING_MONOMIALS, square, np.float32),
         'soft_kf': _node_table(dict(enumerate(kf.transpose(1, 0, 2))),
                                range(len(SOFT_KF_MONOMIALS)), (nodes, size * size + size),
                                np.float32),
-        'soft_phi': _node_table(coupled_frame(model, frame, first), LIFT_MONOMIALS,
+        'soft_phi': _node_table(coupled_frame(model, frame, first, flexibility), LIFT_MONOMIALS,
                                 (nodes, r * size), np.float32),
         'soft_dphi': _node_table({'1': first}, ('1',), (nodes, r * size), np.float32),
         'soft_residual': _node_table(residual, RESIDUAL_MONOMIALS, (nodes, r), np.float32),
