@@ -73,7 +73,6 @@ typedef struct {
     double *rhs;        /* 2r */
     double *operator;   /* outputs x (r + 1): [O | corr] of the record */
     double weights[ROWS_ALL];   /* power form: the record's per-cell tables */
-    Py_ssize_t cells_index;     /* the cell of the last lift */
     double hermite[ROWS_ALL];   /* Hermite form: the node tables */
     /* second-order outputs (core/reduction/second_order_tables.py); so_terms 0: order 1 */
     Py_ssize_t so_rows, so_slots, so_gathers, so_terms;
@@ -284,25 +283,22 @@ static Py_ssize_t lift(Step *s, const double *z, const double *prev)
         v[i] = dot(frame + i * p, z + p, p) + prev[1] * (dot(first + i * p, z, p) + v[i]);
     }
     s->lifted[2 * rr] = 1.0;
-    s->cells_index = k;
     return k;
 }
 
 /* The record of the crank state prev at the state z (tables._StepTables.record); with the
-   soft basis, of its lift (computed here unless `lifted` says it is). */
-static void record(Step *s, const double *z, const double *prev, double *restrict out,
-                   int lifted)
+   soft basis, of its lift (computed here, into s->lifted). */
+static void record(Step *s, const double *z, const double *prev, double *restrict out)
 {
     const Py_ssize_t r = s->rr, width = OUTPUTS * (r + 1);
     Py_ssize_t k;
-    if (s->lift_phi == NULL)
+    if (s->lift_phi == NULL) {
         k = evaluate(s, prev[0], prev[1], prev[2], s->weights, s->hermite);
-    else if (lifted)
-        k = s->cells_index;
-    else
+    }
+    else {
         k = lift(s, z, prev);
-    if (s->lift_phi != NULL)
         z = s->lifted;
+    }
     double *op = s->operator;
     combine(s->weights, s->out + k * s->out_rows * width, s->out_rows, width, width, op);
     for (int o = 0; o < OUTPUTS; o++) {
@@ -873,7 +869,7 @@ static int step_sample(Step *s, double *z, double *prev, const double *row,
     if (radau_step(s, z, prev, sub_h, angle, w, a, sub_step) != 0)
         return SAMPLE_FAILED;
     if (record_out != NULL)
-        record(s, z, prev, record_out, 0);      /* with the soft basis: lifted first */
+        record(s, z, prev, record_out);         /* with the soft basis: lifted first */
     return SAMPLE_DONE;
 }
 

@@ -120,8 +120,7 @@ class CompiledUpdate:
         t = stepper.tables
         self._kernel = native.impl.Update(
             tables=(t.mass, t.damping, t.kf, t.out, t.joint, t.g0), second=t.second_packed,
-            lift=None if t.lift is None else (*stepper._lift_tables, stepper.lifted,
-                                              stepper.history),
+            lift=stepper.lift_buffers,
             cells_per_radian=stepper.cells_per_radian, c1=STAGE1, z=stepper.z,
             prev=stepper.previous, filter=rate_filter.state, record=record,
             indicator=nonlinearity.kernel_tables, sample_type=Sample,

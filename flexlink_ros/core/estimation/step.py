@@ -256,7 +256,7 @@ class NumpyStep:
             np.dot(hermite[0, rows], table[k], out=out)
             out += np.dot(hermite[1, rows], table[0])
 
-    def _load(self, slot, hermite, k, speed):
+    def _load(self, slot, hermite, k):
         """Write M, C and [K, f] of the node tables at (Hermite weights, cell k) into a slot."""
         tables, r = self.tables, self.tables.size
         r2 = r * r
@@ -302,11 +302,12 @@ class NumpyStep:
         if self.history is not None:
             if self.history[0] < 1.0:
                 _, hermite, k = self.evaluate(*previous)
-                self._load(parity, hermite, k, previous[1])
-                self.history[2:2 + self.history.size // 2 - 1] = self._pack(parity)
+                self._load(parity, hermite, k)
+                sample = self._pack(parity)
+                self.history[2:2 + sample.size] = sample
                 self.history[0] = 1.0
             _, hermite, k = self.evaluate(angle, speed, accel)
-            self._load(parity, hermite, k, speed)
+            self._load(parity, hermite, k)
             self._interpolate_stage(h, parity)
             self.previous[:] = (angle, speed, accel)
             return parity
@@ -315,12 +316,11 @@ class NumpyStep:
             stage_angle -= TWO_PI
         elif stage_angle < 0.0:
             stage_angle += TWO_PI
-        stage_speed = previous[1] + c1 * (speed - previous[1])
-        _, hermite, k = self.evaluate(stage_angle, stage_speed,
+        _, hermite, k = self.evaluate(stage_angle, previous[1] + c1 * (speed - previous[1]),
                                       previous[2] + c1 * (accel - previous[2]))
-        self._load(1 - parity, hermite, k, stage_speed)
+        self._load(1 - parity, hermite, k)
         _, hermite, k = self.evaluate(angle, speed, accel)
-        self._load(parity, hermite, k, speed)
+        self._load(parity, hermite, k)
         self.previous[:] = (angle, speed, accel)
         return parity
 
@@ -356,7 +356,9 @@ class CompiledStep(NumpyStep):
             raise RuntimeError('the compiled step (core/estimation/_radau_step.c) is not built')
         super().__init__(model, tables, interpolate_stages)
         self._kernel = native.impl
-        self._lift_tables = None if tables.lift is None else tables.lift.packed()
+        # The soft basis's lift as the kernel takes it: (phi, dphi, residual, lifted, history).
+        self.lift_buffers = (None if tables.lift is None
+                             else (*tables.lift.packed(), self.lifted, self.history))
 
     def advance(self, rows, states, records):
         """
@@ -373,10 +375,9 @@ class CompiledStep(NumpyStep):
 
         """
         t = self.tables
-        lift = None if t.lift is None else (*self._lift_tables, self.lifted, self.history)
         self._kernel.advance(t.mass, t.damping, t.kf, t.out, t.joint, t.g0,
                              self.cells_per_radian, STAGE1, self.z, self.previous, rows,
-                             states, records, t.second_packed, lift)
+                             states, records, t.second_packed, self.lift_buffers)
 
     def criteria(self, record, near_zero_fraction):
         """

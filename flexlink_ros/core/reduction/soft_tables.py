@@ -41,7 +41,6 @@ SOFT_KF_MONOMIALS = ('a', '1', 'w2', 'w')
 RESIDUAL_MONOMIALS = ('a', '1', 'w2')
 # Monomials of the lift's frame (:func:`coupled_frame`): the first four of MONOMIALS.
 LIFT_MONOMIALS = ('a', '1', 'w2', 'w')
-SOFT_PREFIX = 'soft_'
 
 
 def node_values(model, name):
