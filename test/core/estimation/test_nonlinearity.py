@@ -12,6 +12,7 @@ import math
 
 from estimation_toys import toy_model
 from flexlink_ros.core import validity
+from flexlink_ros.core.estimation import nonlinearity as nonlinearity_module
 from flexlink_ros.core.estimation import offline_run
 from flexlink_ros.core.estimation.native import compiled_step_available
 from flexlink_ros.core.estimation.nonlinearity import NonlinearityIndicator
@@ -148,6 +149,34 @@ def test_compiled_and_python_forms_agree(models):
     assert math.isnan(compiled(0.3, math.nan, 0.0, states[0]))
     with pytest.raises(ValueError, match='state'):
         compiled(0.3, 10.0, 0.0, states[0][:3].copy())
+
+
+def test_compiled_batch_refuses_bad_buffers(models):
+    model = models['rigid']
+    indicator = NonlinearityIndicator(model)
+    if not indicator.compiled:
+        pytest.skip('the validity indicator is not compiled')
+    _, _, samples, states = _streamed(model, 269.0, seconds=0.1)
+    context, table = indicator.kernel_tables
+    kernel = nonlinearity_module.kernel
+    rows = states.shape[0]
+    values = np.zeros(rows)
+    out = np.full(rows, -1.0)
+    good = (context, table, np.ascontiguousarray(states), values, values, values)
+    kernel.indicator_rows(*good, out)
+    assert np.all(np.isfinite(out)) and np.all(out >= 0.0)
+    with pytest.raises(ValueError, match='states'):       # a row short
+        kernel.indicator_rows(context, table, states[:-1].copy(), values, values, values, out)
+    with pytest.raises(ValueError, match='speeds'):
+        kernel.indicator_rows(context, table, states, values, values[:-1].copy(), values, out)
+    with pytest.raises(ValueError, match='table'):
+        kernel.indicator_rows(context, table[:1].copy(), states, values, values, values, out)
+    read_only = out.copy()
+    read_only.flags.writeable = False
+    with pytest.raises(ValueError, match='read-only'):
+        kernel.indicator_rows(*good, read_only)
+    with pytest.raises(TypeError):
+        kernel.indicator_rows(*good)
 
 
 @pytest.mark.parametrize('compiled', [True, False])
