@@ -118,6 +118,10 @@ class McapRecorder(QueuedWriting):
         self._stop_flusher = threading.Event()
         self._flusher = None
         self._queue = collections.deque()   # (topic, bytes, log_ns) from enqueue()
+        self._queue_lock = threading.Lock()  # the queue's byte count; never held while writing
+        self._queued_bytes = 0
+        self._overflow = 0   # enqueued messages dropped because the queue was full
+        self._closed_bytes = 0
 
     # -- life cycle -------------------------------------------------------------------------
 
@@ -316,36 +320,50 @@ class McapRecorder(QueuedWriting):
             paths.append(current.path)
         return paths
 
-    def status(self):
+    def status(self, list_files=True):
         """
         Summary of the recording, for diagnostics and the CLI.
+
+        Parameters
+        ----------
+        list_files : bool
+            Include the path of every file (``files``); without it the cost does not grow
+            with the number of files (diagnostics, every period).
 
         Returns
         -------
         dict
-            ``state``, ``error``, ``path``, ``files``, ``message_count``, ``dropped_count``,
-            ``topics`` (name -> count), ``bytes_written``.
+            ``state``, ``error``, ``path``, ``files`` (if listed), ``file_count``,
+            ``message_count``, ``dropped_count`` (overflow included), ``overflow_count``
+            (dropped because the write queue was full), ``queued_bytes``, ``topics``
+            (name -> count), ``bytes_written``.
 
         """
         # Without the lock: the writing thread may hold it through a slow disk write, and
         # diagnostics must not wait for that (each field is read atomically; the set may be
         # one write apart).
-        size = 0
-        for path in self.files:
+        current = self._file    # read once: another thread may close it meanwhile
+        size = self._closed_bytes
+        if current is not None:
             try:
-                size += os.stat(path).st_size
-            except OSError:
+                size += os.fstat(current.stream.fileno()).st_size
+            except (OSError, ValueError):
                 pass
-        return {
+        status = {
             'state': self._state.value,
             'error': None if self._error is None else str(self._error),
             'path': str(self.path),
-            'files': [str(p) for p in self.files],
+            'file_count': len(self._closed_files) + (current is not None),
             'message_count': self._message_count,
-            'dropped_count': self._dropped,
+            'dropped_count': self._dropped + self._overflow,
+            'overflow_count': self._overflow,
+            'queued_bytes': self._queued_bytes,
             'topics': {t.name: t.message_count for t in self._topics.values()},
             'bytes_written': size,
         }
+        if list_files:
+            status['files'] = [str(p) for p in self.files]
+        return status
 
     # -- internals --------------------------------------------------------------------------
 
@@ -363,23 +381,34 @@ class McapRecorder(QueuedWriting):
         self._state = RecorderState.FAILED
         self._error = exc
         if self._file is not None:
+            try:
+                self._closed_bytes += os.stat(self._file.path).st_size
+            except OSError:
+                pass
             abandon(self._file)
             self._closed_files.append(self._file.entry(complete=False))
             self._file = None
 
     def _open_file(self):
+        # The rosbag2 records describe this file alone: their cost does not grow with the
+        # files written before it (see bag_metadata.serialized_metadata).
         path = file_path(self.path, self.bare, len(self._closed_files))
         self._file = OpenFile(path, create_exclusive(path), None, {})
-        opening = serialized_metadata(self._closed_files + [self._file.entry(complete=False)],
-                                      self._topics, UNSET_NS)   # as rosbag2 at open
+        self._file.counts_before = {t.name: t.message_count for t in self._topics.values()}
+        opening = serialized_metadata([self._file.entry(complete=False)], self._topics,
+                                      UNSET_NS, counts={})   # as rosbag2 at open
         start_file(self._file, self.chunk_size_bytes, self.compression, self._topics.values(),
                    opening)
 
     def _finish_file(self):
         current = self._file
+        before = current.counts_before
+        counts = {t.name: t.message_count - before.get(t.name, 0)
+                  for t in self._topics.values()}
         current.writer.add_metadata(METADATA_RECORD, serialized_metadata(
-            self._closed_files + [current.entry(complete=True)], self._topics))
+            [current.entry(complete=True)], self._topics, counts=counts))
         current.writer.finish()
+        self._closed_bytes += current.stream.tell()
         current.stream.close()
         self._closed_files.append(current.entry(complete=True))
         self._file = None

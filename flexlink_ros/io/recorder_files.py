@@ -23,6 +23,11 @@ from .mcap_writer import McapFileWriter
 from .msg_schema import message_definition, offered_qos_yaml, type_hash
 
 LIBRARY = f'flexlink_ros recorder; {LIBRARY_IDENTIFIER}'
+# Smallest split a live recording accepts (0: never split). Each split finishes a file
+# (summary, indexes, metadata) and starts the next (header, schemas, channels): far below
+# these a recorder fed at 1 kHz would do little but split, and fall behind.
+MIN_SPLIT_BYTES = 1 << 20
+MIN_SPLIT_DURATION_S = 1.0
 # O_NOFOLLOW is POSIX; where it is missing O_EXCL alone still refuses a symlink.
 _EXCLUSIVE_FLAGS = (os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, 'O_NOFOLLOW', 0)
                     | getattr(os, 'O_CLOEXEC', 0))
@@ -90,6 +95,7 @@ class OpenFile:
     first_log_ns: int = None
     last_log_ns: int = None
     message_count: int = 0
+    counts_before: dict = dataclasses.field(default_factory=dict)   # topic counts at open
 
     def note(self, first_log_ns, last_log_ns, count):
         """Count ``count`` messages written with log times from first to last [ns]."""
@@ -226,6 +232,33 @@ def split_due(current, split_size_bytes, split_duration_ns, log_time_ns):
     too_long = (split_duration_ns
                 and log_time_ns - current.first_log_ns >= split_duration_ns)
     return bool(too_big or too_long)
+
+
+def split_refusal(name, value, floor, unit):
+    """
+    Say why a live recording's split setting is refused (None: 0 or at least the floor).
+
+    Parameters
+    ----------
+    name : str
+        The setting, as the user wrote it (parameter or option).
+    value : float
+        Its value.
+    floor : float
+        :data:`MIN_SPLIT_BYTES` or :data:`MIN_SPLIT_DURATION_S`, in the setting's unit.
+    unit : str
+        How to write the floor (e.g. '1 MiB', '1 s').
+
+    Returns
+    -------
+    str or None
+
+    """
+    if value == 0 or value >= floor:
+        return None
+    return (f'{name} must be 0 (no split) or at least {unit}, got {value:g}: each split '
+            'finishes one file and starts another, so smaller splits leave the recorder '
+            'splitting instead of writing')
 
 
 def abandon(current):

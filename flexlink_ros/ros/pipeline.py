@@ -323,7 +323,8 @@ class EstimatorPipeline(NodeRecording):
         elif self.subscription is None:
             statuses = diagnostics.inactive_statuses(
                 self.totals, self.input_topic, self.model_facts,
-                None if self.recorder is None else self.recorder.status())
+                None if self.recorder is None
+                else self.recorder.status(list_files=False))
         else:
             statuses = self._active_statuses()
         return diagnostics.named(statuses, self.get_fully_qualified_name(),
@@ -342,7 +343,7 @@ class EstimatorPipeline(NodeRecording):
                 diagnostics.estimator_status(period, values, self.model_facts),
                 *diagnostics.joint_statuses(period, values, self.criteria_source),
                 diagnostics.recorder_status(None if self.recorder is None
-                                            else self.recorder.status())]
+                                            else self.recorder.status(list_files=False))]
 
     def _publish_diagnostics(self):
         clock_ns = self._clock.now().nanoseconds
