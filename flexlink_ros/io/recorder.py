@@ -43,8 +43,8 @@ from .msg_schema import (
     message_definition, message_type_name, qos_profile_dict, serialize_exact,
 )
 from .recorder_files import (
-    abandon, create_exclusive, file_path, OpenFile, refuse_existing, register_topic, split_due,
-    start_file, Topic,
+    abandon, create_exclusive, file_path, make_directories, OpenFile, refuse_existing,
+    register_topic, remove_directories, split_due, start_file, Topic,
 )
 from .recorder_queue import QueuedWriting, RecorderState
 from ..errors import RecorderError
@@ -138,16 +138,19 @@ class McapRecorder(QueuedWriting):
         with self._lock:
             if self._state is not RecorderState.NEW:
                 raise RecorderError(f'recorder for {self.path} already opened')
+            created = []    # directories made here, removed again if the open fails
             try:
                 refuse_existing(self.path)
-                self.path.parent.mkdir(parents=True, exist_ok=True)
+                created = make_directories(self.path.parent)
                 if not self.bare:
                     self.path.mkdir()   # not exist_ok: a directory made meanwhile is refused
+                    created.append(self.path)
                 self._state = RecorderState.RECORDING
                 self._open_file()
             except OSError as exc:
                 # FAILED (not NEW): later writes are dropped quietly, not refused one by one.
                 self._fail(exc)
+                remove_directories(created)   # a retry with this path is then not refused
                 self._error_reported = True
                 where = '' if isinstance(exc, FileExistsError) else f' to {self.path}'
                 raise RecorderError(f'cannot record{where}: {exc}') from exc

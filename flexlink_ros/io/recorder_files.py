@@ -61,6 +61,51 @@ def refuse_existing(path):
                           'links: choose a new path')
 
 
+def make_directories(path):
+    """
+    Create ``path`` and its missing parents; return those created, outermost first.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        A directory.
+
+    Returns
+    -------
+    list of pathlib.Path
+
+    """
+    missing = []
+    while not os.path.lexists(path) and path != path.parent:
+        missing.append(path)
+        path = path.parent
+    created = []
+    for directory in reversed(missing):
+        try:
+            directory.mkdir()
+        except FileExistsError:
+            continue    # made meanwhile by someone else: not ours to remove
+        created.append(directory)
+    return created
+
+
+def remove_directories(created):
+    """
+    Remove directories :func:`make_directories` created, innermost first, if still empty.
+
+    Parameters
+    ----------
+    created : list of pathlib.Path
+        Outermost first.
+
+    """
+    for directory in reversed(created):
+        try:
+            directory.rmdir()
+        except OSError:     # not empty (someone wrote there meanwhile) or gone: left as is
+            return
+
+
 def create_exclusive(path):
     """
     Open a new file for writing; fail if anything (even a dangling link) is at ``path``.

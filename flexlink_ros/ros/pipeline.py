@@ -128,7 +128,7 @@ class EstimatorPipeline(NodeRecording):
         self.get_logger().info(
             f'{READY_MESSAGE} {self.subscription.topic_name} (joint '
             f'{values["crank_joint"]!r}), publishing under {self.get_name()}/'
-            + ('' if self.recorder is None else f'; recording to {self.recorder.path}'))
+            + self._recording_text())
         if not self.estimator.compiled:
             self.get_logger().warning(
                 'the compiled estimator step (flexlink_ros.core.estimation._radau_step) is '

@@ -184,3 +184,17 @@ def test_a_signal_ends_a_split_recording_at_the_floor_within_five_seconds_comple
     assert counts[INPUT] == sent
     assert sum(counts.values()) == metadata['message_count']
     assert read_with_mcap_ros2(bag) == counts
+
+
+def test_a_refused_record_path_is_said_in_the_ready_line_and_leaves_nothing(tmp_path, processes):
+    """A 250-character record.path: refused, the ready line says so, no directory left."""
+    bag = tmp_path / ('x' * 250)
+    node_process = NodeProcess(tmp_path, 'record.enabled:=true', f'record.path:={bag}')
+    processes.append(node_process)
+    node_process.wait_for(READY_MESSAGE, READY_TIMEOUT_S)
+    assert node_process.stop(signal.SIGTERM) == 0
+    ready = [line for line in node_process.log().splitlines() if READY_MESSAGE in line]
+    assert len(ready) == 1 and 'recording to' not in ready[0], ready
+    assert 'not recording (cannot record to' in ready[0] and 'File name too long' in ready[0]
+    assert not bag.exists() and sorted(p.name for p in tmp_path.iterdir()
+                                       if not p.name.endswith('.log')) == []
