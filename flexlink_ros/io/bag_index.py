@@ -13,6 +13,7 @@ messages of a file cut short into a complete file with the ``rosbag2`` metadata 
 """
 
 import dataclasses
+import os
 import pathlib
 import re
 
@@ -156,7 +157,7 @@ def bag_topics(scans):
     return topics
 
 
-def rewrite_complete(source, destination, opening, closing):
+def rewrite_complete(source, destination, opening, closing, mode=0o644):
     """
     Write every intact message of an MCAP file into a new, complete file.
 
@@ -172,12 +173,15 @@ def rewrite_complete(source, destination, opening, closing):
         The new file; created exclusively (refused if anything is there).
     opening, closing : dict
         The maps of the two ``rosbag2`` records (:func:`.bag_metadata.serialized_metadata`).
+    mode : int
+        Permission bits of the new file (from its creation on, so never more open).
 
     """
     salvage = Salvage()
     buffer = map_file(source)
     try:
-        with create_exclusive(destination) as stream:
+        with create_exclusive(destination, mode) as stream:
+            os.fchmod(stream.fileno(), mode)     # exactly, whatever the umask
             writer = McapFileWriter(stream, chunk_size=128 * 1024, compression='zstd',
                                     spill_directory=pathlib.Path(destination).parent)
             copy = _Copy(writer, salvage, opening)

@@ -19,7 +19,7 @@ import stat
 from mcap.writer import LIBRARY_IDENTIFIER
 import numpy as np
 
-from .mcap_writer import McapFileWriter
+from .mcap_writer import COMPRESSIONS, McapFileWriter
 from .msg_schema import message_definition, offered_qos_yaml, type_hash
 
 LIBRARY = f'flexlink_ros recorder; {LIBRARY_IDENTIFIER}'
@@ -106,7 +106,7 @@ def remove_directories(created):
             return
 
 
-def create_exclusive(path):
+def create_exclusive(path, mode=0o644):
     """
     Open a new file for writing; fail if anything (even a dangling link) is at ``path``.
 
@@ -114,6 +114,8 @@ def create_exclusive(path):
     ----------
     path : pathlib.Path
         The file to create.
+    mode : int
+        Its permission bits (less the umask).
 
     Returns
     -------
@@ -121,7 +123,7 @@ def create_exclusive(path):
 
     """
     try:
-        descriptor = os.open(path, _EXCLUSIVE_FLAGS, 0o644)
+        descriptor = os.open(path, _EXCLUSIVE_FLAGS, mode)
     except FileExistsError:
         refuse_existing(path)   # says what is there
         raise
@@ -277,6 +279,25 @@ def split_due(current, split_size_bytes, split_duration_ns, log_time_ns):
     too_long = (split_duration_ns
                 and log_time_ns - current.first_log_ns >= split_duration_ns)
     return bool(too_big or too_long)
+
+
+def check_settings(path, split_size_bytes, split_duration_s, chunk_size_bytes, flush_period_s,
+                   compression):
+    """Raise ValueError naming the first of a recorder's settings that cannot be used."""
+    if split_size_bytes < 0:
+        raise ValueError(f'`split_size_bytes` must be >= 0, got {split_size_bytes}')
+    if split_duration_s < 0:
+        raise ValueError(f'`split_duration_s` must be >= 0, got {split_duration_s}')
+    if path.suffix == '.mcap' and (split_size_bytes or split_duration_s):
+        raise ValueError('`split_size_bytes`/`split_duration_s` need a bag directory path, '
+                         f'not a single .mcap file ({path})')
+    if chunk_size_bytes < 1024:
+        raise ValueError(f'`chunk_size_bytes` must be >= 1024, got {chunk_size_bytes}')
+    if not flush_period_s > 0:
+        raise ValueError(f'`flush_period_s` must be > 0, got {flush_period_s}')
+    if compression not in COMPRESSIONS:
+        raise ValueError(f'`compression` must be one of {sorted(COMPRESSIONS)}, '
+                         f'got {compression!r}')
 
 
 def split_refusal(name, value, floor, unit):

@@ -70,7 +70,7 @@ class NodeRecording:
         return recorder
 
     def _recording_text(self):
-        """What the ready line says of the recording: the truth, also when it was refused."""
+        """Say in the ready line what the recording does (also that it was refused)."""
         recorder = self.recorder
         if recorder is None:
             return ''
