@@ -27,7 +27,8 @@ import stat
 
 from .main import emit
 from ..errors import FlexlinkError, McapFileError
-from ..io.bag_index import bag_files, bag_topics, rewrite_complete, scan_bag_file
+from ..io.bag_files import bag_files
+from ..io.bag_index import bag_topics, rewrite_complete, scan_bag_file
 from ..io.bag_lock import lock_bag, unlock_bag
 from ..io.bag_metadata import serialized_metadata, UNSET_NS, write_bag_metadata
 
@@ -88,7 +89,8 @@ def reindex_bag(bag, force=False):
 def _reindex_locked(bag, force):
     """Reindex ``bag`` while holding its lock (see :func:`reindex_bag`)."""
     removed = remove_stale_salvage(bag)
-    files = bag_files(bag)
+    unsafe = []
+    files = bag_files(bag, unsafe, rosbag2_names=True)
     if not files:
         raise FlexlinkError(f'{bag} holds no {bag.resolve().name}_<N>.mcap file (as rosbag2 '
                             'names them): not a bag directory')
@@ -96,7 +98,8 @@ def _reindex_locked(bag, force):
     if os.path.lexists(metadata) and not force:
         raise FlexlinkError(f'{metadata} exists (the recording was closed, and rosbags and '
                             'ros2 bag open it as it is); --force rebuilds it from the files')
-    scans, skipped = [], []
+    scans = []
+    skipped = [{'path': str(path), 'reason': reason} for path, reason in unsafe]
     for n, path in enumerate(files):
         scan = _scan_or_none(path, skipped)
         if scan is None:

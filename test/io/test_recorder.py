@@ -401,3 +401,14 @@ def test_a_refused_path_leaves_nothing_behind_so_the_next_start_is_not_refused(t
             recorder.open()
         assert recorder.state is RecorderState.FAILED
         assert not (tmp_path / 'new').exists()
+
+
+@pytest.mark.parametrize('option, value', [('--split-size-mb', '0.001'),
+                                           ('--split-duration-s', '0.001')])
+def test_mcap_record_refuses_splits_below_the_floor_before_recording(tmp_path, option, value):
+    out = tmp_path / 'tiny'
+    done = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'mcap-record',
+                           str(out), '--topic', 'joint_states:sensor_msgs/msg/JointState',
+                           option, value], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 1 and f'{option} must be 0 (no split) or at least' in done.stderr
+    assert not out.exists()
