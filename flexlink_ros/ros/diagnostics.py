@@ -52,9 +52,10 @@ def input_status(totals, period, values, topic, rate_hz, stale_s):
     elif rate_hz < values['diagnostics.min_rate_hz']:
         level, message = WARN, f'input rate {rate_hz:.1f} Hz below ' \
             f'{values["diagnostics.min_rate_hz"]:g} Hz'
-    elif period.rejected or period.counts.get('outlier'):
+    elif period.rejected or period.counts.get('outlier') or period.counts.get('conflicting'):
         level, message = WARN, (f'{period.rejected} input messages skipped, '
-                                f'{period.counts.get("outlier", 0)} outliers')
+                                f'{period.counts.get("outlier", 0)} outliers, '
+                                f'{period.counts.get("conflicting", 0)} conflicting')
     return status('input', level, message, input_counts(
         totals, period, {'topic': topic, 'rate_hz': rate_hz, 'stale_s': stale_s}))
 

@@ -34,7 +34,7 @@ from .startup import check_startup_signal
 from ..core.estimation.sample import SampleFlag
 from ..core.estimation.streaming import StreamingEstimator
 from ..core.reduction.soft_basis import soft_basis_text
-from ..errors import FlexlinkError, InputRejected, OutlierSample
+from ..errors import ConflictingSample, FlexlinkError, InputRejected, OutlierSample
 from ..io import cdr
 from ..io.markers import MarkerEncoder
 from ..names import FIRST_INPUT_MESSAGE, READY_MESSAGE, TOPICS
@@ -185,6 +185,13 @@ class EstimatorPipeline(NodeRecording):
 
     def _on_joint_state(self, data):
         receive_ns = self._clock.now().nanoseconds
+        estimator = self.estimator
+        if estimator is None or self.subscription is None:
+            # Queued before a deactivate or cleanup that ran first: an inactive node's rule.
+            if self.totals is not None:
+                self.totals.received += 1
+                self.totals.counts['inactive'] += 1
+            return
         self.totals.received += 1
         if len(data) > cdr.MAX_MESSAGE_BYTES:   # not recorded either
             self._refuse('malformed', f'{len(data)} bytes, beyond the bound of '
@@ -193,19 +200,19 @@ class EstimatorPipeline(NodeRecording):
         if self.recorder is not None:
             self._record_input(data, receive_ns)
         try:
-            self._estimate(data)
+            self._estimate(data, estimator)
         except Exception as exc:    # last resort: no message may stop the node
             self.get_logger().error(f'unexpected {type(exc).__name__} on an input '
                                     f'message: {one_line(exc)}',
                                     throttle_duration_sec=WARN_THROTTLE_S)
             self._refuse('internal', f'{type(exc).__name__}: {one_line(exc)}')
 
-    def _estimate(self, data):
+    def _estimate(self, data, estimator):
         try:
             stamp_ns, angle, speed = crank_sample(data, self.values['crank_joint'],
                                                   self._deserialize)
             start = time.perf_counter_ns()
-            sample = self.estimator.update(stamp_ns, angle, speed)
+            sample = estimator.update(stamp_ns, angle, speed)
             self.period.update_ns.append(time.perf_counter_ns() - start)
         except InputRejected as exc:
             self._refuse(exc.kind, str(exc))
@@ -213,6 +220,9 @@ class EstimatorPipeline(NodeRecording):
         except OutlierSample as exc:
             self.period.flags |= SampleFlag.OUTLIER
             self._refuse('outlier', str(exc))
+            return
+        except ConflictingSample as exc:
+            self._refuse('conflicting', str(exc))
             return
         except (FlexlinkError, ValueError) as exc:
             self._refuse('estimator', one_line(exc))
