@@ -48,8 +48,9 @@ def register(subparsers):
                         help='modal damping ratio of the package (default: the mechanism '
                         "file; 0.012 matches the peer's beta = 1e-4 s at the first modes)")
     parser.add_argument('--stiffness-damping', type=float, default=None, metavar='BETA_S',
-                        help='damp the package with beta [s] on the link-frame strain rates '
-                        'and bearing deflection rates, as the peer (default: modal zeta)')
+                        help='damp the package and the peer with beta [s] on the strain rates '
+                        'and bearing deflection rates (default: the package with modal zeta, '
+                        'the peer with beta 1e-4 s)')
     parser.add_argument('--revolutions', type=int, default=None, metavar='N',
                         help='peer revolutions (default: until its start transient decays)')
     parser.add_argument('--cache', default=None, metavar='DIR',
