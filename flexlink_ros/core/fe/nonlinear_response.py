@@ -58,7 +58,7 @@ class Run:
 
 def stage_systems(model, run, angles):
     """
-    The :class:`StageSystem` data at crank angles (N,): arrays with a leading axis N.
+    Return the :class:`StageSystem` data at crank angles (N,): arrays with a leading axis N.
 
     Linear part: M, ``w C1 + beta K_b`` (+ modal zeta), ``K_b + K_c`` (+ K_G with the linear
     strain), R; element gathers ``T_e`` and ``w_L D1_e``.

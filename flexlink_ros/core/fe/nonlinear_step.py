@@ -84,8 +84,8 @@ def stage_forces(law, stage, disp, vel, tangents=True):
     if not tangents:
         return out, None, None
     k_t, c_t = element_tangent(law.elements, q, rate, law.beta, law.nonlinear)
-    f_q = project_tangent(stage.gather, k_t) + project_tangent(stage.gather, c_t,
-                                                                stage.rate_gather)
+    f_q = (project_tangent(stage.gather, k_t)
+           + project_tangent(stage.gather, c_t, stage.rate_gather))
     f_v = project_tangent(stage.gather, c_t)
     return out, f_q, f_v
 
@@ -118,6 +118,10 @@ def newton_step(method, h, q, v, stage, law, guess=None, sensitivity=False,
         Starting stage accelerations (default zero).
     sensitivity : bool
         Also return the linearised step map d(q_new, v_new)/d(q, v), (2 n, 2 n).
+    tolerance : float
+        Newton stops when the update is this small against the stage accelerations.
+    iterations : int
+        Newton iterations at most.
 
     Returns
     -------
@@ -170,7 +174,7 @@ def newton_step(method, h, q, v, stage, law, guess=None, sensitivity=False,
 
 def _step_map(method, h, factor, stiffness, damping):
     """
-    The linearised step ``d(q_new, v_new)/d(q, v)`` from the last Newton Jacobian, (2n, 2n).
+    Return the linearised step ``d(q_new, v_new)/d(q, v)`` from the last Jacobian, (2n, 2n).
 
     dr_i/dq = K_i, dr_i/dv = C_i + c_i h K_i (tangents included), so
     ``dA/d(q, v) = -J^-1 [K_i | C_i + c_i h K_i]``.
