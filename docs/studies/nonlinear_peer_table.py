@@ -41,7 +41,8 @@ def row(record):
             f"{100 * rms['linear']['lever_tip']:.1f} / {100 * rms['linear']['coupler_mid']:.1f} | "
             f"{100 * rms['nonlinear']['lever_tip']:.1f} / "
             f"{100 * rms['nonlinear']['coupler_mid']:.1f} | "
-            f"{100 * worst_p2p(nl, 'lever_tip'):+.1f} / {100 * worst_p2p(nl, 'coupler_mid'):+.1f} | "
+            f"{100 * worst_p2p(nl, 'lever_tip'):+.1f} / "
+            f"{100 * worst_p2p(nl, 'coupler_mid'):+.1f} | "
             f"{record['spectral_radius']:.3f} | {record['newton_mean']:.2f} | "
             f"{1e3 * record['step_cost_s']:.1f} |")
 

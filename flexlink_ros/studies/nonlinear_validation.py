@@ -149,7 +149,8 @@ def format_nonlinear(record):
                  f"{'yes' if met['coupler_mid'] else 'NO'}")
     moduli = ', '.join(f'{x:.3f}' for x in record['floquet_moduli'])
     lines.append(f"Floquet multipliers |mu| {moduli}; Newton {record['newton_mean']:.2f} "
-                 f"iterations per step (max {record['newton_max']}), {1e3 * record['step_cost_s']:.1f} ms per step "
+                 f"iterations per step (max {record['newton_max']}), "
+                 f"{1e3 * record['step_cost_s']:.1f} ms per step "
                  f"({1e3 * record['step_cpu_s']:.1f} ms CPU), "
                  f"{record['revolutions']} revolutions, {record['wall_s']:.0f} s")
     return '\n'.join(lines)
