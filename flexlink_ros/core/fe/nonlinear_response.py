@@ -40,6 +40,9 @@ PERIODIC_TOLERANCE = 1e-8
 MAX_REVOLUTIONS = 60
 # Steps whose stage systems are built together (memory: CHUNK * s * E * 6 * n doubles x 2).
 CHUNK_STEPS = 48
+# A revolution's stage systems are kept for the next revolutions when they fit in this many
+# bytes (about 220 MB for 8 elements per link, rigid crank, bearing springs: n = 54).
+STAGE_CACHE_BYTES = 256 * 2 ** 20
 
 
 @dataclasses.dataclass(frozen=True)
@@ -92,9 +95,18 @@ def _chunk_stages(model, run, chunk):
     return [StageSystem(*(x[i] for x in shaped)) for i in range(len(chunk))]
 
 
-def march(model, run, q, v, steps, sensitivity=False, stride=None):
+def stage_bytes(model, run, steps):
+    """Memory [bytes] of ``steps`` steps' :class:`StageSystem` data."""
+    s, n, count = run.integrator.c.shape[0], model.size, len(run.law.elements)
+    return 8 * steps * s * (3 * n * n + n + 2 * count * 6 * n)
+
+
+def march(model, run, q, v, steps, sensitivity=False, stride=None, cache=None):
     """
     March ``steps`` steps of the nonlinear model from (q, v) at ``run.start_angle``.
+
+    ``cache``: a list; empty, it is filled with every step's :class:`StageSystem`; holding
+    ``steps`` of them, they are used instead of assembling again (same run, same steps).
 
     Returns
     -------
@@ -108,9 +120,13 @@ def march(model, run, q, v, steps, sensitivity=False, stride=None):
     stride = run.stride if stride is None else stride
     product = np.eye(2 * n) if sensitivity else None
     guess, saved, iterations = None, [], np.zeros(steps, dtype=int)
+    cached = cache is not None and len(cache) == steps
     for begin in range(0, steps, CHUNK_STEPS):
         chunk = np.arange(begin, min(begin + CHUNK_STEPS, steps))
-        for k, stage in zip(chunk, _chunk_stages(model, run, chunk)):
+        stages = cache[begin:chunk[-1] + 1] if cached else _chunk_stages(model, run, chunk)
+        if cache is not None and not cached:
+            cache.extend(stages)
+        for k, stage in zip(chunk, stages):
             if k % stride == 0:
                 saved.append((q, v))
             q, v, acc, iterations[k], step_map = newton_step(
@@ -146,9 +162,11 @@ def periodic_orbit(model, run, start, tolerance=PERIODIC_TOLERANCE,
     n = start.shape[0] // 2
     z0 = np.array(start, dtype=float)
     history = {'revolutions': 0, 'newton_updates': 0, 'mismatch': [], 'iterations': []}
+    # constant speed: every revolution meets the same stage systems
+    cache = [] if stage_bytes(model, run, run.steps) <= STAGE_CACHE_BYTES else None
 
     def revolution(state):
-        out = march(model, run, state[:n], state[n:], run.steps, sensitivity=True)
+        out = march(model, run, state[:n], state[n:], run.steps, sensitivity=True, cache=cache)
         history['revolutions'] += 1
         history['iterations'].append(out['iterations'])
         end = np.concatenate([out['q'], out['v']])
@@ -266,5 +284,6 @@ def nonlinear_response(model, speed, steps=DEFAULT_STEPS, points=DEFAULT_POINTS,
                             outputs=outputs, floquet_multipliers=multipliers, info=info)
 
 
-__all__ = ['PERIODIC_TOLERANCE', 'MAX_REVOLUTIONS', 'Run', 'stage_systems', 'march',
+__all__ = ['PERIODIC_TOLERANCE', 'MAX_REVOLUTIONS', 'STAGE_CACHE_BYTES', 'Run',
+           'stage_systems', 'stage_bytes', 'march',
            'periodic_orbit', 'make_run', 'nonlinear_response']

@@ -27,7 +27,7 @@ import dataclasses
 import numpy as np
 import scipy.linalg
 
-from .nonlinear_strain import element_force, element_tangent, project_force, project_tangent
+from .nonlinear_strain import element_coordinates, element_force, element_tangent, project_force
 from ...errors import ConvergenceError
 
 # Newton stops when the stage-acceleration update is this small against the accelerations.
@@ -76,17 +76,18 @@ def stage_forces(law, stage, disp, vel, tangents=True):
 
     ``disp``, ``vel``: U and U' at the stages, (s, n).
     """
-    q = np.einsum('seai,si->sea', stage.gather, disp)
-    rate = (np.einsum('seai,si->sea', stage.gather, vel)
-            + np.einsum('seai,si->sea', stage.rate_gather, disp))
-    force, _ = element_force(law.elements, q, rate, law.beta, law.nonlinear)
-    out = project_force(stage.gather, force)
+    gather, rate_gather = stage.gather, stage.rate_gather
+    shape = gather.shape[:-1]
+    q = element_coordinates(gather, disp)
+    rate = (element_coordinates(gather, vel) + element_coordinates(rate_gather, disp))
+    force, axial = element_force(law.elements, q, rate, law.beta, law.nonlinear)
+    out = project_force(gather, force)
     if not tangents:
         return out, None, None
-    k_t, c_t = element_tangent(law.elements, q, rate, law.beta, law.nonlinear)
-    f_q = (project_tangent(stage.gather, k_t)
-           + project_tangent(stage.gather, c_t, stage.rate_gather))
-    f_v = project_tangent(stage.gather, c_t)
+    k_t, c_t = element_tangent(law.elements, q, rate, law.beta, law.nonlinear, axial)
+    flat = np.swapaxes(gather.reshape(shape[0], -1, gather.shape[-1]), -1, -2)
+    f_q = flat @ (k_t @ gather + c_t @ rate_gather).reshape(flat.shape[0], -1, flat.shape[1])
+    f_v = flat @ (c_t @ gather).reshape(flat.shape[0], -1, flat.shape[1])
     return out, f_q, f_v
 
 

@@ -165,13 +165,13 @@ def element_force(elements, q, rate, beta, nonlinear=True):
     return axial[..., None] * gradient + bending, axial
 
 
-def element_tangent(elements, q, rate, beta, nonlinear=True):
+def element_tangent(elements, q, rate, beta, nonlinear=True, axial=None):
     """
     Tangents of :func:`element_force`: ``df/dq`` and ``df/dq'``.
 
     ``df/dq = (EA/l) g (g + beta G q')^T + N G + K_b`` and
     ``df/dq' = beta ((EA/l) g g^T + K_b)`` with ``g = b + G q`` (``g = b``, no ``N G``, for
-    the linear strain).
+    the linear strain). ``axial``: N of :func:`element_force` at (q, rate) when known.
 
     Returns
     -------
@@ -184,7 +184,8 @@ def element_tangent(elements, q, rate, beta, nonlinear=True):
     damping = beta * (outer + elements.bending)
     stiffness = outer + elements.bending
     if nonlinear:
-        _, axial = element_force(elements, q, rate, beta, nonlinear)
+        if axial is None:
+            _, axial = element_force(elements, q, rate, beta, nonlinear)
         rate_term = np.einsum('...ab,...b->...a', elements.unit_geometric, rate)
         stiffness = (stiffness + beta * scale * gradient[..., :, None] * rate_term[..., None, :]
                      + axial[..., None, None] * elements.unit_geometric)
@@ -219,9 +220,18 @@ def element_gather(elements, link_gathers):
     return np.concatenate(parts, axis=-3)
 
 
+def element_coordinates(gather, x):
+    """Element coordinates ``q_e = T_e x``: gather (..., E, 6, m), x (..., m) -> (..., E, 6)."""
+    shape = gather.shape
+    flat = gather.reshape(shape[:-3] + (shape[-3] * shape[-2], shape[-1]))
+    return (flat @ x[..., None])[..., 0].reshape(shape[:-1])
+
+
 def project_force(gather, force):
     """Generalized force ``sum_e T_e^T f_e`` from element forces, shape (..., m)."""
-    return np.einsum('...eai,...ea->...i', gather, force)
+    shape = gather.shape
+    flat = gather.reshape(shape[:-3] + (shape[-3] * shape[-2], shape[-1]))
+    return (np.swapaxes(flat, -1, -2) @ force.reshape(flat.shape[:-1] + (1,)))[..., 0]
 
 
 def project_tangent(gather, tangent, right=None):
@@ -240,4 +250,4 @@ def project_tangent(gather, tangent, right=None):
 
 __all__ = ['AXIAL', 'Elements', 'model_elements', 'element_strain', 'strain_gradient',
            'element_force', 'element_tangent', 'strain_energy', 'element_gather',
-           'project_force', 'project_tangent']
+           'element_coordinates', 'project_force', 'project_tangent']
