@@ -38,8 +38,9 @@ from ...errors import ConvergenceError
 # Shooting stops when the revolution's change is this small against the orbit's size.
 PERIODIC_TOLERANCE = 1e-8
 MAX_REVOLUTIONS = 60
-# Steps whose stage systems are built together (memory: CHUNK * s * E * 6 * n doubles x 2).
+# Steps whose stage systems are built together, at most (and at most CHUNK_BYTES of them).
 CHUNK_STEPS = 48
+CHUNK_BYTES = 64 * 2 ** 20
 # A revolution's stage systems are kept for the next revolutions when they fit in this many
 # bytes (about 220 MB for 8 elements per link, rigid crank, bearing springs: n = 54).
 STAGE_CACHE_BYTES = 256 * 2 ** 20
@@ -121,8 +122,9 @@ def march(model, run, q, v, steps, sensitivity=False, stride=None, cache=None):
     product = np.eye(2 * n) if sensitivity else None
     guess, saved, iterations = None, [], np.zeros(steps, dtype=int)
     cached = cache is not None and len(cache) == steps
-    for begin in range(0, steps, CHUNK_STEPS):
-        chunk = np.arange(begin, min(begin + CHUNK_STEPS, steps))
+    size = max(1, min(CHUNK_STEPS, CHUNK_BYTES // stage_bytes(model, run, 1)))
+    for begin in range(0, steps, size):
+        chunk = np.arange(begin, min(begin + size, steps))
         stages = cache[begin:chunk[-1] + 1] if cached else _chunk_stages(model, run, chunk)
         if cache is not None and not cached:
             cache.extend(stages)
