@@ -67,7 +67,7 @@ def _monotone_turns(angles, starts):
 
 def period_ids(stamps_ns, angles, estimated, flags, per='revolution'):
     """
-    Number the periods of a recording 0, 1, ... in sample order, each a run of samples.
+    Give each sample its period's number: 0, 1, ... in sample order, each a run of samples.
 
     Parameters
     ----------
