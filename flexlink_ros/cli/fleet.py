@@ -75,29 +75,36 @@ def output_paths(bags, directory):
     return paths
 
 
-def start_ray(address, num_cpus):
+def import_ray():
     """
-    Start an embedded Ray on this machine (or join the cluster at ``address``), quietly.
+    Import Ray (and pyarrow, the table's writer, which ``ray[data]`` brings), or refuse.
 
     Returns
     -------
     module
-        ``ray``, initialised.
+        ``ray``.
 
     """
     # No usage report leaves the machine; set before Ray reads it.
     os.environ['RAY_USAGE_STATS_ENABLED'] = '0'
-    if not address:
-        # A one-machine Ray: every Ray process on the loopback address.
-        os.environ.setdefault('RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER', '0')
-    import ray
+    try:
+        import ray
+        import pyarrow   # noqa: F401
+    except ImportError as exc:
+        raise ValueError(f"needs Ray (pip install '.[fleet]': ray[data]==2.60.0): {exc}") from None
+    return ray
+
+
+def start_ray(ray, address, num_cpus):
+    """Start an embedded Ray on this machine (or join the cluster at ``address``), quietly."""
     quiet = {'logging_level': logging.ERROR, 'log_to_driver': False}
     if address:
         ray.init(address=address, **quiet)
     else:
+        # A one-machine Ray: every Ray process on the loopback address.
+        os.environ.setdefault('RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER', '0')
         ray.init(num_cpus=num_cpus or os.cpu_count(), include_dashboard=False,
                  object_store_memory=OBJECT_STORE_BYTES, **quiet)
-    return ray
 
 
 def recompute_on_node(bag, fallback, settings, output):
@@ -156,11 +163,12 @@ def run_fleet(args):
                              warm_start=not args.no_warm_start, cache_dir=args.cache_dir,
                              use_cache=not args.no_cache, node_name=args.node_name,
                              frame_id=args.frame_id, markers_every_n=args.markers_every_n)
+    ray = import_ray()
     times = {}
     results = []
     if bags:
         start = time.perf_counter()
-        ray = start_ray(args.address, args.num_cpus)
+        start_ray(ray, args.address, args.num_cpus)
         times['ray_start_s'] = time.perf_counter() - start
         try:
             with Progress('fleet', len(bags), unit='bag') as progress:

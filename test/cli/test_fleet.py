@@ -21,6 +21,7 @@ from rosbags.highlevel import AnyReader, AnyReaderError
 from sensor_msgs.msg import JointState
 
 RAY = pathlib.Path(sys.executable).with_name('ray')
+ROOT = pathlib.Path(__file__).resolve().parents[2]
 # Replay's --json keys whose values depend on the run's timing or output path.
 TIMING_KEYS = {'read_s', 'estimate_s', 'write_s', 'samples_per_s', 'times_real_time',
                'output', 'output_files', 'input'}
@@ -141,6 +142,26 @@ def test_without_a_mechanism_a_bag_fails_with_its_reason(bags, tmp_path):
     assert 'no recorded mechanism' in table.loc[0, 'error']
     again = flexlink('fleet', str(bags / 'steady'), '--out', str(tmp_path))
     assert again.returncode == 1 and 'summary.parquet' in again.stderr and 'exists' in again.stderr
+
+
+# Runs the CLI with ray and pyarrow unimportable (as without the .[fleet] extra).
+WITHOUT_RAY = """
+import sys
+sys.modules['ray'] = sys.modules['pyarrow'] = None
+from flexlink_ros.cli import main
+main.build_parser()     # every command's module imports
+assert main.main(['kinematics', '--mechanism', 'kang1990', '--crank-deg', '0:360:90']) == 0
+sys.exit(main.main(sys.argv[1:]))
+"""
+
+
+def test_without_ray_only_fleet_refuses(bags, tmp_path):
+    result = subprocess.run([sys.executable, '-c', WITHOUT_RAY, 'fleet', str(bags / 'steady'),
+                             '--out', str(tmp_path / 'out'), '--mechanism', 'cho1992'],
+                            capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert result.returncode == 1, result.stderr
+    assert "flexlink fleet: error: needs Ray (pip install '.[fleet]'" in result.stderr
+    assert 'Traceback' not in result.stderr and not (tmp_path / 'out').exists()
 
 
 def free_port(host):
