@@ -153,6 +153,8 @@ def run_fleet(args):
     """
     bags, unmatched = expand_bags(args.bags)
     out = pathlib.Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f'`--out` {out} is not a directory')
     try:    # refused before any work, with the recorder's own test
         refuse_existing(out / TABLE_NAME)
         outputs = output_paths(bags, out) if args.write_mcap else [None] * len(bags)
@@ -242,3 +244,8 @@ def register(subparsers):
                         help='start from the static deflection, not the periodic state')
     add_estimator_arguments(parser)
     parser.set_defaults(func=_fleet_command, mechanism=None)
+    fleet_help = {'mechanism': 'mechanism YAML file or bare name for the bags that carry no '
+                  'recorded mechanism (default: none; such bags fail)',
+                  'json': 'print one JSON object per bag (the last line goes to stderr)'}
+    for action in parser._actions:
+        action.help = fleet_help.get(action.dest, action.help)

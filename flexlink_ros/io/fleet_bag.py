@@ -250,7 +250,9 @@ def _recompute(bag, fallback, settings, output, start):
         summary.update(output=status['path'], output_files=status['files'],
                        output_topics=status['topics'])
     total = time.perf_counter() - start
-    summary.update(seconds=total, write_s=total - read_s - estimate_s if output else None)
+    summary['seconds'] = total
+    if output is not None:
+        summary['write_s'] = total - read_s - estimate_s
     summary['samples_per_s'] = summary['samples'] / total if total > 0 else math.inf
     summary['times_real_time'] = summary['span_s'] / total if total > 0 else math.inf
     skipped = skipped_per_period(messages, samples, ids, settings.joint)

@@ -142,6 +142,9 @@ def test_without_a_mechanism_a_bag_fails_with_its_reason(bags, tmp_path):
     assert 'no recorded mechanism' in table.loc[0, 'error']
     again = flexlink('fleet', str(bags / 'steady'), '--out', str(tmp_path))
     assert again.returncode == 1 and 'summary.parquet' in again.stderr and 'exists' in again.stderr
+    a_file = tmp_path / 'summary.parquet'
+    again = flexlink('fleet', str(bags / 'steady'), '--out', str(a_file))
+    assert again.returncode == 1 and 'is not a directory' in again.stderr
 
 
 # Runs the CLI with ray and pyarrow unimportable (as without the .[fleet] extra).
