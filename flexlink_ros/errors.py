@@ -75,6 +75,19 @@ class OutlierSample(FlexlinkError):
         super().__init__(f'outlier: {reason}')
 
 
+class ConflictingSample(FlexlinkError):
+    """
+    Raised for a sample with the stamp of the last accepted one but another angle (skipped).
+
+    Two readings cannot both be the crank at one instant: the first stays, this one is
+    counted and skipped (not taken as a restart, which would publish its angle).
+    """
+
+    def __init__(self, reason):
+        self.reason = reason
+        super().__init__(f'conflicting: {reason}')
+
+
 class McapFileError(FlexlinkError):
     """Raised if a file is not an MCAP file at all (its reason names why)."""
 

@@ -22,6 +22,7 @@ COMMANDS = {
     'beam': 'flexlink_ros.cli.beam',
     'demo': 'flexlink_ros.cli.demo',
     'estimate': 'flexlink_ros.cli.estimate',
+    'fleet': 'flexlink_ros.cli.fleet',
     'plan': 'flexlink_ros.cli.estimate',
     'bench': 'flexlink_ros.cli.estimate',
     'modes': 'flexlink_ros.cli.flex',

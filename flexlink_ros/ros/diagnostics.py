@@ -20,7 +20,7 @@ from ..core.validity import VALIDITY_THRESHOLD
 from ..names import JOINT_NAMES
 
 
-def input_status(totals, period, values, topic, rate_hz, stale_s):
+def input_status(totals, period, values, topic, rate_hz, stale_s, watch=({}, ())):
     """
     Say whether valid input arrives, and what became of every received message.
 
@@ -38,6 +38,8 @@ def input_status(totals, period, values, topic, rate_hz, stale_s):
         Valid samples per second in the period.
     stale_s : float
         Time since the last valid sample [s] (inf if none yet).
+    watch : (dict, list of str)
+        :meth:`.input_watch.InputWatch.judge`'s facts (key values) and sentences (WARN).
 
     Returns
     -------
@@ -52,11 +54,16 @@ def input_status(totals, period, values, topic, rate_hz, stale_s):
     elif rate_hz < values['diagnostics.min_rate_hz']:
         level, message = WARN, f'input rate {rate_hz:.1f} Hz below ' \
             f'{values["diagnostics.min_rate_hz"]:g} Hz'
-    elif period.rejected or period.counts.get('outlier'):
+    elif period.rejected or period.counts.get('outlier') or period.counts.get('conflicting'):
         level, message = WARN, (f'{period.rejected} input messages skipped, '
-                                f'{period.counts.get("outlier", 0)} outliers')
+                                f'{period.counts.get("outlier", 0)} outliers, '
+                                f'{period.counts.get("conflicting", 0)} conflicting')
+    facts, sentences = watch
+    if sentences:
+        message = '; '.join(list(sentences) if level == OK else [message, *sentences])
+        level = max(level, WARN)
     return status('input', level, message, input_counts(
-        totals, period, {'topic': topic, 'rate_hz': rate_hz, 'stale_s': stale_s}))
+        totals, period, {'topic': topic, 'rate_hz': rate_hz, 'stale_s': stale_s, **facts}))
 
 
 def input_counts(totals, period, values):

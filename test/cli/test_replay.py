@@ -220,3 +220,29 @@ def test_replay_of_a_bag_skips_a_fifo_links_out_and_a_device(tmp_path, names):
     assert sorted(pathlib.Path(d['file']).name for d in result['damaged']) == sorted(planted)
     for name in planted:
         assert f"{tmp_path / 'bag' / name} skipped" in done.stderr
+
+
+def evil_mechanism(tmp_path, name='../../../escape/dir/x'):
+    """Write the shipped Cho 1992 file with a name that spells a path."""
+    import yaml
+    from flexlink_ros.core.mechanism_file import find_config
+    data = yaml.safe_load(find_config('cho1992').read_text())
+    data['name'] = name
+    path = tmp_path / 'evil.yaml'
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def test_a_mechanism_name_that_spells_a_path_is_refused_in_one_line(tmp_path):
+    bag = tmp_path / 'in.mcap'
+    write_recording(bag, [1_700_000_000 * 10**9 + k * 10**6 for k in range(5)],
+                    [0.01 * k for k in range(5)], [10.0] * 5)
+    cache = tmp_path / 'a' / 'b' / 'c' / 'cache'
+    result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'replay', str(bag),
+                             '--out', str(tmp_path / 'out'), '--mechanism',
+                             str(evil_mechanism(tmp_path)), '--cache-dir', str(cache)],
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode != 0 and 'Traceback' not in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1, result.stderr
+    assert 'name:' in result.stderr and 'not a plain name' in result.stderr
+    assert not (tmp_path / 'a' / 'escape').exists() and not cache.exists()
