@@ -106,7 +106,7 @@ def directory_problem(path):
     if not stat.S_ISDIR(info.st_mode):
         return f'{path} is not a directory'
     if info.st_uid not in (os.geteuid(), 0):
-        return f'directory {path} is {_owner_text(info)} or root'
+        return f'directory {path} is {_owner_text(info)}' + (' or root' if os.geteuid() else '')
     mode = stat.S_IMODE(info.st_mode)
     if mode & GROUP_OTHER_WRITE and not (mode & stat.S_ISVTX and info.st_uid == os.geteuid()):
         return (f'directory {path} is writable by group or others (mode {mode:04o}'
