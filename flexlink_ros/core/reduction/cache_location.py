@@ -3,8 +3,8 @@ Where model cache files live, and when one may be read (a rule after OpenSSH's S
 
 Paths stay inside the cache directory. A cache file is only as good as whoever could have
 written it: another local user who can write the file, or replace it in its directory, can
-make the node publish wrong deflections with a valid checksum. So a cache file is read only when all of this holds (the rule,
-:func:`untrusted_reason`; docs/model-cache.md says the same):
+make the node publish wrong deflections with a valid checksum. So a cache file is read only
+when all of this holds (the rule, :func:`untrusted_reason`; docs/model-cache.md says the same):
 
 1. the file is a regular file (not a symbolic link, FIFO or device), owned by the effective
    uid running the code, and not writable by group or others (mode & 0o022 == 0);
