@@ -2,7 +2,8 @@
 Errors of flexlink_ros.
 
 Every error the core raises on purpose is a :class:`FlexlinkError`. The node logs one and
-keeps running; the CLI prints it on one line and exits 1. Bad arguments raise ``ValueError``
+keeps running; the CLI prints it on one line and exits with its ``exit_code`` (1; 2 for a bag
+still being recorded). Bad arguments raise ``ValueError``
 naming the argument.
 """
 
@@ -12,6 +13,8 @@ import struct
 
 class FlexlinkError(Exception):
     """Root of the errors raised by flexlink_ros."""
+
+    exit_code = 1   # of the CLI when it stops on this error
 
 
 class MechanismError(FlexlinkError):
@@ -51,6 +54,12 @@ class CacheError(FlexlinkError):
 
 class RecorderError(FlexlinkError):
     """Raised if the MCAP recorder cannot write (unwritable path, full disk, closed file)."""
+
+
+class BagInUse(RecorderError):
+    """Raised if a bag directory is locked by the recorder that is still writing it."""
+
+    exit_code = 2
 
 
 class OutlierSample(FlexlinkError):

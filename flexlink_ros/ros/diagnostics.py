@@ -208,12 +208,12 @@ def joint_statuses(period, values, criteria_source):
 
 def recorder_status(state):
     """
-    Report the recording.
+    Report the recording: ERROR when it failed or lost messages to a full write queue.
 
     Parameters
     ----------
     state : dict or None
-        ``McapRecorder.status()``; None when not recording.
+        ``McapRecorder.status(list_files=False)``; None when not recording.
 
     Returns
     -------
@@ -223,11 +223,18 @@ def recorder_status(state):
     if state is None:
         return status('recorder', OK, 'disabled', {})
     failed = state['state'] == 'failed'
-    return status('recorder', ERROR if failed else OK,
-                  (f'FAILED: {state["error"]}' if failed else state['state']), {
-                      'path': state['path'], 'messages': state['message_count'],
-                      'dropped': state['dropped_count'], 'bytes': state['bytes_written'],
-                      'files': len(state['files'])})
+    lost = state.get('overflow_count', 0)
+    if failed:
+        text = f'FAILED: {state["error"]}'
+    elif lost:
+        text = (f'{state["state"]}; {lost} messages lost: the write queue was full (the disk '
+                'did not keep up)')
+    else:
+        text = state['state']
+    return status('recorder', ERROR if failed or lost else OK, text, {
+        'path': state['path'], 'messages': state['message_count'],
+        'dropped': state['dropped_count'], 'overflow': lost, 'bytes': state['bytes_written'],
+        'files': state['file_count']})
 
 
 def inactive_statuses(totals, topic, model_facts, recorder_state):

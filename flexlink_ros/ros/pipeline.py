@@ -133,7 +133,7 @@ class EstimatorPipeline(NodeRecording):
         self.get_logger().info(
             f'{READY_MESSAGE} {self.subscription.topic_name} (joint '
             f'{values["crank_joint"]!r}), publishing under {self.get_name()}/'
-            + ('' if self.recorder is None else f'; recording to {self.recorder.path}'))
+            + self._recording_text())
         if not self.estimator.compiled:
             self.get_logger().warning(
                 'the compiled estimator step (flexlink_ros.core.estimation._radau_step) is '
@@ -353,7 +353,8 @@ class EstimatorPipeline(NodeRecording):
         elif self.subscription is None:
             statuses = diagnostics.inactive_statuses(
                 self.totals, self.input_topic, self.model_facts,
-                None if self.recorder is None else self.recorder.status())
+                None if self.recorder is None
+                else self.recorder.status(list_files=False))
         else:
             statuses = self._active_statuses()
         return diagnostics.named(statuses, self.get_fully_qualified_name(),
@@ -379,7 +380,7 @@ class EstimatorPipeline(NodeRecording):
                 diagnostics.estimator_status(period, values, self.model_facts),
                 *diagnostics.joint_statuses(period, values, self.criteria_source),
                 diagnostics.recorder_status(None if self.recorder is None
-                                            else self.recorder.status())]
+                                            else self.recorder.status(list_files=False))]
 
     def _publish_diagnostics(self):
         self._set_overdue()

@@ -33,6 +33,28 @@ ANGLE_ALLOWANCE_RAD = 0.05
 REGIME_SAMPLES = 5
 
 
+def restart_reason(step_ns):
+    """
+    Say why a sample ``step_ns`` after the last accepted one restarts the estimate.
+
+    Parameters
+    ----------
+    step_ns : int
+        Its stamp minus the last accepted stamp [ns]: not positive, or beyond the reset gap.
+
+    Returns
+    -------
+    str
+        A backward step as a magnitude in ms (never "-0"), the same stamp said as such.
+
+    """
+    if step_ns < 0:
+        return f'stamp went back by {-step_ns * 1e-6:.6g} ms'
+    if step_ns == 0:
+        return 'same stamp as the last sample, another angle'
+    return f'gap of {step_ns * 1e-9:.6g} s'
+
+
 class InputGate:
     """
     Plausibility of input samples, checked before the crank filter sees them.
@@ -111,7 +133,7 @@ class InputGate:
                                              f'{last[1]:.6g} rad, not {angle:.6g} rad')
             if dt <= 0.0 or dt > self.reset_gap_s:
                 kind = self.START
-                message = f'stamp went back by {-dt:.6g} s' if dt <= 0.0 else f'gap of {dt:.6g} s'
+                message = restart_reason(stamp_ns - last[0])
             else:
                 reason = self.implausible(last, stamp_ns, angle, speed)
                 if reason:

@@ -161,3 +161,20 @@ def test_mixed_fuzz_never_gives_a_deflection_beyond_the_bound(toy_model, compile
     assert not refused_after
     assert all(math.isfinite(largest(s)) and largest(s) <= estimator.deflection_bound_m
                for s in after.values())
+
+
+@pytest.mark.parametrize('back_ns, text', [(500_000, 'stamp went back by 0.5 ms'),
+                                           (1, 'stamp went back by 1e-06 ms'),
+                                           (3_000_000_000, 'stamp went back by 3000 ms')])
+def test_a_backward_stamp_is_said_with_its_magnitude_in_ms(back_ns, text):
+    gate = InputGate(SPEED_MAX, 1e4)
+    gate.decide(10_000_000_000, 0.5, SPEED)
+    kind, flags, message = gate.decide(10_000_000_000 - back_ns, 0.5, SPEED)
+    assert kind == InputGate.START and message == text
+
+
+def test_a_same_stamp_with_another_angle_is_never_said_as_minus_zero():
+    gate = InputGate(SPEED_MAX, 1e4)
+    gate.decide(10_000_000_000, 0.5, SPEED)
+    _, _, message = gate.decide(10_000_000_000, 0.8, SPEED)
+    assert message and '-0' not in message and 'went back' not in message
