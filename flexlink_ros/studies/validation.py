@@ -42,6 +42,7 @@ from ..core.fe.second_order_dynamic import dynamic_pass
 from ..core.fe.second_order_full import corrected_response
 from ..core.fe.simulate import periodic_response
 from ..core.fe.stiffness_damping import system_matrices
+from ..core.reduction.cache_location import cache_file
 from ..core.validity import is_valid, nonlinearity_indicator, VALIDITY_THRESHOLD
 from ..errors import FlexlinkError
 
@@ -106,8 +107,8 @@ def _cache_name(cache, mech, rpm, settings):
     """File of a peer run in the cache directory: a hash of every setting that changes it."""
     key = repr((mech, float(rpm), settings.elements_per_link, settings.bearings,
                 settings.gravity, settings.beta_s, settings.revolutions, settings.peer_steps))
-    digest = hashlib.sha1(key.encode()).hexdigest()[:16]
-    return os.path.join(cache, f'peer_{mech.name}_{rpm:g}rpm_{digest}.npz')
+    digest = hashlib.sha1(key.encode()).hexdigest()
+    return str(cache_file(cache, f'peer_{mech.name}_{rpm:g}rpm', digest))
 
 
 def peer_run(mech, rpm, settings):
