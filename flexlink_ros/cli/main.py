@@ -192,7 +192,7 @@ def main(argv=None):
         return 141
     except (FlexlinkError, ValueError) as exc:
         print(f'flexlink {args.command}: error: {exc}', file=sys.stderr)
-        return 1
+        return getattr(exc, 'exit_code', 1)
     except OSError as exc:   # a missing or unreadable file, a full disk: said in one line
         print(f'flexlink {args.command}: error: {exc}', file=sys.stderr)
         return 1
