@@ -222,6 +222,9 @@ def test_fleet_on_a_two_node_cluster(bags, tmp_path):
     port = free_port('127.0.0.2')
     address = f'127.0.0.2:{port}'
     nodes = []
+    # The cluster's token (~/.ray/auth_token), made if missing (kept if there; not printed).
+    subprocess.run([str(RAY), 'get-auth-token', '--generate'], env=env, capture_output=True,
+                   check=True, timeout=60)
     try:
         with open(tmp_path / 'nodes.log', 'w') as log:
             nodes.append(ray_node(['--head', f'--port={port}', '--node-ip-address=127.0.0.2',
