@@ -13,6 +13,7 @@ import tempfile
 import time
 
 from fleet_bags import bad_messages, crank_stream, MODEL_FLAGS, write_bag
+from flexlink_ros.cli.fleet import expand_bags, output_paths
 import numpy as np
 import pandas as pd
 import pytest
@@ -260,3 +261,19 @@ def test_fleet_on_a_two_node_cluster(bags, tmp_path):
               for b, rows in table.groupby('bag')}
     pd.testing.assert_frame_equal(by_bag[copies[0]], by_bag[copies[2]])
     pd.testing.assert_frame_equal(by_bag[copies[1]], by_bag[copies[3]])
+
+
+def test_bags_from_paths_and_globs_each_once_and_their_output_names(tmp_path):
+    for name in ('a/run', 'b/run', 'b/other.mcap'):
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_bytes(b'')
+    bags, unmatched = expand_bags([str(tmp_path / 'a' / 'run'), str(tmp_path / '*' / 'run'),
+                                   str(tmp_path / '**' / '*.mcap'), str(tmp_path / 'none*')])
+    assert bags == [str(tmp_path / p) for p in ('a/run', 'b/run', 'b/other.mcap')]
+    assert unmatched == [str(tmp_path / 'none*')]
+    outputs = output_paths(bags, tmp_path / 'out')
+    assert [pathlib.Path(p).name for p in outputs] == ['run.mcap', 'run_2.mcap', 'other.mcap']
+    (tmp_path / 'out' / 'mcap').mkdir(parents=True)
+    (tmp_path / 'out' / 'mcap' / 'run_2.mcap').write_bytes(b'')
+    with pytest.raises(FileExistsError, match='run_2.mcap'):
+        output_paths(bags, tmp_path / 'out')
