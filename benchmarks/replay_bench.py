@@ -31,16 +31,15 @@ import sys
 import tempfile
 import time
 
-from mcap.reader import make_reader
-import numpy as np
-
 ROOT = pathlib.Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-from flexlink_ros.io.cdr import serialize_message  # noqa: E402  the tree's package
-from flexlink_ros.io.recorder import McapRecorder  # noqa: E402
-from flexlink_ros.studies.synthetic import synthetic_signal  # noqa: E402
-from sensor_msgs.msg import JointState  # noqa: E402
-from std_msgs.msg import Header  # noqa: E402
+sys.path.insert(0, str(ROOT))       # the tree's package, not an installed copy
+from flexlink_ros.io.cdr import serialize_message  # noqa: E402, I201
+from flexlink_ros.io.recorder import McapRecorder  # noqa: E402, I201
+from flexlink_ros.studies.synthetic import synthetic_signal  # noqa: E402, I201
+from mcap.reader import make_reader  # noqa: E402, I201
+import numpy as np  # noqa: E402, I201
+from sensor_msgs.msg import JointState  # noqa: E402, I201
+from std_msgs.msg import Header  # noqa: E402, I201
 
 TOPIC = '/joint_states'
 START_NS = 1_700_000_000_000_000_000

@@ -115,3 +115,18 @@ def test_replay_memory_does_not_grow_with_the_recording(tmp_path, chunk):
                                        '--chunk-samples', str(chunk)]))
     # 100 000 samples more: about 90 MB more when every sample was held.
     assert peaks[1] - peaks[0] < 15.0, peaks
+
+
+def test_the_offline_replay_imports_neither_rclpy_nor_matplotlib(tmp_path):
+    """Their import alone costs a replay a good part of its time (0.3 s and more)."""
+    bag = tmp_path / 'short.mcap'
+    subprocess.run([sys.executable, str(BENCH), 'make-bag', str(bag), '--seconds', '0.3'],
+                   check=True, capture_output=True, timeout=300)
+    code = ('import sys\nfrom flexlink_ros.cli import main\nmain.main(sys.argv[1:])\n'
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in "
+            "('rclpy', 'matplotlib')))\n")
+    result = subprocess.run([sys.executable, '-c', code, 'replay', str(bag), '--out',
+                             str(tmp_path / 'out.mcap')], capture_output=True, text=True,
+                            timeout=300, cwd=REPO)
+    assert result.returncode == 0, result.stderr
+    assert 'wrote' in result.stdout and result.stdout.splitlines()[-1] == '[]'
