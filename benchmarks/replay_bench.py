@@ -77,8 +77,9 @@ def make_bag(path, seconds, rate_hz, rpm=391.0):
 
 
 def replay_once(python, root, bag, out, extra=()):
-    """Replay in a fresh process from ``root``: (wall time [s], peak resident size [MB])."""
-    argv = [python, '-m', 'flexlink_ros.cli', 'replay', str(bag), '--out', str(out), *extra]
+    """Replay in a fresh process from ``root``: wall time [s], CPU time [s], peak RSS [MB]."""
+    argv = [python, '-m', 'flexlink_ros.cli', 'replay', str(pathlib.Path(bag).resolve()),
+            '--out', str(out), *extra]
     start = time.perf_counter()
     process = subprocess.Popen(argv, cwd=root, stdout=subprocess.DEVNULL,
                                stderr=subprocess.PIPE)
@@ -88,7 +89,7 @@ def replay_once(python, root, bag, out, extra=()):
     process.stderr.close()
     if os.waitstatus_to_exitcode(status) != 0:
         raise RuntimeError(f'{" ".join(argv)} failed:\n{error[-2000:]}')
-    return seconds, usage.ru_maxrss / 1024.0
+    return seconds, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024.0
 
 
 def messages(path):
@@ -120,6 +121,7 @@ def compare(args):
         builds.append(('reference', args.reference_python, args.reference_root))
     work = pathlib.Path(tempfile.mkdtemp(prefix='replay_bench_'))
     times = {name: [] for name, _, _ in builds}
+    cpu = {name: [] for name, _, _ in builds}
     try:
         for name, python, root in builds:       # fill each build's model cache, untimed
             replay_once(python, root, args.bag, work / f'warm_{name}.mcap')
@@ -129,20 +131,23 @@ def compare(args):
         for pair in range(args.pairs):
             for name, python, root in builds:
                 out = work / f'{name}_{pair}.mcap'
-                seconds, peak_mb = replay_once(python, root, args.bag, out)
+                seconds, cpu_s, peak_mb = replay_once(python, root, args.bag, out)
                 times[name].append(seconds)
-                print(f'pair {pair + 1} {name:9s} {seconds:6.3f} s  peak RSS {peak_mb:6.1f} MB',
-                      flush=True)
+                cpu[name].append(cpu_s)
+                print(f'pair {pair + 1} {name:9s} {seconds:6.3f} s  CPU {cpu_s:6.3f} s  '
+                      f'peak RSS {peak_mb:6.1f} MB', flush=True)
                 out.unlink()
     finally:
         shutil.rmtree(work, ignore_errors=True)
     medians = {name: statistics.median(values) for name, values in times.items()}
     for name, values in times.items():
         print(f'{name:9s} median {medians[name]:.3f} s  (min {min(values):.3f}, '
-              f'max {max(values):.3f}, {len(values)} runs)')
+              f'max {max(values):.3f}, {len(values)} runs); CPU median '
+              f'{statistics.median(cpu[name]):.3f} s')
     if len(builds) == 2:
         print(f'reference / this: {medians["reference"] / medians["this"]:.2f}x '
-              '(medians of alternating runs)')
+              '(medians of alternating runs); CPU: '
+              f'{statistics.median(cpu["reference"]) / statistics.median(cpu["this"]):.2f}x')
     return medians
 
 

@@ -23,6 +23,11 @@ from ..names import JOINT_STATE, MARKER_ARRAY, OUTPUT_POINTS, QUALITY_NAMES, VEC
 
 # Rows encoded and written together by write_replay.
 WRITE_BATCH = 1024
+# The output is written in one go, not live: chunks larger than the node's (whose chunk is what
+# a crash may lose), no flushes by log time and no flush thread (whose flushes by wall time
+# would make the chunk boundaries depend on the machine's speed).
+OUTPUT_CHUNK_BYTES = 1 << 20
+OUTPUT_FLUSH_PERIOD_S = 3600.0
 # Two doubles the quality template holds where each sample's indicators go.
 _QUALITY_SENTINELS = (1.0e300 + 3e285, 1.0e300 + 7e285)
 
@@ -243,7 +248,8 @@ def write_replay(out_path, blocks, input_topic, topics, frame_id, model, markers
         The recorder's final status.
 
     """
-    recorder = McapRecorder(out_path)
+    recorder = McapRecorder(out_path, chunk_size_bytes=OUTPUT_CHUNK_BYTES,
+                            flush_period_s=OUTPUT_FLUSH_PERIOD_S, flush_thread=False)
     recorder.open()
     written = 0
     try:
