@@ -16,6 +16,7 @@ from . import dynamic_second_order_tables, second_order_tables, store
 from .basis import FrozenSamples
 from .build import reduce_samples
 from .build_progress import BuildProgress
+from .cache_location import cache_file
 from .model import ReducedModel
 from .nonlinearity_tables import nonlinearity_tables, NONLINEARITY_VERSION
 from .soft_tables import soft_tables, SOFT_TABLES_VERSION
@@ -49,7 +50,9 @@ def model_for_mechanism(mechanism, options=None, cache_dir=None, use_cache=True,
     options : ModelOptions or None
         Model options (None: the defaults).
     cache_dir : str, Path or None
-        Cache directory (None: core.store.default_cache_dir()).
+        Cache directory (None: core.store.default_cache_dir()); read and written only if
+        trusted (:mod:`.cache_location`), the files named there whatever the mechanism's
+        name says.
     use_cache : bool
         False builds without reading or writing a cache.
     progress : callable or None
@@ -63,19 +66,23 @@ def model_for_mechanism(mechanism, options=None, cache_dir=None, use_cache=True,
     """
     options = options or ModelOptions()
     key = model_key(mechanism, options)
-    path = None
+    directory = None
     if use_cache:
-        directory = store.default_cache_dir() if cache_dir in (None, '') else cache_dir
-        path = f'{directory}/{mechanism.name}-{key[:16]}.npz'
+        directory = store.usable_cache_dir(store.default_cache_dir() if cache_dir in (None, '')
+                                           else cache_dir)
 
     def build():
         return build_model(mechanism, options, progress).to_arrays()
 
-    arrays, meta, _ = store.load_or_build(path, key, build)
+    def place(suffix):
+        return None if directory is None else cache_file(directory, mechanism.name, key, suffix)
+
+    arrays, meta, _ = store.load_or_build(place('.npz'), key, build, directory)
     model = with_nonlinearity(ReducedModel.from_arrays(arrays, meta), mechanism, options,
-                              None if path is None else f'{path[:-4]}-nonlinearity.npz', key)
-    return with_soft_basis(model, options.soft_modes, soft_cache_path(path, options.soft_modes),
-                           key)
+                              (place('-nonlinearity.npz'), directory), key)
+    suffix = soft_cache_suffix(options.soft_modes)
+    return with_soft_basis(model, options.soft_modes,
+                           (None if suffix is None else place(suffix), directory), key)
 
 
 def build_model(mechanism, options, progress=None):
@@ -104,38 +111,41 @@ def build_model(mechanism, options, progress=None):
     return model
 
 
-def with_nonlinearity(model, mechanism, options, path, key):
+def with_nonlinearity(model, mechanism, options, place, key):
     """
     Return the model with the validity indicator's tables (:mod:`.nonlinearity_tables`).
 
-    Cached in a file of their own beside the model's (``path``; None: built, not cached),
-    keyed by the model's key and :data:`NONLINEARITY_VERSION`: the model's own file and key
-    are those of a model without the tables.
+    Cached in a file of their own beside the model's (``place``: the file and the cache
+    directory, or None twice: built, not cached), keyed by the model's key and
+    :data:`NONLINEARITY_VERSION`: the model's own file and key are those of a model without
+    the tables.
     """
     def build():
         linkage = assembly.FlexibleLinkage(fe_mechanism(mechanism, options), options)
         samples = frozen_samples_for(mechanism, options)
         return nonlinearity_tables(linkage, samples, model, options.speed_max), {}
 
+    path, root = place
     arrays, _, _ = store.load_or_build(
-        path, store.cache_key('nonlinearity-tables', NONLINEARITY_VERSION, key), build)
+        path, store.cache_key('nonlinearity-tables', NONLINEARITY_VERSION, key), build, root)
     return dataclasses.replace(model, nonlinearity=arrays)
 
 
-def soft_cache_path(path, soft_modes):
-    """Cache file of a model's soft-basis tables beside the model's ``path`` (None: none)."""
-    if path is None or soft_modes == 0:
+def soft_cache_suffix(soft_modes):
+    """End of the name of a model's soft-basis tables' cache file (None: no tables)."""
+    if soft_modes == 0:
         return None
-    return f'{path[:-4]}-soft{soft_modes if soft_modes > 0 else ""}.npz'
+    return f'-soft{soft_modes if soft_modes > 0 else ""}.npz'
 
 
-def with_soft_basis(model, soft_modes, path=None, key=None):
+def with_soft_basis(model, soft_modes, place=(None, None), key=None):
     """
     Return the model with the soft-basis step tables (:mod:`.soft_tables`), as asked.
 
     The tables (eigenproblems, a matrix logarithm and exponentials at every grid node: most of
-    a cached model's load) are cached in a file of their own, ``path``, keyed by the model's
-    ``key``, :data:`.soft_tables.SOFT_TABLES_VERSION` and ``soft_modes`` (None: built).
+    a cached model's load) are cached in a file of their own beside the model's (``place``:
+    the file and the cache directory, or None twice: built, not cached), keyed by the model's
+    ``key``, :data:`.soft_tables.SOFT_TABLES_VERSION` and ``soft_modes``.
 
     ``soft_modes`` as :class:`~core.options.ModelOptions` takes it: -1 uses the smallest
     usable gap, or none (with the reason in ``info['soft']``); p > 0 refuses a model without
@@ -151,7 +161,7 @@ def with_soft_basis(model, soft_modes, path=None, key=None):
         return dataclasses.replace(model, info={**model.info, 'soft': {'used': False,
                                                                        'reason': reason}})
     try:
-        soft = _cached_soft_tables(model, soft_modes, path, key)
+        soft = _cached_soft_tables(model, soft_modes, place, key)
     except FlexlinkError as exc:
         if soft_modes > 0:
             raise
@@ -166,13 +176,14 @@ def with_soft_basis(model, soft_modes, path=None, key=None):
     return dataclasses.replace(model, soft=soft, info=info)
 
 
-def _cached_soft_tables(model, soft_modes, path, key):
+def _cached_soft_tables(model, soft_modes, place, key):
     """soft_tables of the model, from (or into) its cache file if there is one."""
+    path, root = place
     if path is None:
         return soft_tables(model, soft_modes)
     arrays, _, _ = store.load_or_build(
         path, store.cache_key('soft-tables', SOFT_TABLES_VERSION, key, soft_modes),
-        lambda: (soft_tables(model, soft_modes), {}))
+        lambda: (soft_tables(model, soft_modes), {}), root)
     return dict(arrays)
 
 
