@@ -75,9 +75,15 @@ def output_paths(bags, directory):
     return paths
 
 
-def import_ray():
+def import_ray(embedded):
     """
     Import Ray (and pyarrow, the table's writer, which ``ray[data]`` brings), or refuse.
+
+    Parameters
+    ----------
+    embedded : bool
+        Ray will run on this machine only: every Ray process on the loopback address (Ray
+        reads this when imported).
 
     Returns
     -------
@@ -87,6 +93,8 @@ def import_ray():
     """
     # No usage report leaves the machine; set before Ray reads it.
     os.environ['RAY_USAGE_STATS_ENABLED'] = '0'
+    if embedded:
+        os.environ.setdefault('RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER', '0')
     try:
         import ray
         import pyarrow   # noqa: F401
@@ -101,8 +109,6 @@ def start_ray(ray, address, num_cpus):
     if address:
         ray.init(address=address, **quiet)
     else:
-        # A one-machine Ray: every Ray process on the loopback address.
-        os.environ.setdefault('RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER', '0')
         ray.init(num_cpus=num_cpus or os.cpu_count(), include_dashboard=False,
                  object_store_memory=OBJECT_STORE_BYTES, **quiet)
 
@@ -165,7 +171,7 @@ def run_fleet(args):
                              warm_start=not args.no_warm_start, cache_dir=args.cache_dir,
                              use_cache=not args.no_cache, node_name=args.node_name,
                              frame_id=args.frame_id, markers_every_n=args.markers_every_n)
-    ray = import_ray()
+    ray = import_ray(embedded=not args.address)
     times = {}
     results = []
     if bags:

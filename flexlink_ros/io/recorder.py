@@ -45,8 +45,7 @@ from .msg_schema import (
 )
 from .recorder_files import (
     abandon, check_settings, create_exclusive, file_path, make_directories, OpenFile,
-    refuse_existing,
-    register_topic, remove_directories, split_due, start_file, Topic,
+    refuse_existing, register_topic, remove_directories, split_due, start_file, Topic,
 )
 from .recorder_queue import QueuedWriting, RecorderState
 from .recorder_status import RecordingStatus

@@ -19,9 +19,10 @@ from ..errors import RecorderError
 
 LOGGER = logging.getLogger(__name__)
 QUEUE_PERIOD_S = 0.02  # the background thread writes enqueued messages this often
-# The queue holds at most this much (data plus a queued item's own size): 16 MiB is over ten
-# seconds of the node's 1 kHz output, and a backlog the writer clears within a second at close.
-QUEUE_MAX_BYTES = 16 << 20
+# The queue holds at most this much (data plus a queued item's own size): a few seconds of the
+# node's 1 kHz output, a backlog the writer clears in about 2 s at close even message by
+# message (splits on) on a loaded machine, so a signal still ends the node within 5 s.
+QUEUE_MAX_BYTES = 4 << 20
 QUEUE_ITEM_BYTES = 128   # a queued (topic, bytes, int) tuple's own memory, about
 
 

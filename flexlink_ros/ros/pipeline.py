@@ -42,6 +42,9 @@ from ..names import FIRST_INPUT_MESSAGE, READY_MESSAGE, TOPICS
 
 WARN_THROTTLE_S = 1.0  # at most one warning per second per kind of bad input
 INPUT_NOTE_THROTTLE_S = 10.0   # input lost or several publishers: at most every 10 s
+# A flood of input can hold the diagnostics timer off: after this many periods without
+# /diagnostics the input callback publishes them.
+OVERDUE_PERIODS = 2
 # Message type of each output (keys of names.TOPICS).
 # /diagnostics is a plain publisher, created with the node: a managed node reports while
 # unconfigured and inactive too.
@@ -138,6 +141,7 @@ class EstimatorPipeline(NodeRecording):
                 'colcon build or pip install .)')
 
     def _start_diagnostics_timer(self):
+        self._set_overdue()
         if self._timer is not None:
             self.destroy_timer(self._timer)
         self._timer = self.create_timer(self.values['diagnostics.period_s'],
@@ -186,11 +190,17 @@ class EstimatorPipeline(NodeRecording):
     # -- the per-message path -------------------------------------------------------------
 
     def _on_joint_state(self, data):
-        start = time.perf_counter_ns()
+        start = time.monotonic_ns()
         watch = self.watch
         self._take(data)
-        watch.busy_ns += time.perf_counter_ns() - start
+        watch.busy_ns += time.monotonic_ns() - start
         watch.received += 1
+        if start > self._overdue_ns:
+            self._publish_diagnostics()
+
+    def _set_overdue(self):
+        self._overdue_ns = time.monotonic_ns() + int(
+            OVERDUE_PERIODS * self.values['diagnostics.period_s'] * 1e9)
 
     def _take(self, data):
         receive_ns = self._clock.now().nanoseconds
@@ -373,6 +383,7 @@ class EstimatorPipeline(NodeRecording):
                                             else self.recorder.status(list_files=False))]
 
     def _publish_diagnostics(self):
+        self._set_overdue()
         clock_ns = self._clock.now().nanoseconds
         self._clock_watch.check(self.get_parameter('use_sim_time').value, clock_ns)
         now_ns = self._log_time(clock_ns)     # not 0 on simulated time without /clock

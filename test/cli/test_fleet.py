@@ -222,6 +222,9 @@ def test_fleet_on_a_two_node_cluster(bags, tmp_path):
     port = free_port('127.0.0.2')
     address = f'127.0.0.2:{port}'
     nodes = []
+    # The cluster's token (~/.ray/auth_token), made if missing (kept if there; not printed).
+    subprocess.run([str(RAY), 'get-auth-token', '--generate'], env=env, capture_output=True,
+                   check=True, timeout=60)
     try:
         with open(tmp_path / 'nodes.log', 'w') as log:
             nodes.append(ray_node(['--head', f'--port={port}', '--node-ip-address=127.0.0.2',
@@ -238,7 +241,8 @@ def test_fleet_on_a_two_node_cluster(bags, tmp_path):
             shutil.copytree(inputs[0], copy) if k % 2 == 0 else shutil.copy(inputs[1], copy)
             copies.append(str(copy))
         result = flexlink('fleet', *copies, '--out', str(tmp_path / 'out'), '--address',
-                          address, '--mechanism', 'cho1992', *MODEL_FLAGS, '--json', env=env)
+                          address, '--mechanism', 'cho1992', *MODEL_FLAGS, '--json',
+                          '--per', 'minute', env=env)
     finally:
         stop_nodes(nodes)
         shutil.rmtree(temp, ignore_errors=True)
@@ -246,7 +250,11 @@ def test_fleet_on_a_two_node_cluster(bags, tmp_path):
     summaries = [json.loads(line) for line in result.stdout.splitlines()]
     assert {s['node'] for s in summaries} == {'127.0.0.2', '127.0.0.3'}
     table = pd.read_parquet(tmp_path / 'out' / 'summary.parquet')
-    assert table['error'].isna().all()
+    assert table['error'].isna().all() and table['per'].eq('minute').all()
+    # Bags of under a minute: a row per segment of the estimate (the gap starts one).
+    for summary in summaries:
+        rows = table[table['bag'] == summary['bag']]
+        assert len(rows) == summary['segments'] and rows['samples'].sum() == summary['samples']
     # The same numbers for the same recording, whichever node computed it.
     by_bag = {b: rows.drop(columns='bag').reset_index(drop=True)
               for b, rows in table.groupby('bag')}

@@ -135,3 +135,32 @@ def test_a_same_stamp_sample_with_another_angle_is_conflicting_not_a_restart(
     assert len(outputs) == 400
     assert 'estimator reset' not in node.log()
     assert 'input skipped as conflicting: stamp' in node.log()
+
+
+def test_diagnostics_go_on_during_a_flood_that_holds_the_timer_off(
+        tmp_path, processes, ros):  # noqa: F811
+    from diagnostic_msgs.msg import DiagnosticArray
+    node = NodeProcess(tmp_path)
+    processes.append(node)
+    node.wait_for(READY_MESSAGE, READY_TIMEOUT_S)
+    test_node, executor = ros
+    during = []
+    script = tmp_path / 'feeder.py'
+    script.write_text(FEEDER)
+    feeder = subprocess.Popen([sys.executable, str(script), 'plain', '150000', '20000.0', '0.0',
+                               'fixed'], env=dict(os.environ, PYTHONPATH=os.pathsep.join(
+                                   sys.path)), stdout=subprocess.PIPE, text=True)
+    processes.append(feeder)
+
+    def on_diagnostics(array):
+        for item in array.status:
+            values = {v.key: v.value for v in item.values}
+            if item.name.endswith('input') and int(values.get('lost_in_period', 0)) > 0 \
+                    and feeder.poll() is None:
+                during.append(item.message)
+
+    test_node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 100)
+    spin_until(executor, lambda: feeder.poll() is not None, 300.0, 'the flood to end')
+    assert 'published 150000' in feeder.communicate()[0]
+    # Several reports while the flood went on, each saying input is missing.
+    assert len(during) >= 2 and all('missing' in m for m in during), during

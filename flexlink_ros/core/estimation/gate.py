@@ -40,18 +40,16 @@ def restart_reason(step_ns):
     Parameters
     ----------
     step_ns : int
-        Its stamp minus the last accepted stamp [ns]: not positive, or beyond the reset gap.
+        Its stamp minus the last accepted stamp [ns]: negative, or beyond the reset gap.
 
     Returns
     -------
     str
-        A backward step as a magnitude in ms (never "-0"), the same stamp said as such.
+        A backward step as its magnitude in ms (never "-0 s").
 
     """
     if step_ns < 0:
         return f'stamp went back by {-step_ns * 1e-6:.6g} ms'
-    if step_ns == 0:
-        return 'same stamp as the last sample, another angle'
     return f'gap of {step_ns * 1e-9:.6g} s'
 
 

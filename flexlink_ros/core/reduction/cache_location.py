@@ -3,8 +3,8 @@ Where model cache files live, and when one may be read (a rule after OpenSSH's S
 
 Paths stay inside the cache directory. A cache file is only as good as whoever could have
 written it: another local user who can write the file, or replace it in its directory, can
-make the node publish wrong deflections with a valid checksum. So a cache file is read only when all of this holds (the rule,
-:func:`untrusted_reason`; docs/model-cache.md says the same):
+make the node publish wrong deflections with a valid checksum. So a cache file is read only
+when all of this holds (the rule, :func:`untrusted_reason`; docs/model-cache.md says the same):
 
 1. the file is a regular file (not a symbolic link, FIFO or device), owned by the effective
    uid running the code, and not writable by group or others (mode & 0o022 == 0);
@@ -106,7 +106,7 @@ def directory_problem(path):
     if not stat.S_ISDIR(info.st_mode):
         return f'{path} is not a directory'
     if info.st_uid not in (os.geteuid(), 0):
-        return f'directory {path} is {_owner_text(info)} or root'
+        return f'directory {path} is {_owner_text(info)}' + (' or root' if os.geteuid() else '')
     mode = stat.S_IMODE(info.st_mode)
     if mode & GROUP_OTHER_WRITE and not (mode & stat.S_ISVTX and info.st_uid == os.geteuid()):
         return (f'directory {path} is writable by group or others (mode {mode:04o}'
