@@ -100,7 +100,7 @@ def survey_recording(path, topic=None, damaged=None):
 
     """
     counts, kept = {}, {}
-    for file in recording_files(path):
+    for file in recording_files(path, damaged):
         for salvage, records, messages in _file_units(file, damaged):
             heads = message_heads(records, messages)
             ids, first, numbers = np.unique(heads['channel'], return_index=True,
@@ -152,7 +152,7 @@ def iter_topic_messages(path, topic, type_name=JOINT_STATE, block=65536, damaged
     """
     pending = ([], [], [])
     held = 0
-    for file in recording_files(path):
+    for file in recording_files(path, damaged):
         for salvage, records, messages in _file_units(file, damaged):
             heads = message_heads(records, messages)
             wanted = [channel_id for channel_id, found in _topics_of(
