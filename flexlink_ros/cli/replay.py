@@ -3,11 +3,12 @@
 
 Reads the crank ``sensor_msgs/JointState`` messages of any rosbag2 MCAP (a bare ``.mcap`` file,
 a bag directory, or a truncated or damaged file: every intact chunk is used, damaged ones are
-skipped and listed, :mod:`io.recording`), runs the estimator over them in batches
-(:mod:`core.estimation.offline_run`, the same numbers as the streaming node), and writes a
-new MCAP with the input and the node's output topics (deflections, criteria, the per-sample
-quality ``~/quality`` and markers, the bytes the node records), each output stamped with its
-input's stamp and logged at the input's log time (:mod:`io.replay_writer`). ``--publish``
+skipped and listed, :mod:`io.recording`), runs the estimator over them a chunk at a time
+(:mod:`cli.replay_offline`: memory does not grow with the recording; the same numbers as the
+streaming node, however the chunks fall), and writes a new MCAP with the input and the node's
+output topics (deflections, criteria, the per-sample quality ``~/quality`` and markers, the
+bytes the node records), each output stamped with its input's stamp and logged at the input's
+log time (:mod:`io.replay_writer`). ``--publish``
 republishes the input with its recorded timing for live subscribers (a running
 flexlink_node, Foxglove, RViz; :mod:`ros.republish`), with the flags of ``ros2 bag play``:
 ``--rate R``, ``--clock [HZ]`` and ``--clock-topics-all`` (``/clock`` from the recording's
@@ -29,19 +30,16 @@ import math
 import pathlib
 import time
 
-import numpy as np
-
 from .main import emit
 from .model_args import add_estimator_arguments, load_model, model_options
 from .progress import Progress
-from ..core.estimation.offline_run import allocate_estimate, BackgroundEstimate, \
-    estimate_offline
+from .replay_offline import CHUNK_SAMPLES, estimate_and_write, MAX_CHUNK_SAMPLES, open_input
 from ..core.mechanism_file import load_mechanism
 from ..io.joint_states import read_crank_samples
 from ..io.recorder_files import refuse_existing
 from ..io.recording import choose_input_topic, damage_note, scan_recording
 from ..io.replay_writer import write_replay
-from ..names import DEFAULT_FRAME_ID, NODE_NAME, OUTPUT_POINTS, output_topics, QUALITY_NAMES
+from ..names import DEFAULT_FRAME_ID, NODE_NAME, output_topics, QUALITY_NAMES
 from ..ros.messages import OK
 from ..ros.playback_schedule import DEFAULT_CLOCK_HZ, MAX_CLOCK_HZ
 from ..ros.republish import DISCOVERY_TIMEOUT_S, publish_recording
@@ -79,72 +77,16 @@ def read_input(args, damaged):
     return topic, samples
 
 
-def estimate_and_write(args, model, samples, topic):
-    """
-    Estimate every sample and, with ``--out``, write the output file meanwhile.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-        ``out``, ``no_warm_start``, ``node_name``, ``frame_id``, ``markers_every_n``.
-    model : ReducedModel
-        The model.
-    samples : dict
-        The input samples.
-    topic : str
-        The input topic.
-
-    Returns
-    -------
-    estimate : dict
-        :func:`estimate_offline`'s result.
-    times : dict
-        'estimate_s', and with ``--out`` 'write_s' (estimate and writing, overlapped) and
-        the recorder's status as 'status'.
-
-    """
-    start = time.perf_counter()
-    run_estimate = functools.partial(estimate_offline, model, samples['stamps_ns'],
-                                     samples['angles'], samples['speeds'],
-                                     warm_start=not args.no_warm_start)
+def _writer(args, model, topic):
+    """``write(blocks, progress)`` of the output file (:func:`write_replay`), or None."""
     if not args.out:
-        estimate = run_estimate()
-        return estimate, {'estimate_s': time.perf_counter() - start}
-    # The outputs are written while the rest is computed: the compiled step runs without
-    # the GIL, so the estimate and the writing share the two cores of a small machine.
-    background = BackgroundEstimate(run_estimate,
-                                    allocate_estimate(model, len(samples['data'])))
-    try:
-        with Progress(f'writing {args.out}', len(samples['data']), unit='sample') as progress:
-            status = write_replay(args.out, samples, background.result, topic,
-                                  output_topics(args.node_name), args.frame_id, model,
-                                  args.markers_every_n, wait_for=background.wait_for,
-                                  progress=progress, joint_levels=[OK] * 4)
-    finally:
-        background.join()
-    return background.result, {'estimate_s': background.seconds, 'status': status,
-                               'write_s': time.perf_counter() - start}
+        return None
+    return functools.partial(_write_blocks, args.out, topic=topic, model=model, args=args)
 
 
-def _peak_to_peak(estimate, result):
-    """Add each output point's peak-to-peak deflection [um] of the estimated samples."""
-    estimated = np.isfinite(estimate['lever_tip'][:, 0])     # not outlier, not out of bound
-    for key in OUTPUT_POINTS:
-        values = estimate[key][estimated]
-        result[f'{key}_peak_to_peak_um'] = ((1e6 * (values.max(axis=0) - values.min(axis=0))
-                                             ).tolist() if values.size else [math.nan] * 2)
-
-
-def _quality(estimate, result):
-    """Add the per-sample quality of the estimated samples: count and largest indicators."""
-    estimated = (np.all(np.isfinite(estimate['lever_tip']), axis=1)
-                 & np.all(np.isfinite(estimate['coupler_mid']), axis=1))
-    quality = {'messages': int(np.count_nonzero(estimated))}
-    for key in QUALITY_NAMES:
-        values = estimate[key][estimated]
-        values = values[np.isfinite(values)]
-        quality[f'{key}_max'] = float(values.max()) if values.size else None
-    result['quality'] = quality
+def _write_blocks(out, blocks, progress, topic, model, args):
+    return write_replay(out, blocks, topic, output_topics(args.node_name), args.frame_id, model,
+                        args.markers_every_n, progress=progress, joint_levels=[OK] * 4)
 
 
 def run_replay(args):
@@ -164,15 +106,15 @@ def run_replay(args):
     """
     start = time.perf_counter()
     damaged = []     # (file, offset, reason) of what the reader skipped
-    topic, samples = read_input(args, damaged)
+    topic, rows, messages = open_input(args, damaged)
     read_s = time.perf_counter() - start
     options = model_options(args)
     model = load_model(load_mechanism(args.mechanism), options, args)
-    estimate, times = estimate_and_write(args, model, samples, topic)
-    count = len(samples['data'])
-    span_s = (samples['log_ns'][-1] - samples['log_ns'][0]) * 1e-9 if count > 1 else 0.0
+    estimate, summary, times = estimate_and_write(args, model, rows, messages,
+                                                  _writer(args, model, topic))
+    count, span_s = rows.samples, rows.span_s()
     result = {'input': str(args.input), 'topic': topic, 'samples': count,
-              'skipped': samples['skipped'], 'skipped_reasons': samples['skipped_reasons'],
+              'skipped': rows.skipped, 'skipped_reasons': rows.skipped_reasons,
               'damaged': [{'file': f, 'offset': o, 'reason': r} for f, o, r in damaged],
               'span_s': span_s, 'read_s': read_s,
               'model': {'size': model.size, 'step_size': model.step_size,
@@ -187,12 +129,12 @@ def run_replay(args):
     result.update(estimate_s=times['estimate_s'], segments=estimate['segments'],
                   outliers=estimate['outliers'], out_of_bound=estimate['out_of_bound'],
                   criteria_available=estimate['criteria_available'])
-    total = read_s + result.get('write_s', times['estimate_s'])
+    total = read_s + times['write_s']
     result['samples_per_s'] = count / total if total > 0 else math.inf
     result['times_real_time'] = span_s / total if total > 0 else math.inf
-    _peak_to_peak(estimate, result)
-    _quality(estimate, result)
+    result.update(summary)
     if args.publish:
+        _, samples = read_input(args, [])
         with Progress(f'publishing {topic}', count, unit='msg') as progress:
             played = publish_recording(samples, topic, playback_options(args),
                                        progress=progress)
@@ -236,6 +178,9 @@ def _check_arguments(args):
         raise ValueError('`--wait-for-subscribers` and `--wait-timeout` must be >= 0')
     if args.markers_every_n < 0:
         raise ValueError(f'`--markers-every-n` must be >= 0, got {args.markers_every_n}')
+    if not 1 <= args.chunk_samples <= MAX_CHUNK_SAMPLES:
+        raise ValueError(f'`--chunk-samples` must be in 1..{MAX_CHUNK_SAMPLES}, '
+                         f'got {args.chunk_samples}')
 
 
 def summary_text(result):
@@ -327,6 +272,9 @@ def register(subparsers):
     parser.add_argument('--frame-id', default=DEFAULT_FRAME_ID, help='frame of the outputs')
     parser.add_argument('--markers-every-n', type=int, default=10,
                         help='markers on every n-th sample (0: none; default 10, as the node)')
+    parser.add_argument('--chunk-samples', type=int, default=CHUNK_SAMPLES, metavar='N',
+                        help='input messages read and estimated at a time: memory grows with '
+                        f'it, not with the recording (default {CHUNK_SAMPLES})')
     parser.add_argument('--no-warm-start', action='store_true',
                         help='start from the static deflection, not the periodic state')
     parser.add_argument('--publish', action='store_true',

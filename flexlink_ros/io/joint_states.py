@@ -13,6 +13,7 @@ import numpy as np
 
 from .cdr import align, parse_joint_state
 from .recording import scan_recording
+from .recording_stream import iter_topic_messages
 
 # Errors of a payload that is not a readable JointState.
 UNREADABLE = (struct.error, IndexError, ValueError, OverflowError)
@@ -190,27 +191,76 @@ def read_crank_samples(path, topic, joint_name, scan=None):
     Returns
     -------
     dict
-        'data' (list of bytes), 'log_ns', 'publish_ns', 'stamps_ns' (int64), 'angles',
-        'speeds' (NaN where missing) of the usable messages, 'skipped' (count) and
-        'skipped_reasons' ({reason: count}).
+        :func:`crank_samples` of every message of the topic.
 
     """
     if scan is None:
         scan = scan_recording(path, topic=topic)
     messages = scan[1].get(topic, [])
     if not messages:
-        empty = np.zeros(0, dtype=np.int64)
-        return {'data': [], 'log_ns': empty, 'publish_ns': empty, 'stamps_ns': empty,
-                'angles': np.zeros(0), 'speeds': np.zeros(0), 'skipped': 0,
-                'skipped_reasons': {}}
+        return crank_samples(np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), [],
+                             joint_name)
     log_ns, publish_ns, payloads = zip(*messages)
+    return crank_samples(np.array(log_ns, dtype=np.int64), np.array(publish_ns, dtype=np.int64),
+                         payloads, joint_name)
+
+
+def iter_crank_samples(path, topic, joint_name, block=65536, damaged=None):
+    """
+    Read the crank samples of one topic a block of messages at a time (bounded memory).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        ``.mcap`` file or bag directory.
+    topic : str
+        The JointState topic.
+    joint_name : str
+        The crank joint.
+    block : int
+        Messages per block.
+    damaged : list, optional
+        Receives (file, offset, reason) of every skipped file, chunk or record.
+
+    Yields
+    ------
+    dict
+        :func:`crank_samples` of each block of messages.
+
+    """
+    for log_ns, publish_ns, payloads in iter_topic_messages(path, topic, block=block,
+                                                            damaged=damaged):
+        yield crank_samples(log_ns, publish_ns, payloads, joint_name)
+
+
+def crank_samples(log_ns, publish_ns, payloads, joint_name):
+    """
+    Return the usable crank samples among JointState messages, and why the others are not.
+
+    Parameters
+    ----------
+    log_ns, publish_ns : ndarray of int64, shape (m,)
+        Log and publish times of the messages [ns].
+    payloads : sequence of bytes
+        Their CDR.
+    joint_name : str
+        The crank joint.
+
+    Returns
+    -------
+    dict
+        'data' (list of bytes), 'log_ns', 'publish_ns', 'stamps_ns' (int64), 'angles',
+        'speeds' (NaN where missing) of the usable messages, 'skipped' (count) and
+        'skipped_reasons' ({reason: count}).
+
+    """
     stamps, angles, speeds, valid, has_speed = parse_crank_states(payloads,
                                                                   joint_name.encode())
     usable = valid & np.isfinite(angles) & (stamps != 0) & (np.isfinite(speeds) | ~has_speed)
     chosen = np.flatnonzero(usable)
     return {'data': [payloads[n] for n in chosen.tolist()],
-            'log_ns': np.array(log_ns, dtype=np.int64)[chosen],
-            'publish_ns': np.array(publish_ns, dtype=np.int64)[chosen],
+            'log_ns': np.asarray(log_ns, dtype=np.int64)[chosen],
+            'publish_ns': np.asarray(publish_ns, dtype=np.int64)[chosen],
             'stamps_ns': stamps[chosen], 'angles': angles[chosen], 'speeds': speeds[chosen],
             'skipped': len(payloads) - chosen.size,
             'skipped_reasons': skip_reasons(payloads, valid, usable, joint_name.encode())}

@@ -102,6 +102,24 @@ def iter_messages(buffer, salvage):
         publish time, data; :func:`message_fields`), at least ``MESSAGE_HEAD_SIZE`` long.
 
     """
+    for records, messages in iter_message_units(buffer, salvage):
+        for start, end in messages:
+            yield records, start, end
+
+
+def iter_message_units(buffer, salvage):
+    """
+    Yield the messages of every intact part of an MCAP file a unit (a chunk) at a time.
+
+    As :func:`iter_messages`, for readers that take a chunk's messages together.
+
+    Yields
+    ------
+    (records, messages) : (bytes, list of (int, int))
+        The unit's records (a decompressed chunk, or the file for a message outside chunks)
+        and the (start, end) of each message body in them, in file order.
+
+    """
     size = salvage.size = len(buffer)
     salvage.budget = [decompression_budget(size)]
     _read_summary(buffer, salvage)
@@ -130,7 +148,7 @@ def iter_messages(buffer, salvage):
             offset = resume
             continue
         try:
-            yield from _records(buffer, offset, end, opcode, salvage)
+            unit = _records(buffer, offset, end, opcode, salvage)
         except DamagedRecord as exc:
             resume = (end if _plausible_record(buffer, end)
                       else find_chunk(buffer, offset + 1, salvage.budget))
@@ -140,6 +158,9 @@ def iter_messages(buffer, salvage):
                 salvage.readable_bytes, salvage.end_reason = size, 'end of file without footer'
                 return
             end = resume
+        else:
+            if unit[1]:
+                yield unit
         offset = end
 
 
@@ -153,7 +174,8 @@ def _data_section_ends(buffer, offset, opcode, length):
 
 
 def _records(buffer, offset, end, opcode, salvage):
-    # The messages of one top-level record (a chunk's after checking all of it).
+    # (records, [(start, end)] of its messages) of one top-level record (a chunk's after
+    # checking all of it).
     if opcode == CHUNK:
         payload = decode_chunk(buffer, offset + RECORD_PREFIX.size, end, salvage.budget)
         records, start, stop = payload, 0, len(payload)
@@ -187,8 +209,7 @@ def _records(buffer, offset, end, opcode, salvage):
         salvage.profile, salvage.library = header
     salvage.schemas.update(schemas)
     salvage.channels.update(channels)
-    for body, stop in messages:
-        yield records, body, stop
+    return records, messages
 
 
 def _plausible_record(buffer, offset):

@@ -61,6 +61,9 @@ class McapFileWriter:
         self._stream = stream
         self._chunk_size = int(chunk_size)
         self._compression = '' if compression == 'none' else compression
+        # One compression context for every chunk: zstandard.compress() makes a new one per
+        # call, which costs several times the compression of a 128 KiB chunk.
+        self._compressor = zstandard.ZstdCompressor() if self._compression else None
         self._offset = 0          # bytes written to the stream
         self._data_crc = 0        # CRC-32 of the data section so far
         self._schemas = {}        # id -> Schema (the summary repeats them)
@@ -190,7 +193,7 @@ class McapFileWriter:
         self._seal_singles()
         channels, logs, offsets = (np.concatenate(column) for column in zip(*self._segments))
         data = b''.join(self._parts)
-        compressed = zstandard.compress(data) if self._compression else data
+        compressed = self._compressor.compress(data) if self._compression else data
         chunk = Chunk(compression=self._compression, data=compressed,
                       message_start_time=self._start, message_end_time=self._end,
                       uncompressed_crc=zlib.crc32(data), uncompressed_size=len(data))

@@ -21,8 +21,13 @@ from .recorder import McapRecorder
 from ..core.reduction.second_order_tables import SecondOrderForms
 from ..names import JOINT_STATE, MARKER_ARRAY, OUTPUT_POINTS, QUALITY_NAMES, VECTOR3_STAMPED
 
-# Samples per batch of write_replay (a progress report between batches).
+# Rows encoded and written together by write_replay.
 WRITE_BATCH = 1024
+# The output is written in one go, not live: chunks larger than the node's (whose chunk is what
+# a crash may lose), no flushes by log time and no flush thread (whose flushes by wall time
+# would make the chunk boundaries depend on the machine's speed).
+OUTPUT_CHUNK_BYTES = 1 << 20
+OUTPUT_FLUSH_PERIOD_S = 3600.0
 # Two doubles the quality template holds where each sample's indicators go.
 _QUALITY_SENTINELS = (1.0e300 + 3e285, 1.0e300 + 7e285)
 
@@ -177,10 +182,9 @@ def _interleave(columns, names, valid, with_marker, markers, marker_topic):
     return messages, topic_of
 
 
-def _write_batch(recorder, samples, estimate, chosen, names, marker_topic, frame,
+def _write_batch(recorder, samples, estimate, chosen, first, names, marker_topic, frame,
                  markers_every_n, marker_source):
-    """Encode and write the samples of the slice ``chosen``."""
-    first = chosen.start
+    """Encode and write the samples of the slice ``chosen`` of a block of rows from ``first``."""
     columns = _output_columns(samples, estimate, chosen, frame)
     # Outlier and out-of-bound samples (NaN) keep their input, with no outputs.
     valid = (np.all(np.isfinite(estimate['lever_tip'][chosen]), axis=1)
@@ -188,10 +192,11 @@ def _write_batch(recorder, samples, estimate, chosen, names, marker_topic, frame
     per_sample = np.where(valid, len(names), 1)
     markers = None
     if markers_every_n:
-        marked = np.flatnonzero((np.arange(first, chosen.stop) % markers_every_n == 0) & valid)
+        rows = np.arange(first + chosen.start, first + chosen.stop)
+        marked = np.flatnonzero((rows % markers_every_n == 0) & valid)
         markers = iter(rows_to_bytes(marker_source.rows(
-            samples['stamps_ns'][chosen][marked], estimate['crank_angle'][first + marked],
-            estimate['modal'][first + marked])))
+            samples['stamps_ns'][chosen][marked], estimate['crank_angle'][chosen][marked],
+            estimate['modal'][chosen][marked])))
         per_sample[marked] += 1
     messages, topic_of = _interleave(columns, names, valid.tolist(),
                                      (per_sample > len(names)).tolist(), markers, marker_topic)
@@ -202,20 +207,21 @@ def _write_batch(recorder, samples, estimate, chosen, names, marker_topic, frame
     recorder.write_batch(topic_of, messages, log_times, publish_times)
 
 
-def write_replay(out_path, samples, estimate, input_topic, topics, frame_id, model,
-                 markers_every_n=10, exaggeration=10.0, points_per_link=9, wait_for=None,
-                 progress=None, joint_levels=None):
+def write_replay(out_path, blocks, input_topic, topics, frame_id, model, markers_every_n=10,
+                 exaggeration=10.0, points_per_link=9, progress=None, joint_levels=None):
     """
-    Write the input and the recomputed outputs into a rosbag2 MCAP.
+    Write the input and the recomputed outputs into a rosbag2 MCAP, a block of rows at a time.
 
     Parameters
     ----------
     out_path : str or os.PathLike
         Output ``.mcap`` file or bag directory (must not exist).
-    samples : dict
-        The input (:func:`io.joint_states.read_crank_samples`).
-    estimate : dict
-        The offline estimate of the samples (:func:`estimate_offline`).
+    blocks : iterable of (first, samples, estimate)
+        Consecutive rows from row ``first``: their input (``samples``,
+        :func:`io.joint_states.crank_samples`) and their offline estimate (``estimate``,
+        :func:`core.estimation.offline_run.estimate_stream`). Rows are written in batches of
+        ``WRITE_BATCH`` from the block's start (blocks starting at multiples of it give the
+        same batches however the rows are split).
     input_topic : str
         Topic of the input.
     topics : dict
@@ -225,16 +231,14 @@ def write_replay(out_path, samples, estimate, input_topic, topics, frame_id, mod
     model : ReducedModel
         The model of the estimate (its shapes draw the markers).
     markers_every_n : int
-        Markers on every n-th sample (0: none).
+        Markers on every n-th row (0: none).
     exaggeration : float
         Scale of the drawn deflections.
     points_per_link : int
         Marker points along each link.
-    wait_for : callable, optional
-        ``wait_for(n)`` returns once the first n samples of ``estimate`` are final (the
-        estimate is then computed while this writes).
     progress : callable, optional
-        ``progress(n)`` after each batch and ``progress(count, force=True)`` at the end.
+        ``progress(n)`` after each block (n: rows written) and ``progress(n, force=True)`` at
+        the end.
     joint_levels : sequence, optional
         Diagnostic level of each joint in the markers (required with markers).
 
@@ -244,24 +248,26 @@ def write_replay(out_path, samples, estimate, input_topic, topics, frame_id, mod
         The recorder's final status.
 
     """
-    recorder = McapRecorder(out_path)
+    recorder = McapRecorder(out_path, chunk_size_bytes=OUTPUT_CHUNK_BYTES,
+                            flush_period_s=OUTPUT_FLUSH_PERIOD_S, flush_thread=False)
     recorder.open()
+    written = 0
     try:
         names = _add_topics(recorder, input_topic, topics, markers_every_n)
         marker_source = (MarkerSource(model, frame_id, exaggeration, points_per_link,
                                       joint_levels) if markers_every_n else None)
         frame = frame_id.encode()
-        count = len(samples['data'])
-        for first in range(0, count, WRITE_BATCH):
-            chosen = slice(first, min(first + WRITE_BATCH, count))
-            if wait_for is not None:
-                wait_for(chosen.stop)
-            _write_batch(recorder, samples, estimate, chosen, names, topics.get('markers'),
-                         frame, markers_every_n, marker_source)
+        for first, samples, estimate in blocks:
+            count = len(samples['data'])
+            for start in range(0, count, WRITE_BATCH):
+                chosen = slice(start, min(start + WRITE_BATCH, count))
+                _write_batch(recorder, samples, estimate, chosen, first, names,
+                             topics.get('markers'), frame, markers_every_n, marker_source)
+            written = first + count
             if progress is not None:
-                progress(chosen.stop)
+                progress(written)
         if progress is not None:
-            progress(count, force=True)
+            progress(written, force=True)
     finally:
         status = recorder.close()
     return status

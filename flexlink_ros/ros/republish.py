@@ -20,7 +20,6 @@ are replaced as :func:`.playback_schedule.playback_times` says, with a note.
 import itertools
 import time
 
-from rclpy.subscription import RCLError
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
@@ -46,6 +45,8 @@ def _wait_for_subscribers(rclpy, publisher, count, timeout_s):
 
 def _publish(publisher, message, counts):
     """Publish: 'sent', 'failed' (counted, its reason kept) or 'shutdown' (SIGINT/SIGTERM)."""
+    # rclpy is imported when playing, not with this module: the offline replay imports it.
+    from rclpy.subscription import RCLError
     try:
         publisher.publish(message)
     except RCLError as exc:

@@ -47,7 +47,7 @@ def test_replay_bag_holds_each_input_then_its_outputs(tmp_path):
     samples, estimate = replay_inputs()
     topics = output_topics('/flexlink_node')
     progress = []
-    status = write_replay(tmp_path / 'replay', samples, estimate, '/joint_states', topics,
+    status = write_replay(tmp_path / 'replay', [(0, samples, estimate)], '/joint_states', topics,
                           'linkage_ground', None, markers_every_n=0,
                           progress=lambda n, force=False: progress.append((n, force)))
     assert status['state'] == 'closed' and status['message_count'] == 1 + 5 * (COUNT - 1)

@@ -1,23 +1,24 @@
 """
 The offline estimate of a recorded sample stream, segment by segment as the node would.
 
-:func:`estimate_offline` plans the rows as :meth:`StreamingEstimator.update` decides (restarts,
-repeats, outliers) and replays each segment in one go (the same numbers as streaming);
-:func:`criteria_batch` adds the criteria; :class:`BackgroundEstimate` runs it in a thread.
+:func:`estimate_stream` plans the rows as :meth:`StreamingEstimator.update` decides (restarts,
+repeats, outliers) and replays each segment in pieces (the same numbers as streaming), reading
+its input in chunks and handing the rows on once final, so a recording of any length is
+estimated in bounded memory (:class:`.row_window.RowWindow`); :func:`estimate_offline` does it
+for arrays in memory; :func:`criteria_batch` adds the criteria.
 """
 
 import math
-import threading
-import time
 
 import numpy as np
 
+from .criteria_rows import criteria_batch
 from .gate import DEFAULT_RESET_GAP_S, InputGate, plan_rows
 from .nonlinearity import NonlinearityIndicator
 from .offline import replay
+from .row_window import RowWindow
 from .sample import error_indicator_rows, SampleFlag
-from .step import REACTION_FLOOR_FRACTION
-from .streaming import DEFAULT_ACCEL_LIMIT, DEFAULT_NEAR_ZERO_FRACTION
+from .streaming import DEFAULT_ACCEL_LIMIT
 from .tables import step_tables
 from .warm_start import WarmStartLimiter
 from ...names import JOINT_NAMES, OUTPUT_POINTS
@@ -29,54 +30,6 @@ FIRST_PLAN_WINDOW = 64
 # The per-sample arrays of an estimate (besides 'flags').
 _ESTIMATE_KEYS = OUTPUT_POINTS + ('crank_angle', 'crank_speed', 'modal', 'reaction_n',
                                   'gamma_dot', 'criterion', 'nonlinearity', 'error_indicator')
-
-
-def criteria_batch(model, angles, speeds, accels,
-                   near_zero_fraction=DEFAULT_NEAR_ZERO_FRACTION, blocks=None):
-    """
-    Compute joint reactions, direction rates and Earles-Wu criteria at many crank states.
-
-    The same tabulated quantities as StreamingEstimator._criteria, vectorised.
-
-    Parameters
-    ----------
-    model : ReducedModel
-        The model (its joint-reaction tables).
-    angles, speeds, accels : ndarray, shape (m,)
-        Crank state as the model sees it (speed and acceleration clipped).
-    near_zero_fraction : float
-        A reaction below this fraction of its cycle RMS is flagged near zero.
-    blocks : dict, optional
-        'force', 'force_dot' (m, joints, 2) and 'rms2' (m, joints) at these states, if
-        already evaluated (core.estimator.replay returns them); else the table is evaluated.
-
-    Returns
-    -------
-    reaction_n, gamma_dot, criterion : ndarray, shape (m, 4)
-    near_zero : ndarray of bool, shape (m, 4)
-    available : bool
-        False if the model has no joint-reaction data (all zeros then).
-
-    """
-    count = len(angles)
-    zeros = np.zeros((count, len(JOINT_NAMES)))
-    if not np.any(model.force_moments):
-        return zeros, zeros, zeros, zeros.astype(bool), False
-    if blocks is None:
-        rows = model.evaluate(angles, speeds, accels)
-        blocks = {name: model.layout.block(rows, name)
-                  for name in ('force', 'force_dot', 'rms2')}
-    force, rate, rms2 = blocks['force'], blocks['force_dot'], blocks['rms2']
-    r2 = np.sum(force ** 2, axis=2)
-    # Below REACTION_FLOOR_FRACTION of the cycle RMS the reaction is clamped (finite criterion).
-    clamped = np.maximum(r2, REACTION_FLOOR_FRACTION ** 2 * rms2)
-    positive = clamped > 0.0
-    safe = np.where(positive, clamped, 1.0)
-    gamma_dot = np.where(positive, (force[..., 0] * rate[..., 1]
-                                    - force[..., 1] * rate[..., 0]) / safe, 0.0)
-    criterion = np.where(positive, np.abs(gamma_dot) / np.sqrt(safe), 0.0)
-    reaction = np.where(positive, np.sqrt(r2), 0.0)
-    return reaction, gamma_dot, criterion, r2 < near_zero_fraction ** 2 * rms2, True
 
 
 def segments(stamps_ns, angles, reset_gap_s=DEFAULT_RESET_GAP_S):
@@ -105,6 +58,19 @@ def segments(stamps_ns, angles, reset_gap_s=DEFAULT_RESET_GAP_S):
     return starts, repeated
 
 
+def _window_columns(model):
+    """Return the columns of a run's :class:`RowWindow`: input, plan and estimate."""
+    columns = {'stamps_ns': ((), np.int64), 'angles': ((), float), 'speeds': ((), float),
+               'kinds': ((), np.int8), 'flags': ((), np.int64)}
+    columns.update({key: ((2,), float) for key in OUTPUT_POINTS})
+    columns.update({key: ((len(JOINT_NAMES),), float)
+                    for key in ('reaction_n', 'gamma_dot', 'criterion')})
+    columns.update({key: ((), float)
+                    for key in ('crank_angle', 'crank_speed', 'nonlinearity', 'error_indicator')})
+    columns['modal'] = ((model.size,), float)
+    return columns
+
+
 def allocate_estimate(model, count):
     """
     Allocate the arrays :func:`estimate_offline` fills (zeros; 'flags' per sample).
@@ -121,14 +87,9 @@ def allocate_estimate(model, count):
     dict of ndarray
 
     """
-    result = {key: np.zeros((count, 2)) for key in OUTPUT_POINTS}
-    for key in ('reaction_n', 'gamma_dot', 'criterion'):
-        result[key] = np.zeros((count, len(JOINT_NAMES)))
-    for key in ('crank_angle', 'crank_speed', 'nonlinearity', 'error_indicator'):
-        result[key] = np.zeros(count)
-    result['modal'] = np.zeros((count, model.size))
-    result['flags'] = np.zeros(count, dtype=np.int64)
-    return result
+    return {key: np.zeros((count,) + tuple(shape), dtype=dtype)
+            for key, (shape, dtype) in _window_columns(model).items()
+            if key in _ESTIMATE_KEYS + ('flags',)}
 
 
 def estimate_offline(model, stamps_ns, angles, speeds, warm_start=True, result=None,
@@ -136,10 +97,9 @@ def estimate_offline(model, stamps_ns, angles, speeds, warm_start=True, result=N
     """
     Estimate deflections and criteria of every sample, segment by segment as the node would.
 
-    The rows are planned as StreamingEstimator.update decides (core.estimator.plan_rows:
-    restarts, repeats, outliers); each segment is replayed in one go. Outlier rows and rows
-    whose estimate left the model's deflection bound are NaN (flagged OUTLIER and
-    OUT_OF_BOUND); after an out-of-bound row the rest is planned again, as the node restarts.
+    :func:`estimate_stream` over arrays in memory. Outlier rows and rows whose estimate left
+    the model's deflection bound are NaN (flagged OUTLIER and OUT_OF_BOUND); after an
+    out-of-bound row the rest is planned again, as the node restarts.
 
     Parameters
     ----------
@@ -156,41 +116,90 @@ def estimate_offline(model, stamps_ns, angles, speeds, warm_start=True, result=N
     result : dict or None
         The arrays to fill (:func:`allocate_estimate`); new ones if None.
     progress : callable or None
-        ``progress(n)`` whenever the first n samples are final (the writer of the outputs
-        follows it while the rest is computed).
+        ``progress(n)`` whenever the first n samples are final.
 
     Returns
     -------
     dict of ndarray
         'lever_tip', 'coupler_mid' (m, 2) [m]; 'reaction_n', 'gamma_dot', 'criterion' (m, 4);
         'crank_angle', 'crank_speed', 'nonlinearity' (validity indicator), 'error_indicator'
-        (m,); 'modal' (m, r); 'flags' (m,); 'criteria_available' (bool); 'segments',
-        'outliers', 'out_of_bound'.
+        (m,); 'modal' (m, r); 'flags' (m,); and :func:`estimate_stream`'s counts.
 
     """
     count = len(stamps_ns)
     if result is None:
         result = allocate_estimate(model, count)
-    run = _OfflineRun(model, np.asarray(stamps_ns, dtype=np.int64), np.asarray(angles, float),
-                      np.asarray(speeds, float), warm_start, result, progress)
-    position = 0
-    while position < count:
-        position = run.next_segment(position)
-    run.finish_until(count)
-    flags = result['flags']
-    result.update(criteria_available=run.available, segments=run.segments,
-                  outliers=int(np.count_nonzero(flags & SampleFlag.OUTLIER)),
-                  out_of_bound=int(np.count_nonzero(flags & SampleFlag.OUT_OF_BOUND)))
+
+    def emit(first, block):
+        stop = first + len(block['flags'])
+        for key, values in block.items():
+            result[key][first:stop] = values
+        if progress is not None:
+            progress(stop)
+    chunks = [(np.asarray(stamps_ns, dtype=np.int64), np.asarray(angles, dtype=float),
+               np.asarray(speeds, dtype=float))] if count else []
+    result.update(estimate_stream(model, chunks, emit, warm_start=warm_start))
     return result
 
 
-class _OfflineRun:
-    """The state of :func:`estimate_offline`: segments, repeats to copy, rows final so far."""
+def estimate_stream(model, chunks, emit, warm_start=True, align=1, block_rows=1):
+    """
+    Estimate a stream of samples read in chunks, handing on the rows in order once final.
 
-    def __init__(self, model, stamps_ns, angles, speeds, warm_start, result, progress):
-        self.model, self.stamps_ns, self.angles, self.speeds = model, stamps_ns, angles, speeds
-        self.warm_start, self.result, self.progress = warm_start, result, progress
-        self.count, self.nonlinearity = stamps_ns.size, NonlinearityIndicator(model)
+    The same numbers as one :func:`estimate_offline` over the whole stream, however it is
+    chunked: the rows are planned a window at a time (restarts, repeats, outliers, as
+    :meth:`StreamingEstimator.update` decides) and a window is planned only once all its rows
+    are read, so the windows, and the pieces each segment is replayed in, do not depend on
+    the chunks. Memory: the rows not yet handed on (fewer than ``block_rows + align``), the
+    plan's look-ahead (2 ``PLAN_WINDOW``) and one chunk.
+
+    Parameters
+    ----------
+    model : ReducedModel
+        The model.
+    chunks : iterable of (stamps_ns, angles, speeds)
+        The samples in order: int64 stamps [ns], angles [rad], speeds (NaN where none).
+    emit : callable
+        ``emit(first, block)``: rows ``first...`` are final; ``block`` maps the estimate's
+        keys (:func:`estimate_offline`, with 'flags') to copies of their rows.
+    warm_start : bool
+        Start each segment from the periodic state (else from the static deflection).
+    align : int
+        Blocks end at a multiple of ``align`` rows (but the last).
+    block_rows : int
+        Hand rows on once at least this many are final (and at the end).
+
+    Returns
+    -------
+    dict
+        'samples', 'segments', 'outliers', 'out_of_bound' (counts), 'criteria_available'
+        (False: the model has no joint-reaction data, criteria are zeros) and 'window_rows'
+        (the most rows held at once).
+
+    """
+    blocks = (max(int(align), 1), max(int(block_rows), 1))
+    run = _OfflineRun(model, iter(chunks), warm_start, emit, blocks)
+    position = 0
+    while position < run.ensure(position + 1):
+        position = run.next_segment(position)
+    run.finish_until(run.window.end)
+    run.hand_on(run.final)
+    return {'samples': run.final, 'criteria_available': run.available,
+            'segments': run.segments, 'window_rows': run.window_rows, **run.counts}
+
+
+class _OfflineRun:
+    """The state of :func:`estimate_stream`: segments, repeats to copy, rows final so far."""
+
+    def __init__(self, model, chunks, warm_start, emit, blocks):
+        self.model, self.chunks, self.warm_start, self.emit = model, chunks, warm_start, emit
+        self.align, self.block_rows = blocks
+        self.window = RowWindow(_window_columns(model))
+        self.exhausted, self.window_rows = False, 0
+        self.stamps_ns, self.angles, self.speeds, self.kinds = (
+            self.window[key] for key in ('stamps_ns', 'angles', 'speeds', 'kinds'))
+        self.result = {key: self.window[key] for key in _ESTIMATE_KEYS + ('flags',)}
+        self.nonlinearity = NonlinearityIndicator(model)
         self.available = bool(np.any(model.force_moments))
         self.tables = step_tables(model)    # built once, not per segment
         self.orbit = None   # carried across segments, as one streaming estimator carries it
@@ -200,25 +209,50 @@ class _OfflineRun:
         self.limiter = WarmStartLimiter(clock=lambda: self.clock_s)
         self.repeats = []           # (row, row it repeats), in order
         self.copied = 0             # repeats copied so far
-        self.kinds = np.zeros(self.count, dtype=np.int8)    # InputGate kinds, as planned
         self.restart_plan(0)
         self.segments = 0
-        self.final = 0
+        self.final = self.handed = 0
+        self.counts = {'outliers': 0, 'out_of_bound': 0}
         self.chosen = self.stop = self.resume = None
         self.measured = True
         self.done = 0
         self.last_accepted = -1
 
+    def ensure(self, rows):
+        """Read chunks until the window reaches row ``rows`` or the input ends; its end."""
+        while self.window.end < rows and not self.exhausted:
+            chunk = next(self.chunks, None)
+            if chunk is None:
+                self.exhausted = True
+            elif len(chunk[0]):
+                self.forget_handed()
+                self.window.append(dict(zip(('stamps_ns', 'angles', 'speeds'), chunk)))
+                self.window_rows = max(self.window_rows, self.window.end - self.window.base)
+        return self.window.end
+
+    def forget_handed(self):
+        """Drop the rows handed on, but the one later repeats may still copy."""
+        del self.repeats[:self.copied]
+        self.copied = 0
+        cut = self.handed
+        # Every repeat still to copy from before the cut copies the last accepted row before
+        # it (no accepted row lies between): one row at most is held aside.
+        sources = [source for _, source in self.repeats if source < cut]
+        if 0 <= self.last_accepted < cut:
+            sources.append(self.last_accepted)
+        self.window.drop_before(cut, hold=max(sources) if sources else None)
+
     def restart_plan(self, position):
         """Plan the rows from ``position`` afresh (the first sample, or after out of bound)."""
         self.gate = InputGate(self.model.speed_max, DEFAULT_ACCEL_LIMIT)
         self.planned = position
-        self.window = FIRST_PLAN_WINDOW
+        self.plan_size = FIRST_PLAN_WINDOW
 
     def plan_window(self):
         """Plan a window more rows (core.estimator.plan_rows, the gate carried on)."""
-        stop = min(self.planned + min(self.window, PLAN_WINDOW), self.count)
-        self.window *= 2
+        wanted = self.planned + min(self.plan_size, PLAN_WINDOW)
+        stop = min(wanted, self.ensure(wanted))
+        self.plan_size *= 2
         window = slice(self.planned, stop)
         self.kinds[window], _ = plan_rows(
             self.stamps_ns[window], self.angles[window], self.speeds[window], self.gate)
@@ -238,14 +272,18 @@ class _OfflineRun:
         that goes out of bound often costs time linear in its length.
         """
         first = self.next_start(position)
-        while first is None and self.planned < self.count:
+        while first is None and self.planned < self.ensure(self.planned + 1):
+            # No start before: outliers (final now, so a long run of them is not held).
+            self.mark(np.arange(position, self.planned), SampleFlag.OUTLIER)
+            self.finish_until(self.planned)
+            position = self.planned
             self.plan_window()
             first = self.next_start(position)
-        first = self.count if first is None else first
-        self.mark(np.arange(position, first), SampleFlag.OUTLIER)   # no start before: outliers
-        if first == self.count:
-            return self.count
-        while self.planned < min(first + 3, self.count):
+        if first is None:
+            self.mark(np.arange(position, self.planned), SampleFlag.OUTLIER)
+            return self.planned
+        self.mark(np.arange(position, first), SampleFlag.OUTLIER)
+        while self.planned < min(first + 3, self.ensure(first + 3)):
             self.plan_window()      # replay()'s first call takes the deferred warm start
         self.segments += 1
         self.result['flags'][first] |= int(SampleFlag.RESET)
@@ -261,7 +299,7 @@ class _OfflineRun:
                 self.result['flags'][stopped + 1:stop] = 0
                 del self.repeats[self.copied:]
                 return stopped + 1
-            if found is not None or stop == self.count:
+            if found is not None or stop >= self.ensure(stop + 1):
                 return stop
             self.plan_window()
             start = search = stop
@@ -297,7 +335,7 @@ class _OfflineRun:
             # Measured speeds if every sample of the segment's first window has one.
             self.measured = not np.any(np.isnan(seg_speeds))
         measured = seg_speeds if self.measured else None
-        self.clock_s = max(self.clock_s, self.stamps_ns[chosen[0]] * 1e-9)
+        self.clock_s = max(self.clock_s, self.stamps_ns[int(chosen[0])] * 1e-9)
         out = replay(self.model, self.stamps_ns[chosen], self.angles[chosen],
                      measured, warm_start=self.warm_start, orbit=self.orbit,
                      on_rows=self.on_rows, tables=self.tables,
@@ -336,65 +374,24 @@ class _OfflineRun:
         self.finish_until(self.stop if upto == self.chosen.size else int(self.chosen[upto]))
 
     def finish_until(self, final):
-        """Copy the repeats before ``final`` (as StreamingEstimator.update) and report it."""
-        result = self.result
+        """Copy the repeats before ``final`` (as StreamingEstimator.update); hand rows on."""
         while self.copied < len(self.repeats) and self.repeats[self.copied][0] < final:
             row, source = self.repeats[self.copied]
-            for key in _ESTIMATE_KEYS:
-                result[key][row] = result[key][source]
-            result['flags'][row] = int(SampleFlag.REPEATED)
+            self.window.copy_row(source, row, _ESTIMATE_KEYS)
+            self.result['flags'][row] = int(SampleFlag.REPEATED)
             self.copied += 1
         self.final = max(self.final, final)
-        if self.progress is not None:
-            self.progress(self.final)
+        upto = self.final - self.final % self.align
+        if upto - self.handed >= self.block_rows:
+            self.hand_on(upto)
 
-
-class BackgroundEstimate:
-    """
-    :func:`estimate_offline` in a thread, with the number of final samples for a reader.
-
-    Parameters
-    ----------
-    run_estimate : callable
-        ``run_estimate(result=..., progress=...)``: :func:`estimate_offline` with its
-        model and samples bound.
-    result : dict
-        The arrays it fills (:func:`allocate_estimate`), readable as they become final.
-
-    """
-
-    def __init__(self, run_estimate, result):
-        self.result, self.seconds, self._done, self._error = result, None, 0, None
-        self._condition = threading.Condition()
-        self._thread = threading.Thread(target=self._run, args=(run_estimate,),
-                                        name='replay-estimate', daemon=True)
-        self._thread.start()
-
-    def _run(self, run_estimate):
-        start = time.perf_counter()
-        try:
-            run_estimate(result=self.result, progress=self._progress)
-        except BaseException as exc:   # handed to the waiting thread
-            with self._condition:
-                self._error = exc
-                self._condition.notify_all()
-        self.seconds = time.perf_counter() - start
-
-    def _progress(self, count):
-        with self._condition:
-            self._done = count
-            self._condition.notify_all()
-
-    def wait_for(self, count):
-        """Return once the first ``count`` samples are final; raise the estimate's error."""
-        with self._condition:
-            while self._done < count and self._error is None:
-                self._condition.wait(0.5)
-            if self._error is not None:
-                raise self._error
-
-    def join(self):
-        """Wait for the estimate to end; raise its error."""
-        self._thread.join()
-        if self._error is not None:
-            raise self._error
+    def hand_on(self, upto):
+        """Give rows handed...upto (final) to ``emit``."""
+        if upto <= self.handed:
+            return
+        block = self.window.rows(self.handed, upto, _ESTIMATE_KEYS + ('flags',))
+        flags = block['flags']
+        self.counts['outliers'] += int(np.count_nonzero(flags & SampleFlag.OUTLIER))
+        self.counts['out_of_bound'] += int(np.count_nonzero(flags & SampleFlag.OUT_OF_BOUND))
+        first, self.handed = self.handed, upto
+        self.emit(first, block)

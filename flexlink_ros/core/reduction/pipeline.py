@@ -19,7 +19,7 @@ from .build_progress import BuildProgress
 from .cache_location import cache_file
 from .model import ReducedModel
 from .nonlinearity_tables import nonlinearity_tables, NONLINEARITY_VERSION
-from .soft_tables import soft_tables
+from .soft_tables import soft_tables, SOFT_TABLES_VERSION
 from .. import dynamics
 from ..fe import linkage as assembly
 from ..fe.stiffness_damping import stiffness_damping_terms
@@ -80,7 +80,9 @@ def model_for_mechanism(mechanism, options=None, cache_dir=None, use_cache=True,
     arrays, meta, _ = store.load_or_build(place('.npz'), key, build, directory)
     model = with_nonlinearity(ReducedModel.from_arrays(arrays, meta), mechanism, options,
                               (place('-nonlinearity.npz'), directory), key)
-    return with_soft_basis(model, options.soft_modes)
+    suffix = soft_cache_suffix(options.soft_modes)
+    return with_soft_basis(model, options.soft_modes,
+                           (None if suffix is None else place(suffix), directory), key)
 
 
 def build_model(mechanism, options, progress=None):
@@ -129,9 +131,21 @@ def with_nonlinearity(model, mechanism, options, place, key):
     return dataclasses.replace(model, nonlinearity=arrays)
 
 
-def with_soft_basis(model, soft_modes):
+def soft_cache_suffix(soft_modes):
+    """End of the name of a model's soft-basis tables' cache file (None: no tables)."""
+    if soft_modes == 0:
+        return None
+    return f'-soft{soft_modes if soft_modes > 0 else ""}.npz'
+
+
+def with_soft_basis(model, soft_modes, place=(None, None), key=None):
     """
     Return the model with the soft-basis step tables (:mod:`.soft_tables`), as asked.
+
+    The tables (eigenproblems, a matrix logarithm and exponentials at every grid node: most of
+    a cached model's load) are cached in a file of their own beside the model's (``place``:
+    the file and the cache directory, or None twice: built, not cached), keyed by the model's
+    ``key``, :data:`.soft_tables.SOFT_TABLES_VERSION` and ``soft_modes``.
 
     ``soft_modes`` as :class:`~core.options.ModelOptions` takes it: -1 uses the smallest
     usable gap, or none (with the reason in ``info['soft']``); p > 0 refuses a model without
@@ -147,7 +161,7 @@ def with_soft_basis(model, soft_modes):
         return dataclasses.replace(model, info={**model.info, 'soft': {'used': False,
                                                                        'reason': reason}})
     try:
-        soft = soft_tables(model, soft_modes)
+        soft = _cached_soft_tables(model, soft_modes, place, key)
     except FlexlinkError as exc:
         if soft_modes > 0:
             raise
@@ -160,6 +174,17 @@ def with_soft_basis(model, soft_modes):
                                    'gap_ratio': float(gap[size - 1]) if size < gap.size + 1
                                    else None}}
     return dataclasses.replace(model, soft=soft, info=info)
+
+
+def _cached_soft_tables(model, soft_modes, place, key):
+    """soft_tables of the model, from (or into) its cache file if there is one."""
+    path, root = place
+    if path is None:
+        return soft_tables(model, soft_modes)
+    arrays, _, _ = store.load_or_build(
+        path, store.cache_key('soft-tables', SOFT_TABLES_VERSION, key, soft_modes),
+        lambda: (soft_tables(model, soft_modes), {}), root)
+    return dict(arrays)
 
 
 def fe_mechanism(mechanism, options):

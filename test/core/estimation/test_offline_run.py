@@ -58,17 +58,6 @@ def test_estimate_reports_only_final_samples_to_the_writer(model, monkeypatch):
     np.testing.assert_array_equal(result['lever_tip'][200], result['lever_tip'][199])
 
 
-def test_replay_writer_gets_the_estimate_error():
-    def failing(result, progress):
-        progress(10)
-        raise ValueError('estimate failed')
-    background = offline_run.BackgroundEstimate(failing, {})
-    with pytest.raises(ValueError, match='estimate failed'):
-        background.wait_for(11)
-    with pytest.raises(ValueError, match='estimate failed'):
-        background.join()
-
-
 def test_segments_share_one_set_of_step_tables(model, monkeypatch):
     """A recording with many gaps builds the step tables once, not per segment."""
     built = []
@@ -137,3 +126,74 @@ def test_offline_estimate_equals_streaming_through_outliers_and_out_of_bound(
                                    atol=1e-12)
         # the quality the node publishes with each estimate (~/quality)
         assert result['error_indicator'][n] == pytest.approx(sample.error_indicator, rel=1e-6)
+
+
+def awkward_stream(count):
+    """Return a 1 kHz stream with repeats, outliers, a gap, a step back, speedless samples."""
+    rng = np.random.default_rng(5)
+    stamps = 10**9 + np.cumsum(np.round((1 + 0.3 * rng.uniform(-1, 1, count)) * 1e6)).astype(
+        np.int64)
+    speed = np.full(count, 391.0 * RPM)
+    speed[count * 2 // 3:] = -40.0        # a reversal: outliers until it is plausible
+    angles = np.cumsum(speed) * 1e-3
+    speed[[200, 201, 999, 1000, 4095, 4096]] = 1e6
+    for row in (800, 1024, 4097, 5000):   # exact repeats, some on chunk or plan boundaries
+        stamps[row], angles[row] = stamps[row - 1], angles[row - 1]
+    stamps[3000:] += 800_000_000          # a gap
+    stamps[4500:] -= 2_000_000_000        # back in time
+    speed[5500:5550] = np.nan             # no measured speed
+    return stamps, angles, speed
+
+
+def stream_in_chunks(model, signal, chunk, **blocks):
+    """estimate_stream over ``signal`` read ``chunk`` rows at a time, gathered in arrays."""
+    count = signal[0].size
+    result = offline_run.allocate_estimate(model, count)
+    handed = []
+
+    def emit(first, block):
+        handed.append((first, len(block['flags'])))
+        for key, values in block.items():
+            result[key][first:first + len(values)] = values
+    chunks = ([column[start:start + chunk] for column in signal]
+              for start in range(0, count, chunk))
+    result.update(offline_run.estimate_stream(model, chunks, emit, **blocks))
+    assert [first for first, _ in handed] == np.cumsum([0] + [n for _, n in handed])[
+        :-1].tolist()
+    return result, handed
+
+
+@pytest.mark.parametrize('chunk, align, block_rows',
+                         [(97, 1, 1), (1000, 1024, 3000), (4096, 64, 500)])
+def test_a_stream_read_in_chunks_gives_the_whole_estimate_bit_for_bit(
+        model, monkeypatch, chunk, align, block_rows):
+    """Restarts, repeats and outliers on chunk boundaries: the rows of one whole run."""
+    signal = awkward_stream(7000)
+    peak = np.nanmax(np.abs(offline_run.estimate_offline(model, *signal)['lever_tip'][:4000]))
+    bound = StreamingEstimator(model).deflection_bound_m
+    # A bound below the highest peaks: they go out of bound and restart the estimate.
+    monkeypatch.setattr(streaming, 'DEFLECTION_SAFETY_FACTOR',
+                        streaming.DEFLECTION_SAFETY_FACTOR * 0.95 * peak / bound)
+    whole = offline_run.estimate_offline(model, *signal)
+    assert whole['out_of_bound'] > 3 and whole['segments'] > 5 and whole['outliers'] >= 6
+    streamed, handed = stream_in_chunks(model, signal, chunk, align=align,
+                                        block_rows=block_rows)
+    for key in ('segments', 'outliers', 'out_of_bound', 'criteria_available'):
+        assert streamed[key] == whole[key]
+    for key, values in whole.items():
+        if isinstance(values, np.ndarray):     # bit for bit, NaN where NaN
+            assert values.tobytes() == streamed[key].tobytes(), key
+    assert all(first % align == 0 for first, _ in handed)
+    bound = chunk + 2 * offline_run.PLAN_WINDOW + block_rows + align
+    assert streamed['window_rows'] <= bound
+
+
+def test_the_rows_held_do_not_grow_with_the_stream(model):
+    """A long recording with a long run of outliers is held a window at a time."""
+    stamps, angles, speed = awkward_stream(40000)
+    speed[10000:30000] = 1e7                     # twenty seconds of implausible speeds
+    result, _ = stream_in_chunks(model, (stamps, angles, speed), 500, align=1024,
+                                 block_rows=2048)
+    assert result['samples'] == 40000 and result['outliers'] >= 20000
+    bound = 500 + 2 * offline_run.PLAN_WINDOW + 2048 + 1024
+    assert result['window_rows'] <= bound < 20000

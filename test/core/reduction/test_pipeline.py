@@ -9,6 +9,7 @@ from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.fe.modes import solve_frozen_modes
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
+from flexlink_ros.core.reduction import pipeline
 from flexlink_ros.core.reduction.basis import frozen_modes
 from flexlink_ros.core.reduction.build import reduce_samples
 from flexlink_ros.core.reduction.dynamic_second_order_tables import ARRAY_NAMES as \
@@ -184,7 +185,7 @@ def test_order_2_model_round_trips_through_the_cache_and_order_1_has_no_tables(t
     # The linear tables are the same bits whatever the order.
     np.testing.assert_array_equal(linear.table, loaded.table)
     np.testing.assert_array_equal(linear.basis, loaded.basis)
-    models = [p for p in tmp_path.glob('*.npz') if not p.stem.endswith('-nonlinearity')]
+    models = [p for p in tmp_path.glob('*.npz') if not p.stem.endswith(('-nonlinearity', '-soft'))]
     assert len(models) == 2     # one per order (each beside its validity-indicator tables)
 
 
@@ -207,3 +208,23 @@ def test_dynamic_second_order_has_its_own_key_and_tables_and_round_trips(tmp_pat
                                       built.dynamic_second_order[name])
     assert model_for_mechanism(mechanism, dataclasses.replace(
         options, second_order='quasi-static'), use_cache=False).dynamic_second_order is None
+
+
+def test_soft_tables_are_cached_beside_the_model_and_come_back_bit_for_bit(
+        tmp_path, monkeypatch):
+    """A cached model's load builds no soft tables (eigenproblems, logm, expm per node)."""
+    mechanism = load_mechanism('cho1992')
+    options = ModelOptions(bearings='flexible', grid_size=16, soft_modes=-1)
+    built = model_for_mechanism(mechanism, options, cache_dir=tmp_path)
+    assert built.info['soft']['used']
+    key = model_key(mechanism, options)
+    assert (tmp_path / f'cho1992-{key[:16]}-soft.npz').is_file()
+    calls, original = [], pipeline.soft_tables
+    monkeypatch.setattr(pipeline, 'soft_tables',
+                        lambda *args: calls.append(args) or original(*args))
+    loaded = model_for_mechanism(mechanism, options, cache_dir=tmp_path)
+    assert calls == [] and loaded.info['soft'] == built.info['soft']
+    assert set(loaded.soft) == set(built.soft)
+    for name, table in built.soft.items():
+        assert loaded.soft[name].dtype == table.dtype
+        assert loaded.soft[name].tobytes() == table.tobytes()

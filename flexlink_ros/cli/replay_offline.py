@@ -1,0 +1,301 @@
+"""
+The offline path of `flexlink replay`: a recording read, estimated and written in chunks.
+
+The input topic is chosen from a survey of the recording (:mod:`io.recording_stream`: topic
+counts and the first messages of each JointState topic), then its samples are read
+``--chunk-samples`` messages at a time and estimated in a thread
+(:func:`core.estimation.offline_run.estimate_stream`; the compiled step runs without the GIL)
+while this thread encodes and writes the rows already final (:mod:`io.replay_writer`), so the
+estimate and the writing share the two cores of a small machine. What is held at once does
+not depend on the recording's length: a chunk of input messages and one decompressed MCAP
+chunk, the estimate's window (a chunk, the plan's look-ahead and the rows not yet handed on)
+and at most ``QUEUED_BLOCKS`` + 2 blocks of ``BLOCK_ROWS`` rows on their way to the writer.
+"""
+
+import collections
+import math
+import queue
+import threading
+import time
+
+import numpy as np
+
+from .progress import Progress
+from ..core.estimation.offline_run import estimate_stream
+from ..io.joint_states import iter_crank_samples
+from ..io.recording import choose_input_topic, damage_note
+from ..io.recording_stream import survey_recording
+from ..io.replay_writer import WRITE_BATCH
+from ..names import OUTPUT_POINTS, QUALITY_NAMES
+
+# Input messages read at a time (the --chunk-samples default) ...
+CHUNK_SAMPLES = 65536
+# ... and the most the flag accepts (a bound on what one chunk may hold).
+MAX_CHUNK_SAMPLES = 1 << 22
+# Rows handed from the estimate to the writer at a time, and blocks waiting for the writer
+# (the estimate waits when it is that far ahead).
+BLOCK_ROWS = 8 * WRITE_BATCH
+QUEUED_BLOCKS = 2
+_COLUMNS = ('data', 'log_ns', 'publish_ns', 'stamps_ns', 'angles', 'speeds')
+
+
+class InputRows:
+    """
+    The crank samples of the input topic, read a chunk at a time, and counted.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The recording.
+    topic, joint_name : str
+        The input topic and the crank joint.
+    chunk : int
+        Messages read at a time.
+
+    """
+
+    def __init__(self, path, topic, joint_name, chunk):
+        self.topic, self.joint_name = topic, joint_name
+        self.chunks = iter_crank_samples(path, topic, joint_name, block=chunk)
+        self.samples = self.skipped = 0
+        self.skipped_reasons = {}
+        self.first_log_ns = self.last_log_ns = None
+        self.peeked = collections.deque()
+        self.pending = collections.deque()      # read, given to the estimate, not yet written
+
+    def _next(self):
+        """Return the next chunk with a usable sample (counting the rest), or None."""
+        for chunk in self.chunks:
+            self.skipped += chunk['skipped']
+            for why, count in chunk['skipped_reasons'].items():
+                self.skipped_reasons[why] = self.skipped_reasons.get(why, 0) + count
+            if chunk['data']:
+                self.samples += len(chunk['data'])
+                if self.first_log_ns is None:
+                    self.first_log_ns = int(chunk['log_ns'][0])
+                self.last_log_ns = int(chunk['log_ns'][-1])
+                return chunk
+        return None
+
+    def find_first(self):
+        """Read up to the first usable sample; ValueError naming why there is none."""
+        chunk = self._next()
+        if chunk is None:
+            raise ValueError(f'no usable samples of joint {self.joint_name!r} on {self.topic}'
+                             + ''.join(f'; {n} {why}'
+                                       for why, n in self.skipped_reasons.items()))
+        self.peeked.append(chunk)
+
+    def estimate_input(self):
+        """Yield (stamps, angles, speeds) of each chunk, keeping its rows for :meth:`take`."""
+        while True:
+            chunk = self.peeked.popleft() if self.peeked else self._next()
+            if chunk is None:
+                return
+            self.pending.append(chunk)
+            yield chunk['stamps_ns'], chunk['angles'], chunk['speeds']
+
+    def take(self, count):
+        """Remove and return the next ``count`` rows given to the estimate, as one dict."""
+        parts = []
+        while count:
+            chunk = self.pending[0]
+            size = len(chunk['data'])
+            if size <= count:
+                parts.append(self.pending.popleft())
+                count -= size
+                continue
+            parts.append({key: chunk[key][:count] for key in _COLUMNS})
+            self.pending[0] = {key: chunk[key][count:] for key in _COLUMNS}
+            count = 0
+        if len(parts) == 1:
+            return parts[0]
+        rows = {key: np.concatenate([part[key] for part in parts]) for key in _COLUMNS[1:]}
+        rows['data'] = [data for part in parts for data in part['data']]
+        return rows
+
+    def span_s(self):
+        """Log time from the first to the last usable sample [s]."""
+        return ((self.last_log_ns - self.first_log_ns) * 1e-9 if self.samples > 1 else 0.0)
+
+
+def open_input(args, damaged):
+    """
+    Choose the input topic from a survey of the recording and find its first usable sample.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        ``input``, ``topic``, ``joint``, ``chunk_samples``.
+    damaged : list
+        Receives (file, offset, reason) of what the reader skipped.
+
+    Returns
+    -------
+    (str, InputRows, int)
+        The topic, its samples (the first read) and its message count.
+
+    """
+    counts, kept = survey_recording(args.input, topic=args.topic, damaged=damaged)
+    try:
+        topic = choose_input_topic(args.input, args.joint, args.topic, (counts, kept))
+        rows = InputRows(args.input, topic, args.joint, args.chunk_samples)
+        rows.find_first()
+    except ValueError as exc:
+        raise ValueError(f'{exc}{damage_note(damaged)}') from None
+    return topic, rows, counts[topic][1]
+
+
+class EstimateSummary:
+    """The peak-to-peak deflections and the quality of the estimated rows, block by block."""
+
+    def __init__(self):
+        self.low = {key: np.full(2, math.inf) for key in OUTPUT_POINTS}
+        self.high = {key: np.full(2, -math.inf) for key in OUTPUT_POINTS}
+        self.seen = dict.fromkeys(OUTPUT_POINTS, False)
+        self.messages = 0
+        self.largest = dict.fromkeys(QUALITY_NAMES)
+
+    def add(self, estimate):
+        """Take a block of estimated rows (NaN: outlier or out of bound)."""
+        estimated = np.isfinite(estimate['lever_tip'][:, 0])
+        for key in OUTPUT_POINTS:
+            values = estimate[key][estimated]
+            if values.size:
+                self.seen[key] = True
+                self.low[key] = np.minimum(self.low[key], values.min(axis=0))
+                self.high[key] = np.maximum(self.high[key], values.max(axis=0))
+        published = (np.all(np.isfinite(estimate['lever_tip']), axis=1)
+                     & np.all(np.isfinite(estimate['coupler_mid']), axis=1))
+        self.messages += int(np.count_nonzero(published))
+        for key in QUALITY_NAMES:
+            values = estimate[key][published]
+            values = values[np.isfinite(values)]
+            if values.size:
+                largest = float(values.max())
+                known = self.largest[key]
+                self.largest[key] = largest if known is None else max(known, largest)
+
+    def result(self):
+        """Each output point's peak-to-peak deflection [um] and the 'quality' summary."""
+        result = {f'{key}_peak_to_peak_um': ((1e6 * (self.high[key] - self.low[key])).tolist()
+                                             if self.seen[key] else [math.nan] * 2)
+                  for key in OUTPUT_POINTS}
+        result['quality'] = {'messages': self.messages,
+                             **{f'{key}_max': self.largest[key] for key in QUALITY_NAMES}}
+        return result
+
+
+class _Stopped(Exception):
+    """The writer stopped: the estimate ends too."""
+
+
+def _put(blocks, item, stop):
+    """Queue ``item`` for the writer, waiting while the queue is full; _Stopped if it ends."""
+    while not stop.is_set():
+        try:
+            blocks.put(item, timeout=0.1)
+            return
+        except queue.Full:
+            continue
+    raise _Stopped()
+
+
+class _Pipeline:
+    """The estimate in a thread, handing blocks of final rows to the writing thread."""
+
+    def __init__(self, model, rows, warm_start):
+        self.rows, self.stop = rows, threading.Event()
+        self.blocks = queue.Queue(QUEUED_BLOCKS)
+        self.outcome, self.seconds = None, None
+        self.thread = threading.Thread(target=self._run, args=(model, warm_start),
+                                       name='replay-estimate', daemon=True)
+        self.thread.start()
+
+    def _run(self, model, warm_start):
+        start = time.perf_counter()
+        try:
+            outcome = ('done', estimate_stream(model, self.rows.estimate_input(), self._emit,
+                                               warm_start=warm_start, align=WRITE_BATCH,
+                                               block_rows=BLOCK_ROWS))
+        except _Stopped:
+            return
+        except BaseException as exc:   # handed to the writing thread
+            outcome = ('error', exc)
+        self.seconds = time.perf_counter() - start
+        try:
+            _put(self.blocks, outcome, self.stop)
+        except _Stopped:
+            pass
+
+    def _emit(self, first, estimate):
+        _put(self.blocks, (first, self.rows.take(len(estimate['flags'])), estimate), self.stop)
+
+    def __iter__(self):
+        """Yield (first, samples, estimate) of each block; the estimate's counts at the end."""
+        while True:
+            item = self.blocks.get()
+            if item[0] == 'error':
+                raise item[1]
+            if item[0] == 'done':
+                self.outcome = item[1]
+                return
+            yield item
+
+    def close(self):
+        """Stop the estimate if it still runs (the writer failed or was interrupted)."""
+        self.stop.set()
+        self.thread.join()
+
+
+def estimate_and_write(args, model, rows, messages, write):
+    """
+    Estimate every sample and, with ``write``, write the output file meanwhile.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        ``no_warm_start``, ``out``.
+    model : ReducedModel
+        The model.
+    rows : InputRows
+        The input (its first chunk read).
+    messages : int
+        Messages of the input topic (the progress total).
+    write : callable or None
+        ``write(blocks, progress)``: :func:`io.replay_writer.write_replay` of the blocks
+        (None: estimate only).
+
+    Returns
+    -------
+    counts : dict
+        :func:`estimate_stream`'s counts.
+    summary : dict
+        :meth:`EstimateSummary.result`.
+    times : dict
+        'estimate_s' (the estimate's thread), 'write_s' (reading, estimate and writing,
+        overlapped) and with ``write`` the recorder's final status as 'status'.
+
+    """
+    start = time.perf_counter()
+    summary = EstimateSummary()
+    pipeline = _Pipeline(model, rows, not args.no_warm_start)
+
+    def blocks():
+        for block in pipeline:
+            summary.add(block[2])
+            yield block
+    status = None
+    try:
+        if write is None:
+            collections.deque(blocks(), maxlen=0)
+        else:
+            with Progress(f'writing {args.out}', messages, unit='sample') as shown:
+                status = write(blocks(), lambda done, force=False: shown(done + rows.skipped,
+                                                                         force=force))
+    finally:
+        pipeline.close()
+    times = {'estimate_s': pipeline.seconds, 'write_s': time.perf_counter() - start}
+    if status is not None:
+        times['status'] = status
+    return pipeline.outcome, summary.result(), times

@@ -1,0 +1,132 @@
+"""`flexlink replay` in chunks: the bag of one whole pass, in memory that does not grow."""
+
+import json
+import math
+import os
+import pathlib
+import subprocess
+import sys
+
+from flexlink_ros.io.recorder import McapRecorder
+from flexlink_ros.ros import messages as ros_messages
+from mcap.reader import make_reader
+import numpy as np
+import pytest
+from rclpy.serialization import serialize_message
+from sensor_msgs.msg import JointState
+
+REPO = pathlib.Path(__file__).resolve().parents[2]
+BENCH = REPO / 'benchmarks' / 'replay_bench.py'
+SPEED = 391.0 * 2.0 * math.pi / 60.0
+# Summary keys that differ between two runs of the same replay (times, paths).
+RUN_KEYS = ('read_s', 'write_s', 'estimate_s', 'samples_per_s', 'times_real_time', 'output',
+            'output_files')
+
+
+def crank_state(stamp_ns, angle, speed=SPEED, joint='crank'):
+    message = JointState(name=[joint], position=[angle],
+                         velocity=[] if speed is None else [speed])
+    message.header.stamp = ros_messages.ns_to_stamp(int(stamp_ns))
+    message.header.frame_id = 'crank_link'
+    return bytes(serialize_message(message))
+
+
+def awkward_recording(path, count=5000):
+    """Repeats, outliers, a gap, a step back, speedless and unusable messages near row 1000s."""
+    rng = np.random.default_rng(11)
+    stamps = 1_700_000_000_000_000_000 + np.cumsum(
+        np.round((1 + 0.3 * rng.uniform(-1, 1, count)) * 1e6)).astype(np.int64)
+    stamps[3000:] += 800_000_000                  # a gap: a new segment
+    stamps[4000:] -= 2_000_000_000                # back in time: a new segment
+    angles = np.mod(SPEED * (stamps - stamps[0]) * 1e-9 + np.pi, 2 * np.pi) - np.pi
+    speeds = [SPEED] * count
+    for row in (999, 1000, 2048):                 # exact repeats
+        stamps[row], angles[row] = stamps[row - 1], angles[row - 1]
+    for row in (1001, 2047, 2049, 3001):          # implausible speeds: outliers
+        speeds[row] = 1e6
+    for row in range(2500, 2520):                 # no measured speed
+        speeds[row] = None
+    extra = {1998: crank_state(stamps[1998] + 1, math.nan),     # skipped: NaN position
+             1999: crank_state(stamps[1999] + 1, 0.0, joint='wheel'),   # skipped: no crank
+             2999: crank_state(stamps[2999] + 1, 0.1, math.nan)}        # skipped: NaN speed
+    with McapRecorder(path) as recorder:
+        recorder.add_topic('/joint_states', JointState)
+        for row in range(count):
+            log_ns = int(stamps[row]) + 200_000
+            recorder.write('/joint_states', crank_state(stamps[row], angles[row], speeds[row]),
+                           log_ns, log_ns - 50_000)
+            if row in extra:
+                recorder.write('/joint_states', extra[row], log_ns + 1)
+    return path
+
+
+def replay(bag, out, *extra):
+    result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'replay', str(bag),
+                             '--out', str(out), '--json', '--markers-every-n', '7', *extra],
+                            capture_output=True, text=True, timeout=600, cwd=REPO)
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    return {key: value for key, value in summary.items() if key not in RUN_KEYS}
+
+
+def messages(path):
+    """(topic, log, publish, sequence, bytes) of every message, by mcap's own reader."""
+    with open(path, 'rb') as stream:
+        return [(channel.topic, m.log_time, m.publish_time, m.sequence, bytes(m.data))
+                for _, channel, m in make_reader(stream).iter_messages(log_time_order=False)]
+
+
+def test_a_replay_in_chunks_writes_the_bag_of_one_whole_pass(tmp_path):
+    """Chunks of 1000 and 333 messages: the messages and summary of one chunk (the old pass)."""
+    bag = awkward_recording(tmp_path / 'awkward.mcap')
+    whole = replay(bag, tmp_path / 'whole.mcap', '--chunk-samples', '4194304')
+    assert whole['skipped'] == 3 and whole['samples'] == 5000
+    assert whole['segments'] == 3 and whole['outliers'] == 4
+    expected = messages(tmp_path / 'whole.mcap')
+    for chunk in (1000, 333):
+        out = tmp_path / f'chunks_{chunk}.mcap'
+        assert replay(bag, out, '--chunk-samples', str(chunk)) == whole
+        assert messages(out) == expected
+    markers = sum(1 for topic, *_ in expected if topic.endswith('/markers'))
+    assert len(expected) == 5000 + 4 * (5000 - 4) + markers and markers > 600
+
+
+def peak_resident_mb(argv):
+    """Run a command to its end; its peak resident size [MB] (os.wait4)."""
+    process = subprocess.Popen(argv, cwd=REPO, stdout=subprocess.DEVNULL,
+                               stderr=subprocess.PIPE)
+    _, status, usage = os.wait4(process.pid, 0)
+    error = process.stderr.read().decode(errors='replace')
+    process.stderr.close()
+    assert os.waitstatus_to_exitcode(status) == 0, error
+    return usage.ru_maxrss / 1024.0
+
+
+@pytest.mark.parametrize('chunk', [2000])
+def test_replay_memory_does_not_grow_with_the_recording(tmp_path, chunk):
+    """Six times the messages, the same peak resident size (it held every sample before)."""
+    peaks = []
+    for seconds in (20, 120):
+        bag = tmp_path / f'bag_{seconds}.mcap'
+        subprocess.run([sys.executable, str(BENCH), 'make-bag', str(bag), '--seconds',
+                        str(seconds)], check=True, capture_output=True, timeout=300)
+        peaks.append(peak_resident_mb([sys.executable, '-m', 'flexlink_ros.cli', 'replay',
+                                       str(bag), '--out', str(tmp_path / f'out_{seconds}.mcap'),
+                                       '--chunk-samples', str(chunk)]))
+    # 100 000 samples more: about 90 MB more when every sample was held.
+    assert peaks[1] - peaks[0] < 15.0, peaks
+
+
+def test_the_offline_replay_imports_neither_rclpy_nor_matplotlib(tmp_path):
+    """Their import alone costs a replay a good part of its time (0.3 s and more)."""
+    bag = tmp_path / 'short.mcap'
+    subprocess.run([sys.executable, str(BENCH), 'make-bag', str(bag), '--seconds', '0.3'],
+                   check=True, capture_output=True, timeout=300)
+    code = ('import sys\nfrom flexlink_ros.cli import main\nmain.main(sys.argv[1:])\n'
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in "
+            "('rclpy', 'matplotlib')))\n")
+    result = subprocess.run([sys.executable, '-c', code, 'replay', str(bag), '--out',
+                             str(tmp_path / 'out.mcap')], capture_output=True, text=True,
+                            timeout=300, cwd=REPO)
+    assert result.returncode == 0, result.stderr
+    assert 'wrote' in result.stdout and result.stdout.splitlines()[-1] == '[]'
