@@ -244,7 +244,7 @@ def _recompute(bag, fallback, settings, output, start):
                               recording_totals(columns))
     summary.update(read_s=read_s, estimate_s=estimate_s, mechanism=source, error=None)
     if output is not None:
-        status = write_replay(output, samples, estimate, topic,
+        status = write_replay(output, [(0, samples, estimate)], topic,
                               output_topics(settings.node_name), settings.frame_id, model,
                               settings.markers_every_n, joint_levels=_MARKER_LEVELS)
         summary.update(output=status['path'], output_files=status['files'],
