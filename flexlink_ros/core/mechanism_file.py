@@ -388,12 +388,12 @@ def load_mechanism(path_or_name):
     return mechanism_from_dict(_read_mapping(path_or_name))
 
 
-def stiffness_damping_from_file(path_or_name):
-    """
-    Return a (validated) mechanism file's ``stiffness_damping_s`` [s], 0.0 if it has none.
-
-    The default of ``--stiffness-damping`` and of the node's ``model.stiffness_damping``.
-    """
+def read_mechanism_file(path_or_name):
+    """Read a mechanism file once: its Mechanism and ``stiffness_damping_s`` [s] (0 if none)."""
     data = _read_mapping(path_or_name)
-    mechanism_from_dict(data)
-    return _stiffness_damping_from(data)
+    return mechanism_from_dict(data), _stiffness_damping_from(data)
+
+
+def stiffness_damping_from_file(path_or_name):
+    """Return a (validated) file's ``stiffness_damping_s`` [s] (``--stiffness-damping``)."""
+    return read_mechanism_file(path_or_name)[1]

@@ -12,7 +12,7 @@ import math
 from . import parameters
 from .messages import crank_from_joint_state
 from ..core.estimation.sample import SampleFlag
-from ..core.mechanism_file import load_mechanism, stiffness_damping_from_file
+from ..core.mechanism_file import read_mechanism_file
 from ..core.reduction.pipeline import model_for_mechanism
 from ..errors import InputRejected, MalformedCdr
 from ..io import cdr
@@ -125,12 +125,11 @@ def load_node_model(values, warn, progress=None):
         Warnings given (empty if none).
 
     """
-    mechanism = load_mechanism(values['mechanism'])
-    if values['damping_ratio'] != mechanism.damping_ratio:
-        mechanism = dataclasses.replace(mechanism, damping_ratio=values['damping_ratio'])
-    file_beta = (stiffness_damping_from_file(values['mechanism'])
-                 if values['model.stiffness_damping'] < 0 else 0.0)
-    options = parameters.model_options(values, file_beta)
+    mechanism, file_beta = read_mechanism_file(values['mechanism'])   # read once
+    zeta = values['damping_ratio']      # -1: the file's
+    if zeta >= 0.0 and zeta != mechanism.damping_ratio:
+        mechanism = dataclasses.replace(mechanism, damping_ratio=zeta)
+    options = parameters.model_options(values, file_beta, mechanism.crank_speed)
     notes = []
     if values['model.modes'] == 0 and values['model.tolerance'] < DEFAULT_MODEL_TOLERANCE:
         notes.append(f'the default model was planned for {DEFAULT_MODEL_TOLERANCE:g} relative '

@@ -17,7 +17,7 @@ import pytest
 needs_exudyn = pytest.mark.skipif(not exudyn_available(),
                                   reason="exudyn is not installed (pip install '.[peer]')")
 
-SMALL = ('--elements-per-link', '4', '--no-gravity')
+SMALL = ('--elements-per-link', '4', '--no-gravity', '--bearings', 'rigid')
 
 
 def png_size(path):

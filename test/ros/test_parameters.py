@@ -5,10 +5,29 @@ import subprocess
 import sys
 
 from flexlink_ros.core.mechanism_file import find_config
+from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.ros import parameters as node_params
 from flexlink_ros.ros.node_model import load_node_model
 import pytest
 import yaml
+
+
+# Node parameter -> the ModelOptions field it sets (the parameter's default is that field's).
+MODEL_FIELDS = {'model.grid_size': 'grid_size', 'model.elements_per_link': 'elements_per_link',
+                'model.rigid_crank': 'rigid_crank', 'model.bearings': 'bearings',
+                'model.geometric_stiffness': 'geometric_stiffness', 'model.order': 'order',
+                'model.soft_modes': 'soft_modes', 'model.second_order': 'second_order'}
+
+
+def test_the_parameter_defaults_are_the_default_model_defined_once():
+    default = ModelOptions()
+    for name, field in MODEL_FIELDS.items():
+        assert node_params.SPECS[name].default == getattr(default, field), name
+    assert node_params.model_options(node_params.defaults()) == default
+    assert node_params.default_model_options() == default
+    # "from the file" and "the planned sizes" are markers, not a second definition
+    assert node_params.defaults()['damping_ratio'] == -1.0
+    assert node_params.defaults()['model.speed_max_rpm'] == 0.0
 
 
 def test_defaults_are_valid():
