@@ -94,7 +94,8 @@ PARAMETERS = (
     ParameterSpec('model.soft_modes', DEFAULT_MODEL.soft_modes, 'The estimator steps the p '
                   'lowest modes of the reduced model (a smooth basis at a checked spectral '
                   'gap); -1 = the smallest p at a usable gap, or all coordinates where there '
-                  'is none (logged); 0 = all coordinates; p > 0 = exactly p (refused without a gap there)',
+                  'is none (logged); 0 = all coordinates; p > 0 = exactly p (refused without '
+                  'a gap there)',
                   low=-1, high=1000, read_only=True),
     ParameterSpec('model.second_order', DEFAULT_MODEL.second_order, 'How order 2 is computed: '
                   'quasi-static (the chord shortening of the linear shapes) or dynamic (also '
