@@ -2,8 +2,8 @@
 Errors of flexlink_ros.
 
 Every error the core raises on purpose is a :class:`FlexlinkError`. The node logs one and
-keeps running; the CLI prints it on one line and exits 1. Bad arguments raise ``ValueError``
-naming the argument.
+keeps running; the CLI prints it on one line and exits 1 (2 for a refused mechanism file).
+Bad arguments raise ``ValueError`` naming the argument.
 """
 
 import math

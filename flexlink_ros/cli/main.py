@@ -2,7 +2,8 @@
 The `flexlink` command-line tool: one script, one small module per group of subcommands.
 
 Every subcommand prints human-readable text, or one JSON object on stdout with ``--json``,
-and exits non-zero with a one-line reason on bad input. ``main(argv=None)`` only parses.
+and exits non-zero with a one-line reason on bad input: 2 for a mechanism file refused (its
+key, value and the likely cause), 1 otherwise. ``main(argv=None)`` only parses.
 """
 
 import argparse
@@ -13,7 +14,7 @@ import os
 import sys
 
 from .. import __version__
-from ..errors import FlexlinkError
+from ..errors import FlexlinkError, MechanismError
 
 
 # Each subcommand and the module that registers it (``register(subparsers)``). Only the chosen
@@ -189,6 +190,9 @@ def main(argv=None):
         # The reader went away (`flexlink ... | head`): stop quietly, as Unix tools do.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
+    except MechanismError as exc:      # the file's key, its value and the likely cause
+        print(f'flexlink {args.command}: error: {exc}', file=sys.stderr)
+        return 2
     except (FlexlinkError, ValueError) as exc:
         print(f'flexlink {args.command}: error: {exc}', file=sys.stderr)
         return 1

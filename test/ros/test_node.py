@@ -19,6 +19,7 @@ import yaml
 READY_TIMEOUT_S = 240.0     # node start-up incl. a first model build on a loaded machine
 DISCOVERY_TIMEOUT_S = 20.0
 PARAMS_FILE = pathlib.Path(__file__).resolve().parents[2] / 'config' / 'flexlink_node.yaml'
+DATA = pathlib.Path(__file__).resolve().parents[1] / 'data'
 OUTPUTS = ('/flexlink_node/lever_tip/deflection', '/flexlink_node/coupler_mid/deflection',
            '/flexlink_node/joint_criteria', '/flexlink_node/markers', '/diagnostics')
 
@@ -340,6 +341,24 @@ def test_bad_parameters_file_value_stops_the_node_with_a_reason(tmp_path, proces
     log = node_process.log()
     assert reason in log and 'Traceback' not in log
     assert log.strip().startswith(f'{NODE_NAME}: error:')
+
+
+def test_a_mechanism_file_in_mm_stops_the_node_with_one_line(tmp_path, processes):
+    data = yaml.safe_load((DATA / 'soft_aluminium.yaml').read_text())
+    for link in data['links'].values():
+        link['area_m2'] *= 1e6          # mm^2 and mm^4, the lengths in m
+        link['second_moment_m4'] *= 1e12
+    mechanism = tmp_path / 'soft_mm4.yaml'
+    mechanism.write_text(yaml.safe_dump(data))
+    node_process = NodeProcess(tmp_path, f'mechanism:={mechanism}',
+                               f'model.cache_dir:={tmp_path}')
+    processes.append(node_process)
+    assert node_process.process.wait(timeout=READY_TIMEOUT_S) == 1
+    log = node_process.log()
+    assert 'Traceback' not in log and log.count('\n') == 1
+    assert log.startswith(f'{NODE_NAME}: error: links.crank.second_moment_m4 = 5.625: radius '
+                          'of gyration'), log
+    assert 'mm^2 and mm^4' in log
 
 
 def test_managed_node_streams_only_while_active(tmp_path, processes, ros):
