@@ -158,6 +158,7 @@ class Totals:
         default_factory=lambda: dict.fromkeys(SKIP_KINDS + OTHER_KINDS, 0))   # kind -> messages
     last_rejection: str = ''
     last_outlier: str = ''
+    clipped: int = 0        # published with the speed clipped to the model's range
 
 
 @dataclasses.dataclass

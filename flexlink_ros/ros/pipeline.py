@@ -33,6 +33,7 @@ from .sim_time import ClockWatch, LogTime
 from .startup import check_startup_signal
 from ..core.estimation.sample import SampleFlag
 from ..core.estimation.streaming import StreamingEstimator
+from ..core.numerics import RPM
 from ..core.reduction.soft_basis import soft_basis_text
 from ..errors import FlexlinkError, InputRejected, OutlierSample
 from ..io import cdr
@@ -255,6 +256,8 @@ class EstimatorPipeline(NodeRecording):
 
     def _publish_sample(self, stamp_ns, sample):
         self.period.add_sample(sample)
+        if sample.flags & SampleFlag.CLIPPED_SPEED:
+            self._log_clipped(sample)
         if sample.message:
             self.get_logger().warning(f'estimator: {sample.message}',
                                       throttle_duration_sec=WARN_THROTTLE_S)
@@ -280,6 +283,15 @@ class EstimatorPipeline(NodeRecording):
             log_ns = self._log_time(self._clock.now().nanoseconds, stamp_ns)
             for key, data in outputs:
                 self._record(self.output_topics[key], data, log_ns)
+
+    def _log_clipped(self, sample):
+        """Count a sample beyond the model's speed range; say so at most once a second."""
+        self.totals.clipped += 1
+        self.get_logger().warning(
+            f'crank at {abs(sample.crank_speed) / RPM:.0f} rpm, beyond the model\'s speed range '
+            f'of {self.options.speed_max / RPM:.0f} rpm: {self.totals.clipped} samples so far '
+            'estimated at the clipped speed (too small); restart with model.speed_max_rpm '
+            'above the crank\'s speed', throttle_duration_sec=WARN_THROTTLE_S)
 
     def _publish(self, outputs):
         """Publish (key, CDR) pairs; False if SIGINT/SIGTERM shut the context down."""
