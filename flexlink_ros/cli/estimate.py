@@ -8,7 +8,8 @@
 - ``plan`` picks the smallest model (physics: elements per link, rigid crank, geometric
   stiffness, bearings; size: modes, static directions, grid) meeting a tolerance against the
   full-order response of the richest model of the scene over a speed range, and shows the
-  error and cost of the alternatives (:mod:`studies.plan`).
+  error and cost of the alternatives (:mod:`studies.plan`); ``--params-out FILE`` writes
+  the choice as the node's parameters file (:mod:`.plan_params`).
 - ``bench`` measures, side by side in one run: streaming cost per sample (median, p99),
   offline samples per second, full-order CPU per simulated second, and each configuration's
   error; it prints a table and writes a chart of error against cost (:mod:`studies.bench`).
@@ -23,6 +24,7 @@ import numpy as np
 from .flex import nonlinearity_line
 from .main import emit
 from .model_args import add_estimator_arguments, crank_rpm, load_model, model_options
+from .plan_params import chosen_options, write_params_file
 from .progress import Progress
 from ..core.mechanism_file import load_mechanism
 from ..core.numerics import RPM
@@ -84,7 +86,16 @@ def _plan(args):
     with Progress('plan', unit='step') as progress:
         result = run_plan(mechanism, model_options(scene_args), args.rpm_max, args.tolerance,
                           args.rate_hz, fixed=plan_fixed(args), progress=progress)
-    return emit(result, plan_table(result), args.json)
+    text = plan_table(result)
+    if args.params_out:
+        if not result.get('choice'):
+            emit(result, text, args.json)       # the table says why, the error line what
+        options = chosen_options(result)
+        model = load_model(mechanism, options, args)
+        result['params'] = write_params_file(args.params_out, mechanism, options, model, args)
+        text += (f'\nnode parameters: {args.params_out} (flexlink_node --ros-args '
+                 f'--params-file {args.params_out})')
+    return emit(result, text, args.json)
 
 
 def _bench_lines(result):
@@ -156,6 +167,9 @@ def register(subparsers):
                         "(default: the mechanism file's crank_speed_rpm)")
     parser.add_argument('--tolerance', type=float, default=0.01,
                         help='relative RMS error target (default 0.01)')
+    parser.add_argument('--params-out', default=None, metavar='FILE',
+                        help="write the choice as the node's parameters file (every model "
+                        'choice, the speed range, criterion thresholds of this cycle)')
     parser.set_defaults(func=_plan)
 
     parser = subparsers.add_parser('bench', help='estimator cost and accuracy side by side')

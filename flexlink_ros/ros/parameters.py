@@ -10,6 +10,8 @@ import dataclasses
 import math
 from typing import Optional
 
+import yaml
+
 from ..core.options import DEFAULT_SPEED_MAX, ModelOptions, SPEED_MARGIN, speed_range
 from ..core.validity import VALIDITY_THRESHOLD
 
@@ -329,3 +331,52 @@ def default_model_options(**overrides):
             raise ValueError(f'unknown model option {name!r}')
         values[key] = value
     return model_options(values)
+
+
+def model_parameters(options):
+    """
+    Give the ``model.*`` parameter values that make the node build ``options``.
+
+    The inverse of :func:`model_options`: ``model_options({**defaults(), **these})`` is
+    ``options`` again (the speed range as ``model.speed_max_rpm``, beta as itself).
+
+    Parameters
+    ----------
+    options : core.options.ModelOptions
+        A model (the plan's choice).
+
+    """
+    return {'model.modes': options.modes, 'model.static': options.static,
+            'model.grid_size': options.grid_size,
+            'model.elements_per_link': options.elements_per_link or 0,
+            'model.rigid_crank': options.rigid_crank, 'model.bearings': options.bearings,
+            'model.geometric_stiffness': options.geometric_stiffness,
+            'model.stiffness_damping': float(options.stiffness_damping),
+            'model.order': options.order, 'model.soft_modes': options.soft_modes,
+            'model.second_order': options.second_order,
+            'model.speed_max_rpm': float(options.speed_max) * 30.0 / math.pi}
+
+
+def params_file_text(values, comment=''):
+    """
+    Write parameter values as a ``/**: ros__parameters:`` file the node reads as it is.
+
+    Parameters
+    ----------
+    values : dict
+        Parameter name -> value (validated here; floats keep a decimal point).
+    comment : str
+        Lines put first as YAML comments.
+
+    """
+    validate_all({**defaults(), **values})
+    nested = {}
+    for name, value in values.items():
+        *groups, leaf = name.split('.')
+        target = nested
+        for group in groups:
+            target = target.setdefault(group, {})
+        target[leaf] = float(value) if type(SPECS[name].default) is float else value
+    body = yaml.safe_dump({'/**': {'ros__parameters': nested}}, sort_keys=False)
+    header = ''.join(f'# {line}\n' for line in comment.splitlines())
+    return header + body
