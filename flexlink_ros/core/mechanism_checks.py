@@ -161,7 +161,7 @@ def check_plausible(mechanism):
                 'rpm expected, a crank beyond 100000 rpm is no linkage')
 
 
-def check_first_frequency(first_hz, crank_angle):
+def check_first_frequency(first_hz, crank_angle, crank_speed=0.0):
     """
     Refuse a frozen structure whose first natural frequency is not positive.
 
@@ -171,11 +171,19 @@ def check_first_frequency(first_hz, crank_angle):
         The lowest frozen frequency [Hz] (0 where the eigenvalue was not positive).
     crank_angle : float
         Where [rad].
+    crank_speed : float
+        At which crank speed [rad/s] (the axial forces' geometric stiffness grows with it).
 
     """
-    if not first_hz > 0.0:
+    if first_hz > 0.0:
+        return
+    where = f'at crank angle {math.degrees(crank_angle):.1f} deg'
+    if crank_speed:
         raise MechanismError(
-            'mechanism', f'the first frozen frequency at crank angle '
-            f'{math.degrees(crank_angle):.1f} deg is {first_hz:g} Hz, not positive: the frozen '
-            'structure has no stiffness there (SI units expected: lengths in m, sections in m^2 '
-            'and m^4, E in Pa, bearing stiffness in N/m)')
+            'mechanism', f'the first frozen frequency {where} and {crank_speed * 30 / math.pi:.0f} '
+            f'rpm is {first_hz:g} Hz: the links buckle under their axial forces at that speed; '
+            'lower the speed range (crank_speed_rpm, model.speed_max_rpm, --rpm-max)')
+    raise MechanismError(
+        'mechanism', f'the first frozen frequency {where} is {first_hz:g} Hz, not positive: '
+        'the frozen structure has no stiffness there (SI units expected: lengths in m, '
+        'sections in m^2 and m^4, E in Pa, bearing stiffness in N/m)')

@@ -149,3 +149,13 @@ def test_the_model_build_refuses_a_structure_without_stiffness(tmp_path):
     options = ModelOptions.linear(grid_size=8, modes=2, static=0, geometric_stiffness=False)
     with pytest.raises(MechanismError, match='first frozen frequency'):
         pipeline.model_for_mechanism(floppy, options, use_cache=False)
+
+
+def test_a_speed_range_where_the_links_buckle_is_refused_with_the_speed():
+    # Cho 1992's strips lose their first frozen frequency to the axial forces near 800 rpm:
+    # that speed range was an SVD failure; it is now one line naming the speed.
+    options = ModelOptions.linear(grid_size=16, modes=2, static=0, elements_per_link=2,
+                                  speed_max=812.0 * math.pi / 30.0)
+    with pytest.raises(MechanismError, match=r'and 812 rpm is 0 Hz: the links buckle under '
+                       r'their axial forces at that speed; lower the speed range'):
+        pipeline.model_for_mechanism(load_mechanism('cho1992'), options, use_cache=False)

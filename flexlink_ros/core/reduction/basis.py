@@ -163,9 +163,8 @@ def build_basis(samples, modes, static, speeds, angle_stride=1):
     for k in range(0, samples.grid_size, angle_stride):
         for w in speeds:
             omega, shapes = frozen_modes(samples.frozen_at(k, w), samples.mass[k], per_state)
-            if w == speeds[0]:
-                check_first_frequency(omega[0] / (2.0 * np.pi),
-                                      2.0 * np.pi * k / samples.grid_size)
+            check_first_frequency(omega[0] / (2.0 * np.pi), 2.0 * np.pi * k / samples.grid_size,
+                                  w)
             stiffness = samples.stiffness_at(k, w)
             # Weight by flexibility (omega_1 / omega)^2, a mode's share of a static response,
             # so the extra modes collected count less than the ones to keep.
