@@ -37,7 +37,7 @@ def chosen_options(result):
 
 
 def indicator_warn(model, rpm, rate_hz):
-    """The error indicator's WARN level for ``model``: a margin over its value at ``rpm``."""
+    """Return the error indicator's WARN level for ``model`` (a margin over it at ``rpm``)."""
     measured = run_estimate(model, rpm, INDICATOR_SECONDS, rate_hz)['error_indicator_max']
     default = node_params.SPECS['diagnostics.error_indicator_warn']
     level = max(default.default, INDICATOR_MARGIN * measured)
@@ -79,16 +79,17 @@ def plan_parameters(mechanism, options, model, args):
 
 
 def params_comment(mechanism, args, basis):
-    """The file's comment lines: what made it, how to use it, what its thresholds rest on."""
+    """Write the file's comment: what made it, how to use it, what its thresholds rest on."""
     thresholds = basis['thresholds']
     return (f'flexlink_node parameters from `flexlink plan` for {mechanism.name} up to '
             f'{args.rpm_max:g} rpm (tolerance {args.tolerance:g})\n'
             'ros2 run flexlink_ros flexlink_node --ros-args --params-file THIS_FILE\n'
             f'criterion thresholds: {thresholds["warn_margin"]:g} and '
-            f'{thresholds["error_factor"]:g} times the cycle\'s largest true maximum at '
+            f'{thresholds["error_factor"]:g} times the largest true maximum of the cycle at '
             f'{thresholds["rpm"]:.4g} rpm (docs/criterion-thresholds.md)\n'
-            f'error_indicator_warn: {INDICATOR_MARGIN:g} times the chosen model\'s indicator '
-            f'at {args.rpm_max:g} rpm ({basis["indicator"]:.3g}), outputs verified by the plan')
+            f'error_indicator_warn: {INDICATOR_MARGIN:g} times the indicator of the chosen '
+            f'model at {args.rpm_max:g} rpm ({basis["indicator"]:.3g}), outputs verified by the '
+            'plan')
 
 
 def write_params_file(path, mechanism, options, model, args):

@@ -75,7 +75,7 @@ def _check_length(key, value):
 
 
 def _check_section(where, length, area, second):
-    """The section of one link: its shape factor I/A^2 and its radius of gyration."""
+    """Check the section of one link: its shape factor I/A^2 and radius of gyration."""
     shape = second / area ** 2
     gyration = math.sqrt(second / area)
     if shape > SHAPE_FACTOR[1]:
@@ -180,8 +180,9 @@ def check_first_frequency(first_hz, crank_angle, crank_speed=0.0):
     where = f'at crank angle {math.degrees(crank_angle):.1f} deg'
     if crank_speed:
         raise MechanismError(
-            'mechanism', f'the first frozen frequency {where} and {crank_speed * 30 / math.pi:.0f} '
-            f'rpm is {first_hz:g} Hz: the links buckle under their axial forces at that speed; '
+            'mechanism', f'the first frozen frequency {where} and '
+            f'{crank_speed * 30 / math.pi:.0f} rpm is {first_hz:g} Hz: the links buckle under '
+            'their axial forces at that speed; '
             'lower the speed range (crank_speed_rpm, model.speed_max_rpm, --rpm-max)')
     raise MechanismError(
         'mechanism', f'the first frozen frequency {where} is {first_hz:g} Hz, not positive: '

@@ -288,10 +288,11 @@ class EstimatorPipeline(NodeRecording):
         """Count a sample beyond the model's speed range; say so at most once a second."""
         self.totals.clipped += 1
         self.get_logger().warning(
-            f'crank at {abs(sample.crank_speed) / RPM:.0f} rpm, beyond the model\'s speed range '
-            f'of {self.options.speed_max / RPM:.0f} rpm: {self.totals.clipped} samples so far '
+            f'crank at {abs(sample.crank_speed) / RPM:.0f} rpm, beyond the speed range of the '
+            'model'
+            f' of {self.options.speed_max / RPM:.0f} rpm: {self.totals.clipped} samples so far '
             'estimated at the clipped speed (too small); restart with model.speed_max_rpm '
-            'above the crank\'s speed', throttle_duration_sec=WARN_THROTTLE_S)
+            "above the crank's speed", throttle_duration_sec=WARN_THROTTLE_S)
 
     def _publish(self, outputs):
         """Publish (key, CDR) pairs; False if SIGINT/SIGTERM shut the context down."""

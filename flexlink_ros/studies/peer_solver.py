@@ -7,6 +7,8 @@ line, so :func:`solve_or_explain` holds the banner back and raises a FlexlinkErr
 case and a hint.
 """
 
+import contextlib
+import io
 import os
 import sys
 import tempfile
@@ -40,7 +42,8 @@ def solve_or_explain(exu, mbs, settings, case, bearings):
     """
     sys.stdout.flush()
     saved = os.dup(1)
-    with tempfile.TemporaryFile() as held:
+    printed = io.StringIO()     # the banner comes through Python's print, or C++ to fd 1
+    with tempfile.TemporaryFile() as held, contextlib.redirect_stdout(printed):
         os.dup2(held.fileno(), 1)
         try:
             ok = exu.SolveDynamic(mbs, settings)
@@ -51,7 +54,7 @@ def solve_or_explain(exu, mbs, settings, case, bearings):
             os.dup2(saved, 1)
             os.close(saved)
         held.seek(0)
-        banner = held.read(65536).decode('utf-8', 'replace')
+        banner = held.read(65536).decode('utf-8', 'replace') + printed.getvalue()[-65536:]
     if ok:
         return
     said = ' "DYNAMIC SOLVER FAILED"' if 'SOLVER FAILED' in banner else ''

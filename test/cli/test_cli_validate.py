@@ -95,7 +95,8 @@ def test_no_speed_is_a_one_line_error(capsys):
     code, out, err = _run(capsys, '--no-gravity')
     assert code == 1 and out == ''
     assert err.strip() == ('flexlink validate: error: give crank speeds with --rpm R [R ...] '
-                           'or --sweep START:STOP:STEP')
+                           'or --sweep START:STOP:STEP (the mechanism file has no '
+                           'crank_speed_rpm)')
 
 
 def test_without_exudyn_the_error_names_the_extra():

@@ -106,9 +106,9 @@ def run_node(tmp_path, params, bag, cache):
             if connection.topic == '/diagnostics':
                 message = reader.deserialize(raw, connection.msgtype)
                 for item in message.status:
-                    if item.name.endswith('estimator') and dict(
-                            (kv.key, kv.value) for kv in item.values).get(
-                            'samples_in_period', '0') != '0':
+                    values = {kv.key: kv.value for kv in item.values}
+                    if item.name.endswith('estimator') and \
+                            values.get('samples_in_period', '0') != '0':
                         levels.append(int.from_bytes(item.level, 'little')
                                       if isinstance(item.level, bytes) else int(item.level))
     return levels

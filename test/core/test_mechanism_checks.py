@@ -19,12 +19,12 @@ LINKAGES = ('packaging_steel', 'soft_aluminium')
 
 
 def file_data(name):
-    """The parsed mechanism file of test/data/<name>.yaml."""
+    """Return the parsed mechanism file of test/data/<name>.yaml."""
     return yaml.safe_load((DATA / f'{name}.yaml').read_text())
 
 
 def refusal(data):
-    """The one-line refusal of a mechanism mapping."""
+    """Return the one-line refusal of a mechanism mapping."""
     with pytest.raises(MechanismError) as info:
         mechanism_from_dict(data)
     text = str(info.value)
@@ -112,10 +112,10 @@ def test_joint_masses_in_grams_bearings_and_gravity_are_refused():
 
 
 @pytest.mark.parametrize('section, key, expected', [
-    ('bearings', 'stifness_n_m', "bearings.stifness_n_m: unknown key (did you mean "
+    ('bearings', 'stifness_n_m', 'bearings.stifness_n_m: unknown key (did you mean '
      "'stiffness_n_m'?"),
     ('', 'ground_length', "ground_length: unknown key (did you mean 'ground_length_m'?"),
-    ('material', 'youngs_modulus', "material.youngs_modulus: unknown key (did you mean "
+    ('material', 'youngs_modulus', 'material.youngs_modulus: unknown key (did you mean '
      "'youngs_modulus_pa'?"),
 ])
 def test_a_misspelt_key_names_the_closest_one(section, key, expected):

@@ -735,7 +735,7 @@ def test_a_stiff_linkage_above_620_rpm_follows_its_files_speed_range(tmp_path, p
     bag, log = _drive(tmp_path, processes, 700.0, f'mechanism:={mechanism}',
                       'model.grid_size:=64', f'model.cache_dir:={cache}')
     assert 'speed range' not in log, log
-    assert re.search(r"speed_max=78\.53981", log), log      # 1.25 x 600 rpm
+    assert re.search(r'speed_max=78\.53981', log), log      # 1.25 x 600 rpm
     done = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'estimate', '--mechanism',
                            str(mechanism), '--rpm', '700', '--grid-size', '64', '--cache-dir',
                            str(cache), '--json'], capture_output=True, text=True, timeout=600,

@@ -220,8 +220,8 @@ def test_second_order_parameter_selects_the_dynamic_pass():
     assert node_params.validate_parameter('model.second_order', 'dynamic') is None
 
 
-def test_node_model_reads_the_mechanism_file_once_and_takes_its_damping_ratio(tmp_path,
-                                                                               monkeypatch):
+def test_node_model_reads_the_mechanism_file_once_and_takes_its_damping_ratio(
+        tmp_path, monkeypatch):
     from flexlink_ros.core import mechanism_file
 
     text = pathlib.Path(find_config('cho1992')).read_text()
