@@ -71,7 +71,7 @@ def plan_parameters(mechanism, options, model, args):
     thresholds = suggest_thresholds(mechanism, speed, args.rate_hz)
     warn, measured = indicator_warn(model, args.rpm_max, args.rate_hz)
     values = {'mechanism': str(find_config(args.mechanism).resolve()),
-              **node_params.model_parameters(options),
+              **node_params.model_parameters(options, mechanism.crank_speed),
               'diagnostics.criterion_warn': thresholds['warn'],
               'diagnostics.criterion_error': thresholds['error'],
               'diagnostics.error_indicator_warn': warn}

@@ -333,19 +333,23 @@ def default_model_options(**overrides):
     return model_options(values)
 
 
-def model_parameters(options):
+def model_parameters(options, file_crank_speed=None):
     """
     Give the ``model.*`` parameter values that make the node build ``options``.
 
-    The inverse of :func:`model_options`: ``model_options({**defaults(), **these})`` is
-    ``options`` again (the speed range as ``model.speed_max_rpm``, beta as itself).
+    The inverse of :func:`model_options`: ``model_options({**defaults(), **these},
+    file_crank_speed=...)`` is ``options`` again (beta as itself; the speed range as 0 where
+    it is the file's default, so the node finds the same cached model, else in rpm).
 
     Parameters
     ----------
     options : core.options.ModelOptions
         A model (the plan's choice).
+    file_crank_speed : float or None
+        The mechanism file's crank speed [rad/s].
 
     """
+    default_range = options.speed_max == speed_range(file_crank_speed)
     return {'model.modes': options.modes, 'model.static': options.static,
             'model.grid_size': options.grid_size,
             'model.elements_per_link': options.elements_per_link or 0,
@@ -354,7 +358,8 @@ def model_parameters(options):
             'model.stiffness_damping': float(options.stiffness_damping),
             'model.order': options.order, 'model.soft_modes': options.soft_modes,
             'model.second_order': options.second_order,
-            'model.speed_max_rpm': float(options.speed_max) * 30.0 / math.pi}
+            'model.speed_max_rpm': 0.0 if default_range
+            else float(options.speed_max) * 30.0 / math.pi}
 
 
 def params_file_text(values, comment=''):

@@ -39,6 +39,13 @@ def test_the_parameters_give_the_node_the_same_model(options):
     again = node_params.model_options(values)
     assert again.speed_max == pytest.approx(options.speed_max, rel=1e-12)
     assert again == ModelOptions(**{**vars(options), 'speed_max': again.speed_max})
+    # the file's default range is written as 0: the node then builds the very same options
+    # (the same cache key), not one a rounding away
+    file_speed = options.speed_max / 1.25 if options.speed_max > 65.0 else None
+    values = {**node_params.defaults(),
+              **node_params.model_parameters(options, file_speed)}
+    assert values['model.speed_max_rpm'] == 0.0
+    assert node_params.model_options(values, file_crank_speed=file_speed) == options
 
 
 def test_the_file_is_a_ros_parameters_file_with_floats_written_as_floats(tmp_path):
