@@ -102,6 +102,7 @@ class EstimatorPipeline(NodeRecording):
         self.recorder = self._open_recorder(self.qos) if values['record.enabled'] else None
         self.totals = Totals()
         self.last_valid_wall = None
+        self._clipped_logged = -float('inf')
 
     def _create_publishers(self, make_publisher):
         """Create the output publishers with the QoS the parameters select."""
@@ -287,12 +288,16 @@ class EstimatorPipeline(NodeRecording):
     def _log_clipped(self, sample):
         """Count a sample beyond the model's speed range; say so at most once a second."""
         self.totals.clipped += 1
+        now = time.monotonic()
+        # throttled here, not by the logger: its call costs tens of us on every sample
+        if now - self._clipped_logged < WARN_THROTTLE_S or not self.context.ok():
+            return
+        self._clipped_logged = now
         self.get_logger().warning(
             f'crank at {abs(sample.crank_speed) / RPM:.0f} rpm, beyond the speed range of the '
-            'model'
-            f' of {self.options.speed_max / RPM:.0f} rpm: {self.totals.clipped} samples so far '
-            'estimated at the clipped speed (too small); restart with model.speed_max_rpm '
-            "above the crank's speed", throttle_duration_sec=WARN_THROTTLE_S)
+            f'model of {self.options.speed_max / RPM:.0f} rpm: {self.totals.clipped} samples '
+            'so far estimated at the clipped speed (too small); restart with '
+            "model.speed_max_rpm above the crank's speed")
 
     def _publish(self, outputs):
         """Publish (key, CDR) pairs; False if SIGINT/SIGTERM shut the context down."""

@@ -766,7 +766,8 @@ def test_samples_beyond_the_speed_range_are_logged_with_their_count(tmp_path, pr
                     'model.speed_max_rpm:=650.0', 'model.rigid_crank:=true',
                     'model.elements_per_link:=2', 'model.grid_size:=32',
                     f'model.cache_dir:={tmp_path}', seconds=1.5)
-    found = re.findall(r"crank at 700 rpm, beyond the model's speed range of 650 rpm: "
+    found = re.findall(r'crank at 700 rpm, beyond the speed range of the model of 650 rpm: '
                        r'(\d+) samples so far', log)
     assert found and int(found[0]) >= 1, log
     assert len(found) <= 4       # at most once a second
+    assert int(found[-1]) > 500 and 'Traceback' not in log     # counted, every sample
