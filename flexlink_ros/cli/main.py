@@ -14,7 +14,7 @@ import os
 import sys
 
 from .. import __version__
-from ..errors import FlexlinkError, MechanismError
+from ..errors import FlexlinkError
 
 
 # Each subcommand and the module that registers it (``register(subparsers)``). Only the chosen
@@ -23,6 +23,7 @@ COMMANDS = {
     'beam': 'flexlink_ros.cli.beam',
     'demo': 'flexlink_ros.cli.demo',
     'estimate': 'flexlink_ros.cli.estimate',
+    'fleet': 'flexlink_ros.cli.fleet',
     'plan': 'flexlink_ros.cli.estimate',
     'bench': 'flexlink_ros.cli.estimate',
     'modes': 'flexlink_ros.cli.flex',
@@ -190,12 +191,9 @@ def main(argv=None):
         # The reader went away (`flexlink ... | head`): stop quietly, as Unix tools do.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
-    except MechanismError as exc:      # the file's key, its value and the likely cause
-        print(f'flexlink {args.command}: error: {exc}', file=sys.stderr)
-        return 2
     except (FlexlinkError, ValueError) as exc:
         print(f'flexlink {args.command}: error: {exc}', file=sys.stderr)
-        return 1
+        return getattr(exc, 'exit_code', 1)
     except OSError as exc:   # a missing or unreadable file, a full disk: said in one line
         print(f'flexlink {args.command}: error: {exc}', file=sys.stderr)
         return 1

@@ -23,8 +23,8 @@ import sys
 
 import yaml
 
-from .mechanism import (BRANCHES, check_crank_rocker, check_elements_per_link, Link,
-                        Mechanism, Spring)
+from .mechanism import (BRANCHES, check_crank_rocker, check_elements_per_link, check_name,
+                        Link, Mechanism, Spring)
 from .mechanism_checks import check_keys, check_plausible
 from ..errors import MechanismError
 from ..names import JOINT_NAMES, LINK_NAMES
@@ -236,7 +236,7 @@ def mechanism_from_dict(data):
 
     """
     check_keys(data, _TOP_KEYS, '')
-    name = _text(data, 'name', 'mechanism', MAX_NAME_CHARS)
+    name = check_name(_text(data, 'name', 'mechanism', MAX_NAME_CHARS))
     source = _text(data, 'source', '', MAX_SOURCE_CHARS)
     ground = _number(data, 'ground_length_m', '')
     youngs, density = _material_from(data)

@@ -363,6 +363,21 @@ def test_a_mechanism_file_in_mm_stops_the_node_with_one_line(tmp_path, processes
     assert 'mm^2 and mm^4' in log
 
 
+def test_a_mechanism_name_that_spells_a_path_stops_the_node(tmp_path, processes):
+    data = yaml.safe_load((PARAMS_FILE.parent / 'cho1992.yaml').read_text())
+    data['name'] = '../../../escape/dir/x'
+    mechanism = tmp_path / 'evil.yaml'
+    mechanism.write_text(yaml.safe_dump(data))
+    cache = tmp_path / 'a' / 'b' / 'c' / 'cache'
+    node_process = NodeProcess(tmp_path, f'mechanism:={mechanism}', f'model.cache_dir:={cache}')
+    processes.append(node_process)
+    assert node_process.process.wait(timeout=READY_TIMEOUT_S) == 1
+    log = node_process.log()
+    assert log.strip().startswith(f'{NODE_NAME}: error: name:') and 'Traceback' not in log
+    assert 'not a plain name' in log
+    assert not (tmp_path / 'a' / 'escape').exists() and not cache.exists()
+
+
 def test_managed_node_streams_only_while_active(tmp_path, processes, ros):
     """Lifecycle: configure loads the model, activate subscribes, deactivate stops, cleanup."""
     from geometry_msgs.msg import Vector3Stamped

@@ -243,3 +243,16 @@ def test_node_model_reads_the_mechanism_file_once_and_takes_its_damping_ratio(
     assert options.speed_max == pytest.approx(1.25 * 560.0 * 3.141592653589793 / 30.0)
     values['damping_ratio'] = 0.03
     assert load_node_model(values, lambda note: None)[0].zeta == 0.03
+
+
+@pytest.mark.parametrize('name, tiny, floor', [
+    ('record.max_bytes', 1, 1 << 20), ('record.max_duration_s', 0.001, 1.0)])
+def test_split_settings_below_the_floor_are_refused_with_the_reason(name, tiny, floor):
+    """A split every message would leave the recorder splitting instead of writing."""
+    reason = node_params.validate_parameter(name, tiny)
+    assert reason is not None and f'{name} must be 0 (no split) or at least' in reason
+    assert 'each split' in reason
+    just_below = floor - 1 if isinstance(tiny, int) else floor * 0.999
+    assert node_params.validate_parameter(name, just_below) is not None
+    assert node_params.validate_parameter(name, type(tiny)(floor)) is None
+    assert node_params.validate_parameter(name, type(tiny)(0)) is None     # never split
