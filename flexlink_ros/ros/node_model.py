@@ -8,11 +8,13 @@ lines that tools wait for.
 
 import dataclasses
 import math
+import time
 
 from . import parameters
 from .messages import crank_from_joint_state
 from ..core.estimation.sample import SampleFlag
 from ..core.mechanism_file import read_mechanism_file
+from ..core.numerics import RPM
 from ..core.reduction.pipeline import model_for_mechanism
 from ..errors import InputRejected, MalformedCdr
 from ..io import cdr
@@ -148,6 +150,47 @@ def load_node_model(values, warn, progress=None):
     return model, options, notes
 
 
+class ClippedSpeedLog:
+    """
+    Samples estimated at a speed clipped to the model's range: counted, said once a second.
+
+    Throttled by its own clock, not by the logger's: a logger call costs tens of us, and
+    clipping comes on every sample of a crank beyond the range.
+
+    Parameters
+    ----------
+    warn : callable
+        Called with the warning sentence.
+    running : callable
+        False once the node shuts down (then nothing is logged).
+    speed_max : float
+        The model's speed range [rad/s].
+    throttle_s : float
+        Least time between two warnings [s] (the node's other warnings: once a second).
+
+    """
+
+    def __init__(self, warn, running, speed_max, throttle_s=1.0):
+        self.count = 0
+        self._warn, self._running = warn, running
+        self._speed_max, self._throttle_s = speed_max, throttle_s
+        self._said = -math.inf
+
+    def add(self, sample):
+        """Count ``sample`` if its speed was clipped; warn at most once per throttle period."""
+        if not sample.flags & SampleFlag.CLIPPED_SPEED:
+            return
+        self.count += 1
+        now = time.monotonic()
+        if now - self._said < self._throttle_s or not self._running():
+            return
+        self._said = now
+        self._warn(f'crank at {abs(sample.crank_speed) / RPM:.0f} rpm, beyond the speed range '
+                   f'of the model of {self._speed_max / RPM:.0f} rpm: {self.count} samples so '
+                   'far estimated at the clipped speed (too small); restart with '
+                   "model.speed_max_rpm above the crank's speed")
+
+
 @dataclasses.dataclass
 class Totals:
     """What became of every received message since the node started."""
@@ -159,7 +202,6 @@ class Totals:
         default_factory=lambda: dict.fromkeys(SKIP_KINDS + OTHER_KINDS, 0))   # kind -> messages
     last_rejection: str = ''
     last_outlier: str = ''
-    clipped: int = 0        # published with the speed clipped to the model's range
 
 
 @dataclasses.dataclass

@@ -24,8 +24,8 @@ from visualization_msgs.msg import MarkerArray
 from . import diagnostics, parameters
 from .input_watch import InputWatch
 from .messages import diagnostics_message, joint_level, ns_to_stamp, quality_cdr
-from .node_model import (crank_sample, load_node_model, one_line, PeriodStats, publishable,
-                         SKIP_KINDS, Totals)
+from .node_model import (ClippedSpeedLog, crank_sample, load_node_model, one_line, PeriodStats,
+                         publishable, SKIP_KINDS, Totals)
 from .node_recording import NodeRecording
 from .overrides import declare_table
 from .progress_log import ProgressLog
@@ -34,7 +34,6 @@ from .sim_time import ClockWatch, LogTime
 from .startup import check_startup_signal
 from ..core.estimation.sample import SampleFlag
 from ..core.estimation.streaming import StreamingEstimator
-from ..core.numerics import RPM
 from ..core.reduction.soft_basis import soft_basis_text
 from ..errors import ConflictingSample, FlexlinkError, InputRejected, OutlierSample
 from ..io import cdr
@@ -107,7 +106,7 @@ class EstimatorPipeline(NodeRecording):
         self.recorder = self._open_recorder(self.qos) if values['record.enabled'] else None
         self.totals = Totals()
         self.last_valid_wall = None
-        self._clipped_logged = -float('inf')
+        self._clipped = ClippedSpeedLog(log.warning, self.context.ok, self.options.speed_max)
 
     def _create_publishers(self, make_publisher):
         """Create the output publishers with the QoS the parameters select."""
@@ -287,8 +286,7 @@ class EstimatorPipeline(NodeRecording):
 
     def _publish_sample(self, stamp_ns, sample):
         self.period.add_sample(sample)
-        if sample.flags & SampleFlag.CLIPPED_SPEED:
-            self._log_clipped(sample)
+        self._clipped.add(sample)     # beyond the model's speed range: counted and said
         if sample.message:
             self.get_logger().warning(f'estimator: {sample.message}',
                                       throttle_duration_sec=WARN_THROTTLE_S)
@@ -314,20 +312,6 @@ class EstimatorPipeline(NodeRecording):
             log_ns = self._log_time(self._clock.now().nanoseconds, stamp_ns)
             for key, data in outputs:
                 self._record(self.output_topics[key], data, log_ns)
-
-    def _log_clipped(self, sample):
-        """Count a sample beyond the model's speed range; say so at most once a second."""
-        self.totals.clipped += 1
-        now = time.monotonic()
-        # throttled here, not by the logger: its call costs tens of us on every sample
-        if now - self._clipped_logged < WARN_THROTTLE_S or not self.context.ok():
-            return
-        self._clipped_logged = now
-        self.get_logger().warning(
-            f'crank at {abs(sample.crank_speed) / RPM:.0f} rpm, beyond the speed range of the '
-            f'model of {self.options.speed_max / RPM:.0f} rpm: {self.totals.clipped} samples '
-            'so far estimated at the clipped speed (too small); restart with '
-            "model.speed_max_rpm above the crank's speed")
 
     def _publish(self, outputs):
         """Publish (key, CDR) pairs; False if SIGINT/SIGTERM shut the context down."""
