@@ -5,7 +5,6 @@ import json
 import math
 import subprocess
 import sys
-import time
 
 from flexlink_ros.cli import main as cli
 from flexlink_ros.cli.model_args import BUILD_LABEL
@@ -143,9 +142,7 @@ def test_plan_on_cho1992_compares_every_physics_with_the_scene(config_dir, monke
     physics = [dataclasses.replace(scene, elements_per_link=3, rigid_crank=True),
                dataclasses.replace(scene, elements_per_link=3, geometric_stiffness=False),
                dataclasses.replace(scene, elements_per_link=3)]
-    start = time.perf_counter()
     result = plan.run_plan(mechanism, base, 391.0, 0.03, speeds_rpm=[391.0], physics=physics)
-    assert time.perf_counter() - start < 60.0
     reference = result['reference']['options']
     assert (reference['rigid_crank'], reference['geometric_stiffness'],
             reference['elements_per_link'], reference['bearings']) == (False, True, 4, 'rigid')
