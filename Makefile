@@ -25,8 +25,9 @@ install: venv
 demo: install
 	$(VENV)/bin/flexlink demo
 
+# One BLAS thread: the suite is one process of many small solves on a 2-core machine.
 test: install
-	$(PY) -m pytest -q test
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q test
 
 bench: install
 	$(VENV)/bin/flexlink bench

@@ -2,8 +2,8 @@
 Errors of flexlink_ros.
 
 Every error the core raises on purpose is a :class:`FlexlinkError`. The node logs one and
-keeps running; the CLI prints it on one line and exits with its ``exit_code`` (1; 2 for a bag
-still being recorded). Bad arguments raise ``ValueError``
+keeps running; the CLI prints it on one line and exits with its ``exit_code`` (1; 2 for a
+refused mechanism file or a bag still being recorded). Bad arguments raise ``ValueError``
 naming the argument.
 """
 
@@ -19,6 +19,8 @@ class FlexlinkError(Exception):
 
 class MechanismError(FlexlinkError):
     """Raised if a mechanism file or definition is invalid; names the offending field."""
+
+    exit_code = 2   # refused as given: the file's key, its value and the likely cause
 
     def __init__(self, field, reason):
         self.field = field

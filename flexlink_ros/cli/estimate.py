@@ -8,24 +8,26 @@
 - ``plan`` picks the smallest model (physics: elements per link, rigid crank, geometric
   stiffness, bearings; size: modes, static directions, grid) meeting a tolerance against the
   full-order response of the richest model of the scene over a speed range, and shows the
-  error and cost of the alternatives (:mod:`studies.plan`).
+  error and cost of the alternatives (:mod:`studies.plan`); ``--params-out FILE`` writes
+  the choice as the node's parameters file (:mod:`.plan_params`).
 - ``bench`` measures, side by side in one run: streaming cost per sample (median, p99),
   offline samples per second, full-order CPU per simulated second, and each configuration's
   error; it prints a table and writes a chart of error against cost (:mod:`studies.bench`).
 """
 
 import argparse
+import dataclasses
 import pathlib
 
 import numpy as np
 
 from .flex import nonlinearity_line
 from .main import emit
-from .model_args import add_estimator_arguments, load_model, model_options
+from .model_args import add_estimator_arguments, crank_rpm, load_model, model_options
+from .plan_params import chosen_options, write_params_file
 from .progress import Progress
 from ..core.mechanism_file import load_mechanism
 from ..core.numerics import RPM
-from ..core.options import ModelOptions
 from ..core.reduction.soft_basis import soft_basis_text
 from ..report.estimator import plot_error_vs_cost
 from ..studies.bench import run_bench
@@ -35,8 +37,10 @@ from ..studies.synthetic import run_estimate
 
 def _estimate(args):
     mechanism = load_mechanism(args.mechanism)
-    options = model_options(args, speed_max=max(ModelOptions.speed_max,
-                                                1.05 * abs(args.rpm) * RPM))
+    args.rpm = crank_rpm(args.rpm, mechanism)
+    options = model_options(args)
+    options = dataclasses.replace(options, speed_max=max(options.speed_max,
+                                                         1.05 * abs(args.rpm) * RPM))
     model = load_model(mechanism, options, args)
     result = run_estimate(model, args.rpm, args.seconds, args.rate_hz, args.jitter,
                           not args.no_warm_start, args.seed)
@@ -75,13 +79,23 @@ def plan_fixed(args):
 
 def _plan(args):
     mechanism = load_mechanism(args.mechanism)
+    args.rpm_max = crank_rpm(args.rpm_max, mechanism, '--rpm-max')
     # the scene (the reference) is the richest model whatever the user fixed
     scene_args = argparse.Namespace(**{**vars(args), 'rigid_crank': False,
                                        'no_geometric_stiffness': False})
     with Progress('plan', unit='step') as progress:
         result = run_plan(mechanism, model_options(scene_args), args.rpm_max, args.tolerance,
                           args.rate_hz, fixed=plan_fixed(args), progress=progress)
-    return emit(result, plan_table(result), args.json)
+    text = plan_table(result)
+    if args.params_out:
+        if not result.get('choice'):
+            emit(result, text, args.json)       # the table says why, the error line what
+        options = chosen_options(result)
+        model = load_model(mechanism, options, args)
+        result['params'] = write_params_file(args.params_out, mechanism, options, model, args)
+        text += (f'\nnode parameters: {args.params_out} (flexlink_node --ros-args '
+                 f'--params-file {args.params_out})')
+    return emit(result, text, args.json)
 
 
 def _bench_lines(result):
@@ -130,7 +144,8 @@ def register(subparsers):
     parser = subparsers.add_parser('estimate', help='streaming estimator on a synthetic '
                                    'constant-speed crank signal (last revolution)')
     add_estimator_arguments(parser)
-    parser.add_argument('--rpm', type=float, required=True, help='crank speed [rpm]')
+    parser.add_argument('--rpm', type=float, default=None, help='crank speed [rpm] (default: '
+                        "the mechanism file's crank_speed_rpm)")
     parser.add_argument('--seconds', type=float, default=3.0, help='signal length [s]')
     parser.add_argument('--jitter', type=float, default=0.0,
                         help='relative sample-time jitter, steps (1 +- jitter) / rate')
@@ -148,9 +163,13 @@ def register(subparsers):
                                    'candidate (otherwise the plan tries both)')
     add_estimator_arguments(parser, second_order=False)
     parser.set_defaults(rigid_crank=None)   # None: the plan chooses the crank model
-    parser.add_argument('--rpm-max', type=float, required=True, help='largest speed [rpm]')
+    parser.add_argument('--rpm-max', type=float, default=None, help='largest speed [rpm] '
+                        "(default: the mechanism file's crank_speed_rpm)")
     parser.add_argument('--tolerance', type=float, default=0.01,
                         help='relative RMS error target (default 0.01)')
+    parser.add_argument('--params-out', default=None, metavar='FILE',
+                        help="write the choice as the node's parameters file (every model "
+                        'choice, the speed range, criterion thresholds of this cycle)')
     parser.set_defaults(func=_plan)
 
     parser = subparsers.add_parser('bench', help='estimator cost and accuracy side by side')

@@ -35,7 +35,7 @@ import numpy as np
 
 from .main import degree_range, emit
 from .model_args import add_model_arguments, add_order_argument, \
-    add_stiffness_damping_argument, stiffness_damping
+    add_stiffness_damping_argument, crank_rpm, elements_per_link, stiffness_damping
 from .simulate_nonlinear import simulate_nonlinear
 from ..core import validity
 from ..core.fe import linkage as assembly, modes, simulate
@@ -46,9 +46,13 @@ from ..core.options import ModelOptions
 from ..errors import FlexlinkError
 
 
+# simulate's speed where neither --rpm nor the mechanism file gives one: Cho 1992's highest.
+SIMULATE_RPM = 391.0
+
+
 def _model_arguments(parser):
-    # The FE studies' defaults: rigid bearings, flexible crank (--elements: old spelling).
-    add_model_arguments(parser, 'rigid', 'the mechanism file', elements_alias=True)
+    # The default model's physics (--elements: old spelling).
+    add_model_arguments(parser, elements_alias=True)
     parser.add_argument('--no-gravity', action='store_true', help='leave out gravity')
     parser.add_argument('--json', action='store_true', help='print one JSON object')
 
@@ -74,7 +78,8 @@ def register(subparsers):
     parser = subparsers.add_parser('simulate', help='periodic elastic response at constant '
                                                     'crank speed (full order or modal)')
     _model_arguments(parser)
-    parser.add_argument('--rpm', default='391', help='crank speed [rpm] (default 391)')
+    parser.add_argument('--rpm', default=None, help='crank speed [rpm] (default: the mechanism '
+                        f"file's crank_speed_rpm, else {SIMULATE_RPM:g})")
     parser.add_argument('--method', default='full', help='full (default) or modal')
     parser.add_argument('--modes', default=None, help='modes kept by the modal method')
     parser.add_argument('--static-correction', action='store_true',
@@ -132,9 +137,8 @@ def build_model(args):
 
     """
     mech = load_mechanism(args.mechanism)
-    if args.elements_per_link is not None:
-        mech = dataclasses.replace(mech, elements_per_link=_number(
-            args.elements_per_link, 'elements-per-link', integer=True))
+    mech = dataclasses.replace(mech, elements_per_link=_number(
+        elements_per_link(args), 'elements-per-link', integer=True))
     if args.bearings not in assembly.BEARING_MODELS:
         raise ValueError(f'`--bearings` must be one of {", ".join(assembly.BEARING_MODELS)}, '
                          f'got {args.bearings!r}')
@@ -227,7 +231,7 @@ def simulate_command(args):
     """Periodic steady-state response at constant speed; returns the exit code."""
     started = time.perf_counter()
     mech, model = build_model(args)
-    rpm = _number(args.rpm, 'rpm')
+    rpm = _number(crank_rpm(args.rpm, mech, fallback=SIMULATE_RPM), 'rpm')
     method = args.method
     if method not in simulate.METHODS:
         raise ValueError(f'`--method` must be one of {", ".join(simulate.METHODS)}, '

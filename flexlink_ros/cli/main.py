@@ -2,7 +2,8 @@
 The `flexlink` command-line tool: one script, one small module per group of subcommands.
 
 Every subcommand prints human-readable text, or one JSON object on stdout with ``--json``,
-and exits non-zero with a one-line reason on bad input. ``main(argv=None)`` only parses.
+and exits non-zero with a one-line reason on bad input: 2 for a mechanism file refused (its
+key, value and the likely cause), 1 otherwise. ``main(argv=None)`` only parses.
 """
 
 import argparse

@@ -8,25 +8,25 @@ The model flags every model subcommand shares, and the options and model they gi
 second-order motion of the bent links; 1: the paper's linear KED) where the outputs are
 published (simulate and the estimator's subcommands), and for the estimator's
 ``--second-order {quasi-static,dynamic}`` (simulate has its own, for the full-order method).
-Only the default bearings differ (as before: rigid for the FE studies, flexible for the
-estimator, as the node). ``--elements`` is accepted where it was (simulate, modes) as a
-deprecated spelling of ``--elements-per-link``.
+Every default is the default model's (:class:`core.options.ModelOptions`, the node's too):
+flexible crank, flexible bearings, 4 elements per link, order 2; the speed range and the
+stiffness damping default to the mechanism file's. ``--elements`` is accepted where it was
+(simulate, modes) as a deprecated spelling of ``--elements-per-link``.
 """
 
 import argparse
 import sys
 
 from .progress import OnDemandProgress
-from ..core.mechanism_file import stiffness_damping_from_file
+from ..core.mechanism_file import read_mechanism_file
 from ..core.numerics import RPM
-from ..core.options import ModelOptions, SECOND_ORDER_PASSES
+from ..core.options import DEFAULT_SPEED_MAX, ModelOptions, SECOND_ORDER_PASSES, speed_range
 from ..core.reduction import pipeline
-from ..ros import parameters as node_params
 
 BEARINGS = ('flexible', 'rigid')
-# Output order of the published deflections, and the default of the flag (the node's too).
+# Output order of the published deflections; the flag's default is the default model's.
 ORDERS = (1, 2)
-DEFAULT_ORDER = 2
+DEFAULT_MODEL = ModelOptions()
 # The prefix of the model build's progress on stderr.
 BUILD_LABEL = 'building the model (cached afterwards)'
 
@@ -58,18 +58,14 @@ class DeprecatedAlias(argparse.Action):
         setattr(namespace, self.dest, values)
 
 
-def add_model_arguments(parser, bearings_default, elements_help, elements_alias=False):
+def add_model_arguments(parser, elements_alias=False):
     """
-    Add the shared model flags.
+    Add the shared model flags, their defaults the default model's.
 
     Parameters
     ----------
     parser : argparse.ArgumentParser
         A subcommand's parser.
-    bearings_default : str
-        'flexible' or 'rigid' (the subcommand's default, shown in ``--help``).
-    elements_help : str
-        What ``--elements-per-link`` defaults to (shown in ``--help``).
     elements_alias : bool
         Also accept the deprecated ``--elements``.
 
@@ -77,16 +73,18 @@ def add_model_arguments(parser, bearings_default, elements_help, elements_alias=
     parser.add_argument('--mechanism', default='cho1992',
                         help='mechanism YAML file or bare name (default: %(default)s)')
     crank = parser.add_mutually_exclusive_group()
-    crank.add_argument('--rigid-crank', dest='rigid_crank', action='store_true', default=False,
+    crank.add_argument('--rigid-crank', dest='rigid_crank', action='store_true',
+                       default=DEFAULT_MODEL.rigid_crank,
                        help='treat the crank as rigid: crank pin A is a fixed point of the '
                        "frozen structure (the paper's Figs 20-22 case)")
     crank.add_argument('--flexible-crank', dest='rigid_crank', action='store_false',
                        help='model the crank as a flexible beam (default)')
-    parser.add_argument('--bearings', choices=BEARINGS, default=bearings_default,
+    parser.add_argument('--bearings', choices=BEARINGS, default=DEFAULT_MODEL.bearings,
                         help='revolute bearings: flexible (the springs of the mechanism file, '
                         'Eq. 23) or rigid (exact pins) (default: %(default)s)')
     parser.add_argument('--elements-per-link', type=int, default=None, metavar='N',
-                        help=f'beam elements per link (default: {elements_help})')
+                        help='beam elements per link (default: '
+                        f'{DEFAULT_MODEL.elements_per_link})')
     if elements_alias:
         parser.add_argument('--elements', dest='elements_per_link', type=int,
                             action=DeprecatedAlias, preferred='--elements-per-link',
@@ -105,11 +103,43 @@ def add_stiffness_damping_argument(parser):
                         "simulate) (default: the mechanism file's stiffness_damping_s, else 0)")
 
 
-def stiffness_damping(args):
+def elements_per_link(args):
+    """Beam elements per link: ``--elements-per-link``, else the default model's."""
+    value = getattr(args, 'elements_per_link', None)
+    return DEFAULT_MODEL.elements_per_link if value is None else value
+
+
+def crank_rpm(given, mechanism, flag='--rpm', fallback=None):
+    """
+    Return the crank speed [rpm]: the flag's value, else the file's crank_speed_rpm.
+
+    Parameters
+    ----------
+    given : float or None
+        The flag's value (None: not given).
+    mechanism : Mechanism
+        The mechanism (its ``crank_speed``, from the file's ``crank_speed_rpm``).
+    flag : str
+        The flag's spelling, named in the refusal.
+    fallback : float or None
+        The speed where neither is given (None: refused with one line).
+
+    """
+    if given is not None:
+        return float(given)
+    if mechanism.crank_speed is not None:
+        return mechanism.crank_speed / RPM
+    if fallback is not None:
+        return float(fallback)
+    raise ValueError(f'give `{flag}`: the mechanism file {mechanism.name!r} has no '
+                     'crank_speed_rpm')
+
+
+def stiffness_damping(args, file_beta=None):
     """Beta [s]: ``--stiffness-damping``, else the mechanism file's, else 0 (flag > file)."""
     value = getattr(args, 'stiffness_damping', None)
     if value is None:
-        return stiffness_damping_from_file(args.mechanism)
+        return read_mechanism_file(args.mechanism)[1] if file_beta is None else file_beta
     if not value >= 0.0 or value == float('inf'):
         raise ValueError(f'`--stiffness-damping` must be >= 0 [s], got {value!r}')
     return float(value)
@@ -125,7 +155,7 @@ def add_order_argument(parser):
         A subcommand's parser.
 
     """
-    parser.add_argument('--order', type=int, choices=ORDERS, default=DEFAULT_ORDER,
+    parser.add_argument('--order', type=int, choices=ORDERS, default=DEFAULT_MODEL.order,
                         help='1: the linear KED outputs of the paper; 2: plus the '
                         "second-order motion of the bent links' chord shortening "
                         '(default: %(default)s)')
@@ -183,8 +213,7 @@ def add_estimator_arguments(parser, second_order=True):
         Also ``--second-order`` (not on plan, whose reference is quasi-static).
 
     """
-    add_model_arguments(parser, 'flexible', "the node's 4 with a flexible crank, the "
-                        "mechanism file's with a rigid crank")
+    add_model_arguments(parser)
     add_stiffness_damping_argument(parser)
     add_order_argument(parser)
     if second_order:
@@ -196,9 +225,10 @@ def model_options(args, **overrides):
     """
     Build the reduced model's options from the command-line arguments, with overrides.
 
-    Without size arguments the sizes are the defaults for the chosen bearing and crank models
-    (core.options.DEFAULT_SIZES); a flexible crank gets the node's elements per link, a rigid
-    crank the mechanism file's.
+    Without flags the default model (:class:`core.options.ModelOptions`, as the node); sizes
+    not given are the defaults for the chosen bearing and crank models
+    (core.options.DEFAULT_SIZES). The speed range is ``--rpm-max`` with a 5 % margin where
+    given, else the mechanism file's (:func:`core.options.speed_range`); the file is read once.
 
     Parameters
     ----------
@@ -212,19 +242,18 @@ def model_options(args, **overrides):
     ModelOptions
 
     """
-    rigid_crank = bool(args.rigid_crank)
-    node_elements = node_params.defaults()['model.elements_per_link'] or None
-    values = {'rigid_crank': rigid_crank, 'bearings': args.bearings,
+    mechanism, file_beta = read_mechanism_file(args.mechanism)
+    values = {'rigid_crank': bool(args.rigid_crank), 'bearings': args.bearings,
               'geometric_stiffness': not args.no_geometric_stiffness,
-              'elements_per_link': None if rigid_crank else node_elements}
-    for name in ('modes', 'static', 'grid_size', 'elements_per_link', 'order', 'soft_modes',
-                 'second_order'):
+              'elements_per_link': elements_per_link(args),
+              'speed_max': speed_range(mechanism.crank_speed)}
+    for name in ('modes', 'static', 'grid_size', 'order', 'soft_modes', 'second_order'):
         value = getattr(args, name, None)
         if value is not None:
             values[name] = value
     if getattr(args, 'rpm_max', None):
-        values['speed_max'] = max(ModelOptions.speed_max, 1.05 * args.rpm_max * RPM)
-    values['stiffness_damping'] = stiffness_damping(args)
+        values['speed_max'] = max(DEFAULT_SPEED_MAX, 1.05 * args.rpm_max * RPM)
+    values['stiffness_damping'] = stiffness_damping(args, file_beta)
     values.update(overrides)
     return ModelOptions(**values)
 

@@ -3,6 +3,7 @@ Rigid-body commands: ``flexlink kinematics``, ``flexlink criteria``, ``flexlink 
 
     flexlink kinematics --mechanism M [--crank-deg 0:360:10] [--rpm R] [--json]
     flexlink criteria --mechanism M [--spring K THETA0_DEG] [--grid-deg 1] [--rpm R] [--json]
+                      [--suggest-thresholds [--rate-hz 1000]]
     flexlink design-spring --mechanism M [--rpm R] [--seed S] [--theta0-max-deg 360] [--json]
 
 ``M`` is a mechanism file or a bare name (``kang1990``). Criteria JSON:
@@ -22,6 +23,7 @@ import numpy as np
 from .main import degree_range, emit
 from ..core import criteria as core_criteria
 from ..core import spring_design
+from ..core.criteria_thresholds import suggest_thresholds
 from ..core.kinematics import dead_centres, solve_kinematics, transmission_extremes
 from ..core.mechanism import Spring
 from ..core.mechanism_file import load_mechanism
@@ -50,6 +52,11 @@ def register(subparsers):
     crit.add_argument('--grid-deg', default='1', help='user grid step from 0 [deg] (default 1)')
     crit.add_argument('--scan-points', default=str(core_criteria.SCAN_POINTS),
                       help='scan size before peak refinement')
+    crit.add_argument('--suggest-thresholds', action='store_true',
+                      help="also derive the node's diagnostics.criterion_warn / "
+                      'criterion_error from this cycle (docs/criterion-thresholds.md)')
+    crit.add_argument('--rate-hz', default='1000',
+                      help='input sample rate of the maxima the node sees (default 1000)')
     crit.set_defaults(func=criteria_command)
 
     design = subparsers.add_parser('design-spring', help='coil-spring design against '
@@ -226,7 +233,28 @@ def criteria_command(args):
                      f'{c["at_min_force_deg"]:8.3f}{flag}')
     lines.append(f'objective (A + B + O4): true {result["objective"]:.4f}, '
                  f'on grid {result["objective_on_grid"]:.4f}')
+    if args.suggest_thresholds:
+        result['thresholds'] = suggest_thresholds(
+            mechanism, speed, _number(args.rate_hz, 'rate-hz', positive=True))
+        lines += threshold_lines(result['thresholds'])
     return emit(result, '\n'.join(lines), args.json)
+
+
+def threshold_lines(found):
+    """Say the suggested thresholds, what they come from and the joints left out."""
+    lines = [f'suggested thresholds ({found["warn_margin"]:g} and {found["error_factor"]:g} '
+             f'times the largest true maximum, {found["basis"]:.4g} rad/(s N)):',
+             f'  diagnostics.criterion_warn: {found["warn"]:.6g}',
+             f'  diagnostics.criterion_error: {found["error"]:.6g}',
+             f'  sampled at {found["rate_hz"]:g} Hz the node sees at most: ' + ', '.join(
+                 f'{j} {v["sampled_max"]:.4g}' for j, v in found['joints'].items())]
+    for joint, value in found['joints'].items():
+        if not value['used']:
+            lines.append(f'  {joint}: its reaction falls to {100 * value["min_over_rms"]:.2g} % '
+                         f'of its RMS (criterion peak {value["true_max"]:.4g}): a contact-loss '
+                         'risk in this cycle itself, left out; the node flags it when its '
+                         'samples meet the peak')
+    return lines
 
 
 def design_result(found):

@@ -20,6 +20,9 @@ import argparse
 
 from .main import emit
 from .progress import Progress
+from ..core.mechanism_file import load_mechanism
+from ..core.numerics import RPM
+from ..core.options import ModelOptions
 from ..report.validation import plot_validation
 from ..studies import nonlinear_validation, validation
 
@@ -35,10 +38,12 @@ def register(subparsers):
     parser.add_argument('--mechanism', default='cho1992',
                         help='mechanism YAML file or bare name (default: %(default)s)')
     parser.add_argument('--rpm', type=float, nargs='+', default=[], metavar='R',
-                        help='crank speeds [rpm]')
+                        help="crank speeds [rpm] (default: the mechanism file's "
+                        'crank_speed_rpm, without --sweep)')
     parser.add_argument('--sweep', default=None, metavar='START:STOP:STEP',
                         help='a speed sweep [rpm], STOP included (with the validity flag)')
-    parser.add_argument('--bearings', choices=tuple(validation.BEARINGS), default='rigid',
+    parser.add_argument('--bearings', choices=tuple(validation.BEARINGS),
+                        default=ModelOptions().bearings,
                         help='rigid pins, or the bearing springs of the mechanism file '
                         '(default: %(default)s)')
     parser.add_argument('--gravity', action=argparse.BooleanOptionalAction, default=True,
@@ -72,7 +77,11 @@ def validate_command(args):
     if args.sweep:
         speeds += validation.sweep_speeds(args.sweep)
     if not speeds:
-        raise ValueError('give crank speeds with --rpm R [R ...] or --sweep START:STOP:STEP')
+        rpm = load_mechanism(args.mechanism).crank_speed
+        if rpm is None:
+            raise ValueError('give crank speeds with --rpm R [R ...] or --sweep START:STOP:STEP '
+                             '(the mechanism file has no crank_speed_rpm)')
+        speeds = [rpm / RPM]
     settings = validation.Settings(
         elements_per_link=args.elements_per_link, bearings=args.bearings,
         gravity=args.gravity, zeta=args.zeta, revolutions=args.revolutions,

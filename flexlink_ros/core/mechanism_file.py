@@ -7,8 +7,9 @@ gigabytes), nesting at most :data:`MAX_YAML_DEPTH` deep, strings at most
 :data:`MAX_NAME_CHARS` / :data:`MAX_SOURCE_CHARS` long, and ``elements_per_link`` within
 1..:data:`MAX_ELEMENTS_PER_LINK` (checked by the dataclass too, so ``dataclasses.replace`` and
 ``--elements`` are bounded as well). Each refusal is a :class:`MechanismError` naming the
-field and the bound. Unknown keys, non-positive sizes and linkages that are not the
-crank-rocker the models assume are refused the same way.
+field and the bound. Unknown keys (with the closest known one), non-positive sizes, numbers
+off by orders of magnitude (:mod:`.mechanism_checks`: lengths in mm, sections in mm^4, ...)
+and linkages that are not the crank-rocker the models assume are refused the same way.
 
 Bare names such as 'cho1992' are found in the installed share directories (those of
 ``AMENT_PREFIX_PATH`` as the ament index finds them, then this Python's prefix) and then in
@@ -24,6 +25,7 @@ import yaml
 
 from .mechanism import (BRANCHES, check_crank_rocker, check_elements_per_link, check_name,
                         Link, Mechanism, Spring)
+from .mechanism_checks import check_keys, check_plausible
 from ..errors import MechanismError
 from ..names import JOINT_NAMES, LINK_NAMES
 
@@ -46,15 +48,6 @@ _MATERIAL_KEYS = {'youngs_modulus_pa', 'density_kg_m3'}
 _BEARING_KEYS = {'stiffness_n_m', 'joints', 'mass_split'}
 _SHAFT_KEYS = {'torsional_stiffness_nm_rad'}
 _SPRING_KEYS = {'stiffness_nm_rad', 'theta0_deg'}
-
-
-def _check_keys(mapping, allowed, where):
-    if not isinstance(mapping, dict):
-        raise MechanismError(where, f'expected a mapping, got {type(mapping).__name__}')
-    unknown = sorted((str(key) for key in set(mapping) - allowed), key=str)
-    if unknown:
-        raise MechanismError(f'{where}.{unknown[0]}' if where else unknown[0],
-                             f'unknown key (allowed: {", ".join(sorted(allowed))})')
 
 
 def _as_float(value, field):
@@ -107,7 +100,7 @@ def _number(mapping, key, where, positive=True, required=True, default=None,
 def _material_from(data):
     """Young's modulus and density of the 'material' section (either may be None)."""
     material = data.get('material') or {}
-    _check_keys(material, _MATERIAL_KEYS, 'material')
+    check_keys(material, _MATERIAL_KEYS, 'material')
     youngs = _number(material, 'youngs_modulus_pa', 'material', required=False)
     density = _number(material, 'density_kg_m3', 'material', required=False)
     return youngs, density
@@ -117,7 +110,7 @@ def _link_from(entry, where, density):
     """One Link of the 'links' section; its mass from area and density if not given."""
     if entry is None:
         raise MechanismError(where, 'missing')
-    _check_keys(entry, _LINK_KEYS, where)
+    check_keys(entry, _LINK_KEYS, where)
     length = _number(entry, 'length_m', where)
     area = _number(entry, 'area_m2', where, required=False)
     second = _number(entry, 'second_moment_m4', where, required=False)
@@ -140,7 +133,7 @@ def _links_from(data, density):
     links_data = data.get('links')
     if links_data is None:
         raise MechanismError('links', 'missing')
-    _check_keys(links_data, set(LINK_NAMES), 'links')
+    check_keys(links_data, set(LINK_NAMES), 'links')
     return tuple(_link_from(links_data.get(name), f'links.{name}', density)
                  for name in LINK_NAMES)
 
@@ -148,7 +141,7 @@ def _links_from(data, density):
 def _joint_masses_from(data):
     """Lumped joint masses [kg] of the 'joint_masses_kg' section (0 where not given)."""
     masses_data = data.get('joint_masses_kg') or {}
-    _check_keys(masses_data, set(JOINT_NAMES), 'joint_masses_kg')
+    check_keys(masses_data, set(JOINT_NAMES), 'joint_masses_kg')
     return {j: _number(masses_data, j, 'joint_masses_kg', positive=False,
                        required=False, default=0.0, minimum=0.0) for j in JOINT_NAMES}
 
@@ -156,7 +149,7 @@ def _joint_masses_from(data):
 def _bearings_from(data):
     """Stiffness, joints and joint-mass split of the 'bearings' section."""
     bearings = data.get('bearings') or {}
-    _check_keys(bearings, _BEARING_KEYS, 'bearings')
+    check_keys(bearings, _BEARING_KEYS, 'bearings')
     bearing_k = _number(bearings, 'stiffness_n_m', 'bearings', required=False)
     bearing_joints = bearings.get('joints', JOINT_NAMES)
     if not isinstance(bearing_joints, (list, tuple)):
@@ -177,7 +170,7 @@ def _bearings_from(data):
 def _shaft_from(data):
     """Torsional stiffness of the 'input_shaft' section (None: clamped)."""
     shaft = data.get('input_shaft') or {}
-    _check_keys(shaft, _SHAFT_KEYS, 'input_shaft')
+    check_keys(shaft, _SHAFT_KEYS, 'input_shaft')
     return _number(shaft, 'torsional_stiffness_nm_rad', 'input_shaft', required=False)
 
 
@@ -214,7 +207,7 @@ def _spring_from(data):
     if data.get('spring') is None:
         return None
     spring_data = data['spring']
-    _check_keys(spring_data, _SPRING_KEYS, 'spring')
+    check_keys(spring_data, _SPRING_KEYS, 'spring')
     return Spring(
         stiffness=_number(spring_data, 'stiffness_nm_rad', 'spring', positive=False,
                           minimum=0.0),
@@ -242,7 +235,7 @@ def mechanism_from_dict(data):
         a crank-rocker.
 
     """
-    _check_keys(data, _TOP_KEYS, '')
+    check_keys(data, _TOP_KEYS, '')
     name = check_name(_text(data, 'name', 'mechanism', MAX_NAME_CHARS))
     source = _text(data, 'source', '', MAX_SOURCE_CHARS)
     ground = _number(data, 'ground_length_m', '')
@@ -257,7 +250,7 @@ def mechanism_from_dict(data):
     _stiffness_damping_from(data)   # checked here; read by stiffness_damping_from_file
     spring = _spring_from(data)
     rpm = _number(data, 'crank_speed_rpm', '', required=False)
-    return Mechanism(
+    mechanism = Mechanism(
         name=name, ground_length=ground, links=links, youngs_modulus=youngs,
         density=density, joint_masses=joint_masses, bearing_stiffness=bearing_k,
         bearing_joints=bearing_joints, joint_mass_split=split, shaft_stiffness=shaft_k,
@@ -265,6 +258,8 @@ def mechanism_from_dict(data):
         elements_per_link=elements, branch=branch, spring=spring,
         crank_speed=None if rpm is None else rpm * 2.0 * math.pi / 60.0,
         source=source)
+    check_plausible(mechanism)      # numbers off by orders of magnitude: a slip of units
+    return mechanism
 
 
 def ament_share_directory(package=PACKAGE):
@@ -388,12 +383,12 @@ def load_mechanism(path_or_name):
     return mechanism_from_dict(_read_mapping(path_or_name))
 
 
-def stiffness_damping_from_file(path_or_name):
-    """
-    Return a (validated) mechanism file's ``stiffness_damping_s`` [s], 0.0 if it has none.
-
-    The default of ``--stiffness-damping`` and of the node's ``model.stiffness_damping``.
-    """
+def read_mechanism_file(path_or_name):
+    """Read a mechanism file once: its Mechanism and ``stiffness_damping_s`` [s] (0 if none)."""
     data = _read_mapping(path_or_name)
-    mechanism_from_dict(data)
-    return _stiffness_damping_from(data)
+    return mechanism_from_dict(data), _stiffness_damping_from(data)
+
+
+def stiffness_damping_from_file(path_or_name):
+    """Return a (validated) file's ``stiffness_damping_s`` [s] (``--stiffness-damping``)."""
+    return read_mechanism_file(path_or_name)[1]

@@ -21,6 +21,11 @@ DEFAULT_SIZES = {('rigid', True): (4, 2), ('flexible', True): (16, 2),
 DYNAMIC_SIZES = {key: (max(modes, 8), max(static, 4)) for key, (modes, static)
                  in DEFAULT_SIZES.items()}
 SECOND_ORDER_PASSES = ('quasi-static', 'dynamic')
+# The model's speed range [rad/s] when the mechanism file states no crank speed (620 rpm).
+DEFAULT_SPEED_MAX = 65.0
+# Margin of the speed range over a file's crank_speed_rpm: a crank runs up and overshoots its
+# nominal speed; beyond the range the model sees the clipped speed (flagged and logged).
+SPEED_MARGIN = 1.25
 
 
 @dataclasses.dataclass(frozen=True)
@@ -29,8 +34,12 @@ class ModelOptions:
     Modelling choices: the frozen structure (FE) and the reduced model built from it.
 
     One set of options from the node's parameters or the CLI's flags down to the assembly.
-    The defaults are the node's (rigid crank, flexible bearings); :meth:`full_model` gives
-    the full-order studies' defaults (flexible crank, pinned bearings). Every field is part
+    The defaults are THE default model, defined here only: the node's parameters, every
+    command's flags and the benches take theirs from them (flexible crank of 4 elements per
+    link, flexible bearings, geometric stiffness, second-order outputs). :meth:`full_model`
+    gives the full-order studies' model (flexible crank, pinned bearings, the file's
+    elements, order 1) and :meth:`linear` the paper's linear KED with a rigid
+    crank, on which the unit tests and studies are measured. Every field is part
     of the reduced model's cache key (:meth:`cache_fields`; ``gravity`` only when it is off
     and ``stiffness_damping`` only when it is not 0, so the default model keeps its key).
 
@@ -44,7 +53,8 @@ class ModelOptions:
     grid_size : int
         Crank-angle grid points per revolution.
     elements_per_link : int or None
-        Beam elements per link of the full model (None: the mechanism's value).
+        Beam elements per link of the full model (None: the mechanism file's value; the
+        default 4 is what the flexible crank's default sizes were planned with).
     rigid_crank : bool
         Treat the crank as rigid.
     bearings : str
@@ -52,7 +62,8 @@ class ModelOptions:
     geometric_stiffness : bool
         Include the geometric stiffness of the rigid-body axial forces.
     speed_max : float
-        Largest |crank speed| served [rad/s].
+        Largest |crank speed| served [rad/s] (:func:`speed_range`: from the mechanism file's
+        crank speed with :data:`SPEED_MARGIN`, at least :data:`DEFAULT_SPEED_MAX`).
     gravity : bool
         Include gravity (``mechanism.gravity``) in loads and axial forces.
     stiffness_damping : float
@@ -63,7 +74,7 @@ class ModelOptions:
     order : int
         1: the linear KED outputs of the paper; 2: plus the second-order motion of the bent
         links' chord shortening (core/fe/second_order_*.py; the reduced model then carries its
-        tables). 1 here, the library's linear model; the node and the CLI default to 2.
+        tables).
     soft_modes : int
         The estimator's second reduction onto the p lowest modes (core/reduction/soft_basis.py):
         -1 (default) the smallest p at a usable spectral gap, or all r coordinates where the
@@ -83,14 +94,14 @@ class ModelOptions:
     modes: object = None
     static: object = None
     grid_size: int = 128
-    elements_per_link: object = None
-    rigid_crank: bool = True
+    elements_per_link: object = 4
+    rigid_crank: bool = False
     bearings: str = 'flexible'
     geometric_stiffness: bool = True
-    speed_max: float = 65.0
+    speed_max: float = DEFAULT_SPEED_MAX
     gravity: bool = True
     stiffness_damping: float = 0.0
-    order: int = 1
+    order: int = 2
     soft_modes: int = -1
     second_order: str = 'quasi-static'
 
@@ -126,8 +137,14 @@ class ModelOptions:
 
     @classmethod
     def full_model(cls, **changes):
-        """Options with the full-order studies' defaults: flexible crank, pinned bearings."""
-        return cls(**{'rigid_crank': False, 'bearings': 'rigid', **changes})
+        """Options of the full-order studies: flexible crank, pinned bearings, file's elements."""
+        return cls(**{'rigid_crank': False, 'bearings': 'rigid', 'elements_per_link': None,
+                      'order': 1, **changes})
+
+    @classmethod
+    def linear(cls, **changes):
+        """Options of the paper's linear KED with a rigid crank on the file's elements."""
+        return cls(**{'rigid_crank': True, 'elements_per_link': None, 'order': 1, **changes})
 
     def cache_fields(self):
         """
@@ -150,3 +167,24 @@ class ModelOptions:
         if self.second_order == 'quasi-static':
             del fields['second_order']
         return fields
+
+
+def speed_range(crank_speed=None, speed_max_rpm=0.0):
+    """
+    Return the model's speed range [rad/s]: the one asked for, else the file's with a margin.
+
+    Parameters
+    ----------
+    crank_speed : float or None
+        The mechanism file's nominal crank speed [rad/s] (``crank_speed_rpm``), if any.
+    speed_max_rpm : float
+        A range asked for [rpm] (the node's ``model.speed_max_rpm``, the plan's
+        ``--rpm-max``); 0: :data:`SPEED_MARGIN` times the file's crank speed, at least
+        :data:`DEFAULT_SPEED_MAX` (so a file without a crank speed keeps the default model).
+
+    """
+    if speed_max_rpm and speed_max_rpm > 0.0:
+        return float(speed_max_rpm) * math.pi / 30.0
+    if crank_speed:
+        return max(DEFAULT_SPEED_MAX, SPEED_MARGIN * abs(float(crank_speed)))
+    return DEFAULT_SPEED_MAX

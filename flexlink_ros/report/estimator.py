@@ -15,8 +15,9 @@ import pathlib
 import numpy as np
 
 from ..core.mechanism_file import load_mechanism
+from ..core.options import ModelOptions
 from ..errors import FlexlinkError
-from ..studies.bench import estimator_report_data, node_model_options
+from ..studies.bench import estimator_report_data
 
 CHANNELS = (('coupler_mid', 'coupler mid-point'), ('lever_tip', 'lever tip'))
 
@@ -180,7 +181,7 @@ def plot_estimator(out_dir, options=None, progress=None):
     out_dir : str or Path
         Directory of the charts.
     options : ModelOptions, optional
-        The default model (default: the node's, :func:`studies.bench.node_model_options`).
+        The default model (default: the node's, :class:`core.options.ModelOptions`).
     progress : callable or None
         ``progress(done, total, what)`` of the bench (:func:`studies.bench.run_bench`).
 
@@ -194,7 +195,7 @@ def plot_estimator(out_dir, options=None, progress=None):
     out = pathlib.Path(out_dir)
     try:
         data = estimator_report_data(load_mechanism('cho1992'),
-                                     options or node_model_options(), progress)
+                                     options or ModelOptions(), progress)
     except FlexlinkError as exc:
         return {'charts': [], 'text': f'_Streaming estimator not available: {exc}_'}
     bench = data['bench']

@@ -8,11 +8,13 @@ lines that tools wait for.
 
 import dataclasses
 import math
+import time
 
 from . import parameters
 from .messages import crank_from_joint_state
 from ..core.estimation.sample import SampleFlag
-from ..core.mechanism_file import load_mechanism, stiffness_damping_from_file
+from ..core.mechanism_file import read_mechanism_file
+from ..core.numerics import RPM
 from ..core.reduction.pipeline import model_for_mechanism
 from ..errors import InputRejected, MalformedCdr
 from ..io import cdr
@@ -126,12 +128,11 @@ def load_node_model(values, warn, progress=None):
         Warnings given (empty if none).
 
     """
-    mechanism = load_mechanism(values['mechanism'])
-    if values['damping_ratio'] != mechanism.damping_ratio:
-        mechanism = dataclasses.replace(mechanism, damping_ratio=values['damping_ratio'])
-    file_beta = (stiffness_damping_from_file(values['mechanism'])
-                 if values['model.stiffness_damping'] < 0 else 0.0)
-    options = parameters.model_options(values, file_beta)
+    mechanism, file_beta = read_mechanism_file(values['mechanism'])   # read once
+    zeta = values['damping_ratio']      # -1: the file's
+    if zeta >= 0.0 and zeta != mechanism.damping_ratio:
+        mechanism = dataclasses.replace(mechanism, damping_ratio=zeta)
+    options = parameters.model_options(values, file_beta, mechanism.crank_speed)
     notes = []
     if values['model.modes'] == 0 and values['model.tolerance'] < DEFAULT_MODEL_TOLERANCE:
         notes.append(f'the default model was planned for {DEFAULT_MODEL_TOLERANCE:g} relative '
@@ -147,6 +148,47 @@ def load_node_model(values, warn, progress=None):
         notes.append(f'stepping all {model.size} coordinates: {soft.get("reason")}')
         warn(notes[-1])
     return model, options, notes
+
+
+class ClippedSpeedLog:
+    """
+    Samples estimated at a speed clipped to the model's range: counted, said once a second.
+
+    Throttled by its own clock, not by the logger's: a logger call costs tens of us, and
+    clipping comes on every sample of a crank beyond the range.
+
+    Parameters
+    ----------
+    warn : callable
+        Called with the warning sentence.
+    running : callable
+        False once the node shuts down (then nothing is logged).
+    speed_max : float
+        The model's speed range [rad/s].
+    throttle_s : float
+        Least time between two warnings [s] (the node's other warnings: once a second).
+
+    """
+
+    def __init__(self, warn, running, speed_max, throttle_s=1.0):
+        self.count = 0
+        self._warn, self._running = warn, running
+        self._speed_max, self._throttle_s = speed_max, throttle_s
+        self._said = -math.inf
+
+    def add(self, sample):
+        """Count ``sample`` if its speed was clipped; warn at most once per throttle period."""
+        if not sample.flags & SampleFlag.CLIPPED_SPEED:
+            return
+        self.count += 1
+        now = time.monotonic()
+        if now - self._said < self._throttle_s or not self._running():
+            return
+        self._said = now
+        self._warn(f'crank at {abs(sample.crank_speed) / RPM:.0f} rpm, beyond the speed range '
+                   f'of the model of {self._speed_max / RPM:.0f} rpm: {self.count} samples so '
+                   'far estimated at the clipped speed (too small); restart with '
+                   "model.speed_max_rpm above the crank's speed")
 
 
 @dataclasses.dataclass

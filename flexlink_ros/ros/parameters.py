@@ -10,7 +10,9 @@ import dataclasses
 import math
 from typing import Optional
 
-from ..core.options import ModelOptions
+import yaml
+
+from ..core.options import DEFAULT_SPEED_MAX, ModelOptions, SPEED_MARGIN, speed_range
 from ..core.validity import VALIDITY_THRESHOLD
 from ..io.recorder_files import MIN_SPLIT_BYTES, MIN_SPLIT_DURATION_S, split_refusal
 
@@ -49,6 +51,8 @@ class ParameterSpec:
     max_bytes: Optional[int] = None
 
 
+# The default model, defined once (core.options): the model.* defaults are its fields.
+DEFAULT_MODEL = ModelOptions()
 NAME_MAX_BYTES = 256    # frame, joint and topic names
 PATH_MAX_BYTES = 4096   # file and directory paths (PATH_MAX on Linux)
 PARAMETERS = (
@@ -67,15 +71,18 @@ PARAMETERS = (
                   'default for the bearing model', low=0, high=80, read_only=True),
     ParameterSpec('model.static', -1, 'Basis directions from static load responses; -1 = the '
                   'planned default', low=-1, high=20, read_only=True),
-    ParameterSpec('model.grid_size', 128, 'Crank-angle grid points of the precomputed tables',
-                  low=8, high=4096, read_only=True),
-    ParameterSpec('model.elements_per_link', 4, 'Beam elements per link; 0 = the mechanism '
-                  "file's value", low=0, high=40, read_only=True),
-    ParameterSpec('model.rigid_crank', False, 'Treat the crank as rigid (its pin A fixed)',
+    ParameterSpec('model.grid_size', DEFAULT_MODEL.grid_size,
+                  'Crank-angle grid points of the precomputed tables', low=8, high=4096,
                   read_only=True),
-    ParameterSpec('model.bearings', 'flexible', 'Revolute bearings: flexible springs or rigid',
-                  choices=('flexible', 'rigid'), read_only=True, max_bytes=NAME_MAX_BYTES),
-    ParameterSpec('model.geometric_stiffness', True,
+    ParameterSpec('model.elements_per_link', DEFAULT_MODEL.elements_per_link,
+                  "Beam elements per link; 0 = the mechanism file's value", low=0, high=40,
+                  read_only=True),
+    ParameterSpec('model.rigid_crank', DEFAULT_MODEL.rigid_crank,
+                  'Treat the crank as rigid (its pin A fixed)', read_only=True),
+    ParameterSpec('model.bearings', DEFAULT_MODEL.bearings,
+                  'Revolute bearings: flexible springs or rigid', choices=('flexible', 'rigid'),
+                  read_only=True, max_bytes=NAME_MAX_BYTES),
+    ParameterSpec('model.geometric_stiffness', DEFAULT_MODEL.geometric_stiffness,
                   'Include geometric stiffness from the rigid-body axial forces',
                   read_only=True),
     ParameterSpec('model.stiffness_damping', -1.0,
@@ -83,27 +90,34 @@ PARAMETERS = (
                   'c = beta k on the bearing springs, added to damping_ratio (set that to 0 '
                   "for beta alone, as the Exudyn peer); -1 = the mechanism file's "
                   'stiffness_damping_s (0 if none)', low=-1.0, high=1.0, read_only=True),
-    ParameterSpec('model.order', 2, "Order of the outputs: 1 = the paper's linear KED; 2 = plus "
+    ParameterSpec('model.order', DEFAULT_MODEL.order, "Order of the outputs: 1 = the paper's "
+                  'linear KED; 2 = plus '
                   "the second-order motion of the bent links' chord shortening (lever tip, "
                   'coupler mid-point, markers)', low=1, high=2, read_only=True),
-    ParameterSpec('model.soft_modes', -1, 'The estimator steps the p lowest modes of the '
-                  'reduced model (a smooth basis at a checked spectral gap); -1 = the smallest '
-                  'p at a usable gap, or all coordinates where there is none (logged); 0 = all '
-                  'coordinates; p > 0 = exactly p (refused without a gap there)',
+    ParameterSpec('model.soft_modes', DEFAULT_MODEL.soft_modes, 'The estimator steps the p '
+                  'lowest modes of the reduced model (a smooth basis at a checked spectral '
+                  'gap); -1 = the smallest p at a usable gap, or all coordinates where there '
+                  'is none (logged); 0 = all coordinates; p > 0 = exactly p (refused without '
+                  'a gap there)',
                   low=-1, high=1000, read_only=True),
-    ParameterSpec('model.second_order', 'quasi-static', 'How order 2 is computed: '
+    ParameterSpec('model.second_order', DEFAULT_MODEL.second_order, 'How order 2 is computed: '
                   'quasi-static (the chord shortening of the linear shapes) or dynamic (also '
                   'the inertia of that motion: a second reduced state per sample, on a larger '
                   'basis by default; about +20 us per sample; the lever tip and coupler '
                   'mid-point, the markers stay quasi-static)',
                   choices=('quasi-static', 'dynamic'), read_only=True,
                   max_bytes=NAME_MAX_BYTES),
+    ParameterSpec('model.speed_max_rpm', 0.0, 'Largest |crank speed| the model serves [rpm]; '
+                  'faster samples are clipped to it (counted, logged and flagged); 0 = the '
+                  f"mechanism file's crank_speed_rpm times {SPEED_MARGIN:g}, at least "
+                  f'{int(DEFAULT_SPEED_MAX * 30.0 / math.pi)} rpm', low=0.0, high=1e5,
+                  read_only=True),
     ParameterSpec('model.cache_dir', '', 'Directory of precomputed-model cache files '
                   '(empty: ~/.cache/flexlink_ros)', read_only=True, max_bytes=PATH_MAX_BYTES),
     ParameterSpec('model.warm_start', True,
                   "Start from the periodic steady state at the first sample's speed"),
-    ParameterSpec('damping_ratio', 0.02, 'Modal damping ratio of every frozen mode',
-                  low=0.0, high=1.0, read_only=True),
+    ParameterSpec('damping_ratio', -1.0, 'Modal damping ratio of every frozen mode; -1 = the '
+                  "mechanism file's damping_ratio", low=-1.0, high=1.0, read_only=True),
     ParameterSpec('frame_id', 'linkage_ground', 'Frame of the ground (O2 at its origin, '
                   'x towards O4) for deflections and markers', max_bytes=NAME_MAX_BYTES),
     ParameterSpec('markers.exaggeration', 10.0,
@@ -203,6 +217,8 @@ def validate_parameter(name, value, current=None):
     if spec.max_bytes is not None and len(value.encode('utf-8', 'replace')) > spec.max_bytes:
         return (f'{name} must be at most {spec.max_bytes} bytes, got '
                 f'{len(value.encode("utf-8", "replace"))}')
+    if name == 'damping_ratio' and value < 0.0 and value != -1.0:
+        return f"damping_ratio must be >= 0, or -1 for the mechanism file's, got {value}"
     if name in ('crank_joint', 'frame_id') and not value:
         return f'{name} must not be empty'
     if spec.choices is not None and value not in spec.choices:
@@ -269,7 +285,7 @@ def markdown_table():
     return '\n'.join(rows)
 
 
-def model_options(values, file_stiffness_damping=0.0):
+def model_options(values, file_stiffness_damping=0.0, file_crank_speed=None):
     """
     Select the modelling options by parameter values.
 
@@ -280,6 +296,9 @@ def model_options(values, file_stiffness_damping=0.0):
     file_stiffness_damping : float
         The mechanism file's ``stiffness_damping_s`` [s], used where
         ``model.stiffness_damping`` is negative (-1: not set).
+    file_crank_speed : float or None
+        The mechanism file's crank speed [rad/s], the speed range's default
+        (:func:`core.options.speed_range`) where ``model.speed_max_rpm`` is 0.
 
     Returns
     -------
@@ -294,6 +313,8 @@ def model_options(values, file_stiffness_damping=0.0):
                         rigid_crank=values['model.rigid_crank'],
                         bearings=values['model.bearings'],
                         geometric_stiffness=values['model.geometric_stiffness'],
+                        speed_max=speed_range(file_crank_speed,
+                                              values.get('model.speed_max_rpm', 0.0)),
                         stiffness_damping=file_stiffness_damping if beta < 0 else beta,
                         order=values['model.order'],
                         soft_modes=values.get('model.soft_modes', -1),
@@ -302,10 +323,11 @@ def model_options(values, file_stiffness_damping=0.0):
 
 def default_model_options(**overrides):
     """
-    Give the node's default model options, with ``model.*`` parameters overridden by keyword.
+    Give the default model options with ``model.*`` parameters overridden by keyword.
 
-    Also the default of `flexlink estimate / bench / replay`. Sizes left at their defaults are
-    resolved for the overridden bearing and crank models (core.options.DEFAULT_SIZES).
+    Without overrides :class:`core.options.ModelOptions` (the node's parameters take their
+    defaults from it). Sizes left at their defaults are resolved for the overridden bearing
+    and crank models (core.options.DEFAULT_SIZES).
     """
     values = defaults()
     for name, value in overrides.items():
@@ -314,3 +336,57 @@ def default_model_options(**overrides):
             raise ValueError(f'unknown model option {name!r}')
         values[key] = value
     return model_options(values)
+
+
+def model_parameters(options, file_crank_speed=None):
+    """
+    Give the ``model.*`` parameter values that make the node build ``options``.
+
+    The inverse of :func:`model_options`: ``model_options({**defaults(), **these},
+    file_crank_speed=...)`` is ``options`` again (beta as itself; the speed range as 0 where
+    it is the file's default, so the node finds the same cached model, else in rpm).
+
+    Parameters
+    ----------
+    options : core.options.ModelOptions
+        A model (the plan's choice).
+    file_crank_speed : float or None
+        The mechanism file's crank speed [rad/s].
+
+    """
+    default_range = options.speed_max == speed_range(file_crank_speed)
+    return {'model.modes': options.modes, 'model.static': options.static,
+            'model.grid_size': options.grid_size,
+            'model.elements_per_link': options.elements_per_link or 0,
+            'model.rigid_crank': options.rigid_crank, 'model.bearings': options.bearings,
+            'model.geometric_stiffness': options.geometric_stiffness,
+            'model.stiffness_damping': float(options.stiffness_damping),
+            'model.order': options.order, 'model.soft_modes': options.soft_modes,
+            'model.second_order': options.second_order,
+            'model.speed_max_rpm': 0.0 if default_range
+            else float(options.speed_max) * 30.0 / math.pi}
+
+
+def params_file_text(values, comment=''):
+    """
+    Write parameter values as a ``/**: ros__parameters:`` file the node reads as it is.
+
+    Parameters
+    ----------
+    values : dict
+        Parameter name -> value (validated here; floats keep a decimal point).
+    comment : str
+        Lines put first as YAML comments.
+
+    """
+    validate_all({**defaults(), **values})
+    nested = {}
+    for name, value in values.items():
+        *groups, leaf = name.split('.')
+        target = nested
+        for group in groups:
+            target = target.setdefault(group, {})
+        target[leaf] = float(value) if type(SPECS[name].default) is float else value
+    body = yaml.safe_dump({'/**': {'ros__parameters': nested}}, sort_keys=False)
+    header = ''.join(f'# {line}\n' for line in comment.splitlines())
+    return header + body

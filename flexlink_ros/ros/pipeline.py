@@ -24,8 +24,8 @@ from visualization_msgs.msg import MarkerArray
 from . import diagnostics, parameters
 from .input_watch import InputWatch
 from .messages import diagnostics_message, joint_level, ns_to_stamp, quality_cdr
-from .node_model import (crank_sample, load_node_model, one_line, PeriodStats, publishable,
-                         SKIP_KINDS, Totals)
+from .node_model import (ClippedSpeedLog, crank_sample, load_node_model, one_line, PeriodStats,
+                         publishable, SKIP_KINDS, Totals)
 from .node_recording import NodeRecording
 from .overrides import declare_table
 from .progress_log import ProgressLog
@@ -106,6 +106,7 @@ class EstimatorPipeline(NodeRecording):
         self.recorder = self._open_recorder(self.qos) if values['record.enabled'] else None
         self.totals = Totals()
         self.last_valid_wall = None
+        self._clipped = ClippedSpeedLog(log.warning, self.context.ok, self.options.speed_max)
 
     def _create_publishers(self, make_publisher):
         """Create the output publishers with the QoS the parameters select."""
@@ -285,6 +286,7 @@ class EstimatorPipeline(NodeRecording):
 
     def _publish_sample(self, stamp_ns, sample):
         self.period.add_sample(sample)
+        self._clipped.add(sample)     # beyond the model's speed range: counted and said
         if sample.message:
             self.get_logger().warning(f'estimator: {sample.message}',
                                       throttle_duration_sec=WARN_THROTTLE_S)

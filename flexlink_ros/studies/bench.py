@@ -20,7 +20,6 @@ from ..core.estimation.offline import replay
 from ..core.fe import linkage as assembly
 from ..core.integrators import RadauIIA
 from ..core.numerics import relative_rms, RPM
-from ..core.options import ModelOptions
 from ..core.reduction import pipeline
 from ..core.reduction import reference as reduction_reference
 from ..core.reduction.soft_basis import gap_ratios, MIN_GAP_RATIO
@@ -317,20 +316,6 @@ def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM
     result['targets'] = bench_targets(result)
     step('done')
     return result
-
-
-def node_model_options():
-    """
-    Give the node's default reduced model (flexlink_node's ``model.*`` parameter defaults).
-
-    Returns
-    -------
-    ModelOptions
-        Flexible crank with 4 elements per link, flexible bearings, geometric stiffness,
-        default sizes, second-order outputs (a test keeps it equal to the node's parameters).
-
-    """
-    return ModelOptions(rigid_crank=False, elements_per_link=4, order=2)
 
 
 def estimator_report_data(mechanism, options, progress=None):

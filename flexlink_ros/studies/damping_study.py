@@ -123,8 +123,9 @@ def matched_reduced_model(mechanism='cho1992', elements=8, gravity=False, beta=1
     """
     mech = mechanism if isinstance(mechanism, Mechanism) else load_mechanism(mechanism)
     mech = dataclasses.replace(mech, joint_mass_split=0.5, damping_ratio=float(zeta))
-    options = ModelOptions(rigid_crank=True, bearings='flexible', geometric_stiffness=True,
-                           gravity=gravity, elements_per_link=elements, stiffness_damping=beta)
+    options = ModelOptions.linear(rigid_crank=True, bearings='flexible',
+                                  geometric_stiffness=True, gravity=gravity,
+                                  elements_per_link=elements, stiffness_damping=beta)
     return pipeline.model_for_mechanism(mech, options, use_cache=use_cache)
 
 

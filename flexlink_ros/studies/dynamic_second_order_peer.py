@@ -35,9 +35,9 @@ TARGETS = (0.12, 0.12, 0.04, 0.04)
 
 def case_options(rpm, elements, second_order):
     """Options of the case: rigid crank, rigid bearings, order 2, the pass's default sizes."""
-    return ModelOptions(elements_per_link=elements, bearings='rigid', order=2,
-                        second_order=second_order,
-                        speed_max=max(ModelOptions.speed_max, 1.05 * rpm * math.pi / 30.0))
+    return ModelOptions.linear(elements_per_link=elements, bearings='rigid', order=2,
+                               second_order=second_order,
+                               speed_max=max(ModelOptions.speed_max, 1.05 * rpm * math.pi / 30.0))
 
 
 def streamed_revolution(model, rpm, samples=SAMPLES, revolutions=REVOLUTIONS, start=0.0):

@@ -43,10 +43,10 @@ SAMPLES = 720
 
 def case_options(rpm, elements, sizes, order=2):
     """Model options of a case: rigid crank, rigid bearings, basis ``sizes`` (modes, static)."""
-    return ModelOptions(modes=sizes[0], static=sizes[1], elements_per_link=elements,
-                        bearings='rigid', order=order,
-                        speed_max=max(ModelOptions.speed_max, 1.05 * rpm * math.pi / 30.0),
-                        soft_modes=0)
+    return ModelOptions.linear(modes=sizes[0], static=sizes[1], elements_per_link=elements,
+                               bearings='rigid', order=order,
+                               speed_max=max(ModelOptions.speed_max, 1.05 * rpm * math.pi / 30.0),
+                               soft_modes=0)
 
 
 def _p2p_errors(outputs, reference):

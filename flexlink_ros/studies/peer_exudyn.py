@@ -67,6 +67,7 @@ from .peer_model import DEFAULT_SPECTRAL_RADIUS, DEFAULT_STEPS, deflections
 from .peer_model import exudyn_available, EXUDYN_REQUIREMENT, FLEXIBLE_LINKS, MASS_PLACEMENTS
 from .peer_model import OUTPUT_KEYS, PeerModel, require_exudyn, resolve_mechanism
 from .peer_model import solver_settings
+from .peer_solver import solve_or_explain
 from ..errors import FlexlinkError
 
 # The transient is let decay to this fraction of its start (ln(1/1e-3) = 6.9 time constants).
@@ -158,10 +159,8 @@ def peer_response(mechanism, rpm, *, elements_per_link=DEFAULT_ELEMENTS, bearing
     steps = revolutions * steps_per_revolution
     h = period / steps_per_revolution
     settings = solver_settings(exu, revolutions * period, steps, spectral_radius, 0.5 * h)
-    ok = exu.SolveDynamic(model.mbs, settings)
-    if not ok:
-        raise FlexlinkError(f'the Exudyn peer did not solve at {rpm:g} rpm '
-                            f'({elements_per_link} elements per link, {bearings} bearings)')
+    solve_or_explain(exu, model.mbs, settings, f'{rpm:g} rpm ({elements_per_link} elements '
+                     f'per link, {bearings} bearings)', bearings)
     data, index, wanted = _stored_samples(model, revolutions * samples_per_revolution + 1,
                                           steps_per_revolution // samples_per_revolution, h)
     t = data['lever_tip'][:, 0][index]

@@ -227,7 +227,7 @@ def time_factored(mechanism, bearings, rigid_crank, size, samples=20000, repeat=
     float
 
     """
-    options = ModelOptions(bearings=bearings, rigid_crank=rigid_crank, grid_size=8)
+    options = ModelOptions.linear(bearings=bearings, rigid_crank=rigid_crank, grid_size=8)
     linkage = FlexibleLinkage(fe_mechanism(mechanism, options),
                               options)
     rng = np.random.default_rng(1)
@@ -319,9 +319,9 @@ def main(argv=None):
     args = parser.parse_args(argv)
     mechanism = load_mechanism(args.mechanism)
     cases = [('node default (flexible crank, 4 el.)',
-              ModelOptions(rigid_crank=False, elements_per_link=4)),
-             ('rigid crank, flexible bearings', ModelOptions()),
-             ('rigid crank, rigid bearings', ModelOptions(bearings='rigid'))]
+              ModelOptions.linear(rigid_crank=False, elements_per_link=4)),
+             ('rigid crank, flexible bearings', ModelOptions.linear()),
+             ('rigid crank, rigid bearings', ModelOptions.linear(bearings='rigid'))]
     results = []
     for label, options in cases:
         entry = streaming_overhead(mechanism, options, rounds=args.rounds, samples=args.samples)

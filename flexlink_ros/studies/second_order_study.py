@@ -111,9 +111,10 @@ def reduced_response(mechanism, rpm, gravity, elements, points=720, sizes=None, 
     if not gravity:
         mech = dataclasses.replace(mech, gravity=(0.0, 0.0))
     modes, static = sizes or (None, None)
-    options = ModelOptions(modes=modes, static=static, grid_size=grid,
-                           elements_per_link=elements, bearings='rigid', order=2,
-                           speed_max=max(ModelOptions.speed_max, 1.05 * rpm * math.pi / 30.0))
+    options = ModelOptions.linear(modes=modes, static=static, grid_size=grid,
+                                  elements_per_link=elements, bearings='rigid', order=2,
+                                  speed_max=max(ModelOptions.speed_max,
+                                                1.05 * rpm * math.pi / 30.0))
     model = model_for_mechanism(mech, options)
     speed = rpm * math.pi / 30.0
     angles = 2.0 * math.pi * np.arange(2 * STREAM_SAMPLES) / STREAM_SAMPLES
@@ -170,7 +171,7 @@ def reduced_costs(mechanism):
     """
     out = []
     for (bearings, rigid_crank), (modes, static) in DEFAULT_SIZES.items():
-        options = ModelOptions(bearings=bearings, rigid_crank=rigid_crank, grid_size=8)
+        options = ModelOptions.linear(bearings=bearings, rigid_crank=rigid_crank, grid_size=8)
         linkage = FlexibleLinkage(fe_mechanism(mechanism, options),
                                   options)
         size = modes + static

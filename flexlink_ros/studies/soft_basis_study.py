@@ -41,7 +41,6 @@ import math
 
 import numpy as np
 
-from .bench import node_model_options
 from .peer_model import resolve_mechanism
 from .plan import full_order_dofs, scene_options
 from .synthetic import last_revolution, synthetic_signal
@@ -199,10 +198,10 @@ def soft_pair(mechanism, options):
 def paper_scenes():
     """List the paper's rigid-crank scenes: (label, options), flexible and rigid bearings."""
     return [('rigid crank, flexible bearings (16 + 2)',
-             dataclasses.replace(node_model_options(), rigid_crank=True,
+             dataclasses.replace(ModelOptions(), rigid_crank=True,
                                  elements_per_link=None, modes=16, static=2)),
             ('rigid crank, rigid bearings (4 + 2)',
-             dataclasses.replace(node_model_options(), rigid_crank=True,
+             dataclasses.replace(ModelOptions(), rigid_crank=True,
                                  elements_per_link=None, bearings='rigid', modes=4, static=2))]
 
 
@@ -221,7 +220,7 @@ def run_study(mechanism=None, options=None, cases=STEADY_CASES, ramp_s=RAMP_SECO
 
     """
     mechanism = mechanism or resolve_mechanism('cho1992')
-    options = options or node_model_options()
+    options = options or ModelOptions()
     scene = scene or study_scene(options)
     reference_model = None
     check = {}
@@ -252,7 +251,8 @@ def veering_options():
     its two lowest modes swap order twice a revolution, there and back
     (:func:`mode_order`).
     """
-    return ModelOptions(bearings='rigid', rigid_crank=False, elements_per_link=4, grid_size=64)
+    return ModelOptions.linear(bearings='rigid', rigid_crank=False, elements_per_link=4,
+                               grid_size=64)
 
 
 def mode_order(model, speed, count):

@@ -19,12 +19,12 @@ import time
 
 import numpy as np
 
-from .bench import node_model_options
 from .synthetic import synthetic_signal
 from ..core.estimation.compiled_update import compiled_samples, use_python_path
 from ..core.estimation.step import MAX_SUBSTEP_NS
 from ..core.estimation.streaming import StreamingEstimator
 from ..core.mechanism_file import load_mechanism
+from ..core.options import ModelOptions
 from ..core.reduction.pipeline import model_for_mechanism
 
 # Rows per batched call of the step (below the compiled step's GIL release, as one sample).
@@ -91,7 +91,7 @@ def update_overhead(model, rpm=391.0, rounds=9, samples=3000, jitter=0.3):
     Parameters
     ----------
     model : ReducedModel
-        The model (the node's default: :func:`.bench.node_model_options`).
+        The model (the node's default: :class:`core.options.ModelOptions`).
     rpm : float
         Crank speed of the signal [rpm] (1 kHz, ``jitter`` of each interval).
     rounds, samples : int
@@ -149,7 +149,7 @@ def main(argv=None):
     parser.add_argument('--samples', type=int, default=3000)
     parser.add_argument('--json', action='store_true')
     args = parser.parse_args(argv)
-    model = model_for_mechanism(load_mechanism(args.mechanism), node_model_options())
+    model = model_for_mechanism(load_mechanism(args.mechanism), ModelOptions())
     result = update_overhead(model, args.rpm, args.rounds, args.samples)
     if args.json:
         print(json.dumps(result, indent=1))

@@ -5,7 +5,6 @@ import json
 import math
 import subprocess
 import sys
-import time
 
 from flexlink_ros.cli import main as cli
 from flexlink_ros.cli.model_args import BUILD_LABEL
@@ -27,7 +26,7 @@ TOY_CACHE = {}
 
 
 def toy_model(mechanism, options=None, cache_dir=None, use_cache=True, progress=None):
-    options = options or core_options.ModelOptions()
+    options = options or core_options.ModelOptions.linear()
     key = (min(options.modes, 6), min(options.static, 2), options.grid_size)
     if key not in TOY_CACHE:
         TOY_CACHE[key] = build.reduce_samples(
@@ -38,8 +37,8 @@ def toy_model(mechanism, options=None, cache_dir=None, use_cache=True, progress=
 
 def toy_reference(mechanism, options, speed, angles):
     """Return the toy system with every direction kept, periodic at `speed`, at `angles`."""
-    full = toy_model(None, core_options.ModelOptions(modes=10, static=0, grid_size=32,
-                                                     speed_max=70.0))
+    full = toy_model(None, core_options.ModelOptions.linear(modes=10, static=0, grid_size=32,
+                                                            speed_max=70.0))
     steps = 1024
     grid, q, _ = periodic.periodic_response(full, speed, start_angle=0.0, steps=steps)
     out = tables.output_values(full, full.evaluate(grid, speed, 0.0), q)[:-1]
@@ -82,7 +81,7 @@ def test_estimate_json(toy, capsys):
 
 def test_estimate_matches_the_reference_over_the_last_revolution(toy):
     for jitter in (0.0, 0.3):
-        model = toy_model(None, core_options.ModelOptions(modes=4, static=2, grid_size=32))
+        model = toy_model(None, core_options.ModelOptions.linear(modes=4, static=2, grid_size=32))
         result = synthetic.run_estimate(model, 391.0, seconds=0.4, jitter=jitter)
         angles = np.radians(result['crank_deg'])
         ref = toy_reference(None, None, 391.0 * RPM, angles)
@@ -93,10 +92,10 @@ def test_estimate_matches_the_reference_over_the_last_revolution(toy):
 
 def test_plan_picks_the_first_candidate_within_tolerance(toy, monkeypatch):
     monkeypatch.setattr(plan, 'plan_candidates', lambda base: [
-        core_options.ModelOptions(modes=1, static=0, grid_size=32),
-        core_options.ModelOptions(modes=4, static=2, grid_size=32),
-        core_options.ModelOptions(modes=6, static=3, grid_size=32)])
-    base = core_options.ModelOptions()
+        core_options.ModelOptions.linear(modes=1, static=0, grid_size=32),
+        core_options.ModelOptions.linear(modes=4, static=2, grid_size=32),
+        core_options.ModelOptions.linear(modes=6, static=3, grid_size=32)])
+    base = core_options.ModelOptions.linear()
     result = plan.run_plan(None, base, 391.0, 0.01, physics=[base], scene=base)
     assert result['choice'] is not None and result['choice']['options']['modes'] == 4
     # the physics stage builds the generous size (the last candidate); the size stage
@@ -137,15 +136,13 @@ def test_plan_on_cho1992_compares_every_physics_with_the_scene(config_dir, monke
     sizes = [(4, 2, 64), (8, 4, 128), (16, 4, 128)]
     monkeypatch.setattr(plan, 'plan_candidates', lambda base: [
         dataclasses.replace(base, modes=m, static=s, grid_size=g) for m, s, g in sizes])
-    base = core_options.ModelOptions(bearings='rigid', elements_per_link=4,
-                                     speed_max=1.05 * 391.0 * RPM)
+    base = core_options.ModelOptions.linear(bearings='rigid', elements_per_link=4,
+                                            speed_max=1.05 * 391.0 * RPM)
     scene = plan.scene_options(mechanism, base)
     physics = [dataclasses.replace(scene, elements_per_link=3, rigid_crank=True),
                dataclasses.replace(scene, elements_per_link=3, geometric_stiffness=False),
                dataclasses.replace(scene, elements_per_link=3)]
-    start = time.perf_counter()
     result = plan.run_plan(mechanism, base, 391.0, 0.03, speeds_rpm=[391.0], physics=physics)
-    assert time.perf_counter() - start < 60.0
     reference = result['reference']['options']
     assert (reference['rigid_crank'], reference['geometric_stiffness'],
             reference['elements_per_link'], reference['bearings']) == (False, True, 4, 'rigid')
@@ -173,8 +170,9 @@ def test_plan_on_cho1992_compares_every_physics_with_the_scene(config_dir, monke
 
 
 def test_bench_table_and_chart(toy, tmp_path):
-    configurations = [('default', core_options.ModelOptions(modes=4, static=2, grid_size=32)),
-                      ('small', core_options.ModelOptions(modes=2, static=0, grid_size=32))]
+    linear = core_options.ModelOptions.linear
+    configurations = [('default', linear(modes=4, static=2, grid_size=32)),
+                      ('small', linear(modes=2, static=0, grid_size=32))]
     calls = []
     result = bench.run_bench(None, None, seconds=0.3, configurations=configurations,
                              progress=lambda *call: calls.append(call))
@@ -223,7 +221,7 @@ def test_plot_estimate(tmp_path):
 
 
 def test_the_reports_default_model_is_the_nodes():
-    assert bench.node_model_options() == node_params.default_model_options()
+    assert core_options.ModelOptions() == node_params.default_model_options()
 
 
 @pytest.mark.parametrize('flags, fixed', [

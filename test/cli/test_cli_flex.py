@@ -16,7 +16,8 @@ def _run(capsys, *argv):
 
 def test_modes_json(capsys):
     code, out, _ = _run(capsys, 'modes', '--crank-deg', '0:360:90', '--count', '2',
-                        '--rigid-crank', '--no-geometric-stiffness', '--json')
+                        '--rigid-crank', '--bearings', 'rigid', '--elements-per-link', '3',
+                        '--no-geometric-stiffness', '--json')
     assert code == 0
     result = json.loads(out)
     assert result['crank_deg'] == [0.0, 90.0, 180.0, 270.0]
@@ -42,7 +43,8 @@ def test_modes_shapes_and_flexible_bearings(capsys):
 
 def test_simulate_json_and_modal_equals_full_with_all_modes(capsys):
     common = ('simulate', '--rpm', '269', '--rigid-crank', '--no-geometric-stiffness',
-              '--elements', '1', '--points-per-rev', '12', '--steps-per-rev', '120', '--json')
+              '--bearings', 'rigid', '--elements', '1', '--points-per-rev', '12',
+              '--steps-per-rev', '120', '--json')
     code, out, _ = _run(capsys, *common)
     assert code == 0
     full = json.loads(out)
@@ -59,7 +61,8 @@ def test_simulate_json_and_modal_equals_full_with_all_modes(capsys):
 
 def test_simulate_convergence_check(capsys):
     code, out, _ = _run(capsys, 'simulate', '--rigid-crank', '--no-geometric-stiffness',
-                        '--elements', '1', '--points-per-rev', '10', '--steps-per-rev', '160',
+                        '--bearings', 'rigid', '--elements', '1', '--points-per-rev', '10',
+                        '--steps-per-rev', '160',
                         '--check-convergence', '--json')
     assert code == 0
     conv = json.loads(out)['convergence']

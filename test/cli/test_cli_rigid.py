@@ -2,6 +2,7 @@
 
 import json
 import math
+import pathlib
 
 from flexlink_ros.cli import main as cli
 import pytest
@@ -82,5 +83,19 @@ def test_design_spring_json_small_budget(capsys):
 ])
 def test_bad_input_gives_one_line_error(capsys, argv, message):
     code, out, err = _run(capsys, *argv)
-    assert code == 1 and out == ''
+    # a mechanism file refused (here: not found) ends with 2, other bad input with 1
+    assert code == (2 if '--mechanism' in argv else 1) and out == ''
     assert message in err and len(err.strip().splitlines()) == 1
+
+
+def test_criteria_suggests_thresholds_for_a_machine_of_its_own(capsys):
+    mechanism = pathlib.Path(__file__).resolve().parents[1] / 'data' / 'packaging_steel.yaml'
+    assert cli.main(['criteria', '--mechanism', str(mechanism), '--suggest-thresholds',
+                     '--json']) == 0
+    found = json.loads(capsys.readouterr().out)['thresholds']
+    assert found['rpm'] == pytest.approx(600.0) and found['warn'] < found['error']
+    assert [j for j, v in found['joints'].items() if not v['used']] == ['B']
+    assert cli.main(['criteria', '--mechanism', str(mechanism), '--suggest-thresholds']) == 0
+    text = capsys.readouterr().out
+    assert f'  diagnostics.criterion_warn: {found["warn"]:.6g}\n' in text
+    assert 'B: its reaction falls to 0.18 % of its RMS' in text

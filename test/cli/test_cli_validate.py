@@ -6,6 +6,7 @@ sweep where the validity flag turns, and the one-line errors (no speed, no exudy
 """
 
 import json
+import pathlib
 import struct
 import subprocess
 import sys
@@ -17,7 +18,7 @@ import pytest
 needs_exudyn = pytest.mark.skipif(not exudyn_available(),
                                   reason="exudyn is not installed (pip install '.[peer]')")
 
-SMALL = ('--elements-per-link', '4', '--no-gravity')
+SMALL = ('--elements-per-link', '4', '--no-gravity', '--bearings', 'rigid')
 
 
 def png_size(path):
@@ -94,7 +95,8 @@ def test_no_speed_is_a_one_line_error(capsys):
     code, out, err = _run(capsys, '--no-gravity')
     assert code == 1 and out == ''
     assert err.strip() == ('flexlink validate: error: give crank speeds with --rpm R [R ...] '
-                           'or --sweep START:STOP:STEP')
+                           'or --sweep START:STOP:STEP (the mechanism file has no '
+                           'crank_speed_rpm)')
 
 
 def test_without_exudyn_the_error_names_the_extra():
@@ -106,6 +108,21 @@ def test_without_exudyn_the_error_names_the_extra():
     assert run.returncode == 1 and run.stdout == ''
     assert run.stderr.startswith('flexlink validate: error: the Exudyn peer is not installed')
     assert "pip install '.[peer]'" in run.stderr and len(run.stderr.splitlines()) == 1
+
+
+@needs_exudyn
+def test_a_peer_failure_is_one_line_with_a_hint_and_no_traceback():
+    """The stiff steel linkage with flexible bearings at 600 rpm: the peer's solver fails."""
+    mechanism = pathlib.Path(__file__).resolve().parents[1] / 'data' / 'packaging_steel.yaml'
+    done = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'validate', '--mechanism',
+                           str(mechanism), '--bearings', 'flexible', '--rpm', '600',
+                           '--revolutions', '1'], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 1 and done.stdout == ''      # Exudyn's banner held back
+    assert 'Traceback' not in done.stderr
+    last = done.stderr.strip().splitlines()[-1]
+    assert last.startswith('flexlink validate: error: the Exudyn peer failed at 600 rpm '
+                           '(8 elements per link, springs bearings) "DYNAMIC SOLVER FAILED"')
+    assert 'hint: ' in last and '--bearings rigid' in last
 
 
 @needs_exudyn

@@ -1,4 +1,9 @@
-"""`flexlink --version`: one number, the same in the package, setup.py and package.xml."""
+"""
+`flexlink` (cli/main.py): the version, the split of ROS arguments, exit codes.
+
+`--version` is one number, the same in the package, setup.py and package.xml; a mechanism
+file refused on load ends every command with one line and exit code 2.
+"""
 
 import ast
 import importlib.metadata
@@ -11,8 +16,10 @@ import xml.etree.ElementTree as ElementTree
 import flexlink_ros
 from flexlink_ros.cli import main as cli
 import pytest
+import yaml
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
+DATA = ROOT / 'test' / 'data'
 
 
 def setup_py_version():
@@ -53,3 +60,26 @@ def test_ros_args_sections_are_split_off_as_rclpy_does():
     assert tool == ['replay', 'bag', '--publish']
     assert ros == ['-r', '__ns:=/r1', '-r', 'a:=b']
     assert cli.split_ros_args(['mcap-info', 'run1']) == (['mcap-info', 'run1'], [])
+
+
+MM_COMMANDS = [('modes', '--count', '1'), ('simulate', '--points-per-rev', '12'),
+               ('estimate', '--rpm', '300'), ('plan', '--rpm-max', '300'),
+               ('criteria', '--rpm', '300'), ('kinematics', '--crank-deg', '30')]
+
+
+@pytest.mark.parametrize('command', MM_COMMANDS, ids=lambda c: c[0])
+def test_a_mechanism_file_in_mm_is_refused_in_one_line_with_exit_2(command, tmp_path):
+    data = yaml.safe_load((DATA / 'packaging_steel.yaml').read_text())
+    data['ground_length_m'] *= 1000.0
+    for link in data['links'].values():
+        link['length_m'] *= 1000.0
+        link['area_m2'] *= 1e6
+        link['second_moment_m4'] *= 1e12
+    path = tmp_path / 'packaging_mm.yaml'
+    path.write_text(yaml.safe_dump(data))
+    done = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', command[0], '--mechanism',
+                           str(path), *command[1:]], capture_output=True, text=True,
+                          timeout=120, cwd=ROOT)
+    assert done.returncode == 2 and done.stdout == ''
+    assert done.stderr == (f'flexlink {command[0]}: error: ground_length_m = 220: metres '
+                           'expected, was this mm?\n')

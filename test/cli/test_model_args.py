@@ -5,13 +5,14 @@ import pathlib
 from flexlink_ros.cli import main as cli
 from flexlink_ros.cli import model_args
 from flexlink_ros.core.mechanism_file import find_config
+from flexlink_ros.core.options import ModelOptions
 import pytest
 
 # Each model subcommand with the arguments it requires.
 MODEL_COMMANDS = {'estimate': ['--rpm', '391'], 'plan': ['--rpm-max', '391'], 'bench': [],
                   'replay': ['bag'], 'simulate': [], 'modes': []}
-DEFAULT_BEARINGS = {'estimate': 'flexible', 'plan': 'flexible', 'bench': 'flexible',
-                    'replay': 'flexible', 'simulate': 'rigid', 'modes': 'rigid'}
+# One default model (core.options.ModelOptions): the same bearings everywhere.
+DEFAULT_BEARINGS = dict.fromkeys(MODEL_COMMANDS, ModelOptions().bearings)
 
 
 def parse(*argv):
@@ -32,7 +33,7 @@ def test_every_model_subcommand_accepts_the_shared_flags(command):
 
 
 @pytest.mark.parametrize('command', sorted(MODEL_COMMANDS))
-def test_defaults_are_unchanged_and_shown_in_help(command, capsys):
+def test_defaults_are_the_default_model_and_shown_in_help(command, capsys):
     args = parse(command, *MODEL_COMMANDS[command])
     # plan: neither crank flag leaves the crank model to the plan (None); elsewhere flexible
     rigid_crank = None if command == 'plan' else False
@@ -118,3 +119,18 @@ def test_plan_and_simulate_keep_their_second_order_meaning():
     args = parse('simulate', '--second-order', 'quasi-static')
     assert args.second_order == 'quasi-static'
     assert parse('simulate').second_order is None      # dynamic where it applies
+
+
+@pytest.mark.parametrize('command', ['estimate', 'bench', 'replay'])
+def test_the_estimator_commands_build_the_default_model_without_flags(command):
+    assert model_args.model_options(parse(command, *MODEL_COMMANDS[command])) == ModelOptions()
+
+
+@pytest.mark.parametrize('command', ['simulate', 'modes', 'estimate', 'plan', 'bench', 'replay'])
+def test_every_model_command_defaults_to_the_default_models_physics(command):
+    args = parse(command, *MODEL_COMMANDS[command])
+    default = ModelOptions()
+    crank = None if command == 'plan' else default.rigid_crank   # plan: its choice
+    assert (args.rigid_crank, args.bearings) == (crank, default.bearings)
+    assert model_args.elements_per_link(args) == default.elements_per_link
+    assert getattr(args, 'order', default.order) == default.order

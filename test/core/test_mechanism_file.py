@@ -14,6 +14,7 @@ from flexlink_ros.core.mechanism_file import (ament_share_directory, find_config
                                               MAX_SOURCE_CHARS, MAX_YAML_DEPTH,
                                               mechanism_from_dict, stiffness_damping_from_file)
 from flexlink_ros.errors import MechanismError
+from flexlink_ros.names import JOINT_NAMES, LINK_NAMES
 import pytest
 import yaml
 
@@ -168,7 +169,7 @@ def test_modes_cli_refuses_a_million_elements_in_one_line(config_dir, tmp_path):
         done = subprocess.run(
             [sys.executable, '-m', 'flexlink_ros.cli.main', 'modes', '--mechanism', str(mechanism),
              '--crank-deg', '0'] + extra, capture_output=True, text=True, timeout=120)
-        assert done.returncode == 1, done.stderr
+        assert done.returncode == 2, done.stderr     # a mechanism refused
         lines = done.stderr.strip().splitlines()
         assert len(lines) == 1, done.stderr
         assert 'elements_per_link' in lines[0] and f'1..{MAX_ELEMENTS_PER_LINK}' in lines[0]
@@ -244,3 +245,38 @@ def test_stiffness_damping_key_gives_the_default_beta_without_changing_the_mecha
     path.write_text(yaml.safe_dump(data))
     with pytest.raises(MechanismError, match='stiffness_damping_s'):
         stiffness_damping_from_file(path)
+
+
+def documented_keys():
+    """Every key of docs/mechanism-file.md's key table, <link> and <joint> expanded."""
+    text = (pathlib.Path(__file__).resolve().parents[2] / 'docs' / 'mechanism-file.md'
+            ).read_text()
+    table = text.split('## Every key', 1)[1].split('\n## ', 1)[0]
+    keys = set()
+    for line in table.splitlines():
+        cells = line.split('|')
+        if len(cells) < 3 or not cells[1].strip().startswith('`'):
+            continue
+        for key in re.findall(r'`([^`]+)`', cells[1]):
+            for link in LINK_NAMES:
+                for joint in JOINT_NAMES:
+                    keys.add(key.replace('<link>', link).replace('<joint>', joint))
+    return keys
+
+
+def loader_keys():
+    """Every leaf key the loader accepts, dotted as the file nests it."""
+    from flexlink_ros.core import mechanism_file as loader
+
+    sections = {'material': loader._MATERIAL_KEYS, 'bearings': loader._BEARING_KEYS,
+                'input_shaft': loader._SHAFT_KEYS, 'spring': loader._SPRING_KEYS,
+                'joint_masses_kg': set(JOINT_NAMES),
+                **{f'links.{link}': loader._LINK_KEYS for link in LINK_NAMES}}
+    keys = {key for key in loader._TOP_KEYS if key not in sections and key != 'links'}
+    for section, leaves in sections.items():
+        keys |= {f'{section}.{leaf}' for leaf in leaves}
+    return keys
+
+
+def test_the_mechanism_file_reference_lists_exactly_the_keys_the_loader_accepts():
+    assert documented_keys() == loader_keys()

@@ -106,7 +106,7 @@ def test_replay_markers_of_an_order_2_model_draw_the_joints_second_order_motion(
     # The lever's deformed end (joint B) moves by the second-order lever tip, drawn
     # exaggerated; the model's linear deflections are the same in both drawings.
     model = model_for_mechanism(load_mechanism('cho1992'),
-                                ModelOptions(bearings='rigid', grid_size=32, order=2))
+                                ModelOptions.linear(bearings='rigid', grid_size=32, order=2))
     linear = dataclasses.replace(model, second_order=None)
     rng = np.random.default_rng(3)
     angles = rng.uniform(0.0, 2.0 * np.pi, 4)

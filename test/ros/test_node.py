@@ -1,8 +1,10 @@
 """flexlink_node over real rclpy between processes on loopback (conftest sets the domain)."""
 
+import json
 import math
 import os
 import pathlib
+import re
 import signal
 import subprocess
 import sys
@@ -19,6 +21,7 @@ import yaml
 READY_TIMEOUT_S = 240.0     # node start-up incl. a first model build on a loaded machine
 DISCOVERY_TIMEOUT_S = 20.0
 PARAMS_FILE = pathlib.Path(__file__).resolve().parents[2] / 'config' / 'flexlink_node.yaml'
+DATA = pathlib.Path(__file__).resolve().parents[1] / 'data'
 OUTPUTS = ('/flexlink_node/lever_tip/deflection', '/flexlink_node/coupler_mid/deflection',
            '/flexlink_node/joint_criteria', '/flexlink_node/markers', '/diagnostics')
 
@@ -340,6 +343,24 @@ def test_bad_parameters_file_value_stops_the_node_with_a_reason(tmp_path, proces
     log = node_process.log()
     assert reason in log and 'Traceback' not in log
     assert log.strip().startswith(f'{NODE_NAME}: error:')
+
+
+def test_a_mechanism_file_in_mm_stops_the_node_with_one_line(tmp_path, processes):
+    data = yaml.safe_load((DATA / 'soft_aluminium.yaml').read_text())
+    for link in data['links'].values():
+        link['area_m2'] *= 1e6          # mm^2 and mm^4, the lengths in m
+        link['second_moment_m4'] *= 1e12
+    mechanism = tmp_path / 'soft_mm4.yaml'
+    mechanism.write_text(yaml.safe_dump(data))
+    node_process = NodeProcess(tmp_path, f'mechanism:={mechanism}',
+                               f'model.cache_dir:={tmp_path}')
+    processes.append(node_process)
+    assert node_process.process.wait(timeout=READY_TIMEOUT_S) == 1
+    log = node_process.log()
+    assert 'Traceback' not in log and log.count('\n') == 1
+    assert log.startswith(f'{NODE_NAME}: error: links.crank.second_moment_m4 = 5.625: radius '
+                          'of gyration'), log
+    assert 'mm^2 and mm^4' in log
 
 
 def test_a_mechanism_name_that_spells_a_path_stops_the_node(tmp_path, processes):
@@ -682,3 +703,86 @@ def test_node_publishes_the_dynamic_pass(tmp_path, processes):
                                                       offline[name][n])).max())
     assert sum(len(p) == 2 for p in published.values()) > 500
     assert worst < 1e-6 * scale, worst / scale
+
+
+def _recorded(bag):
+    """Crank angle per input stamp and the published deflections per stamp, from a bag."""
+    from rosbags.highlevel import AnyReader
+
+    angles, published = {}, {}
+    with AnyReader([bag]) as reader:
+        for connection, _, raw in reader.messages():
+            if connection.topic == '/joint_states' or connection.topic.endswith('/deflection'):
+                message = reader.deserialize(raw, connection.msgtype)
+                stamp = message.header.stamp.sec * 10**9 + message.header.stamp.nanosec
+                if connection.topic == '/joint_states':
+                    angles[stamp] = message.position[0]
+                else:
+                    published.setdefault(stamp, {})[connection.topic.split('/')[2]] = (
+                        message.vector.x, message.vector.y)
+    return angles, published
+
+
+def _drive(tmp_path, processes, rpm, *parameters, seconds=2.0):
+    """Run the node on the crank driver at ``rpm`` for ``seconds``, recording; the bag, log."""
+    bag = tmp_path / f'bag_{time.monotonic_ns()}'
+    node_process = NodeProcess(tmp_path, 'record.enabled:=true', f'record.path:={bag}',
+                               *parameters)
+    processes.append(node_process)
+    node_process.wait_for(READY_MESSAGE, 300.0)     # a model build on a loaded machine
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
+    driver = subprocess.Popen([sys.executable, '-m', 'flexlink_ros.ros.crank_driver', '--ros-args',
+                               '-p', f'speed_rpm:={rpm}'], env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    processes.append(driver)
+    node_process.wait_for(FIRST_INPUT_MESSAGE, DISCOVERY_TIMEOUT_S)
+    time.sleep(seconds)    # recording time, not synchronisation
+    driver.send_signal(signal.SIGINT)
+    driver.wait(timeout=20)
+    assert node_process.stop(signal.SIGINT) == 0, node_process.log()
+    return bag, node_process.log()
+
+
+def test_a_stiff_linkage_above_620_rpm_follows_its_files_speed_range(tmp_path, processes):
+    """packaging_steel says 600 rpm: the node serves 750 rpm and matches `flexlink estimate`."""
+    mechanism = DATA / 'packaging_steel.yaml'
+    cache = tmp_path / 'cache'
+    bag, log = _drive(tmp_path, processes, 700.0, f'mechanism:={mechanism}',
+                      'model.grid_size:=64', f'model.cache_dir:={cache}')
+    assert 'speed range' not in log, log
+    assert re.search(r'speed_max=78\.53981', log), log      # 1.25 x 600 rpm
+    done = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'estimate', '--mechanism',
+                           str(mechanism), '--rpm', '700', '--grid-size', '64', '--cache-dir',
+                           str(cache), '--json'], capture_output=True, text=True, timeout=600,
+                          env=dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path)))
+    assert done.returncode == 0, done.stderr
+    assert 'building the model' not in done.stderr      # the node's model: the same key
+    estimate = json.loads(done.stdout)
+    order = np.argsort(estimate['crank_deg'])
+    degrees = np.array(estimate['crank_deg'])[order]
+    angles, published = _recorded(bag)
+    stamps = sorted(s for s in published if len(published[s]) == 2 and s in angles)
+    assert len(stamps) > 1000
+    last = stamps[-500:]      # about 6 revolutions, long after the warm start
+    crank = np.degrees(np.mod([angles[s] for s in last], 2.0 * np.pi))
+    for name in ('lever_tip', 'coupler_mid'):
+        node = np.array([published[s][name] for s in last])
+        expected = np.column_stack([
+            np.interp(crank, degrees, np.array(estimate[name][axis])[order], period=360.0)
+            for axis in ('dx_m', 'dy_m')])
+        peak = np.abs(expected).max()
+        assert 1e-6 < peak < 1e-4      # tens of micrometres
+        assert np.abs(node - expected).max() < 0.05 * peak, name
+
+
+def test_samples_beyond_the_speed_range_are_logged_with_their_count(tmp_path, processes):
+    mechanism = DATA / 'packaging_steel.yaml'
+    _, log = _drive(tmp_path, processes, 700.0, f'mechanism:={mechanism}',
+                    'model.speed_max_rpm:=650.0', 'model.rigid_crank:=true',
+                    'model.elements_per_link:=2', 'model.grid_size:=32',
+                    f'model.cache_dir:={tmp_path}', seconds=1.5)
+    found = re.findall(r'crank at 700 rpm, beyond the speed range of the model of 650 rpm: '
+                       r'(\d+) samples so far', log)
+    assert found and int(found[0]) >= 1, log
+    assert len(found) <= 4       # at most once a second
+    assert int(found[-1]) > 500 and 'Traceback' not in log     # counted, every sample

@@ -5,10 +5,29 @@ import subprocess
 import sys
 
 from flexlink_ros.core.mechanism_file import find_config
+from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.ros import parameters as node_params
 from flexlink_ros.ros.node_model import load_node_model
 import pytest
 import yaml
+
+
+# Node parameter -> the ModelOptions field it sets (the parameter's default is that field's).
+MODEL_FIELDS = {'model.grid_size': 'grid_size', 'model.elements_per_link': 'elements_per_link',
+                'model.rigid_crank': 'rigid_crank', 'model.bearings': 'bearings',
+                'model.geometric_stiffness': 'geometric_stiffness', 'model.order': 'order',
+                'model.soft_modes': 'soft_modes', 'model.second_order': 'second_order'}
+
+
+def test_the_parameter_defaults_are_the_default_model_defined_once():
+    default = ModelOptions()
+    for name, field in MODEL_FIELDS.items():
+        assert node_params.SPECS[name].default == getattr(default, field), name
+    assert node_params.model_options(node_params.defaults()) == default
+    assert node_params.default_model_options() == default
+    # "from the file" and "the planned sizes" are markers, not a second definition
+    assert node_params.defaults()['damping_ratio'] == -1.0
+    assert node_params.defaults()['model.speed_max_rpm'] == 0.0
 
 
 def test_defaults_are_valid():
@@ -199,6 +218,31 @@ def test_second_order_parameter_selects_the_dynamic_pass():
     assert options.second_order == 'dynamic' and (options.modes, options.static) == (8, 4)
     assert node_params.validate_parameter('model.second_order', 'full') is not None
     assert node_params.validate_parameter('model.second_order', 'dynamic') is None
+
+
+def test_node_model_reads_the_mechanism_file_once_and_takes_its_damping_ratio(
+        tmp_path, monkeypatch):
+    from flexlink_ros.core import mechanism_file
+
+    text = pathlib.Path(find_config('cho1992')).read_text()
+    damped = tmp_path / 'damped.yaml'
+    damped.write_text(text.replace('damping_ratio: 0.02', 'damping_ratio: 0.05')
+                      + 'stiffness_damping_s: 1.0e-4\ncrank_speed_rpm: 560.0\n')
+    reads = []
+    read = mechanism_file.read_yaml_bounded
+    monkeypatch.setattr(mechanism_file, 'read_yaml_bounded',
+                        lambda *args, **kwargs: reads.append(args) or read(*args, **kwargs))
+    values = {**node_params.defaults(), 'mechanism': str(damped), 'model.rigid_crank': True,
+              'model.grid_size': 16, 'model.modes': 2, 'model.static': 0,
+              'model.elements_per_link': 2, 'model.cache_dir': str(tmp_path)}
+    model, options, _ = load_node_model(values, lambda note: None)
+    assert len(reads) == 1
+    # damping_ratio -1 (the default) is the file's, as model.stiffness_damping -1 is
+    assert model.zeta == 0.05 and options.stiffness_damping == 1e-4
+    # the speed range from the file's crank speed with its margin
+    assert options.speed_max == pytest.approx(1.25 * 560.0 * 3.141592653589793 / 30.0)
+    values['damping_ratio'] = 0.03
+    assert load_node_model(values, lambda note: None)[0].zeta == 0.03
 
 
 @pytest.mark.parametrize('name, tiny, floor', [

@@ -9,7 +9,7 @@ from flexlink_ros.studies import bench
 
 
 def test_configurations_vary_one_size_at_a_time_around_the_default():
-    base = ModelOptions(modes=6, static=2, grid_size=128)
+    base = ModelOptions.linear(modes=6, static=2, grid_size=128)
     rows = bench.bench_configurations(base)
     assert rows[0] == ('default', base)
     by_label = dict(rows)
@@ -20,7 +20,7 @@ def test_configurations_vary_one_size_at_a_time_around_the_default():
     for _, options in rows:
         assert options.bearings == base.bearings and options.rigid_crank == base.rigid_crank
     # a smaller basis keeps at least one mode
-    assert bench.bench_configurations(ModelOptions(modes=3))[1][1].modes == 1
+    assert bench.bench_configurations(ModelOptions.linear(modes=3))[1][1].modes == 1
 
 
 def test_targets_are_judged_from_the_default_configuration():
@@ -36,7 +36,7 @@ def test_targets_are_judged_from_the_default_configuration():
 
 def test_soft_rows_are_the_other_usable_gaps_and_soft_off():
     # the paper's rigid-crank scene, flexible bearings (16 + 2), grid 64: its model as loaded
-    options = ModelOptions(bearings='flexible', grid_size=64)
+    options = ModelOptions.linear(bearings='flexible', grid_size=64)
     model = pipeline.model_for_mechanism(load_mechanism('cho1992'), options)
     sizes = bench.usable_soft_sizes(model)
     ratios = gap_ratios(node_values(model, 'M')['1'], node_values(model, 'K'),

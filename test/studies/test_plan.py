@@ -14,7 +14,7 @@ def cho():
 
 
 def test_size_candidates_run_from_small_to_large():
-    base = ModelOptions(bearings='rigid')
+    base = ModelOptions.linear(bearings='rigid')
     candidates = plan.plan_candidates(base)
     assert len(candidates) == len(plan.PLAN_MODES) * len(plan.PLAN_STATIC) * len(plan.PLAN_GRIDS)
     keys = [(o.modes + o.static, o.grid_size) for o in candidates]
@@ -25,11 +25,12 @@ def test_size_candidates_run_from_small_to_large():
 
 
 def test_scene_is_the_richest_model_of_the_users_bearings(cho):
-    scene = plan.scene_options(cho, ModelOptions(bearings='rigid'))
+    scene = plan.scene_options(cho, ModelOptions.linear(bearings='rigid'))
     assert scene.elements_per_link == 2 * cho.elements_per_link
     assert scene.rigid_crank is False and scene.geometric_stiffness is True
     assert scene.bearings == 'rigid'
-    given = plan.scene_options(cho, ModelOptions(elements_per_link=5, geometric_stiffness=False))
+    given = plan.scene_options(cho, ModelOptions.linear(elements_per_link=5,
+                                                        geometric_stiffness=False))
     assert given.elements_per_link == 5 and given.geometric_stiffness is True
 
 
@@ -40,12 +41,12 @@ def test_full_order_dofs_grow_by_an_interior_node_per_link_and_element(cho):
     # one more element per link: one more interior node (u, v, phi) on each flexible link
     assert dofs(3, False) - dofs(2, False) == 9
     assert dofs(3, True) - dofs(2, True) == 6
-    assert plan.full_order_dofs(None, ModelOptions()) is None
+    assert plan.full_order_dofs(None, ModelOptions.linear()) is None
 
 
 def test_physics_candidates_are_cheapest_first_and_end_with_the_scene(cho):
-    scene = plan.scene_options(cho, ModelOptions(bearings='flexible'))
-    candidates = plan.physics_candidates(cho, ModelOptions(bearings='flexible'), scene)
+    scene = plan.scene_options(cho, ModelOptions.linear(bearings='flexible'))
+    candidates = plan.physics_candidates(cho, ModelOptions.linear(bearings='flexible'), scene)
     assert candidates[-1] == scene
     costs = [plan.full_order_dofs(cho, o) for o in candidates[:-1]]
     assert costs == sorted(costs)

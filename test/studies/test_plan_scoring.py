@@ -9,15 +9,14 @@ import numpy as np
 
 
 def test_physics_key_ignores_the_reduced_size():
-    base = ModelOptions(bearings='rigid', elements_per_link=4)
-    assert physics_key(base) == physics_key(ModelOptions(bearings='rigid', elements_per_link=4,
-                                                         modes=12, static=0, grid_size=64,
-                                                         speed_max=30.0))
-    for changed in (ModelOptions(bearings='flexible', elements_per_link=4),
-                    ModelOptions(bearings='rigid', elements_per_link=3),
-                    ModelOptions(bearings='rigid', elements_per_link=4, rigid_crank=False),
-                    ModelOptions(bearings='rigid', elements_per_link=4,
-                                 geometric_stiffness=False)):
+    base = ModelOptions.linear(bearings='rigid', elements_per_link=4)
+    assert physics_key(base) == physics_key(ModelOptions.linear(
+        bearings='rigid', elements_per_link=4, modes=12, static=0, grid_size=64, speed_max=30.0))
+    for changed in (ModelOptions.linear(bearings='flexible', elements_per_link=4),
+                    ModelOptions.linear(bearings='rigid', elements_per_link=3),
+                    ModelOptions.linear(bearings='rigid', elements_per_link=4, rigid_crank=False),
+                    ModelOptions.linear(bearings='rigid', elements_per_link=4,
+                                        geometric_stiffness=False)):
         assert physics_key(changed) != physics_key(base)
 
 
@@ -30,4 +29,4 @@ def test_signals_are_two_revolutions_with_the_last_one_marked():
         assert 4.0 * math.pi - 2.0 * speed / 500.0 < np.ptp(angles) <= 4.0 * math.pi + 1e-9
         assert mask[-1] and not mask[0]
         assert np.ptp(angles[mask]) < 2.0 * math.pi <= np.ptp(angles[mask]) + speed / 500.0
-    assert signals.references == {} and signals.reference_seconds(ModelOptions()) == 0
+    assert signals.references == {} and signals.reference_seconds(ModelOptions.linear()) == 0

@@ -28,7 +28,7 @@ def test_compiled_factored_kernel_agrees_and_is_timed(mech):
 
 def test_streaming_overhead_times_both_orders_of_the_package_step(mech, capsys):
     """Order 1 and order 2 of the same options, both timed (no timed assertion)."""
-    entry = second_order_bench.streaming_overhead(mech, ModelOptions(bearings='rigid'),
+    entry = second_order_bench.streaming_overhead(mech, ModelOptions.linear(bearings='rigid'),
                                                   rounds=2, samples=200)
     assert entry['size'] == 6
     for name in ('update_ns', 'rows_ns'):

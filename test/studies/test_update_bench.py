@@ -12,7 +12,7 @@ import pytest
 def test_both_paths_are_timed_and_agree():
     """Both paths timed on the same samples (they agree, or it raises); no timed assertion."""
     model = pipeline.model_for_mechanism(load_mechanism('cho1992'),
-                                         ModelOptions(bearings='rigid'))
+                                         ModelOptions.linear(bearings='rigid'))
     result = update_bench.update_overhead(model, rounds=2, samples=200)
     # Every sample but the first (the start, on the Python path) went through the C call.
     assert result['samples'] == 401 and result['taken'] == 400

@@ -12,6 +12,8 @@ import dataclasses
 import numpy as np
 import scipy.linalg
 
+from ..mechanism_checks import check_first_frequency
+
 # Exponent of the (omega_1 / omega) weight of frozen-mode snapshots in the POD.
 MODE_WEIGHT_POWER = 2.0
 # Static snapshots per angle and speed: the load at that speed ('w') and the acceleration piece.
@@ -161,6 +163,8 @@ def build_basis(samples, modes, static, speeds, angle_stride=1):
     for k in range(0, samples.grid_size, angle_stride):
         for w in speeds:
             omega, shapes = frozen_modes(samples.frozen_at(k, w), samples.mass[k], per_state)
+            check_first_frequency(omega[0] / (2.0 * np.pi), 2.0 * np.pi * k / samples.grid_size,
+                                  w)
             stiffness = samples.stiffness_at(k, w)
             # Weight by flexibility (omega_1 / omega)^2, a mode's share of a static response,
             # so the extra modes collected count less than the ones to keep.

@@ -65,7 +65,7 @@ def cho1992():
 def cho_second_order_model(bearings='rigid', grid_size=32):
     """Cho 1992 reduced model of order 2 (rigid crank, the default sizes), cached."""
     return pipeline.model_for_mechanism(
-        cho1992(), ModelOptions(bearings=bearings, grid_size=grid_size, order=2))
+        cho1992(), ModelOptions.linear(bearings=bearings, grid_size=grid_size, order=2))
 
 
 def toy_model():

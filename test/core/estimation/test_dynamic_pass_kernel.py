@@ -20,8 +20,9 @@ SPEED = 391 * math.pi / 30
 
 @pytest.fixture(scope='module')
 def arrays():
-    options = ModelOptions(bearings='rigid', elements_per_link=3, modes=5, static=3, order=2,
-                           grid_size=32, speed_max=1.05 * SPEED, second_order='dynamic')
+    options = ModelOptions.linear(bearings='rigid', elements_per_link=3, modes=5, static=3,
+                                  order=2, grid_size=32, speed_max=1.05 * SPEED,
+                                  second_order='dynamic')
     model = pipeline.model_for_mechanism(load_mechanism('cho1992'), options, use_cache=False)
     return model.dynamic_second_order
 

@@ -35,8 +35,9 @@ SAMPLES = 360
 def case():
     mech = load_mechanism('cho1992')
     # The default (4, 2) basis misses the pass (see the module's notes); (6, 4) holds it.
-    options = ModelOptions(bearings='rigid', elements_per_link=4, modes=6, static=4, order=2,
-                           grid_size=64, speed_max=1.05 * SPEED, second_order='dynamic')
+    options = ModelOptions.linear(bearings='rigid', elements_per_link=4, modes=6, static=4,
+                                  order=2, grid_size=64, speed_max=1.05 * SPEED,
+                                  second_order='dynamic')
     model = pipeline.model_for_mechanism(mech, options, use_cache=False)
     return mech, options, model, DynamicPassKernel(model.dynamic_second_order)
 

@@ -41,9 +41,9 @@ def mech():
 
 def _options(bearings, soft_modes=0):
     modes, static = SIZES[bearings]
-    return ModelOptions(modes=modes, static=static, bearings=bearings, rigid_crank=True,
-                        elements_per_link=4, grid_size=64, speed_max=45.0,
-                        soft_modes=soft_modes)
+    return ModelOptions.linear(modes=modes, static=static, bearings=bearings, rigid_crank=True,
+                               elements_per_link=4, grid_size=64, speed_max=45.0,
+                               soft_modes=soft_modes)
 
 
 @pytest.fixture(scope='module')

@@ -90,8 +90,8 @@ def test_node_default_model_meets_its_budget_against_the_scene_reference(cho):
     assert not options.rigid_crank and options.geometric_stiffness
     model = pipeline.model_for_mechanism(cho, options)
     # The node's default order (2) on both sides: the reference adds the second order too.
-    scene = plan.scene_options(cho, core_options.ModelOptions(bearings=options.bearings,
-                                                              order=options.order))
+    scene = plan.scene_options(cho, core_options.ModelOptions.linear(bearings=options.bearings,
+                                                                     order=options.order))
     assert options.order == 2 and scene.order == 2
     rpm = 391.0
     period = 60.0 / rpm

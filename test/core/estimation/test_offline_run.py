@@ -73,8 +73,9 @@ def test_segments_share_one_set_of_step_tables(model, monkeypatch):
     result = offline_run.estimate_offline(model, stamps, angles, speeds)
     assert result['segments'] == 6 and len(built) == 1
     with pytest.raises(ValueError, match='do not match the model'):
-        small = pipeline.model_for_mechanism(load_mechanism('cho1992'), core_options.ModelOptions(
-            rigid_crank=True, bearings='rigid', geometric_stiffness=False))
+        small = pipeline.model_for_mechanism(
+            load_mechanism('cho1992'), core_options.ModelOptions.linear(
+                rigid_crank=True, bearings='rigid', geometric_stiffness=False))
         StreamingEstimator(model, step_tables=tables.step_tables(small))
 
 

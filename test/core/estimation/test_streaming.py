@@ -169,7 +169,7 @@ TARGETS = {0.0: (0.01, 0.05), 0.3: (0.02, 0.07)}
 @pytest.mark.parametrize('bearings', ['rigid', 'flexible'])
 def test_cho1992_streaming_accuracy_at_269_and_391_rpm(cho, bearings):
     # The default model: geometric stiffness of the rigid-body axial forces included.
-    options = core_options.ModelOptions(bearings=bearings)
+    options = core_options.ModelOptions.linear(bearings=bearings)
     model = pipeline.model_for_mechanism(cho, options, use_cache=False)
     for rpm in (269.0, 391.0):
         for jitter, (coupler_limit, lever_limit) in TARGETS.items():
@@ -182,7 +182,7 @@ def test_cho1992_streaming_accuracy_at_269_and_391_rpm(cho, bearings):
 @pytest.mark.parametrize('bearings', ['rigid', 'flexible'])
 def test_cho1992_order_2_streaming_equals_the_full_order_plus_second_order(cho, bearings):
     """Order 2 against core.simulate's full order + corrected_response, 269 and 391 rpm."""
-    options = core_options.ModelOptions(bearings=bearings, order=2)
+    options = core_options.ModelOptions.linear(bearings=bearings, order=2)
     model = pipeline.model_for_mechanism(cho, options)
     assert model.order == 2
     for rpm in (269.0, 391.0):
@@ -226,7 +226,7 @@ def test_model_without_reactions_flags_zero_criteria():
 def test_cho1992_criteria_equal_the_rigid_body_analysis_at_constant_speed(cho):
     """Tabulated reactions (F_1 + a F_a + w^2 F_w2, dF/dtheta) against core/criteria.py."""
     criteria = pytest.importorskip('flexlink_ros.core.criteria')
-    options = core_options.ModelOptions(bearings='rigid', geometric_stiffness=False)
+    options = core_options.ModelOptions.linear(bearings='rigid', geometric_stiffness=False)
     model = pipeline.model_for_mechanism(cho, options, use_cache=False)
     speed = 391.0 * 2.0 * np.pi / 60.0
     times = np.arange(600) * 1e-3

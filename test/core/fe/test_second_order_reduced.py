@@ -26,8 +26,8 @@ def mech():
 # -- reduced basis ----------------------------------------------------------------------------
 
 @pytest.mark.parametrize('options', [
-    core_options.ModelOptions(grid_size=8, bearings='rigid', elements_per_link=ELEMENTS),
-    core_options.ModelOptions(grid_size=8, bearings='flexible', rigid_crank=False,
+    core_options.ModelOptions.linear(grid_size=8, bearings='rigid', elements_per_link=ELEMENTS),
+    core_options.ModelOptions.linear(grid_size=8, bearings='flexible', rigid_crank=False,
                          elements_per_link=3, modes=24, static=2)], ids=['rigid', 'flexible'])
 def test_quadratic_form_equals_the_full_order_on_v_q(mech, options):
     samples = pipeline.frozen_samples_for(mech, options)

@@ -13,8 +13,8 @@ CONFIG = pathlib.Path(__file__).resolve().parents[3] / 'config'
 
 def test_build_reports_rising_percentages_and_builds_the_same_model():
     mechanism = load_mechanism(CONFIG / 'cho1992.yaml')
-    options = ModelOptions(bearings='rigid', geometric_stiffness=False, grid_size=16,
-                           modes=4, static=2)
+    options = ModelOptions.linear(bearings='rigid', geometric_stiffness=False, grid_size=16,
+                                  modes=4, static=2)
     reports = []
     followed = build_model(mechanism, options, lambda *args: reports.append(args))
     plain = build_model(mechanism, options)

@@ -24,7 +24,7 @@ GRID = 32
 @pytest.fixture(scope='module')
 def setup():
     mech = dataclasses.replace(load_mechanism('cho1992'), elements_per_link=3)
-    linkage = FlexibleLinkage(mech, ModelOptions(bearings='rigid', elements_per_link=3))
+    linkage = FlexibleLinkage(mech, ModelOptions.linear(bearings='rigid', elements_per_link=3))
     rng = np.random.default_rng(3)
     basis = rng.standard_normal((linkage.size, 5)) * 1e-2
     return linkage, basis, dyn.DynamicLoad(dyn.build_tables(linkage, basis, GRID))

@@ -19,8 +19,8 @@ from flexlink_ros.core.reduction.model import ReducedModel
 import numpy as np
 import pytest
 
-OPTIONS = ModelOptions(bearings='rigid', rigid_crank=True, elements_per_link=3, grid_size=16,
-                       speed_max=40.0)
+OPTIONS = ModelOptions.linear(bearings='rigid', rigid_crank=True, elements_per_link=3,
+                              grid_size=16, speed_max=40.0)
 
 
 @pytest.fixture(scope='module')

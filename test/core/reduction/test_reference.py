@@ -16,7 +16,7 @@ def test_unreduced_tables_agree_with_core_simulate(bearings):
     # Two independent full-order solutions: core/fe/simulate.py (assembly at every stage) and
     # the reduced model's tables with every DOF kept.
     mechanism = load_mechanism(CONFIG / 'cho1992.yaml')
-    options = ModelOptions(bearings=bearings, geometric_stiffness=False)
+    options = ModelOptions.linear(bearings=bearings, geometric_stiffness=False)
     speed = 391 * np.pi / 30
     outputs, source = unreduced_revolution(mechanism, options, speed)
     nodes = np.linspace(0.0, 2 * np.pi, outputs.shape[0], endpoint=False)

@@ -16,10 +16,10 @@ def mech():
 
 
 @pytest.mark.parametrize('options', [
-    ModelOptions(bearings='rigid', grid_size=32, order=2),
-    ModelOptions(bearings='flexible', grid_size=32, order=2),
-    ModelOptions(bearings='flexible', rigid_crank=False, elements_per_link=3, grid_size=32,
-                 order=2)], ids=['rigid', 'flexible', 'flexible-crank'])
+    ModelOptions.linear(bearings='rigid', grid_size=32, order=2),
+    ModelOptions.linear(bearings='flexible', grid_size=32, order=2),
+    ModelOptions.linear(bearings='flexible', rigid_crank=False, elements_per_link=3, grid_size=32,
+                        order=2)], ids=['rigid', 'flexible', 'flexible-crank'])
 def test_tables_give_the_full_order_second_order_of_v_q(mech, options):
     model = pipeline.model_for_mechanism(mech, options, use_cache=False)
     forms = so_tables.SecondOrderForms(model.second_order)
@@ -58,7 +58,7 @@ def test_link_points_follow_the_joints_second_order_motion():
 
 
 def test_index_arrays_are_int32_and_in_range(mech):
-    options = ModelOptions(bearings='rigid', grid_size=16, order=2)
+    options = ModelOptions.linear(bearings='rigid', grid_size=16, order=2)
     model = pipeline.model_for_mechanism(mech, options, use_cache=False)
     arrays = model.second_order
     gather, form = arrays['second_gather'], arrays['second_form']

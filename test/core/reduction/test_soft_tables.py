@@ -18,7 +18,7 @@ SPEED = 41.0        # rad/s (391 rpm)
 @pytest.fixture(scope='module')
 def flexible_model():
     """Build the paper's rigid-crank scene (16 + 2 coordinates), soft basis off; grid 64."""
-    options = ModelOptions(bearings='flexible', grid_size=64, soft_modes=0)
+    options = ModelOptions.linear(bearings='flexible', grid_size=64, soft_modes=0)
     return load_mechanism('cho1992'), options, pipeline.model_for_mechanism(
         load_mechanism('cho1992'), options, use_cache=False)
 
