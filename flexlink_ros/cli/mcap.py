@@ -3,7 +3,8 @@ MCAP subcommands: ``mcap-info`` and ``mcap-recover`` (``mcap-record``: its own m
 
 - ``flexlink mcap-info FILE|BAG_DIR [--json]``: topics, types, counts, time range, and whether
   the file is complete, checked: every chunk is decompressed (bounded) and CRC-checked, and
-  damaged chunks are listed with their offsets rather than trusting the summary.
+  damaged chunks are listed with their offsets rather than trusting the summary; and what the
+  recording says made it (producer, version, mechanism file, model options).
 - ``flexlink mcap-recover IN.mcap [--out OUT.mcap] [--json]``: read a truncated or damaged file
   (a recorder killed with SIGKILL, a full disk, a bad sector) record by record, keep every
   intact chunk and message, skipping damaged chunks, and write a proper file with summary
@@ -19,6 +20,7 @@ from .main import emit
 from ..errors import RecorderError
 from ..io.mcap_reader import iter_messages, map_file, Salvage
 from ..io.mcap_records import MESSAGE_HEAD, MESSAGE_HEAD_SIZE
+from ..io.provenance import ProvenanceError, read_provenance
 
 RECOVER_LIBRARY = f'flexlink mcap-recover; {LIBRARY_IDENTIFIER}'
 
@@ -154,9 +156,33 @@ def _damage_lines(damaged, count, shown=5):
     return lines
 
 
+def made_with(path):
+    """
+    Say what a recording says made it (:mod:`io.provenance`): a dict and its lines of text.
+
+    ``made_with`` is None for a recording that does not say (``ros2 bag record``, an older
+    version), ``{'error': reason}`` for a record that cannot be used.
+    """
+    try:
+        recorded = read_provenance(path)
+    except ProvenanceError as exc:
+        return {'error': str(exc)}, [f'  made with: unusable provenance record: {exc}']
+    if recorded is None:
+        return None, ['  made with: not recorded (no flexlink_ros record: replay needs '
+                      '--mechanism)']
+    lines = recorded.summary()
+    result = {'producer': recorded.producer, 'version': recorded.version,
+              'mechanism_file': recorded.mechanism_file or None,
+              'mechanism_sha256': recorded.mechanism_sha256 or None,
+              'damping_ratio': recorded.damping_ratio,
+              'model_options': recorded.model_options}
+    return result, [f'  made with: {lines[0][len("made by "):]}'] + [f'    {x}' for x in lines[1:]]
+
+
 def _info_command(args):
     info = mcap_info(args.path)
-    return emit(info, _info_text(info), args.json)
+    info['made_with'], lines = made_with(args.path)
+    return emit(info, '\n'.join([_info_text(info)] + lines), args.json)
 
 
 # -- mcap-recover ---------------------------------------------------------------------------

@@ -10,6 +10,7 @@ import time
 from .main import emit
 from ..errors import RecorderError
 from ..io.msg_schema import message_class
+from ..io.provenance import provenance_entries
 from ..io.recorder import McapRecorder
 from ..ros.runtime import spin_until_shutdown
 
@@ -41,7 +42,8 @@ def register(subparsers):
 
 def _record_command(args):
     recorder = McapRecorder(args.out, split_size_bytes=int(args.split_size_mb * 1e6),
-                            split_duration_s=args.split_duration_s)
+                            split_duration_s=args.split_duration_s,
+                            provenance=provenance_entries('flexlink mcap-record'))
     status = record_topics(recorder, [_parse_topic(t) for t in args.topic],
                            duration_s=args.duration_s,
                            discovery_timeout_s=args.discovery_timeout_s)

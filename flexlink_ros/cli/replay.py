@@ -27,16 +27,17 @@ restarts, as in the node.
 import functools
 import math
 import pathlib
+import sys
 import time
 
 import numpy as np
 
 from .main import emit
-from .model_args import add_estimator_arguments, load_model, model_options
+from .model_args import add_estimator_arguments, load_model
 from .progress import Progress
+from .replay_model import defer_model_defaults, MissingModel, replay_model
 from ..core.estimation.offline_run import allocate_estimate, BackgroundEstimate, \
     estimate_offline
-from ..core.mechanism_file import load_mechanism
 from ..io.joint_states import read_crank_samples
 from ..io.recorder_files import refuse_existing
 from ..io.recording import choose_input_topic, damage_note, scan_recording
@@ -119,7 +120,8 @@ def estimate_and_write(args, model, samples, topic):
             status = write_replay(args.out, samples, background.result, topic,
                                   output_topics(args.node_name), args.frame_id, model,
                                   args.markers_every_n, wait_for=background.wait_for,
-                                  progress=progress, joint_levels=[OK] * 4)
+                                  progress=progress, joint_levels=[OK] * 4,
+                                  provenance=args.provenance)
     finally:
         background.join()
     return background.result, {'estimate_s': background.seconds, 'status': status,
@@ -162,12 +164,12 @@ def run_replay(args):
         The JSON-ready summary.
 
     """
+    mechanism, options, notes, args.provenance = replay_model(args)
     start = time.perf_counter()
     damaged = []     # (file, offset, reason) of what the reader skipped
     topic, samples = read_input(args, damaged)
     read_s = time.perf_counter() - start
-    options = model_options(args)
-    model = load_model(load_mechanism(args.mechanism), options, args)
+    model = load_model(mechanism, options, args)
     estimate, times = estimate_and_write(args, model, samples, topic)
     count = len(samples['data'])
     span_s = (samples['log_ns'][-1] - samples['log_ns'][0]) * 1e-9 if count > 1 else 0.0
@@ -178,7 +180,8 @@ def run_replay(args):
               'model': {'size': model.size, 'step_size': model.step_size,
                         'soft_basis': model.info.get('soft'), 'grid_size': model.grid_size,
                         'options': str(options)}, 'order': model.order,
-              'second_order': options.second_order if model.order == 2 else None, 'notes': []}
+              'second_order': options.second_order if model.order == 2 else None,
+              'notes': notes}
     if args.out:
         result['write_s'] = times['write_s']
         result['output'] = times['status']['path']
@@ -296,7 +299,11 @@ def playback_text(played):
 
 def _replay_command(args):
     _check_arguments(args)
-    result = run_replay(args)
+    try:
+        result = run_replay(args)
+    except MissingModel as exc:
+        print(f'flexlink replay: error: {exc}', file=sys.stderr)
+        return 2
     return emit(result, summary_text(result), args.json)
 
 
@@ -311,7 +318,8 @@ def register(subparsers):
     parser.add_argument('--out', help='output .mcap file or bag directory (must not exist)')
     parser.add_argument('--topic', help='input JointState topic (default: the one carrying '
                         'the joint)')
-    parser.add_argument('--joint', default='crank', help='crank joint name (default: crank)')
+    parser.add_argument('--joint', default='crank', help="crank joint name (default: the "
+                        "recording's, else crank)")
     parser.add_argument('--node-name', default=NODE_NAME,
                         help=f'namespace of the output topics (default: {NODE_NAME})')
     parser.add_argument('--frame-id', default=DEFAULT_FRAME_ID, help='frame of the outputs')
@@ -335,4 +343,5 @@ def register(subparsers):
     parser.add_argument('--loop-count', type=int, metavar='N',
                         help='with --publish, play N times in all, then stop')
     add_estimator_arguments(parser)
+    defer_model_defaults(parser)   # the recording's model unless a flag is given
     parser.set_defaults(func=_replay_command, takes_ros_args=True)

@@ -40,7 +40,7 @@ def _since_epoch(nanoseconds):
     return {'nanoseconds_since_epoch': int(nanoseconds)}
 
 
-def bag_metadata(files, topics, no_message_ns=0):
+def bag_metadata(files, topics, no_message_ns=0, custom_data=None):
     """
     Return the rosbag2 (version 9) bag information of MCAP files and their topics.
 
@@ -56,6 +56,8 @@ def bag_metadata(files, topics, no_message_ns=0):
     no_message_ns : int
         Starting time written while there is no message (rosbag2 writes ``UNSET_NS`` in the
         record at open; ``metadata.yaml`` of an empty bag here says 0).
+    custom_data : dict, optional
+        str -> str entries of ``custom_data`` (what made the bag, :mod:`.provenance`).
 
     Returns
     -------
@@ -89,7 +91,7 @@ def bag_metadata(files, topics, no_message_ns=0):
              'duration': {'nanoseconds': _or(f['last_log_ns'], 0) - _or(f['first_log_ns'], 0)},
              'message_count': f['message_count']}
             for f in files],
-        'custom_data': {},
+        'custom_data': dict(custom_data or {}),
         'ros_distro': ROS_DISTRO,
     }
 
@@ -98,7 +100,7 @@ def _or(value, default):
     return default if value is None else value
 
 
-def serialized_metadata(files, topics, no_message_ns=0):
+def serialized_metadata(files, topics, no_message_ns=0, custom_data=None):
     """
     Return the ``rosbag2`` MCAP Metadata record's map, as rosbag2's MCAP storage writes it.
 
@@ -113,12 +115,12 @@ def serialized_metadata(files, topics, no_message_ns=0):
         ``{'serialized_metadata': yaml_text}``.
 
     """
-    text = yaml.dump(bag_metadata(files, topics, no_message_ns), Dumper=_PlainDumper,
+    text = yaml.dump(bag_metadata(files, topics, no_message_ns, custom_data), Dumper=_PlainDumper,
                      sort_keys=False)
     return {'serialized_metadata': text}
 
 
-def write_bag_metadata(bag_dir, files, topics):
+def write_bag_metadata(bag_dir, files, topics, custom_data=None):
     """
     Write a rosbag2 (version 9) ``metadata.yaml`` for MCAP files in a bag directory.
 
@@ -130,9 +132,11 @@ def write_bag_metadata(bag_dir, files, topics):
         Per file: ``path``, ``message_count``, ``first_log_ns``, ``last_log_ns``.
     topics : dict
         Topic name -> object with ``name``, ``type_name``, ``qos_profiles``, ``message_count``.
+    custom_data : dict, optional
+        str -> str entries of ``custom_data``.
 
     """
-    metadata = bag_metadata(files, topics)
+    metadata = bag_metadata(files, topics, custom_data=custom_data)
     bag_dir = pathlib.Path(bag_dir)
     temporary = bag_dir / 'metadata.yaml.tmp'
     text = yaml.dump({'rosbag2_bagfile_information': metadata}, Dumper=_PlainDumper,

@@ -42,6 +42,7 @@ from .mcap_writer import COMPRESSIONS
 from .msg_schema import (
     message_definition, message_type_name, qos_profile_dict, serialize_exact,
 )
+from .provenance import custom_data
 from .recorder_files import (
     abandon, create_exclusive, file_path, OpenFile, refuse_existing, register_topic, split_due,
     start_file, Topic,
@@ -75,12 +76,15 @@ class McapRecorder(QueuedWriting):
     compression : {'zstd', 'none'}
     flush_thread : bool
         Run the background flusher; without it only writes trigger flushes.
+    provenance : dict, optional
+        What makes the recording (:func:`.provenance.provenance_entries`): written as a
+        ``flexlink_ros`` Metadata record in every file and into ``custom_data``.
 
     """
 
     def __init__(self, path, *, split_size_bytes=0, split_duration_s=0.0,
                  chunk_size_bytes=DEFAULT_CHUNK_SIZE, flush_period_s=DEFAULT_FLUSH_PERIOD_S,
-                 compression='zstd', flush_thread=True):
+                 compression='zstd', flush_thread=True, provenance=None):
         self.path = pathlib.Path(path)
         self.bare = self.path.suffix == '.mcap'
         if split_size_bytes < 0:
@@ -103,6 +107,8 @@ class McapRecorder(QueuedWriting):
         self.flush_period_ns = int(round(flush_period_s * 1e9))
         self.compression = compression
         self._use_flush_thread = flush_thread
+        self.provenance = dict(provenance or {})
+        self._custom_data = custom_data(self.provenance)
         self._lock = threading.RLock()
         self._topics = {}
         self._file = None
@@ -172,7 +178,8 @@ class McapRecorder(QueuedWriting):
                     self._finish_file()
                     self._state = RecorderState.CLOSED
                     if not self.bare:
-                        write_bag_metadata(self.path, self._closed_files, self._topics)
+                        write_bag_metadata(self.path, self._closed_files, self._topics,
+                                           self._custom_data)
                 except OSError as exc:
                     self._fail(exc)
             elif self._state is RecorderState.NEW:
@@ -371,14 +378,15 @@ class McapRecorder(QueuedWriting):
         path = file_path(self.path, self.bare, len(self._closed_files))
         self._file = OpenFile(path, create_exclusive(path), None, {})
         opening = serialized_metadata(self._closed_files + [self._file.entry(complete=False)],
-                                      self._topics, UNSET_NS)   # as rosbag2 at open
+                                      self._topics, UNSET_NS, self._custom_data)   # as at open
         start_file(self._file, self.chunk_size_bytes, self.compression, self._topics.values(),
-                   opening)
+                   opening, self.provenance)
 
     def _finish_file(self):
         current = self._file
         current.writer.add_metadata(METADATA_RECORD, serialized_metadata(
-            self._closed_files + [current.entry(complete=True)], self._topics))
+            self._closed_files + [current.entry(complete=True)], self._topics,
+            custom_data=self._custom_data))
         current.writer.finish()
         current.stream.close()
         self._closed_files.append(current.entry(complete=True))

@@ -204,7 +204,7 @@ def _write_batch(recorder, samples, estimate, chosen, names, marker_topic, frame
 
 def write_replay(out_path, samples, estimate, input_topic, topics, frame_id, model,
                  markers_every_n=10, exaggeration=10.0, points_per_link=9, wait_for=None,
-                 progress=None, joint_levels=None):
+                 progress=None, joint_levels=None, provenance=None):
     """
     Write the input and the recomputed outputs into a rosbag2 MCAP.
 
@@ -237,6 +237,8 @@ def write_replay(out_path, samples, estimate, input_topic, topics, frame_id, mod
         ``progress(n)`` after each batch and ``progress(count, force=True)`` at the end.
     joint_levels : sequence, optional
         Diagnostic level of each joint in the markers (required with markers).
+    provenance : dict, optional
+        What made the estimates (:func:`.provenance.provenance_entries`), recorded with them.
 
     Returns
     -------
@@ -244,7 +246,7 @@ def write_replay(out_path, samples, estimate, input_topic, topics, frame_id, mod
         The recorder's final status.
 
     """
-    recorder = McapRecorder(out_path)
+    recorder = McapRecorder(out_path, provenance=provenance)
     recorder.open()
     try:
         names = _add_topics(recorder, input_topic, topics, markers_every_n)
