@@ -23,6 +23,7 @@ from .main import emit
 from ..errors import FlexlinkError
 from ..io.bag_index import bag_files, bag_topics, rewrite_complete, scan_bag_file
 from ..io.bag_metadata import serialized_metadata, UNSET_NS, write_bag_metadata
+from ..io.provenance import custom_data, ProvenanceError, read_entries
 
 
 def register(subparsers):
@@ -89,10 +90,14 @@ def reindex_bag(bag, force=False):
     if not scans:
         raise FlexlinkError(f'{bag}: no readable MCAP file')
     topics = bag_topics(scans)
+    try:     # what made the bag, kept in custom_data
+        provenance = read_entries(bag)
+    except ProvenanceError:
+        provenance = None
     for n, scan in enumerate(scans):
         if not scan['complete']:
             scan['salvaged_from'] = str(_salvage(scans, n))
-    write_bag_metadata(bag, scans, topics)
+    write_bag_metadata(bag, scans, topics, custom_data(provenance))
     return {'bag': str(bag), 'message_count': sum(s['message_count'] for s in scans),
             'files': [{'path': str(s['path']), 'message_count': s['message_count'],
                        'end_reason': s['end_reason'], 'salvaged_from': s.get('salvaged_from')}

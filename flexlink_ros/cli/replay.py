@@ -14,6 +14,10 @@ flexlink_node, Foxglove, RViz; :mod:`ros.republish`), with the flags of ``ros2 b
 time), ``--loop`` (``--loop-count N`` bounds it), and ROS arguments after ``--ros-args``
 (remappings, ``__ns``).
 
+The model is the one the recording says made it (mechanism file, damping ratio, model options,
+crank joint, warm start: :mod:`.replay_model`); a flag that differs is used and said in a note,
+and a recording that names no model needs ``--mechanism``. ``--out`` records the replay's own.
+
 Like the node, a sample whose stamp goes back or jumps by more than the estimator's reset gap
 starts a new segment (the state restarts), an exactly repeated sample repeats the previous
 output, and messages without the crank joint, with a non-finite value or that are not a
@@ -318,7 +322,7 @@ def register(subparsers):
     parser.add_argument('--out', help='output .mcap file or bag directory (must not exist)')
     parser.add_argument('--topic', help='input JointState topic (default: the one carrying '
                         'the joint)')
-    parser.add_argument('--joint', default='crank', help="crank joint name (default: the "
+    parser.add_argument('--joint', default='crank', help='crank joint name (default: the '
                         "recording's, else crank)")
     parser.add_argument('--node-name', default=NODE_NAME,
                         help=f'namespace of the output topics (default: {NODE_NAME})')

@@ -99,7 +99,7 @@ def replay_model(args):
     for field, (flag, read) in FLAG_FIELDS.items():
         given = read(args)
         if given is not None and given != values.get(field):
-            notes.append(f'{flag} {given} differs from the recording\'s {values.get(field)}: '
+            notes.append(f"{flag} {given} differs from the recording's {values.get(field)}: "
                          f'using {given}')
             values[field] = given
     options = ModelOptions(**values)
@@ -112,14 +112,14 @@ def replay_model(args):
 
 
 def _recorded_mechanism(args, recorded, notes):
-    """The recorded mechanism, or ``--mechanism``'s where it differs (with its own beta)."""
+    """Return the recorded mechanism, or ``--mechanism``'s where it differs (and its beta)."""
     recorded_raw = recorded.mechanism_yaml.encode('utf-8')
     if args.mechanism is None:
         return recorded.mechanism(), (recorded.mechanism_file, recorded_raw), None
     path, raw = mechanism_bytes(args.mechanism)
     if raw == recorded_raw:
         return recorded.mechanism(), (recorded.mechanism_file, recorded_raw), None
-    notes.append(f'--mechanism {args.mechanism} differs from the recording\'s '
+    notes.append(f"--mechanism {args.mechanism} differs from the recording's "
                  f'{recorded.mechanism_file}: using {path} (its damping and stiffness damping)')
     return load_mechanism(path, raw=raw), (str(path), raw), stiffness_damping_from_file(
         path, raw=raw)
@@ -130,7 +130,7 @@ def _recorded_estimator(args, recorded, notes):
     if args.joint is None:
         args.joint = recorded.crank_joint
     elif args.joint != recorded.crank_joint:
-        notes.append(f'--joint {args.joint} differs from the recording\'s '
+        notes.append(f"--joint {args.joint} differs from the recording's "
                      f'{recorded.crank_joint}: using {args.joint}')
     if args.no_warm_start and recorded.warm_start:
         notes.append('--no-warm-start differs from the recording (warm start): using a static '
@@ -138,8 +138,8 @@ def _recorded_estimator(args, recorded, notes):
     args.no_warm_start = args.no_warm_start or not recorded.warm_start
 
 
-def _with_defaults(args):
-    """The parsed flags with the deferred ones at their real defaults where not given."""
+def with_flag_defaults(args):
+    """Return the parsed flags with the deferred ones at their real defaults if not given."""
     filled = dict(vars(args))
     for name, default in args.flag_defaults.items():
         if filled.get(name) is None:
@@ -148,12 +148,12 @@ def _with_defaults(args):
 
 
 def _flags_model(args, recorded, broken):
-    """The model of the flags, for a recording that names none (``--mechanism`` needed)."""
+    """Return the flags' model, for a recording that names none (``--mechanism`` needed)."""
     if args.mechanism is None:
         made = '' if recorded is None else f' (made by {recorded.producer} {recorded.version})'
         raise MissingModel(f'{args.input} does not say which mechanism and model made it{made}:'
                            ' give --mechanism FILE (and the model flags it was run with)')
-    filled = _with_defaults(args)
+    filled = with_flag_defaults(args)
     args.joint = filled.joint
     options = model_options(filled)
     mechanism = load_mechanism(args.mechanism)

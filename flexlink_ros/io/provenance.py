@@ -173,16 +173,26 @@ def read_provenance(path):
         fails its SHA-256 or the mechanism file's checks.
 
     """
+    entries = read_entries(path)
+    return None if entries is None else provenance_from_entries(entries, path)
+
+
+def read_entries(path):
+    """
+    Return the undecoded entries of a recording's first ``flexlink_ros`` record, or None.
+
+    Bounded as :func:`read_provenance` (whose refusals it raises), not otherwise checked:
+    what ``reindex`` carries into a rebuilt ``metadata.yaml``.
+    """
     first = recording_files(path)[0]
     try:
         buffer = map_file(first)
     except McapFileError:
         return None
     try:
-        entries = _find_record(buffer, first)
+        return _find_record(buffer, first)
     finally:
         buffer.close()
-    return None if entries is None else provenance_from_entries(entries, first)
 
 
 def _find_record(buffer, file):

@@ -72,7 +72,7 @@ class NodeRecording:
         return recorder
 
     def _provenance(self):
-        """What the recording says made it: mechanism file, model options, version."""
+        """Say what makes the recording: mechanism file, model options, version."""
         values = self.values
         try:
             return provenance_entries(NODE_NAME, values['mechanism'], self.options,

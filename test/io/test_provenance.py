@@ -8,7 +8,7 @@ import tracemalloc
 
 from flexlink_ros import __version__
 from flexlink_ros.io import mcap_records
-from flexlink_ros.io.provenance import (MAX_RECORD_BYTES, PROVENANCE_RECORD, provenance_entries,
+from flexlink_ros.io.provenance import (MAX_RECORD_BYTES, provenance_entries, PROVENANCE_RECORD,
                                         ProvenanceError, read_provenance)
 from flexlink_ros.io.recorder import McapRecorder
 from flexlink_ros.ros.parameters import default_model_options
@@ -120,7 +120,7 @@ def test_a_1_gb_record_is_refused_without_reading_it(tmp_path):
     assert path.stat().st_size > size > MAX_RECORD_BYTES
     tracemalloc.start()
     try:
-        with pytest.raises(ProvenanceError, match=r'more than the \d+ a provenance record can have: not read'):
+        with pytest.raises(ProvenanceError, match=r'more than the \d+ a provenance record'):
             read_provenance(path)
         _, peak = tracemalloc.get_traced_memory()
     finally:

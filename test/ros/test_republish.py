@@ -119,7 +119,7 @@ class Listener:
 def replay(processes, bag, *flags):
     """Start `flexlink replay BAG --publish --json FLAGS`."""
     command = [sys.executable, '-m', 'flexlink_ros.cli.main', 'replay', str(bag), '--publish',
-               '--json', *flags]
+               '--json', '--mechanism', 'cho1992', *flags]   # the bag names no model
     processes.append(subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                       text=True, env=dict(os.environ)))
     return processes[-1]
