@@ -37,9 +37,11 @@ import time
 import numpy as np
 
 from .main import emit
-from .model_args import add_estimator_arguments, load_model
+from .model_args import add_chart_argument, add_estimator_arguments, criterion_thresholds, \
+    load_model
 from .progress import Progress
 from .replay_model import defer_model_defaults, MissingModel, replay_model
+from ..core.estimation.marker_scale import model_exaggeration
 from ..core.estimation.offline_run import allocate_estimate, BackgroundEstimate, \
     estimate_offline
 from ..io.joint_states import read_crank_samples
@@ -47,6 +49,7 @@ from ..io.recorder_files import refuse_existing
 from ..io.recording import choose_input_topic, damage_note, scan_recording
 from ..io.replay_writer import write_replay
 from ..names import DEFAULT_FRAME_ID, NODE_NAME, OUTPUT_POINTS, output_topics, QUALITY_NAMES
+from ..report.cycle_chart import plot_cycle
 from ..ros.messages import OK
 from ..ros.playback_schedule import DEFAULT_CLOCK_HZ
 from ..ros.republish import publish_recording
@@ -123,7 +126,8 @@ def estimate_and_write(args, model, samples, topic):
         with Progress(f'writing {args.out}', len(samples['data']), unit='sample') as progress:
             status = write_replay(args.out, samples, background.result, topic,
                                   output_topics(args.node_name), args.frame_id, model,
-                                  args.markers_every_n, wait_for=background.wait_for,
+                                  args.markers_every_n, model_exaggeration(model),
+                                  wait_for=background.wait_for,
                                   progress=progress, joint_levels=[OK] * 4,
                                   provenance=args.provenance)
     finally:
@@ -199,6 +203,12 @@ def run_replay(args):
     result['times_real_time'] = span_s / total if total > 0 else math.inf
     _peak_to_peak(estimate, result)
     _quality(estimate, result)
+    if args.chart:
+        result['chart'] = str(plot_cycle(
+            args.chart, estimate['crank_angle'], estimate['lever_tip'], estimate['coupler_mid'],
+            estimate['criterion'] if estimate['criteria_available'] else None,
+            title=f'{mechanism.name}: {pathlib.Path(args.input).name} ({count} samples, '
+            f'order {model.order}, flexlink replay)', thresholds=criterion_thresholds()))
     if args.publish:
         with Progress(f'publishing {topic}', count, unit='msg') as progress:
             played = publish_recording(samples, topic, playback_options(args),
@@ -217,8 +227,8 @@ def playback_options(args):
 
 def _check_arguments(args):
     """Refuse bad flags before any reading (``--out`` with the recorder's own test)."""
-    if not args.out and not args.publish:
-        raise ValueError('give `--out` and/or `--publish`')
+    if not args.out and not args.publish and not args.chart:
+        raise ValueError('give `--out`, `--publish` and/or `--chart`')
     playback_flags = [flag for flag, given in (
         ('--clock', args.clock is not None), ('--clock-topics-all', args.clock_topics_all),
         ('--loop', args.loop), ('--loop-count', args.loop_count is not None),
@@ -279,6 +289,8 @@ def summary_text(result):
                  f"{result['times_real_time']:.0f}x real time")
     if 'output' in result:
         lines.append(f"  wrote {result['output']}")
+    if 'chart' in result:
+        lines.append(f"  chart {result['chart']}")
     if 'playback' in result:
         lines.append(playback_text(result['playback']))
     return '\n'.join(lines)
@@ -347,5 +359,6 @@ def register(subparsers):
     parser.add_argument('--loop-count', type=int, metavar='N',
                         help='with --publish, play N times in all, then stop')
     add_estimator_arguments(parser)
+    add_chart_argument(parser)
     defer_model_defaults(parser)   # the recording's model unless a flag is given
     parser.set_defaults(func=_replay_command, takes_ros_args=True)

@@ -31,6 +31,7 @@ from .progress_log import ProgressLog
 from .runtime import is_shutdown_error
 from .sim_time import ClockWatch, LogTime
 from .startup import check_startup_signal
+from ..core.estimation.marker_scale import default_exaggeration, MARKER_SHARE
 from ..core.estimation.sample import SampleFlag
 from ..core.estimation.streaming import StreamingEstimator
 from ..core.reduction.soft_basis import soft_basis_text
@@ -90,6 +91,10 @@ class EstimatorPipeline(NodeRecording):
                  f'{self.options} ({time.perf_counter() - start:.2f} s); '
                  f'criteria: {self.criteria_source}')
         self.estimator = StreamingEstimator(self.model, warm_start=values['model.warm_start'])
+        self.auto_exaggeration, peak, length = default_exaggeration(self.estimator)
+        log.info(f'markers: deflections drawn x{self.auto_exaggeration:g} when '
+                 f'markers.exaggeration is 0 (the expected peak, {peak * 1e6:.3g} um, as at '
+                 f"least {MARKER_SHARE:.0%} of the coupler's {length:g} m)")
         # The node only streams: the step tables serve it, the full table can go.
         self.model = self.estimator.release_model_table()
         self.model_facts = {'model_size': self.model.size, 'model_grid': self.model.grid_size,
@@ -312,7 +317,8 @@ class EstimatorPipeline(NodeRecording):
                   for c in sample.criterion]
         return encoder.encode(stamp_ns, [resample(p) for p in positions],
                               [resample(d) for d in deflections],
-                              values['markers.exaggeration'], joints, levels)
+                              values['markers.exaggeration'] or self.auto_exaggeration,
+                              joints, levels)
 
     # -- diagnostics ----------------------------------------------------------------------
 

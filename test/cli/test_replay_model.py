@@ -16,6 +16,7 @@ import sys
 import time
 
 from flexlink_ros.names import FIRST_INPUT_MESSAGE, READY_MESSAGE
+from matplotlib import image
 import pytest
 from test_replay import deflections_by_stamp, joint_state, write_recording
 
@@ -104,11 +105,17 @@ def test_replay_of_a_node_bag_reproduces_the_node_with_no_flags(tmp_path, proces
     assert 'made with: flexlink_node' in info.stdout
     assert f'mechanism {SOFT}' in info.stdout and 'grid_size=96' in info.stdout
 
-    out = tmp_path / 'replay.mcap'
+    # The node drew its markers at the exaggeration it derived and said so.
+    assert 'markers: deflections drawn x20 when markers.exaggeration is 0' in \
+        (tmp_path / 'node.log').read_text()
+
+    out, chart = tmp_path / 'replay.mcap', tmp_path / 'replay.png'
     result = replay(bag, '--out', out, '--cache-dir', cache, '--markers-every-n', '0',
-                    '--json')
+                    '--json', '--chart', chart)
     assert result.returncode == 0, result.stderr
     summary = json.loads(result.stdout)
+    assert summary['chart'] == str(chart)
+    assert image.imread(chart).shape == (900, 1000, 4)   # the deflections over crank angle
     assert summary['notes'] == [] and 'grid_size=96' in summary['model']['options']
     node, replayed = deflections_by_stamp(bag), deflections_by_stamp(out)
     assert len(node) > 1000 and sorted(replayed) == sorted(node)
