@@ -125,7 +125,8 @@ SKIPPED = {
     'ros2 launch flexlink_ros flexlink_lifecycle.launch.py driver:=true': _LAUNCH,
     'ros2 launch flexlink_ros flexlink_lifecycle.launch.py autostart:=false': _LAUNCH,
     'ros2 launch flexlink_ros flexlink.launch.py --show-args': _LAUNCH,
-    'flexlink replay other_bag --topic /robot/joint_states --joint crank_joint --publish':
+    'flexlink replay other_bag --mechanism cho1992 --topic /robot/joint_states '
+    '--joint crank_joint --publish':
         _PUBLISH,
     'flexlink replay run1 --publish --clock --rate 2 --loop --ros-args -r __ns:=/robot1':
         _PUBLISH + '; an endless loop, ended by Ctrl-C as test_republish.py '

@@ -126,7 +126,8 @@ def estimate_and_write(args, model, samples, topic):
         with Progress(f'writing {args.out}', len(samples['data']), unit='sample') as progress:
             status = write_replay(args.out, samples, background.result, topic,
                                   output_topics(args.node_name), args.frame_id, model,
-                                  args.markers_every_n, model_exaggeration(model),
+                                  args.markers_every_n,
+                                  model_exaggeration(model) if args.markers_every_n else 1.0,
                                   wait_for=background.wait_for,
                                   progress=progress, joint_levels=[OK] * 4,
                                   provenance=args.provenance)
