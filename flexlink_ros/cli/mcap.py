@@ -20,7 +20,7 @@ from .main import emit
 from ..errors import RecorderError
 from ..io.mcap_reader import iter_messages, map_file, Salvage
 from ..io.mcap_records import MESSAGE_HEAD, MESSAGE_HEAD_SIZE
-from ..io.provenance import ProvenanceError, read_provenance
+from ..io.provenance import PROVENANCE_RECORD, ProvenanceError, read_entries, read_provenance
 
 RECOVER_LIBRARY = f'flexlink mcap-recover; {LIBRARY_IDENTIFIER}'
 
@@ -232,8 +232,12 @@ def recover_mcap(source, destination):
     if pathlib.Path(source).resolve() == pathlib.Path(destination).resolve():
         raise ValueError('`--out` must differ from the input file')
     map_file(source).close()    # not an MCAP file: refused before the output is created
+    try:     # what made the recording goes into the copy too
+        provenance = read_entries(source)
+    except ProvenanceError:
+        provenance = None
     with open(destination, 'wb') as out:
-        copier = _Copier(Writer(out))
+        copier = _Copier(Writer(out), provenance)
         result = _stream_copy(source, copier)
         copier.finish(result['header'])
     if result['header'] is None and not result['message_count']:
@@ -246,14 +250,17 @@ def recover_mcap(source, destination):
 class _Copier:
     """Writes salvaged messages with their schemas and channels into a new MCAP writer."""
 
-    def __init__(self, writer):
+    def __init__(self, writer, provenance=None):
         self.writer = writer
+        self.provenance = provenance
         self.started = False
         self.schema_ids, self.channel_ids = {}, {}
 
     def start(self, header):
         if not self.started:
             self.writer.start(profile=header[0] if header else '', library=RECOVER_LIBRARY)
+            if self.provenance:
+                self.writer.add_metadata(PROVENANCE_RECORD, self.provenance)
             self.started = True
 
     def add(self, salvage, channel, sequence, log_time, publish_time, data):

@@ -96,7 +96,7 @@ def reindex_bag(bag, force=False):
         provenance = None
     for n, scan in enumerate(scans):
         if not scan['complete']:
-            scan['salvaged_from'] = str(_salvage(scans, n))
+            scan['salvaged_from'] = str(_salvage(scans, n, provenance))
     write_bag_metadata(bag, scans, topics, custom_data(provenance))
     return {'bag': str(bag), 'message_count': sum(s['message_count'] for s in scans),
             'files': [{'path': str(s['path']), 'message_count': s['message_count'],
@@ -106,7 +106,7 @@ def reindex_bag(bag, force=False):
             'topics': {t.name: t.message_count for t in topics.values()}}
 
 
-def _salvage(scans, n):
+def _salvage(scans, n, provenance):
     """Rewrite file ``n`` complete in place; keep the original as ``.truncated``."""
     path = scans[n]['path']
     kept = path.with_name(path.name + '.truncated')
@@ -119,7 +119,7 @@ def _salvage(scans, n):
     closing = serialized_metadata(scans[:n + 1], bag_topics(scans[:n + 1]))
     temporary = path.with_name(f'.{path.name}.{os.getpid()}.salvage')
     try:
-        rewrite_complete(path, temporary, opening, closing)   # refuses an existing file
+        rewrite_complete(path, temporary, opening, closing, provenance)   # never overwrites
     except FileExistsError:
         raise
     except BaseException:
