@@ -35,8 +35,9 @@ setup(
                            depends=['flexlink_ros/core/estimation/_doubles.h'],
                            extra_compile_args=['-O3'])],
     install_requires=['setuptools'],
-    # The geometrically nonlinear peer the linear model is checked against (studies/).
-    extras_require={'peer': ['exudyn==1.13.6']},
+    # The geometrically nonlinear peer the linear model is checked against (studies/), and
+    # Ray for `flexlink fleet` (many bags recomputed, one task per bag).
+    extras_require={'peer': ['exudyn==1.13.6'], 'fleet': ['ray[data]==2.60.0']},
     zip_safe=False,
     maintainer='flexlink_ros developers',
     maintainer_email='flexlink@example.com',

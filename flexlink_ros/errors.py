@@ -2,7 +2,8 @@
 Errors of flexlink_ros.
 
 Every error the core raises on purpose is a :class:`FlexlinkError`. The node logs one and
-keeps running; the CLI prints it on one line and exits 1. Bad arguments raise ``ValueError``
+keeps running; the CLI prints it on one line and exits with its ``exit_code`` (1; 2 for a bag
+still being recorded). Bad arguments raise ``ValueError``
 naming the argument.
 """
 
@@ -12,6 +13,8 @@ import struct
 
 class FlexlinkError(Exception):
     """Root of the errors raised by flexlink_ros."""
+
+    exit_code = 1   # of the CLI when it stops on this error
 
 
 class MechanismError(FlexlinkError):
@@ -53,6 +56,12 @@ class RecorderError(FlexlinkError):
     """Raised if the MCAP recorder cannot write (unwritable path, full disk, closed file)."""
 
 
+class BagInUse(RecorderError):
+    """Raised if a bag directory is locked by the recorder that is still writing it."""
+
+    exit_code = 2
+
+
 class OutlierSample(FlexlinkError):
     """
     Raised for an input sample the crank cannot have produced (counted and skipped).
@@ -64,6 +73,19 @@ class OutlierSample(FlexlinkError):
     def __init__(self, reason):
         self.reason = reason
         super().__init__(f'outlier: {reason}')
+
+
+class ConflictingSample(FlexlinkError):
+    """
+    Raised for a sample with the stamp of the last accepted one but another angle (skipped).
+
+    Two readings cannot both be the crank at one instant: the first stays, this one is
+    counted and skipped (not taken as a restart, which would publish its angle).
+    """
+
+    def __init__(self, reason):
+        self.reason = reason
+        super().__init__(f'conflicting: {reason}')
 
 
 class McapFileError(FlexlinkError):

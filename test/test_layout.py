@@ -34,7 +34,7 @@ NOT_IN_CORE = ('rclpy', 'rosidl', 'ament_index_python', 'mcap', 'matplotlib', 'b
                'std_msgs', 'sensor_msgs', 'geometry_msgs', 'visualization_msgs',
                'diagnostic_msgs', 'rcl_interfaces', 'lifecycle_msgs')
 # Optional heavy dependencies a command handler may import when it runs.
-LATE_IMPORTS = ('rclpy', 'matplotlib', 'exudyn')
+LATE_IMPORTS = ('rclpy', 'matplotlib', 'exudyn', 'ray', 'pyarrow')
 LATE_IMPORT_LAYERS = ('cli', 'ros', 'studies', 'report')
 
 

@@ -63,6 +63,9 @@ RUN = {
     'flexlink replay run1 --out rerun.mcap':
         Run(('1000 samples on /joint_states', 'wrote rerun.mcap'), creates=('rerun.mcap',),
             setup='run1'),
+    'flexlink fleet run1 --out fleet --mechanism cho1992':
+        Run(('run1: 1000 samples, 0 skipped', '1 bag(s), 0 failed'),
+            creates=('fleet/summary.parquet',), setup='run1'),
     'flexlink reindex run1':     # "after the recorder was killed": no metadata.yaml yet
         Run(('run1/metadata.yaml: 1 files, 1000 messages',), creates=('run1/metadata.yaml',),
             setup='run1 killed'),

@@ -9,7 +9,7 @@
                    [--bearings rigid|flexible] [--method full|modal] [--modes N]
                    [--static-correction] [--damping-ratio Z] [--stiffness-damping BETA_S]
                    [--points-per-rev P] [--steps-per-rev S] [--check-convergence]
-                   [--order 1|2] [--second-order dynamic|quasi-static] [--json]
+                   [--order 1|2] [--second-order dynamic|quasi-static] [--nonlinear] [--json]
 
 ``modes`` JSON: ``crank_deg``, ``frequencies_hz`` (per angle, per mode), ``dominant_link``,
 ``strain_share`` (crank, coupler, lever, springs), ``range_hz`` (min and max per mode),
@@ -23,7 +23,8 @@ optional ``convergence``, ``order`` and, at order 2 (the default), ``second_orde
 by the dynamic pass (:func:`core.fe.second_order_dynamic.dynamic_pass`, ``--method full``) or
 quasi-static (:func:`core.fe.second_order_full.corrected_response`, the estimator's; for the
 modal response from its reconstructed nodal vectors); the convergence check is of the linear
-response.
+response. ``--nonlinear``: the geometrically nonlinear full order instead
+(:mod:`cli.simulate_nonlinear`, which documents its JSON).
 """
 
 import dataclasses
@@ -35,6 +36,7 @@ import numpy as np
 from .main import degree_range, emit
 from .model_args import add_model_arguments, add_order_argument, \
     add_stiffness_damping_argument, stiffness_damping
+from .simulate_nonlinear import simulate_nonlinear
 from ..core import validity
 from ..core.fe import linkage as assembly, modes, simulate
 from ..core.fe.second_order_dynamic import dynamic_pass, MIN_POINTS
@@ -95,6 +97,10 @@ def register(subparsers):
                         'second-order terms, so their motion carries its inertia; --method '
                         'full, at least 24 points per revolution) or quasi-static (the '
                         "estimator's correction) (default: dynamic where it applies)")
+    parser.add_argument('--nonlinear', action='store_true',
+                        help='the geometrically nonlinear full order (von Karman element '
+                        'strain, damping on its rate): periodic orbit by shooting, with its '
+                        'Floquet multipliers')
     parser.set_defaults(func=simulate_command)
 
 
@@ -234,6 +240,10 @@ def simulate_command(args):
     points = _number(args.points_per_rev, 'points-per-rev', integer=True)
     steps = _number(args.steps_per_rev, 'steps-per-rev', integer=True)
     stages = _number(args.stages, 'stages', integer=True)
+    if args.nonlinear:
+        return simulate_nonlinear(args, mech, model, rpm, {
+            'zeta': zeta, 'points': points, 'steps': steps, 'stages': stages,
+            'options': _options_record(model)})
     speed = rpm * 2.0 * math.pi / 60.0
     kwargs = {'method': method, 'modes': count, 'static_correction': args.static_correction,
               'stages': stages, 'zeta': zeta}

@@ -22,6 +22,7 @@ COMMANDS = {
     'beam': 'flexlink_ros.cli.beam',
     'demo': 'flexlink_ros.cli.demo',
     'estimate': 'flexlink_ros.cli.estimate',
+    'fleet': 'flexlink_ros.cli.fleet',
     'plan': 'flexlink_ros.cli.estimate',
     'bench': 'flexlink_ros.cli.estimate',
     'modes': 'flexlink_ros.cli.flex',
@@ -191,7 +192,7 @@ def main(argv=None):
         return 141
     except (FlexlinkError, ValueError) as exc:
         print(f'flexlink {args.command}: error: {exc}', file=sys.stderr)
-        return 1
+        return getattr(exc, 'exit_code', 1)
     except OSError as exc:   # a missing or unreadable file, a full disk: said in one line
         print(f'flexlink {args.command}: error: {exc}', file=sys.stderr)
         return 1

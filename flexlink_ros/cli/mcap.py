@@ -18,6 +18,7 @@ from mcap.writer import LIBRARY_IDENTIFIER, Writer
 
 from .main import emit
 from ..errors import RecorderError
+from ..io.bag_files import bag_files
 from ..io.mcap_reader import iter_messages, map_file, Salvage
 from ..io.mcap_records import MESSAGE_HEAD, MESSAGE_HEAD_SIZE
 from ..io.provenance import PROVENANCE_RECORD, ProvenanceError, read_entries, read_provenance
@@ -73,7 +74,8 @@ def mcap_info(path):
         ``offset``, ``reason``), ``damaged_count``, ``message_count``, ``start_ns``,
         ``end_ns``, ``duration_s``, ``chunk_count`` (intact chunks), ``topics`` (list of
         dicts: ``topic``, ``type``, ``encoding``, ``count``). For a directory: ``files``
-        (those dicts) and the totals.
+        (those dicts), the totals and ``skipped`` (entries that are not regular files inside
+        it, :func:`..io.bag_files.bag_files`: ``path``, ``reason``).
 
     """
     path = pathlib.Path(path)
@@ -115,9 +117,11 @@ def _status(scan, complete):
 
 
 def _directory_info(path):
-    files = [mcap_info(p) for p in sorted(path.glob('*.mcap'))]
+    skipped = []
+    files = [mcap_info(p) for p in bag_files(path, skipped)]
     if not files:
-        raise ValueError(f'`path`: no .mcap files in {path}')
+        raise ValueError(f'`path`: no .mcap files in {path}' + ''.join(
+            f'; {entry} skipped: {reason}' for entry, reason in skipped[:3]))
     topics = {}
     for entry in files:
         for topic in entry['topics']:
@@ -135,6 +139,7 @@ def _directory_info(path):
             'start_ns': min(starts) if starts else None,
             'end_ns': max(ends) if ends else None,
             'duration_s': (max(ends) - min(starts)) / 1e9 if starts else 0.0,
+            'skipped': [{'path': str(entry), 'reason': reason} for entry, reason in skipped],
             'topics': sorted(topics.values(), key=lambda t: t['topic'])}
 
 
@@ -144,6 +149,7 @@ def _info_text(info):
     lines = [f"{info['path']}: {info['message_count']} messages over "
              f"{info['duration_s']:.3f} s{state}"]
     lines += _damage_lines(info.get('damaged', []), info.get('damaged_count', 0))
+    lines += [f"  skipped {entry['path']}: {entry['reason']}" for entry in info.get('skipped', [])]
     for topic in info['topics']:
         lines.append(f"  {topic['topic']:<32} {topic['type']:<40} {topic['count']:>9}")
     return '\n'.join(lines)

@@ -12,6 +12,7 @@ from ..errors import RecorderError
 from ..io.msg_schema import message_class
 from ..io.provenance import provenance_entries
 from ..io.recorder import McapRecorder
+from ..io.recorder_files import MIN_SPLIT_BYTES, MIN_SPLIT_DURATION_S, split_refusal
 from ..ros.runtime import spin_until_shutdown
 
 
@@ -34,13 +35,21 @@ def register(subparsers):
                         help='stop after this many seconds (0: until SIGINT/SIGTERM)')
     record.add_argument('--discovery-timeout-s', type=float, default=10.0,
                         help='how long to wait for publishers of topics given without type')
-    record.add_argument('--split-size-mb', type=float, default=0.0)
-    record.add_argument('--split-duration-s', type=float, default=0.0)
+    record.add_argument('--split-size-mb', type=float, default=0.0,
+                        help='split at this size [MB] (0: never; else at least 1 MiB)')
+    record.add_argument('--split-duration-s', type=float, default=0.0,
+                        help='split after this long [s] (0: never; else at least 1 s)')
     record.add_argument('--json', action='store_true', help='one JSON object on stdout')
     record.set_defaults(func=_record_command)
 
 
 def _record_command(args):
+    for reason in (split_refusal('--split-size-mb', args.split_size_mb, MIN_SPLIT_BYTES / 1e6,
+                                 f'{MIN_SPLIT_BYTES / 1e6:g} (1 MiB)'),
+                   split_refusal('--split-duration-s', args.split_duration_s,
+                                 MIN_SPLIT_DURATION_S, f'{MIN_SPLIT_DURATION_S:g} s')):
+        if reason is not None:
+            raise ValueError(reason)
     recorder = McapRecorder(args.out, split_size_bytes=int(args.split_size_mb * 1e6),
                             split_duration_s=args.split_duration_s,
                             provenance=provenance_entries('flexlink mcap-record'))

@@ -11,17 +11,25 @@ as the recorder's ``close`` would have (rosbag2 version 9). Like ``ros2 bag rein
 what the files say: topics, types, offered QoS and type hashes from their channels.
 
 It refuses a path that is not a directory of MCAP files, and never replaces an existing
-``metadata.yaml`` (written by a recorder that closed the bag) unless ``--force`` is given.
+``metadata.yaml`` (written by a recorder that closed the bag) unless ``--force`` is given. It
+refuses a bag still being recorded (its recorder holds the bag's lock, :mod:`..io.bag_lock`;
+exit 2, ``--force`` or not). A last file without messages (a kill at a split) or a file that
+is not MCAP at all is skipped with a note; a rewritten file keeps its original's mode; hidden
+``.<file>.<pid>.salvage`` files of a reindex stopped mid-rewrite are removed.
 Only files named as rosbag2 names them (``<dir>/<dir>_<N>.mcap``) are taken; any other file is
 left out and untouched.
 """
 
 import os
 import pathlib
+import re
+import stat
 
 from .main import emit
-from ..errors import FlexlinkError
-from ..io.bag_index import bag_files, bag_topics, rewrite_complete, scan_bag_file
+from ..errors import FlexlinkError, McapFileError
+from ..io.bag_files import bag_files
+from ..io.bag_index import bag_topics, rewrite_complete, scan_bag_file
+from ..io.bag_lock import lock_bag, unlock_bag
 from ..io.bag_metadata import serialized_metadata, UNSET_NS, write_bag_metadata
 from ..io.provenance import custom_data, ProvenanceError, read_entries
 
@@ -72,7 +80,18 @@ def reindex_bag(bag, force=False):
     bag = pathlib.Path(bag)
     if not bag.is_dir():
         raise FlexlinkError(f'{bag} is not a directory: reindex takes a bag directory')
-    files = bag_files(bag)
+    lock = lock_bag(bag)    # refuses a bag still being recorded, whatever `force` says
+    try:
+        return _reindex_locked(bag, force)
+    finally:
+        unlock_bag(lock)
+
+
+def _reindex_locked(bag, force):
+    """Reindex ``bag`` while holding its lock (see :func:`reindex_bag`)."""
+    removed = remove_stale_salvage(bag)
+    unsafe = []
+    files = bag_files(bag, unsafe, rosbag2_names=True)
     if not files:
         raise FlexlinkError(f'{bag} holds no {bag.resolve().name}_<N>.mcap file (as rosbag2 '
                             'names them): not a bag directory')
@@ -80,15 +99,23 @@ def reindex_bag(bag, force=False):
     if os.path.lexists(metadata) and not force:
         raise FlexlinkError(f'{metadata} exists (the recording was closed, and rosbags and '
                             'ros2 bag open it as it is); --force rebuilds it from the files')
-    scans, skipped = [], []
-    for path in files:
-        scan = scan_bag_file(path)
-        if scan['header'] or scan['message_count']:
+    scans = []
+    skipped = [{'path': str(path), 'reason': reason} for path, reason in unsafe]
+    for n, path in enumerate(files):
+        scan = _scan_or_none(path, skipped)
+        if scan is None:
+            continue
+        # Without messages and cut short (a kill as the recorder started it, at a split):
+        # nothing to keep; the last file is left alone, not listed, as is an unreadable one.
+        last_and_empty = n == len(files) - 1 and not scan['complete']
+        if scan['message_count'] or (scan['header'] and not last_and_empty):
             scans.append(scan)
-        else:   # nothing readable: left alone, not listed
-            skipped.append({'path': str(path), 'reason': scan['end_reason']})
+        else:
+            skipped.append({'path': str(path),
+                            'reason': f"no message ({scan['end_reason']})"})
     if not scans:
-        raise FlexlinkError(f'{bag}: no readable MCAP file')
+        raise FlexlinkError(f'{bag}: no readable MCAP file (' + '; '.join(
+            f"{entry['path']}: {entry['reason']}" for entry in skipped[:3]) + ')')
     topics = bag_topics(scans)
     try:     # what made the bag, kept in custom_data
         provenance = read_entries(bag)
@@ -102,8 +129,57 @@ def reindex_bag(bag, force=False):
             'files': [{'path': str(s['path']), 'message_count': s['message_count'],
                        'end_reason': s['end_reason'], 'salvaged_from': s.get('salvaged_from')}
                       for s in scans],
-            'skipped': skipped,
+            'skipped': skipped, 'removed': removed,
             'topics': {t.name: t.message_count for t in topics.values()}}
+
+
+def _scan_or_none(path, skipped):
+    """Scan one file; None (noted in ``skipped``) if it is not an MCAP file at all."""
+    try:
+        return scan_bag_file(path)
+    except McapFileError as exc:      # 0 bytes, or not even the magic
+        skipped.append({'path': str(path), 'reason': f'no message ({exc})'})
+        return None
+
+
+def remove_stale_salvage(bag):
+    """
+    Remove the ``.<file>.<pid>.salvage`` files that a reindex killed mid-rewrite left behind.
+
+    Only regular files named exactly so after one of the bag's files, whose process is gone.
+
+    Parameters
+    ----------
+    bag : pathlib.Path
+        The bag directory (its lock held).
+
+    Returns
+    -------
+    list of str
+        The removed files.
+
+    """
+    pattern = re.compile(r'\.(' + re.escape(bag.resolve().name) + r'_\d+\.mcap)\.(\d+)\.salvage')
+    removed = []
+    for entry in os.scandir(bag):
+        match = pattern.fullmatch(entry.name)
+        if (match and entry.is_file(follow_symlinks=False)
+                and not _process_alive(int(match.group(2)))):
+            _remove(entry.path)
+            removed.append(entry.path)
+    return removed
+
+
+def _process_alive(pid):
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:     # alive, another user's
+        return True
+    return True
 
 
 def _salvage(scans, n, provenance):
@@ -112,14 +188,19 @@ def _salvage(scans, n, provenance):
     kept = path.with_name(path.name + '.truncated')
     if os.path.lexists(kept):
         raise FlexlinkError(f'{kept} exists (an earlier salvage?): move it away first')
-    # The rosbag2 records the recorder would have written: at open, the files before this
-    # one and this one empty; at close, the bag up to this file.
+    # The rosbag2 records the recorder would have written: this file alone, at open empty,
+    # at close with its messages.
     empty = {'path': path, 'message_count': 0, 'first_log_ns': None, 'last_log_ns': None}
-    opening = serialized_metadata(scans[:n] + [empty], bag_topics(scans[:n]), UNSET_NS)
-    closing = serialized_metadata(scans[:n + 1], bag_topics(scans[:n + 1]))
+    topics = bag_topics(scans[:n + 1])
+    counts = {name: topic.message_count for name, topic in bag_topics([scans[n]]).items()}
+    extra = custom_data(provenance)    # as the recorder writes them
+    opening = serialized_metadata([empty], topics, UNSET_NS, counts={}, custom_data=extra)
+    closing = serialized_metadata([scans[n]], topics, counts=counts, custom_data=extra)
     temporary = path.with_name(f'.{path.name}.{os.getpid()}.salvage')
+    mode = stat.S_IMODE(os.stat(path).st_mode)     # a 0600 recording stays 0600
     try:
-        rewrite_complete(path, temporary, opening, closing, provenance)   # never overwrites
+        rewrite_complete(path, temporary, opening, closing, mode,   # refuses an existing file
+                         provenance)
     except FileExistsError:
         raise
     except BaseException:
@@ -151,5 +232,8 @@ def _reindex_command(args):
             lines.append(f"  {entry['path']} was cut short ({entry['end_reason']}); rewritten "
                          f"with its {entry['message_count']} intact messages, original kept "
                          f"as {entry['salvaged_from']}")
-    lines += [f"  skipped {entry['path']}: {entry['reason']}" for entry in result['skipped']]
+    lines += [f"  skipped {entry['path']}: {entry['reason']}; left in place, not listed"
+              for entry in result['skipped']]
+    lines += [f'  removed {path}: left by a reindex that was stopped mid-rewrite'
+              for path in result['removed']]
     return emit(result, '\n'.join(lines), args.json)

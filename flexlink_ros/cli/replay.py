@@ -51,8 +51,8 @@ from ..io.replay_writer import write_replay
 from ..names import DEFAULT_FRAME_ID, NODE_NAME, OUTPUT_POINTS, output_topics, QUALITY_NAMES
 from ..report.cycle_chart import plot_cycle
 from ..ros.messages import OK
-from ..ros.playback_schedule import DEFAULT_CLOCK_HZ
-from ..ros.republish import publish_recording
+from ..ros.playback_schedule import DEFAULT_CLOCK_HZ, MAX_CLOCK_HZ
+from ..ros.republish import DISCOVERY_TIMEOUT_S, publish_recording
 
 
 def read_input(args, damaged):
@@ -215,6 +215,7 @@ def run_replay(args):
             played = publish_recording(samples, topic, playback_options(args),
                                        progress=progress)
         result.update(published=played['published'], playback=played)
+        result['notes'] += played['notes']
     return result
 
 
@@ -223,6 +224,7 @@ def playback_options(args):
     passes = args.loop_count if args.loop_count is not None else (0 if args.loop else 1)
     return {'rate': args.rate, 'clock_hz': args.clock or 0.0, 'passes': passes,
             'clock_per_message': args.clock_topics_all,
+            'subscribers': args.wait_for_subscribers, 'discovery_timeout_s': args.wait_timeout,
             'ros_args': list(getattr(args, 'ros_args', None) or [])}
 
 
@@ -245,8 +247,11 @@ def _check_arguments(args):
             raise ValueError(f'`--out` {exc}') from None
     if not args.rate > 0:
         raise ValueError(f'`--rate` must be positive, got {args.rate}')
-    if args.clock is not None and not args.clock > 0:
-        raise ValueError(f'`--clock` must be a positive frequency [Hz], got {args.clock}')
+    if args.clock is not None and not 0 < args.clock <= MAX_CLOCK_HZ:
+        raise ValueError(f'`--clock` must be a positive frequency [Hz] up to '
+                         f'{MAX_CLOCK_HZ:g}, got {args.clock}')
+    if args.wait_for_subscribers < 0 or not args.wait_timeout >= 0:
+        raise ValueError('`--wait-for-subscribers` and `--wait-timeout` must be >= 0')
     if args.markers_every_n < 0:
         raise ValueError(f'`--markers-every-n` must be >= 0, got {args.markers_every_n}')
 
@@ -311,7 +316,11 @@ def playback_text(played):
             f"({played['passes']} pass(es), {played['publish_s']:.2f} s")
     if played['clock_messages']:
         text += f", {played['clock_messages']} /clock messages"
-    return text + (', interrupted)' if played['interrupted'] else ')')
+    text += ', interrupted)' if played['interrupted'] else ')'
+    if played['failed']:
+        text += (f"\n  {played['failed']} publishes failed (a reliable subscriber that cannot "
+                 f"keep up?): {played['last_failure']}")
+    return text
 
 
 def _replay_command(args):
@@ -321,7 +330,8 @@ def _replay_command(args):
     except MissingModel as exc:
         print(f'flexlink replay: error: {exc}', file=sys.stderr)
         return 2
-    return emit(result, summary_text(result), args.json)
+    code = emit(result, summary_text(result), args.json)
+    return 1 if result.get('playback', {}).get('failed') else code
 
 
 def register(subparsers):
@@ -359,6 +369,12 @@ def register(subparsers):
                         help='with --publish, play again from the start until interrupted')
     parser.add_argument('--loop-count', type=int, metavar='N',
                         help='with --publish, play N times in all, then stop')
+    parser.add_argument('--wait-for-subscribers', type=int, default=1, metavar='N',
+                        help='with --publish, start once N subscriptions matched the topic '
+                        '(default 1), or after --wait-timeout')
+    parser.add_argument('--wait-timeout', type=float, default=DISCOVERY_TIMEOUT_S,
+                        metavar='S', help='with --publish, longest wait for the subscriptions '
+                        f'[s] (default {DISCOVERY_TIMEOUT_S:g})')
     add_estimator_arguments(parser)
     add_chart_argument(parser)
     defer_model_defaults(parser)   # the recording's model unless a flag is given

@@ -4,14 +4,16 @@
     flexlink validate --peer exudyn --rpm R [R ...] [--sweep START:STOP:STEP]
                       [--bearings rigid|flexible] [--gravity | --no-gravity]
                       [--elements-per-link N] [--zeta Z | --stiffness-damping BETA_S]
-                      [--revolutions N] [--cache DIR]
+                      [--revolutions N] [--cache DIR] [--nonlinear]
                       [--chart PATH] [--json]
 
 Prints, per speed, the peer's peak-to-peak and, for the linear KED, linear + quasi-static
 second order and linear + the dynamic second-order pass, p2p, p2p error and relative RMS per
 output; with ``--sweep`` one line per speed with the validity indicator and where its flag
-turns. The peer is the optional extra ``pip install '.[peer]'`` (exudyn). The computation is
-:mod:`studies.validation`, the chart :mod:`report.validation`.
+turns. With ``--nonlinear``: the linear and the geometrically nonlinear full order damped as
+the peer (:mod:`studies.nonlinear_validation`), with the orbit's Floquet multipliers, Newton
+iterations and cost per step. The peer is the optional extra ``pip install '.[peer]'``
+(exudyn). The computation is :mod:`studies.validation`, the chart :mod:`report.validation`.
 """
 
 import argparse
@@ -19,7 +21,7 @@ import argparse
 from .main import emit
 from .progress import Progress
 from ..report.validation import plot_validation
-from ..studies import validation
+from ..studies import nonlinear_validation, validation
 
 
 def register(subparsers):
@@ -48,12 +50,16 @@ def register(subparsers):
                         help='modal damping ratio of the package (default: the mechanism '
                         "file; 0.012 matches the peer's beta = 1e-4 s at the first modes)")
     parser.add_argument('--stiffness-damping', type=float, default=None, metavar='BETA_S',
-                        help='damp the package with beta [s] on the link-frame strain rates '
-                        'and bearing deflection rates, as the peer (default: modal zeta)')
+                        help='damp the package and the peer with beta [s] on the strain rates '
+                        'and bearing deflection rates (default: the package with modal zeta, '
+                        'the peer with beta 1e-4 s)')
     parser.add_argument('--revolutions', type=int, default=None, metavar='N',
                         help='peer revolutions (default: until its start transient decays)')
     parser.add_argument('--cache', default=None, metavar='DIR',
                         help='keep peer runs in DIR and reuse them')
+    parser.add_argument('--nonlinear', action='store_true',
+                        help='compare the linear and the geometrically nonlinear full order, '
+                        'damped as the peer (beta; modal zeta 0 unless --zeta)')
     parser.add_argument('--chart', default=None, metavar='PATH', help='write a PNG chart')
     parser.add_argument('--json', action='store_true', help='print one JSON object')
     parser.set_defaults(func=validate_command)
@@ -71,8 +77,10 @@ def validate_command(args):
         elements_per_link=args.elements_per_link, bearings=args.bearings,
         gravity=args.gravity, zeta=args.zeta, revolutions=args.revolutions,
         stiffness_damping=args.stiffness_damping, cache=args.cache)
-    records = []
     speeds = sorted(set(speeds))
+    if args.nonlinear:
+        return _nonlinear(args, speeds, settings)
+    records = []
     with Progress('validate', total=len(speeds), unit='speed') as progress:
         for rpm in speeds:
             progress(len(records), what=f'{rpm:g} rpm: peer, linear, dynamic pass')
@@ -89,4 +97,21 @@ def validate_command(args):
         text = '\n\n'.join(validation.format_speed(r) for r in records)
     if args.chart:
         text += f'\nchart: {args.chart}'
+    return emit(result, text, args.json)
+
+
+def _nonlinear(args, speeds, settings):
+    """Run ``validate --nonlinear`` over the speeds; returns the exit code."""
+    if args.chart:
+        raise ValueError('--chart draws the linear models: leave it out with --nonlinear')
+    records = []
+    with Progress('validate', total=len(speeds), unit='speed') as progress:
+        for rpm in speeds:
+            progress(len(records), what=f'{rpm:g} rpm: peer, linear, nonlinear')
+            records.append(nonlinear_validation.validate_nonlinear(args.mechanism, rpm,
+                                                                   settings))
+        progress(len(records), what='done')
+    result = {'peer': args.peer, 'model': 'nonlinear',
+              'records': [nonlinear_validation.without_series(r) for r in records]}
+    text = '\n\n'.join(nonlinear_validation.format_nonlinear(r) for r in records)
     return emit(result, text, args.json)

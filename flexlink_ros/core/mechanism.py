@@ -19,6 +19,7 @@ import dataclasses
 import hashlib
 import json
 import math
+import re
 from typing import Optional
 
 from ..errors import MechanismError
@@ -151,6 +152,19 @@ class Mechanism:
         """Stable hash of every field, for cache keys (hex string)."""
         payload = json.dumps(dataclasses.asdict(self), sort_keys=True, default=repr)
         return hashlib.sha256(payload.encode()).hexdigest()
+
+
+# A mechanism's name is part of cache file names: letters, digits, _ . - only, no leading dot
+# (so that no path can be spelt with it).
+NAME_PATTERN = re.compile(r'[A-Za-z0-9_-][A-Za-z0-9_.-]*')
+
+
+def check_name(name):
+    """Return ``name`` if it matches NAME_PATTERN, else raise MechanismError naming `name`."""
+    if not NAME_PATTERN.fullmatch(name):
+        raise MechanismError('name', f'{name!r:.80} is not a plain name (letters, digits, '
+                             '_ . - only, not starting with a dot)')
+    return name
 
 
 def check_elements_per_link(elements):

@@ -22,8 +22,8 @@ import sys
 
 import yaml
 
-from .mechanism import (BRANCHES, check_crank_rocker, check_elements_per_link, Link,
-                        Mechanism, Spring)
+from .mechanism import (BRANCHES, check_crank_rocker, check_elements_per_link, check_name,
+                        Link, Mechanism, Spring)
 from ..errors import MechanismError
 from ..names import JOINT_NAMES, LINK_NAMES
 
@@ -243,7 +243,7 @@ def mechanism_from_dict(data):
 
     """
     _check_keys(data, _TOP_KEYS, '')
-    name = _text(data, 'name', 'mechanism', MAX_NAME_CHARS)
+    name = check_name(_text(data, 'name', 'mechanism', MAX_NAME_CHARS))
     source = _text(data, 'source', '', MAX_SOURCE_CHARS)
     ground = _number(data, 'ground_length_m', '')
     youngs, density = _material_from(data)

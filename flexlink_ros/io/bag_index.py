@@ -2,8 +2,8 @@
 What a bag directory's MCAP files hold, read from the files alone (for ``flexlink reindex``).
 
 A recorder killed before its ``close`` leaves a bag directory without ``metadata.yaml`` and
-its last file without a summary. :func:`bag_files` finds the directory's MCAP files as
-rosbag2 names them (``<dir>/<dir>_0.mcap``, ``<dir>_1.mcap``, ...) and :func:`scan_bag_file` reads
+its last file without a summary. :func:`.bag_files.bag_files` finds the directory's MCAP files
+as rosbag2 names them (``<dir>/<dir>_0.mcap``, ``<dir>_1.mcap``, ...); :func:`scan_bag_file` reads
 one through the salvaging reader (:mod:`.mcap_reader`, bounded): its intact messages per
 channel, their log times, and each channel's topic, type, ``offered_qos_profiles`` and
 ``topic_type_hash``. :func:`bag_topics` merges them into the topic records
@@ -13,8 +13,8 @@ messages of a file cut short into a complete file with the ``rosbag2`` metadata 
 """
 
 import dataclasses
+import os
 import pathlib
-import re
 
 import yaml
 
@@ -24,8 +24,6 @@ from .mcap_records import MESSAGE_HEAD, MESSAGE_HEAD_SIZE
 from .mcap_writer import McapFileWriter
 from .provenance import PROVENANCE_RECORD
 from .recorder_files import create_exclusive, LIBRARY
-
-MAX_BAG_FILES = 100_000   # files of one bag directory read at most
 
 
 @dataclasses.dataclass
@@ -37,41 +35,6 @@ class BagTopic:
     qos_profiles: list
     type_hash: str
     message_count: int = 0
-
-
-def bag_files(bag):
-    """
-    Return the files of a bag directory as rosbag2 names them, in order: ``<dir>_<N>.mcap``.
-
-    Other files (a stray ``.mcap`` included) are not part of the bag and are left out, so a
-    directory that merely holds some MCAP file is not taken for a bag.
-
-    Parameters
-    ----------
-    bag : pathlib.Path
-        The bag directory.
-
-    Returns
-    -------
-    list of pathlib.Path
-        Regular files (links are not followed), by ``N``.
-
-    Raises
-    ------
-    ValueError
-        More than ``MAX_BAG_FILES`` such files.
-
-    """
-    bag = pathlib.Path(bag)
-    pattern = re.compile(re.escape(bag.resolve().name) + r'_(\d+)\.mcap')
-    files = []
-    for path in bag.iterdir():
-        match = pattern.fullmatch(path.name)
-        if match and path.is_file() and not path.is_symlink():
-            files.append((int(match.group(1)), path))
-            if len(files) > MAX_BAG_FILES:
-                raise ValueError(f'{bag} holds more than {MAX_BAG_FILES} .mcap files')
-    return [path for _, path in sorted(files)]
 
 
 def scan_bag_file(path):
@@ -157,7 +120,7 @@ def bag_topics(scans):
     return topics
 
 
-def rewrite_complete(source, destination, opening, closing, provenance=None):
+def rewrite_complete(source, destination, opening, closing, mode=0o644, provenance=None):
     """
     Write every intact message of an MCAP file into a new, complete file.
 
@@ -173,6 +136,8 @@ def rewrite_complete(source, destination, opening, closing, provenance=None):
         The new file; created exclusively (refused if anything is there).
     opening, closing : dict
         The maps of the two ``rosbag2`` records (:func:`.bag_metadata.serialized_metadata`).
+    mode : int
+        Permission bits of the new file (from its creation on, so never more open).
     provenance : dict, optional
         The ``flexlink_ros`` record's map, written after the opening record (:mod:`.provenance`).
 
@@ -180,7 +145,8 @@ def rewrite_complete(source, destination, opening, closing, provenance=None):
     salvage = Salvage()
     buffer = map_file(source)
     try:
-        with create_exclusive(destination) as stream:
+        with create_exclusive(destination, mode) as stream:
+            os.fchmod(stream.fileno(), mode)     # exactly, whatever the umask
             writer = McapFileWriter(stream, chunk_size=128 * 1024, compression='zstd',
                                     spill_directory=pathlib.Path(destination).parent)
             copy = _Copy(writer, salvage, opening, provenance)

@@ -40,7 +40,7 @@ def _since_epoch(nanoseconds):
     return {'nanoseconds_since_epoch': int(nanoseconds)}
 
 
-def bag_metadata(files, topics, no_message_ns=0, custom_data=None):
+def bag_metadata(files, topics, no_message_ns=0, counts=None, custom_data=None):
     """
     Return the rosbag2 (version 9) bag information of MCAP files and their topics.
 
@@ -56,6 +56,9 @@ def bag_metadata(files, topics, no_message_ns=0, custom_data=None):
     no_message_ns : int
         Starting time written while there is no message (rosbag2 writes ``UNSET_NS`` in the
         record at open; ``metadata.yaml`` of an empty bag here says 0).
+    counts : dict, optional
+        Topic name -> message count to write instead of each topic's ``message_count``
+        (a topic not in it: 0), for a record that describes one file.
     custom_data : dict, optional
         str -> str entries of ``custom_data`` (what made the bag, :mod:`.provenance`).
 
@@ -80,7 +83,8 @@ def bag_metadata(files, topics, no_message_ns=0, custom_data=None):
                                 'offered_qos_profiles': list(t.qos_profiles),
                                 'type_description_hash': (getattr(t, 'type_hash', None)
                                                           or type_hash(t.type_name))},
-             'message_count': t.message_count}
+             'message_count': (t.message_count if counts is None
+                               else counts.get(t.name, 0))}
             for t in topics.values()],
         'compression_format': '',
         'compression_mode': '',
@@ -100,14 +104,16 @@ def _or(value, default):
     return default if value is None else value
 
 
-def serialized_metadata(files, topics, no_message_ns=0, custom_data=None):
+def serialized_metadata(files, topics, no_message_ns=0, counts=None, custom_data=None):
     """
     Return the ``rosbag2`` MCAP Metadata record's map, as rosbag2's MCAP storage writes it.
 
     rosbag2 (``MCAPStorage::update_metadata``) writes a Metadata record named ``rosbag2`` with
     one key, ``serialized_metadata``: the YAML of the bag information (no
     ``rosbag2_bagfile_information`` wrapper), once when a file is opened and again before it is
-    closed. Arguments as :func:`bag_metadata`.
+    closed. Arguments as :func:`bag_metadata`. The recorder and reindex give it one file
+    (and that file's counts), so a split costs the same whatever the files before it: rosbag2
+    replaces the file list by the file itself when it reads one file anyway.
 
     Returns
     -------
@@ -115,7 +121,8 @@ def serialized_metadata(files, topics, no_message_ns=0, custom_data=None):
         ``{'serialized_metadata': yaml_text}``.
 
     """
-    text = yaml.dump(bag_metadata(files, topics, no_message_ns, custom_data), Dumper=_PlainDumper,
+    text = yaml.dump(bag_metadata(files, topics, no_message_ns, counts, custom_data),
+                     Dumper=_PlainDumper,
                      sort_keys=False)
     return {'serialized_metadata': text}
 

@@ -25,6 +25,8 @@ their channel). A file cut short ends at its last complete chunk.
 
 import dataclasses
 import mmap
+import os
+import stat
 import struct
 import zlib
 
@@ -68,10 +70,15 @@ def map_file(path):
     Raises
     ------
     McapFileError
-        The file does not start with the MCAP magic.
+        The path is not a regular file (a FIFO, a device) or does not start with the MCAP
+        magic.
 
     """
-    with open(path, 'rb') as stream:
+    # Without blocking (a FIFO would wait for a writer for ever), and only a regular file.
+    descriptor = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+    with os.fdopen(descriptor, 'rb') as stream:
+        if not stat.S_ISREG(os.fstat(descriptor).st_mode):
+            raise McapFileError(f'{path} is not a regular file')
         if stream.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
             raise McapFileError(f'{path} is not an MCAP file (bad magic)')
         return mmap.mmap(stream.fileno(), 0, access=mmap.ACCESS_READ)

@@ -8,7 +8,8 @@ topic with ``message_encoding='cdr'`` and metadata ``offered_qos_profiles`` and
 ns); a summary with Statistics, so ``ros2 bag play FILE.mcap`` opens a bare file. A ``path``
 ending in ``.mcap`` is one bare file, any other a rosbag2 bag directory (split files and a
 ``metadata.yaml`` written on close); nothing is ever overwritten or followed
-(:mod:`flexlink_ros.io.recorder_files`).
+(:mod:`flexlink_ros.io.recorder_files`). A bag directory is locked while it is recorded
+(:mod:`flexlink_ros.io.bag_lock`), so ``flexlink reindex`` refuses it.
 
 Crash safety. Chunks are small (128 KiB before compression) and the open chunk is written and
 flushed to the OS whenever a flush period (0.5 s) of data has accumulated, and also by a
@@ -35,19 +36,20 @@ import pathlib
 import threading
 import time
 
+from .bag_lock import lock_bag, unlock_bag
 from .bag_metadata import (
     DEFAULT_QOS, METADATA_RECORD, serialized_metadata, UNSET_NS, write_bag_metadata,
 )
-from .mcap_writer import COMPRESSIONS
 from .msg_schema import (
     message_definition, message_type_name, qos_profile_dict, serialize_exact,
 )
 from .provenance import custom_data
 from .recorder_files import (
-    abandon, create_exclusive, file_path, OpenFile, refuse_existing, register_topic, split_due,
-    start_file, Topic,
+    abandon, check_settings, create_exclusive, file_path, make_directories, OpenFile,
+    refuse_existing, register_topic, remove_directories, split_due, start_file, Topic,
 )
 from .recorder_queue import QueuedWriting, RecorderState
+from .recorder_status import RecordingStatus
 from ..errors import RecorderError
 
 LOGGER = logging.getLogger(__name__)
@@ -56,7 +58,7 @@ DEFAULT_CHUNK_SIZE = 128 * 1024  # bytes before compression; one chunk is the un
 DEFAULT_FLUSH_PERIOD_S = 0.5  # at most this much data (log time, or wall time) sits in memory
 
 
-class McapRecorder(QueuedWriting):
+class McapRecorder(QueuedWriting, RecordingStatus):
     """
     Record ROS 2 messages into rosbag2-compatible MCAP.
 
@@ -87,20 +89,8 @@ class McapRecorder(QueuedWriting):
                  compression='zstd', flush_thread=True, provenance=None):
         self.path = pathlib.Path(path)
         self.bare = self.path.suffix == '.mcap'
-        if split_size_bytes < 0:
-            raise ValueError(f'`split_size_bytes` must be >= 0, got {split_size_bytes}')
-        if split_duration_s < 0:
-            raise ValueError(f'`split_duration_s` must be >= 0, got {split_duration_s}')
-        if self.bare and (split_size_bytes or split_duration_s):
-            raise ValueError('`split_size_bytes`/`split_duration_s` need a bag directory path, '
-                             f'not a single .mcap file ({self.path})')
-        if chunk_size_bytes < 1024:
-            raise ValueError(f'`chunk_size_bytes` must be >= 1024, got {chunk_size_bytes}')
-        if not flush_period_s > 0:
-            raise ValueError(f'`flush_period_s` must be > 0, got {flush_period_s}')
-        if compression not in COMPRESSIONS:
-            raise ValueError(f'`compression` must be one of {sorted(COMPRESSIONS)}, '
-                             f'got {compression!r}')
+        check_settings(self.path, split_size_bytes, split_duration_s, chunk_size_bytes,
+                       flush_period_s, compression)
         self.split_size_bytes = int(split_size_bytes)
         self.split_duration_ns = int(round(split_duration_s * 1e9))
         self.chunk_size_bytes = int(chunk_size_bytes)
@@ -124,6 +114,11 @@ class McapRecorder(QueuedWriting):
         self._stop_flusher = threading.Event()
         self._flusher = None
         self._queue = collections.deque()   # (topic, bytes, log_ns) from enqueue()
+        self._queue_lock = threading.Lock()  # the queue's byte count; never held while writing
+        self._queued_bytes = 0
+        self._overflow = 0   # enqueued messages dropped because the queue was full
+        self._closed_bytes = 0
+        self._bag_lock = None   # descriptor holding the bag directory's lock (bag_lock)
 
     # -- life cycle -------------------------------------------------------------------------
 
@@ -140,16 +135,20 @@ class McapRecorder(QueuedWriting):
         with self._lock:
             if self._state is not RecorderState.NEW:
                 raise RecorderError(f'recorder for {self.path} already opened')
+            created = []    # directories made here, removed again if the open fails
             try:
                 refuse_existing(self.path)
-                self.path.parent.mkdir(parents=True, exist_ok=True)
+                created = make_directories(self.path.parent)
                 if not self.bare:
                     self.path.mkdir()   # not exist_ok: a directory made meanwhile is refused
+                    created.append(self.path)
+                    self._bag_lock = lock_bag(self.path)   # held until metadata.yaml is written
                 self._state = RecorderState.RECORDING
                 self._open_file()
             except OSError as exc:
                 # FAILED (not NEW): later writes are dropped quietly, not refused one by one.
                 self._fail(exc)
+                remove_directories(created)   # a retry with this path is then not refused
                 self._error_reported = True
                 where = '' if isinstance(exc, FileExistsError) else f' to {self.path}'
                 raise RecorderError(f'cannot record{where}: {exc}') from exc
@@ -182,6 +181,8 @@ class McapRecorder(QueuedWriting):
                                            self._custom_data)
                 except OSError as exc:
                     self._fail(exc)
+                unlock_bag(self._bag_lock)
+                self._bag_lock = None
             elif self._state is RecorderState.NEW:
                 self._state = RecorderState.CLOSED
             if self._state is RecorderState.FAILED and not self._error_reported:
@@ -302,58 +303,6 @@ class McapRecorder(QueuedWriting):
             self.add_topic(topic, message_type_name(message))
         return serialize_exact(message)
 
-    # -- state ------------------------------------------------------------------------------
-
-    @property
-    def state(self):
-        """Return the :class:`RecorderState`."""
-        return self._state
-
-    @property
-    def error(self):
-        """Return the OS error that stopped recording (None if none)."""
-        return self._error
-
-    @property
-    def files(self):
-        """Paths of every file written or being written."""
-        paths = [entry['path'] for entry in self._closed_files]
-        current = self._file    # read once: another thread may close it meanwhile
-        if current is not None:
-            paths.append(current.path)
-        return paths
-
-    def status(self):
-        """
-        Summary of the recording, for diagnostics and the CLI.
-
-        Returns
-        -------
-        dict
-            ``state``, ``error``, ``path``, ``files``, ``message_count``, ``dropped_count``,
-            ``topics`` (name -> count), ``bytes_written``.
-
-        """
-        # Without the lock: the writing thread may hold it through a slow disk write, and
-        # diagnostics must not wait for that (each field is read atomically; the set may be
-        # one write apart).
-        size = 0
-        for path in self.files:
-            try:
-                size += os.stat(path).st_size
-            except OSError:
-                pass
-        return {
-            'state': self._state.value,
-            'error': None if self._error is None else str(self._error),
-            'path': str(self.path),
-            'files': [str(p) for p in self.files],
-            'message_count': self._message_count,
-            'dropped_count': self._dropped,
-            'topics': {t.name: t.message_count for t in self._topics.values()},
-            'bytes_written': size,
-        }
-
     # -- internals --------------------------------------------------------------------------
 
     def _refuse(self):
@@ -369,25 +318,39 @@ class McapRecorder(QueuedWriting):
         LOGGER.error('MCAP recording to %s stopped: %s', self.path, exc)
         self._state = RecorderState.FAILED
         self._error = exc
+        unlock_bag(self._bag_lock)      # a failed recording can be reindexed at once
+        self._bag_lock = None
         if self._file is not None:
+            try:
+                self._closed_bytes += os.stat(self._file.path).st_size
+            except OSError:
+                pass
             abandon(self._file)
             self._closed_files.append(self._file.entry(complete=False))
             self._file = None
 
     def _open_file(self):
+        # The rosbag2 records describe this file alone: their cost does not grow with the
+        # files written before it (see bag_metadata.serialized_metadata).
         path = file_path(self.path, self.bare, len(self._closed_files))
         self._file = OpenFile(path, create_exclusive(path), None, {})
-        opening = serialized_metadata(self._closed_files + [self._file.entry(complete=False)],
-                                      self._topics, UNSET_NS, self._custom_data)   # as at open
+        self._file.counts_before = {t.name: t.message_count for t in self._topics.values()}
+        opening = serialized_metadata([self._file.entry(complete=False)], self._topics,
+                                      UNSET_NS, counts={},
+                                      custom_data=self._custom_data)   # as rosbag2 at open
         start_file(self._file, self.chunk_size_bytes, self.compression, self._topics.values(),
                    opening, self.provenance)
 
     def _finish_file(self):
         current = self._file
+        before = current.counts_before
+        counts = {t.name: t.message_count - before.get(t.name, 0)
+                  for t in self._topics.values()}
         current.writer.add_metadata(METADATA_RECORD, serialized_metadata(
-            self._closed_files + [current.entry(complete=True)], self._topics,
+            [current.entry(complete=True)], self._topics, counts=counts,
             custom_data=self._custom_data))
         current.writer.finish()
+        self._closed_bytes += current.stream.tell()
         current.stream.close()
         self._closed_files.append(current.entry(complete=True))
         self._file = None

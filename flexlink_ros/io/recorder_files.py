@@ -19,11 +19,16 @@ import stat
 from mcap.writer import LIBRARY_IDENTIFIER
 import numpy as np
 
-from .mcap_writer import McapFileWriter
+from .mcap_writer import COMPRESSIONS, McapFileWriter
 from .msg_schema import message_definition, offered_qos_yaml, type_hash
 from .provenance import PROVENANCE_RECORD
 
 LIBRARY = f'flexlink_ros recorder; {LIBRARY_IDENTIFIER}'
+# Smallest split a live recording accepts (0: never split). Each split finishes a file
+# (summary, indexes, metadata) and starts the next (header, schemas, channels): far below
+# these a recorder fed at 1 kHz would do little but split, and fall behind.
+MIN_SPLIT_BYTES = 1 << 20
+MIN_SPLIT_DURATION_S = 1.0
 # O_NOFOLLOW is POSIX; where it is missing O_EXCL alone still refuses a symlink.
 _EXCLUSIVE_FLAGS = (os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, 'O_NOFOLLOW', 0)
                     | getattr(os, 'O_CLOEXEC', 0))
@@ -57,7 +62,52 @@ def refuse_existing(path):
                           'links: choose a new path')
 
 
-def create_exclusive(path):
+def make_directories(path):
+    """
+    Create ``path`` and its missing parents; return those created, outermost first.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        A directory.
+
+    Returns
+    -------
+    list of pathlib.Path
+
+    """
+    missing = []
+    while not os.path.lexists(path) and path != path.parent:
+        missing.append(path)
+        path = path.parent
+    created = []
+    for directory in reversed(missing):
+        try:
+            directory.mkdir()
+        except FileExistsError:
+            continue    # made meanwhile by someone else: not ours to remove
+        created.append(directory)
+    return created
+
+
+def remove_directories(created):
+    """
+    Remove directories :func:`make_directories` created, innermost first, if still empty.
+
+    Parameters
+    ----------
+    created : list of pathlib.Path
+        Outermost first.
+
+    """
+    for directory in reversed(created):
+        try:
+            directory.rmdir()
+        except OSError:     # not empty (someone wrote there meanwhile) or gone: left as is
+            return
+
+
+def create_exclusive(path, mode=0o644):
     """
     Open a new file for writing; fail if anything (even a dangling link) is at ``path``.
 
@@ -65,6 +115,8 @@ def create_exclusive(path):
     ----------
     path : pathlib.Path
         The file to create.
+    mode : int
+        Its permission bits (less the umask).
 
     Returns
     -------
@@ -72,7 +124,7 @@ def create_exclusive(path):
 
     """
     try:
-        descriptor = os.open(path, _EXCLUSIVE_FLAGS, 0o644)
+        descriptor = os.open(path, _EXCLUSIVE_FLAGS, mode)
     except FileExistsError:
         refuse_existing(path)   # says what is there
         raise
@@ -91,6 +143,7 @@ class OpenFile:
     first_log_ns: int = None
     last_log_ns: int = None
     message_count: int = 0
+    counts_before: dict = dataclasses.field(default_factory=dict)   # topic counts at open
 
     def note(self, first_log_ns, last_log_ns, count):
         """Count ``count`` messages written with log times from first to last [ns]."""
@@ -231,6 +284,52 @@ def split_due(current, split_size_bytes, split_duration_ns, log_time_ns):
     too_long = (split_duration_ns
                 and log_time_ns - current.first_log_ns >= split_duration_ns)
     return bool(too_big or too_long)
+
+
+def check_settings(path, split_size_bytes, split_duration_s, chunk_size_bytes, flush_period_s,
+                   compression):
+    """Raise ValueError naming the first of a recorder's settings that cannot be used."""
+    if split_size_bytes < 0:
+        raise ValueError(f'`split_size_bytes` must be >= 0, got {split_size_bytes}')
+    if split_duration_s < 0:
+        raise ValueError(f'`split_duration_s` must be >= 0, got {split_duration_s}')
+    if path.suffix == '.mcap' and (split_size_bytes or split_duration_s):
+        raise ValueError('`split_size_bytes`/`split_duration_s` need a bag directory path, '
+                         f'not a single .mcap file ({path})')
+    if chunk_size_bytes < 1024:
+        raise ValueError(f'`chunk_size_bytes` must be >= 1024, got {chunk_size_bytes}')
+    if not flush_period_s > 0:
+        raise ValueError(f'`flush_period_s` must be > 0, got {flush_period_s}')
+    if compression not in COMPRESSIONS:
+        raise ValueError(f'`compression` must be one of {sorted(COMPRESSIONS)}, '
+                         f'got {compression!r}')
+
+
+def split_refusal(name, value, floor, unit):
+    """
+    Say why a live recording's split setting is refused (None: 0 or at least the floor).
+
+    Parameters
+    ----------
+    name : str
+        The setting, as the user wrote it (parameter or option).
+    value : float
+        Its value.
+    floor : float
+        :data:`MIN_SPLIT_BYTES` or :data:`MIN_SPLIT_DURATION_S`, in the setting's unit.
+    unit : str
+        How to write the floor (e.g. '1 MiB', '1 s').
+
+    Returns
+    -------
+    str or None
+
+    """
+    if value == 0 or value >= floor:
+        return None
+    return (f'{name} must be 0 (no split) or at least {unit}, got {value:g}: each split '
+            'finishes one file and starts another, so smaller splits leave the recorder '
+            'splitting instead of writing')
 
 
 def abandon(current):

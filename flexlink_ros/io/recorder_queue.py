@@ -9,6 +9,7 @@ once a flush period of wall time has passed without a message.
 """
 
 import enum
+import logging
 import threading
 import time
 
@@ -16,7 +17,13 @@ import numpy as np
 
 from ..errors import RecorderError
 
+LOGGER = logging.getLogger(__name__)
 QUEUE_PERIOD_S = 0.02  # the background thread writes enqueued messages this often
+# The queue holds at most this much (data plus a queued item's own size): a few seconds of the
+# node's 1 kHz output, a backlog the writer clears in about 2 s at close even message by
+# message (splits on) on a loaded machine, so a signal still ends the node within 5 s.
+QUEUE_MAX_BYTES = 4 << 20
+QUEUE_ITEM_BYTES = 128   # a queued (topic, bytes, int) tuple's own memory, about
 
 
 @enum.unique
@@ -108,8 +115,12 @@ class QueuedWriting:
         write what is left. It records what :meth:`write` calls in the same order would.
         Without the background thread (``flush_thread=False``) this is :meth:`write`.
 
+        The queue is bounded (:data:`QUEUE_MAX_BYTES`): while the writer is that far behind
+        (a stalled disk), messages are dropped and counted (``overflow_count`` of
+        :meth:`status`), never held in ever more memory.
+
         Parameters and errors as :meth:`write`; a failure in the background thread is raised
-        (once) by the next call.
+        (once) by the next call. Returns False for a message dropped on overflow.
 
         """
         if not self._use_flush_thread:
@@ -118,7 +129,17 @@ class QueuedWriting:
         if self._state is not RecorderState.RECORDING:
             with self._lock:
                 return self._refuse()
-        self._queue.append((topic, data, int(log_time_ns)))
+        size = len(data) + QUEUE_ITEM_BYTES
+        with self._queue_lock:
+            if self._queued_bytes + size > QUEUE_MAX_BYTES:
+                self._overflow += 1
+                if self._overflow == 1:
+                    LOGGER.error('MCAP recording to %s cannot keep up: its write queue is full '
+                                 '(%d MiB); messages are dropped and counted', self.path,
+                                 QUEUE_MAX_BYTES >> 20)
+                return False
+            self._queue.append((topic, data, int(log_time_ns)))
+            self._queued_bytes += size
         return True
 
     def write_batch(self, topics, messages, log_times_ns, publish_times_ns=None):
@@ -219,11 +240,14 @@ class QueuedWriting:
         # writers popping one queue would interleave its messages (enqueue only appends,
         # without the lock).
         with self._lock:
-            queue = self._queue
-            count = len(queue)      # appends may go on meanwhile: take only these
-            if not count:
-                return
-            items = [queue.popleft() for _ in range(count)]
+            with self._queue_lock:
+                queue = self._queue
+                count = len(queue)      # appends may go on later: take only these
+                if not count:
+                    return
+                items = [queue.popleft() for _ in range(count)]
+                self._queued_bytes -= sum(len(item[1]) for item in items) + (
+                    count * QUEUE_ITEM_BYTES)
             topics, messages, log_times = zip(*items)
             try:
                 self.write_batch(list(topics), list(messages), log_times)

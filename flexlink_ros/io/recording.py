@@ -11,6 +11,7 @@ import functools
 import pathlib
 import struct
 
+from .bag_files import bag_files
 from .cdr import parse_joint_state
 from .mcap_reader import iter_messages, map_file, Salvage
 from .mcap_records import message_fields, MESSAGE_HEAD, MESSAGE_HEAD_SIZE
@@ -21,14 +22,17 @@ from ..names import JOINT_STATE
 JOINT_PROBE_MESSAGES = 1000
 
 
-def recording_files(path):
+def recording_files(path, damaged=None):
     """
     List the MCAP files of a bare file or a bag directory (in split order).
 
     Parameters
     ----------
     path : str or os.PathLike
-        ``.mcap`` file or bag directory.
+        ``.mcap`` file or bag directory (only its regular files inside it,
+        :func:`.bag_files.bag_files`).
+    damaged : list, optional
+        Receives (entry, None, reason) of every directory entry left out.
 
     Returns
     -------
@@ -37,8 +41,10 @@ def recording_files(path):
     """
     path = pathlib.Path(path)
     if path.is_dir():
-        files = sorted(path.glob('*.mcap'),
-                       key=lambda p: (len(p.stem.rsplit('_', 1)[-1]), p.stem))
+        skipped = []
+        files = bag_files(path, skipped)
+        if damaged is not None:
+            damaged.extend((str(entry), None, reason) for entry, reason in skipped)
         if not files:
             raise ValueError(f'`input`: no .mcap files in {path}')
         return files
@@ -96,7 +102,7 @@ def iter_recording(path, topics=None, damaged=None):
     (topic, type_name, log_time_ns, publish_time_ns, data)
 
     """
-    for file in recording_files(path):
+    for file in recording_files(path, damaged):
         salvage = Salvage()
         for records, body, stop in _intact_messages(file, salvage, damaged):
             channel_id, _, log_time, publish_time, data = message_fields(records, body, stop)
@@ -229,7 +235,7 @@ def scan_recording(path, keep_type=JOINT_STATE, topic=None, joint_name=None, dam
     if topic is None and joint_name is not None:
         keep_rest = functools.partial(has_joint, joint_name=joint_name.encode())
     counts, kept = {}, {}
-    for file in recording_files(path):
+    for file in recording_files(path, damaged):
         file_counts, file_kept = _file_messages(file, wanted, keep_rest, damaged)
         for topic_name, (type_name, count) in file_counts.items():
             counts.setdefault(topic_name, [type_name, 0])[1] += count

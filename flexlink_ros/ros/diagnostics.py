@@ -20,7 +20,7 @@ from ..core.validity import VALIDITY_THRESHOLD
 from ..names import JOINT_NAMES
 
 
-def input_status(totals, period, values, topic, rate_hz, stale_s):
+def input_status(totals, period, values, topic, rate_hz, stale_s, watch=({}, ())):
     """
     Say whether valid input arrives, and what became of every received message.
 
@@ -38,6 +38,8 @@ def input_status(totals, period, values, topic, rate_hz, stale_s):
         Valid samples per second in the period.
     stale_s : float
         Time since the last valid sample [s] (inf if none yet).
+    watch : (dict, list of str)
+        :meth:`.input_watch.InputWatch.judge`'s facts (key values) and sentences (WARN).
 
     Returns
     -------
@@ -52,11 +54,16 @@ def input_status(totals, period, values, topic, rate_hz, stale_s):
     elif rate_hz < values['diagnostics.min_rate_hz']:
         level, message = WARN, f'input rate {rate_hz:.1f} Hz below ' \
             f'{values["diagnostics.min_rate_hz"]:g} Hz'
-    elif period.rejected or period.counts.get('outlier'):
+    elif period.rejected or period.counts.get('outlier') or period.counts.get('conflicting'):
         level, message = WARN, (f'{period.rejected} input messages skipped, '
-                                f'{period.counts.get("outlier", 0)} outliers')
+                                f'{period.counts.get("outlier", 0)} outliers, '
+                                f'{period.counts.get("conflicting", 0)} conflicting')
+    facts, sentences = watch
+    if sentences:
+        message = '; '.join(list(sentences) if level == OK else [message, *sentences])
+        level = max(level, WARN)
     return status('input', level, message, input_counts(
-        totals, period, {'topic': topic, 'rate_hz': rate_hz, 'stale_s': stale_s}))
+        totals, period, {'topic': topic, 'rate_hz': rate_hz, 'stale_s': stale_s, **facts}))
 
 
 def input_counts(totals, period, values):
@@ -201,12 +208,12 @@ def joint_statuses(period, values, criteria_source):
 
 def recorder_status(state):
     """
-    Report the recording.
+    Report the recording: ERROR when it failed or lost messages to a full write queue.
 
     Parameters
     ----------
     state : dict or None
-        ``McapRecorder.status()``; None when not recording.
+        ``McapRecorder.status(list_files=False)``; None when not recording.
 
     Returns
     -------
@@ -216,11 +223,18 @@ def recorder_status(state):
     if state is None:
         return status('recorder', OK, 'disabled', {})
     failed = state['state'] == 'failed'
-    return status('recorder', ERROR if failed else OK,
-                  (f'FAILED: {state["error"]}' if failed else state['state']), {
-                      'path': state['path'], 'messages': state['message_count'],
-                      'dropped': state['dropped_count'], 'bytes': state['bytes_written'],
-                      'files': len(state['files'])})
+    lost = state.get('overflow_count', 0)
+    if failed:
+        text = f'FAILED: {state["error"]}'
+    elif lost:
+        text = (f'{state["state"]}; {lost} messages lost: the write queue was full (the disk '
+                'did not keep up)')
+    else:
+        text = state['state']
+    return status('recorder', ERROR if failed or lost else OK, text, {
+        'path': state['path'], 'messages': state['message_count'],
+        'dropped': state['dropped_count'], 'overflow': lost, 'bytes': state['bytes_written'],
+        'files': state['file_count']})
 
 
 def inactive_statuses(totals, topic, model_facts, recorder_state):

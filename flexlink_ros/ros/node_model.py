@@ -23,7 +23,8 @@ DEFAULT_MODEL_TOLERANCE = 0.02
 MAX_REASON_CHARS = 200   # a refusal's reason as logged and in /diagnostics
 # What happens to a received message (counted per kind, in total and per diagnostics period).
 SKIP_KINDS = ('malformed', 'content', 'estimator', 'internal')   # counted as 'skipped'
-OTHER_KINDS = ('outlier', 'repeated', 'out_of_bound')
+# 'inactive': delivered after deactivate or cleanup (queued before it), not estimated.
+OTHER_KINDS = ('outlier', 'conflicting', 'repeated', 'out_of_bound', 'inactive')
 # Flags after which the estimate is not to be trusted blindly: the estimator status is WARN.
 WARN_FLAGS = (SampleFlag.CLIPPED_SPEED | SampleFlag.CLIPPED_ACCEL | SampleFlag.OUTLIER
               | SampleFlag.COLD_START)

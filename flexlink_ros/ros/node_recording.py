@@ -82,6 +82,15 @@ class NodeRecording:
             self.get_logger().warning(f'the recording will not name its mechanism: {exc}')
             return provenance_entries(NODE_NAME)
 
+    def _recording_text(self):
+        """Say in the ready line what the recording does (also that it was refused)."""
+        recorder = self.recorder
+        if recorder is None:
+            return ''
+        if recorder.state.value == 'recording':
+            return f'; recording to {recorder.path}'
+        return f'; not recording (cannot record to {recorder.path}: {recorder.error})'
+
     def _declare_input(self, recorder, at_first_message):
         """Declare the input topic with its publishers' offered QoS (see the module)."""
         profiles = offered_qos_profiles(self, self.input_topic)

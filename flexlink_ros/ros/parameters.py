@@ -12,6 +12,7 @@ from typing import Optional
 
 from ..core.options import ModelOptions
 from ..core.validity import VALIDITY_THRESHOLD
+from ..io.recorder_files import MIN_SPLIT_BYTES, MIN_SPLIT_DURATION_S, split_refusal
 
 
 @dataclasses.dataclass(frozen=True)
@@ -140,10 +141,10 @@ PARAMETERS = (
                   read_only=True),
     ParameterSpec('record.path', '', 'MCAP file or directory (empty: ./flexlink_<time>)',
                   read_only=True, max_bytes=PATH_MAX_BYTES),
-    ParameterSpec('record.max_bytes', 0, 'Split the recording at this size (0: never) [B]',
-                  low=0, high=2 ** 62, read_only=True),
+    ParameterSpec('record.max_bytes', 0, 'Split the recording at this size (0: never; '
+                  'else at least 1 MiB) [B]', low=0, high=2 ** 62, read_only=True),
     ParameterSpec('record.max_duration_s', 0.0,
-                  'Split the recording after this duration (0: never) [s]',
+                  'Split the recording after this duration (0: never; else at least 1 s) [s]',
                   low=0.0, high=1e7, read_only=True),
     ParameterSpec('qos.depth', 1000, 'History depth of the input subscription and outputs '
                   "(1 s at 1 kHz: room for the warm start's pause)",
@@ -208,6 +209,10 @@ def validate_parameter(name, value, current=None):
         return f'{name} must not be empty'
     if spec.choices is not None and value not in spec.choices:
         return f'{name} must be one of {", ".join(spec.choices)}, got {value!r}'
+    if name == 'record.max_bytes':
+        return split_refusal(name, value, MIN_SPLIT_BYTES, f'{MIN_SPLIT_BYTES} (1 MiB)')
+    if name == 'record.max_duration_s':
+        return split_refusal(name, value, MIN_SPLIT_DURATION_S, f'{MIN_SPLIT_DURATION_S:g} s')
     if name in ('diagnostics.criterion_warn', 'diagnostics.criterion_error') and current:
         warn = value if name.endswith('warn') else current.get('diagnostics.criterion_warn')
         error = value if name.endswith('error') else current.get('diagnostics.criterion_error')

@@ -22,6 +22,7 @@ from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
 from . import diagnostics, parameters
+from .input_watch import InputWatch
 from .messages import diagnostics_message, joint_level, ns_to_stamp, quality_cdr
 from .node_model import (crank_sample, load_node_model, one_line, PeriodStats, publishable,
                          SKIP_KINDS, Totals)
@@ -35,12 +36,16 @@ from ..core.estimation.marker_scale import default_exaggeration, MARKER_SHARE
 from ..core.estimation.sample import SampleFlag
 from ..core.estimation.streaming import StreamingEstimator
 from ..core.reduction.soft_basis import soft_basis_text
-from ..errors import FlexlinkError, InputRejected, OutlierSample
+from ..errors import ConflictingSample, FlexlinkError, InputRejected, OutlierSample
 from ..io import cdr
 from ..io.markers import MarkerEncoder
 from ..names import FIRST_INPUT_MESSAGE, READY_MESSAGE, TOPICS
 
 WARN_THROTTLE_S = 1.0  # at most one warning per second per kind of bad input
+INPUT_NOTE_THROTTLE_S = 10.0   # input lost or several publishers: at most every 10 s
+# A flood of input can hold the diagnostics timer off: after this many periods without
+# /diagnostics the input callback publishes them.
+OVERDUE_PERIODS = 2
 # Message type of each output (keys of names.TOPICS).
 # /diagnostics is a plain publisher, created with the node: a managed node reports while
 # unconfigured and inactive too.
@@ -126,14 +131,14 @@ class EstimatorPipeline(NodeRecording):
         """Subscribe and start the diagnostics timer: estimates flow from now on."""
         values = self.values
         self.estimator.reset()
-        self.period = PeriodStats()
+        self.period, self.watch = PeriodStats(), InputWatch()
         self._period_start = time.monotonic()
         self.subscription = self.create_subscription(
             JointState, values['input_topic'], self._on_joint_state, self.qos, raw=True)
         self.get_logger().info(
             f'{READY_MESSAGE} {self.subscription.topic_name} (joint '
             f'{values["crank_joint"]!r}), publishing under {self.get_name()}/'
-            + ('' if self.recorder is None else f'; recording to {self.recorder.path}'))
+            + self._recording_text())
         if not self.estimator.compiled:
             self.get_logger().warning(
                 'the compiled estimator step (flexlink_ros.core.estimation._radau_step) is '
@@ -141,6 +146,7 @@ class EstimatorPipeline(NodeRecording):
                 'colcon build or pip install .)')
 
     def _start_diagnostics_timer(self):
+        self._set_overdue()
         if self._timer is not None:
             self.destroy_timer(self._timer)
         self._timer = self.create_timer(self.values['diagnostics.period_s'],
@@ -189,7 +195,27 @@ class EstimatorPipeline(NodeRecording):
     # -- the per-message path -------------------------------------------------------------
 
     def _on_joint_state(self, data):
+        start = time.monotonic_ns()
+        watch = self.watch
+        self._take(data)
+        watch.busy_ns += time.monotonic_ns() - start
+        watch.received += 1
+        if start > self._overdue_ns:
+            self._publish_diagnostics()
+
+    def _set_overdue(self):
+        self._overdue_ns = time.monotonic_ns() + int(
+            OVERDUE_PERIODS * self.values['diagnostics.period_s'] * 1e9)
+
+    def _take(self, data):
         receive_ns = self._clock.now().nanoseconds
+        estimator = self.estimator
+        if estimator is None or self.subscription is None:
+            # Queued before a deactivate or cleanup that ran first: an inactive node's rule.
+            if self.totals is not None:
+                self.totals.received += 1
+                self.totals.counts['inactive'] += 1
+            return
         self.totals.received += 1
         if len(data) > cdr.MAX_MESSAGE_BYTES:   # not recorded either
             self._refuse('malformed', f'{len(data)} bytes, beyond the bound of '
@@ -198,19 +224,20 @@ class EstimatorPipeline(NodeRecording):
         if self.recorder is not None:
             self._record_input(data, receive_ns)
         try:
-            self._estimate(data)
+            self._estimate(data, estimator)
         except Exception as exc:    # last resort: no message may stop the node
             self.get_logger().error(f'unexpected {type(exc).__name__} on an input '
                                     f'message: {one_line(exc)}',
                                     throttle_duration_sec=WARN_THROTTLE_S)
             self._refuse('internal', f'{type(exc).__name__}: {one_line(exc)}')
 
-    def _estimate(self, data):
+    def _estimate(self, data, estimator):
         try:
             stamp_ns, angle, speed = crank_sample(data, self.values['crank_joint'],
                                                   self._deserialize)
+            self.watch.note(stamp_ns)
             start = time.perf_counter_ns()
-            sample = self.estimator.update(stamp_ns, angle, speed)
+            sample = estimator.update(stamp_ns, angle, speed)
             self.period.update_ns.append(time.perf_counter_ns() - start)
         except InputRejected as exc:
             self._refuse(exc.kind, str(exc))
@@ -218,6 +245,9 @@ class EstimatorPipeline(NodeRecording):
         except OutlierSample as exc:
             self.period.flags |= SampleFlag.OUTLIER
             self._refuse('outlier', str(exc))
+            return
+        except ConflictingSample as exc:
+            self._refuse('conflicting', str(exc))
             return
         except (FlexlinkError, ValueError) as exc:
             self._refuse('estimator', one_line(exc))
@@ -329,7 +359,8 @@ class EstimatorPipeline(NodeRecording):
         elif self.subscription is None:
             statuses = diagnostics.inactive_statuses(
                 self.totals, self.input_topic, self.model_facts,
-                None if self.recorder is None else self.recorder.status())
+                None if self.recorder is None
+                else self.recorder.status(list_files=False))
         else:
             statuses = self._active_statuses()
         return diagnostics.named(statuses, self.get_fully_qualified_name(),
@@ -343,14 +374,22 @@ class EstimatorPipeline(NodeRecording):
         rate = period.valid / elapsed
         stale = float('inf') if self.last_valid_wall is None else now - self.last_valid_wall
         values = self.values
+        watch = self.watch.judge(elapsed, period.counts.get('outlier', 0)
+                                 + period.counts.get('conflicting', 0),
+                                 self.count_publishers(self.input_topic),
+                                 self.estimator.reset_gap_s)
+        if watch[1]:
+            self.get_logger().warning('input: ' + '; '.join(watch[1]),
+                                      throttle_duration_sec=INPUT_NOTE_THROTTLE_S)
         return [diagnostics.input_status(self.totals, period, values, self.input_topic,
-                                         rate, stale),
+                                         rate, stale, watch),
                 diagnostics.estimator_status(period, values, self.model_facts),
                 *diagnostics.joint_statuses(period, values, self.criteria_source),
                 diagnostics.recorder_status(None if self.recorder is None
-                                            else self.recorder.status())]
+                                            else self.recorder.status(list_files=False))]
 
     def _publish_diagnostics(self):
+        self._set_overdue()
         clock_ns = self._clock.now().nanoseconds
         self._clock_watch.check(self.get_parameter('use_sim_time').value, clock_ns)
         now_ns = self._log_time(clock_ns)     # not 0 on simulated time without /clock

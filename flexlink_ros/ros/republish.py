@@ -9,15 +9,23 @@ namespace (``/joint_states`` becomes ``joint_states``: the same topic unless the
 remapped, then ``/robot1/joint_states``); ``/clock`` stays absolute, as every ROS time source
 expects it. SIGINT or SIGTERM end the playback between two messages; what was published is
 still returned.
+
+Playback starts once the JointState publisher has matched the number of subscriptions asked
+for (or after a timeout, with a note), so a node that matches after another subscriber does
+not miss the first messages. A publish the middleware refuses (a reliable subscriber that
+cannot keep up) is counted, its reason kept, and playback goes on. Log times that go back
+are replaced as :func:`.playback_schedule.playback_times` says, with a note.
 """
 
 import itertools
 import time
 
+from rclpy.subscription import RCLError
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from .playback_schedule import CLOCK, pass_events
+from .playback_schedule import CLOCK, pass_events, playback_times
+from .runtime import is_shutdown_error
 
 
 DISCOVERY_TIMEOUT_S = 10.0
@@ -27,12 +35,26 @@ ACK_TIMEOUT_S = 5.0      # a reliable subscriber gets the last messages before t
 SIGNAL_CHECK_S = 0.1     # longest sleep between two looks at the context (SIGINT shuts it down)
 
 
-def _wait_for_subscribers(rclpy, publishers, timeout_s):
-    """Return once every publisher has a subscriber, after ``timeout_s``, or at a signal."""
+def _wait_for_subscribers(rclpy, publisher, count, timeout_s):
+    """Wait until ``publisher`` matched ``count`` subscriptions, ``timeout_s`` or a signal."""
     deadline = time.monotonic() + timeout_s
     while (rclpy.ok() and time.monotonic() < deadline
-           and any(p.get_subscription_count() == 0 for p in publishers)):
+           and publisher.get_subscription_count() < count):
         time.sleep(0.05)
+    return publisher.get_subscription_count()
+
+
+def _publish(publisher, message, counts):
+    """Publish: 'sent', 'failed' (counted, its reason kept) or 'shutdown' (SIGINT/SIGTERM)."""
+    try:
+        publisher.publish(message)
+    except RCLError as exc:
+        if is_shutdown_error(exc):
+            return 'shutdown'
+        counts['failed'] += 1
+        counts['last_failure'] = (str(exc).strip().splitlines() or [''])[0][:200]
+        return 'failed'
+    return 'sent'
 
 
 def _sleep_until(rclpy, wall):
@@ -61,17 +83,19 @@ def _play_pass(rclpy, publishers, samples, options, counts, progress):
     joint_states, clock = publishers
     data = samples['data']
     start_wall = time.monotonic()
-    for wall_s, kind, value in pass_events(samples['log_ns'], options['rate'],
+    for wall_s, kind, value in pass_events(samples['play_ns'], options['rate'],
                                            options['clock_hz'], options['clock_per_message']):
         _sleep_until(rclpy, start_wall + wall_s)
         if not rclpy.ok():
             return False
+        outcome = _publish(*((clock, _clock_message(value)) if kind == CLOCK
+                             else (joint_states, data[value])), counts)
+        if outcome == 'shutdown':
+            return False
         if kind == CLOCK:
-            clock.publish(_clock_message(value))
-            counts['clock_messages'] += 1
+            counts['clock_messages'] += outcome == 'sent'
             continue
-        joint_states.publish(data[value])
-        counts['published'] += 1
+        counts['published'] += outcome == 'sent'
         counts['pass_position'] = value + 1
         if progress is not None:
             progress(value)
@@ -92,6 +116,18 @@ def _create_publishers(node, topic, options):
     return joint_states, clock
 
 
+def _wait_for_matches(rclpy, publishers, options, counts):
+    """Wait for the subscriptions asked for (a note if too few came); /clock's briefly."""
+    wanted = options.get('subscribers', 1)
+    timeout_s = options.get('discovery_timeout_s', DISCOVERY_TIMEOUT_S)
+    counts['matched'] = _wait_for_subscribers(rclpy, publishers[0], wanted, timeout_s)
+    if counts['matched'] < wanted and rclpy.ok():
+        counts['notes'].append(f"{counts['matched']} of {wanted} subscriptions matched "
+                               f"{counts['topic']} within {timeout_s:g} s: played anyway")
+    if publishers[1] is not None:    # /clock listeners, if any, are found by now
+        _wait_for_subscribers(rclpy, publishers[1], 1, CLOCK_DISCOVERY_S)
+
+
 def publish_recording(samples, topic, options, progress=None):
     """
     Republish recorded JointState bytes with their recorded timing (log time deltas).
@@ -99,32 +135,39 @@ def publish_recording(samples, topic, options, progress=None):
     Parameters
     ----------
     samples : dict
-        'data' (CDR payloads) and 'log_ns' (log times [ns]), as read_crank_samples gives.
+        'data' (CDR payloads), 'log_ns' (log times [ns]) and optionally 'stamps_ns' (header
+        stamps, used where the log times go back), as read_crank_samples gives.
     topic : str
         The recorded topic (published relative to the node's namespace).
     options : dict
         'rate' (playback speed factor, > 0), 'clock_hz' (fixed /clock frequency [Hz], 0:
-        none), 'clock_per_message' (bool), 'passes' (0: until interrupted), 'ros_args'
-        (list of str, the arguments after ``--ros-args``), optionally
-        'discovery_timeout_s'.
+        none, at most MAX_CLOCK_HZ), 'clock_per_message' (bool), 'passes' (0: until
+        interrupted), 'ros_args' (list of str, the arguments after ``--ros-args``),
+        optionally 'subscribers' (matched subscriptions to wait for, default 1) and
+        'discovery_timeout_s' (how long to wait for them).
     progress : callable, optional
         ``progress(n)`` after each message and ``progress(n, force=True)`` at the end.
 
     Returns
     -------
     dict
-        'published', 'clock_messages', 'passes' (started), 'pass_position' (messages into
-        the last pass), 'interrupted', 'topic' (the
-        resolved, remapped name), 'node' (its fully qualified name), 'publish_s' (wall time).
+        'published', 'failed' (publishes the middleware refused) and 'last_failure' (its
+        reason), 'clock_messages', 'passes' (started), 'pass_position' (messages into the
+        last pass), 'interrupted', 'topic' (the resolved, remapped name), 'node' (its fully
+        qualified name), 'matched' (subscriptions when playback began), 'notes' (one line
+        each: timing replaced, too few subscriptions), 'publish_s' (wall time).
 
     """
     import rclpy
     from rclpy.duration import Duration
     from rclpy.executors import ExternalShutdownException
 
-    counts = {'published': 0, 'clock_messages': 0, 'passes': 0, 'pass_position': 0,
-              'interrupted': True,
-              'topic': None, 'node': None, 'publish_s': 0.0}
+    counts = {'published': 0, 'failed': 0, 'last_failure': '', 'clock_messages': 0,
+              'passes': 0, 'pass_position': 0, 'interrupted': True, 'topic': None,
+              'node': None, 'matched': 0, 'notes': [], 'publish_s': 0.0}
+    play_ns, note = playback_times(samples['log_ns'], samples.get('stamps_ns'))
+    samples = {**samples, 'play_ns': play_ns}
+    counts['notes'] += [note] if note else []
     start = time.monotonic()
     try:
         with rclpy.init(args=['--ros-args', *options.get('ros_args', ())]):
@@ -132,10 +175,7 @@ def publish_recording(samples, topic, options, progress=None):
             publishers = _create_publishers(node, topic, options)
             counts.update(topic=publishers[0].topic_name,
                           node=node.get_fully_qualified_name())
-            _wait_for_subscribers(rclpy, publishers[:1],
-                                  options.get('discovery_timeout_s', DISCOVERY_TIMEOUT_S))
-            if publishers[1] is not None:    # /clock listeners, if any, are found by now
-                _wait_for_subscribers(rclpy, publishers[1:], CLOCK_DISCOVERY_S)
+            _wait_for_matches(rclpy, publishers, options, counts)
             start = time.monotonic()
             passes = options['passes']
             for _ in (itertools.count() if passes == 0 else range(passes)):

@@ -22,7 +22,8 @@ Bearings: ``rigid`` are exact pins in both models; ``flexible`` are the mechanis
 springs, with the peer's joint masses split as the mechanism file says (the linear model's
 convention) and the crank pivot rigid. The peer damps with beta = 1e-4 s on the material strain
 rates, the package with modal zeta (0.02 by default; ``zeta`` = 0.012 matches the peer's first
-modes). Peer runs can be kept in a cache directory (keyed by all their settings).
+modes); with ``stiffness_damping`` beta both are damped with that beta. Peer runs can be kept
+in a cache directory (keyed by all their settings).
 """
 
 import dataclasses
@@ -41,6 +42,7 @@ from ..core.fe.second_order_dynamic import dynamic_pass
 from ..core.fe.second_order_full import corrected_response
 from ..core.fe.simulate import periodic_response
 from ..core.fe.stiffness_damping import system_matrices
+from ..core.reduction.cache_location import cache_file
 from ..core.validity import is_valid, nonlinearity_indicator, VALIDITY_THRESHOLD
 from ..errors import FlexlinkError
 
@@ -68,12 +70,17 @@ class Settings:
     revolutions: int = None
     peer_steps: int = DEFAULT_STEPS
     points: int = DEFAULT_POINTS
-    beta_s: float = DEFAULT_BETA_S
+    beta_s: float = None
     stiffness_damping: float = None
     cache: str = None
 
     def __post_init__(self):
-        """Check the settings (ValueError names the bad one)."""
+        """Check the settings (ValueError names the bad one); the peer's beta as asked."""
+        if self.beta_s is None:
+            # the peer is damped as the package: its own default only under modal damping
+            peer_beta = (DEFAULT_BETA_S if self.stiffness_damping is None
+                         else self.stiffness_damping)
+            object.__setattr__(self, 'beta_s', float(peer_beta))
         if self.bearings not in BEARINGS:
             raise ValueError(f'`bearings` must be one of {tuple(BEARINGS)}, '
                              f'got {self.bearings!r}')
@@ -100,8 +107,8 @@ def _cache_name(cache, mech, rpm, settings):
     """File of a peer run in the cache directory: a hash of every setting that changes it."""
     key = repr((mech, float(rpm), settings.elements_per_link, settings.bearings,
                 settings.gravity, settings.beta_s, settings.revolutions, settings.peer_steps))
-    digest = hashlib.sha1(key.encode()).hexdigest()[:16]
-    return os.path.join(cache, f'peer_{mech.name}_{rpm:g}rpm_{digest}.npz')
+    digest = hashlib.sha1(key.encode()).hexdigest()
+    return str(cache_file(cache, f'peer_{mech.name}_{rpm:g}rpm', digest))
 
 
 def peer_run(mech, rpm, settings):
@@ -210,8 +217,9 @@ def validate_speed(mechanism, rpm, settings=None):
         :data:`MODELS`: per output 'other_p2p' [m], 'p2p_error', 'rms_error'), 'targets_met'
         (per model and output point), 'point_rms_error' (per model and output point: the
         deflection vector's relative RMS), 'nonlinearity' ({'indicator_max', 'valid'}),
-        'threshold', 'zeta', 'damping', 'peer_cpu_s', 'wall_s', and 'series' (for charts:
-        crank angle [deg] and outputs [m] of the peer's last revolution and of every model).
+        'threshold', 'zeta', 'damping', 'peer_beta_s' (the peer's beta [s]), 'peer_cpu_s',
+        'wall_s', and 'series' (for charts: crank angle [deg] and outputs [m] of the peer's last
+        revolution and of every model).
 
     """
     settings = Settings() if settings is None else settings
@@ -240,7 +248,8 @@ def validate_speed(mechanism, rpm, settings=None):
                                 for name in MODELS},
             'targets_met': {name: meets_targets(table) for name, table in models.items()},
             'nonlinearity': is_valid(runs['indicator']), 'threshold': VALIDITY_THRESHOLD,
-            'zeta': runs['zeta'], 'damping': runs['damping'], 'peer_cpu_s': peer['info']['cpu_s'],
+            'zeta': runs['zeta'], 'damping': runs['damping'],
+            'peer_beta_s': peer['info']['beta_s'], 'peer_cpu_s': peer['info']['cpu_s'],
             'wall_s': runs['wall_s'], 'series': series}
 
 

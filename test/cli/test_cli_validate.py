@@ -106,3 +106,40 @@ def test_without_exudyn_the_error_names_the_extra():
     assert run.returncode == 1 and run.stdout == ''
     assert run.stderr.startswith('flexlink validate: error: the Exudyn peer is not installed')
     assert "pip install '.[peer]'" in run.stderr and len(run.stderr.splitlines()) == 1
+
+
+@needs_exudyn
+def test_the_peer_is_damped_with_the_asked_stiffness_damping(capsys):
+    """`--stiffness-damping B` damps the peer with B too, not with its default 1e-4 s."""
+    tiny = ('--rpm', '391', '--elements-per-link', '2', '--no-gravity', '--revolutions', '2',
+            '--bearings', 'flexible', '--json')
+    p2p = {}
+    for beta in (3e-4, 1e-4):
+        code, out, _ = _run(capsys, *tiny, '--stiffness-damping', f'{beta:g}')
+        assert code == 0
+        (record,) = json.loads(out)['records']
+        assert record['settings']['beta_s'] == beta
+        assert record['peer_beta_s'] == beta           # what the peer ran with
+        assert record['damping'] == f'beta {beta:g} s'
+        p2p[beta] = record['peer_p2p']['coupler_mid_dy']
+    # the two peers differ: three times the damping changes the start transient's decay
+    assert abs(p2p[3e-4] / p2p[1e-4] - 1.0) > 1e-3
+
+
+@needs_exudyn
+def test_nonlinear_compares_both_full_orders(capsys, tmp_path):
+    """`--nonlinear`: the linear and nonlinear full order, damped as the peer (tiny size)."""
+    tiny = ('--rpm', '391', '--elements-per-link', '2', '--no-gravity', '--revolutions', '2',
+            '--bearings', 'flexible', '--stiffness-damping', '3e-4', '--nonlinear')
+    code, out, _ = _run(capsys, *tiny, '--json')
+    assert code == 0
+    result = json.loads(out)
+    (record,) = result['records']
+    assert result['model'] == 'nonlinear' and record['peer_beta_s'] == 3e-4
+    assert set(record['models']) == {'linear', 'nonlinear'}
+    assert record['spectral_radius'] < 1.0 and len(record['floquet_moduli']) == 4
+    lines = _run(capsys, *tiny)[1].splitlines()
+    assert lines[0].startswith('391 rpm, flexible bearings, gravity off, 2 elements per link')
+    assert lines[-1].startswith('Floquet multipliers |mu| ')
+    code, out, err = _run(capsys, *tiny, '--chart', str(tmp_path / 'x.png'))
+    assert code == 1 and out == '' and '--chart' in err and not (tmp_path / 'x.png').exists()

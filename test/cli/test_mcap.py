@@ -7,8 +7,10 @@ import sys
 
 from flexlink_ros.cli import main as cli
 from flexlink_ros.cli.mcap import default_recovered_path
+from hostile_bag import ENTRIES, plant_hostile_entries
 from mcap.reader import make_reader
 from mcap.writer import Writer
+import pytest
 
 MESSAGES = 200
 ROOT = pathlib.Path(__file__).resolve().parents[2]
@@ -90,3 +92,26 @@ def test_recovery_and_info_keep_what_made_the_recording(tmp_path, capsys):
     capsys.readouterr()
     assert cli.main(['mcap-info', str(out)]) == 0
     assert 'made with: flexlink_node' in capsys.readouterr().out
+
+
+@pytest.mark.parametrize('names', [(name,) for name in ENTRIES] + [ENTRIES],
+                         ids=[name[:-5] for name in ENTRIES] + ['all'])
+def test_mcap_info_of_a_bag_skips_a_fifo_links_out_and_a_device_with_a_warning(tmp_path, names):
+    """These once hung mcap-info for ever, read a file outside the bag, or failed the bag."""
+    from flexlink_ros.io.recorder import McapRecorder
+    from sensor_msgs.msg import JointState
+    paths = {}
+    for name in ('bag', 'elsewhere'):
+        with McapRecorder(tmp_path / name) as recorder:
+            for k in range(MESSAGES if name == 'bag' else 7):
+                recorder.write('/joint_states', JointState(name=['crank']), 10**18 + k)
+        paths[name] = tmp_path / name
+    planted = plant_hostile_entries(paths['bag'], paths['elsewhere'] / 'elsewhere_0.mcap', names)
+    done = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'mcap-info',
+                           str(paths['bag'])], capture_output=True, text=True, timeout=60,
+                          env=ENV)
+    assert done.returncode == 0, done.stderr
+    assert f'{MESSAGES} messages' in done.stdout.splitlines()[0]
+    for name in planted:        # each said on stderr (warning) and in the report
+        assert f'{paths["bag"] / name} skipped' in done.stderr
+        assert f'  skipped {paths["bag"] / name}: ' in done.stdout

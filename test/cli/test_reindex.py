@@ -165,7 +165,11 @@ def test_reindex_rebuilds_the_recorders_metadata_exactly_and_salvages_a_cut_file
     assert {t['topic_metadata']['name']: t['message_count']
             for t in metadata['topics_with_message_count']} == counts
     assert metadata['message_count'] == len(messages)
-    assert records[1] == metadata   # the closing record is the rebuilt metadata.yaml
+    # The closing record describes the rewritten file alone, as the recorder writes it.
+    assert records[1]['relative_file_paths'] == [files[-1].name]
+    assert records[1]['message_count'] == kept
+    assert records[1]['topics_with_message_count'][0]['topic_metadata'] == metadata[
+        'topics_with_message_count'][0]['topic_metadata']
     (qos,) = metadata['topics_with_message_count'][0]['topic_metadata']['offered_qos_profiles']
     assert (qos['reliability'], qos['depth']) == ('best_effort', 100)
 
@@ -225,3 +229,94 @@ def test_reindex_refuses_what_is_not_a_crashed_bag(tmp_path, capsys):
     assert cli.main(['reindex', str(bag)]) == 1      # one file is not MCAP at all: said so
     assert 'not an MCAP file' in capsys.readouterr().err
     assert not (bag / 'metadata.yaml').exists()
+
+
+RECORDING_SCRIPT = """
+import signal, sys, time
+from flexlink_ros.io.recorder import McapRecorder
+from sensor_msgs.msg import JointState
+stop = []
+signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
+recorder = McapRecorder(sys.argv[1]).open()
+k = 0
+while not stop:
+    recorder.enqueue('/a', JointState(name=['crank'], position=[1e-3 * k]),
+                     1_700_000_000_000_000_000 + k * 1_000_000)
+    k += 1
+    time.sleep(0.001)
+status = recorder.close()
+print(k, status['message_count'])
+"""
+
+
+def test_reindex_refuses_a_bag_being_recorded_and_force_does_not_override(tmp_path):
+    """The recorder holds a lock on its bag for the recording's life: reindex exits 2, one line."""
+    bag = tmp_path / 'live'
+    recording = subprocess.Popen([sys.executable, '-c', RECORDING_SCRIPT, str(bag)], cwd=REPO,
+                                 stdout=subprocess.PIPE, text=True)
+    try:
+        first = bag / 'live_0.mcap'
+        deadline = time.monotonic() + 20.0
+        while not (first.exists() and _recorded(first)):
+            assert time.monotonic() < deadline, 'nothing recorded within 20 s'
+            time.sleep(0.05)
+        before = sorted(p.name for p in bag.iterdir())
+        for extra in ([], ['--force']):
+            done = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'reindex',
+                                   str(bag), *extra], cwd=REPO, capture_output=True, text=True,
+                                  timeout=60)
+            assert done.returncode == 2, done.stderr
+            assert len(done.stderr.splitlines()) == 1 and 'being recorded' in done.stderr
+            assert sorted(p.name for p in bag.iterdir()) == before     # nothing rewritten
+    finally:
+        recording.send_signal(signal.SIGTERM)
+        out, _ = recording.communicate(timeout=30)
+    sent, recorded = map(int, out.split())
+    assert recording.returncode == 0 and sent == recorded
+    assert len(rosbags_messages(bag)) == recorded       # the bag is whole: one file, all of it
+
+
+def _kill_at_a_split(tmp_path, name, last):
+    """Make a closed two-file bag, drop its metadata.yaml and make its last file ``last``."""
+    bag = tmp_path / name
+    status = record_bag(bag, count=1500)
+    (bag / 'metadata.yaml').unlink()
+    files = [pathlib.Path(p) for p in status['files']]
+    assert len(files) == 2
+    header = files[1].read_bytes()[:8 + 200]
+    files[1].write_bytes({'empty': b'', 'magic': header[:8], 'header': header}[last])
+    return bag, files
+
+
+@pytest.mark.parametrize('last', ['empty', 'magic', 'header'])
+def test_a_last_file_cut_at_a_split_is_skipped_with_a_note(tmp_path, capsys, last):
+    bag, files = _kill_at_a_split(tmp_path, f'cut_{last}', last)
+    assert cli.main(['reindex', str(bag)]) == 0
+    out = capsys.readouterr().out
+    assert f'skipped {files[1]}' in out and 'no message' in out
+    metadata = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    assert metadata['relative_file_paths'] == [files[0].name]
+    assert len(rosbags_messages(bag)) == metadata['message_count'] == 1100
+
+
+def test_stale_salvage_files_are_removed_and_the_rewrite_keeps_the_mode(tmp_path, capsys):
+    bag = tmp_path / 'stale'
+    record_bag(bag, count=1500)
+    (bag / 'metadata.yaml').unlink()
+    cut = bag / 'stale_1.mcap'
+    data = cut.read_bytes()
+    cut.write_bytes(data[:len(data) // 2])      # killed mid-recording, before its summary
+    cut.chmod(0o600)
+    gone = subprocess.run([sys.executable, '-c', 'import os; print(os.getpid())'],
+                          capture_output=True, text=True, check=True)
+    dead_pid = int(gone.stdout)
+    stale = bag / f'.stale_1.mcap.{dead_pid}.salvage'          # a reindex killed mid-rewrite
+    alive = bag / f'.stale_1.mcap.{1}.salvage'                  # pid 1 is alive: not ours
+    other = bag / f'.stale_1.mcap.{dead_pid}.salvage.keep'      # not the pattern: not ours
+    for path in (stale, alive, other):
+        path.write_bytes(bytes(1000))
+    assert cli.main(['reindex', str(bag)]) == 0
+    assert 'removed' in capsys.readouterr().out
+    assert not stale.exists() and alive.exists() and other.exists()
+    assert cut.stat().st_mode & 0o777 == 0o600          # the rewritten file keeps the mode
+    assert len(rosbags_messages(bag)) > 1100

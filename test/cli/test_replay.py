@@ -2,6 +2,7 @@
 
 import json
 import math
+import pathlib
 import subprocess
 import sys
 
@@ -13,6 +14,7 @@ from flexlink_ros.io.recording import iter_recording
 from flexlink_ros.ros import messages as ros_messages
 from flexlink_ros.ros import parameters as node_params
 from geometry_msgs.msg import Vector3Stamped
+from hostile_bag import ENTRIES, plant_hostile_entries
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
@@ -199,3 +201,49 @@ def test_replay_refuses_an_existing_out_path_before_estimating(tmp_path):
     assert '`--out`' in result.stderr and 'dangling' in result.stderr
     assert 'Traceback' not in result.stderr
     assert not (tmp_path / 'target.mcap').exists() and link.is_symlink()
+
+
+@pytest.mark.parametrize('names', [('fifo_2.mcap',), ENTRIES], ids=['fifo', 'all'])
+def test_replay_of_a_bag_skips_a_fifo_links_out_and_a_device(tmp_path, names):
+    """These once hung replay for ever, read a file outside the bag, or failed the bag."""
+    stamps = [10**18 + k * 10**6 for k in range(300)]
+    angles = [math.remainder(40.0 * k * 1e-3, 2 * math.pi) for k in range(300)]
+    write_recording(tmp_path / 'bag', stamps, angles, [40.0] * 300)
+    write_recording(tmp_path / 'elsewhere', stamps[:5], angles[:5], [40.0] * 5)
+    planted = plant_hostile_entries(tmp_path / 'bag', tmp_path / 'elsewhere' / 'elsewhere_0.mcap',
+                                    names)
+    done = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'replay',
+                           str(tmp_path / 'bag'), '--out', str(tmp_path / 'out.mcap'), '--json'],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    result = json.loads(done.stdout)
+    assert result['samples'] == 300
+    assert sorted(pathlib.Path(d['file']).name for d in result['damaged']) == sorted(planted)
+    for name in planted:
+        assert f"{tmp_path / 'bag' / name} skipped" in done.stderr
+
+
+def evil_mechanism(tmp_path, name='../../../escape/dir/x'):
+    """Write the shipped Cho 1992 file with a name that spells a path."""
+    import yaml
+    from flexlink_ros.core.mechanism_file import find_config
+    data = yaml.safe_load(find_config('cho1992').read_text())
+    data['name'] = name
+    path = tmp_path / 'evil.yaml'
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def test_a_mechanism_name_that_spells_a_path_is_refused_in_one_line(tmp_path):
+    bag = tmp_path / 'in.mcap'
+    write_recording(bag, [1_700_000_000 * 10**9 + k * 10**6 for k in range(5)],
+                    [0.01 * k for k in range(5)], [10.0] * 5)
+    cache = tmp_path / 'a' / 'b' / 'c' / 'cache'
+    result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'replay', str(bag),
+                             '--out', str(tmp_path / 'out'), '--mechanism',
+                             str(evil_mechanism(tmp_path)), '--cache-dir', str(cache)],
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode != 0 and 'Traceback' not in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1, result.stderr
+    assert 'name:' in result.stderr and 'not a plain name' in result.stderr
+    assert not (tmp_path / 'a' / 'escape').exists() and not cache.exists()

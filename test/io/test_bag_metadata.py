@@ -1,6 +1,7 @@
 """bag_metadata: a metadata.yaml written from the files' scans, read back by rosbags."""
 
 from flexlink_ros.io import bag_index
+from flexlink_ros.io.bag_files import bag_files
 from flexlink_ros.io.bag_metadata import write_bag_metadata
 from recorder_helpers import STEP_NS, T0_NS
 from rosbags.rosbag2 import Reader
@@ -10,9 +11,10 @@ import yaml
 def test_metadata_yaml_is_read_by_rosbags_with_the_counts_and_times(split_bag, tmp_path):
     bag = tmp_path / 'run'
     bag.mkdir()
-    for path in bag_index.bag_files(split_bag):    # the files, without the recorder's yaml
+    # The files, without the recorder's yaml.
+    for path in bag_files(split_bag, rosbag2_names=True):
         (bag / path.name).write_bytes(path.read_bytes())
-    files = [bag_index.scan_bag_file(path) for path in bag_index.bag_files(bag)]
+    files = [bag_index.scan_bag_file(path) for path in bag_files(bag, rosbag2_names=True)]
     write_bag_metadata(bag, files, bag_index.bag_topics(files))
     with Reader(bag) as reader:
         assert reader.message_count == 2 * 125

@@ -390,3 +390,25 @@ def test_mcap_info_on_a_missing_or_foreign_file_is_a_one_line_error(tmp_path, co
     assert result.stderr.startswith('flexlink mcap-info: error:')
     assert len(result.stderr.strip().splitlines()) == 1
     assert ('bad magic' if content else 'No such file') in result.stderr
+
+
+def test_a_refused_path_leaves_nothing_behind_so_the_next_start_is_not_refused(tmp_path):
+    """A 250-character bag name: its file name is too long; no directory is left behind."""
+    bag = tmp_path / 'new' / 'parents' / ('x' * 250)
+    for _ in range(2):      # the second start is refused for the same reason, not for a leftover
+        recorder = McapRecorder(bag)
+        with pytest.raises(RecorderError, match='File name too long'):
+            recorder.open()
+        assert recorder.state is RecorderState.FAILED
+        assert not (tmp_path / 'new').exists()
+
+
+@pytest.mark.parametrize('option, value', [('--split-size-mb', '0.001'),
+                                           ('--split-duration-s', '0.001')])
+def test_mcap_record_refuses_splits_below_the_floor_before_recording(tmp_path, option, value):
+    out = tmp_path / 'tiny'
+    done = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'mcap-record',
+                           str(out), '--topic', 'joint_states:sensor_msgs/msg/JointState',
+                           option, value], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 1 and f'{option} must be 0 (no split) or at least' in done.stderr
+    assert not out.exists()

@@ -74,3 +74,25 @@ def test_enqueue_reports_a_full_disk_once_and_estimation_can_go_on(tiny_tmpfs, t
     assert raised == 1 and status['state'] == 'failed' and status['dropped_count'] >= 10
     result = recover_mcap(status['files'][0], tmp_path / 'salvaged.mcap')
     assert result['message_count'] > 0
+
+
+def test_the_queue_is_bounded_in_bytes_and_what_overflows_is_counted(tmp_path):
+    """A writer that cannot keep up (its lock held, as by a slow disk) loses counted messages."""
+    bag = tmp_path / 'bag'
+    recorder = McapRecorder(bag).open()
+    recorder.add_topic('/a', 'sensor_msgs/msg/JointState')
+    data = bytes(1000)
+    bound = recorder_queue.QUEUE_MAX_BYTES
+    offered = 3 * bound // len(data)
+    with recorder._lock:      # the writing thread waits here, as behind a stalled disk
+        accepted = sum(recorder.enqueue('/a', data, T0_NS + k * STEP_NS)
+                       for k in range(offered))
+        status = recorder.status()
+        assert status['queued_bytes'] <= bound
+    assert 0 < accepted < offered
+    assert status['overflow_count'] == offered - accepted == status['dropped_count']
+    status = recorder.close()
+    assert status['overflow_count'] == offered - accepted
+    with open(bag / 'bag_0.mcap', 'rb') as stream:
+        on_disk = sum(1 for _ in make_reader(stream).iter_messages(log_time_order=False))
+    assert on_disk == accepted == status['message_count']

@@ -58,17 +58,24 @@ def test_metadata_record_at_open_and_close_and_sequences_per_topic(tmp_path, bat
     for n, path in enumerate(files):
         (opening, closing), numbers, summary = read_file(path)
         assert summary.statistics.metadata_count == 2 and len(summary.metadata_indexes) == 2
-        # At open: the files so far, this one without messages yet (rosbag2's "unset" start).
-        assert opening['relative_file_paths'] == [f.name for f in files[:n + 1]]
-        assert opening['files'][-1] == {'path': path.name,
-                                        'starting_time': {'nanoseconds_since_epoch': UNSET_NS},
-                                        'duration': {'nanoseconds': 0}, 'message_count': 0}
-        # At close: the bag as it stands, this file complete; the last file's is metadata.yaml.
-        assert closing['files'][-1]['message_count'] == summary.statistics.message_count > 0
-        assert closing['message_count'] == sum(f['message_count'] for f in closing['files'])
+        # Each file's records describe that file alone (a split costs the same at any n):
+        # at open without messages yet (rosbag2's "unset" start), at close complete.
+        assert opening['relative_file_paths'] == closing['relative_file_paths'] == [path.name]
+        assert opening['files'] == [{'path': path.name,
+                                     'starting_time': {'nanoseconds_since_epoch': UNSET_NS},
+                                     'duration': {'nanoseconds': 0}, 'message_count': 0}]
+        assert opening['message_count'] == 0
+        assert closing['files'][0]['message_count'] == summary.statistics.message_count > 0
+        assert closing['message_count'] == summary.statistics.message_count
+        assert {t['topic_metadata']['name']: t['message_count']
+                for t in closing['topics_with_message_count']} == {
+            summary.channels[c].topic: count
+            for c, count in summary.statistics.channel_message_counts.items()}
         for topic, values in numbers.items():
             sequences[topic] += values
-    assert closing == final
+    assert closing['topics_with_message_count'][0]['topic_metadata'] == final[
+        'topics_with_message_count'][0]['topic_metadata']
+    assert final['relative_file_paths'] == [f.name for f in files]
     assert list(final) == ['version', 'storage_identifier', 'duration', 'starting_time',
                            'message_count', 'topics_with_message_count', 'compression_format',
                            'compression_mode', 'relative_file_paths', 'files', 'custom_data',
@@ -133,3 +140,24 @@ def test_offered_qos_given_when_the_first_message_comes_reaches_rosbags(tmp_path
     _, _, summary = read_file(bag / 'qos_0.mcap')
     (channel,) = [c for c in summary.channels.values() if c.topic == '/in']
     assert yaml.safe_load(channel.metadata['offered_qos_profiles'])[0]['depth'] == 5
+
+
+def test_a_split_costs_the_same_whatever_the_number_of_files_before(tmp_path):
+    """The rosbag2 records of file 300 are as long as those of file 1: no list of every file."""
+    bag = tmp_path / 'many'
+    with McapRecorder(bag, split_size_bytes=1, flush_thread=False) as recorder:
+        recorder.add_topic('/a', JointState)
+        for k in range(300):      # one message per file
+            recorder.write('/a', b'\x00\x01\x00\x00' + bytes(40), T0_NS + k * 1_000_000)
+    sizes = []
+    for n in (1, 299):
+        path = bag / f'many_{n}.mcap'
+        with open(path, 'rb') as stream:
+            records = [m.metadata['serialized_metadata']
+                       for m in make_reader(stream).iter_metadata()]
+        assert [yaml.safe_load(r)['relative_file_paths'] for r in records] == [[path.name]] * 2
+        sizes.append([len(r) for r in records])
+    # Only the file's name and times differ (a list of every file would add ~100 B each).
+    assert all(abs(late - early) < 20 for early, late in zip(*sizes))
+    final = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    assert len(final['files']) == 300 and final['message_count'] == 300

@@ -233,3 +233,23 @@ def test_node_nonlinearity_warn_parameter_sets_the_threshold_at_run_time(
     assert found and all('nonlinearity' not in message and threshold == 100.0
                          for _, message, _, threshold in found), found
     assert node.stop() == 0
+
+
+def test_recorder_error_when_its_write_queue_overflowed(tmp_path):
+    """Messages lost to a full write queue (a writer that cannot keep up): ERROR, counted."""
+    from flexlink_ros.io.recorder import McapRecorder
+    from flexlink_ros.io.recorder_queue import QUEUE_MAX_BYTES
+    from flexlink_ros.ros.messages import ERROR
+    recorder = McapRecorder(tmp_path / 'bag').open()
+    recorder.add_topic('/a', 'sensor_msgs/msg/JointState')
+    assert diagnostics.recorder_status(recorder.status(list_files=False)).level == OK
+    with recorder._lock:      # the writing thread waits here, as behind a stalled disk
+        for k in range(2 * QUEUE_MAX_BYTES // 10_000):
+            recorder.enqueue('/a', bytes(10_000), k)
+        report = diagnostics.recorder_status(recorder.status(list_files=False))
+    recorder.close()
+    values = {v.key: v.value for v in report.values}
+    lost = recorder.status()['overflow_count']
+    assert report.level == ERROR and lost > 0
+    assert f'{lost} messages lost' in report.message and values['overflow'] == str(lost)
+    assert values['files'] == '1'

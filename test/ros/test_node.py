@@ -342,6 +342,21 @@ def test_bad_parameters_file_value_stops_the_node_with_a_reason(tmp_path, proces
     assert log.strip().startswith(f'{NODE_NAME}: error:')
 
 
+def test_a_mechanism_name_that_spells_a_path_stops_the_node(tmp_path, processes):
+    data = yaml.safe_load((PARAMS_FILE.parent / 'cho1992.yaml').read_text())
+    data['name'] = '../../../escape/dir/x'
+    mechanism = tmp_path / 'evil.yaml'
+    mechanism.write_text(yaml.safe_dump(data))
+    cache = tmp_path / 'a' / 'b' / 'c' / 'cache'
+    node_process = NodeProcess(tmp_path, f'mechanism:={mechanism}', f'model.cache_dir:={cache}')
+    processes.append(node_process)
+    assert node_process.process.wait(timeout=READY_TIMEOUT_S) == 1
+    log = node_process.log()
+    assert log.strip().startswith(f'{NODE_NAME}: error: name:') and 'Traceback' not in log
+    assert 'not a plain name' in log
+    assert not (tmp_path / 'a' / 'escape').exists() and not cache.exists()
+
+
 def test_managed_node_streams_only_while_active(tmp_path, processes, ros):
     """Lifecycle: configure loads the model, activate subscribes, deactivate stops, cleanup."""
     from geometry_msgs.msg import Vector3Stamped

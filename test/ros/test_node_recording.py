@@ -11,11 +11,13 @@ import os
 import signal
 import subprocess
 import sys
+import time
 
 from flexlink_ros.names import FIRST_INPUT_MESSAGE, QUALITY_NAMES, READY_MESSAGE
 import pytest
 import test_node
-from test_node import DISCOVERY_TIMEOUT_S, NodeProcess, READY_TIMEOUT_S, spin_until
+from test_node import (DISCOVERY_TIMEOUT_S, NodeProcess, read_with_mcap_ros2, read_with_rosbags,
+                       READY_TIMEOUT_S, spin_until)
 import yaml
 
 processes = test_node.processes   # fixtures of test_node, used here by name
@@ -115,3 +117,115 @@ def test_driver_qos_is_recorded_as_offered_and_every_estimate_has_its_quality(
     assert stamps[QUALITY] == stamps[LEVER] == stamps[INPUT]
     assert all(list(m.name) == list(QUALITY_NAMES) for m in quality)
     assert all(math.isfinite(m.position[0]) and m.position[0] >= 0.0 for m in quality)
+
+
+def test_split_settings_below_the_floor_stop_the_node_at_start_up(tmp_path, processes):
+    """record.max_bytes:=1 once lost the recording and hung the node: now refused, nothing made."""
+    bag = tmp_path / 'tiny'
+    node_process = NodeProcess(tmp_path, 'record.enabled:=true', f'record.path:={bag}',
+                               'record.max_bytes:=1', 'record.max_duration_s:=0.001')
+    processes.append(node_process)
+    assert node_process.process.wait(timeout=READY_TIMEOUT_S) == 1
+    log = node_process.log()
+    assert 'record.max_bytes must be 0 (no split) or at least 1048576 (1 MiB), got 1' in log
+    assert 'record.max_duration_s must be 0 (no split) or at least 1 s, got 0.001' in log
+    assert READY_MESSAGE not in log and not bag.exists()
+
+
+def _publish_crank(publisher, executor, count, rate_hz=1000.0):
+    """Publish ``count`` JointState messages of a crank at 391 rpm, paced at ``rate_hz``."""
+    from test_node import joint_state
+    speed = 391.0 * 2.0 * math.pi / 60.0
+    start = time.monotonic()
+    for n in range(count):
+        t = n / rate_hz
+        angle = math.remainder(speed * t, 2.0 * math.pi)
+        publisher.publish(joint_state(1_800_000_000 * 10**9 + round(t * 1e9), ['crank'],
+                                      [angle], [speed]))
+        delay = start + (n + 1) / rate_hz - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+        if n % 100 == 0:
+            executor.spin_once(timeout_sec=0.0)
+
+
+def _settled_count(executor, reports, key='received'):
+    """Spin until the node's input count on /diagnostics stops changing for a second."""
+    def latest():
+        values = [kv.value for report in reports for status in report.status
+                  if status.name.endswith('input') for kv in status.values if kv.key == key]
+        return int(values[-1]) if values else None
+
+    last, since = None, time.monotonic()
+    deadline = since + DISCOVERY_TIMEOUT_S
+    while time.monotonic() - since < 1.0 or last is None:
+        assert time.monotonic() < deadline, 'the input count did not settle'
+        executor.spin_once(timeout_sec=0.05)
+        if latest() != last:
+            last, since = latest(), time.monotonic()
+    return last
+
+
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
+def test_a_signal_ends_a_split_recording_at_the_floor_within_five_seconds_complete(
+        tmp_path, processes, ros, sig):
+    """Splits at the smallest accepted settings, 1 kHz input: closed bag, every input kept."""
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import JointState
+    test_node, executor = ros
+    bag = tmp_path / 'floor'
+    node_process = NodeProcess(tmp_path, 'record.enabled:=true', f'record.path:={bag}',
+                               'record.max_bytes:=1048576', 'record.max_duration_s:=1.0',
+                               'diagnostics.period_s:=0.2')
+    processes.append(node_process)
+    node_process.wait_for(READY_MESSAGE, READY_TIMEOUT_S)
+    from diagnostic_msgs.msg import DiagnosticArray
+    reports = []
+    test_node.create_subscription(DiagnosticArray, '/diagnostics', reports.append, 10)
+    publisher = test_node.create_publisher(
+        JointState, INPUT, QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE))
+    spin_until(executor, lambda: publisher.get_subscription_count() > 0, DISCOVERY_TIMEOUT_S,
+               'the node subscribing')
+    if sig == signal.SIGINT:     # nor can a running node be set below the floor
+        from rclpy.parameter import Parameter
+        from rclpy.parameter_client import AsyncParameterClient
+        client = AsyncParameterClient(test_node, 'flexlink_node')
+        spin_until(executor, client.services_are_ready, DISCOVERY_TIMEOUT_S, 'parameters')
+        future = client.set_parameters([Parameter('record.max_bytes', value=1),
+                                        Parameter('record.max_duration_s', value=0.001)])
+        spin_until(executor, future.done, 10.0, 'set_parameters')
+        assert [r.successful for r in future.result().results] == [False, False]
+    sent = 4000
+    _publish_crank(publisher, executor, sent)
+    node_process.wait_for(FIRST_INPUT_MESSAGE, DISCOVERY_TIMEOUT_S)
+    received = _settled_count(executor, reports)    # what reached the node (a loaded machine
+    assert received > sent // 2                     # may lose some between the processes)
+    start = time.monotonic()
+    node_process.process.send_signal(sig)
+    code = node_process.process.wait(timeout=60)
+    ended_s = time.monotonic() - start
+    node_process.log_file.close()
+    assert code == 0 and ended_s < 5.0, (ended_s, node_process.log())
+
+    files = sorted(bag.glob('*.mcap'))
+    assert len(files) >= 4               # 4 s of input, split every second
+    metadata = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    assert metadata['relative_file_paths'] == [f'floor_{n}.mcap' for n in range(len(files))]
+    counts, _ = read_with_rosbags(bag)
+    assert counts[INPUT] == received        # every input the node received is on disk
+    assert sum(counts.values()) == metadata['message_count']
+    assert read_with_mcap_ros2(bag) == counts
+
+
+def test_a_refused_record_path_is_said_in_the_ready_line_and_leaves_nothing(tmp_path, processes):
+    """A 250-character record.path: refused, the ready line says so, no directory left."""
+    bag = tmp_path / ('x' * 250)
+    node_process = NodeProcess(tmp_path, 'record.enabled:=true', f'record.path:={bag}')
+    processes.append(node_process)
+    node_process.wait_for(READY_MESSAGE, READY_TIMEOUT_S)
+    assert node_process.stop(signal.SIGTERM) == 0
+    ready = [line for line in node_process.log().splitlines() if READY_MESSAGE in line]
+    assert len(ready) == 1 and 'recording to' not in ready[0], ready
+    assert 'not recording (cannot record to' in ready[0] and 'File name too long' in ready[0]
+    assert not bag.exists() and sorted(p.name for p in tmp_path.iterdir()
+                                       if not p.name.endswith('.log')) == []

@@ -199,3 +199,16 @@ def test_second_order_parameter_selects_the_dynamic_pass():
     assert options.second_order == 'dynamic' and (options.modes, options.static) == (8, 4)
     assert node_params.validate_parameter('model.second_order', 'full') is not None
     assert node_params.validate_parameter('model.second_order', 'dynamic') is None
+
+
+@pytest.mark.parametrize('name, tiny, floor', [
+    ('record.max_bytes', 1, 1 << 20), ('record.max_duration_s', 0.001, 1.0)])
+def test_split_settings_below_the_floor_are_refused_with_the_reason(name, tiny, floor):
+    """A split every message would leave the recorder splitting instead of writing."""
+    reason = node_params.validate_parameter(name, tiny)
+    assert reason is not None and f'{name} must be 0 (no split) or at least' in reason
+    assert 'each split' in reason
+    just_below = floor - 1 if isinstance(tiny, int) else floor * 0.999
+    assert node_params.validate_parameter(name, just_below) is not None
+    assert node_params.validate_parameter(name, type(tiny)(floor)) is None
+    assert node_params.validate_parameter(name, type(tiny)(0)) is None     # never split

@@ -1,6 +1,7 @@
 """The playback schedule: message times and /clock ticks as `ros2 bag play` sends them."""
 
-from flexlink_ros.ros.playback_schedule import CLOCK, MESSAGE, pass_events, ticks_in_pass
+from flexlink_ros.ros.playback_schedule import (CLOCK, FALLBACK_PERIOD_NS, MAX_CLOCK_HZ, MESSAGE,
+                                                pass_events, playback_times, ticks_in_pass)
 import numpy as np
 import pytest
 
@@ -50,3 +51,30 @@ def test_rate_must_be_positive_and_an_empty_recording_has_no_events():
         list(pass_events(LOG_NS, rate=0.0))
     assert list(pass_events([], clock_hz=40.0)) == []
     assert ticks_in_pass(10**9, 1.0, 0.0) == 0
+
+
+def test_log_times_that_go_back_play_at_the_stamps_or_a_constant_period():
+    stamps = 10**18 + np.arange(6, dtype=np.int64) * 10_000_000
+    ordered = stamps + 200_000
+    times, note = playback_times(ordered, stamps)
+    np.testing.assert_array_equal(times, ordered)
+    assert note == ''
+    # Crafted: back by 1 ms per message, or a first log time of 2**63 - 1.
+    for crafted in (ordered[0] - np.arange(6) * 1_000_000,
+                    np.concatenate([[2**63 - 1], ordered[1:]])):
+        times, note = playback_times(crafted, stamps)
+        np.testing.assert_array_equal(times, stamps)
+        assert 'go back' in note and 'header stamps' in note and '\n' not in note
+        # The stamps go back too: a constant period, the median positive log spacing.
+        times, note = playback_times(crafted, stamps[::-1])
+        assert np.all(np.diff(times) == np.diff(times)[0]) and 'stored order' in note
+    times, _ = playback_times(np.concatenate([[2**63 - 1], ordered[1:]]), stamps[::-1])
+    assert np.diff(times)[0] == 10_000_000
+    times, _ = playback_times(ordered[0] - np.arange(6) * 1_000_000, stamps[::-1])
+    assert np.diff(times)[0] == FALLBACK_PERIOD_NS
+
+
+def test_the_clock_frequency_is_bounded():
+    assert list(pass_events([0, 1_000_000], clock_hz=MAX_CLOCK_HZ))
+    with pytest.raises(ValueError, match='/clock frequency'):
+        list(pass_events([0, 1_000_000], clock_hz=MAX_CLOCK_HZ * 1.01))

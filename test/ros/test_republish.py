@@ -11,6 +11,7 @@ import signal
 import subprocess
 import sys
 import threading
+import time
 
 from flexlink_ros.io.recorder import McapRecorder
 from flexlink_ros.names import READY_MESSAGE
@@ -222,3 +223,52 @@ def test_a_sim_time_node_in_the_namespace_records_on_the_recordings_clock(
     assert np.all((log_ns >= LOG_NS[0] - 200_000) & (log_ns <= LOG_NS[-1]))
     on_ticks = (log_ns - LOG_NS[0]) % 50_000_000 == 0
     assert on_ticks.sum() > COUNT // 2 and on_ticks[-1]
+
+
+def crafted_bag(tmp_path, log_ns):
+    """Write the 100 Hz recording with other log times (the stamps as in ``bag``)."""
+    path = tmp_path / 'crafted'
+    with McapRecorder(path) as recorder:
+        recorder.add_topic('/joint_states', JointState)
+        for k, logged in enumerate(log_ns):
+            message = JointState(name=['crank'], position=[0.02 * k], velocity=[2.0])
+            message.header.stamp = ros_messages.ns_to_stamp(int(LOG_NS[k]) - 200_000)
+            recorder.write('/joint_states', serialize_message(message), int(logged))
+    return path
+
+
+@pytest.mark.parametrize('log_ns', [LOG_NS[0] - np.arange(COUNT) * 1_000_000,
+                                    np.concatenate([[2**63 - 1], LOG_NS[1:]])],
+                         ids=['back-by-1ms', 'first-2**63-1'])
+def test_crafted_log_times_play_in_stored_order_at_the_recorded_rate(
+        tmp_path, processes, log_ns):
+    listener = Listener(processes, tmp_path, '/joint_states', COUNT)
+    result = finished(replay(processes, crafted_bag(tmp_path, log_ns), '--rate', '4'))
+    stamps, _ = listener.received()
+    assert stamps == (LOG_NS - 200_000).tolist()
+    played = result['playback']
+    assert played['publish_s'] >= 0.99 * SPAN_NS * 1e-9 / 4        # not one burst
+    assert played['published'] == COUNT and played['failed'] == 0
+    notes = [n for n in result['notes'] if 'go back' in n]
+    assert len(notes) == 1 and 'header stamps' in notes[0]
+
+
+def test_playback_waits_for_the_subscriptions_asked_for(bag, tmp_path, processes):
+    (tmp_path / 'early').mkdir()
+    early = Listener(processes, tmp_path / 'early', '/joint_states', COUNT)
+    process = replay(processes, bag, '--wait-for-subscribers', '2', '--wait-timeout', '60')
+    time.sleep(3.0)             # the replay waits: one subscription matched of two
+    late = Listener(processes, tmp_path, '/joint_states', COUNT)
+    result = finished(process)
+    for listener in (early, late):
+        stamps, _ = listener.received()
+        assert stamps == (LOG_NS - 200_000).tolist()    # the late one missed nothing
+    assert result['playback']['matched'] >= 2 and result['notes'] == []
+
+
+def test_the_clock_frequency_is_bounded_in_one_line(bag):
+    result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'replay',
+                             str(bag), '--publish', '--clock', '1000000'], capture_output=True,
+                            text=True, timeout=120)
+    assert result.returncode == 1 and 'up to 1000' in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1

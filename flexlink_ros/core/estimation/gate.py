@@ -2,8 +2,9 @@
 Plausibility of input samples, decided before the crank filter sees them.
 
 :class:`InputGate` refuses implausible samples (outliers: the state is untouched, so one bad
-sample changes no later output), restarts the estimate on backward stamps and long gaps, and
-ignores exact repeats. :func:`plan_rows` decides a whole recorded signal the same way.
+sample changes no later output), restarts the estimate on backward stamps and long gaps,
+ignores exact repeats and refuses a sample with the last one's stamp but another angle.
+:func:`plan_rows` decides a whole recorded signal the same way.
 """
 
 import math
@@ -32,6 +33,26 @@ ANGLE_ALLOWANCE_RAD = 0.05
 REGIME_SAMPLES = 5
 
 
+def restart_reason(step_ns):
+    """
+    Say why a sample ``step_ns`` after the last accepted one restarts the estimate.
+
+    Parameters
+    ----------
+    step_ns : int
+        Its stamp minus the last accepted stamp [ns]: negative, or beyond the reset gap.
+
+    Returns
+    -------
+    str
+        A backward step as its magnitude in ms (never "-0 s").
+
+    """
+    if step_ns < 0:
+        return f'stamp went back by {-step_ns * 1e-6:.6g} ms'
+    return f'gap of {step_ns * 1e-9:.6g} s'
+
+
 class InputGate:
     """
     Plausibility of input samples, checked before the crank filter sees them.
@@ -42,7 +63,8 @@ class InputGate:
     * speed_max``, or when its angle moved by more than ``SPEED_PLAUSIBLE_FACTOR * speed_max *
     dt + ANGLE_ALLOWANCE_RAD`` (modulo a revolution). ``REGIME_SAMPLES`` consecutive outliers
     that pass these tests against each other start a new regime (RESET | OUTLIER). Stamps that
-    go back or leave a gap restart the estimate, as before; exact repeats are ignored.
+    go back or leave a gap restart the estimate, as before; exact repeats are ignored; the
+    last accepted stamp again with another angle is CONFLICTING (nothing changes).
     StreamingEstimator.update and the offline replay (:func:`plan_rows`) share this class.
 
     Parameters
@@ -56,7 +78,7 @@ class InputGate:
 
     """
 
-    STEP, START, OUTLIER, REPEATED = 0, 1, 2, 3
+    STEP, START, OUTLIER, REPEATED, CONFLICTING = 0, 1, 2, 3, 4
 
     def __init__(self, speed_max, accel_limit, reset_gap_s=DEFAULT_RESET_GAP_S):
         self.speed_bound = SPEED_PLAUSIBLE_FACTOR * float(speed_max)
@@ -87,7 +109,7 @@ class InputGate:
 
     def decide(self, stamp_ns, angle, speed):
         """
-        (kind, flags, message) of a sample: STEP, START, OUTLIER or REPEATED.
+        (kind, flags, message) of a sample: STEP, START, OUTLIER, REPEATED or CONFLICTING.
 
         An accepted sample (STEP, START) becomes the reference of the next; ``flags`` has
         RESET for START and OUTLIER when outliers were skipped before it.
@@ -102,11 +124,14 @@ class InputGate:
             kind = self.START
         else:
             dt = (stamp_ns - last[0]) * 1e-9
-            if dt == 0.0 and abs(wrap_to_2pi(angle) - wrap_to_2pi(last[1])) < 1e-12:
-                return self.REPEATED, 0, 'repeated sample ignored'
+            if dt == 0.0:
+                if abs(wrap_to_2pi(angle) - wrap_to_2pi(last[1])) < 1e-12:
+                    return self.REPEATED, 0, 'repeated sample ignored'
+                return self.CONFLICTING, 0, (f'stamp {stamp_ns} already taken with angle '
+                                             f'{last[1]:.6g} rad, not {angle:.6g} rad')
             if dt <= 0.0 or dt > self.reset_gap_s:
                 kind = self.START
-                message = f'stamp went back by {-dt:.6g} s' if dt <= 0.0 else f'gap of {dt:.6g} s'
+                message = restart_reason(stamp_ns - last[0])
             else:
                 reason = self.implausible(last, stamp_ns, angle, speed)
                 if reason:
@@ -167,7 +192,8 @@ def plan_rows(stamps_ns, angles, speeds, gate):
     Returns
     -------
     kinds : ndarray of int8, shape (m,)
-        InputGate.STEP, START, OUTLIER or REPEATED per row.
+        InputGate.STEP, START, OUTLIER or REPEATED per row (a CONFLICTING row is given as
+        OUTLIER: the offline replay flags both alike).
     flags : ndarray of int, shape (m,)
         RESET and OUTLIER bits of the accepted rows (as :meth:`InputGate.decide`).
 
@@ -197,7 +223,7 @@ def plan_rows(stamps_ns, angles, speeds, gate):
         speed = float(speeds[n])
         kind, flag, _ = gate.decide(int(stamps_ns[n]), float(angles[n]),
                                     None if math.isnan(speed) else speed)
-        kinds[n], flags[n] = kind, flag
+        kinds[n], flags[n] = (gate.OUTLIER if kind == gate.CONFLICTING else kind), flag
         synced = kind in (gate.STEP, gate.START)
         n += 1
     return kinds, flags

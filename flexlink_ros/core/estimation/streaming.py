@@ -30,7 +30,7 @@ from .sample import (CLIPPED_ACCEL, CLIPPED_SPEED, LARGE_STEP, nan_sample, NO_CR
 from .step import MAX_SUBSTEP_NS
 from .throttled_log import ThrottledWarning
 from .warm_start import WarmStart
-from ...errors import FlexlinkError, OutlierSample
+from ...errors import ConflictingSample, FlexlinkError, OutlierSample
 from ...names import JOINT_NAMES, OUTPUT_NAMES
 
 LOGGER = logging.getLogger(__name__)
@@ -239,8 +239,8 @@ class StreamingEstimator:
 
         Raises
         ------
-        OutlierSample
-            The sample is implausible (:class:`InputGate`); nothing of the state changed.
+        OutlierSample, ConflictingSample
+            Implausible, or the last stamp with another angle; nothing of the state changed.
 
         """
         sample = self._compiled.sample(stamp_ns, crank_angle, crank_speed)
@@ -258,9 +258,9 @@ class StreamingEstimator:
                 crank_speed = None
         stamp_ns = int(stamp_ns)
         kind, flags, message = self._gate.decide(stamp_ns, angle_in, crank_speed)
-        if kind == InputGate.OUTLIER:
-            self.outliers += 1
-            raise OutlierSample(message)
+        if kind in (InputGate.OUTLIER, InputGate.CONFLICTING):
+            self.outliers += kind == InputGate.OUTLIER
+            raise (OutlierSample if kind == InputGate.OUTLIER else ConflictingSample)(message)
         if kind == InputGate.REPEATED:
             return dataclasses.replace(self._last, flags=self._last.flags | REPEATED,
                                        message=message)

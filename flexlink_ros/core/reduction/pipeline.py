@@ -16,6 +16,7 @@ from . import dynamic_second_order_tables, second_order_tables, store
 from .basis import FrozenSamples
 from .build import reduce_samples
 from .build_progress import BuildProgress
+from .cache_location import cache_file
 from .model import ReducedModel
 from .nonlinearity_tables import nonlinearity_tables, NONLINEARITY_VERSION
 from .soft_tables import soft_tables
@@ -49,7 +50,9 @@ def model_for_mechanism(mechanism, options=None, cache_dir=None, use_cache=True,
     options : ModelOptions or None
         Model options (None: the defaults).
     cache_dir : str, Path or None
-        Cache directory (None: core.store.default_cache_dir()).
+        Cache directory (None: core.store.default_cache_dir()); read and written only if
+        trusted (:mod:`.cache_location`), the files named there whatever the mechanism's
+        name says.
     use_cache : bool
         False builds without reading or writing a cache.
     progress : callable or None
@@ -63,17 +66,20 @@ def model_for_mechanism(mechanism, options=None, cache_dir=None, use_cache=True,
     """
     options = options or ModelOptions()
     key = model_key(mechanism, options)
-    path = None
+    directory = None
     if use_cache:
-        directory = store.default_cache_dir() if cache_dir in (None, '') else cache_dir
-        path = f'{directory}/{mechanism.name}-{key[:16]}.npz'
+        directory = store.usable_cache_dir(store.default_cache_dir() if cache_dir in (None, '')
+                                           else cache_dir)
 
     def build():
         return build_model(mechanism, options, progress).to_arrays()
 
-    arrays, meta, _ = store.load_or_build(path, key, build)
+    def place(suffix):
+        return None if directory is None else cache_file(directory, mechanism.name, key, suffix)
+
+    arrays, meta, _ = store.load_or_build(place('.npz'), key, build, directory)
     model = with_nonlinearity(ReducedModel.from_arrays(arrays, meta), mechanism, options,
-                              None if path is None else f'{path[:-4]}-nonlinearity.npz', key)
+                              (place('-nonlinearity.npz'), directory), key)
     return with_soft_basis(model, options.soft_modes)
 
 
@@ -103,21 +109,23 @@ def build_model(mechanism, options, progress=None):
     return model
 
 
-def with_nonlinearity(model, mechanism, options, path, key):
+def with_nonlinearity(model, mechanism, options, place, key):
     """
     Return the model with the validity indicator's tables (:mod:`.nonlinearity_tables`).
 
-    Cached in a file of their own beside the model's (``path``; None: built, not cached),
-    keyed by the model's key and :data:`NONLINEARITY_VERSION`: the model's own file and key
-    are those of a model without the tables.
+    Cached in a file of their own beside the model's (``place``: the file and the cache
+    directory, or None twice: built, not cached), keyed by the model's key and
+    :data:`NONLINEARITY_VERSION`: the model's own file and key are those of a model without
+    the tables.
     """
     def build():
         linkage = assembly.FlexibleLinkage(fe_mechanism(mechanism, options), options)
         samples = frozen_samples_for(mechanism, options)
         return nonlinearity_tables(linkage, samples, model, options.speed_max), {}
 
+    path, root = place
     arrays, _, _ = store.load_or_build(
-        path, store.cache_key('nonlinearity-tables', NONLINEARITY_VERSION, key), build)
+        path, store.cache_key('nonlinearity-tables', NONLINEARITY_VERSION, key), build, root)
     return dataclasses.replace(model, nonlinearity=arrays)
 
 

@@ -17,6 +17,10 @@ compressed members, a checksum mismatch (corrupt bytes), or an unreadable archiv
 not a zip, a pickle renamed ``.npz``). Each raises :class:`CacheError`; :func:`load_or_build`
 then logs a warning and rebuilds. Writes go to a temporary file in the same directory and are
 moved into place with ``os.replace``, so a reader never sees a half-written file.
+
+Before any of that a file must be trusted (:mod:`.cache_location`: owned by the user, not
+writable by others, in directories only the user can change): an untrusted file is never
+read, and into an untrusted directory nothing is written (the model is built in memory).
 """
 
 import hashlib
@@ -29,6 +33,7 @@ import zipfile
 
 import numpy as np
 
+from .cache_location import make_private_directory, open_trusted, untrusted_reason
 from ...errors import CacheError
 
 LOGGER = logging.getLogger(__name__)
@@ -92,7 +97,7 @@ def save_cache(path, key, arrays, meta=None):
     Parameters
     ----------
     path : str or Path
-        Destination file (parent directories are created).
+        Destination file (missing parent directories are created 0700).
     key : str
         Cache key the content belongs to (see :func:`cache_key`).
     arrays : dict of str to ndarray
@@ -119,7 +124,7 @@ def save_cache(path, key, arrays, meta=None):
         'sha256': _array_digest(arrays), 'meta': meta or {},
     }
     header_bytes = np.frombuffer(json.dumps(header, sort_keys=True).encode(), dtype=np.uint8)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    make_private_directory(path.parent)
     handle, temp_name = tempfile.mkstemp(prefix=path.name + '.', suffix='.tmp',
                                          dir=path.parent)
     try:
@@ -180,14 +185,14 @@ def _read_member(archive, info, name, path, budget):
     return array, announced
 
 
-def _read_header(archive, members, path):
+def _read_header(archive, members, path, file_bytes):
     info = members.get(HEADER_NAME)
     if info is None:
         raise CacheError(f'{path}: not a flexlink_ros cache (no header)')
     if info.file_size > MAX_HEADER_BYTES + 1024:
         raise CacheError(f'{path}: malformed header (larger than {MAX_HEADER_BYTES} bytes)')
     raw, _ = _read_member(archive, info, HEADER_NAME, path,
-                          min(MAX_HEADER_BYTES, path.stat().st_size))
+                          min(MAX_HEADER_BYTES, file_bytes))
     if raw.dtype != np.uint8 or raw.ndim != 1:
         raise CacheError(f'{path}: malformed header')
     header = json.loads(raw.tobytes().decode())
@@ -243,16 +248,18 @@ def load_cache(path, key):
     Raises
     ------
     CacheError
-        If the file is missing, unreadable, foreign, of another version or key, announces
-        more than it holds, or is corrupt.
+        If the file is missing, not trusted (:func:`.cache_location.open_trusted`: owned by
+        another user, writable by others, not a regular file), unreadable, foreign, of
+        another version or key, announces more than it holds, or is corrupt.
 
     """
     path = pathlib.Path(path)
-    if not path.is_file():
+    if not os.path.lexists(path):
         raise CacheError(f'{path}: no cache file')
     try:
-        with zipfile.ZipFile(path) as archive:
-            header, arrays = _read_archive(archive, path, key)
+        with open_trusted(path) as stream, zipfile.ZipFile(stream) as archive:
+            header, arrays = _read_archive(archive, path, key,
+                                           os.fstat(stream.fileno()).st_size)
     except CacheError:
         raise
     except (OSError, EOFError, ValueError, KeyError, TypeError, AttributeError, RuntimeError,
@@ -266,16 +273,16 @@ def load_cache(path, key):
     return arrays, meta if isinstance(meta, dict) else {}
 
 
-def _read_archive(archive, path, key):
+def _read_archive(archive, path, key, file_bytes):
     """Header and arrays of an open cache archive, each checked against the header."""
     members = _members(archive, path)
-    header = _read_header(archive, members, path)
+    header = _read_header(archive, members, path, file_bytes)
     _check_header(header, key, path)
     announced = header.get('arrays')
     if not isinstance(announced, dict) or set(announced) != set(members) - {HEADER_NAME}:
         raise CacheError(f'{path}: arrays differ from the header')
     # The arrays are stored uncompressed in this file: together they fit in it.
-    arrays, budget = {}, min(MAX_CACHE_BYTES, path.stat().st_size)
+    arrays, budget = {}, min(MAX_CACHE_BYTES, file_bytes)
     for name, spec in sorted(announced.items()):
         array, size = _read_member(archive, members[name], name, path, budget)
         budget -= size
@@ -287,9 +294,39 @@ def _read_archive(archive, path, key):
     return header, arrays
 
 
-def load_or_build(path, key, build):
+def usable_cache_dir(directory):
+    """
+    Create the cache directory (0700) if missing; None with one warning if it is not trusted.
+
+    Parameters
+    ----------
+    directory : str or Path
+        The cache directory (:mod:`.cache_location` says when it is trusted).
+
+    Returns
+    -------
+    pathlib.Path or None
+
+    """
+    directory = pathlib.Path(directory)
+    try:
+        make_private_directory(directory)
+    except OSError:     # then it is missing: the reason given below
+        pass
+    problem = untrusted_reason(directory / 'file', directory)
+    if problem:
+        LOGGER.warning('model cache not used (%s): the model is built in memory, not cached',
+                       problem)
+        return None
+    return directory
+
+
+def load_or_build(path, key, build, root=None):
     """
     Load a verified cache, or build the content, save it and return it.
+
+    Nothing is read from or written to a directory that :mod:`.cache_location` does not
+    trust: one warning says why and the content is built in memory.
 
     Parameters
     ----------
@@ -299,6 +336,8 @@ def load_or_build(path, key, build):
         Key of the wanted content.
     build : callable
         ``build() -> (arrays, meta)``, called when the cache is missing or refused.
+    root : str, Path or None
+        The cache directory whose trust is checked down to the file (None: the file's).
 
     Returns
     -------
@@ -312,7 +351,11 @@ def load_or_build(path, key, build):
         arrays, meta = build()
         return arrays, meta, False
     path = pathlib.Path(path)
-    if path.exists():
+    if usable_cache_dir(path.parent if root is None else root) is None or untrusted_reason(
+            path, path.parent if root is None else root):
+        arrays, meta = build()
+        return arrays, meta, False
+    if os.path.lexists(path):
         try:
             arrays, meta = load_cache(path, key)
             return arrays, meta, True

@@ -8,7 +8,7 @@ from estimation_toys import clean_signal, feed, largest, outputs, PATHS, SPEED, 
 from flexlink_ros.core.estimation.gate import InputGate, REGIME_SAMPLES
 from flexlink_ros.core.estimation.sample import SampleFlag
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
-from flexlink_ros.errors import OutlierSample
+from flexlink_ros.errors import ConflictingSample, OutlierSample
 import numpy as np
 import pytest
 
@@ -33,9 +33,32 @@ def test_repeated_and_backward_stamps(toy_model, caplog):
     assert 'estimator reset' in caplog.text
     for sample in (first, second, back, gap):
         assert np.all(np.isfinite(sample.lever_tip + sample.coupler_mid))
-    # Same stamp, different angle: not a repeat, the estimate restarts.
-    changed = est.update(1_500_000 + 2_000_000_000, 0.7, 40.0)
-    assert changed.flags & SampleFlag.RESET
+    # Same stamp, different angle: neither a repeat nor a restart but a conflict, skipped.
+    with pytest.raises(ConflictingSample, match='conflicting'):
+        est.update(1_500_000 + 2_000_000_000, 0.7, 40.0)
+
+
+@pytest.mark.parametrize('compiled', PATHS)
+def test_same_stamp_other_angle_is_conflicting_and_changes_nothing(toy_model, compiled):
+    # Pairs of messages with one stamp and angles 0.3 rad apart: the first of each pair is
+    # estimated, the second refused; the outputs are those of the first ones alone.
+    events = clean_signal(0.4)
+    alone = StreamingEstimator(toy_model, compiled=compiled)
+    expected = [alone.update(*event) for event in events]
+    est = StreamingEstimator(toy_model, compiled=compiled)
+    got, refused = [], 0
+    for stamp, angle, speed in events:
+        got.append(est.update(stamp, angle, speed))
+        with pytest.raises(ConflictingSample):
+            est.update(stamp, angle + 0.3, speed)
+        refused += 1
+    assert refused == len(events) > 100
+    assert not any(sample.flags & SampleFlag.RESET for sample in got[1:])
+    np.testing.assert_array_equal([g.lever_tip for g in got], [e.lever_tip for e in expected])
+    gate = InputGate(SPEED_MAX, 1e4)
+    assert gate.decide(5, 0.1, None)[0] == InputGate.START
+    assert gate.decide(5, 0.4, None)[0] == InputGate.CONFLICTING
+    assert gate.decide(5, 0.1, None)[0] == InputGate.REPEATED
 
 
 @pytest.mark.parametrize('compiled', PATHS)
@@ -138,3 +161,20 @@ def test_mixed_fuzz_never_gives_a_deflection_beyond_the_bound(toy_model, compile
     assert not refused_after
     assert all(math.isfinite(largest(s)) and largest(s) <= estimator.deflection_bound_m
                for s in after.values())
+
+
+@pytest.mark.parametrize('back_ns, text', [(500_000, 'stamp went back by 0.5 ms'),
+                                           (1, 'stamp went back by 1e-06 ms'),
+                                           (3_000_000_000, 'stamp went back by 3000 ms')])
+def test_a_backward_stamp_is_said_with_its_magnitude_in_ms(back_ns, text):
+    gate = InputGate(SPEED_MAX, 1e4)
+    gate.decide(10_000_000_000, 0.5, SPEED)
+    kind, flags, message = gate.decide(10_000_000_000 - back_ns, 0.5, SPEED)
+    assert kind == InputGate.START and message == text
+
+
+def test_a_same_stamp_with_another_angle_is_never_said_as_minus_zero():
+    gate = InputGate(SPEED_MAX, 1e4)
+    gate.decide(10_000_000_000, 0.5, SPEED)
+    _, _, message = gate.decide(10_000_000_000, 0.8, SPEED)
+    assert message and '-0' not in message and 'went back' not in message

@@ -1,0 +1,165 @@
+"""
+The nonlinear full order against the Exudyn peer: ``flexlink validate --nonlinear``.
+
+Per crank speed, in the conventions of :mod:`studies.validation` (rigid crank, prescribed
+constant rotation, the peer's bearings and masses, ``elements_per_link`` in both models), the
+peer's last revolution against the periodic orbit of the geometrically nonlinear full order
+(:func:`core.fe.nonlinear_response.nonlinear_response`), damped as the peer: Kelvin-Voigt
+beta on the strain rates (the peer's beta, ``stiffness_damping`` when given) and
+``beta k`` on the bearing springs, modal zeta 0 unless ``zeta`` is given. The linear full
+order with the same damping is reported beside it. Measures as :mod:`studies.validation`:
+per output the p2p error and relative RMS, per output point the deflection vector's relative
+RMS; and the orbit's Floquet multipliers, Newton iterations per step and cost per step.
+"""
+
+import dataclasses
+import math
+
+import numpy as np
+
+from .peer_exudyn import compare, peak_to_peak
+from .peer_linear import linear_model
+from .peer_model import OUTPUT_KEYS, resolve_mechanism
+from .validation import BEARINGS, peer_run, point_rms_errors, require_peer, Settings
+from ..core.fe.nonlinear_response import nonlinear_response
+from ..core.fe.simulate import periodic_response
+
+MODELS = ('linear', 'nonlinear')
+LABELS = {'linear': 'linear', 'nonlinear': 'nonlinear'}
+# The issue's targets for the nonlinear full order against the peer.
+TARGETS = {'rms': 0.05, 'p2p': 0.03}
+# Package time steps per revolution (a multiple of the output points).
+STEPS = 720
+
+
+def package_runs(mech, rpm, settings):
+    """
+    Linear and nonlinear full order at one speed, damped as the peer.
+
+    Returns
+    -------
+    dict
+        'crank_angle' (P,), 'linear' and 'nonlinear' outputs (P, 4) [m], 'info' (the nonlinear
+        run's info), 'floquet' (moduli of the four largest multipliers), 'beta', 'zeta'.
+
+    """
+    linkage = linear_model(mech, elements_per_link=settings.elements_per_link,
+                           bearings=BEARINGS[settings.bearings], gravity=settings.gravity)
+    speed = rpm * math.pi / 30.0
+    zeta = 0.0 if settings.zeta is None else settings.zeta
+    beta = settings.beta_s
+    linear = periodic_response(linkage, speed, steps=STEPS, points=settings.points, zeta=zeta,
+                               beta=beta)
+    start = np.concatenate([linear.displacement[0], linear.velocity[0]])
+    nonlinear = nonlinear_response(linkage, speed, steps=STEPS, points=settings.points,
+                                   zeta=zeta, beta=beta, start=start)
+    return {'crank_angle': linear.crank_angle, 'linear': linear.outputs,
+            'nonlinear': nonlinear.outputs, 'info': nonlinear.info,
+            'multipliers': nonlinear.floquet_multipliers, 'beta': beta, 'zeta': zeta}
+
+
+def _as_response(angles, values):
+    out = {'crank_angle': angles}
+    out.update(zip(OUTPUT_KEYS, np.asarray(values).T))
+    return out
+
+
+def validate_nonlinear(mechanism, rpm, settings=None):
+    """
+    Compare the peer with the linear and the nonlinear full order at one crank speed.
+
+    Parameters
+    ----------
+    mechanism : Mechanism or str
+        A Mechanism, or a mechanism file path or bare name.
+    rpm : float
+        Crank speed [rpm], positive.
+    settings : Settings or None
+        What to run (:class:`studies.validation.Settings`; the peer's beta damps both).
+
+    Returns
+    -------
+    dict
+        'rpm', 'mechanism', 'settings', 'peer_p2p', 'periodicity' (peer), 'peer_beta_s',
+        'models' (per :data:`MODELS`: per output 'other_p2p', 'p2p_error', 'rms_error'),
+        'point_rms_error' (per model and output point), 'targets_met' (nonlinear, per output
+        point), 'floquet_moduli' (the four largest), 'spectral_radius', 'newton_mean',
+        'newton_max', 'step_cost_s', 'step_cpu_s', 'revolutions', 'wall_s', 'damping', and
+        'series'.
+
+    """
+    settings = Settings() if settings is None else settings
+    if not (math.isfinite(rpm) and rpm > 0.0):
+        raise ValueError(f'`rpm` must be a positive crank speed, got {rpm!r}')
+    require_peer()
+    mech = resolve_mechanism(mechanism)
+    peer = peer_run(mech, rpm, settings)
+    runs = package_runs(mech, rpm, settings)
+    models = {name: compare(peer, _as_response(runs['crank_angle'], runs[name]))
+              for name in MODELS}
+    span = slice(-settings.peer_steps - 1, -1)
+    peer_series = {'outputs': np.stack([peer[k][span] for k in OUTPUT_KEYS], axis=1)}
+    rms = {name: point_rms_errors(peer_series, {'outputs': runs[name]}) for name in MODELS}
+    table = models['nonlinear']
+    met = {point: (rms['nonlinear'][point] <= TARGETS['rms']
+                   and all(abs(table[f'{point}_{axis}']['p2p_error']) <= TARGETS['p2p']
+                           for axis in ('dx', 'dy')))
+           for point in ('lever_tip', 'coupler_mid')}
+    info, p2p = runs['info'], peak_to_peak(peer)
+    return {'rpm': float(rpm), 'mechanism': mech.name,
+            'settings': dataclasses.asdict(dataclasses.replace(settings, cache=None)),
+            'peer_p2p': {k: p2p[k] for k in OUTPUT_KEYS}, 'periodicity': p2p['periodicity'],
+            'peer_beta_s': peer['info']['beta_s'], 'models': models, 'point_rms_error': rms,
+            'targets_met': met,
+            'floquet_moduli': [float(x) for x in np.abs(runs['multipliers'][:4])],
+            'spectral_radius': info['spectral_radius'], 'newton_mean': info['newton_mean'],
+            'newton_max': info['newton_max'], 'step_cost_s': info['step_cost_s'],
+            'step_cpu_s': info['step_cpu_s'],
+            'revolutions': info['revolutions'], 'wall_s': info['wall_s'],
+            'damping': f"beta {runs['beta']:g} s, zeta {runs['zeta']:g}",
+            'series': {'crank_deg': np.degrees(runs['crank_angle']), 'peer': peer_series,
+                       **{name: runs[name] for name in MODELS}}}
+
+
+def format_nonlinear(record):
+    """Text table of one speed: p2p, p2p error and relative RMS of both models, Floquet."""
+    s = record['settings']
+    labels = ('lever tip dX', 'lever tip dY', 'coupler mid dX', 'coupler mid dY')
+    lines = [f"{record['rpm']:g} rpm, {s['bearings']} bearings, gravity "
+             f"{'on' if s['gravity'] else 'off'}, {s['elements_per_link']} elements per link, "
+             f"rigid crank ({record['mechanism']}; both damped {record['damping']}, peer beta "
+             f"{record['peer_beta_s']:g} s)",
+             f"{'':26s}" + ''.join(f'{label:>16s}' for label in labels),
+             f"{'Exudyn peer p2p [um]':26s}" + ''.join(
+                 f"{record['peer_p2p'][k] * 1e6:16.1f}" for k in OUTPUT_KEYS)]
+    for name in MODELS:
+        table = record['models'][name]
+        lines.append(f"{LABELS[name] + ' p2p [um]':26s}" + ''.join(
+            f"{table[k]['other_p2p'] * 1e6:16.1f}" for k in OUTPUT_KEYS))
+        lines.append(f"{LABELS[name] + ' p2p error':26s}" + ''.join(
+            f"{100 * table[k]['p2p_error']:15.1f}%" for k in OUTPUT_KEYS))
+    for name in MODELS:
+        rms = record['point_rms_error'][name]
+        lines.append(f"{LABELS[name] + ' vector rel RMS':26s}lever tip "
+                     f"{100 * rms['lever_tip']:.1f} %, coupler mid "
+                     f"{100 * rms['coupler_mid']:.1f} %")
+    met = record['targets_met']
+    lines.append(f"nonlinear within {100 * TARGETS['rms']:g} % RMS and {100 * TARGETS['p2p']:g} "
+                 f"% p2p: lever tip {'yes' if met['lever_tip'] else 'NO'}, coupler mid "
+                 f"{'yes' if met['coupler_mid'] else 'NO'}")
+    moduli = ', '.join(f'{x:.3f}' for x in record['floquet_moduli'])
+    lines.append(f"Floquet multipliers |mu| {moduli}; Newton {record['newton_mean']:.2f} "
+                 f"iterations per step (max {record['newton_max']}), "
+                 f"{1e3 * record['step_cost_s']:.1f} ms per step "
+                 f"({1e3 * record['step_cpu_s']:.1f} ms CPU), "
+                 f"{record['revolutions']} revolutions, {record['wall_s']:.0f} s")
+    return '\n'.join(lines)
+
+
+def without_series(record):
+    """Return the record as ``--json`` prints it (no sample series)."""
+    return {key: value for key, value in record.items() if key != 'series'}
+
+
+__all__ = ['MODELS', 'TARGETS', 'STEPS', 'package_runs', 'validate_nonlinear',
+           'format_nonlinear', 'without_series']
