@@ -11,6 +11,7 @@ import math
 
 from . import parameters
 from .messages import crank_from_joint_state
+from ..core.estimation.marker_scale import default_exaggeration, MARKER_SHARE
 from ..core.estimation.sample import SampleFlag
 from ..core.mechanism_file import load_mechanism, stiffness_damping_from_file
 from ..core.reduction.pipeline import model_for_mechanism
@@ -147,6 +148,25 @@ def load_node_model(values, warn, progress=None):
         notes.append(f'stepping all {model.size} coordinates: {soft.get("reason")}')
         warn(notes[-1])
     return model, options, notes
+
+
+def marker_exaggeration(estimator, log):
+    """
+    Return the markers' exaggeration when ``markers.exaggeration`` is 0, and log the rule.
+
+    Parameters
+    ----------
+    estimator : StreamingEstimator
+        The node's estimator (:func:`core.estimation.marker_scale.default_exaggeration`).
+    log : callable
+        Called with the sentence the node logs.
+
+    """
+    factor, peak, length = default_exaggeration(estimator)
+    log(f'markers: deflections drawn x{factor:g} when markers.exaggeration is 0 (the expected '
+        f"peak, {peak * 1e6:.3g} um, as at least {MARKER_SHARE:.0%} of the coupler's "
+        f'{length:g} m)')
+    return factor
 
 
 @dataclasses.dataclass

@@ -24,15 +24,14 @@ from visualization_msgs.msg import MarkerArray
 from . import diagnostics, parameters
 from .input_watch import InputWatch
 from .messages import diagnostics_message, joint_level, ns_to_stamp, quality_cdr
-from .node_model import (crank_sample, load_node_model, one_line, PeriodStats, publishable,
-                         SKIP_KINDS, Totals)
+from .node_model import (crank_sample, load_node_model, marker_exaggeration, one_line,
+                         PeriodStats, publishable, SKIP_KINDS, Totals)
 from .node_recording import NodeRecording
 from .overrides import declare_table
 from .progress_log import ProgressLog
 from .runtime import is_shutdown_error
 from .sim_time import ClockWatch, LogTime
 from .startup import check_startup_signal
-from ..core.estimation.marker_scale import default_exaggeration, MARKER_SHARE
 from ..core.estimation.sample import SampleFlag
 from ..core.estimation.streaming import StreamingEstimator
 from ..core.reduction.soft_basis import soft_basis_text
@@ -96,10 +95,7 @@ class EstimatorPipeline(NodeRecording):
                  f'{self.options} ({time.perf_counter() - start:.2f} s); '
                  f'criteria: {self.criteria_source}')
         self.estimator = StreamingEstimator(self.model, warm_start=values['model.warm_start'])
-        self.auto_exaggeration, peak, length = default_exaggeration(self.estimator)
-        log.info(f'markers: deflections drawn x{self.auto_exaggeration:g} when '
-                 f'markers.exaggeration is 0 (the expected peak, {peak * 1e6:.3g} um, as at '
-                 f"least {MARKER_SHARE:.0%} of the coupler's {length:g} m)")
+        self.auto_exaggeration = marker_exaggeration(self.estimator, log.info)
         # The node only streams: the step tables serve it, the full table can go.
         self.model = self.estimator.release_model_table()
         self.model_facts = {'model_size': self.model.size, 'model_grid': self.model.grid_size,
