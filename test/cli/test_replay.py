@@ -213,7 +213,8 @@ def test_replay_of_a_bag_skips_a_fifo_links_out_and_a_device(tmp_path, names):
     planted = plant_hostile_entries(tmp_path / 'bag', tmp_path / 'elsewhere' / 'elsewhere_0.mcap',
                                     names)
     done = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'replay',
-                           str(tmp_path / 'bag'), '--out', str(tmp_path / 'out.mcap'), '--json'],
+                           str(tmp_path / 'bag'), '--out', str(tmp_path / 'out.mcap'), '--json',
+                           '--mechanism', 'cho1992'],   # the bag names no model
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     result = json.loads(done.stdout)
