@@ -1,8 +1,8 @@
 """
 The package's shape, checked from its source with ast (no imports, under a second).
 
-Modules up to 400 lines, functions up to 60 lines of code (docstrings not counted), imports
-that go one way between layers and form no cycle, no imports hidden inside functions except
+Modules up to 600 lines (one concept each, not cut at a line count), functions up to 60 lines
+of code (docstrings not counted), imports that go one way between layers and form no cycle, no imports hidden inside functions except
 the optional heavy ones in command handlers, and a core free of ROS, MCAP and matplotlib.
 """
 
@@ -13,7 +13,7 @@ import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / 'flexlink_ros'
-MODULE_LINES = 400
+MODULE_LINES = 600
 FUNCTION_LINES = 60
 # Which layers each layer may import (names and errors are importable from everywhere).
 LAYERS = {

@@ -28,8 +28,10 @@ import shutil
 import subprocess
 import sys
 
+from flexlink_ros.io.provenance import provenance_entries
 from flexlink_ros.io.recorder import McapRecorder
 from flexlink_ros.ros import messages as ros_messages
+from flexlink_ros.ros.parameters import default_model_options
 import pytest
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
@@ -53,8 +55,8 @@ class Run:
 RUN = {
     # Recording, replay, Foxglove: `run1` is the node's recording (record.path:=run1).
     'flexlink mcap-info run1':
-        Run(('run1: 1000 messages over 0.999 s', '/joint_states', 'sensor_msgs/msg/JointState'),
-            setup='run1'),
+        Run(('run1: 1000 messages over 0.999 s', '/joint_states', 'sensor_msgs/msg/JointState',
+             'made with: flexlink_node'), setup='run1'),
     'flexlink mcap-recover run1/run1_0.mcap':
         Run(('recovered 1000 messages', 'into run1_0.recovered.mcap'),
             creates=('run1_0.recovered.mcap',), setup='run1'),
@@ -126,7 +128,8 @@ SKIPPED = {
     'ros2 launch flexlink_ros flexlink_lifecycle.launch.py driver:=true': _LAUNCH,
     'ros2 launch flexlink_ros flexlink_lifecycle.launch.py autostart:=false': _LAUNCH,
     'ros2 launch flexlink_ros flexlink.launch.py --show-args': _LAUNCH,
-    'flexlink replay other_bag --topic /robot/joint_states --joint crank_joint --publish':
+    'flexlink replay other_bag --mechanism cho1992 --topic /robot/joint_states '
+    '--joint crank_joint --publish':
         _PUBLISH,
     'flexlink replay run1 --publish --clock --rate 2 --loop --ros-args -r __ns:=/robot1':
         _PUBLISH + '; an endless loop, ended by Ctrl-C as test_republish.py '
@@ -204,7 +207,8 @@ def run1(tmp_path_factory):
     """Write ``run1`` as ``flexlink_node -p record.path:=run1`` does: 1 s of 1 kHz crank."""
     path = tmp_path_factory.mktemp('readme') / 'run1'
     speed = 391.0 * 2.0 * math.pi / 60.0
-    with McapRecorder(path) as recorder:
+    made_by = provenance_entries('flexlink_node', 'cho1992', default_model_options())
+    with McapRecorder(path, provenance=made_by) as recorder:
         recorder.add_topic('/joint_states', JointState)
         for k in range(1000):
             stamp = 1_700_000_000_000_000_000 + k * 1_000_000

@@ -318,6 +318,9 @@ def _quality_lines(quality):
     else:
         validity = (f"validity indicator max {verdict['indicator_max']:.3g} (threshold "
                     f"{verdict['threshold']:g}): "
-                    + ('valid' if verdict['valid'] else 'NOT valid: near a resonance the '
-                       'amplitude detunes the links (README: where the estimate holds)'))
+                    + ('valid' if verdict['valid'] else 'NOT valid: at this speed a crank '
+                       "harmonic drives a link near its resonance, where the vibration's own "
+                       'axial force detunes the link and no linear estimate can follow it, so '
+                       'read these deflections as a warning, not a measurement '
+                       '(docs/validity.md)'))
     return [f"quality: error indicator max {quality['error_indicator_max']:.3g}; {validity}"]

@@ -23,12 +23,14 @@ import numpy as np
 
 from .flex import nonlinearity_line
 from .main import emit
-from .model_args import add_estimator_arguments, crank_rpm, load_model, model_options
+from .model_args import (add_chart_argument, add_estimator_arguments, crank_rpm,
+                         criterion_thresholds, load_model, model_options)
 from .plan_params import chosen_options, write_params_file
 from .progress import Progress
 from ..core.mechanism_file import load_mechanism
 from ..core.numerics import RPM
 from ..core.reduction.soft_basis import soft_basis_text
+from ..report.cycle_chart import plot_cycle
 from ..report.estimator import plot_error_vs_cost
 from ..studies.bench import run_bench
 from ..studies.plan import plan_table, run_plan
@@ -59,7 +61,21 @@ def _estimate(args):
             f'{result["us_per_sample_p99"]:.1f} us p99 (r = {model.size}, '
             f'{soft_basis_text(model)}, '
             f'{model.grid_size} grid cells)\n  ' + nonlinearity_line(result['nonlinearity']))
+    if args.chart:
+        result['chart'] = str(_estimate_chart(args, mechanism, model, result))
+        text += f"\n  chart {result['chart']}"
     return emit(result, text, args.json)
+
+
+def _estimate_chart(args, mechanism, model, result):
+    """Draw the last revolution's deflections and criteria (``--chart``)."""
+    def columns(point):
+        return np.column_stack([result[point]['dx_m'], result[point]['dy_m']])
+    criterion = np.asarray(result['criterion']) if model.force_moments.any() else None
+    return plot_cycle(args.chart, np.radians(result['crank_deg']), columns('lever_tip'),
+                      columns('coupler_mid'), criterion, thresholds=criterion_thresholds(),
+                      title=f'{mechanism.name} at {args.rpm:g} rpm (last revolution, order '
+                      f'{model.order}, flexlink estimate)')
 
 
 def plan_fixed(args):
@@ -152,6 +168,7 @@ def register(subparsers):
     parser.add_argument('--no-warm-start', action='store_true',
                         help='start from the static deflection, not the periodic state')
     parser.add_argument('--seed', type=int, default=0, help='jitter random seed')
+    add_chart_argument(parser)
     parser.set_defaults(func=_estimate)
 
     parser = subparsers.add_parser('plan', help='smallest model (physics and size) meeting a '

@@ -3,7 +3,8 @@ MCAP subcommands: ``mcap-info`` and ``mcap-recover`` (``mcap-record``: its own m
 
 - ``flexlink mcap-info FILE|BAG_DIR [--json]``: topics, types, counts, time range, and whether
   the file is complete, checked: every chunk is decompressed (bounded) and CRC-checked, and
-  damaged chunks are listed with their offsets rather than trusting the summary.
+  damaged chunks are listed with their offsets rather than trusting the summary; and what the
+  recording says made it (producer, version, mechanism file, model options).
 - ``flexlink mcap-recover IN.mcap [--out OUT.mcap] [--json]``: read a truncated or damaged file
   (a recorder killed with SIGKILL, a full disk, a bad sector) record by record, keep every
   intact chunk and message, skipping damaged chunks, and write a proper file with summary
@@ -20,6 +21,7 @@ from ..errors import RecorderError
 from ..io.bag_files import bag_files
 from ..io.mcap_reader import iter_messages, map_file, Salvage
 from ..io.mcap_records import MESSAGE_HEAD, MESSAGE_HEAD_SIZE
+from ..io.provenance import PROVENANCE_RECORD, ProvenanceError, read_entries, read_provenance
 
 RECOVER_LIBRARY = f'flexlink mcap-recover; {LIBRARY_IDENTIFIER}'
 
@@ -160,9 +162,33 @@ def _damage_lines(damaged, count, shown=5):
     return lines
 
 
+def made_with(path):
+    """
+    Say what a recording says made it (:mod:`io.provenance`): a dict and its lines of text.
+
+    ``made_with`` is None for a recording that does not say (``ros2 bag record``, an older
+    version), ``{'error': reason}`` for a record that cannot be used.
+    """
+    try:
+        recorded = read_provenance(path)
+    except ProvenanceError as exc:
+        return {'error': str(exc)}, [f'  made with: unusable provenance record: {exc}']
+    if recorded is None:
+        return None, ['  made with: not recorded (no flexlink_ros record: replay needs '
+                      '--mechanism)']
+    lines = recorded.summary()
+    result = {'producer': recorded.producer, 'version': recorded.version,
+              'mechanism_file': recorded.mechanism_file or None,
+              'mechanism_sha256': recorded.mechanism_sha256 or None,
+              'damping_ratio': recorded.damping_ratio,
+              'model_options': recorded.model_options}
+    return result, [f'  made with: {lines[0][len("made by "):]}'] + [f'    {x}' for x in lines[1:]]
+
+
 def _info_command(args):
     info = mcap_info(args.path)
-    return emit(info, _info_text(info), args.json)
+    info['made_with'], lines = made_with(args.path)
+    return emit(info, '\n'.join([_info_text(info)] + lines), args.json)
 
 
 # -- mcap-recover ---------------------------------------------------------------------------
@@ -212,8 +238,12 @@ def recover_mcap(source, destination):
     if pathlib.Path(source).resolve() == pathlib.Path(destination).resolve():
         raise ValueError('`--out` must differ from the input file')
     map_file(source).close()    # not an MCAP file: refused before the output is created
+    try:     # what made the recording goes into the copy too
+        provenance = read_entries(source)
+    except ProvenanceError:
+        provenance = None
     with open(destination, 'wb') as out:
-        copier = _Copier(Writer(out))
+        copier = _Copier(Writer(out), provenance)
         result = _stream_copy(source, copier)
         copier.finish(result['header'])
     if result['header'] is None and not result['message_count']:
@@ -226,14 +256,17 @@ def recover_mcap(source, destination):
 class _Copier:
     """Writes salvaged messages with their schemas and channels into a new MCAP writer."""
 
-    def __init__(self, writer):
+    def __init__(self, writer, provenance=None):
         self.writer = writer
+        self.provenance = provenance
         self.started = False
         self.schema_ids, self.channel_ids = {}, {}
 
     def start(self, header):
         if not self.started:
             self.writer.start(profile=header[0] if header else '', library=RECOVER_LIBRARY)
+            if self.provenance:
+                self.writer.add_metadata(PROVENANCE_RECORD, self.provenance)
             self.started = True
 
     def add(self, salvage, channel, sequence, log_time, publish_time, data):

@@ -10,6 +10,7 @@ import time
 from .main import emit
 from ..errors import RecorderError
 from ..io.msg_schema import message_class
+from ..io.provenance import provenance_entries
 from ..io.recorder import McapRecorder
 from ..io.recorder_files import MIN_SPLIT_BYTES, MIN_SPLIT_DURATION_S, split_refusal
 from ..ros.runtime import spin_until_shutdown
@@ -50,7 +51,8 @@ def _record_command(args):
         if reason is not None:
             raise ValueError(reason)
     recorder = McapRecorder(args.out, split_size_bytes=int(args.split_size_mb * 1e6),
-                            split_duration_s=args.split_duration_s)
+                            split_duration_s=args.split_duration_s,
+                            provenance=provenance_entries('flexlink mcap-record'))
     status = record_topics(recorder, [_parse_topic(t) for t in args.topic],
                            duration_s=args.duration_s,
                            discovery_timeout_s=args.discovery_timeout_s)

@@ -258,6 +258,19 @@ def model_options(args, **overrides):
     return ModelOptions(**values)
 
 
+def add_chart_argument(parser):
+    """Add ``--chart PNG`` (replay, estimate): deflections and criteria over crank angle."""
+    parser.add_argument('--chart', metavar='PNG',
+                        help='also draw the deflections and joint criteria over crank angle '
+                        'into this PNG')
+
+
+def criterion_thresholds():
+    """Return the node's default WARN and ERROR criterion levels [rad/(s N)] (the charts')."""
+    values = node_params.defaults()
+    return values['diagnostics.criterion_warn'], values['diagnostics.criterion_error']
+
+
 def load_model(mechanism, options, args):
     """
     Load the cached (or freshly built) reduced model for the command line.

@@ -31,6 +31,7 @@ from ..io.bag_files import bag_files
 from ..io.bag_index import bag_topics, rewrite_complete, scan_bag_file
 from ..io.bag_lock import lock_bag, unlock_bag
 from ..io.bag_metadata import serialized_metadata, UNSET_NS, write_bag_metadata
+from ..io.provenance import custom_data, ProvenanceError, read_entries
 
 
 def register(subparsers):
@@ -116,10 +117,14 @@ def _reindex_locked(bag, force):
         raise FlexlinkError(f'{bag}: no readable MCAP file (' + '; '.join(
             f"{entry['path']}: {entry['reason']}" for entry in skipped[:3]) + ')')
     topics = bag_topics(scans)
+    try:     # what made the bag, kept in custom_data
+        provenance = read_entries(bag)
+    except ProvenanceError:
+        provenance = None
     for n, scan in enumerate(scans):
         if not scan['complete']:
-            scan['salvaged_from'] = str(_salvage(scans, n))
-    write_bag_metadata(bag, scans, topics)
+            scan['salvaged_from'] = str(_salvage(scans, n, provenance))
+    write_bag_metadata(bag, scans, topics, custom_data(provenance))
     return {'bag': str(bag), 'message_count': sum(s['message_count'] for s in scans),
             'files': [{'path': str(s['path']), 'message_count': s['message_count'],
                        'end_reason': s['end_reason'], 'salvaged_from': s.get('salvaged_from')}
@@ -177,7 +182,7 @@ def _process_alive(pid):
     return True
 
 
-def _salvage(scans, n):
+def _salvage(scans, n, provenance):
     """Rewrite file ``n`` complete in place; keep the original as ``.truncated``."""
     path = scans[n]['path']
     kept = path.with_name(path.name + '.truncated')
@@ -188,12 +193,14 @@ def _salvage(scans, n):
     empty = {'path': path, 'message_count': 0, 'first_log_ns': None, 'last_log_ns': None}
     topics = bag_topics(scans[:n + 1])
     counts = {name: topic.message_count for name, topic in bag_topics([scans[n]]).items()}
-    opening = serialized_metadata([empty], topics, UNSET_NS, counts={})
-    closing = serialized_metadata([scans[n]], topics, counts=counts)
+    extra = custom_data(provenance)    # as the recorder writes them
+    opening = serialized_metadata([empty], topics, UNSET_NS, counts={}, custom_data=extra)
+    closing = serialized_metadata([scans[n]], topics, counts=counts, custom_data=extra)
     temporary = path.with_name(f'.{path.name}.{os.getpid()}.salvage')
     mode = stat.S_IMODE(os.stat(path).st_mode)     # a 0600 recording stays 0600
     try:
-        rewrite_complete(path, temporary, opening, closing, mode)   # refuses an existing file
+        rewrite_complete(path, temporary, opening, closing, mode,   # refuses an existing file
+                         provenance)
     except FileExistsError:
         raise
     except BaseException:

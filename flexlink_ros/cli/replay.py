@@ -15,6 +15,10 @@ flexlink_node, Foxglove, RViz; :mod:`ros.republish`), with the flags of ``ros2 b
 time), ``--loop`` (``--loop-count N`` bounds it), and ROS arguments after ``--ros-args``
 (remappings, ``__ns``).
 
+The model is the one the recording says made it (mechanism file, damping ratio, model options,
+crank joint, warm start: :mod:`.replay_model`); a flag that differs is used and said in a note,
+and a recording that names no model needs ``--mechanism``. ``--out`` records the replay's own.
+
 Like the node, a sample whose stamp goes back or jumps by more than the estimator's reset gap
 starts a new segment (the state restarts), an exactly repeated sample repeats the previous
 output, and messages without the crank joint, with a non-finite value or that are not a
@@ -28,21 +32,29 @@ restarts, as in the node.
 import functools
 import math
 import pathlib
+import sys
 import time
 
+import numpy as np
+
 from .main import emit
-from .model_args import add_estimator_arguments, load_model, model_options
+from .model_args import add_chart_argument, add_estimator_arguments, criterion_thresholds, \
+    load_model
 from .progress import Progress
 from .replay_offline import CHUNK_SAMPLES, estimate_and_write, MAX_CHUNK_SAMPLES, open_input
-from ..core.mechanism_file import load_mechanism
+from .replay_model import defer_model_defaults, MissingModel, replay_model
+from ..core.estimation.marker_scale import model_exaggeration
 from ..io.joint_states import read_crank_samples
 from ..io.recorder_files import refuse_existing
 from ..io.recording import choose_input_topic, damage_note, scan_recording
 from ..io.replay_writer import write_replay
 from ..names import DEFAULT_FRAME_ID, NODE_NAME, output_topics, QUALITY_NAMES
+from ..report.cycle_chart import plot_cycle
 from ..ros.messages import OK
 from ..ros.playback_schedule import DEFAULT_CLOCK_HZ, MAX_CLOCK_HZ
 from ..ros.republish import DISCOVERY_TIMEOUT_S, publish_recording
+
+CHART_ROWS = 200_000   # the chart shows the last 200 s at 1 kHz: enough revolutions to read
 
 
 def read_input(args, damaged):
@@ -85,8 +97,36 @@ def _writer(args, model, topic):
 
 
 def _write_blocks(out, blocks, progress, topic, model, args):
+    exaggeration = model_exaggeration(model) if args.markers_every_n else 1.0
     return write_replay(out, blocks, topic, output_topics(args.node_name), args.frame_id, model,
-                        args.markers_every_n, progress=progress, joint_levels=[OK] * 4)
+                        args.markers_every_n, exaggeration, progress=progress,
+                        joint_levels=[OK] * 4, provenance=args.provenance)
+
+
+class ChartRows:
+    """The last ``CHART_ROWS`` estimated rows, kept for ``--chart`` (bounded memory)."""
+
+    def __init__(self):
+        self.parts, self.count = [], 0
+
+    def add(self, estimate):
+        """Keep a block's crank angle, deflections and criteria."""
+        self.parts.append({key: np.array(estimate[key][-CHART_ROWS:]) for key in
+                           ('crank_angle', 'lever_tip', 'coupler_mid', 'criterion')})
+        self.count += len(self.parts[-1]['crank_angle'])
+        while self.count - len(self.parts[0]['crank_angle']) >= CHART_ROWS:
+            self.count -= len(self.parts.pop(0)['crank_angle'])
+
+    def draw(self, path, criteria_available, title):
+        """Draw the kept rows over crank angle (:func:`plot_cycle`); the PNG's path."""
+        rows = {key: np.concatenate([part[key] for part in self.parts])[-CHART_ROWS:]
+                for key in self.parts[0]} if self.parts else None
+        if rows is None:
+            raise ValueError('no estimated rows to chart')
+        return str(plot_cycle(path, rows['crank_angle'], rows['lever_tip'],
+                              rows['coupler_mid'],
+                              rows['criterion'] if criteria_available else None,
+                              title=title, thresholds=criterion_thresholds()))
 
 
 def run_replay(args):
@@ -104,14 +144,16 @@ def run_replay(args):
         The JSON-ready summary.
 
     """
+    mechanism, options, notes, args.provenance = replay_model(args)
     start = time.perf_counter()
     damaged = []     # (file, offset, reason) of what the reader skipped
     topic, rows, messages = open_input(args, damaged)
     read_s = time.perf_counter() - start
-    options = model_options(args)
-    model = load_model(load_mechanism(args.mechanism), options, args)
+    model = load_model(mechanism, options, args)
+    chart = ChartRows() if args.chart else None
     estimate, summary, times = estimate_and_write(args, model, rows, messages,
-                                                  _writer(args, model, topic))
+                                                  _writer(args, model, topic),
+                                                  on_block=chart and chart.add)
     count, span_s = rows.samples, rows.span_s()
     result = {'input': str(args.input), 'topic': topic, 'samples': count,
               'skipped': rows.skipped, 'skipped_reasons': rows.skipped_reasons,
@@ -120,7 +162,8 @@ def run_replay(args):
               'model': {'size': model.size, 'step_size': model.step_size,
                         'soft_basis': model.info.get('soft'), 'grid_size': model.grid_size,
                         'options': str(options)}, 'order': model.order,
-              'second_order': options.second_order if model.order == 2 else None, 'notes': []}
+              'second_order': options.second_order if model.order == 2 else None,
+              'notes': notes}
     if args.out:
         result['write_s'] = times['write_s']
         result['output'] = times['status']['path']
@@ -133,6 +176,10 @@ def run_replay(args):
     result['samples_per_s'] = count / total if total > 0 else math.inf
     result['times_real_time'] = span_s / total if total > 0 else math.inf
     result.update(summary)
+    if chart:
+        result['chart'] = chart.draw(args.chart, estimate['criteria_available'],
+                                     f'{mechanism.name}: {pathlib.Path(args.input).name} '
+                                     f'({count} samples, order {model.order}, flexlink replay)')
     if args.publish:
         _, samples = read_input(args, [])
         with Progress(f'publishing {topic}', count, unit='msg') as progress:
@@ -154,8 +201,8 @@ def playback_options(args):
 
 def _check_arguments(args):
     """Refuse bad flags before any reading (``--out`` with the recorder's own test)."""
-    if not args.out and not args.publish:
-        raise ValueError('give `--out` and/or `--publish`')
+    if not args.out and not args.publish and not args.chart:
+        raise ValueError('give `--out`, `--publish` and/or `--chart`')
     playback_flags = [flag for flag, given in (
         ('--clock', args.clock is not None), ('--clock-topics-all', args.clock_topics_all),
         ('--loop', args.loop), ('--loop-count', args.loop_count is not None),
@@ -222,6 +269,8 @@ def summary_text(result):
                  f"{result['times_real_time']:.0f}x real time")
     if 'output' in result:
         lines.append(f"  wrote {result['output']}")
+    if 'chart' in result:
+        lines.append(f"  chart {result['chart']}")
     if 'playback' in result:
         lines.append(playback_text(result['playback']))
     return '\n'.join(lines)
@@ -250,7 +299,11 @@ def playback_text(played):
 
 def _replay_command(args):
     _check_arguments(args)
-    result = run_replay(args)
+    try:
+        result = run_replay(args)
+    except MissingModel as exc:
+        print(f'flexlink replay: error: {exc}', file=sys.stderr)
+        return 2
     code = emit(result, summary_text(result), args.json)
     return 1 if result.get('playback', {}).get('failed') else code
 
@@ -266,7 +319,8 @@ def register(subparsers):
     parser.add_argument('--out', help='output .mcap file or bag directory (must not exist)')
     parser.add_argument('--topic', help='input JointState topic (default: the one carrying '
                         'the joint)')
-    parser.add_argument('--joint', default='crank', help='crank joint name (default: crank)')
+    parser.add_argument('--joint', default='crank', help='crank joint name (default: the '
+                        "recording's, else crank)")
     parser.add_argument('--node-name', default=NODE_NAME,
                         help=f'namespace of the output topics (default: {NODE_NAME})')
     parser.add_argument('--frame-id', default=DEFAULT_FRAME_ID, help='frame of the outputs')
@@ -299,4 +353,6 @@ def register(subparsers):
                         metavar='S', help='with --publish, longest wait for the subscriptions '
                         f'[s] (default {DISCOVERY_TIMEOUT_S:g})')
     add_estimator_arguments(parser)
+    add_chart_argument(parser)
+    defer_model_defaults(parser)   # the recording's model unless a flag is given
     parser.set_defaults(func=_replay_command, takes_ros_args=True)

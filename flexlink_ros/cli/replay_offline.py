@@ -248,7 +248,7 @@ class _Pipeline:
         self.thread.join()
 
 
-def estimate_and_write(args, model, rows, messages, write):
+def estimate_and_write(args, model, rows, messages, write, on_block=None):
     """
     Estimate every sample and, with ``write``, write the output file meanwhile.
 
@@ -265,6 +265,8 @@ def estimate_and_write(args, model, rows, messages, write):
     write : callable or None
         ``write(blocks, progress)``: :func:`io.replay_writer.write_replay` of the blocks
         (None: estimate only).
+    on_block : callable, optional
+        ``on_block(estimate)`` with each block of estimated rows (the chart's rows).
 
     Returns
     -------
@@ -284,6 +286,8 @@ def estimate_and_write(args, model, rows, messages, write):
     def blocks():
         for block in pipeline:
             summary.add(block[2])
+            if on_block is not None:
+                on_block(block[2])
             yield block
     status = None
     try:

@@ -342,21 +342,20 @@ class _PlainLoader(yaml.SafeLoader):
             self._depth -= 1
 
 
-def read_yaml_bounded(path, limit=MAX_FILE_BYTES):
+def read_yaml_bounded(path, limit=MAX_FILE_BYTES, raw=None):
     """
     Parse a small YAML file: at most ``limit`` bytes, UTF-8, no aliases, bounded nesting.
 
-    Raises
-    ------
-    MechanismError
-        Naming the file (or ``yaml``) and the bound or the parse error.
+    ``raw``: the file's bytes when the caller has them (a recording's copy; ``path`` then only
+    names it). A MechanismError names the file (or ``yaml``) and the bound or parse error.
 
     """
-    path = pathlib.Path(path)
-    if not path.is_file():
-        raise MechanismError(str(path), 'not a regular file')
-    with open(path, 'rb') as stream:
-        raw = stream.read(limit + 1)
+    if raw is None:
+        path = pathlib.Path(path)
+        if not path.is_file():
+            raise MechanismError(str(path), 'not a regular file')
+        with open(path, 'rb') as stream:
+            raw = stream.read(limit + 1)
     if len(raw) > limit:
         raise MechanismError(str(path), f'larger than {limit} bytes (a mechanism file is '
                              'a few kB)')
@@ -369,26 +368,26 @@ def read_yaml_bounded(path, limit=MAX_FILE_BYTES):
         raise MechanismError(str(path), f'not valid YAML: {reason}') from None
 
 
-def _read_mapping(path_or_name):
-    """Find, read and parse a mechanism file into its top-level mapping."""
-    path = find_config(str(path_or_name))
-    data = read_yaml_bounded(path)
+def _read_mapping(path_or_name, raw=None):
+    """Find (unless its bytes ``raw`` are given), read and parse a mechanism file's mapping."""
+    path = find_config(str(path_or_name)) if raw is None else path_or_name
+    data = read_yaml_bounded(path, raw=raw)
     if not isinstance(data, dict):
         raise MechanismError(str(path), 'expected a YAML mapping at the top level')
     return data
 
 
-def load_mechanism(path_or_name):
-    """Load and validate a mechanism YAML file (see :func:`mechanism_from_dict`)."""
-    return mechanism_from_dict(_read_mapping(path_or_name))
+def load_mechanism(path_or_name, raw=None):
+    """Load and validate a mechanism file, or its bytes ``raw`` (:func:`mechanism_from_dict`)."""
+    return mechanism_from_dict(_read_mapping(path_or_name, raw))
 
 
-def read_mechanism_file(path_or_name):
-    """Read a mechanism file once: its Mechanism and ``stiffness_damping_s`` [s] (0 if none)."""
-    data = _read_mapping(path_or_name)
+def read_mechanism_file(path_or_name, raw=None):
+    """Read a mechanism file (or its bytes ``raw``) once: Mechanism, ``stiffness_damping_s``."""
+    data = _read_mapping(path_or_name, raw)
     return mechanism_from_dict(data), _stiffness_damping_from(data)
 
 
-def stiffness_damping_from_file(path_or_name):
-    """Return a (validated) file's ``stiffness_damping_s`` [s] (``--stiffness-damping``)."""
-    return read_mechanism_file(path_or_name)[1]
+def stiffness_damping_from_file(path_or_name, raw=None):
+    """Return a (validated) file's ``stiffness_damping_s`` [s] (0 if none)."""
+    return read_mechanism_file(path_or_name, raw)[1]

@@ -22,6 +22,7 @@ from .bag_metadata import METADATA_RECORD
 from .mcap_reader import iter_messages, map_file, Salvage
 from .mcap_records import MESSAGE_HEAD, MESSAGE_HEAD_SIZE
 from .mcap_writer import McapFileWriter
+from .provenance import PROVENANCE_RECORD
 from .recorder_files import create_exclusive, LIBRARY
 
 
@@ -119,7 +120,7 @@ def bag_topics(scans):
     return topics
 
 
-def rewrite_complete(source, destination, opening, closing, mode=0o644):
+def rewrite_complete(source, destination, opening, closing, mode=0o644, provenance=None):
     """
     Write every intact message of an MCAP file into a new, complete file.
 
@@ -137,6 +138,8 @@ def rewrite_complete(source, destination, opening, closing, mode=0o644):
         The maps of the two ``rosbag2`` records (:func:`.bag_metadata.serialized_metadata`).
     mode : int
         Permission bits of the new file (from its creation on, so never more open).
+    provenance : dict, optional
+        The ``flexlink_ros`` record's map, written after the opening record (:mod:`.provenance`).
 
     """
     salvage = Salvage()
@@ -146,7 +149,7 @@ def rewrite_complete(source, destination, opening, closing, mode=0o644):
             os.fchmod(stream.fileno(), mode)     # exactly, whatever the umask
             writer = McapFileWriter(stream, chunk_size=128 * 1024, compression='zstd',
                                     spill_directory=pathlib.Path(destination).parent)
-            copy = _Copy(writer, salvage, opening)
+            copy = _Copy(writer, salvage, opening, provenance)
             for records, body, stop in iter_messages(buffer, salvage):
                 channel_id, sequence, log_time, publish_time = MESSAGE_HEAD.unpack_from(
                     records, body)
@@ -166,8 +169,9 @@ def rewrite_complete(source, destination, opening, closing, mode=0o644):
 class _Copy:
     """Schemas and channels of a salvaged file, added to the new file as first needed."""
 
-    def __init__(self, writer, salvage, opening):
+    def __init__(self, writer, salvage, opening, provenance=None):
         self.writer, self.salvage, self.opening = writer, salvage, opening
+        self.provenance = provenance
         self.started = False
         self.schema_ids, self.channel_ids = {}, {}
 
@@ -176,6 +180,8 @@ class _Copy:
         if not self.started:
             self.writer.start(profile=self.salvage.profile or 'ros2', library=LIBRARY)
             self.writer.add_metadata(METADATA_RECORD, self.opening)
+            if self.provenance:
+                self.writer.add_metadata(PROVENANCE_RECORD, self.provenance)
             self.started = True
 
     def channel(self, channel_id):

@@ -40,7 +40,7 @@ def _since_epoch(nanoseconds):
     return {'nanoseconds_since_epoch': int(nanoseconds)}
 
 
-def bag_metadata(files, topics, no_message_ns=0, counts=None):
+def bag_metadata(files, topics, no_message_ns=0, counts=None, custom_data=None):
     """
     Return the rosbag2 (version 9) bag information of MCAP files and their topics.
 
@@ -59,6 +59,8 @@ def bag_metadata(files, topics, no_message_ns=0, counts=None):
     counts : dict, optional
         Topic name -> message count to write instead of each topic's ``message_count``
         (a topic not in it: 0), for a record that describes one file.
+    custom_data : dict, optional
+        str -> str entries of ``custom_data`` (what made the bag, :mod:`.provenance`).
 
     Returns
     -------
@@ -93,7 +95,7 @@ def bag_metadata(files, topics, no_message_ns=0, counts=None):
              'duration': {'nanoseconds': _or(f['last_log_ns'], 0) - _or(f['first_log_ns'], 0)},
              'message_count': f['message_count']}
             for f in files],
-        'custom_data': {},
+        'custom_data': dict(custom_data or {}),
         'ros_distro': ROS_DISTRO,
     }
 
@@ -102,7 +104,7 @@ def _or(value, default):
     return default if value is None else value
 
 
-def serialized_metadata(files, topics, no_message_ns=0, counts=None):
+def serialized_metadata(files, topics, no_message_ns=0, counts=None, custom_data=None):
     """
     Return the ``rosbag2`` MCAP Metadata record's map, as rosbag2's MCAP storage writes it.
 
@@ -119,12 +121,13 @@ def serialized_metadata(files, topics, no_message_ns=0, counts=None):
         ``{'serialized_metadata': yaml_text}``.
 
     """
-    text = yaml.dump(bag_metadata(files, topics, no_message_ns, counts), Dumper=_PlainDumper,
+    text = yaml.dump(bag_metadata(files, topics, no_message_ns, counts, custom_data),
+                     Dumper=_PlainDumper,
                      sort_keys=False)
     return {'serialized_metadata': text}
 
 
-def write_bag_metadata(bag_dir, files, topics):
+def write_bag_metadata(bag_dir, files, topics, custom_data=None):
     """
     Write a rosbag2 (version 9) ``metadata.yaml`` for MCAP files in a bag directory.
 
@@ -136,9 +139,11 @@ def write_bag_metadata(bag_dir, files, topics):
         Per file: ``path``, ``message_count``, ``first_log_ns``, ``last_log_ns``.
     topics : dict
         Topic name -> object with ``name``, ``type_name``, ``qos_profiles``, ``message_count``.
+    custom_data : dict, optional
+        str -> str entries of ``custom_data``.
 
     """
-    metadata = bag_metadata(files, topics)
+    metadata = bag_metadata(files, topics, custom_data=custom_data)
     bag_dir = pathlib.Path(bag_dir)
     temporary = bag_dir / 'metadata.yaml.tmp'
     text = yaml.dump({'rosbag2_bagfile_information': metadata}, Dumper=_PlainDumper,

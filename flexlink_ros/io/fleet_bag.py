@@ -20,6 +20,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
 
 from .joint_states import parse_crank_states, read_crank_samples, skip_reasons
+from .provenance import read_provenance
 from .recording import choose_input_topic, damage_note, scan_recording
 from .replay_writer import write_replay
 from ..core.estimation.offline_run import estimate_offline
@@ -90,6 +91,9 @@ def bag_model(bag, fallback):
         Where they came from, for the table ('--mechanism <file>').
 
     """
+    recorded = read_provenance(bag)    # a ProvenanceError fails this bag, saying why
+    if recorded is not None and recorded.has_model:
+        return recorded.mechanism(), recorded.options(), f'recorded ({recorded.mechanism_file})'
     if fallback is None:
         raise ValueError(f'{bag} has no recorded mechanism: give `--mechanism`')
     mechanism_file, options = fallback

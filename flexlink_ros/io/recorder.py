@@ -43,6 +43,7 @@ from .bag_metadata import (
 from .msg_schema import (
     message_definition, message_type_name, qos_profile_dict, serialize_exact,
 )
+from .provenance import custom_data
 from .recorder_files import (
     abandon, check_settings, create_exclusive, file_path, make_directories, OpenFile,
     refuse_existing, register_topic, remove_directories, split_due, start_file, Topic,
@@ -77,12 +78,15 @@ class McapRecorder(QueuedWriting, RecordingStatus):
     compression : {'zstd', 'none'}
     flush_thread : bool
         Run the background flusher; without it only writes trigger flushes.
+    provenance : dict, optional
+        What makes the recording (:func:`.provenance.provenance_entries`): written as a
+        ``flexlink_ros`` Metadata record in every file and into ``custom_data``.
 
     """
 
     def __init__(self, path, *, split_size_bytes=0, split_duration_s=0.0,
                  chunk_size_bytes=DEFAULT_CHUNK_SIZE, flush_period_s=DEFAULT_FLUSH_PERIOD_S,
-                 compression='zstd', flush_thread=True):
+                 compression='zstd', flush_thread=True, provenance=None):
         self.path = pathlib.Path(path)
         self.bare = self.path.suffix == '.mcap'
         check_settings(self.path, split_size_bytes, split_duration_s, chunk_size_bytes,
@@ -93,6 +97,8 @@ class McapRecorder(QueuedWriting, RecordingStatus):
         self.flush_period_ns = int(round(flush_period_s * 1e9))
         self.compression = compression
         self._use_flush_thread = flush_thread
+        self.provenance = dict(provenance or {})
+        self._custom_data = custom_data(self.provenance)
         self._lock = threading.RLock()
         self._topics = {}
         self._file = None
@@ -171,7 +177,8 @@ class McapRecorder(QueuedWriting, RecordingStatus):
                     self._finish_file()
                     self._state = RecorderState.CLOSED
                     if not self.bare:
-                        write_bag_metadata(self.path, self._closed_files, self._topics)
+                        write_bag_metadata(self.path, self._closed_files, self._topics,
+                                           self._custom_data)
                 except OSError as exc:
                     self._fail(exc)
                 unlock_bag(self._bag_lock)
@@ -329,9 +336,10 @@ class McapRecorder(QueuedWriting, RecordingStatus):
         self._file = OpenFile(path, create_exclusive(path), None, {})
         self._file.counts_before = {t.name: t.message_count for t in self._topics.values()}
         opening = serialized_metadata([self._file.entry(complete=False)], self._topics,
-                                      UNSET_NS, counts={})   # as rosbag2 at open
+                                      UNSET_NS, counts={},
+                                      custom_data=self._custom_data)   # as rosbag2 at open
         start_file(self._file, self.chunk_size_bytes, self.compression, self._topics.values(),
-                   opening)
+                   opening, self.provenance)
 
     def _finish_file(self):
         current = self._file
@@ -339,7 +347,8 @@ class McapRecorder(QueuedWriting, RecordingStatus):
         counts = {t.name: t.message_count - before.get(t.name, 0)
                   for t in self._topics.values()}
         current.writer.add_metadata(METADATA_RECORD, serialized_metadata(
-            [current.entry(complete=True)], self._topics, counts=counts))
+            [current.entry(complete=True)], self._topics, counts=counts,
+            custom_data=self._custom_data))
         current.writer.finish()
         self._closed_bytes += current.stream.tell()
         current.stream.close()

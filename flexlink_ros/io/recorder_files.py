@@ -21,6 +21,7 @@ import numpy as np
 
 from .mcap_writer import COMPRESSIONS, McapFileWriter
 from .msg_schema import message_definition, offered_qos_yaml, type_hash
+from .provenance import PROVENANCE_RECORD
 
 LIBRARY = f'flexlink_ros recorder; {LIBRARY_IDENTIFIER}'
 # Smallest split a live recording accepts (0: never split). Each split finishes a file
@@ -199,7 +200,7 @@ def file_path(path, bare, index):
     return path / f'{path.name}_{index}.mcap'
 
 
-def start_file(current, chunk_size, compression, topics, metadata):
+def start_file(current, chunk_size, compression, topics, metadata, provenance=None):
     """
     Write a new file's header, schemas and channels and flush them; set its writer last.
 
@@ -215,12 +216,16 @@ def start_file(current, chunk_size, compression, topics, metadata):
         Each with ``name``, ``type_name``, ``qos_profiles``.
     metadata : dict
         The ``rosbag2`` Metadata record written after the header, as rosbag2 does at open.
+    provenance : dict, optional
+        The ``flexlink_ros`` Metadata record written next (:mod:`.provenance`).
 
     """
     writer = McapFileWriter(current.stream, chunk_size=chunk_size, compression=compression,
                             spill_directory=current.path.parent)
     writer.start(profile='ros2', library=LIBRARY)
     writer.add_metadata('rosbag2', metadata)
+    if provenance:
+        writer.add_metadata(PROVENANCE_RECORD, provenance)
     for topic in topics:
         register_topic(writer, current, topic)
     writer.flush()

@@ -208,7 +208,8 @@ def _write_batch(recorder, samples, estimate, chosen, first, names, marker_topic
 
 
 def write_replay(out_path, blocks, input_topic, topics, frame_id, model, markers_every_n=10,
-                 exaggeration=10.0, points_per_link=9, progress=None, joint_levels=None):
+                 exaggeration=10.0, points_per_link=9, progress=None, joint_levels=None,
+                 provenance=None):
     """
     Write the input and the recomputed outputs into a rosbag2 MCAP, a block of rows at a time.
 
@@ -241,6 +242,8 @@ def write_replay(out_path, blocks, input_topic, topics, frame_id, model, markers
         the end.
     joint_levels : sequence, optional
         Diagnostic level of each joint in the markers (required with markers).
+    provenance : dict, optional
+        What made the estimates (:func:`.provenance.provenance_entries`), recorded with them.
 
     Returns
     -------
@@ -249,7 +252,8 @@ def write_replay(out_path, blocks, input_topic, topics, frame_id, model, markers
 
     """
     recorder = McapRecorder(out_path, chunk_size_bytes=OUTPUT_CHUNK_BYTES,
-                            flush_period_s=OUTPUT_FLUSH_PERIOD_S, flush_thread=False)
+                            flush_period_s=OUTPUT_FLUSH_PERIOD_S, flush_thread=False,
+                            provenance=provenance)
     recorder.open()
     written = 0
     try:

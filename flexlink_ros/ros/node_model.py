@@ -12,6 +12,7 @@ import time
 
 from . import parameters
 from .messages import crank_from_joint_state
+from ..core.estimation.marker_scale import default_exaggeration, MARKER_SHARE
 from ..core.estimation.sample import SampleFlag
 from ..core.mechanism_file import read_mechanism_file
 from ..core.numerics import RPM
@@ -189,6 +190,25 @@ class ClippedSpeedLog:
                    f'of the model of {self._speed_max / RPM:.0f} rpm: {self.count} samples so '
                    'far estimated at the clipped speed (too small); restart with '
                    "model.speed_max_rpm above the crank's speed")
+
+
+def marker_exaggeration(estimator, log):
+    """
+    Return the markers' exaggeration when ``markers.exaggeration`` is 0, and log the rule.
+
+    Parameters
+    ----------
+    estimator : StreamingEstimator
+        The node's estimator (:func:`core.estimation.marker_scale.default_exaggeration`).
+    log : callable
+        Called with the sentence the node logs.
+
+    """
+    factor, peak, length = default_exaggeration(estimator)
+    log(f'markers: deflections drawn x{factor:g} when markers.exaggeration is 0 (the expected '
+        f"peak, {peak * 1e6:.3g} um, as at least {MARKER_SHARE:.0%} of the coupler's "
+        f'{length:g} m)')
+    return factor
 
 
 @dataclasses.dataclass

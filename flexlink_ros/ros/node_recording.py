@@ -16,7 +16,8 @@ from rclpy import logging as rclpy_logging
 from sensor_msgs.msg import JointState
 
 from .sim_time import cdr_stamp_ns
-from ..errors import RecorderError
+from ..errors import FlexlinkError, RecorderError
+from ..io.provenance import provenance_entries
 from ..io.recorder import McapRecorder
 from ..names import NODE_NAME
 
@@ -54,7 +55,8 @@ class NodeRecording:
             stem, dot, suffix = path.rpartition('.') if path.endswith('.mcap') else (path, '', '')
             path = f'{stem}_{take}{dot}{suffix}'
         recorder = McapRecorder(path, split_size_bytes=values['record.max_bytes'],
-                                split_duration_s=values['record.max_duration_s'])
+                                split_duration_s=values['record.max_duration_s'],
+                                provenance=self._provenance())
         # Topics first: if opening fails, writes to them are then dropped as failed,
         # not refused as undeclared.
         self._input_qos = qos
@@ -68,6 +70,17 @@ class NodeRecording:
         except RecorderError as exc:
             self.get_logger().error(f'recording disabled: {exc}')
         return recorder
+
+    def _provenance(self):
+        """Say what makes the recording: mechanism file, model options, version."""
+        values = self.values
+        try:
+            return provenance_entries(NODE_NAME, values['mechanism'], self.options,
+                                      self.model.zeta, values['crank_joint'],
+                                      values['model.warm_start'])
+        except (FlexlinkError, OSError) as exc:   # the file went away since the model loaded
+            self.get_logger().warning(f'the recording will not name its mechanism: {exc}')
+            return provenance_entries(NODE_NAME)
 
     def _recording_text(self):
         """Say in the ready line what the recording does (also that it was refused)."""

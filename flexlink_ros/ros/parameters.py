@@ -120,9 +120,11 @@ PARAMETERS = (
                   "mechanism file's damping_ratio", low=-1.0, high=1.0, read_only=True),
     ParameterSpec('frame_id', 'linkage_ground', 'Frame of the ground (O2 at its origin, '
                   'x towards O4) for deflections and markers', max_bytes=NAME_MAX_BYTES),
-    ParameterSpec('markers.exaggeration', 10.0,
-                  'Scale applied to elastic deflections in the deformed-linkage markers',
-                  low=1.0, high=1e6),
+    ParameterSpec('markers.exaggeration', 0.0,
+                  'Scale applied to elastic deflections in the deformed-linkage markers; 0 = '
+                  "the smallest of 1, 2, 5, 10, ... that draws the model's expected peak "
+                  "deflection as 5 % of the coupler's length (logged at start)",
+                  low=0.0, high=1e6),
     ParameterSpec('markers.points_per_link', 9, 'Points drawn along each deformed link',
                   low=2, high=200),
     ParameterSpec('markers.every_n', 10,

@@ -24,8 +24,9 @@ from visualization_msgs.msg import MarkerArray
 from . import diagnostics, parameters
 from .input_watch import InputWatch
 from .messages import diagnostics_message, joint_level, ns_to_stamp, quality_cdr
-from .node_model import (ClippedSpeedLog, crank_sample, load_node_model, one_line, PeriodStats,
-                         publishable, SKIP_KINDS, Totals)
+from .node_model import (ClippedSpeedLog, crank_sample, load_node_model,
+                         marker_exaggeration, one_line, PeriodStats, publishable,
+                         SKIP_KINDS, Totals)
 from .node_recording import NodeRecording
 from .overrides import declare_table
 from .progress_log import ProgressLog
@@ -95,6 +96,7 @@ class EstimatorPipeline(NodeRecording):
                  f'{self.options} ({time.perf_counter() - start:.2f} s); '
                  f'criteria: {self.criteria_source}')
         self.estimator = StreamingEstimator(self.model, warm_start=values['model.warm_start'])
+        self.auto_exaggeration = marker_exaggeration(self.estimator, log.info)
         # The node only streams: the step tables serve it, the full table can go.
         self.model = self.estimator.release_model_table()
         self.model_facts = {'model_size': self.model.size, 'model_grid': self.model.grid_size,
@@ -344,7 +346,8 @@ class EstimatorPipeline(NodeRecording):
                   for c in sample.criterion]
         return encoder.encode(stamp_ns, [resample(p) for p in positions],
                               [resample(d) for d in deflections],
-                              values['markers.exaggeration'], joints, levels)
+                              values['markers.exaggeration'] or self.auto_exaggeration,
+                              joints, levels)
 
     # -- diagnostics ----------------------------------------------------------------------
 

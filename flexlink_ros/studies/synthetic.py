@@ -103,7 +103,8 @@ def run_estimate(model, rpm, seconds=3.0, rate_hz=1000.0, jitter=0.0, warm_start
     Returns
     -------
     dict
-        JSON-ready: crank_deg, lever_tip and coupler_mid {dx_m, dy_m}, error_indicator,
+        JSON-ready: crank_deg, lever_tip and coupler_mid {dx_m, dy_m}, criterion (per sample
+        |dgamma/dt|/R of the four joints), error_indicator,
         nonlinearity (core.validity.is_valid of the samples' validity indicator),
         us_per_sample_median, us_per_sample_p99, samples, flags seen.
 
@@ -119,6 +120,7 @@ def run_estimate(model, rpm, seconds=3.0, rate_hz=1000.0, jitter=0.0, warm_start
                       'dy_m': [s.lever_tip[1] for s in chosen]},
         'coupler_mid': {'dx_m': [s.coupler_mid[0] for s in chosen],
                         'dy_m': [s.coupler_mid[1] for s in chosen]},
+        'criterion': [list(s.criterion) for s in chosen],
         'error_indicator_max': max(s.error_indicator for s in chosen),
         'nonlinearity': is_valid([s.nonlinearity for s in chosen]),
         'us_per_sample_median': median,

@@ -2,6 +2,7 @@
 
 import json
 import os
+import pathlib
 import subprocess
 import sys
 
@@ -76,3 +77,16 @@ def test_python_m_flexlink_ros_cli_runs_the_same_command_line(tmp_path):
                              '--out', str(tmp_path)], capture_output=True, text=True,
                             timeout=60)
     assert result.returncode == 1 and 'must be positive' in result.stderr
+
+
+def test_the_not_valid_line_says_why_in_one_sentence_and_where_to_read_more():
+    quality = {'error_indicator_max': 0.004,
+               'nonlinearity': {'valid': False, 'indicator_max': 3.9, 'threshold': 0.5}}
+    (line,) = cli_demo._quality_lines(quality)
+    assert 'NOT valid' in line and 'resonance' in line
+    verdict = line.split('NOT valid', 1)[1]
+    assert verdict.count('. ') == 0 and verdict.rstrip().endswith(')')    # one sentence
+    (doc,) = [word.strip('()') for word in verdict.split() if word.startswith('(docs/')]
+    assert (pathlib.Path(__file__).resolve().parents[2] / doc).is_file()
+    assert 'Where the estimate holds' in (pathlib.Path(__file__).resolve().parents[2]
+                                          / doc).read_text()

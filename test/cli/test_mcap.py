@@ -69,6 +69,31 @@ def test_default_output_of_a_file_outside_a_bag_is_beside_it(tmp_path):
         '/data/run1_3.recovered.mcap'
 
 
+def test_recovery_and_info_keep_what_made_the_recording(tmp_path, capsys):
+    """A killed node's file, recovered: the copy still names its mechanism and model."""
+    from flexlink_ros.io.provenance import provenance_entries, read_provenance
+    from flexlink_ros.io.recorder import McapRecorder
+    from flexlink_ros.ros.parameters import default_model_options
+    from sensor_msgs.msg import JointState
+    made_by = provenance_entries('flexlink_node', 'kang1990', default_model_options())
+    path = tmp_path / 'run.mcap'
+    with McapRecorder(path, provenance=made_by, chunk_size_bytes=2048) as recorder:
+        for n in range(300):
+            recorder.write('/joint_states', JointState(name=['crank'], position=[0.01 * n]),
+                           10**9 + n * 10**6)
+    data = path.read_bytes()
+    path.write_bytes(data[:len(data) // 2])     # cut short, as a SIGKILL does
+    out = tmp_path / 'recovered.mcap'
+    assert cli.main(['mcap-recover', str(path), '--out', str(out)]) == 0
+    recorded = read_provenance(out)
+    assert recorded is not None and recorded.producer == 'flexlink_node'
+    assert recorded.mechanism().name == 'kang1990'
+    assert recorded.options() == default_model_options()
+    capsys.readouterr()
+    assert cli.main(['mcap-info', str(out)]) == 0
+    assert 'made with: flexlink_node' in capsys.readouterr().out
+
+
 @pytest.mark.parametrize('names', [(name,) for name in ENTRIES] + [ENTRIES],
                          ids=[name[:-5] for name in ENTRIES] + ['all'])
 def test_mcap_info_of_a_bag_skips_a_fifo_links_out_and_a_device_with_a_warning(tmp_path, names):

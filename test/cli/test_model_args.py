@@ -3,7 +3,7 @@
 import pathlib
 
 from flexlink_ros.cli import main as cli
-from flexlink_ros.cli import model_args
+from flexlink_ros.cli import model_args, replay_model
 from flexlink_ros.core.mechanism_file import find_config
 from flexlink_ros.core.options import ModelOptions
 import pytest
@@ -16,8 +16,10 @@ DEFAULT_BEARINGS = dict.fromkeys(MODEL_COMMANDS, ModelOptions().bearings)
 
 
 def parse(*argv):
-    """Parse ``argv`` with the parser of its subcommand."""
-    return cli.build_parser(list(argv)).parse_args(list(argv))
+    """Parse ``argv`` with the parser of its subcommand (replay: with the flags' defaults)."""
+    args = cli.build_parser(list(argv)).parse_args(list(argv))
+    # replay defers its model flags' defaults to the recording's; these are the fallbacks
+    return replay_model.with_flag_defaults(args) if argv[0] == 'replay' else args
 
 
 @pytest.mark.parametrize('command', sorted(MODEL_COMMANDS))
@@ -43,8 +45,9 @@ def test_defaults_are_the_default_model_and_shown_in_help(command, capsys):
     with pytest.raises(SystemExit):
         parse(command, '--help')
     text = ' '.join(capsys.readouterr().out.split())
-    assert f'(default: {DEFAULT_BEARINGS[command]})' in text
-    assert '(default: cho1992)' in text and '{flexible,rigid}' in text
+    recorded = "the recording's, else " if command == 'replay' else ''
+    assert f'(default: {recorded}{DEFAULT_BEARINGS[command]})' in text
+    assert f'(default: {recorded}cho1992)' in text and '{flexible,rigid}' in text
 
 
 @pytest.mark.parametrize('command', ['simulate', 'modes'])

@@ -10,7 +10,9 @@ import time
 from flexlink_ros.cli import main as cli
 from flexlink_ros.cli.mcap import scan_mcap
 from flexlink_ros.errors import McapFileError
+from flexlink_ros.io.provenance import provenance_entries, read_provenance
 from flexlink_ros.io.recorder import McapRecorder
+from flexlink_ros.ros.parameters import default_model_options
 from geometry_msgs.msg import Vector3Stamped
 from mcap.reader import make_reader
 import pytest
@@ -113,9 +115,10 @@ def test_reindex_after_a_real_sigkill_lets_rosbags_open_the_bag(tmp_path, capsys
     assert (bag / 'metadata.yaml').read_bytes() == before
 
 
-def record_bag(bag, count=3000):
+def record_bag(bag, count=3000, provenance=None):
     """Record two topics into a bag split by log time; return the closed recorder's status."""
-    with McapRecorder(bag, split_duration_s=1.0, chunk_size_bytes=4096) as recorder:
+    with McapRecorder(bag, split_duration_s=1.0, chunk_size_bytes=4096,
+                      provenance=provenance) as recorder:
         offered = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT)
         recorder.add_topic('/joint_states', JointState, qos_profiles=[offered])
         for k in range(count):
@@ -169,6 +172,34 @@ def test_reindex_rebuilds_the_recorders_metadata_exactly_and_salvages_a_cut_file
         'topics_with_message_count'][0]['topic_metadata']
     (qos,) = metadata['topics_with_message_count'][0]['topic_metadata']['offered_qos_profiles']
     assert (qos['reliability'], qos['depth']) == ('best_effort', 100)
+
+
+def test_reindex_keeps_what_made_the_bag_in_custom_data(tmp_path):
+    """A rebuilt metadata.yaml carries the recording's provenance, as close() wrote it."""
+    bag = tmp_path / 'run'
+    record_bag(bag, count=1500, provenance=provenance_entries('flexlink mcap-record'))
+    written = (bag / 'metadata.yaml').read_text()
+    assert 'flexlink_ros.producer: flexlink mcap-record' in written
+    (bag / 'metadata.yaml').unlink()
+    assert cli.main(['reindex', str(bag)]) == 0
+    assert (bag / 'metadata.yaml').read_text() == written
+
+
+def test_a_salvaged_first_file_still_says_what_made_the_bag(tmp_path):
+    """The recorder killed in its first file: the rewritten file keeps the provenance record."""
+    bag = tmp_path / 'run'
+    status = record_bag(bag, count=800, provenance=provenance_entries(
+        'flexlink_node', 'kang1990', default_model_options()))
+    (first,) = [pathlib.Path(f) for f in status['files']]
+    data = first.read_bytes()
+    first.write_bytes(data[:len(data) * 2 // 3])     # cut short, as a SIGKILL does
+    (bag / 'metadata.yaml').unlink()
+    assert cli.main(['reindex', str(bag)]) == 0
+    recorded = read_provenance(bag)
+    assert recorded is not None and recorded.mechanism().name == 'kang1990'
+    metadata = yaml.safe_load((bag / 'metadata.yaml').read_text())
+    assert metadata['rosbag2_bagfile_information']['custom_data'][
+        'flexlink_ros.producer'] == 'flexlink_node'
 
 
 def test_reindex_refuses_what_is_not_a_crashed_bag(tmp_path, capsys):

@@ -65,6 +65,7 @@ def test_replay_equals_the_streaming_estimator(tmp_path, model):
     out = tmp_path / 'replay.mcap'
     result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'replay', str(bag),
                              '--out', str(out), '--no-geometric-stiffness', '--json',
+                             '--mechanism', 'cho1992',   # the bag names no model
                              '--markers-every-n', '50'],
                             capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr
@@ -137,7 +138,7 @@ def test_replay_refuses_missing_topic_and_existing_output(tmp_path):
     run = lambda *extra: subprocess.run(  # noqa: E731
         [sys.executable, '-m', 'flexlink_ros.cli.main', 'replay', str(bag), *extra],
         capture_output=True, text=True, timeout=120)
-    result = run('--out', str(tmp_path / 'x.mcap'), '--joint', 'wheel')
+    result = run('--out', str(tmp_path / 'x.mcap'), '--joint', 'wheel', '--mechanism', 'cho1992')
     assert result.returncode == 1 and "joint 'wheel'" in result.stderr
     result = run('--out', str(bag))
     assert result.returncode == 1 and 'exists' in result.stderr
@@ -176,7 +177,7 @@ def test_replay_skips_poisoned_speeds_and_matches_a_clean_replay(tmp_path):
         out = tmp_path / f'{name}.mcap'
         result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'replay', str(bag),
                                  '--out', str(out), '--no-geometric-stiffness',
-                                 '--markers-every-n', '0'],
+                                 '--markers-every-n', '0', '--mechanism', 'cho1992'],
                                 capture_output=True, text=True, timeout=300)
         assert result.returncode == 0, result.stderr
         results[name] = (result.stdout, deflections_by_stamp(out))
@@ -212,7 +213,8 @@ def test_replay_of_a_bag_skips_a_fifo_links_out_and_a_device(tmp_path, names):
     planted = plant_hostile_entries(tmp_path / 'bag', tmp_path / 'elsewhere' / 'elsewhere_0.mcap',
                                     names)
     done = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'replay',
-                           str(tmp_path / 'bag'), '--out', str(tmp_path / 'out.mcap'), '--json'],
+                           str(tmp_path / 'bag'), '--out', str(tmp_path / 'out.mcap'), '--json',
+                           '--mechanism', 'cho1992'],   # the bag names no model
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     result = json.loads(done.stdout)

@@ -95,3 +95,27 @@ def test_a_bag_that_fails_is_a_row_with_its_reason(tmp_path, options):
     assert 'corrupt.mcap is not an MCAP file' in reasons[str(corrupt)]
     assert 'no sensor_msgs/msg/JointState topic' in reasons[str(empty)]
     assert 'no such file or directory' in reasons[str(tmp_path / 'missing')]
+
+
+def test_a_bag_that_names_its_model_is_recomputed_with_it(tmp_path):
+    """The recording's own mechanism and options come first; --mechanism only for the rest."""
+    from flexlink_ros.io.fleet_bag import bag_model
+    from flexlink_ros.io.provenance import provenance_entries
+    from flexlink_ros.io.recorder import McapRecorder
+    from sensor_msgs.msg import JointState
+    made = node_params.default_model_options(bearings='rigid', grid_size=48)
+    path = tmp_path / 'named.mcap'
+    with McapRecorder(path, provenance=provenance_entries('flexlink_node', 'kang1990',
+                                                          made)) as recorder:
+        recorder.write('/joint_states', JointState(name=['crank'], position=[0.0]), 10**9)
+    fallback = ('cho1992', node_params.default_model_options())
+    mechanism, options, source = bag_model(str(path), fallback)
+    assert (mechanism.name, options) == ('kang1990', made)
+    assert source.startswith('recorded')
+    plain = tmp_path / 'plain.mcap'
+    with McapRecorder(plain) as recorder:
+        recorder.write('/joint_states', JointState(name=['crank'], position=[0.0]), 10**9)
+    mechanism, options, source = bag_model(str(plain), fallback)
+    assert (mechanism.name, source) == ('cho1992', '--mechanism cho1992')
+    with pytest.raises(ValueError, match='give `--mechanism`'):
+        bag_model(str(plain), None)

@@ -135,7 +135,7 @@ def test_corrupt_zstd_and_a_foreign_payload_do_not_stop_replay(tmp_path):
     out = tmp_path / 'replay.mcap'
     run = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'replay', str(bad),
                           '--out', str(out), '--no-geometric-stiffness', '--json',
-                          '--markers-every-n', '0'],
+                          '--markers-every-n', '0', '--mechanism', 'cho1992'],
                          capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr
     assert 'Traceback' not in run.stderr
@@ -146,7 +146,7 @@ def test_corrupt_zstd_and_a_foreign_payload_do_not_stop_replay(tmp_path):
     assert [d['offset'] for d in summary['damaged']] == [offset]
     text = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'replay', str(bad),
                            '--out', str(tmp_path / 'again.mcap'), '--no-geometric-stiffness',
-                           '--markers-every-n', '0'],
+                           '--markers-every-n', '0', '--mechanism', 'cho1992'],
                           capture_output=True, text=True, timeout=300)
     assert text.returncode == 0
     assert f'skipped damaged data in {bad} at offset {offset}: chunk:' in text.stdout
@@ -162,7 +162,8 @@ def test_replay_with_nothing_usable_is_a_one_line_error(tmp_path):
             data[offset + 9 + 24] ^= 0xff
     bad = damaged_copy(path, tmp_path, break_every_crc)
     run = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'replay', str(bad),
-                          '--out', str(tmp_path / 'x.mcap'), '--no-geometric-stiffness'],
+                          '--out', str(tmp_path / 'x.mcap'), '--no-geometric-stiffness',
+                          '--mechanism', 'cho1992'],
                          capture_output=True, text=True, timeout=300)
     assert run.returncode == 1 and len(run.stderr.strip().splitlines()) == 1
     assert f'{len(chunks)} damaged places skipped' in run.stderr
@@ -243,7 +244,8 @@ def test_decompression_bombs_are_refused_with_a_bound(tmp_path, declared, expect
     assert code == 0 and out.startswith(f'50 {offset} chunk: declares'), err
     assert peak < 200, f"replay's reader peaked at {peak:.0f} MiB"
     run = subprocess.run(flexlink + ['replay', str(path), '--out', str(tmp_path / 'r.mcap'),
-                                     '--no-geometric-stiffness', '--markers-every-n', '0'],
+                                     '--no-geometric-stiffness', '--markers-every-n', '0',
+                                     '--mechanism', 'cho1992'],
                          capture_output=True, text=True, timeout=300)
     assert run.returncode == 0 and 'Traceback' not in run.stderr, run.stderr
     assert run.stdout.startswith(f'{path}: 50 samples on /joint_states')

@@ -263,7 +263,7 @@ def test_node_end_to_end(tmp_path, processes, ros):
 
     result = set_parameter('diagnostics.criterion_warn', 5000.0)
     assert not result.successful and 'must not exceed' in result.reason
-    result = set_parameter('markers.exaggeration', 0.5)
+    result = set_parameter('markers.exaggeration', -1.0)
     assert not result.successful and result.reason
     assert not set_parameter('mechanism', 'kang1990').successful
     assert set_parameter('frame_id', 'machine_base').successful

@@ -36,7 +36,7 @@ def test_defaults_are_valid():
 
 
 @pytest.mark.parametrize('name, value, fragment', [
-    ('markers.exaggeration', 0.5, '>= 1'),
+    ('markers.exaggeration', -0.5, '>= 0'),   # 0: the derived default
     ('damping_ratio', -0.1, '>= 0'),
     ('damping_ratio', float('nan'), 'finite'),
     ('qos.reliability', 'sometimes', 'one of'),

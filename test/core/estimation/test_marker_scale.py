@@ -1,0 +1,40 @@
+"""marker_scale: the markers' default exaggeration shows the expected peak deflection."""
+
+import pathlib
+
+from flexlink_ros.core.estimation.marker_scale import (default_exaggeration, MARKER_SHARE,
+                                                       MAX_EXAGGERATION, round_exaggeration)
+from flexlink_ros.core.estimation.streaming import StreamingEstimator
+from flexlink_ros.core.mechanism_file import load_mechanism
+from flexlink_ros.core.reduction.pipeline import model_for_mechanism
+from flexlink_ros.ros.parameters import default_model_options
+import pytest
+
+SOFT = str(pathlib.Path(__file__).resolve().parents[2] / 'data' / 'soft_linkage.yaml')
+
+
+@pytest.mark.parametrize('peak, length, expected', [
+    (30e-6, 0.25, 500.0),      # a steel linkage's 30 um: 0.05 * 0.25 / 30e-6 = 417 -> 500
+    (11.2e-3, 0.262, 2.0),     # Cho 1992 at 620 rpm: 1.17 -> 2
+    (0.05, 0.2, 1.0),          # already larger than 5 %: drawn as it is
+    (1e-3, 0.2, 10.0),         # exactly 10: not 20
+    (0.0, 0.2, MAX_EXAGGERATION), (float('nan'), 0.2, MAX_EXAGGERATION),
+    (1e-15, 0.2, MAX_EXAGGERATION),
+])
+def test_the_smallest_round_factor_showing_the_peak_as_5_percent(peak, length, expected):
+    assert round_exaggeration(peak, length) == expected
+    if 1.0 < expected < MAX_EXAGGERATION:
+        assert expected * peak >= MARKER_SHARE * length * (1 - 1e-9)
+        assert expected * peak < 2.5 * MARKER_SHARE * length     # the next step down is short
+
+
+def test_a_soft_linkage_gets_a_larger_factor_than_cho1992(tmp_path):
+    """The expected peak from the model: drawn as 5-12.5 % of the coupler in both."""
+    found = {}
+    for name in ('cho1992', SOFT):
+        options = default_model_options(grid_size=32)
+        model = model_for_mechanism(load_mechanism(name), options, cache_dir=tmp_path)
+        factor, peak, length = default_exaggeration(StreamingEstimator(model))
+        assert MARKER_SHARE <= factor * peak / length < 2.5 * MARKER_SHARE
+        found[name] = factor
+    assert found[SOFT] > found['cho1992'] > 1.0
