@@ -2,8 +2,9 @@
 The package's shape, checked from its source with ast (no imports, under a second).
 
 Modules up to 600 lines (one concept each, not cut at a line count), functions up to 60 lines
-of code (docstrings not counted), imports that go one way between layers and form no cycle, no imports hidden inside functions except
-the optional heavy ones in command handlers, and a core free of ROS, MCAP and matplotlib.
+of code (docstrings not counted), imports that go one way between layers and form no cycle,
+no imports hidden inside functions except the optional heavy ones in command handlers, and a
+core free of ROS, MCAP and matplotlib.
 """
 
 import ast
