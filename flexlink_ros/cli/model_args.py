@@ -22,6 +22,7 @@ from ..core.mechanism_file import read_mechanism_file
 from ..core.numerics import RPM
 from ..core.options import DEFAULT_SPEED_MAX, ModelOptions, SECOND_ORDER_PASSES, speed_range
 from ..core.reduction import pipeline
+from ..ros import parameters as node_params
 
 BEARINGS = ('flexible', 'rigid')
 # Output order of the published deflections; the flag's default is the default model's.

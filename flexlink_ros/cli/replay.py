@@ -41,8 +41,8 @@ from .main import emit
 from .model_args import add_chart_argument, add_estimator_arguments, criterion_thresholds, \
     load_model
 from .progress import Progress
-from .replay_offline import CHUNK_SAMPLES, estimate_and_write, MAX_CHUNK_SAMPLES, open_input
 from .replay_model import defer_model_defaults, MissingModel, replay_model
+from .replay_offline import CHUNK_SAMPLES, estimate_and_write, MAX_CHUNK_SAMPLES, open_input
 from ..core.estimation.marker_scale import model_exaggeration
 from ..io.joint_states import read_crank_samples
 from ..io.recorder_files import refuse_existing
