@@ -106,7 +106,7 @@ def test_fleet_equals_one_replay_per_bag(bags, tmp_path):
     for name in ('steady', 'gappy.mcap'):
         replay_out = tmp_path / f'replay_{name}.mcap'
         replay = flexlink('replay', str(bags / name), '--out', str(replay_out), '--json',
-                          *MODEL_FLAGS)
+                          '--mechanism', 'cho1992', *MODEL_FLAGS)
         assert replay.returncode == 0, replay.stderr
         expected = json.loads(replay.stdout)
         got = summaries[name]

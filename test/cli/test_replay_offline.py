@@ -62,7 +62,8 @@ def awkward_recording(path, count=5000):
 
 def replay(bag, out, *extra):
     result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'replay', str(bag),
-                             '--out', str(out), '--json', '--markers-every-n', '7', *extra],
+                             '--out', str(out), '--json', '--markers-every-n', '7',
+                             '--mechanism', 'cho1992', *extra],
                             capture_output=True, text=True, timeout=600, cwd=REPO)
     assert result.returncode == 0, result.stderr
     summary = json.loads(result.stdout)
@@ -112,7 +113,7 @@ def test_replay_memory_does_not_grow_with_the_recording(tmp_path, chunk):
                         str(seconds)], check=True, capture_output=True, timeout=300)
         peaks.append(peak_resident_mb([sys.executable, '-m', 'flexlink_ros.cli', 'replay',
                                        str(bag), '--out', str(tmp_path / f'out_{seconds}.mcap'),
-                                       '--chunk-samples', str(chunk)]))
+                                       '--chunk-samples', str(chunk), '--mechanism', 'cho1992']))
     # 100 000 samples more: about 90 MB more when every sample was held.
     assert peaks[1] - peaks[0] < 15.0, peaks
 
@@ -126,7 +127,8 @@ def test_the_offline_replay_imports_neither_rclpy_nor_matplotlib(tmp_path):
             "print(sorted(m for m in sys.modules if m.split('.')[0] in "
             "('rclpy', 'matplotlib')))\n")
     result = subprocess.run([sys.executable, '-c', code, 'replay', str(bag), '--out',
-                             str(tmp_path / 'out.mcap')], capture_output=True, text=True,
+                             str(tmp_path / 'out.mcap'), '--mechanism', 'cho1992'],
+                            capture_output=True, text=True,
                             timeout=300, cwd=REPO)
     assert result.returncode == 0, result.stderr
     assert 'wrote' in result.stdout and result.stdout.splitlines()[-1] == '[]'
