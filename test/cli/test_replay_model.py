@@ -24,7 +24,9 @@ ROOT = pathlib.Path(__file__).resolve().parents[2]
 SOFT = ROOT / 'test' / 'data' / 'soft_linkage.yaml'
 STEEL = ROOT / 'test' / 'data' / 'steel_linkage.yaml'
 # Each linkage, its crank speed [rpm] and the markers' exaggeration the node derives for it.
-LINKAGES = {'soft': (SOFT, 300.0, 20), 'steel': (STEEL, 600.0, 500)}
+# The markers' exaggeration the node derives: the expected peak over the model's speed range
+# (1.25 x the file's speed) drawn as at least 5 % of the coupler, on a 1-2-5 scale.
+LINKAGES = {'soft': (SOFT, 300.0, 20), 'steel': (STEEL, 600.0, 200)}
 READY_TIMEOUT_S = 240.0     # node start-up incl. a first model build on a loaded machine
 ENV = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path), PYTHONUNBUFFERED='1',
            RCUTILS_LOGGING_BUFFERED_STREAM='0')
