@@ -20,7 +20,8 @@ import numpy as np
 from .peer_exudyn import compare, peak_to_peak
 from .peer_linear import linear_model
 from .peer_model import OUTPUT_KEYS, resolve_mechanism
-from .validation import BEARINGS, peer_run, point_rms_errors, require_peer, Settings
+from .validation import _as_response, BEARINGS, peer_run, point_rms_errors, require_peer, \
+    Settings
 from ..core.fe.nonlinear_response import nonlinear_response
 from ..core.fe.simulate import periodic_response
 
@@ -56,12 +57,6 @@ def package_runs(mech, rpm, settings):
     return {'crank_angle': linear.crank_angle, 'linear': linear.outputs,
             'nonlinear': nonlinear.outputs, 'info': nonlinear.info,
             'multipliers': nonlinear.floquet_multipliers, 'beta': beta, 'zeta': zeta}
-
-
-def _as_response(angles, values):
-    out = {'crank_angle': angles}
-    out.update(zip(OUTPUT_KEYS, np.asarray(values).T))
-    return out
 
 
 def validate_nonlinear(mechanism, rpm, settings=None):
