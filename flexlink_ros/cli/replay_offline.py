@@ -4,7 +4,7 @@ The offline path of `flexlink replay`: a recording read, estimated and written i
 The input topic is chosen from a survey of the recording (:mod:`io.recording_stream`: topic
 counts and the first messages of each JointState topic), then its samples are read
 ``--chunk-samples`` messages at a time and estimated in a thread
-(:func:`core.estimation.offline_run.estimate_stream`; the compiled step runs without the GIL)
+(:func:`core.estimation.offline.estimate_stream`; the compiled step runs without the GIL)
 while this thread encodes and writes the rows already final (:mod:`io.replay_writer`), so the
 estimate and the writing share the two cores of a small machine. What is held at once does
 not depend on the recording's length: a chunk of input messages and one decompressed MCAP
@@ -21,7 +21,7 @@ import time
 import numpy as np
 
 from .progress import Progress
-from ..core.estimation.offline_run import estimate_stream
+from ..core.estimation.offline import estimate_stream
 from ..io.joint_states import iter_crank_samples
 from ..io.recording import choose_input_topic, damage_note
 from ..io.recording_stream import survey_recording

@@ -5,7 +5,7 @@ One bag of a fleet recomputed: read, estimate, summarise per period, optionally 
 ``flexlink fleet`` runs it as one task per bag, a test or a script calls it directly). It
 reads the crank samples as ``flexlink replay`` does (:func:`io.recording.scan_recording`,
 :func:`io.joint_states.read_crank_samples`), estimates them in one sequential pass
-(:func:`core.estimation.offline_run.estimate_offline`: the state carries from sample to
+(:func:`core.estimation.offline.estimate_offline`: the state carries from sample to
 sample, so a bag is one task, its split files in order), and summarises each revolution or
 minute (:mod:`core.estimation.summary`). Which mechanism and model options a bag is
 recomputed with is decided in one place, :func:`bag_model`. A bag that cannot be recomputed
@@ -23,7 +23,7 @@ from .joint_states import parse_crank_states, read_crank_samples, skip_reasons
 from .provenance import read_provenance
 from .recording import choose_input_topic, damage_note, scan_recording
 from .replay_writer import write_replay
-from ..core.estimation.offline_run import estimate_offline
+from ..core.estimation.offline import estimate_offline
 from ..core.estimation.summary import period_ids, recording_totals, summarize_periods
 from ..core.mechanism_file import load_mechanism
 from ..core.reduction import pipeline

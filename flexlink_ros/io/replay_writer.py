@@ -220,7 +220,7 @@ def write_replay(out_path, blocks, input_topic, topics, frame_id, model, markers
     blocks : iterable of (first, samples, estimate)
         Consecutive rows from row ``first``: their input (``samples``,
         :func:`io.joint_states.crank_samples`) and their offline estimate (``estimate``,
-        :func:`core.estimation.offline_run.estimate_stream`). Rows are written in batches of
+        :func:`core.estimation.offline.estimate_stream`). Rows are written in batches of
         ``WRITE_BATCH`` from the block's start (blocks starting at multiples of it give the
         same batches however the rows are split).
     input_topic : str
