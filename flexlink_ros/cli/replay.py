@@ -44,6 +44,7 @@ from .progress import Progress
 from .replay_model import defer_model_defaults, MissingModel, replay_model
 from .replay_offline import CHUNK_SAMPLES, estimate_and_write, MAX_CHUNK_SAMPLES, open_input
 from ..core.estimation.marker_scale import model_exaggeration
+from ..core.estimation.tables import step_tables
 from ..io.joint_states import read_crank_samples
 from ..io.recorder_files import refuse_existing
 from ..io.recording import choose_input_topic, damage_note, scan_recording
@@ -89,15 +90,18 @@ def read_input(args, damaged):
     return topic, samples
 
 
-def _writer(args, model, topic):
+def _writer(args, model, topic, tables):
     """``write(blocks, progress)`` of the output file (:func:`write_replay`), or None."""
     if not args.out:
         return None
-    return functools.partial(_write_blocks, args.out, topic=topic, model=model, args=args)
+    # The estimator's step tables: the quasi-static peak that scales the markers is computed
+    # once, for the deflection bound and the markers.
+    exaggeration = model_exaggeration(model, tables) if args.markers_every_n else 1.0
+    return functools.partial(_write_blocks, args.out, topic=topic, model=model, args=args,
+                             exaggeration=exaggeration)
 
 
-def _write_blocks(out, blocks, progress, topic, model, args):
-    exaggeration = model_exaggeration(model) if args.markers_every_n else 1.0
+def _write_blocks(out, blocks, progress, topic, model, args, exaggeration):
     return write_replay(out, blocks, topic, output_topics(args.node_name), args.frame_id, model,
                         args.markers_every_n, exaggeration, progress=progress,
                         joint_levels=[OK] * 4, provenance=args.provenance)
@@ -151,9 +155,10 @@ def run_replay(args):
     read_s = time.perf_counter() - start
     model = load_model(mechanism, options, args)
     chart = ChartRows() if args.chart else None
+    tables = step_tables(model)
     estimate, summary, times = estimate_and_write(args, model, rows, messages,
-                                                  _writer(args, model, topic),
-                                                  on_block=chart and chart.add)
+                                                  _writer(args, model, topic, tables),
+                                                  on_block=chart and chart.add, tables=tables)
     count, span_s = rows.samples, rows.span_s()
     result = {'input': str(args.input), 'topic': topic, 'samples': count,
               'skipped': rows.skipped, 'skipped_reasons': rows.skipped_reasons,

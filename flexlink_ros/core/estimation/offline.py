@@ -148,7 +148,7 @@ def estimate_offline(model, stamps_ns, angles, speeds, warm_start=True, result=N
     return result
 
 
-def estimate_stream(model, chunks, emit, warm_start=True, align=1, block_rows=1):
+def estimate_stream(model, chunks, emit, warm_start=True, align=1, block_rows=1, tables=None):
     """
     Estimate a stream of samples read in chunks, handing on the rows in order once final.
 
@@ -174,6 +174,8 @@ def estimate_stream(model, chunks, emit, warm_start=True, align=1, block_rows=1)
         Blocks end at a multiple of ``align`` rows (but the last).
     block_rows : int
         Hand rows on once at least this many are final (and at the end).
+    tables : object or None
+        :func:`step_tables` of ``model`` when the caller has them (built here if None).
 
     Returns
     -------
@@ -184,7 +186,7 @@ def estimate_stream(model, chunks, emit, warm_start=True, align=1, block_rows=1)
 
     """
     blocks = (max(int(align), 1), max(int(block_rows), 1))
-    run = _OfflineRun(model, iter(chunks), warm_start, emit, blocks)
+    run = _OfflineRun(model, iter(chunks), warm_start, emit, blocks, tables)
     position = 0
     while position < run.ensure(position + 1):
         position = run.next_segment(position)
@@ -197,7 +199,7 @@ def estimate_stream(model, chunks, emit, warm_start=True, align=1, block_rows=1)
 class _OfflineRun:
     """The state of :func:`estimate_stream`: segments, repeats to copy, rows final so far."""
 
-    def __init__(self, model, chunks, warm_start, emit, blocks):
+    def __init__(self, model, chunks, warm_start, emit, blocks, tables=None):
         self.model, self.chunks, self.warm_start, self.emit = model, chunks, warm_start, emit
         self.align, self.block_rows = blocks
         self.window = RowWindow(_window_columns(model))
@@ -207,7 +209,8 @@ class _OfflineRun:
         self.result = {key: self.window[key] for key in _ESTIMATE_KEYS + ('flags',)}
         self.nonlinearity = NonlinearityIndicator(model)
         self.available = bool(np.any(model.force_moments))
-        self.tables = step_tables(model)    # built once, not per segment
+        # Built once, not per segment.
+        self.tables = step_tables(model) if tables is None else tables
         self.orbit = None   # carried across segments, as one streaming estimator carries it
         # Warm starts rate-limited on the recording's clock (its latest stamp so far): the
         # same numbers on any machine, and a storm of restarts costs no more than the node's.
