@@ -45,9 +45,8 @@ from .replay_model import defer_model_defaults, MissingModel, replay_model
 from .replay_offline import CHUNK_SAMPLES, estimate_and_write, MAX_CHUNK_SAMPLES, open_input
 from ..core.estimation.marker_scale import model_exaggeration
 from ..core.estimation.tables import step_tables
-from ..io.joint_states import read_crank_samples
+from ..io.joint_states import read_input_samples
 from ..io.recorder_files import refuse_existing
-from ..io.recording import choose_input_topic, damage_note, scan_recording
 from ..io.replay_writer import write_replay
 from ..names import DEFAULT_FRAME_ID, NODE_NAME, output_topics, QUALITY_NAMES
 from ..report.cycle_chart import plot_cycle
@@ -56,38 +55,6 @@ from ..ros.playback_schedule import DEFAULT_CLOCK_HZ, MAX_CLOCK_HZ
 from ..ros.republish import DISCOVERY_TIMEOUT_S, publish_recording
 
 CHART_ROWS = 200_000   # the chart shows the last 200 s at 1 kHz: enough revolutions to read
-
-
-def read_input(args, damaged):
-    """
-    Find the input topic of the recording and read its crank samples.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-        ``input``, ``topic``, ``joint``.
-    damaged : list
-        Receives (file, offset, reason) of what the reader skipped.
-
-    Returns
-    -------
-    topic : str
-    samples : dict
-        :func:`io.joint_states.read_crank_samples`.
-
-    """
-    scan = scan_recording(args.input, topic=args.topic, joint_name=args.joint,
-                          damaged=damaged)
-    try:
-        topic = choose_input_topic(args.input, args.joint, args.topic, scan)
-        samples = read_crank_samples(args.input, topic, args.joint, scan)
-        if not samples['data']:
-            raise ValueError(f'no usable samples of joint {args.joint!r} on {topic}'
-                             + ''.join(f'; {n} {why}'
-                                       for why, n in samples['skipped_reasons'].items()))
-    except ValueError as exc:
-        raise ValueError(f'{exc}{damage_note(damaged)}') from None
-    return topic, samples
 
 
 def _writer(args, model, topic, tables):
@@ -186,7 +153,7 @@ def run_replay(args):
                                      f'{mechanism.name}: {pathlib.Path(args.input).name} '
                                      f'({count} samples, order {model.order}, flexlink replay)')
     if args.publish:
-        _, samples = read_input(args, [])
+        _, samples, _ = read_input_samples(args.input, args.topic, args.joint, [])
         with Progress(f'publishing {topic}', count, unit='msg') as progress:
             played = publish_recording(samples, topic, playback_options(args),
                                        progress=progress)

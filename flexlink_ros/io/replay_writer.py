@@ -4,22 +4,17 @@ The MCAP of a replay: the input and the node's outputs recomputed offline.
 Per sample: the input, the two deflections, the criteria and the quality (the error and
 nonlinearity indicators, the node's ``~/quality``), and every ``markers_every_n``-th sample the
 markers, each logged at the input's log time (the order the node records them in). The
-messages are encoded in bulk (the row encoders of :mod:`io.cdr`) and written in batches
+messages are encoded in bulk (the row encoders of :mod:`io.output_cdr`) and written in batches
 (:meth:`McapRecorder.write_batch`).
 """
 
-import functools
-import struct
-
 import numpy as np
-from sensor_msgs.msg import JointState
-from std_msgs.msg import Header
 
-from . import cdr
-from .markers import criteria_rows, MarkerEncoder, rows_to_bytes, vector3_stamped_rows
+from .output_cdr import criteria_rows, MarkerEncoder, quality_rows, rows_to_bytes, \
+    vector3_stamped_rows
 from .recorder import McapRecorder
 from ..core.reduction.second_order_tables import SecondOrderForms
-from ..names import JOINT_STATE, MARKER_ARRAY, OUTPUT_POINTS, QUALITY_NAMES, VECTOR3_STAMPED
+from ..names import JOINT_STATE, MARKER_ARRAY, OUTPUT_POINTS, VECTOR3_STAMPED
 
 # Rows encoded and written together by write_replay.
 WRITE_BATCH = 1024
@@ -30,49 +25,6 @@ OUTPUT_CHUNK_BYTES = 1 << 20
 OUTPUT_FLUSH_PERIOD_S = 3600.0
 # zstd level 1: half the compression time of the default level 3, the file within a percent.
 OUTPUT_ZSTD_LEVEL = 1
-# Two doubles the quality template holds where each sample's indicators go.
-_QUALITY_SENTINELS = (1.0e300 + 3e285, 1.0e300 + 7e285)
-
-
-@functools.lru_cache(maxsize=16)
-def quality_template(frame):
-    """Serialise the quality message of a frame (UTF-8); return it and its values' offset."""
-    template = cdr.serialize_message(JointState(
-        header=Header(frame_id=frame.decode()), name=list(QUALITY_NAMES),
-        position=list(_QUALITY_SENTINELS)))
-    return template, template.index(struct.pack('<2d', *_QUALITY_SENTINELS))
-
-
-def quality_rows(stamps_ns, frame, error_indicator, nonlinearity):
-    """
-    Return the CDR of many quality ``sensor_msgs/JointState`` (the node's ``~/quality``).
-
-    Byte for byte what the node publishes and records for the same values
-    (ros/messages.py ``quality_cdr``): name = QUALITY_NAMES, position = the two indicators.
-
-    Parameters
-    ----------
-    stamps_ns : ndarray of int, shape (m,)
-        Stamps [ns].
-    frame : bytes
-        Frame id, UTF-8.
-    error_indicator, nonlinearity : ndarray, shape (m,)
-        The indicators [-] (NaN: not available).
-
-    Returns
-    -------
-    ndarray of uint8, shape (m, length)
-
-    """
-    template, offset = quality_template(frame)
-    rows = np.tile(np.frombuffer(template, dtype=np.uint8), (len(stamps_ns), 1))
-    sec, nanosec = np.divmod(np.asarray(stamps_ns, dtype=np.int64), 1_000_000_000)
-    start = cdr.ENCAPSULATION_SIZE
-    rows[:, start:start + 4] = sec.astype('<i4').view(np.uint8).reshape(-1, 4)
-    rows[:, start + 4:start + 8] = nanosec.astype('<u4').view(np.uint8).reshape(-1, 4)
-    values = np.column_stack([error_indicator, nonlinearity]).astype('<f8')
-    rows[:, offset:offset + 16] = values.view(np.uint8)
-    return rows
 
 
 class MarkerSource:

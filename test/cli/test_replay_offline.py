@@ -93,7 +93,7 @@ def test_a_replay_in_chunks_writes_the_bag_of_one_whole_pass(tmp_path):
 
 
 def replay_bench():
-    """The benchmark script as a module (its measured runs)."""
+    """Load the benchmark script as a module (its measured runs)."""
     spec = importlib.util.spec_from_file_location('replay_bench', BENCH)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
