@@ -120,20 +120,27 @@ def _output_columns(samples, estimate, chosen, frame):
                                        estimate['nonlinearity'][chosen]))]
 
 
-def _interleave(columns, names, valid, with_marker, markers, marker_topic):
-    """Messages and their topics in write order: per sample its input, outputs, marker."""
-    messages, topic_of = [], []
-    for n, row in enumerate(zip(*columns)):
-        if not valid[n]:
-            messages.append(row[0])
-            topic_of.append(names[0])
-            continue
-        messages += row
-        topic_of += names
-        if with_marker[n]:
-            messages.append(next(markers))
-            topic_of.append(marker_topic)
-    return messages, topic_of
+def _interleave(columns, names, valid, marked, markers, marker_topic, per_sample):
+    """
+    Messages and their topics in write order: per sample its input, outputs, marker.
+
+    Placed with numpy (object arrays) rather than a Python loop over the samples: sample n's
+    messages start at the sum of ``per_sample`` before it.
+    """
+    starts = np.cumsum(per_sample) - per_sample
+    messages = np.empty(int(starts[-1] + per_sample[-1]) if len(starts) else 0, dtype=object)
+    topic_of = np.zeros(messages.size, dtype=np.intp)
+    messages[starts] = columns[0]
+    accepted = np.flatnonzero(valid)
+    for k, column in enumerate(columns[1:], start=1):
+        place = starts[accepted] + k
+        messages[place] = [column[n] for n in accepted.tolist()]
+        topic_of[place] = k
+    if markers is not None and len(marked):
+        place = starts[marked] + len(names)
+        messages[place] = markers
+        topic_of[place] = len(names)
+    return messages.tolist(), np.array([*names, marker_topic], dtype=object)[topic_of].tolist()
 
 
 def _write_batch(recorder, samples, estimate, chosen, first, names, marker_topic, frame,
@@ -144,16 +151,16 @@ def _write_batch(recorder, samples, estimate, chosen, first, names, marker_topic
     valid = (np.all(np.isfinite(estimate['lever_tip'][chosen]), axis=1)
              & np.all(np.isfinite(estimate['coupler_mid'][chosen]), axis=1))
     per_sample = np.where(valid, len(names), 1)
-    markers = None
+    markers, marked = None, np.zeros(0, dtype=np.intp)
     if markers_every_n:
         rows = np.arange(first + chosen.start, first + chosen.stop)
         marked = np.flatnonzero((rows % markers_every_n == 0) & valid)
-        markers = iter(rows_to_bytes(marker_source.rows(
+        markers = rows_to_bytes(marker_source.rows(
             samples['stamps_ns'][chosen][marked], estimate['crank_angle'][chosen][marked],
-            estimate['modal'][chosen][marked])))
+            estimate['modal'][chosen][marked]))
         per_sample[marked] += 1
-    messages, topic_of = _interleave(columns, names, valid.tolist(),
-                                     (per_sample > len(names)).tolist(), markers, marker_topic)
+    messages, topic_of = _interleave(columns, names, valid, marked, markers, marker_topic,
+                                     per_sample)
     log_times = np.repeat(samples['log_ns'][chosen], per_sample)
     publish_times = log_times.copy()
     # The input keeps its publish time; the outputs are logged and sent at its log time.
