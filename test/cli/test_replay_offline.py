@@ -141,3 +141,15 @@ def test_the_offline_replay_imports_neither_rclpy_nor_matplotlib(tmp_path):
                             timeout=300, cwd=REPO)
     assert result.returncode == 0, result.stderr
     assert 'wrote' in result.stdout and result.stdout.splitlines()[-1] == '[]'
+
+
+def test_replay_help_imports_neither_rclpy_nor_matplotlib():
+    """`flexlink replay --help` answers without loading ROS or plotting."""
+    code = ('import sys\nfrom flexlink_ros.cli import main\n'
+            'try:\n    main.main(sys.argv[1:])\nexcept SystemExit:\n    pass\n'
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in "
+            "('rclpy', 'matplotlib')))\n")
+    result = subprocess.run([sys.executable, '-c', code, 'replay', '--help'],
+                            capture_output=True, text=True, timeout=300, cwd=REPO)
+    assert result.returncode == 0, result.stderr
+    assert '--chunk-samples' in result.stdout and result.stdout.splitlines()[-1] == '[]'
