@@ -21,7 +21,7 @@ from .progress import OnDemandProgress
 from ..core.mechanism_file import read_mechanism_file
 from ..core.numerics import RPM
 from ..core.options import DEFAULT_SPEED_MAX, ModelOptions, SECOND_ORDER_PASSES, speed_range
-from ..core.reduction import pipeline
+from ..core.reduction import mechanism_model
 from ..ros import parameters as node_params
 
 BEARINGS = ('flexible', 'rigid')
@@ -294,5 +294,5 @@ def load_model(mechanism, options, args):
 
     """
     with OnDemandProgress(BUILD_LABEL) as progress:
-        return pipeline.model_for_mechanism(mechanism, options, cache_dir=args.cache_dir,
-                                            use_cache=not args.no_cache, progress=progress)
+        return mechanism_model.model_for_mechanism(mechanism, options, cache_dir=args.cache_dir,
+                                                   use_cache=not args.no_cache, progress=progress)

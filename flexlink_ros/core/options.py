@@ -85,7 +85,7 @@ class ModelOptions:
         At order 2, 'quasi-static' (the chord shortening of the linear state's shapes) or
         'dynamic': also the dynamic second-order pass in the streaming step (a second reduced
         state loaded by the second-order terms of the strain energy,
-        core/estimation/dynamic_second_order.py; its tables are part of the model), with
+        core/estimation/second_order_dynamic_step.py; its tables are part of the model), with
         :data:`DYNAMIC_SIZES` when ``modes`` / ``static`` are None. Part of the cache key
         only when 'dynamic'.
 

@@ -16,7 +16,7 @@ from ..core.estimation.marker_scale import default_exaggeration, MARKER_SHARE
 from ..core.estimation.sample import SampleFlag
 from ..core.mechanism_file import read_mechanism_file
 from ..core.numerics import RPM
-from ..core.reduction.pipeline import model_for_mechanism
+from ..core.reduction.mechanism_model import model_for_mechanism
 from ..errors import InputRejected, MalformedCdr
 from ..io import cdr
 

@@ -61,7 +61,7 @@ from ..core.fe.stiffness_damping import (element_resultants, link_local_rate,
 from ..core.mechanism import Mechanism
 from ..core.mechanism_file import load_mechanism
 from ..core.options import ModelOptions
-from ..core.reduction import pipeline
+from ..core.reduction import mechanism_model
 
 DAMPING = ('objective', 'naive', 'modal')
 OUTPUT_KEYS = ('lever_tip_dx', 'lever_tip_dy', 'coupler_mid_dx', 'coupler_mid_dy')
@@ -126,7 +126,7 @@ def matched_reduced_model(mechanism='cho1992', elements=8, gravity=False, beta=1
     options = ModelOptions.linear(rigid_crank=True, bearings='flexible',
                                   geometric_stiffness=True, gravity=gravity,
                                   elements_per_link=elements, stiffness_damping=beta)
-    return pipeline.model_for_mechanism(mech, options, use_cache=use_cache)
+    return mechanism_model.model_for_mechanism(mech, options, use_cache=use_cache)
 
 
 def streaming_response(model, speed, revolutions=3, points=120, oversample=2):

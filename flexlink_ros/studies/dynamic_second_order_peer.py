@@ -25,7 +25,7 @@ from .validation import peer_run, Settings
 from ..core.estimation.streaming import StreamingEstimator
 from ..core.mechanism_file import load_mechanism
 from ..core.options import ModelOptions, SECOND_ORDER_PASSES
-from ..core.reduction.pipeline import model_for_mechanism
+from ..core.reduction.mechanism_model import model_for_mechanism
 
 SAMPLES = 720
 REVOLUTIONS = 8

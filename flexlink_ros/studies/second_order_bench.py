@@ -38,7 +38,7 @@ from ..core.kinematics import solve_kinematics
 from ..core.mechanism_file import load_mechanism
 from ..core.options import ModelOptions
 from ..core.reduction.cells import periodic_cell_coefficients
-from ..core.reduction.pipeline import fe_mechanism, model_for_mechanism
+from ..core.reduction.mechanism_model import fe_mechanism, model_for_mechanism
 
 SCALARS = 22    # cos, sin of the three link angles, then kappa (4 x 4), per grid node
 GRID = 128

@@ -29,7 +29,7 @@ from ..core.fe.second_order_geometry import FORMS
 from ..core.fe.second_order_reduced import factored_forms, step_cost
 from ..core.fe.simulate import periodic_response
 from ..core.options import DEFAULT_SIZES, ModelOptions
-from ..core.reduction.pipeline import fe_mechanism, model_for_mechanism
+from ..core.reduction.mechanism_model import fe_mechanism, model_for_mechanism
 
 TARGETS = {'lever_tip': 0.10, 'coupler_mid': 0.03}
 # The streaming estimate's targets (issue 14).

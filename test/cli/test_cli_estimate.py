@@ -12,8 +12,8 @@ from flexlink_ros.core import options as core_options, validity
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.numerics import relative_rms, RPM
 from flexlink_ros.core.reduction import build, cells
+from flexlink_ros.core.reduction import mechanism_model, periodic
 from flexlink_ros.core.reduction import model as tables
-from flexlink_ros.core.reduction import periodic, pipeline
 from flexlink_ros.core.reduction import reference as reduction_reference
 from flexlink_ros.report.estimator import plot_error_vs_cost, plot_estimate
 from flexlink_ros.ros import parameters as node_params
@@ -52,7 +52,7 @@ def toy_reference(mechanism, options, speed, angles):
 
 @pytest.fixture
 def toy(monkeypatch):
-    monkeypatch.setattr(pipeline, 'model_for_mechanism', toy_model)
+    monkeypatch.setattr(mechanism_model, 'model_for_mechanism', toy_model)
     monkeypatch.setattr(reduction_reference, 'reference_response', toy_reference)
     monkeypatch.setattr(bench, 'reference_cpu_per_second', lambda *args: 1.0)
 

@@ -21,12 +21,12 @@ import numpy as np
 from . import tables
 from .compiled_update import compiled_update
 from .crank_filter import CompiledCrankRateFilter, CrankRateFilter, DEFAULT_FIT_TIME_CONSTANT_S
-from .dynamic_second_order import step_for_model
 from .gate import DEFAULT_RESET_GAP_S, InputGate
 from .native import compiled_step_available, RECORD_SIZE, ROW_SIZE
 from .nonlinearity import NonlinearityIndicator
 from .sample import (CLIPPED_ACCEL, CLIPPED_SPEED, LARGE_STEP, nan_sample, NO_CRITERIA,
                      OUT_OF_BOUND, REPEATED, sample_from_record, SPEED_FROM_ANGLE)
+from .second_order_dynamic_step import step_for_model
 from .step import MAX_SUBSTEP_NS
 from .throttled_log import ThrottledWarning
 from .warm_start import WarmStart

@@ -122,7 +122,7 @@ class ReducedModel:
         estimator steps p coordinates and lifts them to the r of this model; None: it steps
         all r.
     dynamic_second_order : dict of str to ndarray or None
-        Tables of the dynamic second-order pass (:mod:`.dynamic_second_order_tables`, names
+        Tables of the dynamic second-order pass (:mod:`.second_order_dynamic_tables`, names
         ``dynamic_*``) of a model built with ``second_order='dynamic'``; None otherwise.
 
     """

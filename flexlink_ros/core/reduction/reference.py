@@ -12,9 +12,9 @@ import numpy as np
 
 from .build import reduce_samples
 from .cells import CELL_POWERS, periodic_cell_coefficients
+from .mechanism_model import fe_mechanism, frozen_samples_for
 from .model import output_values
 from .periodic import periodic_response
-from .pipeline import fe_mechanism, frozen_samples_for
 from ..fe import linkage as assembly
 from ..fe import simulate
 from ..fe.second_order_full import corrected_response

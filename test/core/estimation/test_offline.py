@@ -9,7 +9,7 @@ from flexlink_ros.core.estimation.offline import replay
 from flexlink_ros.core.estimation.step import MAX_SUBSTEP_NS
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
 from flexlink_ros.core.numerics import relative_rms as numerics_relative_rms
-from flexlink_ros.core.reduction import build, pipeline
+from flexlink_ros.core.reduction import build, mechanism_model
 from flexlink_ros.core.reduction import reference as reduction_reference
 from flexlink_ros.ros import parameters as node_params
 from flexlink_ros.ros.node_model import DEFAULT_MODEL_TOLERANCE
@@ -88,7 +88,7 @@ def test_node_default_model_meets_its_budget_against_the_scene_reference(cho):
     """The node's default (flexible crank, 4 elements, 24 + 2) against the 6-element scene."""
     options = node_params.default_model_options()
     assert not options.rigid_crank and options.geometric_stiffness
-    model = pipeline.model_for_mechanism(cho, options)
+    model = mechanism_model.model_for_mechanism(cho, options)
     # The node's default order (2) on both sides: the reference adds the second order too.
     scene = plan.scene_options(cho, core_options.ModelOptions.linear(bearings=options.bearings,
                                                                      order=options.order))

@@ -7,7 +7,7 @@ from flexlink_ros.core.estimation import offline, offline_run, streaming, tables
 from flexlink_ros.core.estimation.sample import SampleFlag
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
 from flexlink_ros.core.mechanism_file import load_mechanism
-from flexlink_ros.core.reduction import pipeline
+from flexlink_ros.core.reduction import mechanism_model
 from flexlink_ros.errors import OutlierSample
 from flexlink_ros.ros import parameters as node_params
 import numpy as np
@@ -20,7 +20,7 @@ RPM = 2.0 * math.pi / 60.0
 def model():
     """Build (or load) the node's default model without geometric stiffness."""
     options = node_params.default_model_options(geometric_stiffness=False)
-    return pipeline.model_for_mechanism(load_mechanism('cho1992'), options)
+    return mechanism_model.model_for_mechanism(load_mechanism('cho1992'), options)
 
 
 def test_segments_follow_the_streaming_resets():
@@ -73,7 +73,7 @@ def test_segments_share_one_set_of_step_tables(model, monkeypatch):
     result = offline_run.estimate_offline(model, stamps, angles, speeds)
     assert result['segments'] == 6 and len(built) == 1
     with pytest.raises(ValueError, match='do not match the model'):
-        small = pipeline.model_for_mechanism(
+        small = mechanism_model.model_for_mechanism(
             load_mechanism('cho1992'), core_options.ModelOptions.linear(
                 rigid_crank=True, bearings='rigid', geometric_stiffness=False))
         StreamingEstimator(model, step_tables=tables.step_tables(small))

@@ -16,7 +16,7 @@ three constant (3 (e + 1)) x r matrices, the 6 x 6 unit geometric stiffness of i
 and a periodic spline of the link angles' cos and sin and of F_r's three coefficients per
 element. :func:`build_tables` makes the plain arrays (names ``dynamic_*``, part of a model
 built with ``second_order='dynamic'``); :class:`DynamicLoad` evaluates f2 in numpy (the twin of the
-compiled loads, core/estimation/_dynamic_second_order.c).
+compiled loads, core/estimation/_second_order_dynamic.c).
 """
 
 import dataclasses

@@ -151,7 +151,7 @@ class CompiledDynamicStep(CompiledStep):
     :class:`CompiledStep` (the linear state and its records) with z2 advanced in C.
 
     The linear step is the package's compiled one, unchanged; after it, per step,
-    ``_dynamic_second_order.advance`` repeats :meth:`DynamicSecondOrderStep._step`'s
+    ``_second_order_dynamic.advance`` repeats :meth:`DynamicSecondOrderStep._step`'s
     arithmetic for z2 (M, C, [K | f] at the two stages from the same node tables, the same
     G(h) block system, the loads of :class:`.dynamic_pass_kernel.DynamicPassKernel`) and
     the records' deflections add the output operator on q2 - K_r^-1 f2_eigenstrain. Rows
@@ -174,7 +174,7 @@ class CompiledDynamicStep(CompiledStep):
                              'use a model of order 2')
         self.kernel = DynamicPassKernel(model.dynamic_second_order)
         if not self.kernel.compiled:
-            raise RuntimeError('the compiled pass (_dynamic_second_order.c) is not built')
+            raise RuntimeError('the compiled pass (_second_order_dynamic.c) is not built')
         t = tables
         self._step_context = np.array([
             t.size, model.grid_size, self.cells_per_radian, t.mass_groups, t.kf_groups,

@@ -12,7 +12,7 @@ import logging
 import numpy as np
 import scipy.linalg
 
-from . import dynamic_second_order_tables, second_order_tables, store
+from . import second_order_dynamic_tables, second_order_tables, store
 from .basis import FrozenSamples
 from .build import reduce_samples
 from .build_progress import BuildProgress
@@ -105,7 +105,7 @@ def build_model(mechanism, options, progress=None):
             linkage, model.basis, options.grid_size))
         if options.second_order == 'dynamic':
             model = dataclasses.replace(
-                model, dynamic_second_order=dynamic_second_order_tables.build_tables(
+                model, dynamic_second_order=second_order_dynamic_tables.build_tables(
                     linkage, model.basis, options.grid_size))
     tracker.finish()
     return model
@@ -151,7 +151,7 @@ def with_soft_basis(model, soft_modes, place=(None, None), key=None):
     usable gap, or none (with the reason in ``info['soft']``); p > 0 refuses a model without
     a gap there (FlexlinkError); 0 leaves the model as it is. A model with the dynamic
     second-order pass keeps all its coordinates (the pass steps a second reduced state
-    beside them: core/estimation/dynamic_second_order.py).
+    beside them: core/estimation/second_order_dynamic_step.py).
     """
     if soft_modes == 0 or model.dynamic_second_order is not None:
         reason = 'off' if soft_modes == 0 else 'the dynamic second-order pass'
