@@ -6,8 +6,7 @@ from flexlink_ros.cli.mcap import recover_mcap
 from flexlink_ros.errors import RecorderError
 from flexlink_ros.io import recorder_queue
 from flexlink_ros.io.msg_schema import serialize_exact
-from flexlink_ros.io.recorder import McapRecorder
-from flexlink_ros.io.recorder_queue import RecorderState
+from flexlink_ros.io.recorder import McapRecorder, RecorderState
 from mcap.reader import make_reader
 import numpy as np
 from recorder_helpers import sample_messages, STEP_NS, T0_NS
