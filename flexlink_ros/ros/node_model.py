@@ -96,7 +96,7 @@ def publishable(sample):
 
     Parameters
     ----------
-    sample : core.estimation.streaming.Sample
+    sample : core.estimation.sample.Sample
         One estimate.
 
     """
@@ -245,7 +245,7 @@ class PeriodStats:
 
         Parameters
         ----------
-        sample : core.estimation.streaming.Sample
+        sample : core.estimation.sample.Sample
             The estimate published.
 
         """

@@ -27,7 +27,7 @@ from ..core.reduction.soft_tables import node_values
 
 # Length of the signal the offline replay rate is measured on [s] (amortises the warm start).
 OFFLINE_SECONDS = 20.0
-# The estimator's targets (issue #15): median streaming update [us], offline samples/s.
+# The estimator's targets (the soft basis's): median streaming update [us], offline samples/s.
 UPDATE_TARGET_US = 10.0
 OFFLINE_TARGET = 100_000.0
 
@@ -62,7 +62,7 @@ def full_order_cpu_per_second(mechanism, options, rpm, rate_hz=1000.0, steps=40)
     """
     CPU seconds per simulated second of a direct full-order integration at ``rate_hz``.
 
-    Each step assembles the FE system at the two Radau stage angles (core/assembly.py),
+    Each step assembles the FE system at the two Radau stage angles (core/fe/linkage.py),
     builds the modal damping from all frozen modes and takes one order-3 Radau IIA step:
     what integrating the unreduced model sample by sample costs.
     """

@@ -1,5 +1,5 @@
 """
-The dynamic second-order pass per basis size: accuracy and cost of its step (issue 14).
+The dynamic second-order pass per basis size: accuracy and cost of its step.
 
 ``python -m flexlink_ros.studies.dynamic_second_order_study [--rpm 391] [--elements 8]
 [--sizes 4,2 8,4] [--peer] [--cost] [--no-gravity] [--json]`` streams the numpy step of the

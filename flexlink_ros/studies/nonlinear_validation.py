@@ -27,7 +27,7 @@ from ..core.fe.simulate import periodic_response
 
 MODELS = ('linear', 'nonlinear')
 LABELS = {'linear': 'linear', 'nonlinear': 'nonlinear'}
-# The targets for the nonlinear full order against the peer.
+# The targets for the nonlinear full order against the peer.
 TARGETS = {'rms': 0.05, 'p2p': 0.03}
 # Package time steps per revolution (a multiple of the output points).
 STEPS = 720

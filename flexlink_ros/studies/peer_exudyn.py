@@ -1,10 +1,10 @@
 """
 Geometrically nonlinear peer of the flexible four-bar, built with Exudyn (ANCF cables).
 
-The linear kineto-elastodynamic (KED) model of the package (:mod:`core.assembly`,
-:mod:`core.simulate`) follows Cho, Park & Lee (1992). This module builds an independent,
+The linear kineto-elastodynamic (KED) model of the package (:mod:`core.fe.linkage`,
+:mod:`core.fe.simulate`) follows Cho, Park & Lee (1992). This module builds an independent,
 geometrically exact model of the same linkage from the same mechanism file, so that the
-linear estimate (and later second-order corrections) can be checked against it (issue 14).
+linear estimate (and later second-order corrections) can be checked against it.
 
 Model (conventions of the issue's peer):
 
@@ -36,7 +36,7 @@ Outputs: elastic deflections in the ground frame, i.e. the nonlinear position mi
 rigid-body position at the same crank angle (:func:`core.kinematics.solve_kinematics`), of
 the lever tip (node B of the lever) and of the coupler's material mid-point (arc length
 L/2 of the undeformed coupler): the quantities of ``flexlink simulate``
-(:data:`core.assembly.OUTPUT_NAMES`).
+(:data:`names.OUTPUT_NAMES`).
 
 Start and steady state: the run starts with the links straight, in the rigid configuration
 at theta0, with the rigid-body velocities at full speed (no ramp). The transient then decays

@@ -436,7 +436,7 @@ def run_plan(mechanism, base, rpm_max, tolerance, rate_hz=1000.0, speeds_rpm=Non
     """
     Find the smallest model (physics and size) meeting ``tolerance`` against the scene.
 
-    Scene reference. The full-order periodic response (core/simulate.py via
+    Scene reference. The full-order periodic response (core/fe/simulate.py via
     ``reduced.reference_response``) of the richest model of the scene,
     :func:`scene_options`: the user's bearings, flexible crank, geometric stiffness, refined
     elements. Outputs are physical points (lever side of B, coupler material mid-point,

@@ -52,7 +52,7 @@ from ..core.reduction import reference as reduction_reference
 from ..core.reduction.soft_basis import lowest_modes
 from ..core.reduction.soft_tables import node_values
 
-# (label, rpm, jitter) of the constant-speed cases, and the targets (relative RMS).
+# (label, rpm, jitter) of the constant-speed cases, and the targets (relative RMS).
 STEADY_CASES = (('269 rpm', 269.0, 0.0), ('391 rpm', 391.0, 0.0),
                 ('269 rpm +-30 %', 269.0, 0.3), ('391 rpm +-30 %', 391.0, 0.3),
                 ('100 rpm', 100.0, 0.0), ('600 rpm', 600.0, 0.0))

@@ -1,5 +1,5 @@
 """
-Validity indicator (flexlink_ros/core/validity.py, issue 14 item 4): independent checks.
+Validity indicator (flexlink_ros/core/validity.py): independent checks.
 
 * the Euler load pi^2 E I / L^2 against the FE buckling eigenvalue of a pinned-pinned link
   (K u = P G u with the unit geometric stiffness);

@@ -1,8 +1,8 @@
 """
 The Exudyn peer (flexlink_ros/studies/peer_exudyn.py) at a reduced size: 4 ANCF elements per link.
 
-Physics checks against the package's own linear model (core.assembly, core.simulate) and
-against the issue's peer table (issue 14, 8 elements per link, no gravity); the reduced size
+Physics checks against the package's own linear model (core.fe.linkage, core.fe.simulate) and
+against the peer's published table (8 elements per link, no gravity); the reduced size
 is within 0.5 % of the 8-element peer at 269 rpm.
 """
 

@@ -1,5 +1,5 @@
 """
-Validation against the Exudyn peer (flexlink_ros/studies/validation.py, issue 14 item 5).
+Validation against the Exudyn peer (flexlink_ros/studies/validation.py).
 
 At a reduced size (4 ANCF / beam elements per link, the peer at 360 steps per revolution): the
 structure of a record, and the physics the issue states at 8 elements per link: with rigid

@@ -1,5 +1,5 @@
 """
-The dynamic second-order pass in the streaming step (issue 14; ``second_order='dynamic'``).
+The dynamic second-order pass in the streaming step (``second_order='dynamic'``).
 
 The full-order reference (:mod:`core.fe.second_order_dynamic`) solves, after the linear pass,
 one more periodic linear problem of the same model, ``M U2'' + C U2' + K U2 = F2(U1)``, loaded
@@ -123,12 +123,12 @@ class DynamicSecondOrderStep(NumpyStep):
         tables = self.tables
         r = tables.size
         stage_angle = (self.previous[0] + STAGE1 * advance) % TWO_PI
-        parity = self._load_stages(h, angle, speed, accel, advance)
+        parity = self.load_stages(h, angle, speed, accel, advance)
         inv = 1.0 / h
         g = np.dot(np.array((inv * inv, inv, 1.0, h, h * h)), tables.g_stack[parity])
-        blocks = np.dot(g.reshape(8, 8), self._stored.reshape(8, r * r))
+        blocks = np.dot(g.reshape(8, 8), self.stored.reshape(8, r * r))
         system_t = blocks.reshape(2, 4, r, r).transpose(1, 3, 0, 2).reshape(4 * r, 2 * r)
-        z, stored = self.z, self._stored
+        z, stored = self.z, self.stored
         loads = np.concatenate((stored[1 - parity, 3, :r], stored[parity, 3, :r]))
         lu, pivots, info = lapack.dgetrf(system_t[:2 * r].T)
         increment, info2 = lapack.dgetrs(lu, pivots, np.dot(z[:2 * r], system_t[2 * r:]) + loads)

@@ -172,7 +172,7 @@ class ReducedModel:
                 + sum(a.nbytes for a in (self.nonlinearity or {}).values()))
 
     def to_arrays(self):
-        """Arrays and metadata for :func:`core.cache.save_cache`."""
+        """Arrays and metadata for :func:`core.reduction.store.save_cache`."""
         arrays = {'table': self.table, 'shape_table': self.shape_table, 'basis': self.basis,
                   'force_moments': self.force_moments, **(self.nonlinearity or {}),
                   **(self.second_order or {}), **(self.dynamic_second_order or {})}

@@ -1,7 +1,7 @@
 """
 The reduced model's tables of the dynamic second-order load, and their numpy evaluation.
 
-The dynamic second-order pass (:mod:`core.fe.second_order_dynamic`, issue 14 item 2) loads the
+The dynamic second-order pass (:mod:`core.fe.second_order_dynamic`) loads the
 linear model once more with the second-order terms of the strain energy evaluated on the
 linear state U1: per element the axial eigenstrain (EA s_e / l)[1, 0, 0, -1, 0, 0] and the
 geometric stiffness of the elastic axial force, -N_e G_e u_e (its Eq. 3), gathered by the

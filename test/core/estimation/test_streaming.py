@@ -181,7 +181,7 @@ def test_cho1992_streaming_accuracy_at_269_and_391_rpm(cho, bearings):
 
 @pytest.mark.parametrize('bearings', ['rigid', 'flexible'])
 def test_cho1992_order_2_streaming_equals_the_full_order_plus_second_order(cho, bearings):
-    """Order 2 against core.simulate's full order + corrected_response, 269 and 391 rpm."""
+    """Order 2 against core.fe.simulate's full order + corrected_response, 269 and 391 rpm."""
     options = core_options.ModelOptions.linear(bearings=bearings, order=2)
     model = mechanism_model.model_for_mechanism(cho, options)
     assert model.order == 2

@@ -1,5 +1,5 @@
 """
-Second-order geometry (core/fe/second_order_geometry.py, issue 14 item 1), independent checks.
+Second-order geometry (core/fe/second_order_geometry.py), independent checks.
 
 * the FE bending integral against closed forms (half-sine, parabola on part of a link);
 * the loop closure against the exact intersection of two circles (third-order agreement).

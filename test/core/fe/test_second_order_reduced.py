@@ -1,5 +1,5 @@
 """
-Second-order outputs on a reduced basis (core/fe/second_order_reduced.py, issue 14 item 1).
+Second-order outputs on a reduced basis (core/fe/second_order_reduced.py).
 
 The quadratic form on a reduced basis against the full-order computation on V q (the compiled
 kernel and the streamed reduced model: test/studies/test_second_order_{bench,study}.py).

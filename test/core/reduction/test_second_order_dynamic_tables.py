@@ -1,5 +1,5 @@
 """
-Reduced dynamic second-order load (core/reduction/second_order_dynamic_tables.py, issue 14).
+Reduced dynamic second-order load (core/reduction/second_order_dynamic_tables.py).
 
 On a constant basis V the tables' load equals V^T of the full-order pass's load
 (core/fe/second_order_dynamic.second_order_load) of the state V q, and the rigid-body axial

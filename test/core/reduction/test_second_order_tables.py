@@ -1,4 +1,4 @@
-"""The reduced model's second-order tables (issue 14): against the full-order forms on V q."""
+"""The reduced model's second-order tables: against the full-order forms on V q."""
 
 from flexlink_ros.core.fe import linkage as assembly
 from flexlink_ros.core.fe import second_order_full as so_full
