@@ -188,7 +188,8 @@ def add_reduced_arguments(parser):
     parser.add_argument('--static', type=int,
                         help='basis directions from static responses (default: by bearings '
                         'and crank model)')
-    parser.add_argument('--grid-size', type=int, help='crank-angle grid points (default: 128)')
+    parser.add_argument('--grid-size', type=int,
+                        help=f'crank-angle grid points (default: {DEFAULT_MODEL.grid_size})')
     parser.add_argument('--soft-modes', type=int, metavar='P',
                         help='the estimator steps the P lowest modes of the reduced model '
                         '(a smooth basis at a checked spectral gap; refused without a gap '
