@@ -24,7 +24,7 @@ from .dynamic_second_order_bench import time_pass
 from .peer_exudyn import compare, peer_response
 from .peer_model import OUTPUT_KEYS
 from ..core.estimation import native
-from ..core.estimation.dynamic_pass_kernel import DynamicPassKernel
+from ..core.estimation.second_order_dynamic_kernel import DynamicPassKernel
 from ..core.estimation.second_order_dynamic_step import DynamicSecondOrderStep, steady_revolution
 from ..core.estimation.step import NumpyStep
 from ..core.estimation.streaming import StreamingEstimator

@@ -1,7 +1,7 @@
 /*
  * The per-sample loads of the dynamic second-order pass, compiled: the form of
- * flexlink_ros/core/estimation/dynamic_pass_kernel.py (DynamicPassKernel, whose numpy path is
- * its twin and reference; a test compares the two). Plain C API, no numpy headers.
+ * flexlink_ros/core/estimation/second_order_dynamic_kernel.py (DynamicPassKernel, whose numpy
+ * path is its twin and reference; a test compares the two). Plain C API, no numpy headers.
  *
  * loads(context, pieces, unit, scalars, stored, states, out, angle_stage, angle_sample,
  *       stage_slot, sample_slot) -> None
@@ -536,7 +536,7 @@ static PyMethodDef methods[] = {
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT, "_second_order_dynamic",
     "The dynamic second-order pass's loads per sample, compiled "
-    "(core/estimation/dynamic_pass_kernel.py).", -1, methods, NULL, NULL, NULL, NULL,
+    "(core/estimation/second_order_dynamic_kernel.py).", -1, methods, NULL, NULL, NULL, NULL,
 };
 
 PyMODINIT_FUNC PyInit__second_order_dynamic(void)

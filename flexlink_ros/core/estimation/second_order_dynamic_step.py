@@ -8,8 +8,8 @@ output operator of U1 + U2. Here the same runs sample by sample on the reduced m
 state z2 = (q2, q2') advanced by the SAME 2-stage Radau IIA step as the linear state (the same
 M, C, K at the same stage times, so the stage system's LU factors of the linear step serve
 both; only the right-hand side differs), loaded by ``f2 = V^T F2(V q)`` at the two stages
-(:class:`.dynamic_pass_kernel.DynamicPassKernel`, compiled where built). The stages' linear q
-comes from the linear step's own stage values (:func:`stage_positions`).
+(:class:`.second_order_dynamic_kernel.DynamicPassKernel`, compiled where built). The stages'
+linear q comes from the linear step's own stage values (:func:`stage_positions`).
 
 Outputs. The model is of order 2: the record keeps the quasi-static correction and adds the
 output operator on ``q2 - K_r^-1 f2_eigenstrain`` (the mode-acceleration split: the basis
@@ -31,7 +31,7 @@ import numpy as np
 from scipy.linalg import lapack
 
 from . import native
-from .dynamic_pass_kernel import dynamic_pass_compiled_available, DynamicPassKernel, impl
+from .second_order_dynamic_kernel import dynamic_pass_compiled_available, DynamicPassKernel, impl
 from .step import CompiledStep, NumpyStep, STAGE1
 from .tables import step_tables, system_blocks
 from .warm_start import WarmStart
@@ -78,7 +78,7 @@ class DynamicSecondOrderStep(NumpyStep):
         Its step tables.
     kernel : callable
         ``kernel(stored, slots, states, angles)`` -> (3, r): the pass's loads of a step
-        (:class:`.dynamic_pass_kernel.DynamicPassKernel`).
+        (:class:`.second_order_dynamic_kernel.DynamicPassKernel`).
 
     """
 
@@ -153,7 +153,7 @@ class CompiledDynamicStep(CompiledStep):
     The linear step is the package's compiled one, unchanged; after it, per step,
     ``_second_order_dynamic.advance`` repeats :meth:`DynamicSecondOrderStep._step`'s
     arithmetic for z2 (M, C, [K | f] at the two stages from the same node tables, the same
-    G(h) block system, the loads of :class:`.dynamic_pass_kernel.DynamicPassKernel`) and
+    G(h) block system, the loads of :class:`.second_order_dynamic_kernel.DynamicPassKernel`) and
     the records' deflections add the output operator on q2 - K_r^-1 f2_eigenstrain. Rows
     with sub-steps are split here first (as :meth:`NumpyStep._sub_steps` does), so that z2
     sees every linear sub-step.

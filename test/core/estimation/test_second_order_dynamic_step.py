@@ -11,9 +11,9 @@ import math
 
 from flexlink_ros.core.estimation import native
 from flexlink_ros.core.estimation import second_order_dynamic_step as dyn
-from flexlink_ros.core.estimation.dynamic_pass_kernel import dynamic_pass_compiled_available
-from flexlink_ros.core.estimation.dynamic_pass_kernel import DynamicPassKernel
 from flexlink_ros.core.estimation.offline_run import estimate_offline
+from flexlink_ros.core.estimation.second_order_dynamic_kernel import (
+    dynamic_pass_compiled_available, DynamicPassKernel)
 from flexlink_ros.core.estimation.step import NumpyStep, STAGE1
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
 from flexlink_ros.core.estimation.tables import step_tables

@@ -1,5 +1,5 @@
 """
-The dynamic pass's loads of one step (core/estimation/dynamic_pass_kernel.py).
+The dynamic pass's loads of one step (core/estimation/second_order_dynamic_kernel.py).
 
 The compiled form (_second_order_dynamic.c) against its numpy twin, and the numpy twin against
 its definition: the reduced static responses K_r^-1 f_r at the two points as the reference of
@@ -8,7 +8,7 @@ the elastic axial force, and K_r^-1 f2_eigenstrain at the sample.
 
 import math
 
-from flexlink_ros.core.estimation import dynamic_pass_kernel as kernel
+from flexlink_ros.core.estimation import second_order_dynamic_kernel as kernel
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction import mechanism_model
