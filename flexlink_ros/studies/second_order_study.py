@@ -127,7 +127,7 @@ def reduced_response(mechanism, rpm, gravity, elements, points=720, sizes=None, 
 
 def meets_targets(record, name='second_order'):
     """
-    Tell whether a response meets the issue's p2p targets, per output.
+    Tell whether a response meets the p2p targets, per output.
 
     ``name`` 'second_order' (the full order + second order: :data:`TARGETS`) or 'reduced' (the
     streaming estimate of order 2: :data:`STREAM_TARGETS`).

@@ -28,7 +28,7 @@ so the second-order joint motion solves, with the nominal unit vectors, ::
 
     e_c . (dB - dA) = -S_c,   e_l . dB = -S_l,   dA = -S_k e_k (flexible crank, else 0)   (3)
 
-(c coupler A->B, l lever O4->B, k crank O2->A). The issue's form ``[e_c; e_l] dB = -[delta_c;
+(c coupler A->B, l lever O4->B, k crank O2->A). The simpler form ``[e_c; e_l] dB = -[delta_c;
 delta_l]`` is (3) with the rotation term left out; with rigid bearings B's linear motion is
 2-5 um, so the term is 1e-11 m there, but with bearing springs it is not negligible in
 principle. test/core/fe/test_second_order_geometry.py checks (3) against the exact
