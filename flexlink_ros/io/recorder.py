@@ -34,7 +34,6 @@ import logging
 import os
 import pathlib
 import threading
-import time
 
 import numpy as np
 
@@ -51,7 +50,7 @@ from .recorder_files import (
     make_directories, OpenFile, refuse_existing, register_topic, remove_directories, split_due,
     start_file, Topic,
 )
-from .recorder_queue import WriteQueue
+from .recorder_queue import FlushClock, WriteQueue
 from ..errors import RecorderError
 
 LOGGER = logging.getLogger(__name__)
@@ -120,9 +119,7 @@ class McapRecorder:
         self._error_reported = False
         self._dropped = 0
         self._message_count = 0
-        self._unflushed = 0
-        self._last_flush_log_ns = None
-        self._last_flush_wall = time.monotonic()
+        self._flush_clock = FlushClock(self.flush_period_ns)
         self._queue = WriteQueue(self._on_queue_period, self.path)   # what enqueue() hands over
         self._closed_bytes = 0
         self._bag_lock = None   # descriptor holding the bag directory's lock (bag_lock)
@@ -360,10 +357,7 @@ class McapRecorder:
             current.note(log_time_ns, log_time_ns, 1)
             self._topics[topic].message_count += 1
             self._message_count += 1
-            self._unflushed += 1
-            if self._last_flush_log_ns is None:
-                self._last_flush_log_ns = log_time_ns
-            elif log_time_ns - self._last_flush_log_ns >= self.flush_period_ns:
+            if self._flush_clock.wrote(log_time_ns):
                 self._flush_locked(log_time_ns)
             return True
 
@@ -383,7 +377,7 @@ class McapRecorder:
         self._write_queue()
         with self._lock:
             if self._state is RecorderState.RECORDING:
-                self._flush_locked(self._last_flush_log_ns)
+                self._flush_locked(self._flush_clock.last_log_ns)
 
     def enqueue(self, topic, message, log_time_ns):
         """
@@ -474,7 +468,7 @@ class McapRecorder:
         count = len(messages)
         try:
             flushes = add_batch(self._file, self._topics, names, index, messages, log, publish,
-                                self.flush_period_ns, self._last_flush_log_ns)
+                                self.flush_period_ns, self._flush_clock.last_log_ns)
         except OSError as exc:
             self._dropped += count - 1
             self._fail(exc)
@@ -490,14 +484,7 @@ class McapRecorder:
         for k, number in enumerate(np.bincount(index, minlength=len(names)).tolist()):
             self._topics[names[k]].message_count += number
         self._message_count += count
-        if flushes:
-            self._last_flush_log_ns = flushes[-1][1]
-            self._unflushed = count - 1 - flushes[-1][0]
-            self._last_flush_wall = time.monotonic()
-        else:
-            if self._last_flush_log_ns is None:
-                self._last_flush_log_ns = int(log[0])
-            self._unflushed += count
+        self._flush_clock.wrote_batch(int(log[0]), count, flushes)
 
     def _write_queue(self):
         """Write the messages enqueued so far (enqueue), in order, as one batch."""
@@ -518,21 +505,18 @@ class McapRecorder:
         """Write the queue; flush the open chunk once a flush period of wall time has passed."""
         self._write_queue()
         with self._lock:
-            if (self._state is RecorderState.RECORDING and self._unflushed
-                    and time.monotonic() - self._last_flush_wall >= self.flush_period_ns / 1e9):
-                self._flush_locked(self._last_flush_log_ns)
+            if self._state is RecorderState.RECORDING and self._flush_clock.idle_due():
+                self._flush_locked(self._flush_clock.last_log_ns)
 
     def _flush_locked(self, log_time_ns):
-        if self._file is None or not self._unflushed:
+        if self._file is None or not self._flush_clock.unflushed:
             return
         try:
             self._file.writer.flush()
         except OSError as exc:
             self._fail(exc)
             return
-        self._unflushed = 0
-        self._last_flush_log_ns = log_time_ns
-        self._last_flush_wall = time.monotonic()
+        self._flush_clock.flushed(log_time_ns)
 
     # -- internals --------------------------------------------------------------------------
 

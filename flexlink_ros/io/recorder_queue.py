@@ -1,17 +1,19 @@
 """
-The recorder's write queue: messages a latency-sensitive caller hands over, written by a thread.
+When the recorder writes and flushes: its write queue, written by a thread, and its flush clock.
 
 :class:`WriteQueue` is what :meth:`flexlink_ros.io.recorder.McapRecorder.enqueue` appends
 to: a queue bounded in bytes (:data:`QUEUE_MAX_BYTES`; what overflows is dropped and
 counted, never held in ever more memory) and a background thread that calls the recorder back
 every :data:`QUEUE_PERIOD_S` to write what was queued and flush the open chunk when due. The
 queue's own lock guards only its items and byte count and is never held while writing, so an
-enqueuing caller never waits for the disk.
+enqueuing caller never waits for the disk. :class:`FlushClock` says when the open chunk is
+flushed to the OS: what bounds the loss of a crash.
 """
 
 import collections
 import logging
 import threading
+import time
 
 LOGGER = logging.getLogger(__name__)
 QUEUE_PERIOD_S = 0.02  # the background thread writes enqueued messages this often
@@ -95,3 +97,54 @@ class WriteQueue:
     def _run(self):
         while not self._stop.wait(QUEUE_PERIOD_S):
             self._on_period()
+
+
+class FlushClock:
+    """
+    When the open chunk is flushed: a flush period of log time, or of wall time, after the last.
+
+    Log time is checked at every message written, wall time by the queue's thread (no message
+    comes); the recorder flushes when told and reports each flush back (:meth:`flushed`).
+
+    Parameters
+    ----------
+    period_ns : int
+        The flush period [ns].
+
+    """
+
+    def __init__(self, period_ns):
+        self.period_ns = period_ns
+        self.unflushed = 0          # messages written since the last flush
+        self.last_log_ns = None     # log time of the last flush (at first: the first message)
+        self._last_wall = time.monotonic()
+
+    def wrote(self, log_time_ns):
+        """Count one message written; tell whether a flush period of log time has passed."""
+        self.unflushed += 1
+        if self.last_log_ns is None:
+            self.last_log_ns = log_time_ns
+            return False
+        return log_time_ns - self.last_log_ns >= self.period_ns
+
+    def wrote_batch(self, first_log_ns, count, flushes):
+        """Count a batch written with the writer's own flushes ((index, log time) of each)."""
+        if flushes:
+            self.last_log_ns = flushes[-1][1]
+            self.unflushed = count - 1 - flushes[-1][0]
+            self._last_wall = time.monotonic()
+        else:
+            if self.last_log_ns is None:
+                self.last_log_ns = first_log_ns
+            self.unflushed += count
+
+    def idle_due(self):
+        """Tell whether messages have waited unflushed for a flush period of wall time."""
+        return bool(self.unflushed) and (
+            time.monotonic() - self._last_wall >= self.period_ns / 1e9)
+
+    def flushed(self, log_time_ns):
+        """Note a flush, at log time ``log_time_ns``."""
+        self.unflushed = 0
+        self.last_log_ns = log_time_ns
+        self._last_wall = time.monotonic()
