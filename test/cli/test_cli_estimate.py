@@ -8,6 +8,7 @@ import sys
 
 from flexlink_ros.cli import main as cli
 from flexlink_ros.cli.model_args import BUILD_LABEL
+from flexlink_ros.cli.plan_table import plan_table
 from flexlink_ros.core import options as core_options, validity
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.numerics import relative_rms, RPM
@@ -108,7 +109,7 @@ def test_plan_picks_the_first_candidate_within_tolerance(toy, monkeypatch):
     assert first['error_coupler_mid'] > 0.01 or first['error_lever_tip'] > 0.01
     assert all(row['us_per_sample'] > 0 for row in result['alternatives'])
     assert result['alternatives'][0]['physics_error_coupler_mid'] == 0.0
-    assert 'choice: ' in plan.plan_table(result)
+    assert 'choice: ' in plan_table(result)
     # every built size tried its soft basis sizes cheapest first, up to the first in budget
     for row in result['alternatives']:
         tried = row['soft_tried']
