@@ -46,9 +46,9 @@ from .msg_schema import (
 )
 from .provenance import custom_data
 from .recorder_files import (
-    abandon, add_batch, batch_arguments, check_settings, create_exclusive, file_path,
-    make_directories, OpenFile, refuse_existing, register_topic, remove_directories, split_due,
-    start_file, Topic,
+    abandon, add_batch, batch_arguments, check_settings, create_exclusive, DEFAULT_ZSTD_LEVEL,
+    file_path, make_directories, OpenFile, refuse_existing, register_topic, remove_directories,
+    split_due, start_file, Topic,
 )
 from .recorder_queue import FlushClock, WriteQueue
 from ..errors import RecorderError
@@ -87,6 +87,8 @@ class McapRecorder:
     flush_period_s : float
         Longest span of log time (and of wall time, via a background thread) kept unwritten.
     compression : {'zstd', 'none'}
+    compression_level : int
+        zstd level of the chunks (default zstandard's, 3).
     flush_thread : bool
         Run the background flusher; without it only writes trigger flushes.
     provenance : dict, optional
@@ -97,7 +99,8 @@ class McapRecorder:
 
     def __init__(self, path, *, split_size_bytes=0, split_duration_s=0.0,
                  chunk_size_bytes=DEFAULT_CHUNK_SIZE, flush_period_s=DEFAULT_FLUSH_PERIOD_S,
-                 compression='zstd', flush_thread=True, provenance=None):
+                 compression='zstd', flush_thread=True, provenance=None,
+                 compression_level=DEFAULT_ZSTD_LEVEL):
         self.path = pathlib.Path(path)
         self.bare = self.path.suffix == '.mcap'
         check_settings(self.path, split_size_bytes, split_duration_s, chunk_size_bytes,
@@ -107,6 +110,7 @@ class McapRecorder:
         self.chunk_size_bytes = int(chunk_size_bytes)
         self.flush_period_ns = int(round(flush_period_s * 1e9))
         self.compression = compression
+        self.compression_level = int(compression_level)
         self._use_flush_thread = flush_thread
         self.provenance = dict(provenance or {})
         self._custom_data = custom_data(self.provenance)
@@ -554,7 +558,7 @@ class McapRecorder:
                                       UNSET_NS, counts={},
                                       custom_data=self._custom_data)   # as rosbag2 at open
         start_file(self._file, self.chunk_size_bytes, self.compression, self._topics.values(),
-                   opening, self.provenance)
+                   opening, self.provenance, self.compression_level)
 
     def _finish_file(self):
         current = self._file

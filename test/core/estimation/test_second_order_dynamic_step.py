@@ -11,7 +11,7 @@ import math
 
 from flexlink_ros.core.estimation import native
 from flexlink_ros.core.estimation import second_order_dynamic_step as dyn
-from flexlink_ros.core.estimation.offline_run import estimate_offline
+from flexlink_ros.core.estimation.offline import estimate_offline
 from flexlink_ros.core.estimation.second_order_dynamic_kernel import (
     dynamic_pass_compiled_available, DynamicPassKernel)
 from flexlink_ros.core.estimation.step import NumpyStep, STAGE1
