@@ -230,7 +230,6 @@ WITHOUT_OWN_TEST_FILE = {
     'cli/mcap_record.py',
     'ros/message_outcomes.py',
     'ros/node_model.py',
-    'ros/estimator_node.py',
     'ros/startup.py',
 }
 
