@@ -1,0 +1,255 @@
+"""
+The reduced geometrically nonlinear estimator: one Radau IIA step per sample, by Newton.
+
+The model is :mod:`core.reduction.nonlinear_tables` (a constant basis of the nonlinear full
+order with one lumped axial force per flexible link). Per sample interval h the crank angle
+and speed are taken linear between the two samples; at the s stage times the linear part
+(mass, Coriolis, convective and elastic stiffness, loads) is read from the tables and the
+stage accelerations A solve ::
+
+    r_i = M_i A_i + C_i V_i + K_i Q_i + F(Q_i, V_i) - R_i = 0,
+    Q_i = q + c_i h v + h^2 (a a A)_i,   V_i = v + h (a A)_i
+
+with full Newton (Jacobian blocks ``M_i d_ij + h a_ij (C_i + F_v) + h^2 (aa)_ij (K_i + F_q)``,
+as :mod:`core.fe.nonlinear_step`). A step whose Newton does not converge is retried as two
+half steps (down to 1/16 of the interval); a sample that still fails is counted and the
+state is kept (the flag says so). Radau IIA is L-stable, so the stiff axial content of the
+basis needs no small step.
+
+With ``nonlinear=False`` the lumped strain's change is zero and the rigid-body geometric
+stiffness K_G is added: the Galerkin projection of the linear full order.
+"""
+
+import numpy as np
+import scipy.linalg
+
+from ..integrators import RadauIIA
+
+NEWTON_TOLERANCE = 1e-9
+NEWTON_ITERATIONS = 12
+# A failed step is halved at most this many times.
+MAX_HALVINGS = 4
+
+
+def lumped_force(tables, fields, eta, rate, speed, nonlinear=True):
+    """
+    Change of the elastic force by the per-link lumped nonlinear strain, and its tangents.
+
+    ``sum_L N_L (c_L + g_L eta) - (E A / L) c_L (c_L^T eta + beta (c_L^T eta' + w c1_L^T
+    eta))``, zero for ``nonlinear=False``.
+
+    Parameters
+    ----------
+    tables : NonlinearTables
+        The model.
+    fields : dict
+        :meth:`NonlinearTables.at` at the stage angles (s, ...).
+    eta, rate : ndarray, shape (s, m)
+        Coordinates and rates at the stages.
+    speed : ndarray, shape (s,)
+        Crank speed [rad/s] at the stages.
+    nonlinear : bool
+        False: no change (the linear model).
+
+    Returns
+    -------
+    force : ndarray, shape (s, m)
+    stiffness, damping : ndarray, shape (s, m, m)
+        d force / d eta and d force / d eta'.
+    axial : ndarray, shape (s, E)
+        N_L [N], tension > 0.
+
+    """
+    s, m = eta.shape
+    chord, chord_rate = fields['chord'], fields['chord_rate']
+    k, beta, w = tables.axial_stiffness, tables.beta, speed[:, None]
+    linear_strain = np.einsum('slm,sm->sl', chord, eta)
+    linear_rate = np.einsum('slm,sm->sl', chord, rate) + w * np.einsum('slm,sm->sl', chord_rate, eta)
+    if not nonlinear:
+        axial = k * (linear_strain + beta * linear_rate)
+        return np.zeros((s, m)), np.zeros((s, m, m)), np.zeros((s, m, m)), axial
+    short, short_rate = fields['shortening'], fields['shortening_rate']
+    g_eta = np.einsum('slmk,sk->slm', short, eta)
+    h_sym = short_rate + np.swapaxes(short_rate, -1, -2)
+    gradient = chord + g_eta
+    strain = linear_strain + 0.5 * np.einsum('slm,sm->sl', g_eta, eta)
+    strain_rate = (np.einsum('slm,sm->sl', gradient, rate)
+                   + w * (np.einsum('slm,sm->sl', chord_rate, eta)
+                          + np.einsum('sm,slmk,sk->sl', eta, short_rate, eta)))
+    axial = k * (strain + beta * strain_rate)
+    force = (np.einsum('sl,slm->sm', axial, gradient)
+             - np.einsum('sl,slm->sm', k * (linear_strain + beta * linear_rate), chord))
+    d_axial = k[:, None] * (gradient + beta * (np.einsum('slmk,sk->slm', short, rate)
+                                               + w[..., None] * (chord_rate + np.einsum(
+                                                   'slmk,sk->slm', h_sym, eta))))
+    stiffness = (np.einsum('slm,slk->smk', gradient, d_axial)
+                 + np.einsum('sl,slmk->smk', axial, short)
+                 - np.einsum('l,slm,slk->smk', k, chord, chord + beta * w[..., None] * chord_rate))
+    damping = beta * (np.einsum('l,slm,slk->smk', k, gradient, gradient)
+                      - np.einsum('l,slm,slk->smk', k, chord, chord))
+    return force, stiffness, damping, axial
+
+
+def linear_part(tables, fields, speed, accel, nonlinear=True):
+    """
+    Linear mass, damping, stiffness and load at the stages: (s, m, m) x 3 and (s, m).
+
+    ``C = w G + beta (K_el + K_bear)``, ``K = K_el + K_bear + beta w K1 + a K_a + w^2 K_w2``
+    (+ K_G for the linear model), ``R = f_1 + a f_a + w^2 f_w2``.
+    """
+    w = speed[:, None, None]
+    elastic = fields['elastic'] + tables.bearing
+    damping = w * fields['gyroscopic'] + tables.beta * elastic
+    stiffness = (elastic + tables.beta * w * fields['elastic_rate'] + accel * fields['coupling_a']
+                 + w * w * fields['coupling_w2'])
+    if not nonlinear:
+        stiffness = (stiffness + fields['geometric_1'] + accel * fields['geometric_a']
+                     + w * w * fields['geometric_w2'])
+    load = fields['load_1'] + accel * fields['load_a'] + speed[:, None] ** 2 * fields['load_w2']
+    return fields['mass'], damping, stiffness, load
+
+
+class NonlinearStepper:
+    """
+    The estimator's state (eta, eta') and its Radau IIA step (see the module notes).
+
+    Parameters
+    ----------
+    tables : NonlinearTables
+        The reduced nonlinear model.
+    nonlinear : bool
+        False: the linear model in the same basis (for checks).
+    stages : int
+        Radau IIA stages (2: order 3).
+
+    """
+
+    def __init__(self, tables, nonlinear=True, stages=2):
+        self.tables = tables
+        self.nonlinear = bool(nonlinear)
+        self.method = RadauIIA(stages)
+        self.q = np.zeros(tables.size)
+        self.v = np.zeros(tables.size)
+        self.guess = None
+        self.iterations = 0
+        self.axial = np.zeros(tables.links)
+
+    def start(self, angle, speed):
+        """Start from the quasi-static deflection at (angle, speed), at rest in eta."""
+        fields = self.tables.at(angle)
+        _, _, stiffness, load = linear_part(self.tables, fields, np.array([speed]), 0.0,
+                                            self.nonlinear)
+        self.q = np.linalg.solve(stiffness[0], load[0])
+        self.v = np.zeros_like(self.q)
+        self.guess = None
+
+    def outputs(self, angle):
+        """Output deflections [m] at crank angle ``angle`` for the current state, (channels,)."""
+        return self.tables.at(angle)['output'][0] @ self.q
+
+    def _residual(self, h, acc, fields, speed, linear):
+        """Residual (s m,) and Jacobian (s m, s m) at stage accelerations ``acc``."""
+        method = self.method
+        mass, damping, stiffness, load = linear
+        disp = self.q[None] + (method.c[:, None] * h) * self.v[None] + h * h * (method.a2 @ acc)
+        vel = self.v[None] + h * (method.a @ acc)
+        force, f_q, f_v, axial = lumped_force(self.tables, fields, disp, vel, speed,
+                                              self.nonlinear)
+        residual = (np.einsum('sij,sj->si', mass, acc) + np.einsum('sij,sj->si', damping, vel)
+                    + np.einsum('sij,sj->si', stiffness, disp) + force - load)
+        jacobian = method.step_matrix(h, mass, damping + f_v, stiffness + f_q)
+        return residual.ravel(), jacobian, axial
+
+    def _newton(self, h, fields, speed, accel):
+        """Solve one step's stage accelerations; None if Newton does not converge."""
+        linear = linear_part(self.tables, fields, speed, accel, self.nonlinear)
+        s, m = speed.shape[0], self.tables.size
+        acc = np.zeros((s, m)) if self.guess is None else self.guess.copy()
+        for count in range(1, NEWTON_ITERATIONS + 1):
+            residual, jacobian, axial = self._residual(h, acc, fields, speed, linear)
+            update = scipy.linalg.solve(jacobian, -residual, check_finite=False)
+            acc = acc + update.reshape(s, m)
+            size, scale = np.abs(update).max(), np.abs(acc).max()
+            if not np.isfinite(size):
+                return None
+            if size <= NEWTON_TOLERANCE * scale or size == 0.0:
+                self.iterations += count
+                self.axial = axial[-1]
+                return acc
+        return None
+
+    def step(self, h, angle0, angle1, speed0, speed1, halvings=MAX_HALVINGS):
+        """
+        Advance the state over an interval of length h [s] between two samples.
+
+        Returns True if every (sub)step converged; the state is unchanged otherwise.
+        """
+        c = self.method.c
+        angles = angle0 + c * (angle1 - angle0)
+        speed = speed0 + c * (speed1 - speed0)
+        accel = (speed1 - speed0) / h
+        acc = self._newton(h, self.tables.at(angles), speed, accel)
+        if acc is None:
+            if halvings == 0:
+                return False
+            saved = (self.q, self.v, self.guess)
+            middle_angle, middle_speed = 0.5 * (angle0 + angle1), 0.5 * (speed0 + speed1)
+            self.guess = None
+            if not (self.step(0.5 * h, angle0, middle_angle, speed0, middle_speed, halvings - 1)
+                    and self.step(0.5 * h, middle_angle, angle1, middle_speed, speed1,
+                                  halvings - 1)):
+                self.q, self.v, self.guess = saved
+                return False
+            return True
+        self.q = self.q + h * self.v + h * h * (self.method.a2[-1] @ acc)
+        self.v = self.v + h * (self.method.a[-1] @ acc)
+        self.guess = np.broadcast_to(acc[-1], acc.shape).copy()
+        return True
+
+
+def estimate_nonlinear(tables, stamps_ns, angles, speeds=None, nonlinear=True):
+    """
+    Estimate the output deflections of a crank signal with the reduced nonlinear model.
+
+    Parameters
+    ----------
+    tables : NonlinearTables
+        The model.
+    stamps_ns : ndarray of int, shape (K,)
+        Sample stamps [ns], increasing.
+    angles : ndarray, shape (K,)
+        Crank angles [rad] (wrapped or not).
+    speeds : ndarray, shape (K,) or None
+        Crank speeds [rad/s]; None to differentiate the unwrapped angles.
+    nonlinear : bool
+        False: the linear model in the same basis.
+
+    Returns
+    -------
+    dict
+        'outputs' (K, channels) [m], 'converged' (K,) bool, 'newton_iterations' (total),
+        'axial_force' (K, E) [N], 'refused' (samples whose step failed).
+
+    """
+    stamps = np.asarray(stamps_ns, dtype=np.int64)
+    theta = np.unwrap(np.asarray(angles, dtype=float))
+    if stamps.ndim != 1 or stamps.shape != theta.shape or np.any(np.diff(stamps) <= 0):
+        raise ValueError('stamps must be increasing and match the angles, one per sample')
+    time_s = (stamps - stamps[0]) * 1e-9
+    speeds = np.gradient(theta, time_s) if speeds is None else np.asarray(speeds, dtype=float)
+    stepper = NonlinearStepper(tables, nonlinear)
+    stepper.start(theta[0], speeds[0])
+    count = theta.shape[0]
+    outputs = np.empty((count, tables.outputs))
+    axial = np.zeros((count, tables.links))
+    converged = np.ones(count, dtype=bool)
+    outputs[0] = stepper.outputs(theta[0])
+    for k in range(1, count):
+        converged[k] = stepper.step(time_s[k] - time_s[k - 1], theta[k - 1], theta[k],
+                                    speeds[k - 1], speeds[k])
+        outputs[k], axial[k] = stepper.outputs(theta[k]), stepper.axial
+    return {'outputs': outputs, 'converged': converged, 'axial_force': axial,
+            'newton_iterations': stepper.iterations, 'refused': int((~converged).sum())}
+
+
+__all__ = ['NonlinearStepper', 'lumped_force', 'linear_part', 'estimate_nonlinear']
