@@ -31,7 +31,7 @@ NEWTON_ITERATIONS = 12
 MAX_HALVINGS = 4
 
 
-def lumped_force(tables, fields, eta, rate, speed, nonlinear=True):
+def lumped_force(tables, fields, eta, rate, speed, nonlinear=True, tangents=True):
     """
     Change of the elastic force by the per-link lumped nonlinear strain, and its tangents.
 
@@ -50,11 +50,13 @@ def lumped_force(tables, fields, eta, rate, speed, nonlinear=True):
         Crank speed [rad/s] at the stages.
     nonlinear : bool
         False: no change (the linear model).
+    tangents : bool
+        False: stiffness and damping are None.
 
     Returns
     -------
     force : ndarray, shape (s, m)
-    stiffness, damping : ndarray, shape (s, m, m)
+    stiffness, damping : ndarray, shape (s, m, m) or None
         d force / d eta and d force / d eta'.
     axial : ndarray, shape (s, E)
         N_L [N], tension > 0.
@@ -79,6 +81,8 @@ def lumped_force(tables, fields, eta, rate, speed, nonlinear=True):
     axial = k * (strain + beta * strain_rate)
     force = (np.einsum('sl,slm->sm', axial, gradient)
              - np.einsum('sl,slm->sm', k * (linear_strain + beta * linear_rate), chord))
+    if not tangents:
+        return force, None, None, axial
     d_axial = k[:, None] * (gradient + beta * (np.einsum('slmk,sk->slm', short, rate)
                                                + w[..., None] * (chord_rate + np.einsum(
                                                    'slmk,sk->slm', h_sym, eta))))
@@ -145,29 +149,39 @@ class NonlinearStepper:
 
     def outputs(self, angle):
         """Output deflections [m] at crank angle ``angle`` for the current state, (channels,)."""
-        return self.tables.at(angle)['output'][0] @ self.q
+        return self.tables.at(angle, ('output',))['output'][0] @ self.q
 
-    def _residual(self, h, acc, fields, speed, linear):
-        """Residual (s m,) and Jacobian (s m, s m) at stage accelerations ``acc``."""
+    def _residual(self, h, acc, fields, speed, linear, tangents):
+        """Residual (s m,), Jacobian (s m, s m) or None, and N_L at stage accelerations."""
         method = self.method
         mass, damping, stiffness, load = linear
         disp = self.q[None] + (method.c[:, None] * h) * self.v[None] + h * h * (method.a2 @ acc)
         vel = self.v[None] + h * (method.a @ acc)
         force, f_q, f_v, axial = lumped_force(self.tables, fields, disp, vel, speed,
-                                              self.nonlinear)
+                                              self.nonlinear, tangents)
         residual = (np.einsum('sij,sj->si', mass, acc) + np.einsum('sij,sj->si', damping, vel)
                     + np.einsum('sij,sj->si', stiffness, disp) + force - load)
-        jacobian = method.step_matrix(h, mass, damping + f_v, stiffness + f_q)
+        jacobian = (method.step_matrix(h, mass, damping + f_v, stiffness + f_q) if tangents
+                    else None)
         return residual.ravel(), jacobian, axial
 
     def _newton(self, h, fields, speed, accel):
-        """Solve one step's stage accelerations; None if Newton does not converge."""
+        """
+        Solve one step's stage accelerations; None if Newton does not converge.
+
+        Simplified Newton: the Jacobian is formed at the step's start and formed again only
+        when an iteration contracts the update by less than half.
+        """
         linear = linear_part(self.tables, fields, speed, accel, self.nonlinear)
         s, m = speed.shape[0], self.tables.size
         acc = np.zeros((s, m)) if self.guess is None else self.guess.copy()
+        factor, previous = None, np.inf
         for count in range(1, NEWTON_ITERATIONS + 1):
-            residual, jacobian, axial = self._residual(h, acc, fields, speed, linear)
-            update = scipy.linalg.solve(jacobian, -residual, check_finite=False)
+            residual, jacobian, axial = self._residual(h, acc, fields, speed, linear,
+                                                       factor is None)
+            if jacobian is not None:
+                factor = scipy.linalg.lu_factor(jacobian, check_finite=False)
+            update = scipy.linalg.lu_solve(factor, -residual, check_finite=False)
             acc = acc + update.reshape(s, m)
             size, scale = np.abs(update).max(), np.abs(acc).max()
             if not np.isfinite(size):
@@ -176,6 +190,9 @@ class NonlinearStepper:
                 self.iterations += count
                 self.axial = axial[-1]
                 return acc
+            if size > 0.5 * previous:
+                factor = None
+            previous = size
         return None
 
     def step(self, h, angle0, angle1, speed0, speed1, halvings=MAX_HALVINGS):

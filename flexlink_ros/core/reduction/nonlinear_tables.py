@@ -41,8 +41,8 @@ from ..fe.nonlinear_strain import AXIAL, element_gather, model_elements
 # Grid nodes over one revolution and the angles whose modes and statics span the basis.
 GRID_NODES = 120
 BASIS_ANGLES = 24
-BASIS_MODES = 16
-BASIS_SIZE = 24
+BASIS_MODES = 24
+BASIS_SIZE = 36
 # Matrices (m x m) and vectors (m) of the linear part, by name.
 MATRICES = ('mass', 'gyroscopic', 'coupling_a', 'coupling_w2', 'elastic', 'elastic_rate',
             'geometric_1', 'geometric_a', 'geometric_w2')
@@ -88,7 +88,13 @@ class NonlinearTables:
         return self.values.shape[0]
 
     def layout(self):
-        """Return {name: (start, shape)} of the fields in a flat row."""
+        """Return {name: (start, shape)} of the fields in a flat row (computed once)."""
+        cached = self.__dict__.get('_layout')
+        if cached is None:
+            cached = self.__dict__['_layout'] = self._make_layout()
+        return cached
+
+    def _make_layout(self):
         m, e = self.size, self.links
         shapes = [(name, (m, m)) for name in MATRICES] + [(name, (m,)) for name in VECTORS]
         shapes += [('output', (self.outputs, m)), ('chord', (e, m)), ('chord_rate', (e, m)),
@@ -99,12 +105,25 @@ class NonlinearTables:
             start += int(np.prod(shape))
         return out
 
-    def at(self, theta):
+    def at(self, theta, names=None):
         """
-        Return every field at crank angles theta (s,) as a dict of arrays (s, ...).
+        Return the fields (every one, or ``names``) at crank angles theta (s,), {name: (s, ...)}.
 
         Cubic Hermite interpolation between the grid nodes with their FFT slopes.
         """
+        layout = self.layout()
+        names = tuple(layout) if names is None else names
+        if len(names) == 1:
+            start, shape = layout[names[0]]
+            columns = slice(start, start + int(np.prod(shape)))
+            row = self._interpolate(theta, columns)
+            return {names[0]: row.reshape((-1,) + shape)}
+        row = self._interpolate(theta, slice(None))
+        return {name: row[:, start:start + int(np.prod(shape))].reshape((-1,) + shape)
+                for name, (start, shape) in layout.items() if name in names}
+
+    def _interpolate(self, theta, columns):
+        """Hermite-interpolated flat rows (s, F) of the columns ``columns``."""
         theta = np.atleast_1d(np.asarray(theta, dtype=float))
         nodes = self.grid_size
         spacing = 2.0 * np.pi / nodes
@@ -113,11 +132,9 @@ class NonlinearTables:
         t = (position - k)[:, None]
         after = (k + 1) % nodes
         t2, t3 = t * t, t * t * t
-        row = ((2 * t3 - 3 * t2 + 1) * self.values[k] + (t3 - 2 * t2 + t) * spacing * self.slopes[k]
-               + (-2 * t3 + 3 * t2) * self.values[after]
-               + (t3 - t2) * spacing * self.slopes[after])
-        return {name: row[:, start:start + int(np.prod(shape))].reshape((-1,) + shape)
-                for name, (start, shape) in self.layout().items()}
+        values, slopes = self.values[:, columns], self.slopes[:, columns]
+        return ((2 * t3 - 3 * t2 + 1) * values[k] + (t3 - 2 * t2 + t) * spacing * slopes[k]
+                + (-2 * t3 + 3 * t2) * values[after] + (t3 - t2) * spacing * slopes[after])
 
     def to_arrays(self):
         """Return the arrays to store (npz, no pickling) and the scalars as metadata."""
