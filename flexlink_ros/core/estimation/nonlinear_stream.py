@@ -26,7 +26,7 @@ import scipy.linalg
 from ..integrators import RadauIIA
 
 NEWTON_TOLERANCE = 1e-9
-NEWTON_ITERATIONS = 12
+NEWTON_ITERATIONS = 30
 # A failed step is halved at most this many times.
 MAX_HALVINGS = 4
 
@@ -224,6 +224,23 @@ class NonlinearStepper:
         return True
 
 
+def unwrap_with_speed(time_s, angles, speeds=None):
+    """
+    Unwrap crank angles, by the speeds where given (steps of more than half a turn).
+
+    Each step's angle change is taken as the one nearest to ``mean speed x h`` modulo 2 pi;
+    without speeds, as the nearest to zero (np.unwrap) and the speeds from its gradient.
+    """
+    if speeds is None:
+        theta = np.unwrap(angles)
+        return theta, np.gradient(theta, time_s)
+    speeds = np.asarray(speeds, dtype=float)
+    predicted = 0.5 * (speeds[1:] + speeds[:-1]) * np.diff(time_s)
+    change = np.diff(angles) - predicted
+    change = predicted + change - 2.0 * np.pi * np.round(change / (2.0 * np.pi))
+    return angles[0] + np.concatenate([[0.0], np.cumsum(change)]), speeds
+
+
 def estimate_nonlinear(tables, stamps_ns, angles, speeds=None, nonlinear=True):
     """
     Estimate the output deflections of a crank signal with the reduced nonlinear model.
@@ -249,11 +266,11 @@ def estimate_nonlinear(tables, stamps_ns, angles, speeds=None, nonlinear=True):
 
     """
     stamps = np.asarray(stamps_ns, dtype=np.int64)
-    theta = np.unwrap(np.asarray(angles, dtype=float))
+    theta = np.asarray(angles, dtype=float)
     if stamps.ndim != 1 or stamps.shape != theta.shape or np.any(np.diff(stamps) <= 0):
         raise ValueError('stamps must be increasing and match the angles, one per sample')
     time_s = (stamps - stamps[0]) * 1e-9
-    speeds = np.gradient(theta, time_s) if speeds is None else np.asarray(speeds, dtype=float)
+    theta, speeds = unwrap_with_speed(time_s, theta, speeds)
     stepper = NonlinearStepper(tables, nonlinear)
     stepper.start(theta[0], speeds[0])
     count = theta.shape[0]
@@ -269,4 +286,5 @@ def estimate_nonlinear(tables, stamps_ns, angles, speeds=None, nonlinear=True):
             'newton_iterations': stepper.iterations, 'refused': int((~converged).sum())}
 
 
-__all__ = ['NonlinearStepper', 'lumped_force', 'linear_part', 'estimate_nonlinear']
+__all__ = ['NonlinearStepper', 'lumped_force', 'linear_part', 'unwrap_with_speed',
+           'estimate_nonlinear']

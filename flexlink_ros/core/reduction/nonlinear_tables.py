@@ -41,8 +41,8 @@ from ..fe.nonlinear_strain import AXIAL, element_gather, model_elements
 # Grid nodes over one revolution and the angles whose modes and statics span the basis.
 GRID_NODES = 120
 BASIS_ANGLES = 24
-BASIS_MODES = 24
-BASIS_SIZE = 36
+BASIS_MODES = 20
+BASIS_SIZE = 30
 # Matrices (m x m) and vectors (m) of the linear part, by name.
 MATRICES = ('mass', 'gyroscopic', 'coupling_a', 'coupling_w2', 'elastic', 'elastic_rate',
             'geometric_1', 'geometric_a', 'geometric_w2')
