@@ -27,7 +27,7 @@ import scipy.linalg
 
 from ..integrators import RadauIIA
 
-NEWTON_TOLERANCE = 1e-9
+NEWTON_TOLERANCE = 1e-6
 NEWTON_ITERATIONS = 30
 # A failed step is halved at most this many times.
 MAX_HALVINGS = 4
