@@ -173,7 +173,7 @@ def register(subparsers):
     parser.add_argument('--nonlinear', choices=CHOICES, default='auto',
                         help='the reduced geometrically nonlinear model: auto (default: where '
                         "the linear estimate's validity indicator says it is not valid), on, "
-                        'off; the deflections reported are the chosen model\'s')
+                        "off; the deflections reported are the chosen model's")
     add_chart_argument(parser)
     parser.set_defaults(func=_estimate)
 

@@ -1,4 +1,4 @@
-"""``flexlink estimate --nonlinear`` (cli/estimate_nonlinear.py), on the real linkage at 2 elements."""
+"""``flexlink estimate --nonlinear`` (cli/estimate_nonlinear.py): the real linkage, 2 elements."""
 
 import dataclasses
 import json

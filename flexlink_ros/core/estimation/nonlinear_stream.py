@@ -68,7 +68,8 @@ def lumped_force(tables, fields, eta, rate, speed, nonlinear=True, tangents=True
     chord, chord_rate = fields['chord'], fields['chord_rate']
     k, beta, w = tables.axial_stiffness, tables.beta, speed[:, None]
     linear_strain = np.einsum('slm,sm->sl', chord, eta)
-    linear_rate = np.einsum('slm,sm->sl', chord, rate) + w * np.einsum('slm,sm->sl', chord_rate, eta)
+    linear_rate = (np.einsum('slm,sm->sl', chord, rate)
+                   + w * np.einsum('slm,sm->sl', chord_rate, eta))
     if not nonlinear:
         axial = k * (linear_strain + beta * linear_rate)
         return np.zeros((s, m)), np.zeros((s, m, m)), np.zeros((s, m, m)), axial

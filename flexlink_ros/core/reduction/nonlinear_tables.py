@@ -13,7 +13,8 @@ Per-link lumping of the axial force. Each flexible link L carries one axial forc
 elongation and its chord shortening summed over its elements (the von Karman strain
 averaged over the link instead of over each element) ::
 
-    e_L   = c_L^T eta + 1/2 eta^T g_L eta,     c_L = sum_e b^T T_e V,  g_L = sum_e (T_e V)^T G_e (T_e V)
+    e_L   = c_L^T eta + 1/2 eta^T g_L eta,
+            c_L = sum_e b^T T_e V,  g_L = sum_e (T_e V)^T G_e (T_e V)
     e_L'  = (c_L + g_L eta)^T eta' + w (c1_L^T eta + eta^T h_L eta)     (link-frame rate)
     N_L   = (E A / L) (e_L + beta e_L')                                  (Kelvin-Voigt)
 
@@ -212,8 +213,8 @@ def node_fields(model, basis, elements, theta):
     gather, rate = element_gathers(model, elements, theta)
     gather, rate = gather @ basis, rate @ basis
     project = (lambda matrix: np.swapaxes(basis, 0, 1) @ matrix @ basis)
-    element_stiffness = elements.bending + ((elements.axial_stiffness / elements.length)[:, None, None]
-                                            * np.outer(AXIAL, AXIAL))
+    axial = (elements.axial_stiffness / elements.length)[:, None, None]
+    element_stiffness = elements.bending + axial * np.outer(AXIAL, AXIAL)
     fields = {'mass': project(system.mass), 'gyroscopic': project(system.gyroscopic),
               'coupling_a': project(system.coupling['a']),
               'coupling_w2': project(system.coupling['w2']),
@@ -260,7 +261,8 @@ def build_nonlinear_tables(model, beta, grid_nodes=GRID_NODES, basis=None, **bas
     theta = 2.0 * np.pi * np.arange(grid_nodes) / grid_nodes
     fields = node_fields(model, basis, elements, theta)
     link_length = np.array([model.mechanism.links[link].length for link in model.links])
-    link_ea = np.array([elements.axial_stiffness[elements.link == link][0] for link in model.links])
+    link_ea = np.array([elements.axial_stiffness[elements.link == link][0]
+                        for link in model.links])
     tables = NonlinearTables(values=None, slopes=None, size=basis.shape[1],
                              links=len(model.links), outputs=fields['output'].shape[1],
                              axial_stiffness=link_ea / link_length,
