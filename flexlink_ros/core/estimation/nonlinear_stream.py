@@ -27,6 +27,11 @@ import scipy.linalg
 
 from ..integrators import RadauIIA
 
+try:
+    from . import _nonlinear_step as compiled_newton
+except ImportError:     # not built: the numpy Newton serves
+    compiled_newton = None
+
 NEWTON_TOLERANCE = 1e-6
 NEWTON_ITERATIONS = 30
 # A failed step is halved at most this many times.
@@ -128,13 +133,16 @@ class NonlinearStepper:
         False: the linear model in the same basis (for checks).
     stages : int
         Radau IIA stages (2: order 3).
+    compiled : bool
+        Newton in C (_nonlinear_step.c) where it is built; False: the numpy reference.
 
     """
 
-    def __init__(self, tables, nonlinear=True, stages=2):
+    def __init__(self, tables, nonlinear=True, stages=2, compiled=True):
         self.tables = tables
         self.nonlinear = bool(nonlinear)
         self.method = RadauIIA(stages)
+        self.compiled = bool(compiled) and compiled_newton is not None
         self.q = np.zeros(tables.size)
         self.v = np.zeros(tables.size)
         self.guess = None
@@ -181,6 +189,8 @@ class NonlinearStepper:
         linear = linear_part(self.tables, fields, speed, accel, self.nonlinear)
         s, m = speed.shape[0], self.tables.size
         acc = np.zeros((s, m)) if self.guess is None else self.guess.copy()
+        if self.compiled:
+            return self._compiled_newton(h, fields, speed, linear, acc)
         factor, previous = None, np.inf
         for count in range(1, NEWTON_ITERATIONS + 1):
             residual, jacobian, axial = self._residual(h, acc, fields, speed, linear,
@@ -200,6 +210,24 @@ class NonlinearStepper:
                 factor = None
             previous = size
         return None
+
+    def _compiled_newton(self, h, fields, speed, linear, acc):
+        """The same Newton in C; None if it does not converge."""
+        tables, method = self.tables, self.method
+        axial = np.zeros(tables.links)
+        arrays = [np.ascontiguousarray(x, dtype=float) for x in linear]
+        arrays += [np.ascontiguousarray(fields[name]) for name in (
+            'chord', 'chord_rate', 'shortening', 'shortening_rate')]
+        count = compiled_newton.newton(
+            *arrays, tables.axial_stiffness, np.ascontiguousarray(speed, dtype=float), self.q,
+            self.v, acc, axial, method.a, method.a2, method.c, speed.shape[0], tables.size,
+            tables.links, float(h), float(tables.beta), self.nonlinear, NEWTON_TOLERANCE,
+            NEWTON_ITERATIONS)
+        if count == 0 or not np.all(np.isfinite(acc)):
+            return None
+        self.iterations += count
+        self.axial = axial
+        return acc
 
     def step(self, h, angle0, angle1, speed0, speed1, halvings=MAX_HALVINGS):
         """
@@ -249,7 +277,7 @@ def unwrap_with_speed(time_s, angles, speeds=None):
     return angles[0] + np.concatenate([[0.0], np.cumsum(change)]), speeds
 
 
-def estimate_nonlinear(tables, stamps_ns, angles, speeds=None, nonlinear=True):
+def estimate_nonlinear(tables, stamps_ns, angles, speeds=None, nonlinear=True, compiled=True):
     """
     Estimate the output deflections of a crank signal with the reduced nonlinear model.
 
@@ -265,6 +293,8 @@ def estimate_nonlinear(tables, stamps_ns, angles, speeds=None, nonlinear=True):
         Crank speeds [rad/s]; None to differentiate the unwrapped angles.
     nonlinear : bool
         False: the linear model in the same basis.
+    compiled : bool
+        Newton in C where built (False: the numpy reference).
 
     Returns
     -------
@@ -280,7 +310,7 @@ def estimate_nonlinear(tables, stamps_ns, angles, speeds=None, nonlinear=True):
         raise ValueError('stamps must be increasing and match the angles, one per sample')
     time_s = (stamps - stamps[0]) * 1e-9
     theta, speeds = unwrap_with_speed(time_s, theta, speeds)
-    stepper = NonlinearStepper(tables, nonlinear)
+    stepper = NonlinearStepper(tables, nonlinear, compiled=compiled)
     stepper.start(theta[0], speeds[0])
     count = theta.shape[0]
     outputs = np.empty((count, tables.outputs))

@@ -161,3 +161,21 @@ def test_jittered_1khz_estimate_agrees_with_the_exudyn_peer_through_the_resonanc
                                       period=2 * math.pi) for c in range(4)])
     errors = _relative_rms(mine, expected)
     assert max(errors) < 0.05, errors
+
+
+def test_compiled_newton_equals_the_numpy_reference(tables):
+    pytest.importorskip('flexlink_ros.core.estimation._nonlinear_step')
+    rng = np.random.default_rng(2)
+    count = 600
+    steps = np.round((1.0 + 0.3 * rng.uniform(-1.0, 1.0, count - 1)) * 1e6).astype(np.int64)
+    stamps = np.concatenate([[0], np.cumsum(steps)])
+    angles = np.mod(SPEED * stamps * 1e-9, 2 * math.pi)
+    for nonlinear in (False, True):
+        numpy_run = estimate_nonlinear(tables, stamps, angles, np.full(count, SPEED), nonlinear,
+                                       compiled=False)
+        c_run = estimate_nonlinear(tables, stamps, angles, np.full(count, SPEED), nonlinear)
+        scale = np.abs(numpy_run['outputs']).max()
+        assert np.abs(c_run['outputs'] - numpy_run['outputs']).max() < 1e-9 * scale
+        np.testing.assert_allclose(c_run['axial_force'], numpy_run['axial_force'],
+                                   rtol=1e-6, atol=1e-9)
+        assert c_run['newton_iterations'] == numpy_run['newton_iterations']
