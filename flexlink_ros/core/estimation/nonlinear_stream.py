@@ -159,7 +159,7 @@ class NonlinearStepper:
         self.q = np.linalg.solve(stiffness[0], load[0])
         self.v = np.zeros_like(self.q)
         self.guess = None
-        self.output_operator = fields['output'][0]
+        self.output_operator = fields['output'][0].copy()
 
     def outputs(self, angle):
         """Output deflections [m] at crank angle ``angle`` for the current state, (channels,)."""
@@ -212,7 +212,7 @@ class NonlinearStepper:
         return None
 
     def _compiled_newton(self, h, fields, speed, linear, acc):
-        """The same Newton in C; None if it does not converge."""
+        """Run the same Newton in C; None if it does not converge."""
         tables, method = self.tables, self.method
         axial = np.zeros(tables.links)
         arrays = [np.ascontiguousarray(x, dtype=float) for x in linear]
@@ -256,7 +256,7 @@ class NonlinearStepper:
         self.q = self.q + h * self.v + h * h * (self.method.a2[-1] @ acc)
         self.v = self.v + h * (self.method.a[-1] @ acc)
         self.guess = np.broadcast_to(acc[-1], acc.shape).copy()
-        self.output_operator = fields['output'][-1]
+        self.output_operator = fields['output'][-1].copy()
         return True
 
 

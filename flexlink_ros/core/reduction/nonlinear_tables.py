@@ -103,39 +103,57 @@ class NonlinearTables:
         out, start = {}, 0
         for name, shape in shapes:
             out[name] = (start, shape)
-            start += int(np.prod(shape))
+            start += _count(shape)
         return out
 
     def at(self, theta, names=None):
         """
         Return the fields (every one, or ``names``) at crank angles theta (s,), {name: (s, ...)}.
 
-        Cubic Hermite interpolation between the grid nodes with their FFT slopes.
+        Cubic Hermite interpolation between the grid nodes with their FFT slopes. Every field
+        read at once is a view of one buffer that the next such call overwrites (the rows are
+        large: a fresh allocation each time costs more than the interpolation).
         """
         layout = self.layout()
         names = tuple(layout) if names is None else names
         if len(names) == 1:
             start, shape = layout[names[0]]
-            columns = slice(start, start + int(np.prod(shape)))
-            row = self._interpolate(theta, columns)
-            return {names[0]: row.reshape((-1,) + shape)}
-        row = self._interpolate(theta, slice(None))
-        return {name: row[:, start:start + int(np.prod(shape))].reshape((-1,) + shape)
+            columns = slice(start, start + _count(shape))
+            return {names[0]: self._interpolate(theta, columns).reshape((-1,) + shape)}
+        row = self._interpolate(theta, slice(None), reuse=True)
+        return {name: row[:, start:start + _count(shape)].reshape((-1,) + shape)
                 for name, (start, shape) in layout.items() if name in names}
 
-    def _interpolate(self, theta, columns):
-        """Hermite-interpolated flat rows (s, F) of the columns ``columns``."""
+    def cell_coefficients(self):
+        """Per grid cell the coefficients of 1, t, t^2, t^3 of the Hermite cubic, (N, 4, F)."""
+        cached = self.__dict__.get('_cells')
+        if cached is None:
+            spacing = 2.0 * np.pi / self.grid_size
+            p0, p1 = self.values, np.roll(self.values, -1, axis=0)
+            d0, d1 = spacing * self.slopes, spacing * np.roll(self.slopes, -1, axis=0)
+            cached = np.stack([p0, d0, -3.0 * p0 + 3.0 * p1 - 2.0 * d0 - d1,
+                               2.0 * p0 - 2.0 * p1 + d0 + d1], axis=1)
+            self.__dict__['_cells'] = cached
+        return cached
+
+    def _interpolate(self, theta, columns, reuse=False):
+        """Hermite-interpolated flat rows (s, F') of the columns ``columns``."""
         theta = np.atleast_1d(np.asarray(theta, dtype=float))
         nodes = self.grid_size
-        spacing = 2.0 * np.pi / nodes
-        position = np.mod(theta, 2.0 * np.pi) / spacing
-        k = np.minimum(np.floor(position).astype(int), nodes - 1)
-        t = (position - k)[:, None]
-        after = (k + 1) % nodes
-        t2, t3 = t * t, t * t * t
-        values, slopes = self.values[:, columns], self.slopes[:, columns]
-        return ((2 * t3 - 3 * t2 + 1) * values[k] + (t3 - 2 * t2 + t) * spacing * slopes[k]
-                + (-2 * t3 + 3 * t2) * values[after] + (t3 - t2) * spacing * slopes[after])
+        position = np.mod(theta, 2.0 * np.pi) * (nodes / (2.0 * np.pi))
+        cell = np.minimum(position.astype(int), nodes - 1)
+        t = position - cell
+        cells = self.cell_coefficients()[:, :, columns]
+        out = None
+        if reuse:
+            out = self.__dict__.get('_row')
+            if out is None or out.shape[0] != theta.shape[0]:
+                out = self.__dict__['_row'] = np.empty((theta.shape[0], cells.shape[2]))
+        else:
+            out = np.empty((theta.shape[0], cells.shape[2]))
+        for i, (k, ti) in enumerate(zip(cell.tolist(), t.tolist())):
+            np.matmul(np.array([1.0, ti, ti * ti, ti * ti * ti]), cells[k], out=out[i])
+        return out
 
     def to_arrays(self):
         """Return the arrays to store (npz, no pickling) and the scalars as metadata."""
@@ -153,6 +171,14 @@ class NonlinearTables:
                    links=int(meta['links']), outputs=int(meta['outputs']),
                    axial_stiffness=arrays['axial_stiffness'], bearing=arrays['bearing'],
                    beta=float(meta['beta']), basis=arrays['basis'])
+
+
+def _count(shape):
+    """Return the number of values of an array of ``shape``."""
+    out = 1
+    for size in shape:
+        out *= size
+    return out
 
 
 def link_chord_gradients(model, elements, gather):
