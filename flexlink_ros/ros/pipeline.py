@@ -23,7 +23,7 @@ from visualization_msgs.msg import MarkerArray
 
 from . import diagnostics, parameters
 from .input_watch import InputWatch
-from .messages import diagnostics_message, joint_level, ns_to_stamp, quality_cdr
+from .messages import diagnostics_message, joint_level, ns_to_stamp
 from .node_model import (ClippedSpeedLog, crank_sample, load_node_model,
                          marker_exaggeration, one_line, PeriodStats, publishable,
                          SKIP_KINDS, Totals)
@@ -38,7 +38,7 @@ from ..core.estimation.streaming import StreamingEstimator
 from ..core.reduction.soft_basis import soft_basis_text
 from ..errors import ConflictingSample, FlexlinkError, InputRejected, OutlierSample
 from ..io import cdr
-from ..io.markers import MarkerEncoder
+from ..io.output_cdr import criteria_cdr, MarkerEncoder, quality_cdr, vector3_stamped_cdr
 from ..names import FIRST_INPUT_MESSAGE, READY_MESSAGE, TOPICS
 
 WARN_THROTTLE_S = 1.0  # at most one warning per second per kind of bad input
@@ -298,10 +298,10 @@ class EstimatorPipeline(NodeRecording):
         sec, nanosec = divmod(stamp_ns, 1_000_000_000)
         frame = self._frame
         outputs = [
-            ('lever_tip', cdr.vector3_stamped_cdr(sec, nanosec, frame, *sample.lever_tip)),
-            ('coupler_mid', cdr.vector3_stamped_cdr(sec, nanosec, frame, *sample.coupler_mid)),
-            ('criteria', cdr.criteria_cdr(sec, nanosec, frame, sample.criterion,
-                                          sample.gamma_dot, sample.reaction_n)),
+            ('lever_tip', vector3_stamped_cdr(sec, nanosec, frame, *sample.lever_tip)),
+            ('coupler_mid', vector3_stamped_cdr(sec, nanosec, frame, *sample.coupler_mid)),
+            ('criteria', criteria_cdr(sec, nanosec, frame, sample.criterion,
+                                      sample.gamma_dot, sample.reaction_n)),
             ('quality', quality_cdr(sec, nanosec, frame, sample.error_indicator,
                                     getattr(sample, 'nonlinearity', NAN)))]
         published = self._publish(outputs)
