@@ -3,17 +3,12 @@
  * NonlinearStepper._newton in flexlink_ros/core/estimation/nonlinear_stream.py (its numpy
  * reference; a test compares the two). Plain C API, no numpy headers.
  *
- * newton(mass, damping, stiffness, load, chord, chord_rate, shortening, shortening_rate,
- *        axial_stiffness, speed, q, v, acc, axial, a, a2, c,
- *        stages, size, links, h, beta, nonlinear, tolerance, iterations) -> int
+ * step(...): see its notes below. The linear part is formed from the interpolated table rows,
+ * then the stage accelerations are solved by simplified Newton (the Jacobian formed at the
+ * step's start and again when an iteration contracts by less than half).
  *
- *   mass, damping, stiffness (s m m), load (s m): the linear part at the stages;
- *   chord, chord_rate (s E m), shortening, shortening_rate (s E m m): the lumped strain's
- *   tables at the stages; axial_stiffness (E); speed (s); q, v (m): the state;
- *   acc (s m): the starting stage accelerations, overwritten by the solution;
- *   axial (E): written, the last stage's N_L; a, a2 (s s), c (s): the method.
- *
- * Returns the Newton iterations taken, 0 if Newton did not converge (acc is then garbage).
+ * Returns the Newton iterations taken, 0 if Newton did not converge (acc is then not a solution
+ * and the caller keeps its state).
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -22,7 +17,6 @@
 
 #include "_doubles.h"
 
-#define ARGS 25
 
 typedef struct {
     const double *mass, *damping, *stiffness, *load, *chord, *chord_rate, *shortening,
@@ -230,74 +224,148 @@ static Py_ssize_t solve(Problem *p, double tolerance, Py_ssize_t iterations, dou
     return 0;
 }
 
-static PyObject *newton(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+/*
+ * step(row, offsets, bearing, speed, accel, q, v, acc, axial, axial_stiffness, a, a2, c,
+ *      stages, size, links, fields, h, beta, nonlinear, tolerance, iterations) -> int
+ *
+ * As newton, with the linear part formed here from the interpolated table rows (s x fields,
+ * NonlinearTables.at's flat row) at the offsets (float64) of mass, gyroscopic, coupling_a,
+ * coupling_w2, elastic, elastic_rate, geometric_1, geometric_a, geometric_w2, load_1,
+ * load_a, load_w2, chord, chord_rate, shortening, shortening_rate (the layout's order):
+ * C = w G + beta (K_el + K_bear), K = K_el + K_bear + beta w K1 + a K_a + w^2 K_w2 (+ K_G
+ * for the linear model), R = f_1 + a f_a + w^2 f_w2, as linear_part in nonlinear_stream.py.
+ */
+#define STEP_ARGS 22
+#define OFFSETS 16
+
+static void gather_linear(const double *row, const double *off, const double *bearing,
+                          const Problem *p, double accel, Py_ssize_t fields, double *mass,
+                          double *damping, double *stiffness, double *load, double *tables)
+{
+    const Py_ssize_t m = p->m, mm = m * m, e = p->e, s = p->s;
+    for (Py_ssize_t i = 0; i < s; i++) {
+        const double *r = row + i * fields, w = p->speed[i];
+#define AT(k) (r + (Py_ssize_t)off[k])
+        const double *gy = AT(1), *ca = AT(2), *cw = AT(3), *el = AT(4), *er = AT(5),
+                     *g1 = AT(6), *ga = AT(7), *gw = AT(8);
+        memcpy(mass + i * mm, AT(0), (size_t)mm * sizeof(double));
+        for (Py_ssize_t j = 0; j < mm; j++) {
+            const double elastic = el[j] + bearing[j];
+            damping[i * mm + j] = w * gy[j] + p->beta * elastic;
+            double k = elastic + p->beta * w * er[j] + accel * ca[j] + w * w * cw[j];
+            if (!p->nonlinear)
+                k += g1[j] + accel * ga[j] + w * w * gw[j];
+            stiffness[i * mm + j] = k;
+        }
+        for (Py_ssize_t j = 0; j < m; j++)
+            load[i * m + j] = AT(9)[j] + accel * AT(10)[j] + w * w * AT(11)[j];
+        /* chord, chord_rate (s E m) and shortening, shortening_rate (s E m m), contiguous */
+        memcpy(tables + i * e * m, AT(12), (size_t)(e * m) * sizeof(double));
+        memcpy(tables + s * e * m + i * e * m, AT(13), (size_t)(e * m) * sizeof(double));
+        memcpy(tables + 2 * s * e * m + i * e * mm, AT(14), (size_t)(e * mm) * sizeof(double));
+        memcpy(tables + 2 * s * e * m + s * e * mm + i * e * mm, AT(15),
+               (size_t)(e * mm) * sizeof(double));
+#undef AT
+    }
+}
+
+static PyObject *step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     (void)self;
-    if (nargs != ARGS) {
-        PyErr_SetString(PyExc_TypeError, "newton takes 25 arguments (see the module notes)");
+    if (nargs != STEP_ARGS) {
+        PyErr_SetString(PyExc_TypeError, "step takes 22 arguments (see the module notes)");
         return NULL;
     }
     Problem p;
-    p.s = PyLong_AsSsize_t(args[17]);
-    p.m = PyLong_AsSsize_t(args[18]);
-    p.e = PyLong_AsSsize_t(args[19]);
-    p.h = PyFloat_AsDouble(args[20]);
-    p.beta = PyFloat_AsDouble(args[21]);
-    p.nonlinear = PyObject_IsTrue(args[22]);
-    const double tolerance = PyFloat_AsDouble(args[23]);
-    const Py_ssize_t iterations = PyLong_AsSsize_t(args[24]);
+    p.s = PyLong_AsSsize_t(args[13]);
+    p.m = PyLong_AsSsize_t(args[14]);
+    p.e = PyLong_AsSsize_t(args[15]);
+    const Py_ssize_t fields = PyLong_AsSsize_t(args[16]);
+    p.h = PyFloat_AsDouble(args[17]);
+    p.beta = PyFloat_AsDouble(args[18]);
+    p.nonlinear = PyObject_IsTrue(args[19]);
+    const double tolerance = PyFloat_AsDouble(args[20]);
+    const Py_ssize_t iterations = PyLong_AsSsize_t(args[21]);
+    const double accel = PyFloat_AsDouble(args[4]);
     if (PyErr_Occurred())
         return NULL;
-    if (p.s < 1 || p.s > 8 || p.m < 1 || p.m > 4096 || p.e < 0 || p.e > 64) {
-        PyErr_SetString(PyExc_ValueError, "newton: sizes out of range");
+    if (p.s < 1 || p.s > 8 || p.m < 1 || p.m > 4096 || p.e < 0 || p.e > 64 || fields < 1) {
+        PyErr_SetString(PyExc_ValueError, "step: sizes out of range");
         return NULL;
     }
-    const Py_ssize_t s = p.s, m = p.m, e = p.e;
-    const Py_ssize_t counts[17] = {s * m * m, s * m * m, s * m * m, s * m, s * e * m, s * e * m,
-                                   s * e * m * m, s * e * m * m, e, s, m, m, s * m, e, s * s,
+    const Py_ssize_t s = p.s, m = p.m, e = p.e, n = s * m;
+    const Py_ssize_t counts[13] = {s * fields, OFFSETS, m * m, s, 1, m, m, s * m, e, e, s * s,
                                    s * s, s};
-    static const char *const names[17] = {
-        "mass", "damping", "stiffness", "load", "chord", "chord_rate", "shortening",
-        "shortening_rate", "axial_stiffness", "speed", "q", "v", "acc", "axial", "a", "a2", "c"};
-    Py_buffer views[17];
+    static const char *const names[13] = {"row", "offsets", "bearing", "speed", "accel", "q",
+                                          "v", "acc", "axial", "axial_stiffness", "a", "a2",
+                                          "c"};
+    Py_buffer views[13];
     Py_ssize_t taken = 0;
     PyObject *result = NULL;
-    for (; taken < 17; taken++)
+    for (; taken < 13; taken++) {
+        if (taken == 4)
+            continue;       /* accel is a float */
         if (get_doubles(args[taken], &views[taken], counts[taken], names[taken],
-                        taken == 12 || taken == 13) < 0)
+                        taken == 7 || taken == 8) < 0)
             goto release;
-    const double **in[] = {&p.mass, &p.damping, &p.stiffness, &p.load, &p.chord, &p.chord_rate,
-                           &p.shortening, &p.shortening_rate, &p.k, &p.speed, &p.q, &p.v};
-    for (Py_ssize_t i = 0; i < 12; i++)
-        *in[i] = views[i].buf;
-    p.acc = views[12].buf;
-    p.axial = views[13].buf;
-    p.a = views[14].buf;
-    p.a2 = views[15].buf;
-    p.c = views[16].buf;
-    const Py_ssize_t n = s * m;
+    }
+    const double *off = views[1].buf;
+    for (Py_ssize_t k = 0; k < OFFSETS; k++)
+        if (off[k] < 0.0 || off[k] >= (double)fields) {
+            PyErr_SetString(PyExc_ValueError, "step: an offset is outside the row");
+            goto release;
+        }
+    if (off[15] + (double)(e * m * m) > (double)fields) {
+        PyErr_SetString(PyExc_ValueError, "step: the row is shorter than its layout");
+        goto release;
+    }
+    p.speed = views[3].buf;
+    p.q = views[5].buf;
+    p.v = views[6].buf;
+    p.acc = views[7].buf;
+    p.axial = views[8].buf;
+    p.k = views[9].buf;
+    p.a = views[10].buf;
+    p.a2 = views[11].buf;
+    p.c = views[12].buf;
+    const size_t linear = (size_t)(3 * s * m * m + s * m + 2 * s * e * m + 2 * s * e * m * m);
+    double *lin = PyMem_Malloc(linear * sizeof(double));
     double *mem = PyMem_Malloc((size_t)(3 * n + n * n + 2 * s * m * m + 4 * m) * sizeof(double));
     Py_ssize_t *piv = PyMem_Malloc((size_t)n * sizeof(Py_ssize_t));
-    if (mem == NULL || piv == NULL) {
+    if (lin == NULL || mem == NULL || piv == NULL) {
         PyErr_NoMemory();
     } else {
+        double *mass = lin, *damping = mass + s * m * m, *stiffness = damping + s * m * m;
+        double *load = stiffness + s * m * m, *tables = load + s * m;
         Py_ssize_t count;
         Py_BEGIN_ALLOW_THREADS
+        gather_linear(views[0].buf, off, views[2].buf, &p, accel, fields, mass, damping,
+                      stiffness, load, tables);
+        p.mass = mass;
+        p.damping = damping;
+        p.stiffness = stiffness;
+        p.load = load;
+        p.chord = tables;
+        p.chord_rate = tables + s * e * m;
+        p.shortening = tables + 2 * s * e * m;
+        p.shortening_rate = tables + 2 * s * e * m + s * e * m * m;
         count = solve(&p, tolerance, iterations, mem, piv);
         Py_END_ALLOW_THREADS
         result = PyLong_FromSsize_t(count);
     }
+    PyMem_Free(lin);
     PyMem_Free(mem);
     PyMem_Free(piv);
 release:
     for (Py_ssize_t i = 0; i < taken; i++)
-        PyBuffer_Release(&views[i]);
+        if (i != 4)
+            PyBuffer_Release(&views[i]);
     return result;
 }
 
 static PyMethodDef METHODS[] = {
-    {"newton", (PyCFunction)(void (*)(void))newton, METH_FASTCALL,
-     "One Radau IIA step of the reduced nonlinear model by simplified Newton."},
+    {"step", (PyCFunction)(void (*)(void))step, METH_FASTCALL,
+     "One Radau IIA step of the reduced nonlinear model from its interpolated table rows."},
     {NULL, NULL, 0, NULL}};
 
 static struct PyModuleDef MODULE = {PyModuleDef_HEAD_INIT, "_nonlinear_step",

@@ -36,6 +36,10 @@ NEWTON_TOLERANCE = 1e-6
 NEWTON_ITERATIONS = 30
 # A failed step is halved at most this many times.
 MAX_HALVINGS = 6
+# The tables' fields the compiled step reads, in its order (_nonlinear_step.c).
+STEP_FIELDS = ('mass', 'gyroscopic', 'coupling_a', 'coupling_w2', 'elastic', 'elastic_rate',
+               'geometric_1', 'geometric_a', 'geometric_w2', 'load_1', 'load_a', 'load_w2',
+               'chord', 'chord_rate', 'shortening', 'shortening_rate')
 
 
 def lumped_force(tables, fields, eta, rate, speed, nonlinear=True, tangents=True):
@@ -189,8 +193,6 @@ class NonlinearStepper:
         linear = linear_part(self.tables, fields, speed, accel, self.nonlinear)
         s, m = speed.shape[0], self.tables.size
         acc = np.zeros((s, m)) if self.guess is None else self.guess.copy()
-        if self.compiled:
-            return self._compiled_newton(h, fields, speed, linear, acc)
         factor, previous = None, np.inf
         for count in range(1, NEWTON_ITERATIONS + 1):
             residual, jacobian, axial = self._residual(h, acc, fields, speed, linear,
@@ -211,23 +213,30 @@ class NonlinearStepper:
             previous = size
         return None
 
-    def _compiled_newton(self, h, fields, speed, linear, acc):
-        """Run the same Newton in C; None if it does not converge."""
+    def _compiled_step(self, h, angles, speed, accel):
+        """Run the step in C from the interpolated rows; (acc or None, output operator)."""
         tables, method = self.tables, self.method
+        layout = tables.layout()
+        offsets = self.__dict__.get('_offsets')
+        if offsets is None:
+            offsets = self._offsets = np.array(
+                [layout[name][0] for name in STEP_FIELDS], dtype=float)
+        row = tables.at_rows(angles)
+        acc = (np.zeros((angles.shape[0], tables.size)) if self.guess is None
+               else self.guess.copy())
         axial = np.zeros(tables.links)
-        arrays = [np.ascontiguousarray(x, dtype=float) for x in linear]
-        arrays += [np.ascontiguousarray(fields[name]) for name in (
-            'chord', 'chord_rate', 'shortening', 'shortening_rate')]
-        count = compiled_newton.newton(
-            *arrays, tables.axial_stiffness, np.ascontiguousarray(speed, dtype=float), self.q,
-            self.v, acc, axial, method.a, method.a2, method.c, speed.shape[0], tables.size,
-            tables.links, float(h), float(tables.beta), self.nonlinear, NEWTON_TOLERANCE,
-            NEWTON_ITERATIONS)
+        count = compiled_newton.step(
+            row, offsets, tables.bearing, np.ascontiguousarray(speed, dtype=float), float(accel),
+            self.q, self.v, acc, axial, tables.axial_stiffness, method.a, method.a2, method.c,
+            angles.shape[0], tables.size, tables.links, row.shape[1], float(h),
+            float(tables.beta), self.nonlinear, NEWTON_TOLERANCE, NEWTON_ITERATIONS)
+        start, shape = layout['output']
+        output = row[-1, start:start + shape[0] * shape[1]].reshape(shape)
         if count == 0 or not np.all(np.isfinite(acc)):
-            return None
+            return None, output
         self.iterations += count
         self.axial = axial
-        return acc
+        return acc, output
 
     def step(self, h, angle0, angle1, speed0, speed1, halvings=MAX_HALVINGS):
         """
@@ -239,8 +248,12 @@ class NonlinearStepper:
         angles = angle0 + c * (angle1 - angle0)
         speed = speed0 + c * (speed1 - speed0)
         accel = (speed1 - speed0) / h
-        fields = self.tables.at(angles)
-        acc = self._newton(h, fields, speed, accel)
+        if self.compiled:
+            acc, output = self._compiled_step(h, angles, speed, accel)
+        else:
+            fields = self.tables.at(angles)
+            acc = self._newton(h, fields, speed, accel)
+            output = fields['output'][-1]
         if acc is None:
             if halvings == 0:
                 return False
@@ -256,7 +269,7 @@ class NonlinearStepper:
         self.q = self.q + h * self.v + h * h * (self.method.a2[-1] @ acc)
         self.v = self.v + h * (self.method.a[-1] @ acc)
         self.guess = np.broadcast_to(acc[-1], acc.shape).copy()
-        self.output_operator = fields['output'][-1].copy()
+        self.output_operator = output.copy()
         return True
 
 

@@ -124,6 +124,10 @@ class NonlinearTables:
         return {name: row[:, start:start + _count(shape)].reshape((-1,) + shape)
                 for name, (start, shape) in layout.items() if name in names}
 
+    def at_rows(self, theta):
+        """Return every field at theta (s,) as flat rows (s, F): a buffer the next call reuses."""
+        return self._interpolate(theta, slice(None), reuse=True)
+
     def cell_coefficients(self):
         """Per grid cell the coefficients of 1, t, t^2, t^3 of the Hermite cubic, (N, 4, F)."""
         cached = self.__dict__.get('_cells')
