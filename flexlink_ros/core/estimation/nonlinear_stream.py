@@ -242,8 +242,11 @@ class NonlinearStepper:
         """
         Advance the state over an interval of length h [s] between two samples.
 
-        Returns True if every (sub)step converged; the state is unchanged otherwise.
+        Returns True if every (sub)step converged; the state is unchanged otherwise (and for
+        a non-finite input or a step that is not positive).
         """
+        if not (np.isfinite([h, angle0, angle1, speed0, speed1]).all() and h > 0.0):
+            return False
         c = self.method.c
         angles = angle0 + c * (angle1 - angle0)
         speed = speed0 + c * (speed1 - speed0)
@@ -294,6 +297,9 @@ def estimate_nonlinear(tables, stamps_ns, angles, speeds=None, nonlinear=True, c
     """
     Estimate the output deflections of a crank signal with the reduced nonlinear model.
 
+    Samples with a non-finite angle or speed are refused (counted, their outputs NaN) and
+    left out of the stepping: the next good sample steps from the last good one.
+
     Parameters
     ----------
     tables : NonlinearTables
@@ -307,20 +313,44 @@ def estimate_nonlinear(tables, stamps_ns, angles, speeds=None, nonlinear=True, c
     nonlinear : bool
         False: the linear model in the same basis.
     compiled : bool
-        Newton in C where built (False: the numpy reference).
+        The step in C where built (False: the numpy reference).
 
     Returns
     -------
     dict
         'outputs' (K, channels) [m], 'converged' (K,) bool, 'newton_iterations' (total),
-        'axial_force' (K, E) [N], 'refused' (samples whose step failed), 'update_ns' (K,)
-        (perf_counter_ns of each sample's step and outputs).
+        'axial_force' (K, E) [N], 'refused' (samples refused: bad input or a failed step),
+        'bad_input' (of them, non-finite input), 'update_ns' (K,) (perf_counter_ns of each
+        sample's step and outputs).
 
     """
     stamps = np.asarray(stamps_ns, dtype=np.int64)
     theta = np.asarray(angles, dtype=float)
     if stamps.ndim != 1 or stamps.shape != theta.shape or np.any(np.diff(stamps) <= 0):
         raise ValueError('stamps must be increasing and match the angles, one per sample')
+    good = np.isfinite(theta)
+    if speeds is not None:
+        speeds = np.asarray(speeds, dtype=float)
+        if speeds.shape != theta.shape:
+            raise ValueError('speeds must match the angles, one per sample')
+        good &= np.isfinite(speeds)
+        speeds = speeds[good]
+    count = theta.shape[0]
+    out = {'outputs': np.full((count, tables.outputs), np.nan),
+           'axial_force': np.full((count, tables.links), np.nan),
+           'converged': np.zeros(count, dtype=bool), 'update_ns': np.zeros(count, np.int64),
+           'newton_iterations': 0, 'bad_input': int((~good).sum())}
+    if good.any():
+        marched = _march(tables, stamps[good], theta[good], speeds, nonlinear, compiled)
+        for name in ('outputs', 'axial_force', 'converged', 'update_ns'):
+            out[name][good] = marched[name]
+        out['newton_iterations'] = marched['newton_iterations']
+    out['refused'] = int((~out['converged']).sum())
+    return out
+
+
+def _march(tables, stamps, theta, speeds, nonlinear, compiled):
+    """Step the model through finite samples; the arrays of :func:`estimate_nonlinear`."""
     time_s = (stamps - stamps[0]) * 1e-9
     theta, speeds = unwrap_with_speed(time_s, theta, speeds)
     stepper = NonlinearStepper(tables, nonlinear, compiled=compiled)
@@ -341,8 +371,7 @@ def estimate_nonlinear(tables, stamps_ns, angles, speeds=None, nonlinear=True, c
         outputs[k], axial[k] = stepper.output_operator @ stepper.q, stepper.axial
         update_ns[k] = clock() - begin
     return {'outputs': outputs, 'converged': converged, 'axial_force': axial,
-            'newton_iterations': stepper.iterations, 'refused': int((~converged).sum()),
-            'update_ns': update_ns}
+            'newton_iterations': stepper.iterations, 'update_ns': update_ns}
 
 
 __all__ = ['NonlinearStepper', 'lumped_force', 'linear_part', 'unwrap_with_speed',

@@ -130,6 +130,10 @@ def test_stepper_refuses_nothing_silently(tables):
     stepper.start(0.0, SPEED)
     assert stepper.step(1e-3, 0.0, SPEED * 1e-3, SPEED, SPEED)
     assert np.all(np.isfinite(stepper.q)) and stepper.iterations >= 1
+    state = stepper.q.copy()
+    assert not stepper.step(1e-3, SPEED * 1e-3, np.nan, SPEED, SPEED)
+    assert not stepper.step(0.0, SPEED * 1e-3, SPEED * 2e-3, SPEED, SPEED)
+    np.testing.assert_array_equal(stepper.q, state)
 
 
 def test_jittered_1khz_estimate_agrees_with_the_exudyn_peer_through_the_resonance():
@@ -179,3 +183,23 @@ def test_compiled_newton_equals_the_numpy_reference(tables):
         np.testing.assert_allclose(c_run['axial_force'], numpy_run['axial_force'],
                                    rtol=1e-6, atol=1e-9)
         assert c_run['newton_iterations'] == numpy_run['newton_iterations']
+
+
+def test_non_finite_samples_are_refused_counted_and_do_not_poison_the_rest(tables):
+    count = 600
+    stamps = np.arange(count, dtype=np.int64) * 1_000_000
+    angles = np.mod(SPEED * stamps * 1e-9, 2 * math.pi)
+    speeds = np.full(count, SPEED)
+    clean = estimate_nonlinear(tables, stamps, angles, speeds)
+    bad_angles, bad_speeds = angles.copy(), speeds.copy()
+    bad_angles[[100, 101]] = np.nan
+    bad_speeds[300] = np.inf
+    out = estimate_nonlinear(tables, stamps, bad_angles, bad_speeds)
+    assert out['bad_input'] == 3 and out['refused'] == 3
+    assert np.isnan(out['outputs'][[100, 101, 300]]).all()
+    assert not out['converged'][[100, 101, 300]].any()
+    # the samples after a gap of 3 ms step on from the last good one: close to the clean run
+    later = slice(400, count)
+    scale = np.abs(clean['outputs'][later]).max()
+    assert np.isfinite(out['outputs'][later]).all()
+    assert np.abs(out['outputs'][later] - clean['outputs'][later]).max() < 0.05 * scale
