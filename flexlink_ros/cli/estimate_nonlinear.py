@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from ..core.estimation.nonlinear_stream import estimate_nonlinear
+from ..core.estimation.nonlinear_stream import estimate_nonlinear, VON_KARMAN_SLOPE
 from ..core.reduction.nonlinear_model import nonlinear_model_for
 from ..studies.synthetic import last_revolution, synthetic_signal, timing_summary
 
@@ -52,7 +52,9 @@ def run_nonlinear(args, mechanism, options):
             'refused_samples': out['refused'], 'damping': damping,
             'stiffness_damping_s': tables.beta, 'size': tables.size, 'links': tables.links,
             'axial_force_range_n': [float(out['axial_force'][mask].min()),
-                                    float(out['axial_force'][mask].max())]}
+                                    float(out['axial_force'][mask].max())],
+            'link_slope_max_rad': float(np.nanmax(out['link_slope'][mask])),
+            'beyond_von_karman_samples': out['beyond_von_karman']}
 
 
 def nonlinear_lines(nonlinear):
@@ -68,7 +70,10 @@ def nonlinear_lines(nonlinear):
             f"{nonlinear['links']} lumped axial forces, "
             f"{nonlinear['newton_per_sample']:.2f} Newton iterations per sample, "
             f"{nonlinear['refused_samples']} samples refused)",
-            f"  {nonlinear['damping']}; link axial forces {low:.3g} ... {high:.3g} N"]
+            f"  {nonlinear['damping']}; link axial forces {low:.3g} ... {high:.3g} N",
+            f"  link RMS bending slope max {nonlinear['link_slope_max_rad']:.3g} rad (von Karman "
+            f"limit {VON_KARMAN_SLOPE:g}; {nonlinear['beyond_von_karman_samples']} samples "
+            'beyond it)']
 
 
 def add_nonlinear(args, mechanism, options, result):

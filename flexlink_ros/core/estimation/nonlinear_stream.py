@@ -34,6 +34,10 @@ except ImportError:     # not built: the numpy Newton serves
 
 NEWTON_TOLERANCE = 1e-6
 NEWTON_ITERATIONS = 30
+# Largest RMS slope of a link's bending relative to its frame [rad] the von Karman strain
+# carries: it keeps v'^2 / 2 of the exact stretch sqrt((1 + u')^2 + v'^2) - 1 and drops
+# -v'^4 / 8, a relative error of v'^2 / 4 (1 % at 0.2 rad).
+VON_KARMAN_SLOPE = 0.2
 # A failed step is halved at most this many times.
 MAX_HALVINGS = 6
 # The tables' fields the compiled step reads, in its order (_nonlinear_step.c).
@@ -152,6 +156,7 @@ class NonlinearStepper:
         self.guess = None
         self.iterations = 0
         self.axial = np.zeros(tables.links)
+        self.slope = np.zeros(tables.links)
         # output operator at the last step's end (the last stage: c_s = 1)
         self.output_operator = None
 
@@ -213,6 +218,12 @@ class NonlinearStepper:
             previous = size
         return None
 
+    def _link_slopes(self, angle):
+        """RMS slope of each link's bending [rad]: sqrt(2 S_L / L), S_L = eta^T g_L eta / 2."""
+        shortening = self.tables.at(angle, ('shortening',))['shortening'][0]
+        doubled = np.einsum('m,lmk,k->l', self.q, shortening, self.q)
+        return np.sqrt(np.maximum(doubled, 0.0) / self.tables.link_length)
+
     def _compiled_step(self, h, angles, speed, accel):
         """Run the step in C from the interpolated rows; (acc or None, output operator)."""
         tables, method = self.tables, self.method
@@ -273,6 +284,7 @@ class NonlinearStepper:
         self.v = self.v + h * (self.method.a[-1] @ acc)
         self.guess = np.broadcast_to(acc[-1], acc.shape).copy()
         self.output_operator = output.copy()
+        self.slope = self._link_slopes(angle1)
         return True
 
 
@@ -320,8 +332,10 @@ def estimate_nonlinear(tables, stamps_ns, angles, speeds=None, nonlinear=True, c
     dict
         'outputs' (K, channels) [m], 'converged' (K,) bool, 'newton_iterations' (total),
         'axial_force' (K, E) [N], 'refused' (samples refused: bad input or a failed step),
-        'bad_input' (of them, non-finite input), 'update_ns' (K,) (perf_counter_ns of each
-        sample's step and outputs).
+        'bad_input' (of them, non-finite input), 'link_slope' (K, E) (RMS bending slope of
+        each link [rad]), 'beyond_von_karman' (samples with a slope above
+        :data:`VON_KARMAN_SLOPE`), 'update_ns' (K,) (perf_counter_ns of each sample's step and
+        outputs).
 
     """
     stamps = np.asarray(stamps_ns, dtype=np.int64)
@@ -338,14 +352,17 @@ def estimate_nonlinear(tables, stamps_ns, angles, speeds=None, nonlinear=True, c
     count = theta.shape[0]
     out = {'outputs': np.full((count, tables.outputs), np.nan),
            'axial_force': np.full((count, tables.links), np.nan),
+           'link_slope': np.full((count, tables.links), np.nan),
            'converged': np.zeros(count, dtype=bool), 'update_ns': np.zeros(count, np.int64),
            'newton_iterations': 0, 'bad_input': int((~good).sum())}
     if good.any():
         marched = _march(tables, stamps[good], theta[good], speeds, nonlinear, compiled)
-        for name in ('outputs', 'axial_force', 'converged', 'update_ns'):
+        for name in ('outputs', 'axial_force', 'link_slope', 'converged', 'update_ns'):
             out[name][good] = marched[name]
         out['newton_iterations'] = marched['newton_iterations']
     out['refused'] = int((~out['converged']).sum())
+    with np.errstate(invalid='ignore'):
+        out['beyond_von_karman'] = int((out['link_slope'] > VON_KARMAN_SLOPE).any(axis=1).sum())
     return out
 
 
@@ -358,9 +375,11 @@ def _march(tables, stamps, theta, speeds, nonlinear, compiled):
     count = theta.shape[0]
     outputs = np.empty((count, tables.outputs))
     axial = np.zeros((count, tables.links))
+    slope = np.zeros((count, tables.links))
     converged = np.ones(count, dtype=bool)
     update_ns = np.zeros(count, dtype=np.int64)
     outputs[0] = stepper.outputs(theta[0])
+    slope[0] = stepper._link_slopes(theta[0])
     clock = time.perf_counter_ns
     for k in range(1, count):
         begin = clock()
@@ -369,9 +388,11 @@ def _march(tables, stamps, theta, speeds, nonlinear, compiled):
         if not converged[k]:
             stepper.output_operator = stepper.tables.at(theta[k], ('output',))['output'][0]
         outputs[k], axial[k] = stepper.output_operator @ stepper.q, stepper.axial
+        slope[k] = stepper.slope
         update_ns[k] = clock() - begin
     return {'outputs': outputs, 'converged': converged, 'axial_force': axial,
-            'newton_iterations': stepper.iterations, 'update_ns': update_ns}
+            'link_slope': slope, 'newton_iterations': stepper.iterations,
+            'update_ns': update_ns}
 
 
 __all__ = ['NonlinearStepper', 'lumped_force', 'linear_part', 'unwrap_with_speed',

@@ -23,7 +23,7 @@ from .nonlinear_tables import build_nonlinear_tables, NonlinearTables
 from .pipeline import fe_mechanism
 from ..fe.linkage import FlexibleLinkage
 
-NONLINEAR_VERSION = 1
+NONLINEAR_VERSION = 2
 
 
 def nonlinear_beta(linkage, stiffness_damping, damping_ratio):

@@ -64,6 +64,8 @@ class NonlinearTables:
         m, E (flexible links) and the output channels.
     axial_stiffness : ndarray, shape (E,)
         E A / L of each flexible link [N/m].
+    link_length : ndarray, shape (E,)
+        L of each flexible link [m].
     bearing : ndarray, shape (m, m)
         Projected bearing springs (constant).
     beta : float
@@ -79,6 +81,7 @@ class NonlinearTables:
     links: int
     outputs: int
     axial_stiffness: np.ndarray
+    link_length: np.ndarray
     bearing: np.ndarray
     beta: float
     basis: np.ndarray
@@ -162,7 +165,8 @@ class NonlinearTables:
     def to_arrays(self):
         """Return the arrays to store (npz, no pickling) and the scalars as metadata."""
         arrays = {'values': self.values, 'slopes': self.slopes,
-                  'axial_stiffness': self.axial_stiffness, 'bearing': self.bearing,
+                  'axial_stiffness': self.axial_stiffness, 'link_length': self.link_length,
+                  'bearing': self.bearing,
                   'basis': self.basis}
         meta = {'size': self.size, 'links': self.links, 'outputs': self.outputs,
                 'beta': self.beta}
@@ -173,7 +177,8 @@ class NonlinearTables:
         """Rebuild from :meth:`to_arrays`."""
         return cls(values=arrays['values'], slopes=arrays['slopes'], size=int(meta['size']),
                    links=int(meta['links']), outputs=int(meta['outputs']),
-                   axial_stiffness=arrays['axial_stiffness'], bearing=arrays['bearing'],
+                   axial_stiffness=arrays['axial_stiffness'],
+                   link_length=arrays['link_length'], bearing=arrays['bearing'],
                    beta=float(meta['beta']), basis=arrays['basis'])
 
 
@@ -295,7 +300,7 @@ def build_nonlinear_tables(model, beta, grid_nodes=GRID_NODES, basis=None, **bas
                         for link in model.links])
     tables = NonlinearTables(values=None, slopes=None, size=basis.shape[1],
                              links=len(model.links), outputs=fields['output'].shape[1],
-                             axial_stiffness=link_ea / link_length,
+                             axial_stiffness=link_ea / link_length, link_length=link_length,
                              bearing=basis.T @ np.asarray(model.bearing_stiffness) @ basis,
                              beta=float(beta), basis=basis)
     layout = tables.layout()

@@ -11,6 +11,7 @@ stays bounded from 10 us to 100 ms steps with +-30 % jitter.
 import dataclasses
 import math
 
+from flexlink_ros.core.estimation import nonlinear_stream
 from flexlink_ros.core.estimation.nonlinear_stream import (estimate_nonlinear, lumped_force,
                                                            NonlinearStepper)
 from flexlink_ros.core.fe.linkage import FlexibleLinkage
@@ -203,3 +204,16 @@ def test_non_finite_samples_are_refused_counted_and_do_not_poison_the_rest(table
     scale = np.abs(clean['outputs'][later]).max()
     assert np.isfinite(out['outputs'][later]).all()
     assert np.abs(out['outputs'][later] - clean['outputs'][later]).max() < 0.05 * scale
+
+
+def test_link_slopes_are_reported_and_counted_beyond_the_von_karman_limit(tables, monkeypatch):
+    count = 400
+    stamps = np.arange(count, dtype=np.int64) * 1_000_000
+    angles = np.mod(SPEED * stamps * 1e-9, 2 * math.pi)
+    out = estimate_nonlinear(tables, stamps, angles, np.full(count, SPEED))
+    # millimetres on links of 0.1-0.3 m: slopes below 0.1 rad, inside the limit
+    assert 1e-3 < np.nanmax(out['link_slope']) < 0.1 and out['beyond_von_karman'] == 0
+    monkeypatch.setattr(nonlinear_stream, 'VON_KARMAN_SLOPE', 1e-3)
+    flagged = estimate_nonlinear(tables, stamps, angles, np.full(count, SPEED))
+    expected = int((out['link_slope'] > 1e-3).any(axis=1).sum())
+    assert flagged['beyond_von_karman'] == expected > 0
