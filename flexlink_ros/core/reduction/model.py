@@ -30,7 +30,7 @@ cell's table gives every matrix, load and output operator at (theta, w, a); the 
 splits that product by block to read only the monomial rows each block uses.
 
 This module holds the model itself (:class:`ReducedModel`, its table layout and readers);
-:mod:`.build` makes one from full-order samples, :mod:`.pipeline` for a mechanism (cached in
+:mod:`.build` makes one from full-order samples, :mod:`.mechanism_model` for a mechanism (cached in
 :mod:`.store`), :mod:`.periodic` gives its periodic response, :mod:`.reference` the full-order
 reference it is checked against.
 """
