@@ -66,17 +66,17 @@ class NonlinearValidity:
 
     @property
     def indicator(self):
-        """The larger of the two indicators."""
+        """Return the larger of the two indicators."""
         return max(self.rotation, self.fold)
 
     @property
     def valid(self):
-        """True below :data:`THRESHOLD`."""
+        """Return True below :data:`THRESHOLD`."""
         return self.indicator < THRESHOLD
 
     @property
     def reason(self):
-        """Why not valid, in words ('' when valid)."""
+        """Return why not valid, in words ('' when valid)."""
         if self.valid:
             return ''
         if self.fold >= self.rotation:
@@ -88,7 +88,7 @@ class NonlinearValidity:
 
 def element_rotations(q, length):
     """
-    Rotation of every element relative to its link frame [rad], shape (..., E).
+    Return every element's rotation relative to its link frame [rad], shape (..., E).
 
     Parameters
     ----------
@@ -116,7 +116,7 @@ def rotation_indicator(rotation, limit=ROTATION_LIMIT):
 
 def fold_distance(multipliers):
     """
-    Distance of the periodic orbit from a fold: ``min |1 - mu|``; 0 if any ``|mu| >= 1``.
+    Return the periodic orbit's distance from a fold: ``min |1 - mu|``; 0 if any ``|mu| >= 1``.
 
     An empty set of multipliers is infinitely far (nothing known).
     """
@@ -136,7 +136,7 @@ def fold_indicator(multipliers, margin=FOLD_MARGIN):
 
 def nonlinear_validity(rotations=None, multipliers=None):
     """
-    Validity of a nonlinear estimate from element rotations and/or an orbit's multipliers.
+    Judge a nonlinear estimate by its element rotations and/or its orbit's multipliers.
 
     Parameters
     ----------
@@ -160,7 +160,7 @@ def nonlinear_validity(rotations=None, multipliers=None):
 
 def orbit_rotations(model, response):
     """
-    Element rotations along a periodic orbit of the full order, shape (P, E) [rad].
+    Return the element rotations along a full-order periodic orbit, shape (P, E) [rad].
 
     ``model`` a :class:`core.fe.linkage.FlexibleLinkage`; ``response`` its
     :class:`core.fe.simulate.PeriodicResponse` (displacements at the output points).
@@ -178,7 +178,7 @@ def orbit_validity(model, response):
 
 
 def validity_record(validity):
-    """The JSON form of a :class:`NonlinearValidity`."""
+    """Return the JSON form of a :class:`NonlinearValidity`."""
     return {'valid': validity.valid, 'indicator': validity.indicator,
             'rotation_indicator': validity.rotation, 'fold_indicator': validity.fold,
             'max_element_rotation_rad': validity.max_rotation,
