@@ -33,6 +33,11 @@ setup(
                  Extension('flexlink_ros.core.estimation._dynamic_second_order',
                            ['flexlink_ros/core/estimation/_dynamic_second_order.c'],
                            depends=['flexlink_ros/core/estimation/_doubles.h'],
+                           extra_compile_args=['-O3']),
+                 # the reduced nonlinear model's Newton step (numpy twin where not built)
+                 Extension('flexlink_ros.core.estimation._nonlinear_step',
+                           ['flexlink_ros/core/estimation/_nonlinear_step.c'],
+                           depends=['flexlink_ros/core/estimation/_doubles.h'],
                            extra_compile_args=['-O3'])],
     install_requires=['setuptools'],
     # The geometrically nonlinear peer the linear model is checked against (studies/), and

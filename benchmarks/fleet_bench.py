@@ -94,7 +94,7 @@ def fleet(flexlink, bags, scratch, write_mcap):
 
 def split_warm_up(seconds):
     """How a split file estimated alone differs from the same samples of the whole bag."""
-    from flexlink_ros.core.estimation.offline_run import estimate_offline
+    from flexlink_ros.core.estimation.offline import estimate_offline
     from flexlink_ros.core.mechanism_file import load_mechanism
     from flexlink_ros.core.reduction import pipeline
     from flexlink_ros.ros import parameters as node_params

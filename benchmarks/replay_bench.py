@@ -13,8 +13,10 @@ an encoder gives it, logged 150 us after its stamp, written in batches (bounded 
 ``compare`` replays the bag with this build and, given ``--reference-python``, with another
 (a worktree of an older commit with its own venv, run from its root), in turn: A B A B ...,
 each a fresh process ``PY -m flexlink_ros.cli replay BAG --out TMP`` with the default model
-(its cache filled by a first, untimed run of each build). It prints every run's wall time and
-peak resident size (``os.wait4``), the medians and the ratio of the medians. Timing is
+(its cache filled by a first, untimed run of each build). It prints every run's wall time, CPU
+time (``os.wait4``) and peak resident size (the child's own ``VmHWM``, read as it exits: the
+``ru_maxrss`` of ``wait4`` also counts the parent's pages the child held between fork and
+exec), the medians and the ratio of the medians. Timing is
 printed, never asserted: the machine is shared. ``--same-output`` also checks that the two
 builds wrote the same messages (topic, log and publish time, sequence, bytes).
 """
@@ -76,10 +78,28 @@ def make_bag(path, seconds, rate_hz, rpm=391.0):
     return stamps.size
 
 
-def replay_once(python, root, bag, out, extra=()):
-    """Replay in a fresh process from ``root``: wall time [s], CPU time [s], peak RSS [MB]."""
-    argv = [python, '-m', 'flexlink_ros.cli', 'replay', str(pathlib.Path(bag).resolve()),
-            '--out', str(out), '--mechanism', 'cho1992', *extra]   # the bag names no model
+# Runs `python -m flexlink_ros.cli ARGS` and, as the process exits, prints its own peak
+# resident size (VmHWM: the pages of this process image alone) on stderr.
+_PEAK_MARK = 'flexlink-peak-rss-kb'
+_PEAK_WRAPPER = (
+    'import atexit, runpy, sys\n'
+    'def _peak():\n'
+    "    with open('/proc/self/status') as status:\n"
+    "        kb = [line.split()[1] for line in status if line.startswith('VmHWM:')]\n"
+    f"    sys.stderr.write('\\n{_PEAK_MARK} ' + kb[0] + '\\n')\n"
+    'atexit.register(_peak)\n'
+    "runpy.run_module('flexlink_ros.cli', run_name='__main__', alter_sys=True)\n")
+
+
+def run_measured(python, root, args):
+    """
+    Run ``python -m flexlink_ros.cli ARGS`` from ``root`` to its end.
+
+    Returns wall time [s], CPU time [s] (``os.wait4``) and the process's own peak resident size
+    [MB]: the ``ru_maxrss`` of ``wait4`` would also count the parent's pages the child held
+    between fork and exec (a large parent makes every child look as large).
+    """
+    argv = [python, '-c', _PEAK_WRAPPER, *args]
     start = time.perf_counter()
     process = subprocess.Popen(argv, cwd=root, stdout=subprocess.DEVNULL,
                                stderr=subprocess.PIPE)
@@ -88,8 +108,15 @@ def replay_once(python, root, bag, out, extra=()):
     error = process.stderr.read().decode(errors='replace')
     process.stderr.close()
     if os.waitstatus_to_exitcode(status) != 0:
-        raise RuntimeError(f'{" ".join(argv)} failed:\n{error[-2000:]}')
-    return seconds, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024.0
+        raise RuntimeError(f'flexlink {" ".join(args)} failed:\n{error[-2000:]}')
+    peaks = [line.split()[1] for line in error.splitlines() if line.startswith(_PEAK_MARK)]
+    return seconds, usage.ru_utime + usage.ru_stime, int(peaks[-1]) / 1024.0
+
+
+def replay_once(python, root, bag, out, extra=()):
+    """Replay in a fresh process from ``root``: wall time [s], CPU time [s], peak RSS [MB]."""
+    return run_measured(python, root, ['replay', str(pathlib.Path(bag).resolve()), '--out',
+                                       str(out), '--mechanism', 'cho1992', *extra])
 
 
 def messages(path):

@@ -44,9 +44,9 @@ from .progress import Progress
 from .replay_model import defer_model_defaults, MissingModel, replay_model
 from .replay_offline import CHUNK_SAMPLES, estimate_and_write, MAX_CHUNK_SAMPLES, open_input
 from ..core.estimation.marker_scale import model_exaggeration
-from ..io.joint_states import read_crank_samples
+from ..core.estimation.tables import step_tables
+from ..io.joint_states import read_input_samples
 from ..io.recorder_files import refuse_existing
-from ..io.recording import choose_input_topic, damage_note, scan_recording
 from ..io.replay_writer import write_replay
 from ..names import DEFAULT_FRAME_ID, NODE_NAME, output_topics, QUALITY_NAMES
 from ..report.cycle_chart import plot_cycle
@@ -57,47 +57,18 @@ from ..ros.republish import DISCOVERY_TIMEOUT_S, publish_recording
 CHART_ROWS = 200_000   # the chart shows the last 200 s at 1 kHz: enough revolutions to read
 
 
-def read_input(args, damaged):
-    """
-    Find the input topic of the recording and read its crank samples.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-        ``input``, ``topic``, ``joint``.
-    damaged : list
-        Receives (file, offset, reason) of what the reader skipped.
-
-    Returns
-    -------
-    topic : str
-    samples : dict
-        :func:`io.joint_states.read_crank_samples`.
-
-    """
-    scan = scan_recording(args.input, topic=args.topic, joint_name=args.joint,
-                          damaged=damaged)
-    try:
-        topic = choose_input_topic(args.input, args.joint, args.topic, scan)
-        samples = read_crank_samples(args.input, topic, args.joint, scan)
-        if not samples['data']:
-            raise ValueError(f'no usable samples of joint {args.joint!r} on {topic}'
-                             + ''.join(f'; {n} {why}'
-                                       for why, n in samples['skipped_reasons'].items()))
-    except ValueError as exc:
-        raise ValueError(f'{exc}{damage_note(damaged)}') from None
-    return topic, samples
-
-
-def _writer(args, model, topic):
+def _writer(args, model, topic, tables):
     """``write(blocks, progress)`` of the output file (:func:`write_replay`), or None."""
     if not args.out:
         return None
-    return functools.partial(_write_blocks, args.out, topic=topic, model=model, args=args)
+    # The estimator's step tables: the quasi-static peak that scales the markers is computed
+    # once, for the deflection bound and the markers.
+    exaggeration = model_exaggeration(model, tables) if args.markers_every_n else 1.0
+    return functools.partial(_write_blocks, args.out, topic=topic, model=model, args=args,
+                             exaggeration=exaggeration)
 
 
-def _write_blocks(out, blocks, progress, topic, model, args):
-    exaggeration = model_exaggeration(model) if args.markers_every_n else 1.0
+def _write_blocks(out, blocks, progress, topic, model, args, exaggeration):
     return write_replay(out, blocks, topic, output_topics(args.node_name), args.frame_id, model,
                         args.markers_every_n, exaggeration, progress=progress,
                         joint_levels=[OK] * 4, provenance=args.provenance)
@@ -151,9 +122,10 @@ def run_replay(args):
     read_s = time.perf_counter() - start
     model = load_model(mechanism, options, args)
     chart = ChartRows() if args.chart else None
+    tables = step_tables(model)
     estimate, summary, times = estimate_and_write(args, model, rows, messages,
-                                                  _writer(args, model, topic),
-                                                  on_block=chart and chart.add)
+                                                  _writer(args, model, topic, tables),
+                                                  on_block=chart and chart.add, tables=tables)
     count, span_s = rows.samples, rows.span_s()
     result = {'input': str(args.input), 'topic': topic, 'samples': count,
               'skipped': rows.skipped, 'skipped_reasons': rows.skipped_reasons,
@@ -181,7 +153,7 @@ def run_replay(args):
                                      f'{mechanism.name}: {pathlib.Path(args.input).name} '
                                      f'({count} samples, order {model.order}, flexlink replay)')
     if args.publish:
-        _, samples = read_input(args, [])
+        _, samples, _ = read_input_samples(args.input, args.topic, args.joint, [])
         with Progress(f'publishing {topic}', count, unit='msg') as progress:
             played = publish_recording(samples, topic, playback_options(args),
                                        progress=progress)

@@ -4,7 +4,7 @@ The offline path of `flexlink replay`: a recording read, estimated and written i
 The input topic is chosen from a survey of the recording (:mod:`io.recording_stream`: topic
 counts and the first messages of each JointState topic), then its samples are read
 ``--chunk-samples`` messages at a time and estimated in a thread
-(:func:`core.estimation.offline_run.estimate_stream`; the compiled step runs without the GIL)
+(:func:`core.estimation.offline.estimate_stream`; the compiled step runs without the GIL)
 while this thread encodes and writes the rows already final (:mod:`io.replay_writer`), so the
 estimate and the writing share the two cores of a small machine. What is held at once does
 not depend on the recording's length: a chunk of input messages and one decompressed MCAP
@@ -21,7 +21,7 @@ import time
 import numpy as np
 
 from .progress import Progress
-from ..core.estimation.offline_run import estimate_stream
+from ..core.estimation.offline import estimate_stream
 from ..io.joint_states import iter_crank_samples
 from ..io.recording import choose_input_topic, damage_note
 from ..io.recording_stream import survey_recording
@@ -204,8 +204,8 @@ def _put(blocks, item, stop):
 class _Pipeline:
     """The estimate in a thread, handing blocks of final rows to the writing thread."""
 
-    def __init__(self, model, rows, warm_start):
-        self.rows, self.stop = rows, threading.Event()
+    def __init__(self, model, rows, warm_start, tables):
+        self.rows, self.stop, self.tables = rows, threading.Event(), tables
         self.blocks = queue.Queue(QUEUED_BLOCKS)
         self.outcome, self.seconds = None, None
         self.thread = threading.Thread(target=self._run, args=(model, warm_start),
@@ -217,7 +217,7 @@ class _Pipeline:
         try:
             outcome = ('done', estimate_stream(model, self.rows.estimate_input(), self._emit,
                                                warm_start=warm_start, align=WRITE_BATCH,
-                                               block_rows=BLOCK_ROWS))
+                                               block_rows=BLOCK_ROWS, tables=self.tables))
         except _Stopped:
             return
         except BaseException as exc:   # handed to the writing thread
@@ -248,7 +248,7 @@ class _Pipeline:
         self.thread.join()
 
 
-def estimate_and_write(args, model, rows, messages, write, on_block=None):
+def estimate_and_write(args, model, rows, messages, write, on_block=None, tables=None):
     """
     Estimate every sample and, with ``write``, write the output file meanwhile.
 
@@ -267,6 +267,8 @@ def estimate_and_write(args, model, rows, messages, write, on_block=None):
         (None: estimate only).
     on_block : callable, optional
         ``on_block(estimate)`` with each block of estimated rows (the chart's rows).
+    tables : object, optional
+        The model's step tables (:func:`core.estimation.tables.step_tables`), when built.
 
     Returns
     -------
@@ -281,7 +283,7 @@ def estimate_and_write(args, model, rows, messages, write, on_block=None):
     """
     start = time.perf_counter()
     summary = EstimateSummary()
-    pipeline = _Pipeline(model, rows, not args.no_warm_start)
+    pipeline = _Pipeline(model, rows, not args.no_warm_start, tables)
 
     def blocks():
         for block in pipeline:

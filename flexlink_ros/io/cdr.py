@@ -1,11 +1,9 @@
 """
-CDR (XCDR1) bytes: the one alignment rule and message walker, and the per-sample fast paths.
+CDR (XCDR1) bytes: the one alignment rule, the JointState reader and the message walker.
 
 rclpy's Python message classes cost 10-20 us to build and as much to serialise; at 1 kHz with
 recording that is a large share of the node's time. :func:`parse_joint_state` reads a
-``sensor_msgs/JointState`` and :func:`vector3_stamped_cdr`, :func:`criteria_cdr` write
-``geometry_msgs/Vector3Stamped`` and the criteria ``sensor_msgs/JointState`` directly, with
-zeroed alignment padding, byte-identical to the serialised ros/messages.py message (tested).
+``sensor_msgs/JointState`` directly (the node's outputs are written by :mod:`.output_cdr`).
 
 :func:`walk_message` walks any message object's fields (``SLOT_TYPES``) in CDR order for a
 :class:`CdrWriter` (the bytes, zeroed padding: :func:`serialize_message`) or a
@@ -13,13 +11,11 @@ zeroed alignment padding, byte-identical to the serialised ros/messages.py messa
 (:func:`align`) counts from the end of the 4-byte encapsulation header.
 """
 
-import functools
 import struct
 
 from rosidl_parser import definition
 
 from ..errors import MalformedCdr
-from ..names import JOINT_NAMES as JOINTS
 
 CDR_LE = b'\x00\x01\x00\x00'  # encapsulation header: plain CDR, little endian
 ENCAPSULATION_SIZE = len(CDR_LE)
@@ -137,56 +133,6 @@ def parse_joint_state(data, joint_name):
         return stamp_ns, None, None
     velocity = velocities[index] if index < len(velocities) else None
     return stamp_ns, positions[index], velocity
-
-
-def _header_bytes(sec, nanosec, frame):
-    return CDR_LE + struct.pack('<iII', sec, nanosec, len(frame) + 1) + frame + b'\x00'
-
-
-def vector3_stamped_cdr(sec, nanosec, frame, x, y, z=0.0):
-    """CDR bytes of a ``geometry_msgs/Vector3Stamped`` (frame as UTF-8 bytes)."""
-    head = _header_bytes(sec, nanosec, frame)
-    return head + bytes(align(len(head), 8) - len(head)) + struct.pack('<3d', x, y, z)
-
-
-def criteria_cdr(sec, nanosec, frame, ratio, gamma_dot, force):
-    """CDR bytes of the criteria ``sensor_msgs/JointState`` (ros_messages.criteria_message)."""
-    if len(ratio) == len(gamma_dot) == len(force) == len(JOINTS):
-        # Per-sample path: the layout is fixed by the frame; patch a template (~1 us).
-        template, offsets = criteria_template(frame)
-        out = bytearray(template)
-        _STAMP.pack_into(out, 4, sec, nanosec)
-        _FOUR_DOUBLES.pack_into(out, offsets[0], *ratio)
-        _FOUR_DOUBLES.pack_into(out, offsets[1], *gamma_dot)
-        _FOUR_DOUBLES.pack_into(out, offsets[2], *force)
-        return bytes(out)
-    return _criteria_cdr_plain(sec, nanosec, frame, ratio, gamma_dot, force)
-
-
-@functools.lru_cache(maxsize=16)
-def criteria_template(frame):
-    """Serialise the criteria message of a frame; return it and its three arrays' offsets."""
-    joints = len(JOINTS)
-    sentinels = [[1.0e300 + k * 1e285 + j * 1e284 for j in range(joints)] for k in range(3)]
-    template = _criteria_cdr_plain(0, 0, frame, *sentinels)
-    offsets = [template.index(struct.pack(f'<{joints}d', *values)) for values in sentinels]
-    return template, offsets
-
-
-_STAMP = struct.Struct('<iI')
-_FOUR_DOUBLES = struct.Struct(f'<{len(JOINTS)}d')
-
-
-def _criteria_cdr_plain(sec, nanosec, frame, ratio, gamma_dot, force):
-    out = bytearray(_header_bytes(sec, nanosec, frame))
-    out += bytes(align(len(out), 4) - len(out)) + struct.pack('<I', len(JOINTS))
-    for name in JOINTS:
-        out += bytes(align(len(out), 4) - len(out))
-        out += struct.pack('<I', len(name) + 1) + name.encode() + b'\x00'
-    for values in (ratio, gamma_dot, force):
-        out += bytes(align(len(out), 4) - len(out)) + struct.pack('<I', len(values))
-        out += bytes(align(len(out), 8) - len(out)) + struct.pack(f'<{len(values)}d', *values)
-    return bytes(out)
 
 
 # -- any message object, walked field by field ------------------------------------------------

@@ -5,7 +5,7 @@ One bag of a fleet recomputed: read, estimate, summarise per period, optionally 
 ``flexlink fleet`` runs it as one task per bag, a test or a script calls it directly). It
 reads the crank samples as ``flexlink replay`` does (:func:`io.recording.scan_recording`,
 :func:`io.joint_states.read_crank_samples`), estimates them in one sequential pass
-(:func:`core.estimation.offline_run.estimate_offline`: the state carries from sample to
+(:func:`core.estimation.offline.estimate_offline`: the state carries from sample to
 sample, so a bag is one task, its split files in order), and summarises each revolution or
 minute (:mod:`core.estimation.summary`). Which mechanism and model options a bag is
 recomputed with is decided in one place, :func:`bag_model`. A bag that cannot be recomputed
@@ -19,11 +19,10 @@ import time
 from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
 
-from .joint_states import parse_crank_states, read_crank_samples, skip_reasons
+from .joint_states import parse_crank_states, read_input_samples, skip_reasons
 from .provenance import read_provenance
-from .recording import choose_input_topic, damage_note, scan_recording
 from .replay_writer import write_replay
-from ..core.estimation.offline_run import estimate_offline
+from ..core.estimation.offline import estimate_offline
 from ..core.estimation.summary import period_ids, recording_totals, summarize_periods
 from ..core.mechanism_file import load_mechanism
 from ..core.reduction import pipeline
@@ -109,33 +108,6 @@ def _model(mechanism, options, settings):
         _MODELS[key] = pipeline.model_for_mechanism(
             mechanism, options, cache_dir=settings.cache_dir, use_cache=settings.use_cache)
     return _MODELS[key]
-
-
-def read_bag(bag, settings, damaged):
-    """
-    Read the crank samples of a bag and every message of its input topic.
-
-    Returns
-    -------
-    topic : str
-    samples : dict
-        :func:`io.joint_states.read_crank_samples`.
-    messages : list of (log_ns, publish_ns, data)
-        Every message of the topic, usable or not, in file order.
-
-    """
-    scan = scan_recording(bag, topic=settings.topic, joint_name=settings.joint,
-                          damaged=damaged)
-    try:
-        topic = choose_input_topic(bag, settings.joint, settings.topic, scan)
-        samples = read_crank_samples(bag, topic, settings.joint, scan)
-        if not samples['data']:
-            raise ValueError(f'no usable samples of joint {settings.joint!r} on {topic}'
-                             + ''.join(f'; {n} {why}'
-                                       for why, n in samples['skipped_reasons'].items()))
-    except ValueError as exc:
-        raise ValueError(f'{exc}{damage_note(damaged)}') from None
-    return topic, samples, scan[1].get(topic, [])
 
 
 def skipped_per_period(messages, samples, ids, joint_name):
@@ -232,7 +204,7 @@ def failed_row(bag, reason, per):
 def _recompute(bag, fallback, settings, output, start):
     damaged = []
     mechanism, options, source = bag_model(bag, fallback)
-    topic, samples, messages = read_bag(bag, settings, damaged)
+    topic, samples, messages = read_input_samples(bag, settings.topic, settings.joint, damaged)
     read_s = time.perf_counter() - start
     model = _model(mechanism, options, settings)
     began = time.perf_counter()

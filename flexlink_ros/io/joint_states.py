@@ -12,7 +12,7 @@ import struct
 import numpy as np
 
 from .cdr import align, parse_joint_state
-from .recording import scan_recording
+from .recording import choose_input_topic, damage_note, scan_recording
 from .recording_stream import iter_topic_messages
 
 # Errors of a payload that is not a readable JointState.
@@ -203,6 +203,48 @@ def read_crank_samples(path, topic, joint_name, scan=None):
     log_ns, publish_ns, payloads = zip(*messages)
     return crank_samples(np.array(log_ns, dtype=np.int64), np.array(publish_ns, dtype=np.int64),
                          payloads, joint_name)
+
+
+def read_input_samples(path, topic, joint_name, damaged):
+    """
+    Find a recording's input topic and read all its crank samples (in memory).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        ``.mcap`` file or bag directory.
+    topic : str or None
+        The input topic (None: the one carrying the joint).
+    joint_name : str
+        The crank joint.
+    damaged : list
+        Receives (file, offset, reason) of what the reader skipped.
+
+    Returns
+    -------
+    topic : str
+    samples : dict
+        :func:`read_crank_samples`.
+    messages : list of (log_ns, publish_ns, data)
+        Every message of the topic, usable or not, in file order.
+
+    Raises
+    ------
+    ValueError
+        No such topic, or no usable sample on it (with the reasons and the damage found).
+
+    """
+    scan = scan_recording(path, topic=topic, joint_name=joint_name, damaged=damaged)
+    try:
+        topic = choose_input_topic(path, joint_name, topic, scan)
+        samples = read_crank_samples(path, topic, joint_name, scan)
+        if not samples['data']:
+            raise ValueError(f'no usable samples of joint {joint_name!r} on {topic}'
+                             + ''.join(f'; {n} {why}'
+                                       for why, n in samples['skipped_reasons'].items()))
+    except ValueError as exc:
+        raise ValueError(f'{exc}{damage_note(damaged)}') from None
+    return topic, samples, scan[1].get(topic, [])
 
 
 def iter_crank_samples(path, topic, joint_name, block=65536, damaged=None):

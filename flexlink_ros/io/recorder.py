@@ -45,8 +45,8 @@ from .msg_schema import (
 )
 from .provenance import custom_data
 from .recorder_files import (
-    abandon, check_settings, create_exclusive, file_path, make_directories, OpenFile,
-    refuse_existing, register_topic, remove_directories, split_due, start_file, Topic,
+    abandon, check_settings, create_exclusive, DEFAULT_ZSTD_LEVEL, file_path, make_directories,
+    OpenFile, refuse_existing, register_topic, remove_directories, split_due, start_file, Topic,
 )
 from .recorder_queue import QueuedWriting, RecorderState
 from .recorder_status import RecordingStatus
@@ -76,6 +76,8 @@ class McapRecorder(QueuedWriting, RecordingStatus):
     flush_period_s : float
         Longest span of log time (and of wall time, via a background thread) kept unwritten.
     compression : {'zstd', 'none'}
+    compression_level : int
+        zstd level of the chunks (default zstandard's, 3).
     flush_thread : bool
         Run the background flusher; without it only writes trigger flushes.
     provenance : dict, optional
@@ -86,7 +88,8 @@ class McapRecorder(QueuedWriting, RecordingStatus):
 
     def __init__(self, path, *, split_size_bytes=0, split_duration_s=0.0,
                  chunk_size_bytes=DEFAULT_CHUNK_SIZE, flush_period_s=DEFAULT_FLUSH_PERIOD_S,
-                 compression='zstd', flush_thread=True, provenance=None):
+                 compression='zstd', flush_thread=True, provenance=None,
+                 compression_level=DEFAULT_ZSTD_LEVEL):
         self.path = pathlib.Path(path)
         self.bare = self.path.suffix == '.mcap'
         check_settings(self.path, split_size_bytes, split_duration_s, chunk_size_bytes,
@@ -96,6 +99,7 @@ class McapRecorder(QueuedWriting, RecordingStatus):
         self.chunk_size_bytes = int(chunk_size_bytes)
         self.flush_period_ns = int(round(flush_period_s * 1e9))
         self.compression = compression
+        self.compression_level = int(compression_level)
         self._use_flush_thread = flush_thread
         self.provenance = dict(provenance or {})
         self._custom_data = custom_data(self.provenance)
@@ -339,7 +343,7 @@ class McapRecorder(QueuedWriting, RecordingStatus):
                                       UNSET_NS, counts={},
                                       custom_data=self._custom_data)   # as rosbag2 at open
         start_file(self._file, self.chunk_size_bytes, self.compression, self._topics.values(),
-                   opening, self.provenance)
+                   opening, self.provenance, self.compression_level)
 
     def _finish_file(self):
         current = self._file

@@ -19,7 +19,7 @@ import stat
 from mcap.writer import LIBRARY_IDENTIFIER
 import numpy as np
 
-from .mcap_writer import COMPRESSIONS, McapFileWriter
+from .mcap_writer import COMPRESSIONS, DEFAULT_ZSTD_LEVEL, McapFileWriter
 from .msg_schema import message_definition, offered_qos_yaml, type_hash
 from .provenance import PROVENANCE_RECORD
 
@@ -200,7 +200,8 @@ def file_path(path, bare, index):
     return path / f'{path.name}_{index}.mcap'
 
 
-def start_file(current, chunk_size, compression, topics, metadata, provenance=None):
+def start_file(current, chunk_size, compression, topics, metadata, provenance=None,
+               compression_level=DEFAULT_ZSTD_LEVEL):
     """
     Write a new file's header, schemas and channels and flush them; set its writer last.
 
@@ -218,10 +219,13 @@ def start_file(current, chunk_size, compression, topics, metadata, provenance=No
         The ``rosbag2`` Metadata record written after the header, as rosbag2 does at open.
     provenance : dict, optional
         The ``flexlink_ros`` Metadata record written next (:mod:`.provenance`).
+    compression_level : int
+        zstd level of the chunks.
 
     """
     writer = McapFileWriter(current.stream, chunk_size=chunk_size, compression=compression,
-                            spill_directory=current.path.parent)
+                            spill_directory=current.path.parent,
+                            compression_level=compression_level)
     writer.start(profile='ros2', library=LIBRARY)
     writer.add_metadata('rosbag2', metadata)
     if provenance:

@@ -68,7 +68,7 @@ def batch_arguments(topics, messages, log_times_ns, publish_times_ns, known_topi
             raise ValueError(f'`topics` has {len(topics)} entries for {count} messages')
         names = list(dict.fromkeys(topics))
         lookup = {name: k for k, name in enumerate(names)}
-        index = np.fromiter((lookup[t] for t in topics), dtype=np.intp, count=count)
+        index = np.fromiter(map(lookup.__getitem__, topics), dtype=np.intp, count=count)
     for name in names:
         if name not in known_topics:
             raise ValueError(f'`topic` {name!r}: declare it with add_topic() before '

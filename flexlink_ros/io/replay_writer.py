@@ -4,22 +4,17 @@ The MCAP of a replay: the input and the node's outputs recomputed offline.
 Per sample: the input, the two deflections, the criteria and the quality (the error and
 nonlinearity indicators, the node's ``~/quality``), and every ``markers_every_n``-th sample the
 markers, each logged at the input's log time (the order the node records them in). The
-messages are encoded in bulk (the row encoders of :mod:`io.cdr`) and written in batches
+messages are encoded in bulk (the row encoders of :mod:`io.output_cdr`) and written in batches
 (:meth:`McapRecorder.write_batch`).
 """
 
-import functools
-import struct
-
 import numpy as np
-from sensor_msgs.msg import JointState
-from std_msgs.msg import Header
 
-from . import cdr
-from .markers import criteria_rows, MarkerEncoder, rows_to_bytes, vector3_stamped_rows
+from .output_cdr import criteria_rows, MarkerEncoder, quality_rows, rows_to_bytes, \
+    vector3_stamped_rows
 from .recorder import McapRecorder
 from ..core.reduction.second_order_tables import SecondOrderForms
-from ..names import JOINT_STATE, MARKER_ARRAY, OUTPUT_POINTS, QUALITY_NAMES, VECTOR3_STAMPED
+from ..names import JOINT_STATE, MARKER_ARRAY, OUTPUT_POINTS, VECTOR3_STAMPED
 
 # Rows encoded and written together by write_replay.
 WRITE_BATCH = 1024
@@ -28,49 +23,8 @@ WRITE_BATCH = 1024
 # would make the chunk boundaries depend on the machine's speed).
 OUTPUT_CHUNK_BYTES = 1 << 20
 OUTPUT_FLUSH_PERIOD_S = 3600.0
-# Two doubles the quality template holds where each sample's indicators go.
-_QUALITY_SENTINELS = (1.0e300 + 3e285, 1.0e300 + 7e285)
-
-
-@functools.lru_cache(maxsize=16)
-def quality_template(frame):
-    """Serialise the quality message of a frame (UTF-8); return it and its values' offset."""
-    template = cdr.serialize_message(JointState(
-        header=Header(frame_id=frame.decode()), name=list(QUALITY_NAMES),
-        position=list(_QUALITY_SENTINELS)))
-    return template, template.index(struct.pack('<2d', *_QUALITY_SENTINELS))
-
-
-def quality_rows(stamps_ns, frame, error_indicator, nonlinearity):
-    """
-    Return the CDR of many quality ``sensor_msgs/JointState`` (the node's ``~/quality``).
-
-    Byte for byte what the node publishes and records for the same values
-    (ros/messages.py ``quality_cdr``): name = QUALITY_NAMES, position = the two indicators.
-
-    Parameters
-    ----------
-    stamps_ns : ndarray of int, shape (m,)
-        Stamps [ns].
-    frame : bytes
-        Frame id, UTF-8.
-    error_indicator, nonlinearity : ndarray, shape (m,)
-        The indicators [-] (NaN: not available).
-
-    Returns
-    -------
-    ndarray of uint8, shape (m, length)
-
-    """
-    template, offset = quality_template(frame)
-    rows = np.tile(np.frombuffer(template, dtype=np.uint8), (len(stamps_ns), 1))
-    sec, nanosec = np.divmod(np.asarray(stamps_ns, dtype=np.int64), 1_000_000_000)
-    start = cdr.ENCAPSULATION_SIZE
-    rows[:, start:start + 4] = sec.astype('<i4').view(np.uint8).reshape(-1, 4)
-    rows[:, start + 4:start + 8] = nanosec.astype('<u4').view(np.uint8).reshape(-1, 4)
-    values = np.column_stack([error_indicator, nonlinearity]).astype('<f8')
-    rows[:, offset:offset + 16] = values.view(np.uint8)
-    return rows
+# zstd level 1: half the compression time of the default level 3, the file within a percent.
+OUTPUT_ZSTD_LEVEL = 1
 
 
 class MarkerSource:
@@ -166,20 +120,27 @@ def _output_columns(samples, estimate, chosen, frame):
                                        estimate['nonlinearity'][chosen]))]
 
 
-def _interleave(columns, names, valid, with_marker, markers, marker_topic):
-    """Messages and their topics in write order: per sample its input, outputs, marker."""
-    messages, topic_of = [], []
-    for n, row in enumerate(zip(*columns)):
-        if not valid[n]:
-            messages.append(row[0])
-            topic_of.append(names[0])
-            continue
-        messages += row
-        topic_of += names
-        if with_marker[n]:
-            messages.append(next(markers))
-            topic_of.append(marker_topic)
-    return messages, topic_of
+def _interleave(columns, names, valid, marked, markers, marker_topic, per_sample):
+    """
+    Messages and their topics in write order: per sample its input, outputs, marker.
+
+    Placed with numpy (object arrays) rather than a Python loop over the samples: sample n's
+    messages start at the sum of ``per_sample`` before it.
+    """
+    starts = np.cumsum(per_sample) - per_sample
+    messages = np.empty(int(starts[-1] + per_sample[-1]) if len(starts) else 0, dtype=object)
+    topic_of = np.zeros(messages.size, dtype=np.intp)
+    messages[starts] = columns[0]
+    accepted = np.flatnonzero(valid)
+    for k, column in enumerate(columns[1:], start=1):
+        place = starts[accepted] + k
+        messages[place] = [column[n] for n in accepted.tolist()]
+        topic_of[place] = k
+    if markers is not None and len(marked):
+        place = starts[marked] + len(names)
+        messages[place] = markers
+        topic_of[place] = len(names)
+    return messages.tolist(), np.array([*names, marker_topic], dtype=object)[topic_of].tolist()
 
 
 def _write_batch(recorder, samples, estimate, chosen, first, names, marker_topic, frame,
@@ -190,16 +151,16 @@ def _write_batch(recorder, samples, estimate, chosen, first, names, marker_topic
     valid = (np.all(np.isfinite(estimate['lever_tip'][chosen]), axis=1)
              & np.all(np.isfinite(estimate['coupler_mid'][chosen]), axis=1))
     per_sample = np.where(valid, len(names), 1)
-    markers = None
+    markers, marked = None, np.zeros(0, dtype=np.intp)
     if markers_every_n:
         rows = np.arange(first + chosen.start, first + chosen.stop)
         marked = np.flatnonzero((rows % markers_every_n == 0) & valid)
-        markers = iter(rows_to_bytes(marker_source.rows(
+        markers = rows_to_bytes(marker_source.rows(
             samples['stamps_ns'][chosen][marked], estimate['crank_angle'][chosen][marked],
-            estimate['modal'][chosen][marked])))
+            estimate['modal'][chosen][marked]))
         per_sample[marked] += 1
-    messages, topic_of = _interleave(columns, names, valid.tolist(),
-                                     (per_sample > len(names)).tolist(), markers, marker_topic)
+    messages, topic_of = _interleave(columns, names, valid, marked, markers, marker_topic,
+                                     per_sample)
     log_times = np.repeat(samples['log_ns'][chosen], per_sample)
     publish_times = log_times.copy()
     # The input keeps its publish time; the outputs are logged and sent at its log time.
@@ -220,7 +181,7 @@ def write_replay(out_path, blocks, input_topic, topics, frame_id, model, markers
     blocks : iterable of (first, samples, estimate)
         Consecutive rows from row ``first``: their input (``samples``,
         :func:`io.joint_states.crank_samples`) and their offline estimate (``estimate``,
-        :func:`core.estimation.offline_run.estimate_stream`). Rows are written in batches of
+        :func:`core.estimation.offline.estimate_stream`). Rows are written in batches of
         ``WRITE_BATCH`` from the block's start (blocks starting at multiples of it give the
         same batches however the rows are split).
     input_topic : str
@@ -253,7 +214,7 @@ def write_replay(out_path, blocks, input_topic, topics, frame_id, model, markers
     """
     recorder = McapRecorder(out_path, chunk_size_bytes=OUTPUT_CHUNK_BYTES,
                             flush_period_s=OUTPUT_FLUSH_PERIOD_S, flush_thread=False,
-                            provenance=provenance)
+                            provenance=provenance, compression_level=OUTPUT_ZSTD_LEVEL)
     recorder.open()
     written = 0
     try:

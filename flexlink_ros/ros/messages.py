@@ -17,9 +17,7 @@ stamped with the input's stamp, frame = the ground frame, SI units):
 Also the ``rcl_interfaces/ParameterDescriptor`` of a parameter table's entry.
 """
 
-import functools
 import math
-import struct
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -29,7 +27,6 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 
 from ..errors import InputRejected
-from ..io import cdr
 from ..names import JOINT_NAMES, QUALITY_NAMES
 
 OK, WARN, ERROR, STALE = (DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR,
@@ -153,32 +150,6 @@ def quality_message(stamp, frame_id, error_indicator, nonlinearity):
     msg.name = list(QUALITY_NAMES)
     msg.position = [float(error_indicator), float(nonlinearity)]
     return msg
-
-
-# Two doubles the template of a frame's quality message holds where the indicators go.
-_QUALITY_SENTINELS = (1.0e300 + 3e285, 1.0e300 + 7e285)
-_QUALITY_VALUES = struct.Struct('<2d')
-_STAMP = struct.Struct('<iI')
-
-
-@functools.lru_cache(maxsize=16)
-def _quality_template(frame):
-    template = cdr.serialize_message(quality_message(Time(), frame.decode(),
-                                                     *_QUALITY_SENTINELS))
-    return template, template.index(_QUALITY_VALUES.pack(*_QUALITY_SENTINELS))
-
-
-def quality_cdr(sec, nanosec, frame, error_indicator, nonlinearity):
-    """
-    Return the CDR of :func:`quality_message` (frame as UTF-8 bytes), byte-identical to it.
-
-    The per-sample path: the layout is fixed by the frame, so a template is patched (~1 us).
-    """
-    template, offset = _quality_template(frame)
-    out = bytearray(template)
-    _STAMP.pack_into(out, cdr.ENCAPSULATION_SIZE, sec, nanosec)
-    _QUALITY_VALUES.pack_into(out, offset, error_indicator, nonlinearity)
-    return bytes(out)
 
 
 def joint_level(ratio, flagged, warn, error):

@@ -1,13 +1,13 @@
 """
 flexlink_node's recording: what it opens, what it records, with which QoS and log time.
 
-:class:`NodeRecording` is the recording part of :class:`.pipeline.EstimatorPipeline` (a mixin
-of the node classes). The outputs are declared with their publishers' QoS when the recording
-opens. The input topic is declared with the QoS its publishers offer, read from the ROS graph
-as ``ros2 bag record`` does: at once if a publisher is known then, else at the first input
-message (whose publisher the graph knows by then); the node's own subscription QoS stands in
-only if the graph names none. Log times come from :class:`.sim_time.LogTime`: the node clock,
-or the input stamp while a simulated clock reads 0.
+:class:`NodeRecording` is the recording part of :class:`.estimator_node.EstimatorNode` (a
+mixin of the node classes). The outputs are declared with their publishers' QoS when the
+recording opens. The input topic is declared with the QoS its publishers offer, read from
+the ROS graph as ``ros2 bag record`` does: at once if a publisher is known then, else at the
+first input message (whose publisher the graph knows by then); the node's own subscription
+QoS stands in only if the graph names none. Log times come from :class:`.sim_time.LogTime`:
+the node clock, or the input stamp while a simulated clock reads 0.
 """
 
 import time

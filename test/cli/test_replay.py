@@ -9,6 +9,7 @@ import sys
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.reduction import pipeline
+from flexlink_ros.io import output_cdr
 from flexlink_ros.io.recorder import McapRecorder
 from flexlink_ros.io.recording import iter_recording
 from flexlink_ros.ros import messages as ros_messages
@@ -125,7 +126,7 @@ def check_quality(out, expected):
             assert error == pytest.approx(sample.error_indicator, rel=1e-5, abs=1e-12)
             assert nonlinearity == pytest.approx(sample.nonlinearity, rel=1e-5, abs=1e-12)
             # the bytes the node publishes and records for these values
-            assert bytes(data) == ros_messages.quality_cdr(
+            assert bytes(data) == output_cdr.quality_cdr(
                 message.header.stamp.sec, message.header.stamp.nanosec, b'linkage_ground',
                 error, nonlinearity)
             seen.append(stamp)

@@ -1,8 +1,8 @@
 """`flexlink replay` in chunks: the bag of one whole pass, in memory that does not grow."""
 
+import importlib.util
 import json
 import math
-import os
 import pathlib
 import subprocess
 import sys
@@ -92,15 +92,24 @@ def test_a_replay_in_chunks_writes_the_bag_of_one_whole_pass(tmp_path):
     assert len(expected) == 5000 + 4 * (5000 - 4) + markers and markers > 600
 
 
-def peak_resident_mb(argv):
-    """Run a command to its end; its peak resident size [MB] (os.wait4)."""
-    process = subprocess.Popen(argv, cwd=REPO, stdout=subprocess.DEVNULL,
-                               stderr=subprocess.PIPE)
-    _, status, usage = os.wait4(process.pid, 0)
-    error = process.stderr.read().decode(errors='replace')
-    process.stderr.close()
-    assert os.waitstatus_to_exitcode(status) == 0, error
-    return usage.ru_maxrss / 1024.0
+def replay_bench():
+    """Load the benchmark script as a module (its measured runs)."""
+    spec = importlib.util.spec_from_file_location('replay_bench', BENCH)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def peak_resident_mb(args):
+    """Run ``flexlink ARGS`` from the repository to its end; its own peak resident size [MB]."""
+    return replay_bench().run_measured(sys.executable, REPO, args)[2]
+
+
+def test_the_peak_resident_size_is_the_child_s_own():
+    """A parent holding 300 MB does not make a small child look as large (wait4's maxrss did)."""
+    held = np.ones(300 * 1024 * 1024 // 8)
+    small = peak_resident_mb(['--help'])
+    assert held.sum() > 0 and 10.0 < small < 200.0, small
 
 
 @pytest.mark.parametrize('chunk', [2000])
@@ -111,8 +120,8 @@ def test_replay_memory_does_not_grow_with_the_recording(tmp_path, chunk):
         bag = tmp_path / f'bag_{seconds}.mcap'
         subprocess.run([sys.executable, str(BENCH), 'make-bag', str(bag), '--seconds',
                         str(seconds)], check=True, capture_output=True, timeout=300)
-        peaks.append(peak_resident_mb([sys.executable, '-m', 'flexlink_ros.cli', 'replay',
-                                       str(bag), '--out', str(tmp_path / f'out_{seconds}.mcap'),
+        peaks.append(peak_resident_mb(['replay', str(bag), '--out',
+                                       str(tmp_path / f'out_{seconds}.mcap'),
                                        '--chunk-samples', str(chunk), '--mechanism', 'cho1992']))
     # 100 000 samples more: about 90 MB more when every sample was held.
     assert peaks[1] - peaks[0] < 15.0, peaks
@@ -132,3 +141,15 @@ def test_the_offline_replay_imports_neither_rclpy_nor_matplotlib(tmp_path):
                             timeout=300, cwd=REPO)
     assert result.returncode == 0, result.stderr
     assert 'wrote' in result.stdout and result.stdout.splitlines()[-1] == '[]'
+
+
+def test_replay_help_imports_neither_rclpy_nor_matplotlib():
+    """`flexlink replay --help` answers without loading ROS or plotting."""
+    code = ('import sys\nfrom flexlink_ros.cli import main\n'
+            'try:\n    main.main(sys.argv[1:])\nexcept SystemExit:\n    pass\n'
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in "
+            "('rclpy', 'matplotlib')))\n")
+    result = subprocess.run([sys.executable, '-c', code, 'replay', '--help'],
+                            capture_output=True, text=True, timeout=300, cwd=REPO)
+    assert result.returncode == 0, result.stderr
+    assert '--chunk-samples' in result.stdout and result.stdout.splitlines()[-1] == '[]'

@@ -3,7 +3,7 @@
 import math
 
 from fleet_bags import bad_messages, crank_stream, write_bag
-from flexlink_ros.core.estimation.offline_run import estimate_offline
+from flexlink_ros.core.estimation.offline import estimate_offline
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.reduction import pipeline
 from flexlink_ros.io.fleet_bag import FleetSettings, recompute_bag

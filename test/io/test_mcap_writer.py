@@ -2,6 +2,7 @@
 
 import ast
 import io
+import math
 import pathlib
 import re
 
@@ -11,10 +12,13 @@ from flexlink_ros.io.mcap_writer import McapFileWriter
 from flexlink_ros.io.recorder import McapRecorder
 from geometry_msgs.msg import Vector3Stamped
 from mcap.reader import make_reader, NonSeekingReader, SeekingReader
+from mcap.records import Chunk
+from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 import numpy as np
 from rclpy.serialization import serialize_message
 from rosbags.highlevel import AnyReader
+import zstandard
 
 T0_NS = 1_700_000_000_000_000_000
 PACKAGE = pathlib.Path(flexlink_ros.__file__).parent
@@ -167,3 +171,33 @@ def test_file_equals_mcap_public_writers_byte_for_byte(tmp_path, monkeypatch):
         assert len(ours.chunk_indexes) * 60 > 4 * 4096     # spilled, several times
         assert written.getvalue() == expected.getvalue()
     assert list(tmp_path.iterdir()) == []   # the spill files are gone
+
+
+def test_compression_level_is_the_chunks_zstd_level(tmp_path):
+    """A recorder at level 1 writes each chunk as zstd level 1 compresses it; readers read it."""
+    path = tmp_path / 'fast.mcap'
+    stamps = T0_NS + np.arange(3000) * 1_000_000
+    messages = []
+    for n, stamp in enumerate(stamps.tolist()):
+        message = Vector3Stamped()
+        message.header.stamp.sec, message.header.stamp.nanosec = divmod(stamp, 10**9)
+        message.vector.x = math.sin(n * 0.01)
+        messages.append(bytes(serialize_message(message)))
+    with McapRecorder(path, flush_thread=False, compression_level=1) as recorder:
+        recorder.add_topic('/v', Vector3Stamped)
+        recorder.write_batch('/v', messages, stamps)
+    chunks = 0
+    with open(path, 'rb') as stream:
+        for record in StreamReader(stream, emit_chunks=True).records:
+            if isinstance(record, Chunk):
+                data = zstandard.ZstdDecompressor().decompress(
+                    record.data, max_output_size=record.uncompressed_size)
+                assert record.data == zstandard.ZstdCompressor(level=1).compress(data)
+                assert record.data != zstandard.ZstdCompressor(level=3).compress(data)
+                chunks += 1
+    assert chunks > 1
+    with open(path, 'rb') as stream:
+        read = [bytes(m.data) for _, _, m in make_reader(stream).iter_messages()]
+    assert read == messages
+    with AnyReader([path]) as reader:
+        assert sum(1 for _ in reader.messages()) == len(messages)

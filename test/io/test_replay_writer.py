@@ -7,7 +7,7 @@ from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction.pipeline import model_for_mechanism
 from flexlink_ros.core.reduction.second_order_tables import SecondOrderForms
 from flexlink_ros.io.msg_schema import serialize_exact
-from flexlink_ros.io.replay_writer import MarkerSource, quality_rows, write_replay
+from flexlink_ros.io.replay_writer import MarkerSource, write_replay
 from flexlink_ros.names import JOINT_NAMES, output_topics, QUALITY_NAMES
 from flexlink_ros.ros import messages as ros_messages
 from mcap.reader import make_reader
@@ -89,17 +89,6 @@ def test_replay_bag_holds_each_input_then_its_outputs(tmp_path):
             '/joint_states': COUNT, topics['lever_tip']: COUNT - 1,
             topics['coupler_mid']: COUNT - 1, topics['criteria']: COUNT - 1,
             topics['quality']: COUNT - 1}
-
-
-def test_quality_rows_are_the_bytes_the_node_publishes():
-    stamps = np.array([T0_NS, 1_700_000_000_999_999_999, 5])
-    error = np.array([0.031, 0.0, 2.5])
-    nonlinearity = np.array([np.nan, 0.25, 1e-3])
-    for frame in (b'linkage_ground', b'odd'):    # the frame's length moves the values
-        rows = quality_rows(stamps, frame, error, nonlinearity)
-        for row, stamp, e, n in zip(rows, stamps.tolist(), error, nonlinearity):
-            sec, nanosec = divmod(stamp, 1_000_000_000)
-            assert row.tobytes() == ros_messages.quality_cdr(sec, nanosec, frame, e, n)
 
 
 def test_replay_markers_of_an_order_2_model_draw_the_joints_second_order_motion():

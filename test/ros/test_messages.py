@@ -2,7 +2,7 @@
 
 import math
 
-from flexlink_ros.io import markers
+from flexlink_ros.io import output_cdr
 from flexlink_ros.ros import messages as rm
 import numpy as np
 import pytest
@@ -59,8 +59,8 @@ def test_markers_exaggerate_deflection_and_colour_joints():
     points = [np.array([[0.0, 0.0], [0.1, 0.0]])] * 3
     deflection = [np.array([[0.0, 0.0], [0.0, 1e-4]])] * 3
     joints = np.array([[0, 0], [0.1, 0], [0.2, 0.1], [0.24, 0]])
-    msg = markers.linkage_markers(rm.ns_to_stamp(1), 'g', points, deflection, 100.0, joints,
-                                  [rm.OK, rm.WARN, rm.ERROR, rm.OK])
+    msg = output_cdr.linkage_markers(rm.ns_to_stamp(1), 'g', points, deflection, 100.0, joints,
+                                     [rm.OK, rm.WARN, rm.ERROR, rm.OK])
     back = deserialize_message(serialize_message(msg), MarkerArray)
     deformed = [m for m in back.markers if m.ns.endswith('deformed')]
     assert len(deformed) == 3 and deformed[0].points[1].y == pytest.approx(0.01)
@@ -74,21 +74,3 @@ def test_joint_levels():
     assert rm.joint_level(500.0, False, 10.0, 100.0) == rm.ERROR
     assert rm.joint_level(1.0, True, 10.0, 100.0) == rm.ERROR
     assert rm.joint_level(math.nan, False, 10.0, 100.0) == rm.ERROR
-
-
-def test_quality_cdr_is_the_quality_message_read_back_by_rclpy_and_rosbags():
-    from rosbags.typesys import get_typestore, Stores
-    from flexlink_ros.io.cdr import serialize_message as exact_cdr
-    stamp = rm.ns_to_stamp(1_700_000_000_123_456_789)
-    data = rm.quality_cdr(stamp.sec, stamp.nanosec, b'linkage_ground', 0.031, math.nan)
-    assert data == exact_cdr(rm.quality_message(stamp, 'linkage_ground', 0.031, math.nan))
-    message = deserialize_message(data, JointState)
-    assert list(message.name) == ['error_indicator', 'nonlinearity']
-    assert message.position[0] == 0.031 and math.isnan(message.position[1])
-    assert (message.header.stamp, message.header.frame_id) == (stamp, 'linkage_ground')
-    assert len(message.velocity) == len(message.effort) == 0
-    # rosbags refuses CDR of any other length than the message's (exact bytes).
-    decoded = get_typestore(Stores.ROS2_HUMBLE).deserialize_cdr(data, 'sensor_msgs/msg/JointState')
-    assert decoded.position[0] == 0.031 and decoded.header.stamp.nanosec == 123_456_789
-    other = rm.quality_cdr(1, 2, b'frame_b', 0.5, 0.25)     # another frame: its own template
-    assert deserialize_message(other, JointState).position.tolist() == [0.5, 0.25]

@@ -657,7 +657,7 @@ def test_run_time_parameters_take_effect(tmp_path, processes, ros):
 
 def test_node_publishes_the_dynamic_pass(tmp_path, processes):
     """model.second_order:=dynamic: the node's recorded deflections are the replay's."""
-    from flexlink_ros.core.estimation.offline_run import estimate_offline
+    from flexlink_ros.core.estimation.offline import estimate_offline
     from rosbags.highlevel import AnyReader
 
     params = {'model.second_order': 'dynamic', 'model.rigid_crank': True,

@@ -8,8 +8,8 @@ import time
 from flexlink_ros.errors import InputRejected
 from flexlink_ros.io import cdr
 from flexlink_ros.names import READY_MESSAGE
+from flexlink_ros.ros.message_outcomes import crank_sample, SKIP_KINDS
 from flexlink_ros.ros.messages import ns_to_stamp
-from flexlink_ros.ros.node_model import crank_sample, SKIP_KINDS
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message

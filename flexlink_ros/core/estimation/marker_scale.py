@@ -52,9 +52,9 @@ def round_exaggeration(peak_m, length_m, share=MARKER_SHARE):
     return MAX_EXAGGERATION
 
 
-def model_exaggeration(model):
-    """Return :func:`default_exaggeration` of a reduced model (through its own estimator)."""
-    return default_exaggeration(StreamingEstimator(model))[0]
+def model_exaggeration(model, step_tables=None):
+    """Return :func:`default_exaggeration` of a reduced model (its step tables, if given)."""
+    return default_exaggeration(StreamingEstimator(model, step_tables=step_tables))[0]
 
 
 def default_exaggeration(estimator):

@@ -3,7 +3,7 @@ The rows of a long sample stream held in bounded memory: appended at the end, dr
 
 :class:`RowWindow` keeps named columns (the input and the estimate of each sample) for the rows
 ``base <= row < end`` of a stream and is indexed by the rows' numbers in the whole stream, so
-the offline run (:mod:`.offline_run`) reads and writes rows as if it held the whole recording
+the offline run (:mod:`.offline`) reads and writes rows as if it held the whole recording
 while only a window of it is in memory. A row dropped from the window but still needed as the
 source of later repeats is held aside (:meth:`RowWindow.drop_before`).
 """

@@ -178,7 +178,7 @@ class StreamingEstimator:
         See :func:`~.tables.quasi_static_peak`; the deflection bound is
         DEFLECTION_SAFETY_FACTOR / (2 zeta) times it.
         """
-        return tables.quasi_static_peak(self.model, self._tables)
+        return self._tables.quasi_static_peak(self.model)
 
     def periodic_state(self, angle, speed):
         """

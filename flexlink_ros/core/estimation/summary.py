@@ -133,7 +133,7 @@ def summarize_periods(stamps_ns, estimate, ids, validity_threshold=VALIDITY_THRE
     stamps_ns : ndarray of int, shape (m,)
         Sample stamps [ns].
     estimate : dict
-        :func:`core.estimation.offline_run.estimate_offline`'s result for those samples.
+        :func:`core.estimation.offline.estimate_offline`'s result for those samples.
     ids : ndarray of int, shape (m,)
         :func:`period_ids` of the samples.
     validity_threshold : float

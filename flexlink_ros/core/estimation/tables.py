@@ -216,7 +216,7 @@ class _StepTables:
         self.g_stack = build_step_coefficients(stages)
         # The compiled step's convention: the sample in slot 0, stage 1 in slot 1.
         self.g0 = np.ascontiguousarray(self.g_stack[0])
-        self._bounds = {}
+        self._bounds, self._peaks = {}, {}
         self.second = self.second_packed = None
         if model.second_order is not None:
             self.second = SecondOrderForms(model.second_order)
@@ -239,10 +239,16 @@ class _StepTables:
         if key not in self._bounds:
             bound = math.inf
             if zeta > 0.0:
-                bound = safety_factor / (2.0 * zeta) * quasi_static_peak(model, self)
+                bound = safety_factor / (2.0 * zeta) * self.quasi_static_peak(model)
             # No load at all (or a singular K somewhere): no bound rather than a zero one.
             self._bounds[key] = bound if math.isfinite(bound) and bound > 0.0 else math.inf
         return self._bounds[key]
+
+    def quasi_static_peak(self, model):
+        """Return :func:`quasi_static_peak` of the model of these tables (computed once)."""
+        if model.speed_max not in self._peaks:
+            self._peaks[model.speed_max] = quasi_static_peak(model, self)
+        return self._peaks[model.speed_max]
 
     def record(self, weights, k, z, out):
         """

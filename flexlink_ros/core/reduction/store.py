@@ -79,7 +79,7 @@ def _array_digest(arrays):
         digest.update(name.encode())
         digest.update(array.dtype.str.encode())
         digest.update(repr(tuple(array.shape)).encode())
-        digest.update(array.tobytes())
+        digest.update(memoryview(array.reshape(-1)).cast('B'))   # the bytes, not a copy
     return digest.hexdigest()
 
 

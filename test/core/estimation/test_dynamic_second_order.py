@@ -13,7 +13,7 @@ from flexlink_ros.core.estimation import dynamic_second_order as dyn
 from flexlink_ros.core.estimation import native
 from flexlink_ros.core.estimation.dynamic_pass_kernel import dynamic_pass_compiled_available
 from flexlink_ros.core.estimation.dynamic_pass_kernel import DynamicPassKernel
-from flexlink_ros.core.estimation.offline_run import estimate_offline
+from flexlink_ros.core.estimation.offline import estimate_offline
 from flexlink_ros.core.estimation.step import NumpyStep, STAGE1
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
 from flexlink_ros.core.estimation.tables import step_tables

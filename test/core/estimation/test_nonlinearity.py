@@ -13,9 +13,9 @@ import math
 from estimation_toys import toy_model
 from flexlink_ros.core import validity
 from flexlink_ros.core.estimation import nonlinearity as nonlinearity_module
-from flexlink_ros.core.estimation import offline_run
 from flexlink_ros.core.estimation.native import compiled_step_available
 from flexlink_ros.core.estimation.nonlinearity import NonlinearityIndicator
+from flexlink_ros.core.estimation.offline import estimate_offline
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
 from flexlink_ros.core.fe import linkage as assembly
 from flexlink_ros.core.fe.simulate import periodic_response
@@ -126,7 +126,7 @@ def test_per_sample_batch_and_offline_agree(models):
     batch = indicator.batch(state[:, 0], state[:, 1], state[:, 2], states[:, :model.size],
                             states[:, model.size:])
     np.testing.assert_allclose(batch, [s.nonlinearity for s in samples], rtol=1e-9, atol=1e-12)
-    offline = offline_run.estimate_offline(model, stamps, angles, speeds)
+    offline = estimate_offline(model, stamps, angles, speeds)
     np.testing.assert_allclose(offline['nonlinearity'], batch, rtol=1e-6, atol=1e-9)
     # the compiled batch (the offline replay's) and the numpy batch agree too
     python = NonlinearityIndicator(model, compiled=False).batch(

@@ -1,25 +1,30 @@
 """
-The linkage as RViz/Foxglove markers, and its CDR written fast by patching a template.
+The node's outputs as CDR: one message (the node, per sample) or many rows at once (replay).
 
-:func:`linkage_markers` builds the ``visualization_msgs/MarkerArray`` of the rigid and the
-deformed linkage. Its layout is fixed for a frame and a number of points per link, so
-:class:`MarkerEncoder` serialises it once (zeroed padding) and then writes only stamps, points
-and colours into a copy, per message or for many messages at once (numpy rows). The row
-encoders here do the same for the fixed-layout messages of :mod:`.cdr`
-(``geometry_msgs/Vector3Stamped``, the criteria ``sensor_msgs/JointState``). All are
-byte-identical to the one-message serialisation (tested).
+Every output has a fixed layout for a frame, so each is serialised once as a template (zeroed
+padding, :func:`.cdr.serialize_message`) and then only its stamp and values are written into a
+copy: the deflections (``geometry_msgs/Vector3Stamped``, :func:`vector3_stamped_cdr`), the
+joint criteria and the quality (``sensor_msgs/JointState``, :func:`criteria_cdr`,
+:func:`quality_cdr`) and the deformed linkage (``visualization_msgs/MarkerArray`` of
+:func:`linkage_markers`, :class:`MarkerEncoder`). The row encoders (:func:`vector3_stamped_rows`,
+:func:`criteria_rows`, :func:`quality_rows`, :meth:`MarkerEncoder.encode_rows`) write many
+messages at once as numpy rows. All are byte-identical to rclpy's ``serialize_message`` of the
+same message (tested).
 """
 
+import functools
 import struct
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import Point
 import numpy as np
+from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
-from .cdr import criteria_template, serialize_message, vector3_stamped_cdr
+from .cdr import align, CDR_LE, ENCAPSULATION_SIZE, serialize_message
+from ..names import JOINT_NAMES as JOINTS, QUALITY_NAMES
 
 OK, WARN, ERROR, STALE = (DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR,
                           DiagnosticStatus.STALE)
@@ -27,6 +32,88 @@ LEVEL_COLOURS = {OK: (0.2, 0.7, 0.3), WARN: (1.0, 0.7, 0.0), ERROR: (0.9, 0.1, 0
                  STALE: (0.5, 0.5, 0.5)}
 LINK_COLOURS = ((0.25, 0.45, 0.85), (0.85, 0.4, 0.1), (0.2, 0.6, 0.4))
 
+
+# -- one message -----------------------------------------------------------------------------
+
+def _header_bytes(sec, nanosec, frame):
+    return CDR_LE + struct.pack('<iII', sec, nanosec, len(frame) + 1) + frame + b'\x00'
+
+
+def vector3_stamped_cdr(sec, nanosec, frame, x, y, z=0.0):
+    """CDR bytes of a ``geometry_msgs/Vector3Stamped`` (frame as UTF-8 bytes)."""
+    head = _header_bytes(sec, nanosec, frame)
+    return head + bytes(align(len(head), 8) - len(head)) + struct.pack('<3d', x, y, z)
+
+
+def criteria_cdr(sec, nanosec, frame, ratio, gamma_dot, force):
+    """CDR bytes of the criteria ``sensor_msgs/JointState`` (ros_messages.criteria_message)."""
+    if len(ratio) == len(gamma_dot) == len(force) == len(JOINTS):
+        # Per-sample path: the layout is fixed by the frame; patch a template (~1 us).
+        template, offsets = criteria_template(frame)
+        out = bytearray(template)
+        _STAMP.pack_into(out, 4, sec, nanosec)
+        _FOUR_DOUBLES.pack_into(out, offsets[0], *ratio)
+        _FOUR_DOUBLES.pack_into(out, offsets[1], *gamma_dot)
+        _FOUR_DOUBLES.pack_into(out, offsets[2], *force)
+        return bytes(out)
+    return _criteria_cdr_plain(sec, nanosec, frame, ratio, gamma_dot, force)
+
+
+@functools.lru_cache(maxsize=16)
+def criteria_template(frame):
+    """Serialise the criteria message of a frame; return it and its three arrays' offsets."""
+    joints = len(JOINTS)
+    sentinels = [[1.0e300 + k * 1e285 + j * 1e284 for j in range(joints)] for k in range(3)]
+    template = _criteria_cdr_plain(0, 0, frame, *sentinels)
+    offsets = [template.index(struct.pack(f'<{joints}d', *values)) for values in sentinels]
+    return template, offsets
+
+
+_STAMP = struct.Struct('<iI')
+_FOUR_DOUBLES = struct.Struct(f'<{len(JOINTS)}d')
+
+
+def _criteria_cdr_plain(sec, nanosec, frame, ratio, gamma_dot, force):
+    out = bytearray(_header_bytes(sec, nanosec, frame))
+    out += bytes(align(len(out), 4) - len(out)) + struct.pack('<I', len(JOINTS))
+    for name in JOINTS:
+        out += bytes(align(len(out), 4) - len(out))
+        out += struct.pack('<I', len(name) + 1) + name.encode() + b'\x00'
+    for values in (ratio, gamma_dot, force):
+        out += bytes(align(len(out), 4) - len(out)) + struct.pack('<I', len(values))
+        out += bytes(align(len(out), 8) - len(out)) + struct.pack(f'<{len(values)}d', *values)
+    return bytes(out)
+
+
+# Two doubles the quality template holds where each sample's indicators go.
+_QUALITY_SENTINELS = (1.0e300 + 3e285, 1.0e300 + 7e285)
+_QUALITY_VALUES = struct.Struct('<2d')
+
+
+@functools.lru_cache(maxsize=16)
+def quality_template(frame):
+    """Serialise the quality message of a frame (UTF-8); return it and its values' offset."""
+    template = serialize_message(JointState(
+        header=Header(frame_id=frame.decode()), name=list(QUALITY_NAMES),
+        position=list(_QUALITY_SENTINELS)))
+    return template, template.index(_QUALITY_VALUES.pack(*_QUALITY_SENTINELS))
+
+
+def quality_cdr(sec, nanosec, frame, error_indicator, nonlinearity):
+    """
+    Return the CDR of the quality ``sensor_msgs/JointState`` (ros/messages.py quality_message).
+
+    name = QUALITY_NAMES, position = the two indicators (frame as UTF-8 bytes). The per-sample
+    path: the layout is fixed by the frame, so a template is patched (~1 us).
+    """
+    template, offset = quality_template(frame)
+    out = bytearray(template)
+    _STAMP.pack_into(out, ENCAPSULATION_SIZE, sec, nanosec)
+    _QUALITY_VALUES.pack_into(out, offset, error_indicator, nonlinearity)
+    return bytes(out)
+
+
+# -- the linkage as markers -------------------------------------------------------------------
 
 def _colour(rgb, alpha=1.0):
     return ColorRGBA(r=float(rgb[0]), g=float(rgb[1]), b=float(rgb[2]), a=float(alpha))
@@ -254,7 +341,7 @@ def rows_to_bytes(rows):
 
 def vector3_stamped_rows(stamps_ns, frame, values):
     """
-    Return the CDR of many ``geometry_msgs/Vector3Stamped`` (as :func:`.cdr.vector3_stamped_cdr`).
+    Return the CDR of many ``geometry_msgs/Vector3Stamped`` (as :func:`vector3_stamped_cdr`).
 
     Parameters
     ----------
@@ -280,7 +367,7 @@ def vector3_stamped_rows(stamps_ns, frame, values):
 
 def criteria_rows(stamps_ns, frame, ratio, gamma_dot, force):
     """
-    Return the CDR of many criteria ``sensor_msgs/JointState`` (as :func:`.cdr.criteria_cdr`).
+    Return the CDR of many criteria ``sensor_msgs/JointState`` (as :func:`criteria_cdr`).
 
     Parameters
     ----------
@@ -305,4 +392,29 @@ def criteria_rows(stamps_ns, frame, ratio, gamma_dot, force):
     rows[:, 4:12] = _stamp_columns(stamps_ns)
     for offset, values in zip(offsets, (ratio, gamma_dot, force)):
         _put_doubles(rows, offset, values)
+    return rows
+
+
+def quality_rows(stamps_ns, frame, error_indicator, nonlinearity):
+    """
+    Return the CDR of many quality ``sensor_msgs/JointState`` (as :func:`quality_cdr`).
+
+    Parameters
+    ----------
+    stamps_ns : ndarray of int, shape (m,)
+        Stamps [ns].
+    frame : bytes
+        Frame id, UTF-8.
+    error_indicator, nonlinearity : ndarray, shape (m,)
+        The indicators [-] (NaN: not available).
+
+    Returns
+    -------
+    ndarray of uint8, shape (m, length)
+
+    """
+    template, offset = quality_template(frame)
+    rows = _template_rows(template, len(stamps_ns))
+    rows[:, ENCAPSULATION_SIZE:ENCAPSULATION_SIZE + 8] = _stamp_columns(stamps_ns)
+    _put_doubles(rows, offset, np.column_stack([error_indicator, nonlinearity]))
     return rows

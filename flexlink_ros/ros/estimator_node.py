@@ -1,13 +1,14 @@
 """
 The work of flexlink_node, shared by the plain and the managed (lifecycle) node.
 
-:class:`EstimatorPipeline` declares the parameters, loads the model, creates the publishers,
+:class:`EstimatorNode` declares the parameters, loads the model, creates the publishers,
 subscribes to the crank's JointState, runs the estimator on every message, publishes (and
 records, :mod:`.node_recording`) the outputs as CDR and publishes ``/diagnostics`` on a timer
 of the steady clock (so also on simulated time without ``/clock``, :mod:`.sim_time`). It is a
 mixin: the node classes in :mod:`.node` combine it with rclpy's ``Node`` or ``LifecycleNode``.
 """
 
+import functools
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -23,10 +24,10 @@ from visualization_msgs.msg import MarkerArray
 
 from . import diagnostics, parameters
 from .input_watch import InputWatch
-from .messages import diagnostics_message, joint_level, ns_to_stamp, quality_cdr
-from .node_model import (ClippedSpeedLog, crank_sample, load_node_model,
-                         marker_exaggeration, one_line, PeriodStats, publishable,
-                         SKIP_KINDS, Totals)
+from .message_outcomes import (ClippedSpeedLog, crank_sample, one_line, PeriodStats,
+                               publishable, SKIP_KINDS, Totals)
+from .messages import diagnostics_message, joint_level, ns_to_stamp
+from .node_model import load_node_model, marker_exaggeration
 from .node_recording import NodeRecording
 from .overrides import declare_table
 from .progress_log import ProgressLog
@@ -38,7 +39,7 @@ from ..core.estimation.streaming import StreamingEstimator
 from ..core.reduction.soft_basis import soft_basis_text
 from ..errors import ConflictingSample, FlexlinkError, InputRejected, OutlierSample
 from ..io import cdr
-from ..io.markers import MarkerEncoder
+from ..io.output_cdr import criteria_cdr, MarkerEncoder, quality_cdr, vector3_stamped_cdr
 from ..names import FIRST_INPUT_MESSAGE, READY_MESSAGE, TOPICS
 
 WARN_THROTTLE_S = 1.0  # at most one warning per second per kind of bad input
@@ -56,7 +57,14 @@ NAN = float('nan')
 OTHER_OUTPUT_DEPTH = 10   # history depth of markers and /diagnostics
 
 
-class EstimatorPipeline(NodeRecording):
+@functools.lru_cache(maxsize=4)
+def linear_resampling(points, count):
+    """Matrix (count, points): equally spaced points to ``count`` ones, linearly (as np.interp)."""
+    source, target = np.linspace(0.0, 1.0, points), np.linspace(0.0, 1.0, count)
+    return np.stack([np.interp(target, source, unit) for unit in np.eye(points)], axis=1)
+
+
+class EstimatorNode(NodeRecording):
     """The node's work, shared by the plain and the managed (lifecycle) node."""
 
     def _declare(self):
@@ -206,7 +214,8 @@ class EstimatorPipeline(NodeRecording):
             OVERDUE_PERIODS * self.values['diagnostics.period_s'] * 1e9)
 
     def _take(self, data):
-        receive_ns = self._clock.now().nanoseconds
+        recorder = self.recorder
+        receive_ns = self._clock.now().nanoseconds if recorder is not None else 0
         estimator = self.estimator
         if estimator is None or self.subscription is None:
             # Queued before a deactivate or cleanup that ran first: an inactive node's rule.
@@ -219,8 +228,7 @@ class EstimatorPipeline(NodeRecording):
             self._refuse('malformed', f'{len(data)} bytes, beyond the bound of '
                          f'{cdr.MAX_MESSAGE_BYTES}')
             return
-        if self.recorder is not None:
-            self._record_input(data, receive_ns)
+        self._to_record = None
         try:
             self._estimate(data, estimator)
         except Exception as exc:    # last resort: no message may stop the node
@@ -228,6 +236,11 @@ class EstimatorPipeline(NodeRecording):
                                     f'message: {one_line(exc)}',
                                     throttle_duration_sec=WARN_THROTTLE_S)
             self._refuse('internal', f'{type(exc).__name__}: {one_line(exc)}')
+        finally:
+            # Recorded once the outputs are out (they wait for nothing), input first.
+            if recorder is not None:
+                self._record_input(data, receive_ns)
+                self._record_outputs()
 
     def _estimate(self, data, estimator):
         try:
@@ -287,31 +300,39 @@ class EstimatorPipeline(NodeRecording):
                                       throttle_duration_sec=WARN_THROTTLE_S)
 
     def _publish_sample(self, stamp_ns, sample):
+        # Serialised once (exact CDR), published raw and recorded as the same bytes. The
+        # per-sample outputs go out first, before any bookkeeping; the markers (every n-th
+        # sample: link shapes and a MarkerArray) after them, so they do not delay this
+        # sample's deflection.
+        sec, nanosec = divmod(stamp_ns, 1_000_000_000)
+        frame = self._frame
+        outputs = [
+            ('lever_tip', vector3_stamped_cdr(sec, nanosec, frame, *sample.lever_tip)),
+            ('coupler_mid', vector3_stamped_cdr(sec, nanosec, frame, *sample.coupler_mid)),
+            ('criteria', criteria_cdr(sec, nanosec, frame, sample.criterion,
+                                      sample.gamma_dot, sample.reaction_n)),
+            ('quality', quality_cdr(sec, nanosec, frame, sample.error_indicator,
+                                    getattr(sample, 'nonlinearity', NAN)))]
+        published = self._publish(outputs)
         self.period.add_sample(sample)
         self._clipped.add(sample)     # beyond the model's speed range: counted and said
         if sample.message:
             self.get_logger().warning(f'estimator: {sample.message}',
                                       throttle_duration_sec=WARN_THROTTLE_S)
-        # Serialised once (exact CDR), published raw and recorded as the same bytes. The
-        # per-sample outputs go out first; the markers (every n-th sample: link shapes
-        # and a MarkerArray) after them, so they do not delay this sample's deflection.
-        sec, nanosec = divmod(stamp_ns, 1_000_000_000)
-        frame = self._frame
-        outputs = [
-            ('lever_tip', cdr.vector3_stamped_cdr(sec, nanosec, frame, *sample.lever_tip)),
-            ('coupler_mid', cdr.vector3_stamped_cdr(sec, nanosec, frame, *sample.coupler_mid)),
-            ('criteria', cdr.criteria_cdr(sec, nanosec, frame, sample.criterion,
-                                          sample.gamma_dot, sample.reaction_n)),
-            ('quality', quality_cdr(sec, nanosec, frame, sample.error_indicator,
-                                    getattr(sample, 'nonlinearity', NAN)))]
-        published = self._publish(outputs)
         if published and self.totals.published % self.values['markers.every_n'] == 0:
             markers = [('markers', self._markers(stamp_ns, sample))]
             self._publish(markers)
             outputs += markers
         self.totals.published += 1
         if self.recorder is not None:   # recorded even if shut down meanwhile: the input was
-            log_ns = self._log_time(self._clock.now().nanoseconds, stamp_ns)
+            self._to_record = (outputs, self._log_time(self._clock.now().nanoseconds,
+                                                       stamp_ns))
+
+    def _record_outputs(self):
+        """Record the outputs of the message just taken (after its input)."""
+        if self._to_record is not None:
+            outputs, log_ns = self._to_record
+            self._to_record = None
             for key, data in outputs:
                 self._record(self.output_topics[key], data, log_ns)
 
@@ -334,18 +355,12 @@ class EstimatorPipeline(NodeRecording):
         if encoder is None or (encoder.frame_id, encoder.count) != (values['frame_id'], count):
             encoder = self._marker_encoder = MarkerEncoder(values['frame_id'], count)
         positions, deflections = self.estimator.link_shapes(sample)
-        source = np.linspace(0.0, 1.0, positions.shape[1])
-        target = np.linspace(0.0, 1.0, count)
-
-        def resample(a):
-            return np.stack([np.interp(target, source, a[:, i]) for i in range(2)], axis=1)
-
+        resample = linear_resampling(positions.shape[1], count)
         joints = (positions[0, 0], positions[0, -1], positions[1, -1], positions[2, 0])
         levels = [joint_level(c, False, values['diagnostics.criterion_warn'],
                               values['diagnostics.criterion_error'])
                   for c in sample.criterion]
-        return encoder.encode(stamp_ns, [resample(p) for p in positions],
-                              [resample(d) for d in deflections],
+        return encoder.encode(stamp_ns, list(resample @ positions), list(resample @ deflections),
                               values['markers.exaggeration'] or self.auto_exaggeration,
                               joints, levels)
 
