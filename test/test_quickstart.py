@@ -24,7 +24,7 @@ from flexlink_ros.cli import main as cli
 from flexlink_ros.cli import plan_params
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.core.reduction import pipeline
+from flexlink_ros.core.reduction import mechanism_model
 from flexlink_ros.names import FIRST_INPUT_MESSAGE, READY_MESSAGE
 import numpy as np
 from test_readme import SCRIPTS, VENV_BIN, fenced_commands
@@ -56,7 +56,7 @@ def _write_plan_params(command, cwd):
     args = cli.build_parser().parse_args(shlex.split(command)[1:])
     assert args.params_out == 'my_node.yaml' and args.rpm_max == 600.0
     mechanism = load_mechanism(cwd / args.mechanism)
-    model = pipeline.model_for_mechanism(mechanism, CHOICE, cache_dir=cwd / 'cache')
+    model = mechanism_model.model_for_mechanism(mechanism, CHOICE, cache_dir=cwd / 'cache')
     plan_args = argparse.Namespace(mechanism=str(cwd / args.mechanism), rpm_max=args.rpm_max,
                                    rate_hz=1000.0, tolerance=args.tolerance)
     plan_params.write_params_file(cwd / args.params_out, mechanism, CHOICE, model, plan_args)
