@@ -27,7 +27,7 @@ from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction import mechanism_model
 from flexlink_ros.names import FIRST_INPUT_MESSAGE, READY_MESSAGE
 import numpy as np
-from test_readme import SCRIPTS, VENV_BIN, fenced_commands
+from test_readme import fenced_commands, SCRIPTS, VENV_BIN
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 PAGE = ROOT / 'docs' / 'quickstart-own-linkage.md'

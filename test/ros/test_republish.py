@@ -1,6 +1,5 @@
 """
-`flexlink replay --publish`: /clock, rate, loop, SIGINT, remappings and publishes the middleware
-refuses, between real processes.
+`flexlink replay --publish` between real processes: /clock, rate, loop, SIGINT, refusals.
 
 A listener process subscribes to the republished topic and to /clock and writes what it
 received; the replay is the `flexlink replay` command as a user runs it.
