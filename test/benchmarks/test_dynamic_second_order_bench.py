@@ -5,8 +5,8 @@ import shutil
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.reduction.dynamic_second_order_tables import load_for_model
 from flexlink_ros.core.reduction.pipeline import model_for_mechanism
-from flexlink_ros.studies.dynamic_second_order_bench import time_pass
-from flexlink_ros.studies.dynamic_second_order_study import case_options
+from dynamic_second_order_bench import time_pass
+from dynamic_second_order_study import case_options
 import pytest
 
 

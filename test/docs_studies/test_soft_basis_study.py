@@ -4,7 +4,7 @@ import dataclasses
 
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.reduction import pipeline
-from flexlink_ros.studies import soft_basis_study as study
+import soft_basis_study as study
 import numpy as np
 import pytest
 

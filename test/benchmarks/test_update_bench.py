@@ -4,7 +4,7 @@ from flexlink_ros.core.estimation.native import compiled_step_available
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction import pipeline
-from flexlink_ros.studies import update_bench
+import update_bench
 import pytest
 
 

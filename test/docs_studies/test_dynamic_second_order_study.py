@@ -3,7 +3,7 @@
 import shutil
 
 from flexlink_ros.core.mechanism_file import load_mechanism
-from flexlink_ros.studies import dynamic_second_order_study as study
+import dynamic_second_order_study as study
 import numpy as np
 import pytest
 

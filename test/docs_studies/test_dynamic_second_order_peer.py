@@ -7,7 +7,7 @@ on the coupler mid-point and the dynamic pass meets it.
 """
 
 from flexlink_ros.core.mechanism_file import load_mechanism
-from flexlink_ros.studies import dynamic_second_order_peer as study
+import dynamic_second_order_peer as study
 from flexlink_ros.studies import peer_exudyn
 import pytest
 
