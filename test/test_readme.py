@@ -2,10 +2,9 @@
 Every README and docs command that runs this package, run as written, or skipped with a reason.
 
 The commands are read at test time from README.md, the pages of ``docs/`` and
-``benchmarks/README.md``: every command of a fenced ``bash`` block
-(continuation lines joined, comments dropped, split at ``&&``, ``;`` and a trailing ``&``) and
-every command in the first column of the README's `flexlink` tool table. A command invokes the package
-when its program is ``flexlink``, ``flexlink_node`` or ``crank_driver`` (bare or under
+``benchmarks/README.md``: every command of a fenced ``bash`` block (continuation lines
+joined, comments dropped, split at ``&&``, ``;`` and a trailing ``&``) and every command in the
+first column of the README's `flexlink` tool table. A command invokes the package when its program is ``flexlink``, ``flexlink_node`` or ``crank_driver`` (bare or under
 ``.venv/bin/``), ``python -m flexlink_ros…``, or ``ros2 run|launch flexlink_ros``. Each such
 command is either in ``RUN`` (run with the installed console scripts of the venv running this
 test, ``.venv/bin/`` rewritten to it, in a temporary working directory holding what the README

@@ -2,8 +2,8 @@
 
 import shutil
 
-from flexlink_ros.core.mechanism_file import load_mechanism
 import dynamic_second_order_study as study
+from flexlink_ros.core.mechanism_file import load_mechanism
 import numpy as np
 import pytest
 
