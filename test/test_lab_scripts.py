@@ -15,8 +15,8 @@ import pytest
 REPO = pathlib.Path(__file__).resolve().parents[1]
 # Each script with the smallest arguments that still run its whole main.
 TINY_RUNS = {
-    'benchmarks/update_bench.py': ['--rounds', '1', '--samples', '50', '--json'],
-    'benchmarks/second_order_bench.py': ['--rounds', '1', '--samples', '50', '--json'],
+    'benchmarks/update_bench.py': ['--rounds', '2', '--samples', '300'],
+    'benchmarks/second_order_bench.py': ['--rounds', '2', '--samples', '300'],
     'docs/studies/soft_basis_study.py': ['--no-ramp', '--no-paper'],
     'docs/studies/validity_study.py': ['--rpm', '150', '--elements', '2', '--json'],
     'docs/studies/damping_study.py': ['--elements', '2', '--steps', '72'],
