@@ -84,6 +84,8 @@ RUN = {
     # The `flexlink` tool table.
     'flexlink kinematics --mechanism kang1990 --crank-deg 0:360:30':
         Run(('dead centres', 'transmission angle', 'coupler', 'lever')),
+    'flexlink kinematics --mechanism kang1990 --crank-deg 0:360:30 --rpm 300':
+        Run(('dead centres', 'transmission angle')),
     'flexlink criteria --mechanism kang1990 [--spring K THETA0_DEG]':
         Run(('true max', 'grid max', 'min R'), argv=(
             'flexlink criteria --mechanism kang1990',
@@ -142,6 +144,8 @@ SKIPPED = {
     'ros2 launch flexlink_ros flexlink_lifecycle.launch.py driver:=true': _LAUNCH,
     'ros2 launch flexlink_ros flexlink_lifecycle.launch.py autostart:=false': _LAUNCH,
     'ros2 launch flexlink_ros flexlink.launch.py --show-args': _LAUNCH,
+    'ros2 launch flexlink_ros flexlink.launch.py mechanism:=/path/my_linkage.yaml '
+    'params_file:=my_node.yaml': _LAUNCH,
     'flexlink replay other_bag --mechanism cho1992 --topic /robot/joint_states '
     '--joint crank_joint --publish':
         _PUBLISH,
