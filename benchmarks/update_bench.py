@@ -25,7 +25,7 @@ from flexlink_ros.core.estimation.step import MAX_SUBSTEP_NS
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.core.reduction.pipeline import model_for_mechanism
+from flexlink_ros.core.reduction.mechanism_model import model_for_mechanism
 
 # Rows per batched call of the step (below the compiled step's GIL release, as one sample).
 CHUNK = 50

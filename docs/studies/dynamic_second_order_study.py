@@ -1,9 +1,9 @@
 """
-The dynamic second-order pass per basis size: accuracy and cost of its step (issue 14).
+The dynamic second-order pass per basis size: accuracy and cost of its step.
 
 ``python docs/studies/dynamic_second_order_study.py [--rpm 391] [--elements 8]
 [--sizes 4,2 8,4] [--peer] [--cost] [--no-gravity] [--json]`` streams the numpy step of the
-pass (core/estimation/dynamic_second_order.py) at constant speed (rigid crank, rigid
+pass (core/estimation/second_order_dynamic_step.py) at constant speed (rigid crank, rigid
 bearings, gravity unless ``--no-gravity``) per basis size and prints its coupler and lever
 p2p against the full-order pass (core/fe/second_order_dynamic.py) and, with ``--peer``,
 against the Exudyn peer, next to the quasi-static estimate of the same model. ``--cost``
@@ -25,8 +25,8 @@ import numpy as np
 from flexlink_ros.studies.peer_exudyn import compare, peer_response
 from flexlink_ros.studies.peer_model import OUTPUT_KEYS
 from flexlink_ros.core.estimation import native
-from flexlink_ros.core.estimation.dynamic_pass_kernel import DynamicPassKernel
-from flexlink_ros.core.estimation.dynamic_second_order import DynamicSecondOrderStep, steady_revolution
+from flexlink_ros.core.estimation.second_order_dynamic_kernel import DynamicPassKernel
+from flexlink_ros.core.estimation.second_order_dynamic_step import DynamicSecondOrderStep, steady_revolution
 from flexlink_ros.core.estimation.step import NumpyStep
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
 from flexlink_ros.core.estimation.tables import step_tables
@@ -36,8 +36,8 @@ from flexlink_ros.core.fe.second_order_full import corrected_response
 from flexlink_ros.core.fe.simulate import periodic_response
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.core.reduction.dynamic_second_order_tables import load_for_model
-from flexlink_ros.core.reduction.pipeline import fe_mechanism, model_for_mechanism
+from flexlink_ros.core.reduction.mechanism_model import fe_mechanism, model_for_mechanism
+from flexlink_ros.core.reduction.second_order_dynamic_tables import load_for_model
 
 # The compiled kernels' timers live with the benchmarks, beside this folder.
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[2] / 'benchmarks'))

@@ -21,11 +21,13 @@ import pathlib
 
 import numpy as np
 
+from .estimate_nonlinear import add_nonlinear, CHOICES
 from .flex import nonlinearity_line
 from .main import emit
 from .model_args import (add_chart_argument, add_estimator_arguments, crank_rpm,
                          criterion_thresholds, load_model, model_options)
 from .plan_params import chosen_options, write_params_file
+from .plan_table import plan_table
 from .progress import Progress
 from ..core.mechanism_file import load_mechanism
 from ..core.numerics import RPM
@@ -33,7 +35,7 @@ from ..core.reduction.soft_basis import soft_basis_text
 from ..report.cycle_chart import plot_cycle
 from ..report.estimator import plot_error_vs_cost
 from ..studies.bench import run_bench
-from ..studies.plan import plan_table, run_plan
+from ..studies.plan import run_plan
 from ..studies.synthetic import run_estimate
 
 
@@ -61,6 +63,7 @@ def _estimate(args):
             f'{result["us_per_sample_p99"]:.1f} us p99 (r = {model.size}, '
             f'{soft_basis_text(model)}, '
             f'{model.grid_size} grid cells)\n  ' + nonlinearity_line(result['nonlinearity']))
+    text += '\n' + '\n'.join(add_nonlinear(args, mechanism, options, result))
     if args.chart:
         result['chart'] = str(_estimate_chart(args, mechanism, model, result))
         text += f"\n  chart {result['chart']}"
@@ -168,6 +171,10 @@ def register(subparsers):
     parser.add_argument('--no-warm-start', action='store_true',
                         help='start from the static deflection, not the periodic state')
     parser.add_argument('--seed', type=int, default=0, help='jitter random seed')
+    parser.add_argument('--nonlinear', choices=CHOICES, default='auto',
+                        help='the reduced geometrically nonlinear model: auto (default: where '
+                        "the linear estimate's validity indicator says it is not valid), on, "
+                        "off; the deflections reported are the chosen model's")
     add_chart_argument(parser)
     parser.set_defaults(func=_estimate)
 

@@ -31,7 +31,6 @@ COMMANDS = {
     'mcap-info': 'flexlink_ros.cli.mcap',
     'mcap-recover': 'flexlink_ros.cli.mcap',
     'mcap-record': 'flexlink_ros.cli.mcap_record',
-    'node-bench': 'flexlink_ros.cli.node_bench',
     'reindex': 'flexlink_ros.cli.reindex',
     'replay': 'flexlink_ros.cli.replay',
     'report': 'flexlink_ros.cli.report',

@@ -1,16 +1,16 @@
 """
-Validity of the linear + second-order estimate: a per-sample nonlinearity indicator (issue 14).
+Validity of the linear + second-order estimate: a per-sample nonlinearity indicator.
 
-The linear KED model (:mod:`core.assembly`) stiffens each link's bending by the geometric
+The linear KED model (:mod:`core.fe.linkage`) stiffens each link's bending by the geometric
 stiffness of the RIGID-BODY axial force F_r(x) (A.4). The geometrically exact linkage carries the
 whole axial force: F_r plus the ELASTIC part N_e that the elastic vibration adds (the inertia
 of the vibrating links and joint masses reacted along the links). N_e is amplitude dependent, so
 it detunes the bending modes with the response itself; near a resonance that detuning decides
 the amplitude, and neither the linear model nor the quasi-static second order of
-:mod:`core.second_order` (computed from the linear state) can follow it.
+:mod:`core.fe.second_order_full` (computed from the linear state) can follow it.
 
 Elastic axial force (from the linear state only). The FE element axial force EA (u2 - u1) / l_e
-(:meth:`core.assembly.FlexibleLinkage.element_axial_forces`) is, for the axially stiff links
+(:meth:`core.fe.linkage.FlexibleLinkage.element_axial_forces`) is, for the axially stiff links
 (axial modes above 2 kHz), quasi-static: the element average of the axial force the FE loads
 carry. Its rigid-body part is the element average of F_r(x) (:func:`core.dynamics.axial_force`,
 Gauss-averaged), so ::
@@ -39,7 +39,7 @@ resonance: where it is small the response amplitude hardly depends on the shift,
 state (and the second order computed from it) stands; where it approaches 1 the peer's resonance
 has moved by about its own width and one corrective pass cannot follow it.
 
-Choice, against the Exudyn peer (``python -m flexlink_ros.studies.validity_study``, rigid crank
+Choice, against the Exudyn peer (``python docs/studies/validity_study.py``, rigid crank
 and bearings, no gravity, 8 elements per link, 250-450 rpm; README note for the tables). Three
 candidates were computed from the linear state:
 

@@ -2,8 +2,8 @@
 The statuses of flexlink_node's ``/diagnostics``: plain functions of the node's counts.
 
 One status for the input, one for the estimator, one per joint (O2, A, B, O4) and one for the
-recorder, each from the totals (:class:`node_model.Totals`), the period's counts
-(:class:`node_model.PeriodStats`) and the node's parameter values. A managed node that is not
+recorder, each from the totals (:class:`message_outcomes.Totals`), the period's counts
+(:class:`message_outcomes.PeriodStats`) and the node's parameter values. A managed node that is not
 active says so instead (:func:`inactive_statuses`, :func:`unconfigured_statuses`). The names
 are relative ('estimator'); :func:`named` prefixes them with the node's fully qualified name,
 as diagnostic_updater prefixes its node's name ('/robot1/flexlink_node: estimator').
@@ -13,8 +13,8 @@ import math
 
 import numpy as np
 
+from .message_outcomes import OTHER_KINDS, PeriodStats, SKIP_KINDS, WARN_FLAGS
 from .messages import ERROR, joint_level, OK, STALE, status, WARN
-from .node_model import OTHER_KINDS, PeriodStats, SKIP_KINDS, WARN_FLAGS
 from ..core.estimation.sample import SampleFlag
 from ..core.validity import VALIDITY_THRESHOLD
 from ..names import JOINT_NAMES
@@ -26,9 +26,9 @@ def input_status(totals, period, values, topic, rate_hz, stale_s, watch=({}, ())
 
     Parameters
     ----------
-    totals : node_model.Totals
+    totals : message_outcomes.Totals
         Counts since the start.
-    period : node_model.PeriodStats
+    period : message_outcomes.PeriodStats
         Counts of the period.
     values : dict
         Parameter name -> value.
@@ -72,9 +72,9 @@ def input_counts(totals, period, values):
 
     Parameters
     ----------
-    totals : node_model.Totals
+    totals : message_outcomes.Totals
         Counts since the start.
-    period : node_model.PeriodStats
+    period : message_outcomes.PeriodStats
         Counts of the period.
     values : dict
         Key values so far (changed in place and returned).
@@ -98,7 +98,7 @@ def estimator_level(period, error_indicator_warn, nonlinearity_warn=VALIDITY_THR
 
     Parameters
     ----------
-    period : node_model.PeriodStats
+    period : message_outcomes.PeriodStats
         Counts of the period.
     error_indicator_warn : float
         WARN above this error indicator.
@@ -141,7 +141,7 @@ def estimator_status(period, values, model_facts):
 
     Parameters
     ----------
-    period : node_model.PeriodStats
+    period : message_outcomes.PeriodStats
         Counts of the period.
     values : dict
         Parameter name -> value.
@@ -175,7 +175,7 @@ def joint_statuses(period, values, criteria_source):
 
     Parameters
     ----------
-    period : node_model.PeriodStats
+    period : message_outcomes.PeriodStats
         Counts of the period.
     values : dict
         Parameter name -> value.
@@ -243,7 +243,7 @@ def inactive_statuses(totals, topic, model_facts, recorder_state):
 
     Parameters
     ----------
-    totals : node_model.Totals
+    totals : message_outcomes.Totals
         Counts since the configure transition.
     topic : str
         The input topic (not subscribed while inactive).

@@ -19,7 +19,7 @@ Exact repeats are counted and not published again; an estimate beyond the model'
 non-finite) is counted and not published. SIGINT/SIGTERM during start-up exit with one line
 and code 0 (ros/startup.py).
 
-The work is :class:`pipeline.EstimatorPipeline`; this module holds the two node classes that
+The work is :class:`estimator_node.EstimatorNode`; this module holds the two node classes that
 run it (plain and managed), the start-up and ``main``.
 """
 
@@ -44,16 +44,16 @@ from rclpy.node import Node  # noqa: E402
 from rclpy.utilities import remove_ros_args  # noqa: E402
 
 from . import parameters, runtime, startup  # noqa: E402
+from .estimator_node import EstimatorNode  # noqa: E402
 from .overrides import NODE_OPTIONS  # noqa: E402
 from .parameters import parameter_help  # noqa: E402
-from .pipeline import EstimatorPipeline  # noqa: E402
 from ..errors import FlexlinkError  # noqa: E402
 
 # GIL switch interval of the node process [s] (see main).
 SWITCH_INTERVAL_S = 0.0005
 
 
-class FlexlinkNode(EstimatorPipeline, Node):
+class FlexlinkNode(EstimatorNode, Node):
     """flexlink_node: configured and streaming from construction."""
 
     finalized = False   # runs until SIGINT/SIGTERM
@@ -65,7 +65,7 @@ class FlexlinkNode(EstimatorPipeline, Node):
         self._activate()
 
 
-class FlexlinkManagedNode(EstimatorPipeline, LifecycleNode):
+class FlexlinkManagedNode(EstimatorNode, LifecycleNode):
     """
     flexlink_node as a managed (lifecycle) node.
 

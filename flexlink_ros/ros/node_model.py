@@ -1,111 +1,19 @@
 """
-What flexlink_node does with a message and its model, without rclpy.
+The model flexlink_node loads, without rclpy: read the mechanism, load or build its model.
 
-The crank sample of a JointState's CDR, whether an estimate may be published, the counts the
-node keeps (in total and per diagnostics period) and the model the node loads; the node's log
-lines that tools wait for.
+Also what the node derives from the model at start-up (the markers' exaggeration).
 """
 
 import dataclasses
-import math
-import time
 
 from . import parameters
-from .messages import crank_from_joint_state
 from ..core.estimation.marker_scale import default_exaggeration, MARKER_SHARE
-from ..core.estimation.sample import SampleFlag
-from ..core.mechanism_file import read_mechanism_file
-from ..core.numerics import RPM
-from ..core.reduction.pipeline import model_for_mechanism
-from ..errors import InputRejected, MalformedCdr
-from ..io import cdr
-
-# The default model (node parameters, core.options.DEFAULT_SIZES) meets this relative RMS
-# error on Cho 1992 against flexlink plan's scene reference (1.3 % coupler, 0.9 % lever).
-DEFAULT_MODEL_TOLERANCE = 0.02
-MAX_REASON_CHARS = 200   # a refusal's reason as logged and in /diagnostics
-# What happens to a received message (counted per kind, in total and per diagnostics period).
-SKIP_KINDS = ('malformed', 'content', 'estimator', 'internal')   # counted as 'skipped'
-# 'inactive': delivered after deactivate or cleanup (queued before it), not estimated.
-OTHER_KINDS = ('outlier', 'conflicting', 'repeated', 'out_of_bound', 'inactive')
-# Flags after which the estimate is not to be trusted blindly: the estimator status is WARN.
-WARN_FLAGS = (SampleFlag.CLIPPED_SPEED | SampleFlag.CLIPPED_ACCEL | SampleFlag.OUTLIER
-              | SampleFlag.COLD_START)
+from ..core.mechanism_file import read_mechanism_file, read_mechanism_source
+from ..core.options import PLANNED_TOLERANCE
+from ..core.reduction.mechanism_model import model_for_mechanism
 
 
-def one_line(text):
-    """Return the first line of ``text``, cut to MAX_REASON_CHARS."""
-    lines = str(text).strip().splitlines()
-    line = lines[0] if lines else ''
-    return line if len(line) <= MAX_REASON_CHARS else line[:MAX_REASON_CHARS - 3] + '...'
-
-
-def crank_sample(data, joint_name, deserialize):
-    """
-    Read stamp, angle and speed of the crank from JointState CDR; InputRejected says why not.
-
-    The fast parser (cdr.parse_joint_state) checks the bytes against the input bounds; only a
-    message without a usable sample is deserialised by rclpy, to name what is wrong, and an
-    error there (rclpy raises RMWError on truncated CDR) is a refusal too.
-
-    Parameters
-    ----------
-    data : bytes
-        CDR of a ``sensor_msgs/JointState``.
-    joint_name : str
-        Name of the crank joint.
-    deserialize : callable
-        bytes -> sensor_msgs.msg.JointState (rclpy's deserialize_message).
-
-    Returns
-    -------
-    stamp_ns : int
-    angle : float
-    speed : float or None
-
-    Raises
-    ------
-    errors.InputRejected
-        With ``kind`` 'malformed' or 'content' and a one-line reason.
-
-    """
-    try:
-        stamp_ns, angle, speed = cdr.parse_joint_state(data, joint_name.encode())
-    except MalformedCdr as exc:
-        raise InputRejected(f'malformed JointState: {one_line(exc)}', 'malformed') from None
-    if angle is None or not math.isfinite(angle) or (
-            speed is not None and not math.isfinite(speed)):
-        try:
-            message = deserialize(data)
-        except (RuntimeError, ValueError, TypeError, MemoryError) as exc:  # RMWError: Runtime
-            raise InputRejected(f'malformed JointState ({type(exc).__name__}): '
-                                f'{one_line(exc)}', 'malformed') from None
-        stamp_ns, angle, speed = crank_from_joint_state(message, joint_name)
-    if stamp_ns <= 0:
-        raise InputRejected('zero stamp (the publisher does not stamp its messages)'
-                            if stamp_ns == 0 else f'negative stamp {stamp_ns} ns')
-    return stamp_ns, angle, speed
-
-
-def publishable(sample):
-    """
-    Say why a Sample's numbers may not be published (None if they may).
-
-    The estimator flags OUT_OF_BOUND every estimate beyond its deflection bound or not finite
-    (a non-finite state makes the deflections non-finite), so the flag is the one test.
-
-    Parameters
-    ----------
-    sample : core.estimation.streaming.Sample
-        One estimate.
-
-    """
-    if sample.flags & SampleFlag.OUT_OF_BOUND:
-        return sample.message or "deflection beyond the model's bound"
-    return None
-
-
-def load_node_model(values, warn, progress=None):
+def load_node_model(values, warn, progress=None, source=None):
     """
     Load the mechanism and its reduced model (cached, else built).
 
@@ -119,6 +27,9 @@ def load_node_model(values, warn, progress=None):
         Called with a warning sentence.
     progress : callable or None
         ``progress(done, total, what)`` while the model is built (not on a cache hit).
+    source : (path, bytes), optional
+        The mechanism file as read once by the caller (:func:`read_mechanism_source`, whose
+        bytes the recording also names); default: ``values['mechanism']`` read here.
 
     Returns
     -------
@@ -129,14 +40,15 @@ def load_node_model(values, warn, progress=None):
         Warnings given (empty if none).
 
     """
-    mechanism, file_beta = read_mechanism_file(values['mechanism'])   # read once
+    path, raw = source or read_mechanism_source(values['mechanism'])
+    mechanism, file_beta = read_mechanism_file(path, raw=raw)
     zeta = values['damping_ratio']      # -1: the file's
     if zeta >= 0.0 and zeta != mechanism.damping_ratio:
         mechanism = dataclasses.replace(mechanism, damping_ratio=zeta)
     options = parameters.model_options(values, file_beta, mechanism.crank_speed)
     notes = []
-    if values['model.modes'] == 0 and values['model.tolerance'] < DEFAULT_MODEL_TOLERANCE:
-        notes.append(f'the default model was planned for {DEFAULT_MODEL_TOLERANCE:g} relative '
+    if values['model.modes'] == 0 and values['model.tolerance'] < PLANNED_TOLERANCE:
+        notes.append(f'the default model was planned for {PLANNED_TOLERANCE:g} relative '
                      f'error; for {values["model.tolerance"]:g} run `flexlink plan --tolerance '
                      f'{values["model.tolerance"]:g}` and set model.modes')
         warn(notes[-1])
@@ -149,47 +61,6 @@ def load_node_model(values, warn, progress=None):
         notes.append(f'stepping all {model.size} coordinates: {soft.get("reason")}')
         warn(notes[-1])
     return model, options, notes
-
-
-class ClippedSpeedLog:
-    """
-    Samples estimated at a speed clipped to the model's range: counted, said once a second.
-
-    Throttled by its own clock, not by the logger's: a logger call costs tens of us, and
-    clipping comes on every sample of a crank beyond the range.
-
-    Parameters
-    ----------
-    warn : callable
-        Called with the warning sentence.
-    running : callable
-        False once the node shuts down (then nothing is logged).
-    speed_max : float
-        The model's speed range [rad/s].
-    throttle_s : float
-        Least time between two warnings [s] (the node's other warnings: once a second).
-
-    """
-
-    def __init__(self, warn, running, speed_max, throttle_s=1.0):
-        self.count = 0
-        self._warn, self._running = warn, running
-        self._speed_max, self._throttle_s = speed_max, throttle_s
-        self._said = -math.inf
-
-    def add(self, sample):
-        """Count ``sample`` if its speed was clipped; warn at most once per throttle period."""
-        if not sample.flags & SampleFlag.CLIPPED_SPEED:
-            return
-        self.count += 1
-        now = time.monotonic()
-        if now - self._said < self._throttle_s or not self._running():
-            return
-        self._said = now
-        self._warn(f'crank at {abs(sample.crank_speed) / RPM:.0f} rpm, beyond the speed range '
-                   f'of the model of {self._speed_max / RPM:.0f} rpm: {self.count} samples so '
-                   'far estimated at the clipped speed (too small); restart with '
-                   "model.speed_max_rpm above the crank's speed")
 
 
 def marker_exaggeration(estimator, log):
@@ -209,52 +80,3 @@ def marker_exaggeration(estimator, log):
         f"peak, {peak * 1e6:.3g} um, as at least {MARKER_SHARE:.0%} of the coupler's "
         f'{length:g} m)')
     return factor
-
-
-@dataclasses.dataclass
-class Totals:
-    """What became of every received message since the node started."""
-
-    received: int = 0
-    rejected: int = 0       # skipped (SKIP_KINDS)
-    published: int = 0
-    counts: dict = dataclasses.field(
-        default_factory=lambda: dict.fromkeys(SKIP_KINDS + OTHER_KINDS, 0))   # kind -> messages
-    last_rejection: str = ''
-    last_outlier: str = ''
-
-
-@dataclasses.dataclass
-class PeriodStats:
-    """What happened since the last /diagnostics message."""
-
-    valid: int = 0
-    rejected: int = 0
-    counts: dict = dataclasses.field(default_factory=dict)   # kind -> messages
-    last_out_of_bound: str = ''
-    update_ns: list = dataclasses.field(default_factory=list)
-    max_error_indicator: float = 0.0
-    max_nonlinearity: float = -math.inf     # validity indicator (NaN samples left out)
-    max_criterion: list = dataclasses.field(default_factory=lambda: [0.0] * 4)
-    near_zero: list = dataclasses.field(default_factory=lambda: [False] * 4)
-    flags: int = 0
-
-    def add_sample(self, sample):
-        """
-        Count a published sample: its flags, error and validity indicators, joint criteria.
-
-        Parameters
-        ----------
-        sample : core.estimation.streaming.Sample
-            The estimate published.
-
-        """
-        self.valid += 1
-        self.flags |= sample.flags
-        self.max_error_indicator = max(self.max_error_indicator, sample.error_indicator)
-        if sample.nonlinearity > self.max_nonlinearity:
-            self.max_nonlinearity = sample.nonlinearity
-        for j, value in enumerate(sample.criterion):
-            if value > self.max_criterion[j]:
-                self.max_criterion[j] = value
-            self.near_zero[j] = self.near_zero[j] or sample.near_zero[j]

@@ -1,13 +1,13 @@
 """
 flexlink_node's recording: what it opens, what it records, with which QoS and log time.
 
-:class:`NodeRecording` is the recording part of :class:`.pipeline.EstimatorPipeline` (a mixin
-of the node classes). The outputs are declared with their publishers' QoS when the recording
-opens. The input topic is declared with the QoS its publishers offer, read from the ROS graph
-as ``ros2 bag record`` does: at once if a publisher is known then, else at the first input
-message (whose publisher the graph knows by then); the node's own subscription QoS stands in
-only if the graph names none. Log times come from :class:`.sim_time.LogTime`: the node clock,
-or the input stamp while a simulated clock reads 0.
+:class:`NodeRecording` is the recording part of :class:`.estimator_node.EstimatorNode` (a
+mixin of the node classes). The outputs are declared with their publishers' QoS when the
+recording opens. The input topic is declared with the QoS its publishers offer, read from
+the ROS graph as ``ros2 bag record`` does: at once if a publisher is known then, else at the
+first input message (whose publisher the graph knows by then); the node's own subscription
+QoS stands in only if the graph names none. Log times come from :class:`.sim_time.LogTime`:
+the node clock, or the input stamp while a simulated clock reads 0.
 """
 
 import time
@@ -74,11 +74,12 @@ class NodeRecording:
     def _provenance(self):
         """Say what makes the recording: mechanism file, model options, version."""
         values = self.values
+        path, raw = self.mechanism_source       # the bytes the model was built from
         try:
-            return provenance_entries(NODE_NAME, values['mechanism'], self.options,
+            return provenance_entries(NODE_NAME, str(path.resolve()), self.options,
                                       self.model.zeta, values['crank_joint'],
-                                      values['model.warm_start'])
-        except (FlexlinkError, OSError) as exc:   # the file went away since the model loaded
+                                      values['model.warm_start'], raw=raw)
+        except (FlexlinkError, OSError) as exc:   # the recording goes on without it
             self.get_logger().warning(f'the recording will not name its mechanism: {exc}')
             return provenance_entries(NODE_NAME)
 

@@ -13,8 +13,8 @@ from flexlink_ros.core import validity
 from flexlink_ros.core.estimation.sample import Sample
 from flexlink_ros.names import NODE_NAME, READY_MESSAGE
 from flexlink_ros.ros import diagnostics
+from flexlink_ros.ros.message_outcomes import PeriodStats
 from flexlink_ros.ros.messages import OK, WARN
-from flexlink_ros.ros.node_model import PeriodStats
 import test_node
 from test_node import DISCOVERY_TIMEOUT_S, joint_state, NodeProcess, READY_TIMEOUT_S, spin_until
 

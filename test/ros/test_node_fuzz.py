@@ -8,8 +8,8 @@ import time
 from flexlink_ros.errors import InputRejected
 from flexlink_ros.io import cdr
 from flexlink_ros.names import READY_MESSAGE
+from flexlink_ros.ros.message_outcomes import crank_sample, SKIP_KINDS
 from flexlink_ros.ros.messages import ns_to_stamp
-from flexlink_ros.ros.node_model import crank_sample, SKIP_KINDS
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
@@ -118,7 +118,7 @@ def test_parse_path_refuses_every_mutation_with_a_reason():
 
 
 def test_truncated_effort_is_refused_not_raised():
-    # The example: a NaN position and the effort array 8 bytes short.
+    # The message that once killed the node: a NaN position and the effort array 8 bytes short.
     data = bytearray(valid_message(1))
     data[-40:-32] = struct.pack('<d', math.nan)
     data = bytes(data[:-8])

@@ -1,13 +1,14 @@
 """
 The work of flexlink_node, shared by the plain and the managed (lifecycle) node.
 
-:class:`EstimatorPipeline` declares the parameters, loads the model, creates the publishers,
+:class:`EstimatorNode` declares the parameters, loads the model, creates the publishers,
 subscribes to the crank's JointState, runs the estimator on every message, publishes (and
 records, :mod:`.node_recording`) the outputs as CDR and publishes ``/diagnostics`` on a timer
 of the steady clock (so also on simulated time without ``/clock``, :mod:`.sim_time`). It is a
 mixin: the node classes in :mod:`.node` combine it with rclpy's ``Node`` or ``LifecycleNode``.
 """
 
+import functools
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -23,10 +24,10 @@ from visualization_msgs.msg import MarkerArray
 
 from . import diagnostics, parameters
 from .input_watch import InputWatch
+from .message_outcomes import (ClippedSpeedLog, crank_sample, one_line, PeriodStats,
+                               publishable, SKIP_KINDS, Totals)
 from .messages import diagnostics_message, joint_level, ns_to_stamp
-from .node_model import (ClippedSpeedLog, crank_sample, load_node_model,
-                         marker_exaggeration, one_line, PeriodStats, publishable,
-                         SKIP_KINDS, Totals)
+from .node_model import load_node_model, marker_exaggeration
 from .node_recording import NodeRecording
 from .overrides import declare_table
 from .progress_log import ProgressLog
@@ -35,6 +36,7 @@ from .sim_time import ClockWatch, LogTime
 from .startup import check_startup_signal
 from ..core.estimation.sample import SampleFlag
 from ..core.estimation.streaming import StreamingEstimator
+from ..core.mechanism_file import read_mechanism_source
 from ..core.reduction.soft_basis import soft_basis_text
 from ..errors import ConflictingSample, FlexlinkError, InputRejected, OutlierSample
 from ..io import cdr
@@ -56,7 +58,14 @@ NAN = float('nan')
 OTHER_OUTPUT_DEPTH = 10   # history depth of markers and /diagnostics
 
 
-class EstimatorPipeline(NodeRecording):
+@functools.lru_cache(maxsize=4)
+def linear_resampling(points, count):
+    """Matrix (count, points): equally spaced points to ``count`` ones, linearly (as np.interp)."""
+    source, target = np.linspace(0.0, 1.0, points), np.linspace(0.0, 1.0, count)
+    return np.stack([np.interp(target, source, unit) for unit in np.eye(points)], axis=1)
+
+
+class EstimatorNode(NodeRecording):
     """The node's work, shared by the plain and the managed (lifecycle) node."""
 
     def _declare(self):
@@ -87,8 +96,10 @@ class EstimatorPipeline(NodeRecording):
         log = self.get_logger()
         start = time.perf_counter()
         check_startup_signal()
-        self.model, self.options, self.notes = load_node_model(values, log.warning,
-                                                               ProgressLog(log.info))
+        # Read once: the model is built from these bytes and the recording names them.
+        self.mechanism_source = read_mechanism_source(values['mechanism'])
+        self.model, self.options, self.notes = load_node_model(
+            values, log.warning, ProgressLog(log.info), self.mechanism_source)
         check_startup_signal()
         self.criteria_source = self.model.info.get('criteria', 'unknown')
         log.info(f'model: {self.model.size} coordinates, {soft_basis_text(self.model)}, '
@@ -206,7 +217,8 @@ class EstimatorPipeline(NodeRecording):
             OVERDUE_PERIODS * self.values['diagnostics.period_s'] * 1e9)
 
     def _take(self, data):
-        receive_ns = self._clock.now().nanoseconds
+        recorder = self.recorder
+        receive_ns = self._clock.now().nanoseconds if recorder is not None else 0
         estimator = self.estimator
         if estimator is None or self.subscription is None:
             # Queued before a deactivate or cleanup that ran first: an inactive node's rule.
@@ -219,8 +231,7 @@ class EstimatorPipeline(NodeRecording):
             self._refuse('malformed', f'{len(data)} bytes, beyond the bound of '
                          f'{cdr.MAX_MESSAGE_BYTES}')
             return
-        if self.recorder is not None:
-            self._record_input(data, receive_ns)
+        self._to_record = None
         try:
             self._estimate(data, estimator)
         except Exception as exc:    # last resort: no message may stop the node
@@ -228,6 +239,11 @@ class EstimatorPipeline(NodeRecording):
                                     f'message: {one_line(exc)}',
                                     throttle_duration_sec=WARN_THROTTLE_S)
             self._refuse('internal', f'{type(exc).__name__}: {one_line(exc)}')
+        finally:
+            # Recorded once the outputs are out (they wait for nothing), input first.
+            if recorder is not None:
+                self._record_input(data, receive_ns)
+                self._record_outputs()
 
     def _estimate(self, data, estimator):
         try:
@@ -287,14 +303,10 @@ class EstimatorPipeline(NodeRecording):
                                       throttle_duration_sec=WARN_THROTTLE_S)
 
     def _publish_sample(self, stamp_ns, sample):
-        self.period.add_sample(sample)
-        self._clipped.add(sample)     # beyond the model's speed range: counted and said
-        if sample.message:
-            self.get_logger().warning(f'estimator: {sample.message}',
-                                      throttle_duration_sec=WARN_THROTTLE_S)
         # Serialised once (exact CDR), published raw and recorded as the same bytes. The
-        # per-sample outputs go out first; the markers (every n-th sample: link shapes
-        # and a MarkerArray) after them, so they do not delay this sample's deflection.
+        # per-sample outputs go out first, before any bookkeeping; the markers (every n-th
+        # sample: link shapes and a MarkerArray) after them, so they do not delay this
+        # sample's deflection.
         sec, nanosec = divmod(stamp_ns, 1_000_000_000)
         frame = self._frame
         outputs = [
@@ -305,13 +317,25 @@ class EstimatorPipeline(NodeRecording):
             ('quality', quality_cdr(sec, nanosec, frame, sample.error_indicator,
                                     getattr(sample, 'nonlinearity', NAN)))]
         published = self._publish(outputs)
+        self.period.add_sample(sample)
+        self._clipped.add(sample)     # beyond the model's speed range: counted and said
+        if sample.message:
+            self.get_logger().warning(f'estimator: {sample.message}',
+                                      throttle_duration_sec=WARN_THROTTLE_S)
         if published and self.totals.published % self.values['markers.every_n'] == 0:
             markers = [('markers', self._markers(stamp_ns, sample))]
             self._publish(markers)
             outputs += markers
         self.totals.published += 1
         if self.recorder is not None:   # recorded even if shut down meanwhile: the input was
-            log_ns = self._log_time(self._clock.now().nanoseconds, stamp_ns)
+            self._to_record = (outputs, self._log_time(self._clock.now().nanoseconds,
+                                                       stamp_ns))
+
+    def _record_outputs(self):
+        """Record the outputs of the message just taken (after its input)."""
+        if self._to_record is not None:
+            outputs, log_ns = self._to_record
+            self._to_record = None
             for key, data in outputs:
                 self._record(self.output_topics[key], data, log_ns)
 
@@ -334,18 +358,12 @@ class EstimatorPipeline(NodeRecording):
         if encoder is None or (encoder.frame_id, encoder.count) != (values['frame_id'], count):
             encoder = self._marker_encoder = MarkerEncoder(values['frame_id'], count)
         positions, deflections = self.estimator.link_shapes(sample)
-        source = np.linspace(0.0, 1.0, positions.shape[1])
-        target = np.linspace(0.0, 1.0, count)
-
-        def resample(a):
-            return np.stack([np.interp(target, source, a[:, i]) for i in range(2)], axis=1)
-
+        resample = linear_resampling(positions.shape[1], count)
         joints = (positions[0, 0], positions[0, -1], positions[1, -1], positions[2, 0])
         levels = [joint_level(c, False, values['diagnostics.criterion_warn'],
                               values['diagnostics.criterion_error'])
                   for c in sample.criterion]
-        return encoder.encode(stamp_ns, [resample(p) for p in positions],
-                              [resample(d) for d in deflections],
+        return encoder.encode(stamp_ns, list(resample @ positions), list(resample @ deflections),
                               values['markers.exaggeration'] or self.auto_exaggeration,
                               joints, levels)
 

@@ -1,9 +1,13 @@
 """
-`flexlink node-bench`: end-to-end latency, loss and footprint of flexlink_node.
+End-to-end latency, loss and footprint of flexlink_node next to a bare rclpy echo node.
+
+    python benchmarks/node_bench.py [--rate-hz 1000] [--max-rate-hz 8000] [--seconds 3]
+        [--runs 1] [--reference-root OTHER] [--no-recording] [--out DIR] [--json]
 
 Prints figures (it is not a timed test). One run measures, on loopback in a domain of its own,
 a bare rclpy echo node (JointState in, the same bytes out: the floor any Python node pays) and
-flexlink_node without and with recording, each in its own process with the same executor:
+flexlink_node without and with recording, each in its own process with the same executor
+(the node of this source tree, not an installed copy):
 
 - latency JointState -> output (the output carries the input's stamp, which is the send time):
   p50 and p99 at each rate;
@@ -11,9 +15,13 @@ flexlink_node without and with recording, each in its own process with the same 
 - RSS of the node process; recording throughput (messages and bytes per second written).
 
 The source publishes at rates doubling from ``--rate-hz`` until messages are lost or
-``--max-rate-hz`` is reached, for ``--seconds`` each.
+``--max-rate-hz`` is reached, for ``--seconds`` each. ``--runs`` repeats the whole run;
+``--reference-root`` adds, in every run, the node of another source tree (an export of an
+older commit, its extensions built in place), the two nodes measured in alternating order.
 """
 
+import argparse
+import json
 import math
 import os
 import pathlib
@@ -23,14 +31,15 @@ import sys
 import tempfile
 import time
 
-import numpy as np
-
-from .main import emit
-from .mcap import mcap_info
-from ..io.cdr import CDR_LE
-from ..io.msg_schema import message_class
-from ..names import JOINT_STATE, VECTOR3_STAMPED
-from ..ros.runtime import isolate_ros_environment, make_executor, spin_until_shutdown
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))       # the tree's package, not an installed copy
+from flexlink_ros.cli.mcap import mcap_info  # noqa: E402, I201
+from flexlink_ros.io.cdr import CDR_LE  # noqa: E402, I201
+from flexlink_ros.io.msg_schema import message_class  # noqa: E402, I201
+from flexlink_ros.names import JOINT_STATE, VECTOR3_STAMPED  # noqa: E402, I201
+from flexlink_ros.ros.runtime import (isolate_ros_environment, make_executor,  # noqa: E402, I201
+                                      spin_until_shutdown)
+import numpy as np  # noqa: E402, I201
 
 INPUT_TOPIC = '/bench/joint_states'
 ECHO_TOPIC = '/bench/echo'
@@ -163,7 +172,7 @@ class Source:
 
 def measure_target(source, name, argv, output_topic, output_type, rates, seconds, env):
     """Start a target, step through the rates, stop it; returns its rows and footprint."""
-    process = subprocess.Popen(argv, env=env, stdout=subprocess.DEVNULL,
+    process = subprocess.Popen(argv, env=env, stdout=subprocess.DEVNULL, cwd=env['PYTHONPATH'],
                                stderr=subprocess.DEVNULL)
     try:
         source.listen(output_topic, output_type)
@@ -236,9 +245,38 @@ def _step_rates(source, rates, seconds):
     return rows
 
 
-def run_node_bench(rate_hz=1000.0, max_rate_hz=8000.0, seconds=3.0, work_dir=None):
+def rate_steps(rate_hz, max_rate_hz):
+    """Return the rates doubling from ``rate_hz`` up to ``max_rate_hz``."""
+    rates = []
+    rate = rate_hz
+    while rate <= max_rate_hz:
+        rates.append(rate)
+        rate *= 2.0
+    return rates
+
+
+def bench_targets(bag, recording=True, reference_root=None, reference_first=False):
+    """Return (name, argv, output topic, output type, source root) of every target of a run."""
+    node = [sys.executable, '-m', 'flexlink_ros.ros.node', '--ros-args',
+            '-p', f'input_topic:={INPUT_TOPIC}', '-p', 'qos.depth:=1000']
+    joint_state, vector3_stamped = message_class(JOINT_STATE), message_class(VECTOR3_STAMPED)
+    nodes = [('flexlink_node', node, NODE_OUTPUT, vector3_stamped, ROOT)]
+    if reference_root is not None:
+        nodes.insert(1 - reference_first, ('flexlink_node (reference)', node, NODE_OUTPUT,
+                                           vector3_stamped, pathlib.Path(reference_root)))
+    targets = [('echo (bare rclpy)', [sys.executable, str(pathlib.Path(__file__).resolve()),
+                                      '--echo'], ECHO_TOPIC, joint_state, ROOT), *nodes]
+    if recording:
+        targets.append(('flexlink_node + recording', node + [
+            '-p', 'record.enabled:=true', '-p', f'record.path:={bag}'],
+            NODE_OUTPUT, vector3_stamped, ROOT))
+    return targets
+
+
+def run_node_bench(rate_hz=1000.0, max_rate_hz=8000.0, seconds=3.0, work_dir=None,
+                   recording=True, reference_root=None, reference_first=False):
     """
-    Run the benchmark (see the module docstring).
+    Run the benchmark once (see the module docstring).
 
     Parameters
     ----------
@@ -250,48 +288,48 @@ def run_node_bench(rate_hz=1000.0, max_rate_hz=8000.0, seconds=3.0, work_dir=Non
         Time per rate [s].
     work_dir : str or os.PathLike, optional
         Directory of the bench recording (default: a new temporary directory).
+    recording : bool
+        Also measure the node with its recording on.
+    reference_root : str or os.PathLike, optional
+        Source tree of a second node to measure (run with its root on PYTHONPATH).
+    reference_first : bool
+        Measure the reference node before this tree's.
 
     Returns
     -------
     dict
         'targets': list of {name, rows, rss_mb, max_rate_without_loss_hz}, 'recording':
-        {messages_per_s, bytes_per_s, path}.
+        {messages_per_s, bytes_per_s, path} (None without recording).
 
     """
     if not 0 < rate_hz <= max_rate_hz or not seconds > 0:
         raise ValueError('need 0 < `--rate-hz` <= `--max-rate-hz` and `--seconds` > 0')
     domain = isolate_ros_environment()
-    env = dict(os.environ)
-    rates = []
-    rate = rate_hz
-    while rate <= max_rate_hz:
-        rates.append(rate)
-        rate *= 2.0
+    rates = rate_steps(rate_hz, max_rate_hz)
     work_dir = pathlib.Path(work_dir or tempfile.mkdtemp(prefix='flexlink_node_bench_'))
     bag = work_dir / 'bench_bag'
-    node = [sys.executable, '-m', 'flexlink_ros.ros.node', '--ros-args',
-            '-p', f'input_topic:={INPUT_TOPIC}', '-p', 'qos.depth:=1000']
-    joint_state, vector3_stamped = message_class(JOINT_STATE), message_class(VECTOR3_STAMPED)
-    targets = [
-        ('echo (bare rclpy)', [sys.executable, '-m', 'flexlink_ros.cli.node_bench'],
-         ECHO_TOPIC, joint_state),
-        ('flexlink_node', node, NODE_OUTPUT, vector3_stamped),
-        ('flexlink_node + recording', node + ['-p', 'record.enabled:=true',
-                                              '-p', f'record.path:={bag}'],
-         NODE_OUTPUT, vector3_stamped),
-    ]
     source = Source()
+    results = []
     try:
-        results = [measure_target(source, *target, rates, seconds, env) for target in targets]
+        for name, argv, topic, msg_type, root in bench_targets(bag, recording, reference_root,
+                                                               reference_first):
+            env = dict(os.environ, PYTHONPATH=str(root))
+            results.append(measure_target(source, name, argv, topic, msg_type, rates,
+                                          seconds, env))
     finally:
         source.close()
+    return {'domain_id': domain, 'seconds_per_rate': seconds, 'targets': results,
+            'recording': recording_figures(bag) if recording else None}
+
+
+def recording_figures(bag):
+    """Messages and bytes per second the node with recording on wrote."""
     info = mcap_info(bag)
     duration = info['duration_s'] or math.nan
     size = sum(p.stat().st_size for p in bag.glob('*.mcap'))
-    return {'domain_id': domain, 'seconds_per_rate': seconds, 'targets': results,
-            'recording': {'path': str(bag), 'messages': info['message_count'],
-                          'messages_per_s': info['message_count'] / duration,
-                          'bytes_per_s': size / duration, 'complete': info['complete']}}
+    return {'path': str(bag), 'messages': info['message_count'],
+            'messages_per_s': info['message_count'] / duration,
+            'bytes_per_s': size / duration, 'complete': info['complete']}
 
 
 def _text(result):
@@ -308,29 +346,48 @@ def _text(result):
         lines.append(f'{target["name"]}: highest rate without loss '
                      f'{target["max_rate_without_loss_hz"]:.0f} Hz, RSS {rss}')
     rec = result['recording']
-    lines.append(f'recording: {rec["messages_per_s"]:.0f} messages/s, '
-                 f'{rec["bytes_per_s"] / 1e3:.0f} kB/s ({rec["path"]})')
+    if rec is not None:
+        lines.append(f'recording: {rec["messages_per_s"]:.0f} messages/s, '
+                     f'{rec["bytes_per_s"] / 1e3:.0f} kB/s ({rec["path"]})')
     return '\n'.join(lines)
 
 
-def _node_bench_command(args):
-    result = run_node_bench(args.rate_hz, args.max_rate_hz, args.seconds, args.out)
-    return emit(result, _text(result), args.json)
-
-
-def register(subparsers):
-    """Add the node-bench subcommand."""
-    parser = subparsers.add_parser('node-bench', help='latency, loss and footprint of '
-                                   'flexlink_node next to a bare rclpy echo node')
+def build_parser():
+    """Build the command-line parser (see the module docstring)."""
+    parser = argparse.ArgumentParser(description='latency, loss and footprint of '
+                                     'flexlink_node next to a bare rclpy echo node')
     parser.add_argument('--rate-hz', type=float, default=1000.0, help='first rate [Hz]')
     parser.add_argument('--max-rate-hz', type=float, default=8000.0,
                         help='stop doubling the rate here [Hz]')
     parser.add_argument('--seconds', type=float, default=3.0, help='time per rate [s]')
-    parser.add_argument('--out', default=None, help='directory of the bench recording '
+    parser.add_argument('--runs', type=int, default=1, help='whole runs, one after another')
+    parser.add_argument('--reference-root', type=pathlib.Path, default=None,
+                        help='also measure the node of this source tree (alternating order)')
+    parser.add_argument('--no-recording', dest='recording', action='store_false',
+                        help='leave out the node with recording on')
+    parser.add_argument('--out', default=None, help='directory of the bench recordings '
                         '(default: a new temporary directory)')
-    parser.add_argument('--json', action='store_true', help='print one JSON object')
-    parser.set_defaults(func=_node_bench_command)
+    parser.add_argument('--json', action='store_true', help='print one JSON object per run')
+    parser.add_argument('--echo', action='store_true', help=argparse.SUPPRESS)
+    return parser
+
+
+def main(argv=None):
+    """Run the benchmark (or, with ``--echo``, be the echo node it starts)."""
+    args = build_parser().parse_args(argv)
+    if args.echo:
+        echo_main()
+        return 0
+    out = pathlib.Path(args.out or tempfile.mkdtemp(prefix='flexlink_node_bench_'))
+    for run in range(args.runs):
+        result = run_node_bench(args.rate_hz, args.max_rate_hz, args.seconds,
+                                out / f'run{run + 1}', args.recording, args.reference_root,
+                                reference_first=run % 2 == 1)
+        result['run'] = run + 1
+        print(json.dumps(result) if args.json else f'run {run + 1}\n{_text(result)}',
+              flush=True)
+    return 0
 
 
 if __name__ == '__main__':
-    echo_main()
+    sys.exit(main())

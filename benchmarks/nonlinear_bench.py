@@ -1,0 +1,94 @@
+"""
+The reduced nonlinear update against the linear update, in alternating whole processes.
+
+    .venv/bin/python benchmarks/nonlinear_bench.py [--rpm 391] [--seconds 3] [--pairs 3]
+
+Each round runs two processes in alternating order: one times the linear streaming update
+(the compiled step, ``StreamingEstimator.update``) per sample, the other the reduced nonlinear
+model's step (``NonlinearStepper.step`` plus its outputs) per sample, on the same synthetic
+1 kHz signal (rigid crank, bearing springs, 8 elements per link, beta 1e-4 s). Both models
+come from the cache (built once before the rounds). Prints each run's median and p99 per
+sample and the offline samples per second, then the medians over the rounds and the ratio.
+"""
+
+import argparse
+import json
+import pathlib
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from flexlink_ros.core.estimation.nonlinear_stream import estimate_nonlinear  # noqa: E402
+from flexlink_ros.core.mechanism_file import load_mechanism  # noqa: E402
+from flexlink_ros.core.options import ModelOptions  # noqa: E402
+from flexlink_ros.core.reduction.nonlinear_model import nonlinear_model_for  # noqa: E402
+from flexlink_ros.core.reduction.mechanism_model import model_for_mechanism  # noqa: E402
+from flexlink_ros.studies.synthetic import stream_timed, synthetic_signal  # noqa: E402
+from flexlink_ros.studies.synthetic import timing_summary  # noqa: E402
+
+OPTIONS = ModelOptions(rigid_crank=True, bearings='flexible', elements_per_link=8,
+                       stiffness_damping=1e-4)
+
+
+def measure(kind, rpm, seconds, cache):
+    """Time one model's update per sample; a JSON-ready dict."""
+    mech = load_mechanism('cho1992')
+    stamps, angles, speeds = synthetic_signal(rpm, seconds, 1000.0)
+    started = time.perf_counter()
+    if kind == 'linear':
+        model = model_for_mechanism(mech, OPTIONS, cache_dir=cache)
+        started = time.perf_counter()
+        _, update_ns = stream_timed(model, stamps, angles, speeds)
+    else:
+        tables, _ = nonlinear_model_for(mech, OPTIONS, cache_dir=cache)
+        started = time.perf_counter()
+        update_ns = estimate_nonlinear(tables, stamps, angles, speeds)['update_ns'][1:]
+    wall = time.perf_counter() - started
+    median, p99 = timing_summary(np.asarray(update_ns))
+    return {'kind': kind, 'median_us': median, 'p99_us': p99,
+            'samples_per_s': len(stamps) / wall}
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
+    parser.add_argument('--rpm', type=float, default=391.0)
+    parser.add_argument('--seconds', type=float, default=3.0)
+    parser.add_argument('--pairs', type=int, default=3)
+    parser.add_argument('--cache-dir', default=None)
+    parser.add_argument('--one', choices=('linear', 'nonlinear'), help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    cache = args.cache_dir or tempfile.mkdtemp(prefix='nonlinear-bench-')
+    if args.one:
+        print(json.dumps(measure(args.one, args.rpm, args.seconds, cache)))
+        return
+    for kind in ('linear', 'nonlinear'):      # build and cache both models first
+        measure(kind, args.rpm, 0.05, cache)
+    runs = {'linear': [], 'nonlinear': []}
+    for pair in range(args.pairs):
+        order = ('linear', 'nonlinear') if pair % 2 == 0 else ('nonlinear', 'linear')
+        for kind in order:
+            out = subprocess.run([sys.executable, __file__, '--one', kind, '--rpm', str(args.rpm),
+                                  '--seconds', str(args.seconds), '--cache-dir', cache],
+                                 capture_output=True, text=True, check=True)
+            result = json.loads(out.stdout.strip().splitlines()[-1])
+            runs[kind].append(result)
+            print(f"round {pair + 1} {kind:9s}: median {result['median_us']:9.1f} us, "
+                  f"p99 {result['p99_us']:9.1f} us, {result['samples_per_s']:9.0f} samples/s")
+    medians = {kind: statistics.median(r['median_us'] for r in values)
+               for kind, values in runs.items()}
+    for kind, values in runs.items():
+        print(f"{kind:9s}: median of medians {medians[kind]:9.1f} us, median p99 "
+              f"{statistics.median(r['p99_us'] for r in values):9.1f} us, median "
+              f"{statistics.median(r['samples_per_s'] for r in values):9.0f} samples/s")
+    print(f"nonlinear / linear update median: {medians['nonlinear'] / medians['linear']:.1f}x")
+
+
+if __name__ == '__main__':
+    main()
