@@ -4,8 +4,8 @@ Every README and docs command that runs this package, run as written, or skipped
 The commands are read at test time from README.md, the pages of ``docs/`` and
 ``benchmarks/README.md``: every command of a fenced ``bash`` block (continuation lines
 joined, comments dropped, split at ``&&``, ``;`` and a trailing ``&``) and every command in the
-first column of the README's `flexlink` tool table. A command invokes the package when its program is ``flexlink``, ``flexlink_node`` or ``crank_driver`` (bare or under
-``.venv/bin/``), ``python -m flexlink_ros…``, or ``ros2 run|launch flexlink_ros``. Each such
+first column of the README's `flexlink` tool table. A command invokes the package when its
+program is ``flexlink``, ``flexlink_node`` or ``crank_driver`` (bare or under ``.venv/bin/``), ``python -m flexlink_ros…``, or ``ros2 run|launch flexlink_ros``. Each such
 command is either in ``RUN`` (run with the installed console scripts of the venv running this
 test, ``.venv/bin/`` rewritten to it, in a temporary working directory holding what the README
 says is there, e.g. the ``run1`` recording; exit code 0 and what the README says it prints or
@@ -191,8 +191,20 @@ SKIPPED = {
     'crank_driver --ros-args -p speed_rpm:=600.0':
         'runs until stopped, publishing into a ROS graph: test/ros/test_crank_driver.py',
     'flexlink_node --ros-args --params-file my_node.yaml':
-        'runs until stopped and needs a crank driver and the plan\'s parameters file: '
+        "runs until stopped and needs a crank driver and the plan's parameters file: "
         'test/cli/test_plan_params.py checks the file the node reads',
+    'flexlink_node --ros-args --params-file my_node.yaml -p record.enabled:=true '
+    '-p record.path:=run1':
+        'runs until stopped and needs a crank driver: '
+        'test/ros/test_node.py::test_node_end_to_end records from one',
+    'flexlink plan --mechanism my_linkage.yaml --rpm-max 600 --tolerance 0.02 '
+    '--params-out my_node.yaml':
+        'minutes of full-order references: test/cli/test_plan_params.py writes and checks '
+        'the parameters file of a small plan',
+    'flexlink estimate --rpm 391 --rigid-crank --bearings flexible --stiffness-damping 1e-4 '
+    '--nonlinear on':
+        'builds the reduced nonlinear model (minutes on a loaded machine): '
+        'test/cli/test_cli_estimate.py runs the estimator; docs/nonlinear.md names its tests',
     'flexlink node-bench': 'starts nodes on a ROS graph and measures for minutes',
     'flexlink report --out out/report': 'about 4 minutes (every chart)',
     'flexlink demo': 'starts crank_driver and flexlink_node on a ROS graph: '

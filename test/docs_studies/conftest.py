@@ -1,5 +1,4 @@
-"""The studies import as top-level modules: ``docs/studies/`` (and the timers they use in
-``benchmarks/``) are not packages."""
+"""The studies (and the benchmarks' timers they use) import as top-level modules."""
 
 import pathlib
 import sys
