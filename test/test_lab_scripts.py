@@ -1,4 +1,5 @@
-"""The benchmarks and the docs' studies run as scripts from the repository root, at a tiny size.
+"""
+The benchmarks and the docs' studies run as scripts from the repository root, at a tiny size.
 
 They print figures (never assert times); the test only checks that each still runs as
 ``python benchmarks/X.py`` or ``python docs/studies/X.py`` and prints what it measured.

@@ -5,7 +5,8 @@ The commands are read at test time from README.md, the pages of ``docs/`` and
 ``benchmarks/README.md``: every command of a fenced ``bash`` block (continuation lines
 joined, comments dropped, split at ``&&``, ``;`` and a trailing ``&``) and every command in the
 first column of the README's `flexlink` tool table. A command invokes the package when its
-program is ``flexlink``, ``flexlink_node`` or ``crank_driver`` (bare or under ``.venv/bin/``), ``python -m flexlink_ros…``, or ``ros2 run|launch flexlink_ros``. Each such
+program is ``flexlink``, ``flexlink_node`` or ``crank_driver`` (bare or under ``.venv/bin/``),
+``python -m flexlink_ros…``, or ``ros2 run|launch flexlink_ros``. Each such
 command is either in ``RUN`` (run with the installed console scripts of the venv running this
 test, ``.venv/bin/`` rewritten to it, in a temporary working directory holding what the README
 says is there, e.g. the ``run1`` recording; exit code 0 and what the README says it prints or
