@@ -20,7 +20,7 @@ TINY_RUNS = {
     'benchmarks/second_order_bench.py': ['--rounds', '2', '--samples', '300'],
     'docs/studies/soft_basis_study.py': ['--no-ramp', '--no-paper'],
     'docs/studies/validity_study.py': ['--rpm', '150', '--elements', '2', '--json'],
-    'docs/studies/damping_study.py': ['--elements', '2', '--steps', '72'],
+    'docs/studies/damping_study.py': ['--elements', '2', '--steps', '120'],
     'docs/studies/second_order_study.py': ['--rpm', '269', '--gravity', 'off', '--elements',
                                            '2', '--json'],
     'docs/studies/dynamic_second_order_study.py': ['--elements', '2', '--sizes', '4,2',
