@@ -2,8 +2,8 @@
 
 import shutil
 
+import dynamic_second_order_study as study
 from flexlink_ros.core.mechanism_file import load_mechanism
-from flexlink_ros.studies import dynamic_second_order_study as study
 import numpy as np
 import pytest
 

@@ -4,8 +4,8 @@ import shutil
 
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.studies import second_order_bench
 import pytest
+import second_order_bench
 
 
 @pytest.fixture(scope='module')

@@ -4,8 +4,8 @@ from flexlink_ros.core.estimation.native import compiled_step_available
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction import mechanism_model
-from flexlink_ros.studies import update_bench
 import pytest
+import update_bench
 
 
 @pytest.mark.skipif(not compiled_step_available(), reason='compiled step not built')

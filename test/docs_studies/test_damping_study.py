@@ -2,7 +2,7 @@
 
 import math
 
-from flexlink_ros.studies import damping_study as ds
+import damping_study as ds
 import numpy as np
 import pytest
 
