@@ -2,7 +2,7 @@
 The benchmarks and the docs' studies run as scripts from the repository root, at a tiny size.
 
 They print figures (never assert times); the test only checks that each still runs as
-``python benchmarks/X.py`` or ``python docs/studies/X.py`` and prints what it measured.
+``python benchmarks/<name>.py`` or ``python docs/studies/<name>.py`` and prints what it measured.
 """
 
 import os

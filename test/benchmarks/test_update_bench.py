@@ -1,4 +1,4 @@
-"""The update timed around the step, compiled against Python path (studies/update_bench.py)."""
+"""The update timed around the step, compiled against Python path (benchmarks/update_bench.py)."""
 
 from flexlink_ros.core.estimation.native import compiled_step_available
 from flexlink_ros.core.mechanism_file import load_mechanism

@@ -1,4 +1,4 @@
-"""Stiffness-proportional damping studied against the peer (studies/damping_study.py)."""
+"""Stiffness-proportional damping studied against the peer (docs/studies/damping_study.py)."""
 
 import math
 

@@ -1,4 +1,4 @@
-"""The dynamic-pass study (studies/dynamic_second_order_study.py) at a reduced size."""
+"""The dynamic-pass study (docs/studies/dynamic_second_order_study.py) at a reduced size."""
 
 import shutil
 

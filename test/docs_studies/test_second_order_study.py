@@ -1,4 +1,4 @@
-"""The reduced model's second order against the full order (studies/second_order_study.py)."""
+"""The reduced model's second order against the full order (docs/studies/second_order_study.py)."""
 
 import math
 

@@ -1,4 +1,4 @@
-"""The validity sweep's bookkeeping (studies/validity_study.py): separation and the table."""
+"""The validity sweep's bookkeeping (docs/studies/validity_study.py): separation and the table."""
 
 import validity_study
 
