@@ -169,6 +169,9 @@ SKIPPED = {
     'flexlink estimate --mechanism my_linkage.yaml --rpm 600 --chart my_600rpm.png': _OWN,
     'flexlink plan --mechanism my_linkage.yaml --rpm-max 600 --tolerance 0.02':
         'minutes of full-order references: test/studies/test_plan.py plans small cases',
+    'flexlink replay run1 --chart run1.png':
+        "replays the quick start's own node recording: test/test_quickstart.py"
+        '::test_every_quickstart_command_runs_on_a_linkage_not_in_config runs it',
     'flexlink replay other_bag --mechanism my_linkage.yaml --out rerun2.mcap':
         "needs the user's own bag: test/cli/test_replay.py replays bags of other topics",
     "flexlink fleet 'recordings/line1_*' --out out/fleet --mechanism cho1992":

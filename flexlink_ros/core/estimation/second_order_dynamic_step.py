@@ -18,7 +18,8 @@ rest). Only the record's deflections (lever tip, coupler mid-point) get the incr
 link shapes keep the quasi-static correction.
 
 Two things the reduced state does not hold, measured against the full-order pass (391 rpm,
-gravity, rigid crank and bearings, 8 elements per link; docs/studies/dynamic_second_order_study.py):
+gravity, rigid crank and bearings, 8 elements per link;
+docs/studies/dynamic_second_order_study.py):
 the static axial stretch (the elastic axial force of V q alone is off by the rigid-body force
 F_r, 25 N against 1.5 N at 4 elements per link: the reference is therefore the axial force of
 the reduced static response K_r^-1 f_r at each stage), and, on the default basis (4 modes +
