@@ -137,7 +137,8 @@ def test_a_replay_from_the_cache_imports_neither_ros_plotting_nor_scipy_solvers(
     bag = tmp_path / 'short.mcap'
     subprocess.run([sys.executable, str(BENCH), 'make-bag', str(bag), '--seconds', '0.3'],
                    check=True, capture_output=True, timeout=300)
-    code = 'import sys\nfrom flexlink_ros.cli import main\nmain.main(sys.argv[1:])\n' + HEAVY_IMPORTS
+    code = ('import sys\nfrom flexlink_ros.cli import main\nmain.main(sys.argv[1:])\n'
+            + HEAVY_IMPORTS)
     replay = [sys.executable, '-c', code, 'replay', str(bag), '--mechanism', 'cho1992',
               '--cache-dir', str(tmp_path / 'cache'), '--out']
     first = subprocess.run(replay + [str(tmp_path / 'first.mcap')], capture_output=True,

@@ -149,7 +149,7 @@ def save_cache(path, key, arrays, meta=None):
 
 def _write_archive(stream, arrays):
     """
-    A zip of ``<name>.npy`` members (what ``np.savez`` writes) with every array's data aligned.
+    Write a zip of ``<name>.npy`` members (as ``np.savez`` does) with each array's data aligned.
 
     Each member's local header gets an extra field of padding (id 0xD935, as Android's
     zipalign uses; zip readers skip unknown extra fields) so that its data, after the .npy
