@@ -167,7 +167,7 @@ def _write_archive(stream, arrays):
 
 
 def _padding_field(size):
-    """A zip extra field of ``size`` zero bytes after its 4-byte id and length."""
+    """Return a zip extra field of ``size`` zero bytes after its 4-byte id and length."""
     return (0xD935).to_bytes(2, 'little') + size.to_bytes(2, 'little') + bytes(size)
 
 
