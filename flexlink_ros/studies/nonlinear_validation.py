@@ -10,6 +10,12 @@ beta on the strain rates (the peer's beta, ``stiffness_damping`` when given) and
 order with the same damping is reported beside it. Measures as :mod:`studies.validation`:
 per output the p2p error and relative RMS, per output point the deflection vector's relative
 RMS; and the orbit's Floquet multipliers, Newton iterations per step and cost per step.
+
+The streaming estimate (:func:`core.estimation.nonlinear_stream.estimate_nonlinear`) is
+compared too: the reduced nonlinear model of the same FE model, damped by the same beta,
+stepped per sample on a constant-speed crank signal sampled at :data:`STREAM_RATE_HZ` from
+rest at crank angle 0 for as many revolutions as the peer marched to settle, its last
+revolution interpolated periodically over crank angle onto the full order's output points.
 """
 
 import dataclasses
@@ -20,29 +26,62 @@ import numpy as np
 from .peer_exudyn import compare, peak_to_peak
 from .peer_linear import linear_model
 from .peer_model import OUTPUT_KEYS, resolve_mechanism
+from .synthetic import last_revolution, synthetic_signal
 from .validation import _as_response, BEARINGS, peer_run, point_rms_errors, require_peer, \
     Settings
+from ..core.estimation.nonlinear_stream import estimate_nonlinear
 from ..core.fe.nonlinear_response import nonlinear_response
 from ..core.fe.nonlinear_validity import orbit_validity, validity_record
 from ..core.fe.simulate import periodic_response
+from ..core.reduction.nonlinear_tables import build_nonlinear_tables
 
-MODELS = ('linear', 'nonlinear')
-LABELS = {'linear': 'linear', 'nonlinear': 'nonlinear'}
+MODELS = ('linear', 'nonlinear', 'streaming')
+LABELS = {'linear': 'linear', 'nonlinear': 'nonlinear', 'streaming': 'streaming'}
 # The targets for the nonlinear full order against the peer.
 TARGETS = {'rms': 0.05, 'p2p': 0.03}
+# The streaming estimate's RMS target through the resonance.
+STREAM_TARGET_RMS = 0.10
 # Package time steps per revolution (a multiple of the output points).
 STEPS = 720
+# The streaming estimate's sample rate [Hz] (the node's rate).
+STREAM_RATE_HZ = 1000.0
 
 
-def package_runs(mech, rpm, settings):
+def streaming_run(linkage, rpm, beta, revolutions, crank_angle):
     """
-    Linear and nonlinear full order at one speed, damped as the peer.
+    Stream the reduced nonlinear model at one constant speed; its last turn on the points.
 
     Returns
     -------
     dict
-        'crank_angle' (P,), 'linear' and 'nonlinear' outputs (P, 4) [m], 'info' (the nonlinear
-        run's info), 'multipliers', 'beta', 'zeta', 'validity' (the nonlinear orbit's
+        'outputs' (P, 4) [m] at ``crank_angle``, 'samples', 'refused', 'newton_per_sample'.
+
+    """
+    tables = build_nonlinear_tables(linkage, beta)
+    seconds = revolutions * 60.0 / rpm
+    stamps, angles, speeds = synthetic_signal(rpm, seconds, STREAM_RATE_HZ)
+    out = estimate_nonlinear(tables, stamps, angles, speeds)
+    mask = last_revolution(stamps, rpm)
+    phase = np.mod(angles[mask], 2.0 * math.pi)
+    values = out['outputs'][mask][:, :len(OUTPUT_KEYS)]
+    outputs = np.stack([np.interp(crank_angle, phase, values[:, k], period=2.0 * math.pi)
+                        for k in range(values.shape[1])], axis=1)
+    return {'outputs': outputs, 'samples': int(len(stamps)), 'refused': int(out['refused']),
+            'newton_per_sample': out['newton_iterations'] / max(1, len(stamps) - 1)}
+
+
+def package_runs(mech, rpm, settings, stream_revolutions=None):
+    """
+    Linear and nonlinear full order and streaming estimate at one speed, damped as the peer.
+
+    The streaming estimate runs ``stream_revolutions`` (None: the full order's plus two).
+
+    Returns
+    -------
+    dict
+        'crank_angle' (P,), 'linear', 'nonlinear' and 'streaming' outputs (P, 4) [m],
+        'streaming_info' (:func:`streaming_run`), 'info' (the nonlinear run's info),
+        'multipliers', 'beta', 'zeta', 'validity' (the nonlinear orbit's
         :class:`core.fe.nonlinear_validity.NonlinearValidity`).
 
     """
@@ -56,8 +95,13 @@ def package_runs(mech, rpm, settings):
     start = np.concatenate([linear.displacement[0], linear.velocity[0]])
     nonlinear = nonlinear_response(linkage, speed, steps=STEPS, points=settings.points,
                                    zeta=zeta, beta=beta, start=start)
+    if stream_revolutions is None:
+        stream_revolutions = nonlinear.info['revolutions'] + 2
+    streaming = streaming_run(linkage, rpm, beta, stream_revolutions, linear.crank_angle)
     return {'crank_angle': linear.crank_angle, 'linear': linear.outputs,
-            'nonlinear': nonlinear.outputs, 'info': nonlinear.info,
+            'nonlinear': nonlinear.outputs, 'streaming': streaming['outputs'],
+            'streaming_info': {k: v for k, v in streaming.items() if k != 'outputs'},
+            'info': nonlinear.info,
             'multipliers': nonlinear.floquet_multipliers, 'beta': beta, 'zeta': zeta,
             'validity': orbit_validity(linkage, nonlinear)}
 
@@ -81,8 +125,10 @@ def validate_nonlinear(mechanism, rpm, settings=None):
         'rpm', 'mechanism', 'settings', 'peer_p2p', 'periodicity' (peer), 'peer_beta_s',
         'models' (per :data:`MODELS`: per output 'other_p2p', 'p2p_error', 'rms_error'),
         'point_rms_error' (per model and output point), 'targets_met' (nonlinear, per output
-        point), 'floquet_moduli' (the four largest), 'spectral_radius', 'newton_mean',
-        'newton_max', 'step_cost_s', 'step_cpu_s', 'revolutions', 'wall_s', 'damping',
+        point), 'streaming_targets_met' (per output point), 'streaming' (samples, refused,
+        Newton iterations per sample), 'floquet_moduli' (the four largest),
+        'spectral_radius', 'newton_mean', 'newton_max', 'step_cost_s', 'step_cpu_s',
+        'revolutions', 'wall_s', 'damping',
         'nonlinear_validity' (the orbit's element rotations and fold distance) and 'series'.
 
     """
@@ -92,7 +138,7 @@ def validate_nonlinear(mechanism, rpm, settings=None):
     require_peer()
     mech = resolve_mechanism(mechanism)
     peer = peer_run(mech, rpm, settings)
-    runs = package_runs(mech, rpm, settings)
+    runs = package_runs(mech, rpm, settings, stream_revolutions=peer['info']['revolutions'])
     models = {name: compare(peer, _as_response(runs['crank_angle'], runs[name]))
               for name in MODELS}
     span = slice(-settings.peer_steps - 1, -1)
@@ -103,12 +149,15 @@ def validate_nonlinear(mechanism, rpm, settings=None):
                    and all(abs(table[f'{point}_{axis}']['p2p_error']) <= TARGETS['p2p']
                            for axis in ('dx', 'dy')))
            for point in ('lever_tip', 'coupler_mid')}
+    streaming_met = {point: rms['streaming'][point] <= STREAM_TARGET_RMS
+                     for point in ('lever_tip', 'coupler_mid')}
     info, p2p = runs['info'], peak_to_peak(peer)
     return {'rpm': float(rpm), 'mechanism': mech.name,
             'settings': dataclasses.asdict(dataclasses.replace(settings, cache=None)),
             'peer_p2p': {k: p2p[k] for k in OUTPUT_KEYS}, 'periodicity': p2p['periodicity'],
             'peer_beta_s': peer['info']['beta_s'], 'models': models, 'point_rms_error': rms,
-            'targets_met': met,
+            'targets_met': met, 'streaming_targets_met': streaming_met,
+            'streaming': runs['streaming_info'],
             'floquet_moduli': [float(x) for x in np.abs(runs['multipliers'][:4])],
             'spectral_radius': info['spectral_radius'], 'newton_mean': info['newton_mean'],
             'newton_max': info['newton_max'], 'step_cost_s': info['step_cost_s'],
@@ -146,6 +195,13 @@ def format_nonlinear(record):
     lines.append(f"nonlinear within {100 * TARGETS['rms']:g} % RMS and {100 * TARGETS['p2p']:g} "
                  f"% p2p: lever tip {'yes' if met['lever_tip'] else 'NO'}, coupler mid "
                  f"{'yes' if met['coupler_mid'] else 'NO'}")
+    met = record['streaming_targets_met']
+    lines.append(f'streaming within {100 * STREAM_TARGET_RMS:g} % RMS: lever tip '
+                 f"{'yes' if met['lever_tip'] else 'NO'}, coupler mid "
+                 f"{'yes' if met['coupler_mid'] else 'NO'} ({record['streaming']['samples']} "
+                 f'samples at {STREAM_RATE_HZ:g} Hz, '
+                 f"{record['streaming']['newton_per_sample']:.2f} Newton per sample, "
+                 f"{record['streaming']['refused']} refused)")
     moduli = ', '.join(f'{x:.3f}' for x in record['floquet_moduli'])
     lines.append(f"Floquet multipliers |mu| {moduli}; Newton {record['newton_mean']:.2f} "
                  f"iterations per step (max {record['newton_max']}), "
@@ -165,5 +221,6 @@ def without_series(record):
     return {key: value for key, value in record.items() if key != 'series'}
 
 
-__all__ = ['MODELS', 'TARGETS', 'STEPS', 'package_runs', 'validate_nonlinear',
+__all__ = ['MODELS', 'TARGETS', 'STEPS', 'STREAM_RATE_HZ', 'STREAM_TARGET_RMS',
+           'streaming_run', 'package_runs', 'validate_nonlinear',
            'format_nonlinear', 'without_series']

@@ -144,8 +144,8 @@ def test_the_peer_is_damped_with_the_asked_stiffness_damping(capsys):
 
 
 @needs_exudyn
-def test_nonlinear_compares_both_full_orders(capsys, tmp_path):
-    """`--nonlinear`: the linear and nonlinear full order, damped as the peer (tiny size)."""
+def test_nonlinear_compares_both_full_orders_and_the_streaming_estimate(capsys, tmp_path):
+    """`--nonlinear`: linear and nonlinear full order, streaming estimate, damped as the peer."""
     tiny = ('--rpm', '391', '--elements-per-link', '2', '--no-gravity', '--revolutions', '2',
             '--bearings', 'flexible', '--stiffness-damping', '3e-4', '--nonlinear')
     code, out, _ = _run(capsys, *tiny, '--json')
@@ -153,10 +153,15 @@ def test_nonlinear_compares_both_full_orders(capsys, tmp_path):
     result = json.loads(out)
     (record,) = result['records']
     assert result['model'] == 'nonlinear' and record['peer_beta_s'] == 3e-4
-    assert set(record['models']) == {'linear', 'nonlinear'}
+    assert set(record['models']) == {'linear', 'nonlinear', 'streaming'}
+    assert set(record['point_rms_error']['streaming']) == {'lever_tip', 'coupler_mid'}
+    assert record['streaming']['refused'] == 0 and record['streaming']['samples'] > 0
+    assert set(record['streaming_targets_met']) == {'lever_tip', 'coupler_mid'}
     assert record['spectral_radius'] < 1.0 and len(record['floquet_moduli']) == 4
     lines = _run(capsys, *tiny)[1].splitlines()
     assert lines[0].startswith('391 rpm, flexible bearings, gravity off, 2 elements per link')
+    assert lines[-3].startswith('streaming within 10 % RMS: lever tip ')
+    assert any(line.startswith('streaming vector rel RMS  lever tip ') for line in lines)
     assert lines[-2].startswith('Floquet multipliers |mu| ')
     assert lines[-1].startswith('nonlinear validity: largest element rotation ')
     code, out, err = _run(capsys, *tiny, '--chart', str(tmp_path / 'x.png'))
