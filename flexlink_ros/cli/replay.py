@@ -37,11 +37,13 @@ import time
 
 import numpy as np
 
+from .estimate_nonlinear import CHOICES as NONLINEAR_CHOICES
 from .main import emit
 from .model_args import add_chart_argument, add_estimator_arguments, criterion_thresholds, \
     load_model
 from .progress import Progress
 from .replay_model import defer_model_defaults, MissingModel, replay_model
+from .replay_nonlinear import add_replay_nonlinear, model_lines
 from .replay_offline import CHUNK_SAMPLES, estimate_and_write, MAX_CHUNK_SAMPLES, open_input
 from ..core.estimation.marker_scale import model_exaggeration
 from ..core.estimation.tables import step_tables
@@ -148,6 +150,7 @@ def run_replay(args):
     result['samples_per_s'] = count / total if total > 0 else math.inf
     result['times_real_time'] = span_s / total if total > 0 else math.inf
     result.update(summary)
+    add_replay_nonlinear(args, mechanism, options, result)
     if chart:
         result['chart'] = chart.draw(args.chart, estimate['criteria_available'],
                                      f'{mechanism.name}: {pathlib.Path(args.input).name} '
@@ -234,6 +237,7 @@ def summary_text(result):
                  f"{result['coupler_mid_peak_to_peak_um'][0]:10.1f} um  dy "
                  f"{result['coupler_mid_peak_to_peak_um'][1]:10.1f} um")
     lines.append(quality_text(result['quality']))
+    lines += model_lines(result)
     if not result['criteria_available']:
         lines.append('  criteria unavailable: the model has no joint-reaction data '
                      '(written as zeros)')
@@ -324,6 +328,10 @@ def register(subparsers):
     parser.add_argument('--wait-timeout', type=float, default=DISCOVERY_TIMEOUT_S,
                         metavar='S', help='with --publish, longest wait for the subscriptions '
                         f'[s] (default {DISCOVERY_TIMEOUT_S:g})')
+    parser.add_argument('--nonlinear', choices=NONLINEAR_CHOICES, default='auto',
+                        help='the reduced geometrically nonlinear model, as estimate: auto '
+                        "(default: where the linear replay's validity indicator says it is not "
+                        'valid), on or off')
     add_estimator_arguments(parser)
     add_chart_argument(parser)
     defer_model_defaults(parser)   # the recording's model unless a flag is given
