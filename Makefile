@@ -18,7 +18,10 @@ $(STAMP): requirements.txt requirements-test.txt
 # Non-editable install: console scripts in $(VENV)/bin and config files in
 # $(VENV)/share/flexlink_ros, where ament_index finds them (AMENT_PREFIX_PATH=$(VENV)).
 # The compiled step is also built in place, for the tests and tools run from this tree.
+# build/ is removed first: setuptools reuses it, and a module renamed or removed since the
+# last build would otherwise be installed again.
 install: venv
+	rm -rf build
 	$(PY) -m pip install -q --no-deps --force-reinstall .
 	$(PY) setup.py -q build_ext --inplace
 

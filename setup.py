@@ -30,8 +30,8 @@ setup(
                                     'flexlink_ros/core/estimation/_doubles.h'],
                            extra_compile_args=['-O3']),
                  # the dynamic second-order pass's loads per sample (numpy twin where not built)
-                 Extension('flexlink_ros.core.estimation._dynamic_second_order',
-                           ['flexlink_ros/core/estimation/_dynamic_second_order.c'],
+                 Extension('flexlink_ros.core.estimation._second_order_dynamic',
+                           ['flexlink_ros/core/estimation/_second_order_dynamic.c'],
                            depends=['flexlink_ros/core/estimation/_doubles.h'],
                            extra_compile_args=['-O3']),
                  # the reduced nonlinear model's Newton step (numpy twin where not built)

@@ -96,9 +96,9 @@ def split_warm_up(seconds):
     """How a split file estimated alone differs from the same samples of the whole bag."""
     from flexlink_ros.core.estimation.offline import estimate_offline
     from flexlink_ros.core.mechanism_file import load_mechanism
-    from flexlink_ros.core.reduction import pipeline
+    from flexlink_ros.core.reduction import mechanism_model
     from flexlink_ros.ros import parameters as node_params
-    model = pipeline.model_for_mechanism(load_mechanism('cho1992'),
+    model = mechanism_model.model_for_mechanism(load_mechanism('cho1992'),
                                          node_params.default_model_options())
     for rpm in (300.0, 391.0):
         speed = rpm * 2.0 * math.pi / 60.0

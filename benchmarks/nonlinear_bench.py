@@ -29,7 +29,7 @@ from flexlink_ros.core.estimation.nonlinear_stream import estimate_nonlinear  # 
 from flexlink_ros.core.mechanism_file import load_mechanism  # noqa: E402
 from flexlink_ros.core.options import ModelOptions  # noqa: E402
 from flexlink_ros.core.reduction.nonlinear_model import nonlinear_model_for  # noqa: E402
-from flexlink_ros.core.reduction.pipeline import model_for_mechanism  # noqa: E402
+from flexlink_ros.core.reduction.mechanism_model import model_for_mechanism  # noqa: E402
 from flexlink_ros.studies.synthetic import stream_timed, synthetic_signal  # noqa: E402
 from flexlink_ros.studies.synthetic import timing_summary  # noqa: E402
 

@@ -27,6 +27,7 @@ from .main import emit
 from .model_args import (add_chart_argument, add_estimator_arguments, crank_rpm,
                          criterion_thresholds, load_model, model_options)
 from .plan_params import chosen_options, write_params_file
+from .plan_table import plan_table
 from .progress import Progress
 from ..core.mechanism_file import load_mechanism
 from ..core.numerics import RPM
@@ -34,7 +35,7 @@ from ..core.reduction.soft_basis import soft_basis_text
 from ..report.cycle_chart import plot_cycle
 from ..report.estimator import plot_error_vs_cost
 from ..studies.bench import run_bench
-from ..studies.plan import plan_table, run_plan
+from ..studies.plan import run_plan
 from ..studies.synthetic import run_estimate
 
 

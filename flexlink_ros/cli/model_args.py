@@ -21,7 +21,7 @@ from .progress import OnDemandProgress
 from ..core.mechanism_file import read_mechanism_file
 from ..core.numerics import RPM
 from ..core.options import DEFAULT_SPEED_MAX, ModelOptions, SECOND_ORDER_PASSES, speed_range
-from ..core.reduction import pipeline
+from ..core.reduction import mechanism_model
 from ..ros import parameters as node_params
 
 BEARINGS = ('flexible', 'rigid')
@@ -188,7 +188,8 @@ def add_reduced_arguments(parser):
     parser.add_argument('--static', type=int,
                         help='basis directions from static responses (default: by bearings '
                         'and crank model)')
-    parser.add_argument('--grid-size', type=int, help='crank-angle grid points (default: 128)')
+    parser.add_argument('--grid-size', type=int,
+                        help=f'crank-angle grid points (default: {DEFAULT_MODEL.grid_size})')
     parser.add_argument('--soft-modes', type=int, metavar='P',
                         help='the estimator steps the P lowest modes of the reduced model '
                         '(a smooth basis at a checked spectral gap; refused without a gap '
@@ -294,5 +295,5 @@ def load_model(mechanism, options, args):
 
     """
     with OnDemandProgress(BUILD_LABEL) as progress:
-        return pipeline.model_for_mechanism(mechanism, options, cache_dir=args.cache_dir,
-                                            use_cache=not args.no_cache, progress=progress)
+        return mechanism_model.model_for_mechanism(mechanism, options, cache_dir=args.cache_dir,
+                                                   use_cache=not args.no_cache, progress=progress)

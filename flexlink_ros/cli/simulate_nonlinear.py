@@ -11,7 +11,9 @@ linear full order with the same damping, the shooting's start), ``floquet_multip
 (the 8 largest as [re, im]), ``floquet_spectral_radius``, ``newton_iterations_per_step``
 (mean and max over the periodic revolution), ``step_cost_s`` and ``step_cpu_s`` (wall and
 CPU time per step), ``revolutions`` marched,
-``shooting_updates`` and ``periodicity`` (the last revolution-to-revolution change).
+``shooting_updates`` and ``periodicity`` (the last revolution-to-revolution change), and
+``nonlinear_validity`` (:mod:`core.fe.nonlinear_validity`: the orbit's largest element
+rotation and its nearest multiplier to +1, whether the model can carry them).
 """
 
 import math
@@ -21,6 +23,7 @@ import numpy as np
 
 from .main import emit
 from ..core.fe.nonlinear_response import nonlinear_response
+from ..core.fe.nonlinear_validity import orbit_validity, validity_record
 from ..core.fe.simulate import periodic_response
 
 # Floquet multipliers printed in the JSON (largest modulus first).
@@ -65,7 +68,9 @@ def simulate_nonlinear(args, mech, model, rpm, numbers):
               'step_cost_s': info['step_cost_s'], 'step_cpu_s': info['step_cpu_s'],
               'revolutions': info['revolutions'],
               'shooting_updates': info['shooting_updates'],
-              'periodicity': info['periodicity'], 'rpm': rpm, 'method': 'full',
+              'periodicity': info['periodicity'],
+              'nonlinear_validity': validity_record(orbit_validity(model, response)),
+              'rpm': rpm, 'method': 'full',
               'model': 'nonlinear', 'damping_ratio': info['zeta'],
               'stiffness_damping_s': info['stiffness_damping_s'],
               'steps_per_rev': numbers['steps'], 'stages': numbers['stages'],
@@ -96,7 +101,16 @@ def _text(mech, model, args, result):
             f'{1e3 * result["step_cost_s"]:.2f} ms per step ({1e3 * result["step_cpu_s"]:.2f} '
             f'ms CPU), {result["revolutions"]} '
             f'revolutions ({result["shooting_updates"]} shooting updates), periodic to '
-            f'{result["periodicity"]:.1e}, wall {result["wall_s"]:.1f} s')
+            f'{result["periodicity"]:.1e}, wall {result["wall_s"]:.1f} s\n'
+            + _validity_line(result['nonlinear_validity']))
+
+
+def _validity_line(validity):
+    """One line: the nonlinear model's validity on this orbit."""
+    verdict = 'valid' if validity['valid'] else f"NOT valid: {validity['reason']}"
+    return (f"nonlinear validity indicator {validity['indicator']:.2f} (threshold 1; largest "
+            f"element rotation {validity['max_element_rotation_rad']:.3f} rad, nearest "
+            f"multiplier {validity['fold_distance']:.3f} from +1): {verdict}")
 
 
 __all__ = ['check_arguments', 'simulate_nonlinear']

@@ -50,7 +50,8 @@ UNKNOWNS = 9
 TORQUE_COLUMN = 8
 # Joints at each end of each link body: (first joint, second joint) along the link's x axis.
 LINK_JOINTS = (('O2', 'A'), ('A', 'B'), ('O4', 'B'))
-# Pieces of the affine dependence on the crank motion (see reduce_samples in core/reduced.py).
+# Pieces of the affine dependence on the crank motion (see reduce_samples in
+# core/reduction/build.py).
 PIECES = ('1', 'a', 'w2')
 
 
@@ -318,8 +319,8 @@ def reaction_pieces(mechanism, angles):
     dict
         'force' and 'force_rate': {'1', 'a', 'w2'} -> ndarray, shape (N, 4, 2) [N] and
         [N/rad], joints O2, A, B, O4 (the ``forces`` argument of
-        ``core.reduced.reduce_samples``); 'torque' and 'torque_rate': the same pieces of the
-        input torque, shape (N,) [N m] and [N m/rad].
+        ``core.reduction.build.reduce_samples``); 'torque' and 'torque_rate': the same pieces
+        of the input torque, shape (N,) [N m] and [N m/rad].
 
     """
     theta = np.atleast_1d(np.asarray(angles, dtype=float))

@@ -342,6 +342,15 @@ class _PlainLoader(yaml.SafeLoader):
             self._depth -= 1
 
 
+def read_bounded(path, limit=MAX_FILE_BYTES):
+    """Read at most ``limit`` + 1 bytes of a regular file (one more tells it is too large)."""
+    path = pathlib.Path(path)
+    if not path.is_file():
+        raise MechanismError(str(path), 'not a regular file')
+    with open(path, 'rb') as stream:
+        return stream.read(limit + 1)
+
+
 def read_yaml_bounded(path, limit=MAX_FILE_BYTES, raw=None):
     """
     Parse a small YAML file: at most ``limit`` bytes, UTF-8, no aliases, bounded nesting.
@@ -351,11 +360,7 @@ def read_yaml_bounded(path, limit=MAX_FILE_BYTES, raw=None):
 
     """
     if raw is None:
-        path = pathlib.Path(path)
-        if not path.is_file():
-            raise MechanismError(str(path), 'not a regular file')
-        with open(path, 'rb') as stream:
-            raw = stream.read(limit + 1)
+        raw = read_bounded(path, limit)
     if len(raw) > limit:
         raise MechanismError(str(path), f'larger than {limit} bytes (a mechanism file is '
                              'a few kB)')
@@ -386,6 +391,18 @@ def read_mechanism_file(path_or_name, raw=None):
     """Read a mechanism file (or its bytes ``raw``) once: Mechanism, ``stiffness_damping_s``."""
     data = _read_mapping(path_or_name, raw)
     return mechanism_from_dict(data), _stiffness_damping_from(data)
+
+
+def read_mechanism_source(path_or_name):
+    """
+    Find a mechanism file and read its bytes once: (path, bytes), not yet checked.
+
+    For a caller that both builds a model (:func:`read_mechanism_file` with ``raw``) and
+    records the file (a recording's provenance): both then describe the same bytes, even if
+    the file changes in between.
+    """
+    path = find_config(str(path_or_name))
+    return path, read_bounded(path)
 
 
 def stiffness_damping_from_file(path_or_name, raw=None):

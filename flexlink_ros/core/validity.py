@@ -1,16 +1,16 @@
 """
-Validity of the linear + second-order estimate: a per-sample nonlinearity indicator (issue 14).
+Validity of the linear + second-order estimate: a per-sample nonlinearity indicator.
 
-The linear KED model (:mod:`core.assembly`) stiffens each link's bending by the geometric
+The linear KED model (:mod:`core.fe.linkage`) stiffens each link's bending by the geometric
 stiffness of the RIGID-BODY axial force F_r(x) (A.4). The geometrically exact linkage carries the
 whole axial force: F_r plus the ELASTIC part N_e that the elastic vibration adds (the inertia
 of the vibrating links and joint masses reacted along the links). N_e is amplitude dependent, so
 it detunes the bending modes with the response itself; near a resonance that detuning decides
 the amplitude, and neither the linear model nor the quasi-static second order of
-:mod:`core.second_order` (computed from the linear state) can follow it.
+:mod:`core.fe.second_order_full` (computed from the linear state) can follow it.
 
 Elastic axial force (from the linear state only). The FE element axial force EA (u2 - u1) / l_e
-(:meth:`core.assembly.FlexibleLinkage.element_axial_forces`) is, for the axially stiff links
+(:meth:`core.fe.linkage.FlexibleLinkage.element_axial_forces`) is, for the axially stiff links
 (axial modes above 2 kHz), quasi-static: the element average of the axial force the FE loads
 carry. Its rigid-body part is the element average of F_r(x) (:func:`core.dynamics.axial_force`,
 Gauss-averaged), so ::

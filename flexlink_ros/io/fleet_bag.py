@@ -25,7 +25,7 @@ from .replay_writer import write_replay
 from ..core.estimation.offline import estimate_offline
 from ..core.estimation.summary import period_ids, recording_totals, summarize_periods
 from ..core.mechanism_file import load_mechanism
-from ..core.reduction import pipeline
+from ..core.reduction import mechanism_model
 from ..core.validity import VALIDITY_THRESHOLD
 from ..names import DEFAULT_FRAME_ID, NODE_NAME, output_topics
 
@@ -101,11 +101,11 @@ def bag_model(bag, fallback):
 
 def _model(mechanism, options, settings):
     """Load the reduced model once per worker process (from the cache file or built)."""
-    key = (pipeline.model_key(mechanism, options), settings.cache_dir, settings.use_cache)
+    key = (mechanism_model.model_key(mechanism, options), settings.cache_dir, settings.use_cache)
     if key not in _MODELS:
         if len(_MODELS) >= _MODELS_KEPT:
             _MODELS.pop(next(iter(_MODELS)))
-        _MODELS[key] = pipeline.model_for_mechanism(
+        _MODELS[key] = mechanism_model.model_for_mechanism(
             mechanism, options, cache_dir=settings.cache_dir, use_cache=settings.use_cache)
     return _MODELS[key]
 

@@ -29,12 +29,13 @@ Errors. An unwritable path or a full disk raises :class:`RecorderError` once (fr
 counts them, so the caller can report it (a diagnostic) and carry on.
 """
 
-import collections
+import enum
 import logging
 import os
 import pathlib
 import threading
-import time
+
+import numpy as np
 
 from .bag_lock import lock_bag, unlock_bag
 from .bag_metadata import (
@@ -45,11 +46,11 @@ from .msg_schema import (
 )
 from .provenance import custom_data
 from .recorder_files import (
-    abandon, check_settings, create_exclusive, DEFAULT_ZSTD_LEVEL, file_path, make_directories,
-    OpenFile, refuse_existing, register_topic, remove_directories, split_due, start_file, Topic,
+    abandon, add_batch, batch_arguments, check_settings, create_exclusive, DEFAULT_ZSTD_LEVEL,
+    file_path, make_directories, OpenFile, refuse_existing, register_topic, remove_directories,
+    split_due, start_file, Topic,
 )
-from .recorder_queue import QueuedWriting, RecorderState
-from .recorder_status import RecordingStatus
+from .recorder_queue import FlushClock, WriteQueue
 from ..errors import RecorderError
 
 LOGGER = logging.getLogger(__name__)
@@ -58,7 +59,17 @@ DEFAULT_CHUNK_SIZE = 128 * 1024  # bytes before compression; one chunk is the un
 DEFAULT_FLUSH_PERIOD_S = 0.5  # at most this much data (log time, or wall time) sits in memory
 
 
-class McapRecorder(QueuedWriting, RecordingStatus):
+@enum.unique
+class RecorderState(enum.Enum):
+    """Life cycle of a :class:`McapRecorder`."""
+
+    NEW = 'new'
+    RECORDING = 'recording'
+    FAILED = 'failed'
+    CLOSED = 'closed'
+
+
+class McapRecorder:
     """
     Record ROS 2 messages into rosbag2-compatible MCAP.
 
@@ -112,15 +123,8 @@ class McapRecorder(QueuedWriting, RecordingStatus):
         self._error_reported = False
         self._dropped = 0
         self._message_count = 0
-        self._unflushed = 0
-        self._last_flush_log_ns = None
-        self._last_flush_wall = time.monotonic()
-        self._stop_flusher = threading.Event()
-        self._flusher = None
-        self._queue = collections.deque()   # (topic, bytes, log_ns) from enqueue()
-        self._queue_lock = threading.Lock()  # the queue's byte count; never held while writing
-        self._queued_bytes = 0
-        self._overflow = 0   # enqueued messages dropped because the queue was full
+        self._flush_clock = FlushClock(self.flush_period_ns)
+        self._queue = WriteQueue(self._on_queue_period, self.path)   # what enqueue() hands over
         self._closed_bytes = 0
         self._bag_lock = None   # descriptor holding the bag directory's lock (bag_lock)
 
@@ -156,7 +160,8 @@ class McapRecorder(QueuedWriting, RecordingStatus):
                 self._error_reported = True
                 where = '' if isinstance(exc, FileExistsError) else f' to {self.path}'
                 raise RecorderError(f'cannot record{where}: {exc}') from exc
-        self._start_flusher()
+        if self._use_flush_thread:
+            self._queue.start()
         return self
 
     def close(self):
@@ -174,7 +179,8 @@ class McapRecorder(QueuedWriting, RecordingStatus):
             Finishing failed (full disk) and no error had been raised before.
 
         """
-        self._stop_flushing()
+        self._queue.stop()
+        self._write_queue()
         with self._lock:
             if self._state is RecorderState.RECORDING:
                 try:
@@ -202,6 +208,72 @@ class McapRecorder(QueuedWriting, RecordingStatus):
         """Close on leaving the context, even on an exception."""
         self.close()
         return False
+
+    # -- status -----------------------------------------------------------------------------
+
+    @property
+    def state(self):
+        """Return the :class:`RecorderState`."""
+        return self._state
+
+    @property
+    def error(self):
+        """Return the OS error that stopped recording (None if none)."""
+        return self._error
+
+    @property
+    def files(self):
+        """Paths of every file written or being written."""
+        paths = [entry['path'] for entry in self._closed_files]
+        current = self._file    # read once: another thread may close it meanwhile
+        if current is not None:
+            paths.append(current.path)
+        return paths
+
+    def status(self, list_files=True):
+        """
+        Summary of the recording, for diagnostics and the CLI.
+
+        Parameters
+        ----------
+        list_files : bool
+            Include the path of every file (``files``); without it the cost does not grow
+            with the number of files (diagnostics, every period).
+
+        Returns
+        -------
+        dict
+            ``state``, ``error``, ``path``, ``files`` (if listed), ``file_count``,
+            ``message_count``, ``dropped_count`` (overflow included), ``overflow_count``
+            (dropped because the write queue was full), ``queued_bytes``, ``topics``
+            (name -> count), ``bytes_written``.
+
+        """
+        # Without the lock: the writing thread may hold it through a slow disk write, and
+        # diagnostics must not wait for that (each field is read atomically; the set may be
+        # one write apart).
+        current = self._file    # read once: another thread may close it meanwhile
+        size = self._closed_bytes
+        if current is not None:
+            try:
+                size += os.fstat(current.stream.fileno()).st_size
+            except (OSError, ValueError):
+                pass
+        status = {
+            'state': self._state.value,
+            'error': None if self._error is None else str(self._error),
+            'path': str(self.path),
+            'file_count': len(self._closed_files) + (current is not None),
+            'message_count': self._message_count,
+            'dropped_count': self._dropped + self._queue.overflow_count,
+            'overflow_count': self._queue.overflow_count,
+            'queued_bytes': self._queue.queued_bytes,
+            'topics': {t.name: t.message_count for t in self._topics.values()},
+            'bytes_written': size,
+        }
+        if list_files:
+            status['files'] = [str(p) for p in self.files]
+        return status
 
     # -- recording --------------------------------------------------------------------------
 
@@ -289,10 +361,7 @@ class McapRecorder(QueuedWriting, RecordingStatus):
             current.note(log_time_ns, log_time_ns, 1)
             self._topics[topic].message_count += 1
             self._message_count += 1
-            self._unflushed += 1
-            if self._last_flush_log_ns is None:
-                self._last_flush_log_ns = log_time_ns
-            elif log_time_ns - self._last_flush_log_ns >= self.flush_period_ns:
+            if self._flush_clock.wrote(log_time_ns):
                 self._flush_locked(log_time_ns)
             return True
 
@@ -306,6 +375,152 @@ class McapRecorder(QueuedWriting, RecordingStatus):
         if topic not in self._topics:
             self.add_topic(topic, message_type_name(message))
         return serialize_exact(message)
+
+    def flush(self):
+        """Write the queue and the open chunk and flush them to the OS (no fsync)."""
+        self._write_queue()
+        with self._lock:
+            if self._state is RecorderState.RECORDING:
+                self._flush_locked(self._flush_clock.last_log_ns)
+
+    def enqueue(self, topic, message, log_time_ns):
+        """
+        Record one message without writing it in the calling thread.
+
+        For a latency-sensitive caller (the node's subscription callback): the message is
+        queued (:class:`.recorder_queue.WriteQueue`) and the background thread writes the queue
+        every ``QUEUE_PERIOD_S`` (20 ms) in one :meth:`write_batch` (so neither the per-message
+        cost of :meth:`write` nor a slow disk holding the recorder's lock lands in the caller);
+        :meth:`flush` and :meth:`close` write what is left. It records what :meth:`write`
+        calls in the same order would.
+        Without the background thread (``flush_thread=False``) this is :meth:`write`.
+
+        The queue is bounded (``QUEUE_MAX_BYTES``, 4 MiB): while the writer is that far behind
+        (a stalled disk), messages are dropped and counted (``overflow_count`` of
+        :meth:`status`), never held in ever more memory.
+
+        Parameters and errors as :meth:`write`; a failure in the background thread is raised
+        (once) by the next call. Returns False for a message dropped on overflow.
+
+        """
+        if not self._use_flush_thread:
+            return self.write(topic, message, log_time_ns)
+        data = self._message_bytes(topic, message)
+        if self._state is not RecorderState.RECORDING:
+            with self._lock:
+                return self._refuse()
+        return self._queue.put(topic, data, int(log_time_ns))
+
+    def write_batch(self, topics, messages, log_times_ns, publish_times_ns=None):
+        """
+        Record many serialised messages, exactly as the same :meth:`write` calls in order.
+
+        The file is the same (chunk boundaries, flushes, indexes, statistics), but the
+        message and index records are built in bulk (numpy), not one Python call each: use
+        it for offline writing (replay) where per-message cost dominates.
+
+        Parameters
+        ----------
+        topics : str or sequence of str
+            One topic for every message, or the topic of each (declared with
+            :meth:`add_topic`).
+        messages : sequence of bytes
+            CDR bytes.
+        log_times_ns : array-like of int, shape (n,)
+            Log (receive) times [ns].
+        publish_times_ns : array-like of int, shape (n,), optional
+            Default: the log times.
+
+        Returns
+        -------
+        int
+            Messages recorded (0 if dropped because the recorder failed earlier).
+
+        Raises
+        ------
+        RecorderError
+            As :meth:`write`.
+
+        """
+        names, index, log, publish = batch_arguments(
+            topics, messages, log_times_ns, publish_times_ns, self._topics)
+        count = len(messages)
+        if count == 0:
+            return 0
+        with self._lock:
+            if self._state is not RecorderState.RECORDING:
+                if self._state is RecorderState.FAILED:
+                    self._dropped += count - 1
+                self._refuse()
+                return 0
+            if self.split_size_bytes or self.split_duration_ns:   # a split may fall inside
+                return self._write_each(names, index, messages, log, publish)
+            return self._write_bulk(names, index, messages, log, publish)
+
+    # -- batches and the queue ----------------------------------------------------------------
+
+    def _write_each(self, names, index, messages, log, publish):
+        """Write a batch one message at a time (a file split may fall inside it)."""
+        topic_of = [names[k] for k in index.tolist()]
+        recorded = 0
+        for n, (log_ns, publish_ns) in enumerate(zip(log.tolist(), publish.tolist())):
+            recorded += bool(self.write(topic_of[n], messages[n], log_ns, publish_ns))
+        return recorded
+
+    def _write_bulk(self, names, index, messages, log, publish):
+        """Write a batch into the open file in one call of its writer."""
+        count = len(messages)
+        try:
+            flushes = add_batch(self._file, self._topics, names, index, messages, log, publish,
+                                self.flush_period_ns, self._flush_clock.last_log_ns)
+        except OSError as exc:
+            self._dropped += count - 1
+            self._fail(exc)
+            self._refuse()
+            return 0
+        self._count_batch(names, index, log, flushes)
+        return count
+
+    def _count_batch(self, names, index, log, flushes):
+        """Update counts, times and flush state after a batch (as its write calls would)."""
+        count = len(log)
+        self._file.note(int(log.min()), int(log.max()), count)
+        for k, number in enumerate(np.bincount(index, minlength=len(names)).tolist()):
+            self._topics[names[k]].message_count += number
+        self._message_count += count
+        self._flush_clock.wrote_batch(int(log[0]), count, flushes)
+
+    def _write_queue(self):
+        """Write the messages enqueued so far (enqueue), in order, as one batch."""
+        # Under the lock: flush() and the background thread may both get here, and two
+        # writers popping one queue would interleave its messages (enqueue only appends,
+        # without the lock).
+        with self._lock:
+            topics, messages, log_times = self._queue.take()
+            if not topics:
+                return
+            try:
+                self.write_batch(list(topics), list(messages), log_times)
+            except RecorderError:
+                # told to the enqueuing thread at its next call, or by close
+                self._error_reported = False
+
+    def _on_queue_period(self):
+        """Write the queue; flush the open chunk once a flush period of wall time has passed."""
+        self._write_queue()
+        with self._lock:
+            if self._state is RecorderState.RECORDING and self._flush_clock.idle_due():
+                self._flush_locked(self._flush_clock.last_log_ns)
+
+    def _flush_locked(self, log_time_ns):
+        if self._file is None or not self._flush_clock.unflushed:
+            return
+        try:
+            self._file.writer.flush()
+        except OSError as exc:
+            self._fail(exc)
+            return
+        self._flush_clock.flushed(log_time_ns)
 
     # -- internals --------------------------------------------------------------------------
 

@@ -177,6 +177,69 @@ class Topic:
         return np.arange(first, self.sequence + 1, dtype=np.uint64) % 2 ** 32
 
 
+def batch_arguments(topics, messages, log_times_ns, publish_times_ns, known_topics):
+    """
+    Check write_batch's arguments: (topic names, topic index per message, log, publish).
+
+    Parameters
+    ----------
+    topics : str or sequence of str
+        One topic for every message, or the topic of each.
+    messages : sequence of bytes
+        CDR bytes.
+    log_times_ns : array-like of int, shape (n,)
+        Log times [ns].
+    publish_times_ns : array-like of int, shape (n,), or None
+        Publish times [ns] (None: the log times).
+    known_topics : container of str
+        The declared topics.
+
+    Returns
+    -------
+    names : list of str
+    index : ndarray of intp, shape (n,)
+    log, publish : ndarray of int64, shape (n,)
+
+    """
+    count = len(messages)
+    if isinstance(topics, str):
+        names, index = [topics], np.zeros(count, dtype=np.intp)
+    else:
+        if len(topics) != count:
+            raise ValueError(f'`topics` has {len(topics)} entries for {count} messages')
+        names = list(dict.fromkeys(topics))
+        lookup = {name: k for k, name in enumerate(names)}
+        index = np.fromiter(map(lookup.__getitem__, topics), dtype=np.intp, count=count)
+    for name in names:
+        if name not in known_topics:
+            raise ValueError(f'`topic` {name!r}: declare it with add_topic() before '
+                             'writing serialised bytes')
+    log = np.asarray(log_times_ns, dtype=np.int64).reshape(-1)
+    publish = log if publish_times_ns is None else np.asarray(
+        publish_times_ns, dtype=np.int64).reshape(-1)
+    if log.size != count or publish.size != count:
+        raise ValueError('`log_times_ns` and `publish_times_ns` need one entry per message')
+    return names, index, log, publish
+
+
+def add_batch(current, topics, names, index, messages, log, publish, flush_period_ns,
+              last_flush_log_ns):
+    """
+    Write a checked batch (:func:`batch_arguments`) into the open file in one writer call.
+
+    Takes the batch's sequence numbers from ``topics`` (name -> :class:`Topic`); returns the
+    writer's flushes (:meth:`McapFileWriter.add_messages`). Raises OSError as the writer does.
+    """
+    channel_of = np.array([current.channel_ids[name] for name in names],
+                          dtype=np.uint16)[index]
+    sequences = np.zeros(len(messages), dtype=np.uint64)
+    for k, name in enumerate(names):
+        chosen = index == k
+        sequences[chosen] = topics[name].next_sequences(int(chosen.sum()))
+    return current.writer.add_messages(channel_of, messages, log, publish, flush_period_ns,
+                                       last_flush_log_ns, sequences)
+
+
 def file_path(path, bare, index):
     """
     Return the path of a recording's file number ``index``.

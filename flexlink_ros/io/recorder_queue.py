@@ -1,21 +1,19 @@
 """
-Writing many messages at once: the queue of :meth:`McapRecorder.enqueue` and its flush thread.
+When the recorder writes and flushes: its write queue, written by a thread, and its flush clock.
 
-:class:`QueuedWriting` is the part of :class:`~flexlink_ros.io.recorder.McapRecorder` that
-records messages in bulk: :meth:`~QueuedWriting.write_batch` (the same file as the same
-``write`` calls, built with numpy), the queue a latency-sensitive caller appends to, and the
-background thread that writes the queue every :data:`QUEUE_PERIOD_S` and flushes the open chunk
-once a flush period of wall time has passed without a message.
+:class:`WriteQueue` is what :meth:`flexlink_ros.io.recorder.McapRecorder.enqueue` appends
+to: a queue bounded in bytes (:data:`QUEUE_MAX_BYTES`; what overflows is dropped and
+counted, never held in ever more memory) and a background thread that calls the recorder back
+every :data:`QUEUE_PERIOD_S` to write what was queued and flush the open chunk when due. The
+queue's own lock guards only its items and byte count and is never held while writing, so an
+enqueuing caller never waits for the disk. :class:`FlushClock` says when the open chunk is
+flushed to the OS: what bounds the loss of a crash.
 """
 
-import enum
+import collections
 import logging
 import threading
 import time
-
-import numpy as np
-
-from ..errors import RecorderError
 
 LOGGER = logging.getLogger(__name__)
 QUEUE_PERIOD_S = 0.02  # the background thread writes enqueued messages this often
@@ -26,252 +24,127 @@ QUEUE_MAX_BYTES = 4 << 20
 QUEUE_ITEM_BYTES = 128   # a queued (topic, bytes, int) tuple's own memory, about
 
 
-@enum.unique
-class RecorderState(enum.Enum):
-    """Life cycle of a :class:`~flexlink_ros.io.recorder.McapRecorder`."""
-
-    NEW = 'new'
-    RECORDING = 'recording'
-    FAILED = 'failed'
-    CLOSED = 'closed'
-
-
-def batch_arguments(topics, messages, log_times_ns, publish_times_ns, known_topics):
+class WriteQueue:
     """
-    Check write_batch's arguments: (topic names, topic index per message, log, publish).
+    Messages waiting to be written, bounded in bytes, and the thread that has them written.
 
     Parameters
     ----------
-    topics : str or sequence of str
-        One topic for every message, or the topic of each.
-    messages : sequence of bytes
-        CDR bytes.
-    log_times_ns : array-like of int, shape (n,)
-        Log times [ns].
-    publish_times_ns : array-like of int, shape (n,), or None
-        Publish times [ns] (None: the log times).
-    known_topics : container of str
-        The declared topics.
-
-    Returns
-    -------
-    names : list of str
-    index : ndarray of intp, shape (n,)
-    log, publish : ndarray of int64, shape (n,)
+    on_period : callable
+        Called without arguments every :data:`QUEUE_PERIOD_S` by the thread (the recorder
+        writes what :meth:`take` gives and flushes when due).
+    name : str
+        What the queue writes to, for the overflow message.
 
     """
-    count = len(messages)
-    if isinstance(topics, str):
-        names, index = [topics], np.zeros(count, dtype=np.intp)
-    else:
-        if len(topics) != count:
-            raise ValueError(f'`topics` has {len(topics)} entries for {count} messages')
-        names = list(dict.fromkeys(topics))
-        lookup = {name: k for k, name in enumerate(names)}
-        index = np.fromiter(map(lookup.__getitem__, topics), dtype=np.intp, count=count)
-    for name in names:
-        if name not in known_topics:
-            raise ValueError(f'`topic` {name!r}: declare it with add_topic() before '
-                             'writing serialised bytes')
-    log = np.asarray(log_times_ns, dtype=np.int64).reshape(-1)
-    publish = log if publish_times_ns is None else np.asarray(
-        publish_times_ns, dtype=np.int64).reshape(-1)
-    if log.size != count or publish.size != count:
-        raise ValueError('`log_times_ns` and `publish_times_ns` need one entry per message')
-    return names, index, log, publish
 
+    def __init__(self, on_period, name):
+        self._on_period = on_period
+        self._name = name
+        self._items = collections.deque()   # (topic, bytes, log_ns)
+        self._lock = threading.Lock()       # items and byte count; never held while writing
+        self._bytes = 0
+        self._overflow = 0
+        self._stop = threading.Event()
+        self._thread = None
 
-class QueuedWriting:
-    """Batch writing, the enqueue queue and the flush thread of the recorder (a mixin)."""
+    @property
+    def queued_bytes(self):
+        """Bytes queued, with each item's own size."""
+        return self._bytes
 
-    def flush(self):
-        """Write the queue and the open chunk and flush them to the OS (no fsync)."""
-        self._write_queue()
-        with self._lock:
-            if self._state is RecorderState.RECORDING:
-                self._flush_locked(self._last_flush_log_ns)
+    @property
+    def overflow_count(self):
+        """Messages dropped because the queue was full."""
+        return self._overflow
 
-    def _start_flusher(self):
-        if self._use_flush_thread:
-            self._flusher = threading.Thread(target=self._flush_loop, name='mcap-flush',
-                                             daemon=True)
-            self._flusher.start()
-
-    def _stop_flushing(self):
-        """Stop the flush thread and write what is left in the queue."""
-        self._stop_flusher.set()
-        if self._flusher is not None and self._flusher is not threading.current_thread():
-            self._flusher.join()
-        self._write_queue()
-
-    def enqueue(self, topic, message, log_time_ns):
-        """
-        Record one message without writing it in the calling thread.
-
-        For a latency-sensitive caller (the node's subscription callback): the message is
-        queued and the background thread writes the queue every ``QUEUE_PERIOD_S`` in one
-        :meth:`write_batch` (so neither the per-message cost of :meth:`write` nor a slow disk
-        holding the recorder's lock lands in the caller); :meth:`flush` and :meth:`close`
-        write what is left. It records what :meth:`write` calls in the same order would.
-        Without the background thread (``flush_thread=False``) this is :meth:`write`.
-
-        The queue is bounded (:data:`QUEUE_MAX_BYTES`): while the writer is that far behind
-        (a stalled disk), messages are dropped and counted (``overflow_count`` of
-        :meth:`status`), never held in ever more memory.
-
-        Parameters and errors as :meth:`write`; a failure in the background thread is raised
-        (once) by the next call. Returns False for a message dropped on overflow.
-
-        """
-        if not self._use_flush_thread:
-            return self.write(topic, message, log_time_ns)
-        data = self._message_bytes(topic, message)
-        if self._state is not RecorderState.RECORDING:
-            with self._lock:
-                return self._refuse()
+    def put(self, topic, data, log_time_ns):
+        """Queue one message; False (and counted) if the queue is full."""
         size = len(data) + QUEUE_ITEM_BYTES
-        with self._queue_lock:
-            if self._queued_bytes + size > QUEUE_MAX_BYTES:
+        with self._lock:
+            if self._bytes + size > QUEUE_MAX_BYTES:
                 self._overflow += 1
                 if self._overflow == 1:
                     LOGGER.error('MCAP recording to %s cannot keep up: its write queue is full '
-                                 '(%d MiB); messages are dropped and counted', self.path,
+                                 '(%d MiB); messages are dropped and counted', self._name,
                                  QUEUE_MAX_BYTES >> 20)
                 return False
-            self._queue.append((topic, data, int(log_time_ns)))
-            self._queued_bytes += size
+            self._items.append((topic, data, log_time_ns))
+            self._bytes += size
         return True
 
-    def write_batch(self, topics, messages, log_times_ns, publish_times_ns=None):
-        """
-        Record many serialised messages, exactly as the same :meth:`write` calls in order.
-
-        The file is the same (chunk boundaries, flushes, indexes, statistics), but the
-        message and index records are built in bulk (numpy), not one Python call each: use
-        it for offline writing (replay) where per-message cost dominates.
-
-        Parameters
-        ----------
-        topics : str or sequence of str
-            One topic for every message, or the topic of each (declared with
-            :meth:`add_topic`).
-        messages : sequence of bytes
-            CDR bytes.
-        log_times_ns : array-like of int, shape (n,)
-            Log (receive) times [ns].
-        publish_times_ns : array-like of int, shape (n,), optional
-            Default: the log times.
-
-        Returns
-        -------
-        int
-            Messages recorded (0 if dropped because the recorder failed earlier).
-
-        Raises
-        ------
-        RecorderError
-            As :meth:`write`.
-
-        """
-        names, index, log, publish = batch_arguments(
-            topics, messages, log_times_ns, publish_times_ns, self._topics)
-        count = len(messages)
-        if count == 0:
-            return 0
+    def take(self):
+        """Remove and return the messages queued so far, in order: (topics, messages, times)."""
         with self._lock:
-            if self._state is not RecorderState.RECORDING:
-                if self._state is RecorderState.FAILED:
-                    self._dropped += count - 1
-                self._refuse()
-                return 0
-            if self.split_size_bytes or self.split_duration_ns:   # a split may fall inside
-                return self._write_each(names, index, messages, log, publish)
-            return self._write_bulk(names, index, messages, log, publish)
+            count = len(self._items)      # appends may go on later: take only these
+            if not count:
+                return (), (), ()
+            items = [self._items.popleft() for _ in range(count)]
+            self._bytes -= sum(len(item[1]) for item in items) + count * QUEUE_ITEM_BYTES
+        return tuple(zip(*items))
 
-    def _write_each(self, names, index, messages, log, publish):
-        """Write a batch one message at a time (a file split may fall inside it)."""
-        topic_of = [names[k] for k in index.tolist()]
-        recorded = 0
-        for n, (log_ns, publish_ns) in enumerate(zip(log.tolist(), publish.tolist())):
-            recorded += bool(self.write(topic_of[n], messages[n], log_ns, publish_ns))
-        return recorded
+    def start(self):
+        """Start the thread."""
+        self._thread = threading.Thread(target=self._run, name='mcap-flush', daemon=True)
+        self._thread.start()
 
-    def _write_bulk(self, names, index, messages, log, publish):
-        """Write a batch into the open file in one call of its writer."""
-        count = len(messages)
-        current = self._file
-        channel_of = np.array([current.channel_ids[name] for name in names],
-                              dtype=np.uint16)[index]
-        sequences = np.zeros(count, dtype=np.uint64)
-        for k, name in enumerate(names):
-            chosen = index == k
-            sequences[chosen] = self._topics[name].next_sequences(int(chosen.sum()))
-        try:
-            flushes = current.writer.add_messages(channel_of, messages, log, publish,
-                                                  self.flush_period_ns,
-                                                  self._last_flush_log_ns, sequences)
-        except OSError as exc:
-            self._dropped += count - 1
-            self._fail(exc)
-            self._refuse()
-            return 0
-        self._count_batch(names, index, log, flushes)
-        return count
+    def stop(self):
+        """Stop the thread and wait for it (unless called from it); :meth:`take` still works."""
+        self._stop.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join()
 
-    def _count_batch(self, names, index, log, flushes):
-        """Update counts, times and flush state after a batch (as its write calls would)."""
-        count = len(log)
-        self._file.note(int(log.min()), int(log.max()), count)
-        for k, number in enumerate(np.bincount(index, minlength=len(names)).tolist()):
-            self._topics[names[k]].message_count += number
-        self._message_count += count
+    def _run(self):
+        while not self._stop.wait(QUEUE_PERIOD_S):
+            self._on_period()
+
+
+class FlushClock:
+    """
+    When the open chunk is flushed: a flush period of log time, or of wall time, after the last.
+
+    Log time is checked at every message written, wall time by the queue's thread (no message
+    comes); the recorder flushes when told and reports each flush back (:meth:`flushed`).
+
+    Parameters
+    ----------
+    period_ns : int
+        The flush period [ns].
+
+    """
+
+    def __init__(self, period_ns):
+        self.period_ns = period_ns
+        self.unflushed = 0          # messages written since the last flush
+        self.last_log_ns = None     # log time of the last flush (at first: the first message)
+        self._last_wall = time.monotonic()
+
+    def wrote(self, log_time_ns):
+        """Count one message written; tell whether a flush period of log time has passed."""
+        self.unflushed += 1
+        if self.last_log_ns is None:
+            self.last_log_ns = log_time_ns
+            return False
+        return log_time_ns - self.last_log_ns >= self.period_ns
+
+    def wrote_batch(self, first_log_ns, count, flushes):
+        """Count a batch written with the writer's own flushes ((index, log time) of each)."""
         if flushes:
-            self._last_flush_log_ns = flushes[-1][1]
-            self._unflushed = count - 1 - flushes[-1][0]
-            self._last_flush_wall = time.monotonic()
+            self.last_log_ns = flushes[-1][1]
+            self.unflushed = count - 1 - flushes[-1][0]
+            self._last_wall = time.monotonic()
         else:
-            if self._last_flush_log_ns is None:
-                self._last_flush_log_ns = int(log[0])
-            self._unflushed += count
+            if self.last_log_ns is None:
+                self.last_log_ns = first_log_ns
+            self.unflushed += count
 
-    def _write_queue(self):
-        """Write the messages enqueued so far (enqueue), in order, as one batch."""
-        # Under the lock: flush() and the background thread may both get here, and two
-        # writers popping one queue would interleave its messages (enqueue only appends,
-        # without the lock).
-        with self._lock:
-            with self._queue_lock:
-                queue = self._queue
-                count = len(queue)      # appends may go on later: take only these
-                if not count:
-                    return
-                items = [queue.popleft() for _ in range(count)]
-                self._queued_bytes -= sum(len(item[1]) for item in items) + (
-                    count * QUEUE_ITEM_BYTES)
-            topics, messages, log_times = zip(*items)
-            try:
-                self.write_batch(list(topics), list(messages), log_times)
-            except RecorderError:
-                # told to the enqueuing thread at its next call, or by close
-                self._error_reported = False
+    def idle_due(self):
+        """Tell whether messages have waited unflushed for a flush period of wall time."""
+        return bool(self.unflushed) and (
+            time.monotonic() - self._last_wall >= self.period_ns / 1e9)
 
-    def _flush_loop(self):
-        period_s = self.flush_period_ns / 1e9
-        while not self._stop_flusher.wait(QUEUE_PERIOD_S):
-            self._write_queue()
-            with self._lock:
-                if (self._state is RecorderState.RECORDING and self._unflushed
-                        and time.monotonic() - self._last_flush_wall >= period_s):
-                    self._flush_locked(self._last_flush_log_ns)
-
-    def _flush_locked(self, log_time_ns):
-        if self._file is None or not self._unflushed:
-            return
-        try:
-            self._file.writer.flush()
-        except OSError as exc:
-            self._fail(exc)
-            return
-        self._unflushed = 0
-        self._last_flush_log_ns = log_time_ns
-        self._last_flush_wall = time.monotonic()
+    def flushed(self, log_time_ns):
+        """Note a flush, at log time ``log_time_ns``."""
+        self.unflushed = 0
+        self.last_log_ns = log_time_ns
+        self._last_wall = time.monotonic()

@@ -7,7 +7,7 @@ Charts of ``flexlink validate``: the package's models against the nonlinear Exud
   dX / dY [um]) over one steady revolution, the peer against linear, linear + second order and
   the dynamic pass, with each model's p2p error in the legend;
 - a sweep (more than :data:`MAX_ROWS` speeds, or ``sweep=True``): the worse p2p error of the
-  lever tip and of the coupler mid-point against speed per model, with the issue's targets,
+  lever tip and of the coupler mid-point against speed per model, with the accuracy targets,
   and below it the validity indicator with its threshold, the speeds it flags shaded.
 """
 

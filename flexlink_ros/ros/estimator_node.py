@@ -36,6 +36,7 @@ from .sim_time import ClockWatch, LogTime
 from .startup import check_startup_signal
 from ..core.estimation.sample import SampleFlag
 from ..core.estimation.streaming import StreamingEstimator
+from ..core.mechanism_file import read_mechanism_source
 from ..core.reduction.soft_basis import soft_basis_text
 from ..errors import ConflictingSample, FlexlinkError, InputRejected, OutlierSample
 from ..io import cdr
@@ -95,8 +96,10 @@ class EstimatorNode(NodeRecording):
         log = self.get_logger()
         start = time.perf_counter()
         check_startup_signal()
-        self.model, self.options, self.notes = load_node_model(values, log.warning,
-                                                               ProgressLog(log.info))
+        # Read once: the model is built from these bytes and the recording names them.
+        self.mechanism_source = read_mechanism_source(values['mechanism'])
+        self.model, self.options, self.notes = load_node_model(
+            values, log.warning, ProgressLog(log.info), self.mechanism_source)
         check_startup_signal()
         self.criteria_source = self.model.info.get('criteria', 'unknown')
         log.info(f'model: {self.model.size} coordinates, {soft_basis_text(self.model)}, '

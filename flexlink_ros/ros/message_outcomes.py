@@ -89,7 +89,7 @@ def publishable(sample):
 
     Parameters
     ----------
-    sample : core.estimation.streaming.Sample
+    sample : core.estimation.sample.Sample
         One estimate.
 
     """
@@ -173,7 +173,7 @@ class PeriodStats:
 
         Parameters
         ----------
-        sample : core.estimation.streaming.Sample
+        sample : core.estimation.sample.Sample
             The estimate published.
 
         """

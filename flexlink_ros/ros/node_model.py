@@ -1,23 +1,19 @@
 """
 The model flexlink_node loads, without rclpy: read the mechanism, load or build its model.
 
-Also what the node derives from the model at start-up (the markers' exaggeration) and the
-tolerance the default model was planned for.
+Also what the node derives from the model at start-up (the markers' exaggeration).
 """
 
 import dataclasses
 
 from . import parameters
 from ..core.estimation.marker_scale import default_exaggeration, MARKER_SHARE
-from ..core.mechanism_file import read_mechanism_file
-from ..core.reduction.pipeline import model_for_mechanism
-
-# The default model (node parameters, core.options.DEFAULT_SIZES) meets this relative RMS
-# error on Cho 1992 against flexlink plan's scene reference (1.3 % coupler, 0.9 % lever).
-DEFAULT_MODEL_TOLERANCE = 0.02
+from ..core.mechanism_file import read_mechanism_file, read_mechanism_source
+from ..core.options import PLANNED_TOLERANCE
+from ..core.reduction.mechanism_model import model_for_mechanism
 
 
-def load_node_model(values, warn, progress=None):
+def load_node_model(values, warn, progress=None, source=None):
     """
     Load the mechanism and its reduced model (cached, else built).
 
@@ -31,6 +27,9 @@ def load_node_model(values, warn, progress=None):
         Called with a warning sentence.
     progress : callable or None
         ``progress(done, total, what)`` while the model is built (not on a cache hit).
+    source : (path, bytes), optional
+        The mechanism file as read once by the caller (:func:`read_mechanism_source`, whose
+        bytes the recording also names); default: ``values['mechanism']`` read here.
 
     Returns
     -------
@@ -41,14 +40,15 @@ def load_node_model(values, warn, progress=None):
         Warnings given (empty if none).
 
     """
-    mechanism, file_beta = read_mechanism_file(values['mechanism'])   # read once
+    path, raw = source or read_mechanism_source(values['mechanism'])
+    mechanism, file_beta = read_mechanism_file(path, raw=raw)
     zeta = values['damping_ratio']      # -1: the file's
     if zeta >= 0.0 and zeta != mechanism.damping_ratio:
         mechanism = dataclasses.replace(mechanism, damping_ratio=zeta)
     options = parameters.model_options(values, file_beta, mechanism.crank_speed)
     notes = []
-    if values['model.modes'] == 0 and values['model.tolerance'] < DEFAULT_MODEL_TOLERANCE:
-        notes.append(f'the default model was planned for {DEFAULT_MODEL_TOLERANCE:g} relative '
+    if values['model.modes'] == 0 and values['model.tolerance'] < PLANNED_TOLERANCE:
+        notes.append(f'the default model was planned for {PLANNED_TOLERANCE:g} relative '
                      f'error; for {values["model.tolerance"]:g} run `flexlink plan --tolerance '
                      f'{values["model.tolerance"]:g}` and set model.modes')
         warn(notes[-1])

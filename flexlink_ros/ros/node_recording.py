@@ -74,11 +74,12 @@ class NodeRecording:
     def _provenance(self):
         """Say what makes the recording: mechanism file, model options, version."""
         values = self.values
+        path, raw = self.mechanism_source       # the bytes the model was built from
         try:
-            return provenance_entries(NODE_NAME, values['mechanism'], self.options,
+            return provenance_entries(NODE_NAME, str(path.resolve()), self.options,
                                       self.model.zeta, values['crank_joint'],
-                                      values['model.warm_start'])
-        except (FlexlinkError, OSError) as exc:   # the file went away since the model loaded
+                                      values['model.warm_start'], raw=raw)
+        except (FlexlinkError, OSError) as exc:   # the recording goes on without it
             self.get_logger().warning(f'the recording will not name its mechanism: {exc}')
             return provenance_entries(NODE_NAME)
 

@@ -12,7 +12,8 @@ from typing import Optional
 
 import yaml
 
-from ..core.options import DEFAULT_SPEED_MAX, ModelOptions, SPEED_MARGIN, speed_range
+from ..core.options import (DEFAULT_SPEED_MAX, ModelOptions, PLANNED_TOLERANCE, SPEED_MARGIN,
+                            speed_range)
 from ..core.validity import VALIDITY_THRESHOLD
 from ..io.recorder_files import MIN_SPLIT_BYTES, MIN_SPLIT_DURATION_S, split_refusal
 
@@ -63,7 +64,7 @@ PARAMETERS = (
                   max_bytes=NAME_MAX_BYTES),
     ParameterSpec('input_topic', 'joint_states', 'JointState topic carrying the crank',
                   read_only=True, max_bytes=NAME_MAX_BYTES),
-    ParameterSpec('model.tolerance', 0.02,
+    ParameterSpec('model.tolerance', PLANNED_TOLERANCE,
                   'Relative RMS error the default sizes were planned for; a smaller value '
                   'warns that `flexlink plan` should choose the model.* sizes',
                   low=1e-4, high=0.5, read_only=True),
@@ -319,8 +320,9 @@ def model_options(values, file_stiffness_damping=0.0, file_crank_speed=None):
                                               values.get('model.speed_max_rpm', 0.0)),
                         stiffness_damping=file_stiffness_damping if beta < 0 else beta,
                         order=values['model.order'],
-                        soft_modes=values.get('model.soft_modes', -1),
-                        second_order=values.get('model.second_order', 'quasi-static'))
+                        soft_modes=values.get('model.soft_modes', DEFAULT_MODEL.soft_modes),
+                        second_order=values.get('model.second_order',
+                                                DEFAULT_MODEL.second_order))
 
 
 def default_model_options(**overrides):

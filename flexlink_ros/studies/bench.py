@@ -20,14 +20,14 @@ from ..core.estimation.offline import replay
 from ..core.fe import linkage as assembly
 from ..core.integrators import RadauIIA
 from ..core.numerics import relative_rms, RPM
-from ..core.reduction import pipeline
+from ..core.reduction import mechanism_model
 from ..core.reduction import reference as reduction_reference
 from ..core.reduction.soft_basis import gap_ratios, MIN_GAP_RATIO
 from ..core.reduction.soft_tables import node_values
 
 # Length of the signal the offline replay rate is measured on [s] (amortises the warm start).
 OFFLINE_SECONDS = 20.0
-# The estimator's targets (issue #15): median streaming update [us], offline samples/s.
+# The estimator's targets (the soft basis's): median streaming update [us], offline samples/s.
 UPDATE_TARGET_US = 10.0
 OFFLINE_TARGET = 100_000.0
 
@@ -62,11 +62,11 @@ def full_order_cpu_per_second(mechanism, options, rpm, rate_hz=1000.0, steps=40)
     """
     CPU seconds per simulated second of a direct full-order integration at ``rate_hz``.
 
-    Each step assembles the FE system at the two Radau stage angles (core/assembly.py),
+    Each step assembles the FE system at the two Radau stage angles (core/fe/linkage.py),
     builds the modal damping from all frozen modes and takes one order-3 Radau IIA step:
     what integrating the unreduced model sample by sample costs.
     """
-    mech = pipeline.fe_mechanism(mechanism, options)
+    mech = mechanism_model.fe_mechanism(mechanism, options)
     linkage = assembly.FlexibleLinkage(mech, options)
     method = RadauIIA(2)
     speed, h = rpm * RPM, 1.0 / rate_hz
@@ -77,8 +77,9 @@ def full_order_cpu_per_second(mechanism, options, rpm, rate_hz=1000.0, steps=40)
         system = linkage.assemble(speed * h * (n + method.c))
         mass, damping, stiffness, load = system.evaluate(speed)
         frozen = system.frozen_stiffness(speed)
-        damping = damping + np.array([pipeline.modal_damping_matrix(m, k, mech.damping_ratio)
-                                      for m, k in zip(mass, frozen)])
+        damping = damping + np.array([
+            mechanism_model.modal_damping_matrix(m, k, mech.damping_ratio)
+            for m, k in zip(mass, frozen)])
         q, v, _ = method.step(q, v, h, mass, damping, stiffness, load)
     return (time.process_time() - start) / steps * rate_hz
 
@@ -137,11 +138,11 @@ def soft_configurations(options, model):
     """
     bare = dataclasses.replace(model, soft=None)
     rows = [(f'soft basis p = {p}', dataclasses.replace(options, soft_modes=p),
-             pipeline.with_soft_basis(bare, p))
+             mechanism_model.with_soft_basis(bare, p))
             for p in usable_soft_sizes(model) if p != model.step_size]
     if model.soft is not None:
         rows.append((f'soft off (r = {model.size})', dataclasses.replace(options, soft_modes=0),
-                     pipeline.with_soft_basis(bare, 0)))
+                     mechanism_model.with_soft_basis(bare, 0)))
     return rows
 
 
@@ -286,7 +287,7 @@ def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM
     for label, options in configurations:
         step(f'building {label}')
         models.append((label, options,
-                       pipeline.model_for_mechanism(mechanism, options, use_cache=False)))
+                       mechanism_model.model_for_mechanism(mechanism, options, use_cache=False)))
         if soft_rows and label == 'default':
             models += soft_configurations(options, models[-1][2])
     step.total += len(models) - len(configurations)
@@ -339,7 +340,7 @@ def estimator_report_data(mechanism, options, progress=None):
 
     """
     bench = run_bench(mechanism, options, progress=progress)
-    model = pipeline.model_for_mechanism(mechanism, options)
+    model = mechanism_model.model_for_mechanism(mechanism, options)
     rpm = PAPER_RPM[-1]
     estimate = run_estimate(model, rpm)
     angles = np.radians(estimate['crank_deg'])

@@ -1,12 +1,12 @@
 """
 Study: full order and streaming estimate with stiffness-proportional damping against the peer.
 
-Issue 14, item 3. The full-order reference (:func:`core.fe.simulate.periodic_response`) runs
+The full-order reference (:func:`core.fe.simulate.periodic_response`) runs
 with the objective beta damping of :mod:`core.fe.stiffness_damping` and zeta = 0
 (``damping='objective'``), with the naive ``beta K U'`` (``'naive'``) or with modal zeta
 (``'modal'``); the streaming estimate runs on the reduced model with the same beta
 (:func:`streaming_response`). Both are compared with the nonlinear Exudyn peer
-(:mod:`studies.peer_exudyn`, same beta convention) in the issue's matched conventions: rigid
+(:mod:`studies.peer_exudyn`, same beta convention) in matched conventions: rigid
 crank with a rigid pivot (the package's ``rigid_crank``: the crank is not modelled, pin A is a
 fixed point, the O2 bearing spring drops out; the peer prescribes the crank), bearing springs at
 A, B, O4 with c = beta k, joint masses split 50/50 (``mass_placement='split'``; the package's
@@ -37,13 +37,14 @@ streaming, zeta 0.02, gravity       2.8 %       4.8 %
 ("streaming": the node's estimator, :func:`streaming_response`, on the reduced model of
 :func:`matched_reduced_model`, r = 18; 0.1-0.2 % RMS off the full order.)
 
-(the issue: 2.9 / 3.4 %; 4 elements: 2.8 / 3.4 %). At 391 rpm (inside the 385-405 rpm band
-where the issue finds amplitude-dependent detuning) the linear model is 52 / 97 % off with beta
-and 43 / 72 % with modal zeta. The naive ``beta K U'`` changes the response by only 0.04-0.34 %
-RMS (its spurious force acts in the axially stiff direction: 738 N over E A / l_e = 9.6e7 N/m is
-8 um), but it is 738 N of axial force in the coupler's element at B at 391 rpm (171 N at 269
-rpm) against elastic axial forces of 2-9 N: anything that reads element forces with their
-damping part (stresses, the nonlinearity indicator) must use the objective form.
+(first measured at 8 elements: 2.9 / 3.4 %; 4 elements: 2.8 / 3.4 %). At 391 rpm (inside the
+385-405 rpm band where amplitude-dependent detuning dominates) the linear model is 52 / 97 %
+off with beta and 43 / 72 % with modal zeta. The naive ``beta K U'`` changes the response by
+only 0.04-0.34 % RMS (its spurious force acts in the axially stiff direction: 738 N over E A /
+l_e = 9.6e7 N/m is 8 um), but it is 738 N of axial force in the coupler's element at B at 391
+rpm (171 N at 269 rpm) against elastic axial forces of 2-9 N: anything that reads element
+forces with their damping part (stresses, the nonlinearity indicator) must use the objective
+form.
 """
 
 import argparse
@@ -61,7 +62,7 @@ from ..core.fe.stiffness_damping import (element_resultants, link_local_rate,
 from ..core.mechanism import Mechanism
 from ..core.mechanism_file import load_mechanism
 from ..core.options import ModelOptions
-from ..core.reduction import pipeline
+from ..core.reduction import mechanism_model
 
 DAMPING = ('objective', 'naive', 'modal')
 OUTPUT_KEYS = ('lever_tip_dx', 'lever_tip_dy', 'coupler_mid_dx', 'coupler_mid_dy')
@@ -126,7 +127,7 @@ def matched_reduced_model(mechanism='cho1992', elements=8, gravity=False, beta=1
     options = ModelOptions.linear(rigid_crank=True, bearings='flexible',
                                   geometric_stiffness=True, gravity=gravity,
                                   elements_per_link=elements, stiffness_damping=beta)
-    return pipeline.model_for_mechanism(mech, options, use_cache=use_cache)
+    return mechanism_model.model_for_mechanism(mech, options, use_cache=use_cache)
 
 
 def streaming_response(model, speed, revolutions=3, points=120, oversample=2):
@@ -188,7 +189,7 @@ def compare_with_peer(peer, linear):
 
 def point_rms(peer, linear):
     """
-    Relative RMS per point, dX and dY together (the issue's lever / coupler figures).
+    Relative RMS per point, dX and dY together (the lever / coupler figures).
 
     ``sqrt(sum |d - d_peer|^2 / sum |d_peer|^2)`` over the peer's last revolution sampled on
     the linear grid (a divisor of the peer's samples, same start angle).

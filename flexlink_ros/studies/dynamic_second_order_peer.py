@@ -1,5 +1,5 @@
 """
-The streaming estimator with ``second_order='dynamic'`` against the Exudyn peer (issue 14).
+The streaming estimator with ``second_order='dynamic'`` against the Exudyn peer.
 
 ``python -m flexlink_ros.studies.dynamic_second_order_peer [--rpm 269 391] [--elements 8]
 [--no-gravity] [--cache DIR] [--cost] [--json]`` feeds :class:`StreamingEstimator` (the path of
@@ -7,7 +7,7 @@ the node, ``flexlink estimate`` and ``replay``) a constant-speed crank stream wi
 speeds, 720 samples per revolution (the peer's grid), rigid crank and rigid bearings, once
 with the quasi-static second order (default sizes) and once with the dynamic pass (its
 default sizes, :data:`core.options.DYNAMIC_SIZES`), and prints the last revolution's p2p
-error against the peer per output; the issue's targets are 12 % (lever tip) and 4 % (coupler
+error against the peer per output; the targets are 12 % (lever tip) and 4 % (coupler
 mid-point). ``--cost`` times both estimators per sample (CPU time, alternating rounds, medians).
 """
 
@@ -25,11 +25,11 @@ from .validation import peer_run, Settings
 from ..core.estimation.streaming import StreamingEstimator
 from ..core.mechanism_file import load_mechanism
 from ..core.options import ModelOptions, SECOND_ORDER_PASSES
-from ..core.reduction.pipeline import model_for_mechanism
+from ..core.reduction.mechanism_model import model_for_mechanism
 
 SAMPLES = 720
 REVOLUTIONS = 8
-# The issue's targets for the streaming estimate: lever tip, coupler mid-point p2p.
+# The targets for the streaming estimate: lever tip, coupler mid-point p2p.
 TARGETS = (0.12, 0.12, 0.04, 0.04)
 
 

@@ -1,9 +1,9 @@
 """
-The dynamic second-order pass per basis size: accuracy and cost of its step (issue 14).
+The dynamic second-order pass per basis size: accuracy and cost of its step.
 
 ``python -m flexlink_ros.studies.dynamic_second_order_study [--rpm 391] [--elements 8]
 [--sizes 4,2 8,4] [--peer] [--cost] [--no-gravity] [--json]`` streams the numpy step of the
-pass (core/estimation/dynamic_second_order.py) at constant speed (rigid crank, rigid
+pass (core/estimation/second_order_dynamic_step.py) at constant speed (rigid crank, rigid
 bearings, gravity unless ``--no-gravity``) per basis size and prints its coupler and lever
 p2p against the full-order pass (core/fe/second_order_dynamic.py) and, with ``--peer``,
 against the Exudyn peer, next to the quasi-static estimate of the same model. ``--cost``
@@ -24,8 +24,8 @@ from .dynamic_second_order_bench import time_pass
 from .peer_exudyn import compare, peer_response
 from .peer_model import OUTPUT_KEYS
 from ..core.estimation import native
-from ..core.estimation.dynamic_pass_kernel import DynamicPassKernel
-from ..core.estimation.dynamic_second_order import DynamicSecondOrderStep, steady_revolution
+from ..core.estimation.second_order_dynamic_kernel import DynamicPassKernel
+from ..core.estimation.second_order_dynamic_step import DynamicSecondOrderStep, steady_revolution
 from ..core.estimation.step import NumpyStep
 from ..core.estimation.streaming import StreamingEstimator
 from ..core.estimation.tables import step_tables
@@ -35,8 +35,8 @@ from ..core.fe.second_order_full import corrected_response
 from ..core.fe.simulate import periodic_response
 from ..core.mechanism_file import load_mechanism
 from ..core.options import ModelOptions
-from ..core.reduction.dynamic_second_order_tables import load_for_model
-from ..core.reduction.pipeline import fe_mechanism, model_for_mechanism
+from ..core.reduction.mechanism_model import fe_mechanism, model_for_mechanism
+from ..core.reduction.second_order_dynamic_tables import load_for_model
 
 SAMPLES = 720
 

@@ -29,7 +29,7 @@ def truncation_study(model, speed, mode_counts, steps=DEFAULT_STEPS, points=DEFA
     """
     Error of mode superposition with N frozen modes against the full-order response.
 
-    Both use the same integrator and time step (:func:`core.simulate.periodic_response`), so
+    Both use the same integrator and time step (:func:`core.fe.simulate.periodic_response`), so
     the error is that of the modal approximation, not of the time discretisation; with all
     modes it vanishes to round-off.
 
@@ -68,7 +68,7 @@ def truncation_study(model, speed, mode_counts, steps=DEFAULT_STEPS, points=DEFA
                                 points=points, zeta=zeta)
         wall += run.info['wall_s']
         errors['plain'][row] = output_errors(run.outputs, reference.outputs)
-        # The static correction only post-processes the modal state (core.simulate does the
+        # The static correction only post-processes the modal state (core.fe.simulate does the
         # same inside periodic_response), so one integration serves both.
         corrected = run.displacement
         if count < model.size:

@@ -23,11 +23,12 @@ from .peer_model import OUTPUT_KEYS, resolve_mechanism
 from .validation import _as_response, BEARINGS, peer_run, point_rms_errors, require_peer, \
     Settings
 from ..core.fe.nonlinear_response import nonlinear_response
+from ..core.fe.nonlinear_validity import orbit_validity, validity_record
 from ..core.fe.simulate import periodic_response
 
 MODELS = ('linear', 'nonlinear')
 LABELS = {'linear': 'linear', 'nonlinear': 'nonlinear'}
-# The issue's targets for the nonlinear full order against the peer.
+# The targets for the nonlinear full order against the peer.
 TARGETS = {'rms': 0.05, 'p2p': 0.03}
 # Package time steps per revolution (a multiple of the output points).
 STEPS = 720
@@ -41,7 +42,8 @@ def package_runs(mech, rpm, settings):
     -------
     dict
         'crank_angle' (P,), 'linear' and 'nonlinear' outputs (P, 4) [m], 'info' (the nonlinear
-        run's info), 'floquet' (moduli of the four largest multipliers), 'beta', 'zeta'.
+        run's info), 'multipliers', 'beta', 'zeta', 'validity' (the nonlinear orbit's
+        :class:`core.fe.nonlinear_validity.NonlinearValidity`).
 
     """
     linkage = linear_model(mech, elements_per_link=settings.elements_per_link,
@@ -56,7 +58,8 @@ def package_runs(mech, rpm, settings):
                                    zeta=zeta, beta=beta, start=start)
     return {'crank_angle': linear.crank_angle, 'linear': linear.outputs,
             'nonlinear': nonlinear.outputs, 'info': nonlinear.info,
-            'multipliers': nonlinear.floquet_multipliers, 'beta': beta, 'zeta': zeta}
+            'multipliers': nonlinear.floquet_multipliers, 'beta': beta, 'zeta': zeta,
+            'validity': orbit_validity(linkage, nonlinear)}
 
 
 def validate_nonlinear(mechanism, rpm, settings=None):
@@ -79,8 +82,8 @@ def validate_nonlinear(mechanism, rpm, settings=None):
         'models' (per :data:`MODELS`: per output 'other_p2p', 'p2p_error', 'rms_error'),
         'point_rms_error' (per model and output point), 'targets_met' (nonlinear, per output
         point), 'floquet_moduli' (the four largest), 'spectral_radius', 'newton_mean',
-        'newton_max', 'step_cost_s', 'step_cpu_s', 'revolutions', 'wall_s', 'damping', and
-        'series'.
+        'newton_max', 'step_cost_s', 'step_cpu_s', 'revolutions', 'wall_s', 'damping',
+        'nonlinear_validity' (the orbit's element rotations and fold distance) and 'series'.
 
     """
     settings = Settings() if settings is None else settings
@@ -112,6 +115,7 @@ def validate_nonlinear(mechanism, rpm, settings=None):
             'step_cpu_s': info['step_cpu_s'],
             'revolutions': info['revolutions'], 'wall_s': info['wall_s'],
             'damping': f"beta {runs['beta']:g} s, zeta {runs['zeta']:g}",
+            'nonlinear_validity': validity_record(runs['validity']),
             'series': {'crank_deg': np.degrees(runs['crank_angle']), 'peer': peer_series,
                        **{name: runs[name] for name in MODELS}}}
 
@@ -148,6 +152,11 @@ def format_nonlinear(record):
                  f"{1e3 * record['step_cost_s']:.1f} ms per step "
                  f"({1e3 * record['step_cpu_s']:.1f} ms CPU), "
                  f"{record['revolutions']} revolutions, {record['wall_s']:.0f} s")
+    validity = record['nonlinear_validity']
+    lines.append('nonlinear validity: largest element rotation '
+                 f"{validity['max_element_rotation_rad']:.3f} rad, nearest multiplier "
+                 f"{validity['fold_distance']:.3f} from +1: "
+                 + ('valid' if validity['valid'] else f"NOT valid ({validity['reason']})"))
     return '\n'.join(lines)
 
 

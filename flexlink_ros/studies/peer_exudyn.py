@@ -1,12 +1,12 @@
 """
 Geometrically nonlinear peer of the flexible four-bar, built with Exudyn (ANCF cables).
 
-The linear kineto-elastodynamic (KED) model of the package (:mod:`core.assembly`,
-:mod:`core.simulate`) follows Cho, Park & Lee (1992). This module builds an independent,
+The linear kineto-elastodynamic (KED) model of the package (:mod:`core.fe.linkage`,
+:mod:`core.fe.simulate`) follows Cho, Park & Lee (1992). This module builds an independent,
 geometrically exact model of the same linkage from the same mechanism file, so that the
-linear estimate (and later second-order corrections) can be checked against it (issue 14).
+linear estimate (and later second-order corrections) can be checked against it.
 
-Model (conventions of the issue's peer):
+Model (the conventions of the published peer comparison):
 
 * coupler and lever: ``elements_per_link`` planar ANCF cable elements each
   (``ObjectANCFCable2D``: Bernoulli-Euler, exact in large rotations, axial strain
@@ -20,7 +20,7 @@ Model (conventions of the issue's peer):
   isotropic spring k = ``bearings.stiffness_n_m`` (damping c = beta k) in place of the pin at
   each joint of ``bearings.joints`` among A, B and O4; the crank pivot O2 stays rigid (the
   crank is prescribed);
-* joint masses are point masses. ``mass_placement='coupler-end'`` (the issue's peer and the
+* joint masses are point masses. ``mass_placement='coupler-end'`` (the published peer's and the
   package's rigid-bearing convention): each joint's whole mass on the first modelled member
   (A and B on the coupler, O4 on the lever); ``'split'``: the fraction
   ``joint_mass_split`` on the joint's first member (crank, coupler, lever for A, B, O4) and
@@ -36,7 +36,7 @@ Outputs: elastic deflections in the ground frame, i.e. the nonlinear position mi
 rigid-body position at the same crank angle (:func:`core.kinematics.solve_kinematics`), of
 the lever tip (node B of the lever) and of the coupler's material mid-point (arc length
 L/2 of the undeformed coupler): the quantities of ``flexlink simulate``
-(:data:`core.assembly.OUTPUT_NAMES`).
+(:data:`names.OUTPUT_NAMES`).
 
 Start and steady state: the run starts with the links straight, in the rigid configuration
 at theta0, with the rigid-body velocities at full speed (no ramp). The transient then decays
@@ -336,7 +336,7 @@ def compare(peer, linear):
 
 def main(argv=None):
     """
-    Print peer and linear peak-to-peak side by side (the issue's table).
+    Print peer and linear peak-to-peak side by side (the published peer table).
 
     ``python -m flexlink_ros.studies.peer_exudyn --rpm 269 391 [--gravity] [--json]``.
     """
@@ -348,7 +348,7 @@ def main(argv=None):
     parser.add_argument('--bearings', choices=BEARINGS, default='rigid')
     parser.add_argument('--mass-placement', choices=MASS_PLACEMENTS, default='coupler-end')
     parser.add_argument('--gravity', action='store_true', help='apply gravity (default off, '
-                        "as in the issue's table)")
+                        'as in the published peer table)')
     parser.add_argument('--beta', type=float, default=DEFAULT_BETA_S)
     parser.add_argument('--steps', type=int, default=DEFAULT_STEPS)
     parser.add_argument('--revolutions', type=int, default=None)

@@ -57,7 +57,7 @@ def linear_response(mechanism, rpm, *, elements_per_link=DEFAULT_ELEMENTS, beari
     -------
     dict
         'crank_angle' [rad] and the four :data:`OUTPUT_KEYS` [m] over one steady revolution,
-        'info' of :func:`core.simulate.periodic_response`.
+        'info' of :func:`core.fe.simulate.periodic_response`.
 
     """
     model = linear_model(mechanism, elements_per_link=elements_per_link, bearings=bearings,

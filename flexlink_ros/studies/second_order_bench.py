@@ -1,13 +1,14 @@
 """
-Time the factored second-order step (core.second_order.FactoredForms) compiled, per sample.
+Time the factored second-order step compiled, per sample.
 
-A small C kernel (compiled here with ``cc -O3``, the flags of the package's compiled step,
-setup.py) does per sample what a compiled estimator step would add: the cubic-spline tables
-of cos/sin of the link angles and of kappa (22 scalars), the rows of V q the links read, the
-rotation of the end-node translations, the bands of G and the 4 x 4 output combination. It is
-checked against :func:`core.second_order.factored_second_order` at the grid angles (where the
-spline equals its samples) before it is timed. Needs a C compiler; nothing here is used by the
-package at run time.
+The step is core.fe.second_order_reduced.FactoredForms. A small C kernel (compiled here with
+``cc -O3``, the flags of the package's compiled step, setup.py) does per sample what a compiled
+estimator step would add: the cubic-spline tables of cos/sin of the link angles and of kappa
+(22 scalars), the rows of V q the links read, the rotation of the end-node translations, the
+bands of G and the 4 x 4 output combination. It is checked against
+:func:`core.fe.second_order_reduced.factored_second_order` at the grid angles (where the spline
+equals its samples) before it is timed. Needs a C compiler; nothing here is used by the package
+at run time.
 
 :func:`streaming_overhead` times what the second order costs in the package's own compiled
 step (core/estimation/_radau_step.c): the in-process streaming update and the batched step
@@ -38,7 +39,7 @@ from ..core.kinematics import solve_kinematics
 from ..core.mechanism_file import load_mechanism
 from ..core.options import ModelOptions
 from ..core.reduction.cells import periodic_cell_coefficients
-from ..core.reduction.pipeline import fe_mechanism, model_for_mechanism
+from ..core.reduction.mechanism_model import fe_mechanism, model_for_mechanism
 
 SCALARS = 22    # cos, sin of the three link angles, then kappa (4 x 4), per grid node
 GRID = 128

@@ -1,5 +1,5 @@
 """
-Linear KED and linear + second order against the nonlinear Exudyn peer (issue 14, item 1).
+Linear KED and linear + second order against the nonlinear Exudyn peer.
 
 ``python -m flexlink_ros.studies.second_order_study [--rpm 269 391] [--gravity both]
 [--elements 8] [--json]`` prints, per speed and gravity setting (rigid crank, rigid bearings),
@@ -29,10 +29,10 @@ from ..core.fe.second_order_geometry import FORMS
 from ..core.fe.second_order_reduced import factored_forms, step_cost
 from ..core.fe.simulate import periodic_response
 from ..core.options import DEFAULT_SIZES, ModelOptions
-from ..core.reduction.pipeline import fe_mechanism, model_for_mechanism
+from ..core.reduction.mechanism_model import fe_mechanism, model_for_mechanism
 
 TARGETS = {'lever_tip': 0.10, 'coupler_mid': 0.03}
-# The streaming estimate's targets (issue 14).
+# The streaming estimate's targets against the peer (p2p relative error).
 STREAM_TARGETS = {'lever_tip': 0.12, 'coupler_mid': 0.04}
 # Samples per revolution fed to the streaming estimate (the peer's output grid).
 STREAM_SAMPLES = 720
@@ -53,7 +53,7 @@ def run_case(mechanism, rpm, gravity, elements, points=720, zeta=None, revolutio
     dict
         'rpm', 'gravity', 'elements', 'peer_p2p' (per output, m), 'linear' and 'second_order'
         (per output: :func:`peer_exudyn.compare` entries), 'periodicity' of the peer,
-        'max_sums' (largest S per :data:`core.second_order.FORMS`, m), 'info'.
+        'max_sums' (largest S per :data:`core.fe.second_order_geometry.FORMS`, m), 'info'.
 
     """
     response = peer_response(mechanism, rpm, elements_per_link=elements, gravity=gravity,
@@ -127,7 +127,7 @@ def reduced_response(mechanism, rpm, gravity, elements, points=720, sizes=None, 
 
 def meets_targets(record, name='second_order'):
     """
-    Tell whether a response meets the issue's p2p targets, per output.
+    Tell whether a response meets the p2p targets, per output.
 
     ``name`` 'second_order' (the full order + second order: :data:`TARGETS`) or 'reduced' (the
     streaming estimate of order 2: :data:`STREAM_TARGETS`).
@@ -164,10 +164,10 @@ def format_record(record):
 
 def reduced_costs(mechanism):
     """
-    Count multiply-adds per sample (:func:`core.second_order.step_cost`) of the reduced models.
+    Count multiply-adds per sample of the reduced models.
 
-    For their default sizes (core.reduced.DEFAULT_SIZES) with the mechanism's elements per
-    link.
+    By :func:`core.fe.second_order_reduced.step_cost`, for their default sizes
+    (core.options.DEFAULT_SIZES) with the mechanism's elements per link.
     """
     out = []
     for (bearings, rigid_crank), (modes, static) in DEFAULT_SIZES.items():

@@ -47,12 +47,12 @@ from .synthetic import last_revolution, synthetic_signal
 from ..core.estimation.offline import replay
 from ..core.numerics import relative_rms, RPM
 from ..core.options import ModelOptions
-from ..core.reduction import pipeline
+from ..core.reduction import mechanism_model
 from ..core.reduction import reference as reduction_reference
 from ..core.reduction.soft_basis import lowest_modes
 from ..core.reduction.soft_tables import node_values
 
-# (label, rpm, jitter) of the constant-speed cases, and the issue's targets (relative RMS).
+# (label, rpm, jitter) of the constant-speed cases, and the targets (relative RMS).
 STEADY_CASES = (('269 rpm', 269.0, 0.0), ('391 rpm', 391.0, 0.0),
                 ('269 rpm +-30 %', 269.0, 0.3), ('391 rpm +-30 %', 391.0, 0.3),
                 ('100 rpm', 100.0, 0.0), ('600 rpm', 600.0, 0.0))
@@ -191,8 +191,9 @@ def case_errors(mechanism, models, reference_options, cases, reference_model=Non
 
 def soft_pair(mechanism, options):
     """Give the model of ``options`` with the soft basis (-1) and without (0): (soft, full)."""
-    soft = pipeline.model_for_mechanism(mechanism, dataclasses.replace(options, soft_modes=-1))
-    return soft, pipeline.with_soft_basis(dataclasses.replace(soft, soft=None), 0)
+    soft = mechanism_model.model_for_mechanism(mechanism,
+                                               dataclasses.replace(options, soft_modes=-1))
+    return soft, mechanism_model.with_soft_basis(dataclasses.replace(soft, soft=None), 0)
 
 
 def paper_scenes():
@@ -226,7 +227,7 @@ def run_study(mechanism=None, options=None, cases=STEADY_CASES, ramp_s=RAMP_SECO
     check = {}
     if ramp_s:
         grid = min(REFERENCE_GRID, 2 * options.grid_size)
-        reference_model = pipeline.model_for_mechanism(
+        reference_model = mechanism_model.model_for_mechanism(
             mechanism, every_dof_options(mechanism, scene, grid))
         check = {rpm: check_every_dof_reference(mechanism, scene, reference_model, rpm,
                                                 steps=steps)

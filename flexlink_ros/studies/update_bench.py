@@ -25,7 +25,7 @@ from ..core.estimation.step import MAX_SUBSTEP_NS
 from ..core.estimation.streaming import StreamingEstimator
 from ..core.mechanism_file import load_mechanism
 from ..core.options import ModelOptions
-from ..core.reduction.pipeline import model_for_mechanism
+from ..core.reduction.mechanism_model import model_for_mechanism
 
 # Rows per batched call of the step (below the compiled step's GIL release, as one sample).
 CHUNK = 50

@@ -15,7 +15,7 @@ over one steady revolution, per output (lever tip dX / dY, coupler mid-point dX 
 Each is reported as its peak-to-peak, its p2p error against the peer's and its RMS difference
 relative to the peer's RMS (:func:`studies.peer_exudyn.compare`). With several speeds (a sweep)
 the record also holds the validity indicator of :mod:`core.validity` (computed from the linear
-response alone, as the node does) and whether the second order meets the issue's targets, so
+response alone, as the node does) and whether the second order meets the accuracy targets, so
 that the table shows where the flag turns and whether it turns where the errors grow.
 
 Bearings: ``rigid`` are exact pins in both models; ``flexible`` are the mechanism's bearing
@@ -52,7 +52,7 @@ BEARINGS = {'rigid': 'rigid', 'flexible': 'springs'}
 MODELS = ('linear', 'second_order', 'dynamic')
 MODEL_LABELS = {'linear': 'linear', 'second_order': 'linear + 2nd order',
                 'dynamic': '+ dynamic pass', 'peer': 'Exudyn peer'}
-# The p2p targets against the peer (lever tip, coupler mid-point), for linear + 2nd.
+# The p2p targets against the peer (lever tip, coupler mid-point), for linear + 2nd.
 TARGETS = {'lever_tip': 0.10, 'coupler_mid': 0.03}
 DEFAULT_POINTS = DEFAULT_STEPS
 LABELS = dict(zip(OUTPUT_KEYS, ('lever tip dX', 'lever tip dY', 'coupler mid dX',

@@ -1,10 +1,10 @@
 """
-Where linear + second order can be trusted: a speed sweep against the Exudyn peer (issue 14, 4).
+Where linear + second order can be trusted: a speed sweep against the Exudyn peer.
 
 ``python -m flexlink_ros.studies.validity_study [--rpm ...] [--elements 8] [--bearings rigid]
 [--chart validity.png] [--cache DIR] [--json]`` runs, per crank speed, the nonlinear peer
 (:mod:`studies.peer_exudyn`: rigid crank, no gravity) and the package's full-order linear
-response plus its second order (:func:`core.second_order.corrected_response`), records the
+response plus its second order (:func:`core.fe.second_order_full.corrected_response`), records the
 error of the lever tip and the coupler mid-point against the peer (p2p and relative RMS; the
 worse of the dX / dY channels), and computes from the linear state the candidate indicators of
 :mod:`core.validity`:
@@ -18,7 +18,7 @@ worse of the dX / dY channels), and computes from the linear state the candidate
   tip's is 10-70 at every speed with rigid bearings, so it cannot separate).
 
 A speed is ``accurate`` when linear + second order is within 10 % (lever tip) and 3 %
-(coupler mid-point) of the peer's p2p (the issue's targets). For each candidate the study
+(coupler mid-point) of the peer's p2p (the accuracy targets). For each candidate the study
 prints the largest value over accurate speeds and the smallest over inaccurate ones: a
 candidate separates the sweep when the first is below the second.
 

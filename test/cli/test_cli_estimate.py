@@ -8,12 +8,13 @@ import sys
 
 from flexlink_ros.cli import main as cli
 from flexlink_ros.cli.model_args import BUILD_LABEL
+from flexlink_ros.cli.plan_table import plan_table
 from flexlink_ros.core import options as core_options, validity
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.numerics import relative_rms, RPM
 from flexlink_ros.core.reduction import build, cells
+from flexlink_ros.core.reduction import mechanism_model, periodic
 from flexlink_ros.core.reduction import model as tables
-from flexlink_ros.core.reduction import periodic, pipeline
 from flexlink_ros.core.reduction import reference as reduction_reference
 from flexlink_ros.report.estimator import plot_error_vs_cost, plot_estimate
 from flexlink_ros.ros import parameters as node_params
@@ -52,7 +53,7 @@ def toy_reference(mechanism, options, speed, angles):
 
 @pytest.fixture
 def toy(monkeypatch):
-    monkeypatch.setattr(pipeline, 'model_for_mechanism', toy_model)
+    monkeypatch.setattr(mechanism_model, 'model_for_mechanism', toy_model)
     monkeypatch.setattr(reduction_reference, 'reference_response', toy_reference)
     monkeypatch.setattr(bench, 'reference_cpu_per_second', lambda *args: 1.0)
 
@@ -108,7 +109,7 @@ def test_plan_picks_the_first_candidate_within_tolerance(toy, monkeypatch):
     assert first['error_coupler_mid'] > 0.01 or first['error_lever_tip'] > 0.01
     assert all(row['us_per_sample'] > 0 for row in result['alternatives'])
     assert result['alternatives'][0]['physics_error_coupler_mid'] == 0.0
-    assert 'choice: ' in plan.plan_table(result)
+    assert 'choice: ' in plan_table(result)
     # every built size tried its soft basis sizes cheapest first, up to the first in budget
     for row in result['alternatives']:
         tried = row['soft_tried']

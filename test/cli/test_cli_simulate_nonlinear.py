@@ -10,6 +10,7 @@ import math
 from flexlink_ros.cli import main as cli
 from flexlink_ros.cli.flex import build_model
 from flexlink_ros.core.fe.nonlinear_response import nonlinear_response
+from flexlink_ros.core.fe.nonlinear_validity import orbit_rotations
 from flexlink_ros.core.fe.simulate import periodic_response
 import numpy as np
 import pytest
@@ -54,6 +55,13 @@ def test_json_is_the_cores_nonlinear_orbit(capsys):
     assert result['model'] == 'nonlinear' and result['stiffness_damping_s'] == 1e-4
     assert result['periodicity'] < 1e-8 and result['step_cpu_s'] > 0.0
     assert len(result['crank_deg']) == 60
+    validity = result['nonlinear_validity']
+    assert validity['max_element_rotation_rad'] == pytest.approx(
+        orbit_rotations(model, core).max(), rel=1e-6)
+    assert 0.01 < validity['max_element_rotation_rad'] < 0.5         # bent, in the resonance
+    moduli_all = np.abs(core.floquet_multipliers)
+    assert validity['fold_distance'] >= 1.0 - moduli_all.max() - 1e-12
+    assert validity['valid'] == (validity['indicator'] < 1.0)
 
 
 def test_text_report(capsys):
@@ -65,6 +73,7 @@ def test_text_report(capsys):
     assert lines[2].startswith('  linear full order: lever tip dX')
     assert lines[3].startswith('Floquet multipliers |mu|') and lines[3].endswith('stable)')
     assert lines[4].startswith('Newton ') and 'ms per step' in lines[4]
+    assert lines[5].startswith('nonlinear validity indicator ') and 'element rotation' in lines[5]
 
 
 @pytest.mark.parametrize('extra, message', [(('--method', 'modal', '--modes', '4'), 'full'),

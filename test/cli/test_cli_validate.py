@@ -157,6 +157,7 @@ def test_nonlinear_compares_both_full_orders(capsys, tmp_path):
     assert record['spectral_radius'] < 1.0 and len(record['floquet_moduli']) == 4
     lines = _run(capsys, *tiny)[1].splitlines()
     assert lines[0].startswith('391 rpm, flexible bearings, gravity off, 2 elements per link')
-    assert lines[-1].startswith('Floquet multipliers |mu| ')
+    assert lines[-2].startswith('Floquet multipliers |mu| ')
+    assert lines[-1].startswith('nonlinear validity: largest element rotation ')
     code, out, err = _run(capsys, *tiny, '--chart', str(tmp_path / 'x.png'))
     assert code == 1 and out == '' and '--chart' in err and not (tmp_path / 'x.png').exists()

@@ -18,7 +18,7 @@ import time
 from flexlink_ros.cli import plan_params
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.core.reduction import pipeline
+from flexlink_ros.core.reduction import mechanism_model
 from flexlink_ros.names import FIRST_INPUT_MESSAGE, READY_MESSAGE
 from flexlink_ros.ros import parameters as node_params
 import pytest
@@ -66,7 +66,7 @@ def test_a_real_node_takes_the_file_as_it_is_and_its_estimator_is_not_stuck_at_w
     mechanism_path = DATA / 'packaging_steel.yaml'
     mechanism = load_mechanism(mechanism_path)
     cache = tmp_path / 'cache'
-    model = pipeline.model_for_mechanism(mechanism, CHOICE, cache_dir=cache)
+    model = mechanism_model.model_for_mechanism(mechanism, CHOICE, cache_dir=cache)
     args = argparse.Namespace(mechanism=str(mechanism_path), rpm_max=600.0, rate_hz=1000.0,
                               tolerance=0.05)
     params = tmp_path / 'plan.yaml'

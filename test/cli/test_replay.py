@@ -8,7 +8,7 @@ import sys
 
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
 from flexlink_ros.core.mechanism_file import load_mechanism
-from flexlink_ros.core.reduction import pipeline
+from flexlink_ros.core.reduction import mechanism_model
 from flexlink_ros.io import output_cdr
 from flexlink_ros.io.recorder import McapRecorder
 from flexlink_ros.io.recording import iter_recording
@@ -29,7 +29,7 @@ RPM = 2.0 * math.pi / 60.0
 def model():
     # The replay's default model (the node's) without geometric stiffness, cached.
     options = node_params.default_model_options(geometric_stiffness=False)
-    return pipeline.model_for_mechanism(load_mechanism('cho1992'), options)
+    return mechanism_model.model_for_mechanism(load_mechanism('cho1992'), options)
 
 
 def joint_state(stamp_ns, names, positions, velocities=()):

@@ -9,7 +9,7 @@ import re
 from flexlink_ros.core import mechanism_checks
 from flexlink_ros.core.mechanism_file import load_mechanism, mechanism_from_dict
 from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.core.reduction import pipeline
+from flexlink_ros.core.reduction import mechanism_model
 from flexlink_ros.errors import MechanismError
 import pytest
 import yaml
@@ -148,7 +148,7 @@ def test_the_model_build_refuses_a_structure_without_stiffness(tmp_path):
     floppy = dataclasses.replace(mechanism, youngs_modulus=0.0)
     options = ModelOptions.linear(grid_size=8, modes=2, static=0, geometric_stiffness=False)
     with pytest.raises(MechanismError, match='first frozen frequency'):
-        pipeline.model_for_mechanism(floppy, options, use_cache=False)
+        mechanism_model.model_for_mechanism(floppy, options, use_cache=False)
 
 
 def test_a_speed_range_where_the_links_buckle_is_refused_with_the_speed():
@@ -158,4 +158,4 @@ def test_a_speed_range_where_the_links_buckle_is_refused_with_the_speed():
                                   speed_max=812.0 * math.pi / 30.0)
     with pytest.raises(MechanismError, match=r'and 812 rpm is 0 Hz: the links buckle under '
                        r'their axial forces at that speed; lower the speed range'):
-        pipeline.model_for_mechanism(load_mechanism('cho1992'), options, use_cache=False)
+        mechanism_model.model_for_mechanism(load_mechanism('cho1992'), options, use_cache=False)

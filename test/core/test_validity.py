@@ -1,5 +1,5 @@
 """
-Validity indicator (flexlink_ros/core/validity.py, issue 14 item 4): independent checks.
+Validity indicator (flexlink_ros/core/validity.py): independent checks.
 
 * the Euler load pi^2 E I / L^2 against the FE buckling eigenvalue of a pinned-pinned link
   (K u = P G u with the unit geometric stiffness);
@@ -8,7 +8,7 @@ Validity indicator (flexlink_ros/core/validity.py, issue 14 item 4): independent
   small against the rigid-body force far below resonance, and a few N in the lever-mode
   resonance band;
 * the indicator below the threshold at 269 rpm and above it at 405 rpm (rigid bearings, rigid
-  crank, 4 elements per link: the issue's requirement at reduced size).
+  crank, 4 elements per link: the requirement at reduced size).
 """
 
 import dataclasses
@@ -52,7 +52,7 @@ def test_buckling_load_closed_form(mech):
     for link, spec in ((1, mech.links[1]), (2, mech.links[2])):
         assert loads[link] == pytest.approx(math.pi ** 2 * E * spec.second_moment
                                             / spec.length ** 2, rel=1e-12)
-    assert loads[1] == pytest.approx(36.3, abs=0.1)       # the issue's "36 N"
+    assert loads[1] == pytest.approx(36.3, abs=0.1)       # the measured "36 N"
     assert loads[2] == pytest.approx(43.3, abs=0.1)
 
 
@@ -143,7 +143,7 @@ def test_mode_reference_and_distance(linkage):
 
 
 def test_candidate_load_ratio(linkage, responses):
-    """Max |N_e| / P_cr: 0.5-1 % at 269 rpm, about 6 % at 405 rpm (the issue's 2-9 N / 36 N)."""
+    """Max |N_e| / P_cr: 0.5-1 % at 269 rpm, about 6 % at 405 rpm (measured: 2-9 N / 36 N)."""
     values = {rpm: validity.load_ratio_indicator(linkage, r.displacement, r.crank_angle,
                                                  rpm * math.pi / 30.0).max()
               for rpm, r in responses.items()}

@@ -5,7 +5,7 @@ import math
 from fleet_bags import bad_messages, crank_stream, write_bag
 from flexlink_ros.core.estimation.offline import estimate_offline
 from flexlink_ros.core.mechanism_file import load_mechanism
-from flexlink_ros.core.reduction import pipeline
+from flexlink_ros.core.reduction import mechanism_model
 from flexlink_ros.io.fleet_bag import FleetSettings, recompute_bag
 from flexlink_ros.io.joint_states import read_crank_samples
 from flexlink_ros.ros import parameters as node_params
@@ -55,7 +55,7 @@ def test_the_numbers_are_the_offline_estimate_s(tmp_path, options):
     out = tmp_path / 'out.mcap'
     result = recompute_bag(str(bag), ('cho1992', options), FleetSettings(per='minute'),
                            output=str(out))
-    model = pipeline.model_for_mechanism(load_mechanism('cho1992'), options)
+    model = mechanism_model.model_for_mechanism(load_mechanism('cho1992'), options)
     samples = read_crank_samples(bag, '/joint_states', 'crank')
     estimate = estimate_offline(model, samples['stamps_ns'], samples['angles'],
                                 samples['speeds'])

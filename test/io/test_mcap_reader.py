@@ -220,7 +220,7 @@ def peak_rss_of(args):
 def test_decompression_bombs_are_refused_with_a_bound(tmp_path, declared, expected_kb):
     path, offset = bomb_file(tmp_path, 'bomb.mcap', declared)
     bomb_size = len(zstd_zeros(declared))
-    assert abs(bomb_size / 1000 - expected_kb) < 0.3 * expected_kb      # the files
+    assert abs(bomb_size / 1000 - expected_kb) < 0.3 * expected_kb      # the reported bomb files
     flexlink = [sys.executable, '-m', 'flexlink_ros.cli.main']
     code, out, err, peak = peak_rss_of(flexlink + ['mcap-info', str(path), '--json'])
     assert code == 0 and 'Traceback' not in err, err

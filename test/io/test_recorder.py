@@ -1,6 +1,7 @@
 """MCAP recorder: rosbag2 layout read back by two readers, crash and full-disk paths."""
 
 import json
+import os
 import pathlib
 import signal
 import struct
@@ -13,8 +14,7 @@ from flexlink_ros.cli.mcap import mcap_info, recover_mcap, scan_mcap
 from flexlink_ros.errors import McapFileError, RecorderError
 from flexlink_ros.io.msg_schema import message_definition, serialize_exact, share_directory, \
     type_hash
-from flexlink_ros.io.recorder import McapRecorder
-from flexlink_ros.io.recorder_queue import RecorderState
+from flexlink_ros.io.recorder import McapRecorder, RecorderState
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 import numpy as np
@@ -412,3 +412,18 @@ def test_mcap_record_refuses_splits_below_the_floor_before_recording(tmp_path, o
                            option, value], capture_output=True, text=True, timeout=120)
     assert done.returncode == 1 and f'{option} must be 0 (no split) or at least' in done.stderr
     assert not out.exists()
+
+
+def test_status_counts_files_and_bytes_and_lists_paths_only_when_asked(tmp_path):
+    bag = tmp_path / 'bag'
+    with McapRecorder(bag, split_size_bytes=1, flush_thread=False) as recorder:
+        recorder.add_topic('/a', 'sensor_msgs/msg/JointState')
+        for k in range(5):      # one message per file
+            recorder.write('/a', b'\x00\x01\x00\x00' + bytes(40), T0_NS + k)
+        light = recorder.status(list_files=False)
+        assert 'files' not in light and light['file_count'] == 5
+        assert light['message_count'] == 5 and light['dropped_count'] == 0
+    status = recorder.status()
+    assert status['files'] == [str(bag / f'bag_{n}.mcap') for n in range(5)]
+    assert status['bytes_written'] == sum(os.stat(p).st_size for p in status['files'])
+    assert status['state'] == 'closed' and status['queued_bytes'] == 0

@@ -6,8 +6,7 @@ from flexlink_ros.cli.mcap import recover_mcap
 from flexlink_ros.errors import RecorderError
 from flexlink_ros.io import recorder_queue
 from flexlink_ros.io.msg_schema import serialize_exact
-from flexlink_ros.io.recorder import McapRecorder
-from flexlink_ros.io.recorder_queue import RecorderState
+from flexlink_ros.io.recorder import McapRecorder, RecorderState
 from mcap.reader import make_reader
 import numpy as np
 from recorder_helpers import sample_messages, STEP_NS, T0_NS
@@ -96,3 +95,19 @@ def test_the_queue_is_bounded_in_bytes_and_what_overflows_is_counted(tmp_path):
     with open(bag / 'bag_0.mcap', 'rb') as stream:
         on_disk = sum(1 for _ in make_reader(stream).iter_messages(log_time_order=False))
     assert on_disk == accepted == status['message_count']
+
+
+def test_the_flush_clock_counts_log_time_per_message_and_wall_time_when_idle():
+    clock = recorder_queue.FlushClock(period_ns=200_000_000)
+    assert clock.wrote(T0_NS) is False and clock.last_log_ns == T0_NS   # starts the period
+    assert clock.wrote(T0_NS + 199_999_999) is False
+    assert clock.wrote(T0_NS + 200_000_000) is True and clock.unflushed == 3
+    clock.flushed(T0_NS + 200_000_000)
+    assert (clock.unflushed, clock.idle_due()) == (0, False)
+    clock.wrote_batch(T0_NS + 250_000_000, 5, flushes=[])
+    assert clock.unflushed == 5 and not clock.idle_due()
+    time.sleep(0.25)                  # no message for a flush period of wall time
+    assert clock.idle_due()
+    clock.wrote_batch(T0_NS + 300_000_000, 4, flushes=[(1, T0_NS + 420_000_000)])
+    assert (clock.unflushed, clock.last_log_ns) == (2, T0_NS + 420_000_000)
+    assert not clock.idle_due()

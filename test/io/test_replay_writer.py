@@ -4,7 +4,7 @@ import dataclasses
 
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.core.reduction.pipeline import model_for_mechanism
+from flexlink_ros.core.reduction.mechanism_model import model_for_mechanism
 from flexlink_ros.core.reduction.second_order_tables import SecondOrderForms
 from flexlink_ros.io.msg_schema import serialize_exact
 from flexlink_ros.io.replay_writer import MarkerSource, write_replay

@@ -573,7 +573,7 @@ def test_run_time_parameters_take_effect(tmp_path, processes, ros):
         spin_until(executor, lambda: len(lever) >= expected, 30.0, 'outputs')
 
     feed(50)
-    # Strings are bounded: the 1 MB frame_id of the issue is refused with the reason.
+    # Strings are bounded: a 1 MB frame_id (once accepted) is refused with the reason.
     result, = set_parameters(frame_id='x' * 10**6)
     assert not result.successful and 'at most 256 bytes' in result.reason
     assert not set_parameters(crank_joint='')[0].successful

@@ -118,7 +118,7 @@ def test_parse_path_refuses_every_mutation_with_a_reason():
 
 
 def test_truncated_effort_is_refused_not_raised():
-    # The example: a NaN position and the effort array 8 bytes short.
+    # The message that once killed the node: a NaN position and the effort array 8 bytes short.
     data = bytearray(valid_message(1))
     data[-40:-32] = struct.pack('<d', math.nan)
     data = bytes(data[:-8])

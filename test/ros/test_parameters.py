@@ -4,7 +4,7 @@ import pathlib
 import subprocess
 import sys
 
-from flexlink_ros.core.mechanism_file import find_config
+from flexlink_ros.core.mechanism_file import find_config, read_mechanism_source
 from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.ros import parameters as node_params
 from flexlink_ros.ros.node_model import load_node_model
@@ -174,6 +174,22 @@ def test_node_model_takes_the_mechanism_files_stiffness_damping(tmp_path):
     values['model.stiffness_damping'] = 0.0
     _, options, _ = load_node_model(values, lambda note: None)
     assert options.stiffness_damping == 0.0
+
+
+def test_node_model_is_built_from_the_bytes_the_node_read_once(tmp_path):
+    """The model is built from the bytes the recording names, whatever the file says later."""
+    linkage = tmp_path / 'linkage.yaml'
+    text = pathlib.Path(find_config('cho1992')).read_text()
+    linkage.write_text(text + 'stiffness_damping_s: 2.0e-4\n')
+    source = read_mechanism_source(str(linkage))
+    linkage.write_text(text)        # changed after the node's one read: no longer damped
+    values = {**node_params.defaults(), 'mechanism': str(linkage), 'model.rigid_crank': True,
+              'model.grid_size': 16, 'model.modes': 2, 'model.static': 0,
+              'model.elements_per_link': 2, 'model.cache_dir': str(tmp_path)}
+    _, options, _ = load_node_model(values, lambda note: None, source=source)
+    assert options.stiffness_damping == 2e-4 and source == (linkage, linkage.read_bytes()
+                                                            + b'stiffness_damping_s: 2.0e-4\n')
+    assert load_node_model(values, lambda note: None)[1].stiffness_damping == 0.0   # read now
 
 
 def test_soft_modes_defaults_to_the_smallest_usable_gap_and_reaches_the_model_options():

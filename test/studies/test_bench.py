@@ -2,7 +2,7 @@
 
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.core.reduction import pipeline
+from flexlink_ros.core.reduction import mechanism_model
 from flexlink_ros.core.reduction.soft_basis import gap_ratios, MIN_GAP_RATIO
 from flexlink_ros.core.reduction.soft_tables import node_values
 from flexlink_ros.studies import bench
@@ -37,7 +37,7 @@ def test_targets_are_judged_from_the_default_configuration():
 def test_soft_rows_are_the_other_usable_gaps_and_soft_off():
     # the paper's rigid-crank scene, flexible bearings (16 + 2), grid 64: its model as loaded
     options = ModelOptions.linear(bearings='flexible', grid_size=64)
-    model = pipeline.model_for_mechanism(load_mechanism('cho1992'), options)
+    model = mechanism_model.model_for_mechanism(load_mechanism('cho1992'), options)
     sizes = bench.usable_soft_sizes(model)
     ratios = gap_ratios(node_values(model, 'M')['1'], node_values(model, 'K'),
                         float(model.speed_max), 5000.0)

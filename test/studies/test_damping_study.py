@@ -11,7 +11,7 @@ BETA = 1e-4
 
 def test_naive_spurious_axial_force_in_coupler_end_element_at_391_rpm():
     """
-    The issue's ~760 N: naive beta K U' minus objective, coupler's element at B, 8 elements.
+    The measured ~760 N: naive beta K U' minus objective, coupler's element at B, 8 elements.
 
     Measured 738 N (391 rpm, bearing springs, rigid crank, split masses, no gravity; 171 N at
     269 rpm; 240 steps per revolution instead of 720 change it by 0.1 %). It is
@@ -34,10 +34,10 @@ def test_beta_damped_full_order_and_streaming_estimate_against_peer_at_four_elem
     """
     269 rpm, bearing springs, matched conventions: lever / coupler within 4.5 % RMS.
 
-    Measured 2.8 / 3.4 % at 4 elements and 2.8 / 3.3 % at 8 (the issue: 2.9 / 3.4 %). The
-    remainder is the second-order motion the linear model lacks (the issue's quasi-static
+    Measured 2.8 / 3.4 % at 4 elements and 2.8 / 3.3 % at 8 (first measured: 2.9 / 3.4 %). The
+    remainder is the second-order motion the linear model lacks (the quasi-static
     correction brings the lever to 1 %); 4.5 % leaves room for the peer's time step and
-    elements while staying inside the issue's 5 % target. Modal zeta = 0.02 is 4.5 % on the
+    elements while staying inside the 5 % target. Modal zeta = 0.02 is 4.5 % on the
     coupler: the beta model must beat it there.
     """
     peer_exudyn = pytest.importorskip('flexlink_ros.studies.peer_exudyn')

@@ -3,8 +3,8 @@
 import shutil
 
 from flexlink_ros.core.mechanism_file import load_mechanism
-from flexlink_ros.core.reduction.dynamic_second_order_tables import load_for_model
-from flexlink_ros.core.reduction.pipeline import model_for_mechanism
+from flexlink_ros.core.reduction.mechanism_model import model_for_mechanism
+from flexlink_ros.core.reduction.second_order_dynamic_tables import load_for_model
 from flexlink_ros.studies.dynamic_second_order_bench import time_pass
 from flexlink_ros.studies.dynamic_second_order_study import case_options
 import pytest

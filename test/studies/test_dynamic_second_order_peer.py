@@ -2,7 +2,7 @@
 The streaming estimator with the dynamic pass against the Exudyn peer (dynamic_second_order_peer).
 
 At a reduced size (4 ANCF elements per link; the README's table is at 8): 391 rpm with
-gravity, rigid crank and bearings, where the quasi-static second order misses the issue's 4 %
+gravity, rigid crank and bearings, where the quasi-static second order misses the 4 %
 on the coupler mid-point and the dynamic pass meets it.
 """
 

@@ -51,6 +51,10 @@ def test_record_structure_and_text(record):
     assert 'series' not in nv.without_series(record)
     lines = nv.format_nonlinear(record).splitlines()
     assert lines[0].startswith('391 rpm, flexible bearings, gravity off, 4 elements per link')
-    assert lines[-2] == ('nonlinear within 5 % RMS and 3 % p2p: lever tip yes, '
+    assert lines[-3] == ('nonlinear within 5 % RMS and 3 % p2p: lever tip yes, '
                          'coupler mid yes')
-    assert lines[-1].startswith('Floquet multipliers |mu| ')
+    assert lines[-2].startswith('Floquet multipliers |mu| ')
+    assert lines[-1].startswith('nonlinear validity: largest element rotation ')
+    validity = record['nonlinear_validity']
+    assert 0.0 < validity['max_element_rotation_rad'] < 0.5
+    assert validity['fold_distance'] >= 1.0 - record['spectral_radius'] - 1e-12

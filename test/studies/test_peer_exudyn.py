@@ -1,8 +1,8 @@
 """
 The Exudyn peer (flexlink_ros/studies/peer_exudyn.py) at a reduced size: 4 ANCF elements per link.
 
-Physics checks against the package's own linear model (core.assembly, core.simulate) and
-against the issue's peer table (issue 14, 8 elements per link, no gravity); the reduced size
+Physics checks against the package's own linear model (core.fe.linkage, core.fe.simulate) and
+against the peer's published table (8 elements per link, no gravity); the reduced size
 is within 0.5 % of the 8-element peer at 269 rpm.
 """
 
@@ -31,7 +31,7 @@ def mech():
 
 @pytest.fixture(scope='module')
 def rigid_269(mech):
-    """Rigid bearings, 269 rpm, no gravity (the issue table's setting): peer and linear."""
+    """Rigid bearings, 269 rpm, no gravity (the published table's setting): peer and linear."""
     response = peer.peer_response(mech, 269.0, elements_per_link=ELEMENTS, gravity=False)
     linear = peer.linear_response(mech, 269.0, elements_per_link=ELEMENTS, gravity=False)
     return response, linear
@@ -99,10 +99,10 @@ def test_rigid_bearings_269rpm_steady_state(rigid_269):
     # the start transient was large: the first revolution is far from the last
     first = peer.peak_to_peak(response, 0)
     assert first['coupler_mid_dx'] > 1.3 * p2p['coupler_mid_dx']
-    # the issue's peer (8 elements, no gravity): 20.4 / 29.8 ; 2107 / 1902 um
-    issue = dict(zip(KEYS, (20.4e-6, 29.8e-6, 2107e-6, 1902e-6)))
+    # the published peer table (8 elements, no gravity): 20.4 / 29.8 ; 2107 / 1902 um
+    published = dict(zip(KEYS, (20.4e-6, 29.8e-6, 2107e-6, 1902e-6)))
     for key in KEYS:
-        assert p2p[key] == pytest.approx(issue[key], rel=0.03), key
+        assert p2p[key] == pytest.approx(published[key], rel=0.03), key
 
 
 @needs_exudyn
@@ -114,7 +114,7 @@ def test_rigid_bearings_269rpm_against_the_linear_model(rigid_269):
         assert abs(table[key]['p2p_error']) < 0.05, (key, table[key])
         assert table[key]['rms_error'] < 0.05, (key, table[key])
     # the lever tip moves by the chord shortening of the bent links (second order): the
-    # linear estimate is an order of magnitude low (issue: -89 % / -98 %)
+    # linear estimate is an order of magnitude low (published: -89 % / -98 %)
     for key in ('lever_tip_dx', 'lever_tip_dy'):
         assert table[key]['peer_p2p'] > 5.0 * table[key]['other_p2p'], (key, table[key])
         assert table[key]['p2p_error'] < -0.8, (key, table[key])

@@ -20,7 +20,7 @@ def test_compiled_factored_kernel_agrees_and_is_timed(mech):
     The C kernel of the factored form agrees and is fast.
 
     The C kernel of studies/second_order_bench.py equals factored_second_order (checked
-    inside time_factored) and takes well under the issue's 2 us per sample (r = 26: 0.7 us).
+    inside time_factored) and takes well under the 2 us per sample target (r = 26: 0.7 us).
     """
     ns = second_order_bench.time_factored(mech, 'flexible', False, 26, samples=2000, repeat=5)
     assert 0.0 < ns < 20000.0

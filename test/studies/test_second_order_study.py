@@ -45,7 +45,7 @@ def test_order_2_against_the_nonlinear_peer_at_4_elements(mech):
     Rigid crank and bearings, no gravity, 4 elements per link (the peer runs in a few
     seconds; its lever-tip p2p is within 0.3 % of 8 elements': 20.36 / 29.67 um against
     20.39 / 29.83), all its settling revolutions (fewer leave a 15 % transient on the
-    lever tip). The issue's targets at 8 elements apply unchanged: lever tip p2p within
+    lever tip). The targets at 8 elements apply unchanged: lever tip p2p within
     10 % (streamed 12 %), coupler mid-point 3 % (4 %). Measured: full order + second order
     -2.1 / -3.6 % (lever tip), +0.7 / +0.6 % (coupler); the linear lever tip is ~90 % low.
     """

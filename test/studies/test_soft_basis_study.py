@@ -3,7 +3,7 @@
 import dataclasses
 
 from flexlink_ros.core.mechanism_file import load_mechanism
-from flexlink_ros.core.reduction import pipeline
+from flexlink_ros.core.reduction import mechanism_model
 from flexlink_ros.studies import soft_basis_study as study
 import numpy as np
 import pytest
@@ -15,8 +15,9 @@ RPM_391 = 391.0 * 2.0 * np.pi / 60.0
 def veering():
     """Load the flexible crank on rigid bearings (8 + 4, grid 64): soft (p = 7) and all 12."""
     mechanism = load_mechanism('cho1992')
-    soft = pipeline.model_for_mechanism(mechanism, study.veering_options())
-    return mechanism, soft, pipeline.with_soft_basis(dataclasses.replace(soft, soft=None), 0)
+    soft = mechanism_model.model_for_mechanism(mechanism, study.veering_options())
+    full = mechanism_model.with_soft_basis(dataclasses.replace(soft, soft=None), 0)
+    return mechanism, soft, full
 
 
 def test_the_two_lowest_modes_swap_order_twice_a_revolution_inside_the_soft_subspace(veering):

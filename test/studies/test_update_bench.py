@@ -3,7 +3,7 @@
 from flexlink_ros.core.estimation.native import compiled_step_available
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.core.reduction import pipeline
+from flexlink_ros.core.reduction import mechanism_model
 from flexlink_ros.studies import update_bench
 import pytest
 
@@ -11,8 +11,8 @@ import pytest
 @pytest.mark.skipif(not compiled_step_available(), reason='compiled step not built')
 def test_both_paths_are_timed_and_agree():
     """Both paths timed on the same samples (they agree, or it raises); no timed assertion."""
-    model = pipeline.model_for_mechanism(load_mechanism('cho1992'),
-                                         ModelOptions.linear(bearings='rigid'))
+    model = mechanism_model.model_for_mechanism(load_mechanism('cho1992'),
+                                                ModelOptions.linear(bearings='rigid'))
     result = update_bench.update_overhead(model, rounds=2, samples=200)
     # Every sample but the first (the start, on the Python path) went through the C call.
     assert result['samples'] == 401 and result['taken'] == 400

@@ -1,8 +1,8 @@
 """
-Validation against the Exudyn peer (flexlink_ros/studies/validation.py, issue 14 item 5).
+Validation against the Exudyn peer (flexlink_ros/studies/validation.py).
 
 At a reduced size (4 ANCF / beam elements per link, the peer at 360 steps per revolution): the
-structure of a record, and the physics the issue states at 8 elements per link: with rigid
+structure of a record, and the physics measured at 8 elements per link: with rigid
 bearings the linear lever tip misses nearly all of the peer's motion, the second order brings
 it within 10 %, and the dynamic pass leaves it so and brings the coupler mid-point's RMS error
 from about 6.5 % to under 3 % at 391 rpm.
@@ -133,7 +133,7 @@ def test_missing_exudyn_says_how_to_install_it():
 @needs_exudyn
 def test_conventions_matched_with_bearing_springs():
     """
-    Bearing springs, beta damping in both models, 269 rpm: the issue's matched comparison.
+    Bearing springs, beta damping in both models, 269 rpm: the matched comparison.
 
     Measured at 4 elements (vector RMS, lever tip ; coupler mid): linear 2.7 ; 3.0 %, + 2nd
     order 0.9 ; 3.0 %, + dynamic pass 0.4 ; 0.5 % (8 elements: 2.8 ; 3.3, 0.9 ; 3.3, 0.3 ; 0.3).

@@ -1,7 +1,7 @@
 /*
  * get_doubles: a float64 buffer of at least `count` values (writable if asked), or -1 with
  * an exception set. The one buffer check of the small extensions (_nonlinearity.c,
- * _dynamic_second_order.c); include after Python.h.
+ * _second_order_dynamic.c); include after Python.h.
  */
 #ifndef FLEXLINK_DOUBLES_H
 #define FLEXLINK_DOUBLES_H

@@ -470,7 +470,7 @@ static void history_copy(Step *s, double *entry)
  * Stage 1 (slot 1) and the sample (slot 0) of a step of h from prev to (angle, w, a): both
  * from the tables, or (with a history) only the sample, stage 1 by interpolation in time
  * through the last two samples' evaluations and the new one (quadratic; linear with one,
- * after the previous sample is evaluated on a fresh start): NumpyStep._load_stages.
+ * after the previous sample is evaluated on a fresh start): NumpyStep.load_stages.
  */
 static void load_stages(Step *s, const double *prev, double h, double angle, double w, double a,
                         double advance)

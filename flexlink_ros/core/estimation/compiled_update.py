@@ -60,12 +60,12 @@ def compiled_update(estimator, stepper, gate, record, base_flags):
 
 def use_python_path(estimator):
     """Send every sample of a StreamingEstimator to the Python path (comparisons, benchmarks)."""
-    estimator._compiled = PythonUpdate()
+    estimator.use_python_path()
 
 
 def compiled_samples(estimator):
     """Count the samples of a StreamingEstimator that the compiled path estimated."""
-    return estimator._compiled.taken
+    return estimator.compiled_samples
 
 
 class PythonUpdate:

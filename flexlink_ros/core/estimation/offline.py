@@ -43,7 +43,7 @@ def segments(stamps_ns, angles, reset_gap_s=DEFAULT_RESET_GAP_S):
     Split a sample stream where the streaming estimator would restart on its stamps.
 
     Stamps and angles only, without the input gate's outliers (estimate_offline plans its
-    rows with core.estimator.plan_rows, which has both).
+    rows with core.estimation.gate.plan_rows, which has both).
 
     Returns
     -------
@@ -258,7 +258,7 @@ class _OfflineRun:
         self.plan_size = FIRST_PLAN_WINDOW
 
     def plan_window(self):
-        """Plan a window more rows (core.estimator.plan_rows, the gate carried on)."""
+        """Plan a window more rows (core.estimation.gate.plan_rows, the gate carried on)."""
         wanted = self.planned + min(self.plan_size, PLAN_WINDOW)
         stop = min(wanted, self.ensure(wanted))
         self.plan_size *= 2

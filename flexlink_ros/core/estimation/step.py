@@ -111,9 +111,10 @@ class NumpyStep:
         if tables.lift is not None and interpolate_stages:
             self.history = np.zeros(2 + 2 * (3 * r * r + r))
         self.previous = np.zeros(3)         # crank state (angle, speed, accel) of the last step
-        # [M, C, K, F] of stage 1 and of the sample, in alternating slots.
-        self._stored = np.zeros((2, 4, r * r))
-        self._flat = self._stored.reshape(2, 4 * r * r)
+        # [M, C, K, F] of stage 1 and of the sample, in alternating slots (the dynamic pass
+        # of second_order_dynamic_step.py reads them too).
+        self.stored = np.zeros((2, 4, r * r))
+        self._flat = self.stored.reshape(2, 4 * r * r)
         self._parity = 0
         self._weights = np.zeros(CELL_POWERS * len(MONOMIALS))
         self._hermite = np.zeros((2, 2 * len(MONOMIALS)))
@@ -271,7 +272,7 @@ class NumpyStep:
     def _pack(self, slot):
         """Return a slot's [M, C, K | f] as one history entry."""
         r = self.tables.size
-        return np.concatenate((self._stored[slot, :3].ravel(), self._stored[slot, 3, :r]))
+        return np.concatenate((self.stored[slot, :3].ravel(), self.stored[slot, 3, :r]))
 
     def _interpolate_stage(self, h, parity):
         """Stage 1 from the history and the sample's slot (_radau_step.c's load_stages)."""
@@ -286,14 +287,14 @@ class NumpyStep:
             weights = (0.0, 1.0 - c1, c1)
         sample = self._pack(parity)
         stage = weights[0] * before + weights[1] * last + weights[2] * sample
-        self._stored[1 - parity, :3] = stage[:3 * r * r].reshape(3, r * r)
-        self._stored[1 - parity, 3, :r] = stage[3 * r * r:]
+        self.stored[1 - parity, :3] = stage[:3 * r * r].reshape(3, r * r)
+        self.stored[1 - parity, 3, :r] = stage[3 * r * r:]
         before[:] = last
         last[:] = sample
         history[1] = h
         history[0] = min(history[0] + 1.0, 2.0)
 
-    def _load_stages(self, h, angle, speed, accel, advance):
+    def load_stages(self, h, angle, speed, accel, advance):
         """Load stage 1 (crank state interpolated to c_1 h) and the sample into the slots."""
         parity = 1 - self._parity
         self._parity = parity
@@ -328,15 +329,15 @@ class NumpyStep:
         """One Radau IIA step to the new crank state (the numpy twin of _radau_step.c)."""
         tables = self.tables
         r = tables.size
-        parity = self._load_stages(h, angle, speed, accel, advance)
+        parity = self.load_stages(h, angle, speed, accel, advance)
         inv = 1.0 / h
         g = np.dot(np.array((inv * inv, inv, 1.0, h, h * h)), tables.g_stack[parity])
-        blocks = np.dot(g.reshape(8, 8), self._stored.reshape(8, r * r))
+        blocks = np.dot(g.reshape(8, 8), self.stored.reshape(8, r * r))
         # Transposed system (column block, l, i, k): its first 2 r rows are the Fortran-order
         # block matrix LAPACK wants, the rest the transposed right-hand-side operator.
         system_t = blocks.reshape(2, 4, r, r).transpose(1, 3, 0, 2).reshape(4 * r, 2 * r)
         z = self.z
-        stored = self._stored
+        stored = self.stored
         loads = np.concatenate((stored[1 - parity, 3, :r], stored[parity, 3, :r]))
         _, _, increment, info = lapack.dgesv(system_t[:2 * r].T,
                                              np.dot(z[:2 * r], system_t[2 * r:]) + loads,

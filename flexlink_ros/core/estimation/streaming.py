@@ -19,14 +19,14 @@ import math
 import numpy as np
 
 from . import tables
-from .compiled_update import compiled_update
+from .compiled_update import compiled_update, PythonUpdate
 from .crank_filter import CompiledCrankRateFilter, CrankRateFilter, DEFAULT_FIT_TIME_CONSTANT_S
-from .dynamic_second_order import step_for_model
 from .gate import DEFAULT_RESET_GAP_S, InputGate
 from .native import compiled_step_available, RECORD_SIZE, ROW_SIZE
 from .nonlinearity import NonlinearityIndicator
 from .sample import (CLIPPED_ACCEL, CLIPPED_SPEED, LARGE_STEP, nan_sample, NO_CRITERIA,
                      OUT_OF_BOUND, REPEATED, sample_from_record, SPEED_FROM_ANGLE)
+from .second_order_dynamic_step import step_for_model
 from .step import MAX_SUBSTEP_NS
 from .throttled_log import ThrottledWarning
 from .warm_start import WarmStart
@@ -210,6 +210,15 @@ class StreamingEstimator:
         empty = np.empty((self.model.grid_size,) + self.model.table.shape[1:2] + (0,))
         self.model = dataclasses.replace(self.model, table=empty)
         return self.model
+
+    def use_python_path(self):
+        """Send every later sample to the Python path (comparisons, benchmarks)."""
+        self._compiled = PythonUpdate()
+
+    @property
+    def compiled_samples(self):
+        """Count the samples the compiled path estimated."""
+        return self._compiled.taken
 
     def _set_state(self, angle, speed, accel, warm):
         """Start from the periodic state at this speed (warm) or the static deflection."""

@@ -9,7 +9,7 @@ with x from node 1 (x = 0) to node 2 (x = L). Departures from the print (papers.
 A.1 uses h2, not h1, for v1 (A.2 defines h2 and never uses it otherwise); A.9's node-1 block is
 [[0, -m1], [m1, 0]] (skew-symmetric, as the integral of H^T I_s H of a point mass gives), and
 its "m^2" is m2. A.3-A.7 are as printed. Every matrix here equals the integral stated in its
-docstring (checked by quadrature of :func:`shape_functions` in test/test_beam.py).
+docstring (checked by quadrature of :func:`shape_functions` in test/core/fe/test_beam.py).
 """
 
 import numpy as np

@@ -4,7 +4,7 @@ Dynamic second-order pass of the full-order model: the inertia of the second-ord
 The quasi-static second order (:mod:`core.fe.second_order_full`) adds the chord shortening of
 the bent links to the outputs without any dynamics. This module computes the same motion as the
 periodic response of one more LINEAR pass of the full-order model, loaded by the second-order
-terms of the beam's strain energy evaluated on the linear state (issue 14, item 2).
+terms of the beam's strain energy evaluated on the linear state.
 
 Derivation. In each link's nominal (rigid-body) frame the Bernoulli-Euler beam's axial strain to
 second order is ``eps = u' + 1/2 v'^2``, and its strain energy ::
@@ -46,7 +46,8 @@ U1 is known on the linear response's output grid; the integrator of (4) needs it
 angles, which :func:`periodic_interpolation` gives by trigonometric interpolation over the
 revolution (the linear state is periodic and smooth). Left out: the second-order terms of the
 kinetic energy (Coriolis and centrifugal products of two elastic quantities) and the feedback
-of U2 into the loads (no iteration: near resonance the fixed point diverges, issue 14).
+of U2 into the loads (no iteration: near resonance the fixed point diverges, as measured
+against the peer).
 """
 
 import numpy as np

@@ -1,5 +1,5 @@
 """
-Second-order (quasi-static) motion of the flexible four-bar from its linear KED state (issue 14).
+Second-order (quasi-static) motion of the flexible four-bar from its linear KED state.
 
 The linear kineto-elastodynamic model of Cho, Park & Lee (1992) (:mod:`core.fe.linkage`,
 :mod:`core.fe.simulate`) keeps each link's axial and transverse deflections to first order. A bent
@@ -7,7 +7,8 @@ link is also shorter along its chord, by an amount quadratic in its bending; wit
 joint B moves mainly by that shortening of the coupler and the lever (the linear lever tip is
 89-100 % low against a geometrically exact peer, :mod:`studies.peer_exudyn`). This module adds
 that motion, computed from the linear state, without any further dynamics (the inertia of the
-second-order motion and the axial eigenstrain it causes are left out: issue 14, item 2).
+second-order motion and the axial eigenstrain it causes are left out here:
+:mod:`.second_order_dynamic` adds them).
 
 Here the second-order outputs are evaluated from full-order nodal vectors U; the geometry
 (Eqs. 1-4) is in :mod:`core.fe.second_order_geometry`, the reduced-basis forms in

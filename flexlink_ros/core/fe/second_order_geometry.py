@@ -1,5 +1,5 @@
 """
-Second-order geometry of a bent link: chord shortening and loop closure (issue 14).
+Second-order geometry of a bent link: chord shortening and loop closure.
 
 Derivation. Take a link of length L in its nominal (rigid-body) frame, x along the nominal chord
 from its first joint, with the linear FE deflections u(x) (axial) and v(x) (transverse) that
@@ -28,10 +28,11 @@ so the second-order joint motion solves, with the nominal unit vectors, ::
 
     e_c . (dB - dA) = -S_c,   e_l . dB = -S_l,   dA = -S_k e_k (flexible crank, else 0)   (3)
 
-(c coupler A->B, l lever O4->B, k crank O2->A). The issue's form ``[e_c; e_l] dB = -[delta_c;
+(c coupler A->B, l lever O4->B, k crank O2->A). The simpler form ``[e_c; e_l] dB = -[delta_c;
 delta_l]`` is (3) with the rotation term left out; with rigid bearings B's linear motion is
 2-5 um, so the term is 1e-11 m there, but with bearing springs it is not negligible in
-principle. test/test_second_order.py checks (3) against the exact intersection of two circles.
+principle. test/core/fe/test_second_order_geometry.py checks (3) against the exact
+intersection of two circles.
 With bearing springs the frame is statically determinate (rigid crank pin, two bars), so the
 second-order shortening changes no spring force and (3) holds with the members' end nodes.
 

@@ -1,5 +1,5 @@
 """
-Second-order outputs on a reduced basis U = V q: quadratic forms in q (issue 14).
+Second-order outputs on a reduced basis U = V q: quadratic forms in q.
 
 Reduced basis (the estimator). With a constant basis V (U = V q, :mod:`core.reduction.model`)
 only the end-node translation rows of T^T rotate with the link angle theta_L,
@@ -110,7 +110,8 @@ def quadratic_tables(linkage, basis, crank_angle, forms=None):
     Parameters
     ----------
     linkage : FlexibleLinkage
-        The full model the basis belongs to (core.reduction.model.fe_mechanism, the same options).
+        The full model the basis belongs to (same options:
+        core.reduction.mechanism_model.fe_mechanism).
     basis : ndarray, shape (n, r)
         Reduced basis V (U = V q).
     crank_angle : ndarray, shape (N,)

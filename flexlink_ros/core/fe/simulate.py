@@ -34,7 +34,7 @@ the output points, the quasi-static response of the discarded modes to the load 
 part sees: ``U_r = (K_f^-1 - Phi Lambda^-1 Phi^T) (R - C_c U_m' - K_c U_m)`` with
 K_f = K + K_G.
 
-Stiffness-proportional damping (issue 14, item 3). With ``beta`` > 0 the objective
+Stiffness-proportional damping. With ``beta`` > 0 the objective
 Kelvin-Voigt damping of :mod:`core.fe.stiffness_damping` is added at every stage:
 ``C_beta U' + D_beta U`` with ``C_beta = beta K`` on the damping and ``D_beta = w Kb1`` on the
 stiffness, on top of the modal zeta (set zeta = 0 for beta alone, the peer's convention).

@@ -1,5 +1,5 @@
 """
-Stiffness-proportional (Kelvin-Voigt) damping of the KED model, objective (issue 14, item 3).
+Stiffness-proportional (Kelvin-Voigt) damping of the KED model, objective.
 
 The peer (:mod:`studies.peer_exudyn`) damps the material strain rates: axial force
 ``beta E A eps'`` and bending moment ``beta E I kappa'`` in every element, and ``c = beta k`` on

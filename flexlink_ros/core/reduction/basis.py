@@ -45,7 +45,7 @@ class FrozenSamples:
         Rigid-body positions of those points [m].
     frozen : dict or None
         Keys '1', 'a', 'w2': symmetric stiffness pieces of the frozen eigenproblem (elastic +
-        geometric, as core/modes.py); None to use the symmetric part of ``stiffness``.
+        geometric, as core/fe/modes.py); None to use the symmetric part of ``stiffness``.
 
     """
 

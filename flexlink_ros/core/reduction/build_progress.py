@@ -1,7 +1,7 @@
 """
 How far a model build is: a percentage from the eigenproblems and damping matrices done.
 
-A build (:func:`.pipeline.build_model`) spends most of its time in two loops over the grid:
+A build (:func:`.mechanism_model.build_model`) spends most of its time in two loops over the grid:
 the frozen eigenproblems of the basis snapshots (:func:`.basis.build_basis`, per angle and
 basis speed) and the modal damping matrices (:func:`.build.project_system`, per angle and
 damping speed). :class:`BuildProgress` hands the build samples that count both, weighted by

@@ -30,7 +30,7 @@ cell's table gives every matrix, load and output operator at (theta, w, a); the 
 splits that product by block to read only the monomial rows each block uses.
 
 This module holds the model itself (:class:`ReducedModel`, its table layout and readers);
-:mod:`.build` makes one from full-order samples, :mod:`.pipeline` for a mechanism (cached in
+:mod:`.build` makes one from full-order samples, :mod:`.mechanism_model` for a mechanism (cached in
 :mod:`.store`), :mod:`.periodic` gives its periodic response, :mod:`.reference` the full-order
 reference it is checked against.
 """
@@ -122,7 +122,7 @@ class ReducedModel:
         estimator steps p coordinates and lifts them to the r of this model; None: it steps
         all r.
     dynamic_second_order : dict of str to ndarray or None
-        Tables of the dynamic second-order pass (:mod:`.dynamic_second_order_tables`, names
+        Tables of the dynamic second-order pass (:mod:`.second_order_dynamic_tables`, names
         ``dynamic_*``) of a model built with ``second_order='dynamic'``; None otherwise.
 
     """
@@ -172,7 +172,7 @@ class ReducedModel:
                 + sum(a.nbytes for a in (self.nonlinearity or {}).values()))
 
     def to_arrays(self):
-        """Arrays and metadata for :func:`core.cache.save_cache`."""
+        """Arrays and metadata for :func:`core.reduction.store.save_cache`."""
         arrays = {'table': self.table, 'shape_table': self.shape_table, 'basis': self.basis,
                   'force_moments': self.force_moments, **(self.nonlinearity or {}),
                   **(self.second_order or {}), **(self.dynamic_second_order or {})}

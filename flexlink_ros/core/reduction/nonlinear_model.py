@@ -19,8 +19,8 @@ import numpy as np
 from . import store
 from .basis import frozen_modes
 from .cache_location import cache_file
+from .mechanism_model import fe_mechanism
 from .nonlinear_tables import build_nonlinear_tables, NonlinearTables
-from .pipeline import fe_mechanism
 from ..fe.linkage import FlexibleLinkage
 
 NONLINEAR_VERSION = 2

@@ -31,7 +31,7 @@ The reference modes (frozen frequency omega_j and strain-energy shares s_jl, rev
 w^2.
 
 Plain arrays (:data:`TABLE_NAMES`), cached beside the model under a key of their own that
-carries :data:`NONLINEARITY_VERSION` (:func:`.pipeline.with_nonlinearity`).
+carries :data:`NONLINEARITY_VERSION` (:func:`.mechanism_model.with_nonlinearity`).
 """
 
 import numpy as np

@@ -12,9 +12,9 @@ import numpy as np
 
 from .build import reduce_samples
 from .cells import CELL_POWERS, periodic_cell_coefficients
+from .mechanism_model import fe_mechanism, frozen_samples_for
 from .model import output_values
 from .periodic import periodic_response
-from .pipeline import fe_mechanism, frozen_samples_for
 from ..fe import linkage as assembly
 from ..fe import simulate
 from ..fe.second_order_full import corrected_response
@@ -30,10 +30,10 @@ def reference_response(mechanism, options, speed, angles, steps=REFERENCE_STEPS)
     """
     Full-order periodic response at constant crank speed, at given crank angles.
 
-    The reference is core/simulate.py's full-order shooting (every FE DOF, coefficient
+    The reference is core/fe/simulate.py's full-order shooting (every FE DOF, coefficient
     matrices assembled at every Radau stage) with ``steps`` steps and one output per
     REFERENCE_POINT_STRIDE steps, interpolated to ``angles`` by a periodic cubic spline.
-    Where core/simulate.py is not in the checkout, the same equations are solved here without
+    Where core/fe/simulate.py is not in the checkout, the same equations are solved here without
     reduction (identity basis, tables on a REFERENCE_GRID-point grid): the two agree to
     4e-5 (flexible bearings) and 1e-6 (rigid) relative RMS at 269 and 391 rpm.
 
@@ -88,7 +88,7 @@ def unreduced_revolution(mechanism, options, speed, steps=REFERENCE_STEPS):
     Return the outputs (points, 4) over one revolution of the unreduced tables, and their source.
 
     The tables of :func:`reduce_samples` with every DOF kept, integrated as the reduced model
-    is: a check of the tables and the integrator against core.simulate's full order.
+    is: a check of the tables and the integrator against core.fe.simulate's full order.
     """
     full_options = dataclasses.replace(options, grid_size=REFERENCE_GRID, modes=1, static=0)
     samples = frozen_samples_for(mechanism, full_options)

@@ -1,5 +1,5 @@
 """
-The reduced model's tables of the second-order outputs, and their numpy evaluation (issue 14).
+The reduced model's tables of the second-order outputs, and their numpy evaluation.
 
 The second-order motion of the bent links (chord shortening, :mod:`core.fe.second_order_geometry`)
 is on a constant basis U = V q a sum of quadratic forms of q

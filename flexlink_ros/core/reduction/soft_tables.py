@@ -34,8 +34,8 @@ from .cells import MONOMIALS, periodic_cell_coefficients
 from .soft_basis import align_modes, angle_derivatives, choose_soft_size, gap_ratios, \
     lowest_modes
 
-# Version of what soft_tables computes: the key of its cache files (pipeline.with_soft_basis);
-# change it whenever the tables change.
+# Version of what soft_tables computes: the key of its cache files
+# (mechanism_model.with_soft_basis); change it whenever the tables change.
 SOFT_TABLES_VERSION = 1
 # The step's monomial groups of each node table (the order of MONOMIALS).
 SOFT_DAMPING_MONOMIALS = ('1', 'w2', 'w', 'w4')

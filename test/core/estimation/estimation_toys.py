@@ -5,7 +5,7 @@ import dataclasses
 from flexlink_ros.core.estimation.native import compiled_step_available
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.core.reduction import build, cells, pipeline
+from flexlink_ros.core.reduction import build, cells, mechanism_model
 from flexlink_ros.core.reduction import model as tables
 from flexlink_ros.core.reduction import periodic
 from flexlink_ros.errors import OutlierSample
@@ -64,7 +64,7 @@ def cho1992():
 
 def cho_second_order_model(bearings='rigid', grid_size=32):
     """Cho 1992 reduced model of order 2 (rigid crank, the default sizes), cached."""
-    return pipeline.model_for_mechanism(
+    return mechanism_model.model_for_mechanism(
         cho1992(), ModelOptions.linear(bearings=bearings, grid_size=grid_size, order=2))
 
 

@@ -4,7 +4,7 @@ from flexlink_ros.core.estimation.criteria_rows import criteria_batch
 from flexlink_ros.core.estimation.step import joint_criteria
 from flexlink_ros.core.estimation.streaming import DEFAULT_NEAR_ZERO_FRACTION
 from flexlink_ros.core.mechanism_file import load_mechanism
-from flexlink_ros.core.reduction import pipeline
+from flexlink_ros.core.reduction import mechanism_model
 from flexlink_ros.ros import parameters as node_params
 import numpy as np
 import pytest
@@ -13,7 +13,7 @@ import pytest
 @pytest.fixture(scope='module')
 def model():
     options = node_params.default_model_options(geometric_stiffness=False)
-    return pipeline.model_for_mechanism(load_mechanism('cho1992'), options)
+    return mechanism_model.model_for_mechanism(load_mechanism('cho1992'), options)
 
 
 def test_criteria_of_many_rows_are_the_step_criteria_of_each(model):

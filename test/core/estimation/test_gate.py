@@ -1,4 +1,4 @@
-"""Hostile input (issue #12 items 2-4): outliers skipped, new regimes, repeats and restarts."""
+"""Hostile input (wild speeds, reset storms): outliers skipped, new regimes, repeats, restarts."""
 
 import logging
 import math

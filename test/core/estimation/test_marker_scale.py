@@ -6,7 +6,7 @@ from flexlink_ros.core.estimation.marker_scale import (default_exaggeration, MAR
                                                        MAX_EXAGGERATION, round_exaggeration)
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
 from flexlink_ros.core.mechanism_file import load_mechanism
-from flexlink_ros.core.reduction.pipeline import model_for_mechanism
+from flexlink_ros.core.reduction.mechanism_model import model_for_mechanism
 from flexlink_ros.ros.parameters import default_model_options
 import pytest
 

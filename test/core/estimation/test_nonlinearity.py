@@ -21,7 +21,7 @@ from flexlink_ros.core.fe import linkage as assembly
 from flexlink_ros.core.fe.simulate import periodic_response
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.core.reduction import pipeline
+from flexlink_ros.core.reduction import mechanism_model
 from flexlink_ros.studies.synthetic import last_revolution, synthetic_signal
 import numpy as np
 import pytest
@@ -48,7 +48,8 @@ def _options(bearings, soft_modes=0):
 
 @pytest.fixture(scope='module')
 def models(mech):
-    return {bearings: pipeline.model_for_mechanism(mech, _options(bearings), use_cache=False)
+    return {bearings: mechanism_model.model_for_mechanism(mech, _options(bearings),
+                                                          use_cache=False)
             for bearings in SIZES}
 
 
@@ -67,7 +68,7 @@ def _streamed(model, rpm, seconds=2.0):
 
 def _full_order(mech, bearings, rpm):
     options = _options(bearings)
-    linkage = assembly.FlexibleLinkage(pipeline.fe_mechanism(mech, options), options)
+    linkage = assembly.FlexibleLinkage(mechanism_model.fe_mechanism(mech, options), options)
     speed = rpm * math.pi / 30.0
     response = periodic_response(linkage, speed, method='full', points=120)
     return validity.nonlinearity_indicator(linkage, response.displacement,
@@ -97,7 +98,7 @@ def test_soft_basis_indicator_against_the_full_order(mech, models, rpm):
     # gives the other 6 their quasi-static response (to the loads and to the soft motion).
     # Measured: +6.8 % at 269 rpm (modes 13-16 are not stiff enough to be quite static;
     # the 18-coordinate model is -2.4 %), -3.7 % at 391.
-    soft = pipeline.with_soft_basis(models['flexible'], -1)
+    soft = mechanism_model.with_soft_basis(models['flexible'], -1)
     assert soft.step_size == 12
     streamed = np.array([s.nonlinearity for s in _streamed(soft, rpm)[0]])
     full = _full_order(mech, 'flexible', rpm)

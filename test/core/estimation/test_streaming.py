@@ -13,8 +13,8 @@ from flexlink_ros.core.estimation.native import FILTER_SPEED_FIT
 from flexlink_ros.core.estimation.sample import SampleFlag
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
 from flexlink_ros.core.reduction import build
+from flexlink_ros.core.reduction import mechanism_model
 from flexlink_ros.core.reduction import model as tables
-from flexlink_ros.core.reduction import pipeline
 from flexlink_ros.core.reduction import reference as reduction_reference
 from flexlink_ros.ros import parameters as node_params
 from flexlink_ros.studies import bench
@@ -170,7 +170,7 @@ TARGETS = {0.0: (0.01, 0.05), 0.3: (0.02, 0.07)}
 def test_cho1992_streaming_accuracy_at_269_and_391_rpm(cho, bearings):
     # The default model: geometric stiffness of the rigid-body axial forces included.
     options = core_options.ModelOptions.linear(bearings=bearings)
-    model = pipeline.model_for_mechanism(cho, options, use_cache=False)
+    model = mechanism_model.model_for_mechanism(cho, options, use_cache=False)
     for rpm in (269.0, 391.0):
         for jitter, (coupler_limit, lever_limit) in TARGETS.items():
             errors = bench.configuration_error(cho, model, options, rpm, 1000.0, jitter,
@@ -181,9 +181,9 @@ def test_cho1992_streaming_accuracy_at_269_and_391_rpm(cho, bearings):
 
 @pytest.mark.parametrize('bearings', ['rigid', 'flexible'])
 def test_cho1992_order_2_streaming_equals_the_full_order_plus_second_order(cho, bearings):
-    """Order 2 against core.simulate's full order + corrected_response, 269 and 391 rpm."""
+    """Order 2 against core.fe.simulate's full order + corrected_response, 269 and 391 rpm."""
     options = core_options.ModelOptions.linear(bearings=bearings, order=2)
-    model = pipeline.model_for_mechanism(cho, options)
+    model = mechanism_model.model_for_mechanism(cho, options)
     assert model.order == 2
     for rpm in (269.0, 391.0):
         errors = bench.configuration_error(cho, model, options, rpm, 1000.0, 0.0, seed=3)
@@ -227,7 +227,7 @@ def test_cho1992_criteria_equal_the_rigid_body_analysis_at_constant_speed(cho):
     """Tabulated reactions (F_1 + a F_a + w^2 F_w2, dF/dtheta) against core/criteria.py."""
     criteria = pytest.importorskip('flexlink_ros.core.criteria')
     options = core_options.ModelOptions.linear(bearings='rigid', geometric_stiffness=False)
-    model = pipeline.model_for_mechanism(cho, options, use_cache=False)
+    model = mechanism_model.model_for_mechanism(cho, options, use_cache=False)
     speed = 391.0 * 2.0 * np.pi / 60.0
     times = np.arange(600) * 1e-3
     angles = 0.4 + speed * times
@@ -271,7 +271,7 @@ def test_criterion_is_finite_and_flagged_at_a_zero_reaction():
 def test_gap_in_the_input_costs_no_accuracy(cho, gap_s):
     """391 rpm at 1 kHz with the input missing for gap_s: sub-steps keep the state."""
     options = node_params.default_model_options()
-    model = pipeline.model_for_mechanism(cho, options)
+    model = mechanism_model.model_for_mechanism(cho, options)
     speed = 391.0 * np.pi / 30.0
     times = np.arange(0.0, 2.0, 1e-3)
     times = times[(times <= 1.0) | (times >= 1.0 + gap_s)]

@@ -1,5 +1,5 @@
 """
-Dynamic second-order pass (core/fe/second_order_dynamic.py, issue 14 item 2).
+Dynamic second-order pass (core/fe/second_order_dynamic.py).
 
 Its element loads against closed forms, its quasi-static limit against the loop closure of
 core/fe/second_order_geometry.py (Eqs. 3-4), the pass at a low crank speed against the

@@ -1,5 +1,5 @@
 """
-Second-order outputs from full-order vectors (core/fe/second_order_full.py, issue 14 item 1).
+Second-order outputs from full-order vectors (core/fe/second_order_full.py).
 
 The quasi-static formulas against the geometrically exact Exudyn peer's static sag, and linear
 plus second order against the peer at 269 rpm (4 elements per link).

@@ -1,5 +1,5 @@
 """
-Second-order geometry (core/fe/second_order_geometry.py, issue 14 item 1), independent checks.
+Second-order geometry (core/fe/second_order_geometry.py), independent checks.
 
 * the FE bending integral against closed forms (half-sine, parabola on part of a link);
 * the loop closure against the exact intersection of two circles (third-order agreement).
@@ -119,7 +119,7 @@ def test_loop_closure_is_third_order_against_the_circles(mech, theta):
     assert np.all(second < 0.02 * first)
     orders = np.log2(second[:-1] / second[1:])
     assert np.all(orders > 2.7), orders
-    # without the chord-rotation term (the issue's delta form) the residual is second order
+    # without the chord-rotation term (the simpler delta form) the residual is second order
     bare = np.array([loop_errors(mech, theta, s, with_rotation=False)[0]
                      for s in (2e-3, 1e-3, 5e-4)])
     assert np.all(np.log2(bare[:-1] / bare[1:]) < 2.3)

@@ -1,5 +1,5 @@
 """
-Second-order outputs on a reduced basis (core/fe/second_order_reduced.py, issue 14 item 1).
+Second-order outputs on a reduced basis (core/fe/second_order_reduced.py).
 
 The quadratic form on a reduced basis against the full-order computation on V q (the compiled
 kernel and the streamed reduced model: test/studies/test_second_order_{bench,study}.py).
@@ -11,7 +11,7 @@ from flexlink_ros.core.fe import second_order_full as so_full
 from flexlink_ros.core.fe import second_order_reduced as so_reduced
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.reduction import basis as reduction_basis
-from flexlink_ros.core.reduction import pipeline
+from flexlink_ros.core.reduction import mechanism_model
 import numpy as np
 import pytest
 
@@ -30,10 +30,10 @@ def mech():
     core_options.ModelOptions.linear(grid_size=8, bearings='flexible', rigid_crank=False,
                          elements_per_link=3, modes=24, static=2)], ids=['rigid', 'flexible'])
 def test_quadratic_form_equals_the_full_order_on_v_q(mech, options):
-    samples = pipeline.frozen_samples_for(mech, options)
+    samples = mechanism_model.frozen_samples_for(mech, options)
     basis, _ = reduction_basis.build_basis(samples, options.modes, options.static,
                                            np.linspace(0.0, 60.0, 2))
-    linkage = assembly.FlexibleLinkage(pipeline.fe_mechanism(mech, options),
+    linkage = assembly.FlexibleLinkage(mechanism_model.fe_mechanism(mech, options),
                                        options)
     theta = np.linspace(0.0, 2.0 * np.pi, 9, endpoint=False) + 0.2
     q = np.random.default_rng(3).standard_normal((theta.size, basis.shape[1])) * 1e-4

@@ -1,4 +1,4 @@
-"""Objective stiffness-proportional damping (core/stiffness_damping.py, issue 14 item 3)."""
+"""Objective stiffness-proportional damping (core/fe/stiffness_damping.py)."""
 
 import dataclasses
 import math

@@ -5,7 +5,7 @@ import pathlib
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction.build_progress import ASSEMBLED_PERCENT, BASIS_STEP, DAMPING_STEP
-from flexlink_ros.core.reduction.pipeline import build_model
+from flexlink_ros.core.reduction.mechanism_model import build_model
 import numpy as np
 
 CONFIG = pathlib.Path(__file__).resolve().parents[3] / 'config'

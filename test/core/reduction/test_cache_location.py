@@ -9,7 +9,7 @@ from flexlink_ros.core.estimation.streaming import StreamingEstimator
 from flexlink_ros.core.mechanism import Mechanism
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.core.reduction import cache_location, pipeline, store
+from flexlink_ros.core.reduction import cache_location, mechanism_model, store
 from flexlink_ros.errors import CacheError
 import numpy as np
 import pytest
@@ -40,7 +40,7 @@ def planted_cache(source_dir, target_dir, scale=1.3):
         shutil.copyfile(source, target)
         if source.name.endswith(('-nonlinearity.npz', '-soft.npz')):
             continue
-        key = pipeline.model_key(load_mechanism('cho1992'), OPTIONS)
+        key = mechanism_model.model_key(load_mechanism('cho1992'), OPTIONS)
         arrays, meta = store.load_cache(source, key)
         arrays['table'] = arrays['table'] * scale
         store.save_cache(target, key, arrays, meta)
@@ -51,15 +51,15 @@ def planted_cache(source_dir, target_dir, scale=1.3):
 def reference(tmp_path):
     """Give the untouched model's cache directory and its deflections."""
     good = tmp_path / 'good'
-    model = pipeline.model_for_mechanism(load_mechanism('cho1992'), OPTIONS, cache_dir=good)
+    model = mechanism_model.model_for_mechanism(load_mechanism('cho1992'), OPTIONS, cache_dir=good)
     return good, deflections(model)
 
 
 def load(cache_dir, caplog):
     caplog.clear()
     with caplog.at_level(logging.WARNING, logger=LOGGER):
-        model = pipeline.model_for_mechanism(load_mechanism('cho1992'), OPTIONS,
-                                             cache_dir=cache_dir)
+        model = mechanism_model.model_for_mechanism(load_mechanism('cho1992'), OPTIONS,
+                                                    cache_dir=cache_dir)
     return deflections(model), caplog.text
 
 
@@ -127,7 +127,7 @@ def test_the_default_cache_directory_is_created_private(tmp_path, monkeypatch):
     monkeypatch.setenv('XDG_CACHE_HOME', str(tmp_path / 'xdg'))
     old = os.umask(0)
     try:
-        pipeline.model_for_mechanism(load_mechanism('cho1992'), OPTIONS)
+        mechanism_model.model_for_mechanism(load_mechanism('cho1992'), OPTIONS)
     finally:
         os.umask(old)
     for directory in (tmp_path / 'xdg', tmp_path / 'xdg' / 'flexlink_ros'):
@@ -161,7 +161,7 @@ def test_a_mechanism_named_as_a_path_writes_only_inside_the_cache(tmp_path):
     mechanism = dataclasses.replace(load_mechanism('cho1992'), name='../../../escape/dir/x')
     assert isinstance(mechanism, Mechanism)
     cache = tmp_path / 'a' / 'b' / 'c' / 'cache'
-    pipeline.model_for_mechanism(mechanism, OPTIONS, cache_dir=cache)
+    mechanism_model.model_for_mechanism(mechanism, OPTIONS, cache_dir=cache)
     written = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob('*') if p.is_file())
     assert len(written) == 3 and all(p.parent == cache.relative_to(tmp_path) for p in written)
     assert not (tmp_path / 'escape').exists()

@@ -14,7 +14,7 @@ from flexlink_ros.core import validity
 from flexlink_ros.core.fe import linkage as assembly
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.core.reduction import nonlinearity_tables as nl, pipeline, store
+from flexlink_ros.core.reduction import mechanism_model, nonlinearity_tables as nl, store
 from flexlink_ros.core.reduction.model import ReducedModel
 import numpy as np
 import pytest
@@ -30,12 +30,13 @@ def mech():
 
 @pytest.fixture(scope='module')
 def linkage(mech):
-    return assembly.FlexibleLinkage(pipeline.fe_mechanism(mech, OPTIONS), OPTIONS)
+    return assembly.FlexibleLinkage(mechanism_model.fe_mechanism(mech, OPTIONS), OPTIONS)
 
 
 @pytest.fixture(scope='module')
 def model(mech, tmp_path_factory):
-    return pipeline.model_for_mechanism(mech, OPTIONS, cache_dir=tmp_path_factory.mktemp('c'))
+    return mechanism_model.model_for_mechanism(mech, OPTIONS,
+                                               cache_dir=tmp_path_factory.mktemp('c'))
 
 
 def test_axial_operator_is_the_link_mean_of_the_element_forces(linkage):
@@ -93,16 +94,16 @@ def test_tables_survive_a_cache_file_as_plain_arrays(model, tmp_path):
 
 
 def test_tables_cached_beside_the_model_under_their_own_key(mech, model, tmp_path):
-    """The model's file and key are unchanged by the tables (test_pipeline pins the keys)."""
-    again = pipeline.model_for_mechanism(mech, OPTIONS, cache_dir=tmp_path)
+    """The model's file and key are unchanged by the tables (test_mechanism_model pins keys)."""
+    again = mechanism_model.model_for_mechanism(mech, OPTIONS, cache_dir=tmp_path)
     files = sorted(path.name for path in tmp_path.iterdir() if '-soft' not in path.name)
-    key = pipeline.model_key(mech, OPTIONS)
+    key = mechanism_model.model_key(mech, OPTIONS)
     assert files == [f'cho1992-{key[:16]}-nonlinearity.npz', f'cho1992-{key[:16]}.npz']
     arrays, _ = store.load_cache(tmp_path / files[0], store.cache_key(
         'nonlinearity-tables', nl.NONLINEARITY_VERSION, key))
     assert set(arrays) == set(nl.TABLE_NAMES)
     model_arrays, _ = store.load_cache(tmp_path / files[1], key)
     assert not set(nl.TABLE_NAMES) & set(model_arrays)
-    loaded = pipeline.model_for_mechanism(mech, OPTIONS, cache_dir=tmp_path)   # from the files
+    loaded = mechanism_model.model_for_mechanism(mech, OPTIONS, cache_dir=tmp_path)   # from files
     for name in nl.TABLE_NAMES:
         np.testing.assert_array_equal(loaded.nonlinearity[name], again.nonlinearity[name])

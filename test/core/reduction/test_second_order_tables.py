@@ -1,10 +1,10 @@
-"""The reduced model's second-order tables (issue 14): against the full-order forms on V q."""
+"""The reduced model's second-order tables: against the full-order forms on V q."""
 
 from flexlink_ros.core.fe import linkage as assembly
 from flexlink_ros.core.fe import second_order_full as so_full
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.core.reduction import pipeline
+from flexlink_ros.core.reduction import mechanism_model
 from flexlink_ros.core.reduction import second_order_tables as so_tables
 import numpy as np
 import pytest
@@ -21,9 +21,9 @@ def mech():
     ModelOptions.linear(bearings='flexible', rigid_crank=False, elements_per_link=3, grid_size=32,
                         order=2)], ids=['rigid', 'flexible', 'flexible-crank'])
 def test_tables_give_the_full_order_second_order_of_v_q(mech, options):
-    model = pipeline.model_for_mechanism(mech, options, use_cache=False)
+    model = mechanism_model.model_for_mechanism(mech, options, use_cache=False)
     forms = so_tables.SecondOrderForms(model.second_order)
-    linkage = assembly.FlexibleLinkage(pipeline.fe_mechanism(mech, options), options)
+    linkage = assembly.FlexibleLinkage(mechanism_model.fe_mechanism(mech, options), options)
     rng = np.random.default_rng(2)
     # At the grid nodes the splines are their samples: equal to rounding; between them the
     # cubic spline of the link angles and of kappa on this 32-point grid is within 5e-4 of
@@ -59,7 +59,7 @@ def test_link_points_follow_the_joints_second_order_motion():
 
 def test_index_arrays_are_int32_and_in_range(mech):
     options = ModelOptions.linear(bearings='rigid', grid_size=16, order=2)
-    model = pipeline.model_for_mechanism(mech, options, use_cache=False)
+    model = mechanism_model.model_for_mechanism(mech, options, use_cache=False)
     arrays = model.second_order
     gather, form = arrays['second_gather'], arrays['second_form']
     assert gather.dtype == np.int32 and form.dtype == np.int32

@@ -4,7 +4,7 @@ from flexlink_ros.core.estimation.native import compiled_step_available
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.core.reduction import pipeline, soft_basis
+from flexlink_ros.core.reduction import mechanism_model, soft_basis
 from flexlink_ros.core.reduction.periodic import periodic_response
 from flexlink_ros.core.reduction.reference import reference_response
 from flexlink_ros.errors import FlexlinkError
@@ -19,7 +19,7 @@ SPEED = 41.0        # rad/s (391 rpm)
 def flexible_model():
     """Build the paper's rigid-crank scene (16 + 2 coordinates), soft basis off; grid 64."""
     options = ModelOptions.linear(bearings='flexible', grid_size=64, soft_modes=0)
-    return load_mechanism('cho1992'), options, pipeline.model_for_mechanism(
+    return load_mechanism('cho1992'), options, mechanism_model.model_for_mechanism(
         load_mechanism('cho1992'), options, use_cache=False)
 
 
@@ -38,7 +38,7 @@ def _periodic_outputs(model, estimator_model=None):
 def test_soft_basis_follows_the_reduced_model(flexible_model):
     # 14 of the 18 coordinates kept (a gap of 6.7x in frequency), the rest quasi-static
     _, _, model = flexible_model
-    soft = pipeline.with_soft_basis(model, -1)
+    soft = mechanism_model.with_soft_basis(model, -1)
     assert soft.step_size == 14 and soft.info['soft']['gap_ratio'] > 6.0
     reduced = _periodic_outputs(model)
     stepped = _periodic_outputs(model, soft)
@@ -52,7 +52,7 @@ def test_soft_basis_follows_the_reduced_model(flexible_model):
 
 def test_soft_basis_agrees_with_the_full_order_reference(flexible_model):
     mechanism, options, model = flexible_model
-    soft = pipeline.with_soft_basis(model, -1)
+    soft = mechanism_model.with_soft_basis(model, -1)
     assert soft.info['soft']['used'] and soft.step_size < model.size
     assert soft.info['soft']['gap_ratio'] >= soft_basis.MIN_GAP_RATIO
     angles = np.linspace(0.0, 2 * np.pi, 90, endpoint=False)
@@ -71,7 +71,7 @@ def test_soft_basis_agrees_with_the_full_order_reference(flexible_model):
 @pytest.mark.skipif(not compiled_step_available(), reason='compiled step not built')
 def test_compiled_soft_step_equals_the_numpy_step(flexible_model):
     _, _, model = flexible_model
-    soft = pipeline.with_soft_basis(model, -1)
+    soft = mechanism_model.with_soft_basis(model, -1)
     stamps, angles, speeds = synthetic_signal(391, 0.3, 1000.0, 0.3, 4)
     results = []
     for compiled in (False, True):
@@ -89,8 +89,8 @@ def test_compiled_soft_step_equals_the_numpy_step(flexible_model):
 def test_a_size_without_a_gap_is_refused_and_auto_falls_back(flexible_model):
     _, _, model = flexible_model
     with pytest.raises(FlexlinkError, match='no spectral gap after mode 3'):
-        pipeline.with_soft_basis(model, 3)
-    off = pipeline.with_soft_basis(model, 0)
+        mechanism_model.with_soft_basis(model, 3)
+    off = mechanism_model.with_soft_basis(model, 0)
     assert off.soft is None and off.step_size == model.size
     ratios = np.ones(model.size - 1)
     with pytest.raises(FlexlinkError, match='no spectral gap'):

@@ -1,7 +1,7 @@
 /*
  * The per-sample loads of the dynamic second-order pass, compiled: the form of
- * flexlink_ros/core/estimation/dynamic_pass_kernel.py (DynamicPassKernel, whose numpy path is
- * its twin and reference; a test compares the two). Plain C API, no numpy headers.
+ * flexlink_ros/core/estimation/second_order_dynamic_kernel.py (DynamicPassKernel, whose numpy
+ * path is its twin and reference; a test compares the two). Plain C API, no numpy headers.
  *
  * loads(context, pieces, unit, scalars, stored, states, out, angle_stage, angle_sample,
  *       stage_slot, sample_slot) -> None
@@ -21,7 +21,7 @@
  * reference of the linear state's), per link the gather B = B0 + cos Bc + sin Bs, u = B q,
  * per element the eigenstrain load EA (1/2 u^T G u) / l [1, 0, 0, -1, 0, 0] and the
  * geometric-stiffness load -N_e G u with N_e = EA ((u_4 - u_1) - (s_4 - s_1)) / l, f2 = B^T f
- * (core/reduction/dynamic_second_order_tables.py, element_loads).
+ * (core/reduction/second_order_dynamic_tables.py, element_loads).
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -243,7 +243,7 @@ release:
  *         rows, z_start, previous, states, z2, static2, increments) -> None
  *
  *   step_context float64: r, grid, cells per radian, mass groups, kf groups, out rows, c_1,
- *            g_1, g_2 (dynamic_second_order.STAGE_WEIGHTS), first group of M and C, groups
+ *            g_1, g_2 (second_order_dynamic_step.STAGE_WEIGHTS), first group of M and C, groups
  *            of C (STEP_*).
  *   mass, damping float32 (grid, 2 groups, r r); kf float64 (grid, 2 groups, r r + r): the
  *            step tables' node data (core/estimation/tables.py); g0 float64 (5, 64): G(h),
@@ -534,12 +534,12 @@ static PyMethodDef methods[] = {
 };
 
 static struct PyModuleDef module = {
-    PyModuleDef_HEAD_INIT, "_dynamic_second_order",
+    PyModuleDef_HEAD_INIT, "_second_order_dynamic",
     "The dynamic second-order pass's loads per sample, compiled "
-    "(core/estimation/dynamic_pass_kernel.py).", -1, methods, NULL, NULL, NULL, NULL,
+    "(core/estimation/second_order_dynamic_kernel.py).", -1, methods, NULL, NULL, NULL, NULL,
 };
 
-PyMODINIT_FUNC PyInit__dynamic_second_order(void)
+PyMODINIT_FUNC PyInit__second_order_dynamic(void)
 {
     return PyModule_Create(&module);
 }

@@ -12,7 +12,7 @@ import logging
 import numpy as np
 import scipy.linalg
 
-from . import dynamic_second_order_tables, second_order_tables, store
+from . import second_order_dynamic_tables, second_order_tables, store
 from .basis import FrozenSamples
 from .build import reduce_samples
 from .build_progress import BuildProgress
@@ -50,7 +50,7 @@ def model_for_mechanism(mechanism, options=None, cache_dir=None, use_cache=True,
     options : ModelOptions or None
         Model options (None: the defaults).
     cache_dir : str, Path or None
-        Cache directory (None: core.store.default_cache_dir()); read and written only if
+        Cache directory (None: core.reduction.store.default_cache_dir()); read and written only if
         trusted (:mod:`.cache_location`), the files named there whatever the mechanism's
         name says.
     use_cache : bool
@@ -87,7 +87,7 @@ def model_for_mechanism(mechanism, options=None, cache_dir=None, use_cache=True,
 
 def build_model(mechanism, options, progress=None):
     """
-    Precompute the reduced model of a mechanism (full-order pieces from core/assembly.py).
+    Precompute the reduced model of a mechanism (full-order pieces from core/fe/linkage.py).
 
     ``progress(done, total, what)``, if given, follows the build (:mod:`.build_progress`).
     """
@@ -105,7 +105,7 @@ def build_model(mechanism, options, progress=None):
             linkage, model.basis, options.grid_size))
         if options.second_order == 'dynamic':
             model = dataclasses.replace(
-                model, dynamic_second_order=dynamic_second_order_tables.build_tables(
+                model, dynamic_second_order=second_order_dynamic_tables.build_tables(
                     linkage, model.basis, options.grid_size))
     tracker.finish()
     return model
@@ -151,7 +151,7 @@ def with_soft_basis(model, soft_modes, place=(None, None), key=None):
     usable gap, or none (with the reason in ``info['soft']``); p > 0 refuses a model without
     a gap there (FlexlinkError); 0 leaves the model as it is. A model with the dynamic
     second-order pass keeps all its coordinates (the pass steps a second reduced state
-    beside them: core/estimation/dynamic_second_order.py).
+    beside them: core/estimation/second_order_dynamic_step.py).
     """
     if soft_modes == 0 or model.dynamic_second_order is not None:
         reason = 'off' if soft_modes == 0 else 'the dynamic second-order pass'
@@ -196,7 +196,7 @@ def fe_mechanism(mechanism, options):
 
 def modal_damping_matrix(mass, stiffness, zeta):
     """
-    ``C_d = M Phi diag(2 zeta omega) Phi^T M`` over all frozen modes (as core/modes.py).
+    ``C_d = M Phi diag(2 zeta omega) Phi^T M`` over all frozen modes (as core/fe/modes.py).
 
     Parameters
     ----------
@@ -217,9 +217,9 @@ def modal_damping_matrix(mass, stiffness, zeta):
 
 def frozen_samples_for(mechanism, options, points_per_element=SHAPE_POINTS_PER_ELEMENT):
     """
-    Full-order affine pieces of the flexible model (core/assembly.py) on the crank-angle grid.
+    Full-order affine pieces of the flexible model (core/fe/linkage.py) on the crank-angle grid.
 
-    The frozen eigenproblem and the modal damping use ``K + K_G(w, a)`` as core/modes.py does
+    The frozen eigenproblem and the modal damping use ``K + K_G(w, a)`` as core/fe/modes.py does
     (no centrifugal term); the equations of motion add the rotating-frame terms K_c. With
     ``options.stiffness_damping`` (beta > 0) the objective Kelvin-Voigt damping of
     core/fe/stiffness_damping.py is added: ``C_beta = beta K`` to the damping and

@@ -1,7 +1,7 @@
 """
 The reduced model's tables of the dynamic second-order load, and their numpy evaluation.
 
-The dynamic second-order pass (:mod:`core.fe.second_order_dynamic`, issue 14 item 2) loads the
+The dynamic second-order pass (:mod:`core.fe.second_order_dynamic`) loads the
 linear model once more with the second-order terms of the strain energy evaluated on the
 linear state U1: per element the axial eigenstrain (EA s_e / l)[1, 0, 0, -1, 0, 0] and the
 geometric stiffness of the elastic axial force, -N_e G_e u_e (its Eq. 3), gathered by the
@@ -16,7 +16,7 @@ three constant (3 (e + 1)) x r matrices, the 6 x 6 unit geometric stiffness of i
 and a periodic spline of the link angles' cos and sin and of F_r's three coefficients per
 element. :func:`build_tables` makes the plain arrays (names ``dynamic_*``, part of a model
 built with ``second_order='dynamic'``); :class:`DynamicLoad` evaluates f2 in numpy (the twin of the
-compiled loads, core/estimation/_dynamic_second_order.c).
+compiled loads, core/estimation/_second_order_dynamic.c).
 """
 
 import dataclasses

@@ -1,5 +1,5 @@
 """
-The dynamic second-order pass in the streaming step (issue 14; ``second_order='dynamic'``).
+The dynamic second-order pass in the streaming step (``second_order='dynamic'``).
 
 The full-order reference (:mod:`core.fe.second_order_dynamic`) solves, after the linear pass,
 one more periodic linear problem of the same model, ``M U2'' + C U2' + K U2 = F2(U1)``, loaded
@@ -8,8 +8,8 @@ output operator of U1 + U2. Here the same runs sample by sample on the reduced m
 state z2 = (q2, q2') advanced by the SAME 2-stage Radau IIA step as the linear state (the same
 M, C, K at the same stage times, so the stage system's LU factors of the linear step serve
 both; only the right-hand side differs), loaded by ``f2 = V^T F2(V q)`` at the two stages
-(:class:`.dynamic_pass_kernel.DynamicPassKernel`, compiled where built). The stages' linear q
-comes from the linear step's own stage values (:func:`stage_positions`).
+(:class:`.second_order_dynamic_kernel.DynamicPassKernel`, compiled where built). The stages'
+linear q comes from the linear step's own stage values (:func:`stage_positions`).
 
 Outputs. The model is of order 2: the record keeps the quasi-static correction and adds the
 output operator on ``q2 - K_r^-1 f2_eigenstrain`` (the mode-acceleration split: the basis
@@ -31,7 +31,7 @@ import numpy as np
 from scipy.linalg import lapack
 
 from . import native
-from .dynamic_pass_kernel import dynamic_pass_compiled_available, DynamicPassKernel, impl
+from .second_order_dynamic_kernel import dynamic_pass_compiled_available, DynamicPassKernel, impl
 from .step import CompiledStep, NumpyStep, STAGE1
 from .tables import step_tables, system_blocks
 from .warm_start import WarmStart
@@ -78,7 +78,7 @@ class DynamicSecondOrderStep(NumpyStep):
         Its step tables.
     kernel : callable
         ``kernel(stored, slots, states, angles)`` -> (3, r): the pass's loads of a step
-        (:class:`.dynamic_pass_kernel.DynamicPassKernel`).
+        (:class:`.second_order_dynamic_kernel.DynamicPassKernel`).
 
     """
 
@@ -123,12 +123,12 @@ class DynamicSecondOrderStep(NumpyStep):
         tables = self.tables
         r = tables.size
         stage_angle = (self.previous[0] + STAGE1 * advance) % TWO_PI
-        parity = self._load_stages(h, angle, speed, accel, advance)
+        parity = self.load_stages(h, angle, speed, accel, advance)
         inv = 1.0 / h
         g = np.dot(np.array((inv * inv, inv, 1.0, h, h * h)), tables.g_stack[parity])
-        blocks = np.dot(g.reshape(8, 8), self._stored.reshape(8, r * r))
+        blocks = np.dot(g.reshape(8, 8), self.stored.reshape(8, r * r))
         system_t = blocks.reshape(2, 4, r, r).transpose(1, 3, 0, 2).reshape(4 * r, 2 * r)
-        z, stored = self.z, self._stored
+        z, stored = self.z, self.stored
         loads = np.concatenate((stored[1 - parity, 3, :r], stored[parity, 3, :r]))
         lu, pivots, info = lapack.dgetrf(system_t[:2 * r].T)
         increment, info2 = lapack.dgetrs(lu, pivots, np.dot(z[:2 * r], system_t[2 * r:]) + loads)
@@ -151,9 +151,9 @@ class CompiledDynamicStep(CompiledStep):
     :class:`CompiledStep` (the linear state and its records) with z2 advanced in C.
 
     The linear step is the package's compiled one, unchanged; after it, per step,
-    ``_dynamic_second_order.advance`` repeats :meth:`DynamicSecondOrderStep._step`'s
+    ``_second_order_dynamic.advance`` repeats :meth:`DynamicSecondOrderStep._step`'s
     arithmetic for z2 (M, C, [K | f] at the two stages from the same node tables, the same
-    G(h) block system, the loads of :class:`.dynamic_pass_kernel.DynamicPassKernel`) and
+    G(h) block system, the loads of :class:`.second_order_dynamic_kernel.DynamicPassKernel`) and
     the records' deflections add the output operator on q2 - K_r^-1 f2_eigenstrain. Rows
     with sub-steps are split here first (as :meth:`NumpyStep._sub_steps` does), so that z2
     sees every linear sub-step.
@@ -174,7 +174,7 @@ class CompiledDynamicStep(CompiledStep):
                              'use a model of order 2')
         self.kernel = DynamicPassKernel(model.dynamic_second_order)
         if not self.kernel.compiled:
-            raise RuntimeError('the compiled pass (_dynamic_second_order.c) is not built')
+            raise RuntimeError('the compiled pass (_second_order_dynamic.c) is not built')
         t = tables
         self._step_context = np.array([
             t.size, model.grid_size, self.cells_per_radian, t.mass_groups, t.kf_groups,

@@ -1,17 +1,17 @@
 """
-The dynamic pass's loads of one step (core/estimation/dynamic_pass_kernel.py).
+The dynamic pass's loads of one step (core/estimation/second_order_dynamic_kernel.py).
 
-The compiled form (_dynamic_second_order.c) against its numpy twin, and the numpy twin against
+The compiled form (_second_order_dynamic.c) against its numpy twin, and the numpy twin against
 its definition: the reduced static responses K_r^-1 f_r at the two points as the reference of
 the elastic axial force, and K_r^-1 f2_eigenstrain at the sample.
 """
 
 import math
 
-from flexlink_ros.core.estimation import dynamic_pass_kernel as kernel
+from flexlink_ros.core.estimation import second_order_dynamic_kernel as kernel
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.core.reduction import pipeline
+from flexlink_ros.core.reduction import mechanism_model
 import numpy as np
 import pytest
 
@@ -23,7 +23,8 @@ def arrays():
     options = ModelOptions.linear(bearings='rigid', elements_per_link=3, modes=5, static=3,
                                   order=2, grid_size=32, speed_max=1.05 * SPEED,
                                   second_order='dynamic')
-    model = pipeline.model_for_mechanism(load_mechanism('cho1992'), options, use_cache=False)
+    model = mechanism_model.model_for_mechanism(load_mechanism('cho1992'), options,
+                                                use_cache=False)
     return model.dynamic_second_order
 
 
@@ -54,7 +55,7 @@ def test_numpy_form_is_its_definition(arrays):
 
 
 @pytest.mark.skipif(not kernel.dynamic_pass_compiled_available(),
-                    reason='the compiled pass (_dynamic_second_order.c) is not built')
+                    reason='the compiled pass (_second_order_dynamic.c) is not built')
 @pytest.mark.parametrize('seed, slots, angles', [(2, (1, 0), (0.1, 0.2)),
                                                  (3, (0, 1), (6.28, -1.0)),
                                                  (4, (1, 0), (3.0, 12.0))])
@@ -70,7 +71,7 @@ def test_compiled_form_equals_numpy(arrays, seed, slots, angles):
 
 
 @pytest.mark.skipif(not kernel.dynamic_pass_compiled_available(),
-                    reason='the compiled pass (_dynamic_second_order.c) is not built')
+                    reason='the compiled pass (_second_order_dynamic.c) is not built')
 def test_compiled_form_refuses_bad_buffers(arrays):
     compiled = kernel.DynamicPassKernel(arrays)
     stored, states = _inputs(compiled.size, 5)

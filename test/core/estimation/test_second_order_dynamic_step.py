@@ -1,5 +1,5 @@
 """
-The dynamic second-order pass in the streaming step (core/estimation/dynamic_second_order.py).
+The dynamic second-order pass in the streaming step (core/estimation/second_order_dynamic_step.py).
 
 The stage values it loads the pass with, its linear state against the plain numpy step, and
 the streamed pass against the full-order pass (core/fe/second_order_dynamic.py) on the same
@@ -9,11 +9,11 @@ model at 391 rpm with gravity (rigid crank, rigid bearings, 4 elements per link)
 import dataclasses
 import math
 
-from flexlink_ros.core.estimation import dynamic_second_order as dyn
 from flexlink_ros.core.estimation import native
-from flexlink_ros.core.estimation.dynamic_pass_kernel import dynamic_pass_compiled_available
-from flexlink_ros.core.estimation.dynamic_pass_kernel import DynamicPassKernel
+from flexlink_ros.core.estimation import second_order_dynamic_step as dyn
 from flexlink_ros.core.estimation.offline import estimate_offline
+from flexlink_ros.core.estimation.second_order_dynamic_kernel import (
+    dynamic_pass_compiled_available, DynamicPassKernel)
 from flexlink_ros.core.estimation.step import NumpyStep, STAGE1
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
 from flexlink_ros.core.estimation.tables import step_tables
@@ -23,7 +23,7 @@ from flexlink_ros.core.fe.second_order_full import corrected_response
 from flexlink_ros.core.fe.simulate import periodic_response
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.core.reduction import pipeline
+from flexlink_ros.core.reduction import mechanism_model
 import numpy as np
 import pytest
 
@@ -38,7 +38,7 @@ def case():
     options = ModelOptions.linear(bearings='rigid', elements_per_link=4, modes=6, static=4,
                                   order=2, grid_size=64, speed_max=1.05 * SPEED,
                                   second_order='dynamic')
-    model = pipeline.model_for_mechanism(mech, options, use_cache=False)
+    model = mechanism_model.model_for_mechanism(mech, options, use_cache=False)
     return mech, options, model, DynamicPassKernel(model.dynamic_second_order)
 
 
@@ -76,7 +76,7 @@ def test_linear_state_is_the_plain_steps(case):
 
 def test_streamed_pass_follows_the_full_order_pass(case):
     mech, options, model, load = case
-    linkage = FlexibleLinkage(pipeline.fe_mechanism(mech, options), options)
+    linkage = FlexibleLinkage(mechanism_model.fe_mechanism(mech, options), options)
     linear = periodic_response(linkage, SPEED, method='full', points=SAMPLES)
     full = dynamic_pass(linkage, linear)
     angles, outputs = dyn.steady_revolution(model, load, SPEED, SAMPLES, revolutions=8)
@@ -136,7 +136,7 @@ def test_streaming_estimator_and_offline_replay_publish_the_pass(case):
 
 
 @pytest.mark.skipif(not (native.compiled_step_available() and dynamic_pass_compiled_available()),
-                    reason='the compiled steps (_radau_step.c, _dynamic_second_order.c) are not '
+                    reason='the compiled steps (_radau_step.c, _second_order_dynamic.c) are not '
                     'built')
 def test_compiled_dynamic_step_equals_the_numpy_step(case):
     """Rows with a gap (sub-steps), speed and acceleration changes; every record and the last."""

@@ -1,28 +1,28 @@
 """
-The dynamic second-order pass's loads of one step, compiled (_dynamic_second_order.c) or numpy.
+The dynamic second-order pass's loads of one step, compiled (_second_order_dynamic.c) or numpy.
 
-Per Radau step the pass (:mod:`.dynamic_second_order`) needs, at stage 1 and at the sample,
+Per Radau step the pass (:mod:`.second_order_dynamic_step`) needs, at stage 1 and at the sample,
 the reduced static response s = K_r^-1 f_r (its elastic axial force is the reference of the
 linear state's: the basis misses most of the static axial stretch), the reduced second-order
 load f2 of the linear state q against it, and at the sample K_r^-1 f2_eigenstrain (the part
 of q2 the quasi-static correction already holds). :class:`DynamicPassKernel` returns the three
 in one call: in C where the extension is built (one call instead of about a hundred numpy
-calls), else with :class:`core.reduction.dynamic_second_order_tables.DynamicLoad` (its numpy
+calls), else with :class:`core.reduction.second_order_dynamic_tables.DynamicLoad` (its numpy
 twin and reference; a test compares the two).
 """
 
 import numpy as np
 
-from ..reduction.dynamic_second_order_tables import DynamicLoad
+from ..reduction.second_order_dynamic_tables import DynamicLoad
 
 try:
-    from . import _dynamic_second_order as impl     # _dynamic_second_order.c
+    from . import _second_order_dynamic as impl     # _second_order_dynamic.c
 except ImportError:     # not built: the numpy form serves
     impl = None
 
 
 def dynamic_pass_compiled_available():
-    """Tell whether the compiled loads (_dynamic_second_order.c) are built."""
+    """Tell whether the compiled loads (_second_order_dynamic.c) are built."""
     return impl is not None
 
 

@@ -9,14 +9,14 @@ from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.fe.modes import solve_frozen_modes
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.core.reduction import pipeline
+from flexlink_ros.core.reduction import mechanism_model
 from flexlink_ros.core.reduction.basis import frozen_modes
 from flexlink_ros.core.reduction.build import reduce_samples
-from flexlink_ros.core.reduction.dynamic_second_order_tables import ARRAY_NAMES as \
-    DYNAMIC_ARRAY_NAMES
+from flexlink_ros.core.reduction.mechanism_model import (fe_mechanism, frozen_samples_for,
+                                                         model_for_mechanism, model_key)
 from flexlink_ros.core.reduction.model import system_blocks
-from flexlink_ros.core.reduction.pipeline import (fe_mechanism, frozen_samples_for,
-                                                  model_for_mechanism, model_key)
+from flexlink_ros.core.reduction.second_order_dynamic_tables import ARRAY_NAMES as \
+    DYNAMIC_ARRAY_NAMES
 from flexlink_ros.core.reduction.second_order_tables import ARRAY_NAMES
 from flexlink_ros.studies import flex_events, flex_frequencies
 import numpy as np
@@ -225,8 +225,8 @@ def test_soft_tables_are_cached_beside_the_model_and_come_back_bit_for_bit(
     assert built.info['soft']['used']
     key = model_key(mechanism, options)
     assert (tmp_path / f'cho1992-{key[:16]}-soft.npz').is_file()
-    calls, original = [], pipeline.soft_tables
-    monkeypatch.setattr(pipeline, 'soft_tables',
+    calls, original = [], mechanism_model.soft_tables
+    monkeypatch.setattr(mechanism_model, 'soft_tables',
                         lambda *args: calls.append(args) or original(*args))
     loaded = model_for_mechanism(mechanism, options, cache_dir=tmp_path)
     assert calls == [] and loaded.info['soft'] == built.info['soft']

@@ -1,5 +1,5 @@
 """
-Reduced dynamic second-order load (core/reduction/dynamic_second_order_tables.py, issue 14).
+Reduced dynamic second-order load (core/reduction/second_order_dynamic_tables.py).
 
 On a constant basis V the tables' load equals V^T of the full-order pass's load
 (core/fe/second_order_dynamic.second_order_load) of the state V q, and the rigid-body axial
@@ -13,7 +13,7 @@ from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.fe.second_order_dynamic import second_order_load
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.core.reduction import dynamic_second_order_tables as dyn
+from flexlink_ros.core.reduction import second_order_dynamic_tables as dyn
 from flexlink_ros.core.validity import rigid_element_axial_forces
 import numpy as np
 import pytest
