@@ -1,11 +1,12 @@
 """
-Every README command that runs this package, run as the README gives it, or skipped with a reason.
+Every README and docs command that runs this package, run as written, or skipped with a reason.
 
-The commands are read from README.md at test time: every command of a fenced ``bash`` block
-(continuation lines joined, comments dropped, split at ``&&``, ``;`` and a trailing ``&``) and
-every command in the first column of the `flexlink` tool table. A command invokes the package
-when its program is ``flexlink``, ``flexlink_node`` or ``crank_driver`` (bare or under
-``.venv/bin/``), ``python -m flexlink_ros…``, or ``ros2 run|launch flexlink_ros``. Each such
+The commands are read at test time from README.md, the pages of ``docs/`` and
+``benchmarks/README.md``: every command of a fenced ``bash`` block (continuation lines
+joined, comments dropped, split at ``&&``, ``;`` and a trailing ``&``) and every command in the
+first column of the README's `flexlink` tool table. A command invokes the package when its
+program is ``flexlink``, ``flexlink_node`` or ``crank_driver`` (bare or under ``.venv/bin/``),
+``python -m flexlink_ros…``, or ``ros2 run|launch flexlink_ros``. Each such
 command is either in ``RUN`` (run with the installed console scripts of the venv running this
 test, ``.venv/bin/`` rewritten to it, in a temporary working directory holding what the README
 says is there, e.g. the ``run1`` recording; exit code 0 and what the README says it prints or
@@ -38,6 +39,8 @@ from sensor_msgs.msg import JointState
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 README = ROOT / 'README.md'
+# The pages whose commands run too: the user's guide and the benchmarks' README.
+PAGES = (README, *sorted((ROOT / 'docs').glob('*.md')), ROOT / 'benchmarks' / 'README.md')
 VENV_BIN = pathlib.Path(sys.executable).parent
 SCRIPTS = ('flexlink', 'flexlink_node', 'crank_driver')
 
@@ -48,7 +51,8 @@ class Run:
 
     prints: tuple = ()            # fragments of stdout
     creates: tuple = ()           # paths relative to the working directory
-    setup: str = ''               # 'run1' (a closed recording) or 'run1 killed' (no metadata)
+    setup: str = ''               # 'run1' (a closed recording), 'run1 killed' (no metadata)
+    #                               or 'my_linkage' (a mechanism file of one's own)
     argv: tuple = ()              # the command lines run instead, where the README has a synopsis
 
 
@@ -69,9 +73,20 @@ RUN = {
     'flexlink reindex run1':     # "after the recorder was killed": no metadata.yaml yet
         Run(('run1/metadata.yaml: 1 files, 1000 messages',), creates=('run1/metadata.yaml',),
             setup='run1 killed'),
+    'flexlink replay run1 --out rerun.mcap --chart rerun.png':
+        Run(('1000 samples on /joint_states', 'wrote rerun.mcap'),
+            creates=('rerun.mcap', 'rerun.png'), setup='run1'),
+    # docs/cli.md and the own-linkage quick start.
+    'flexlink criteria --mechanism kang1990 --rpm 300': Run(('true max', 'grid max')),
+    'flexlink modes --mechanism my_linkage.yaml --crank-deg 0:360:30':
+        Run(('frozen modes', 'f1 [Hz]'), setup='my_linkage'),
+    'flexlink modes --mechanism my_linkage.yaml --crank-deg 0:360:45':
+        Run(('frozen modes', 'f1 [Hz]'), setup='my_linkage'),
     # The `flexlink` tool table.
     'flexlink kinematics --mechanism kang1990 --crank-deg 0:360:30':
         Run(('dead centres', 'transmission angle', 'coupler', 'lever')),
+    'flexlink kinematics --mechanism kang1990 --crank-deg 0:360:30 --rpm 300':
+        Run(('dead centres', 'transmission angle')),
     'flexlink criteria --mechanism kang1990 [--spring K THETA0_DEG]':
         Run(('true max', 'grid max', 'min R'), argv=(
             'flexlink criteria --mechanism kang1990',
@@ -101,6 +116,8 @@ _LAUNCH = ('needs ros2 launch (a ROS 2 distro; launch and launch_ros are not on 
            'is importable, runs it')
 _PUBLISH = ('publishes into a live ROS graph (waits up to 10 s for a subscriber): '
             'test/ros/test_republish.py runs replay --publish with subscribers')
+_OWN = ('builds the model of a linkage not in config/ (a minute on a loaded machine): '
+        'test/report/test_cycle_chart.py::test_estimate_chart_of_a_linkage_not_in_config')
 SKIPPED = {
     '.venv/bin/crank_driver --ros-args -p speed_rpm:=391.0':
         'runs until stopped, publishing into a ROS graph: test/ros/test_crank_driver.py and '
@@ -128,6 +145,8 @@ SKIPPED = {
     'ros2 launch flexlink_ros flexlink_lifecycle.launch.py driver:=true': _LAUNCH,
     'ros2 launch flexlink_ros flexlink_lifecycle.launch.py autostart:=false': _LAUNCH,
     'ros2 launch flexlink_ros flexlink.launch.py --show-args': _LAUNCH,
+    'ros2 launch flexlink_ros flexlink.launch.py mechanism:=/path/my_linkage.yaml '
+    'params_file:=my_node.yaml': _LAUNCH,
     'flexlink replay other_bag --mechanism cho1992 --topic /robot/joint_states '
     '--joint crank_joint --publish':
         _PUBLISH,
@@ -141,7 +160,55 @@ SKIPPED = {
     'flexlink validate --peer exudyn --rpm 269 391 --chart out/validate.png':
         'about a minute of peer and full-order runs at 8 elements per link: '
         'test/cli/test_cli_validate.py runs it at 4',
-    'flexlink bench': 'minutes of benchmarks (the estimator, offline and full-order)',
+    'flexlink bench': 'minutes of benchmarks (the estimator, offline and full-order): '
+                      'test/cli/test_cli_estimate.py::test_bench_table_and_chart runs a toy one',
+    'flexlink design-spring --mechanism kang1990 --seed 1':
+        'a global search of minutes: test/cli/test_cli_rigid.py'
+        '::test_design_spring_json_small_budget runs it with a small budget',
+    'flexlink estimate --mechanism my_linkage.yaml --rpm 300 --chart out/estimate.png': _OWN,
+    'flexlink estimate --mechanism my_linkage.yaml --rpm 600 --chart my_600rpm.png': _OWN,
+    'flexlink plan --mechanism my_linkage.yaml --rpm-max 600 --tolerance 0.02':
+        'minutes of full-order references: test/studies/test_plan.py plans small cases',
+    'flexlink replay run1 --chart run1.png':
+        "replays the quick start's own node recording: test/test_quickstart.py"
+        '::test_every_quickstart_command_runs_on_a_linkage_not_in_config runs it',
+    'flexlink replay other_bag --mechanism my_linkage.yaml --out rerun2.mcap':
+        "needs the user's own bag: test/cli/test_replay.py replays bags of other topics",
+    "flexlink fleet 'recordings/line1_*' --out out/fleet --mechanism cho1992":
+        'needs a directory of recordings: test/cli/test_fleet.py'
+        '::test_bags_from_paths_and_globs_each_once_and_their_output_names',
+    "flexlink fleet 'recordings/*' --out out/fleet --mechanism cho1992 "
+    '--address 127.0.0.2:6380 --json':
+        'needs a running Ray cluster: test/cli/test_fleet.py::test_fleet_on_a_two_node_cluster',
+    'flexlink mcap-record run2 --topic /joint_states --duration-s 10':
+        'records 10 s from a live ROS graph: test/io/test_recorder.py tests mcap-record',
+    'flexlink demo --seconds 6 --rpm 391':
+        'starts crank_driver and flexlink_node on a ROS graph: '
+        'test/cli/test_demo.py::test_demo_runs_records_and_summarises runs it',
+    'flexlink node-bench --rate-hz 1000 --seconds 3':
+        'starts nodes on a ROS graph: test/cli/test_node_bench.py'
+        '::test_node_bench_measures_every_target runs it',
+    'flexlink_node --ros-args -p mechanism:=my_linkage.yaml -p record.enabled:=true '
+    '-p record.path:=run1':
+        'runs until stopped and needs a crank driver: '
+        'test/ros/test_node.py::test_node_end_to_end records from one',
+    'crank_driver --ros-args -p speed_rpm:=600.0':
+        'runs until stopped, publishing into a ROS graph: test/ros/test_crank_driver.py',
+    'flexlink_node --ros-args --params-file my_node.yaml':
+        "runs until stopped and needs a crank driver and the plan's parameters file: "
+        'test/cli/test_plan_params.py checks the file the node reads',
+    'flexlink_node --ros-args --params-file my_node.yaml -p record.enabled:=true '
+    '-p record.path:=run1':
+        'runs until stopped and needs a crank driver: '
+        'test/ros/test_node.py::test_node_end_to_end records from one',
+    'flexlink plan --mechanism my_linkage.yaml --rpm-max 600 --tolerance 0.02 '
+    '--params-out my_node.yaml':
+        'minutes of full-order references: test/cli/test_plan_params.py writes and checks '
+        'the parameters file of a small plan',
+    'flexlink estimate --rpm 391 --rigid-crank --bearings flexible --stiffness-damping 1e-4 '
+    '--nonlinear on':
+        'builds the reduced nonlinear model (minutes on a loaded machine): '
+        'test/cli/test_cli_estimate.py runs the estimator; docs/nonlinear.md names its tests',
     'flexlink node-bench': 'starts nodes on a ROS graph and measures for minutes',
     'flexlink report --out out/report': 'about 4 minutes (every chart)',
     'flexlink demo': 'starts crank_driver and flexlink_node on a ROS graph: '
@@ -187,9 +254,12 @@ def invokes_package(command):
 
 
 def readme_commands():
-    """Every README command that invokes the package, once each, in README order."""
-    text = README.read_text()
-    found = [c for c in (*fenced_commands(text), *table_commands(text)) if invokes_package(c)]
+    """Every command of README and the docs pages that invokes the package, once each, in order."""
+    found = []
+    for page in PAGES:
+        text = page.read_text()
+        tables = table_commands(text) if page == README else ()
+        found += [c for c in (*fenced_commands(text), *tables) if invokes_package(c)]
     return list(dict.fromkeys(found))
 
 
@@ -223,6 +293,9 @@ def test_readme_commands_are_found():
     commands = readme_commands()
     assert 'flexlink replay run1 --out rerun.mcap' in commands
     assert 'flexlink kinematics --mechanism kang1990 --crank-deg 0:360:30' in commands
+    # The pages moved out of the README keep their commands in the test.
+    assert 'flexlink modes --mechanism my_linkage.yaml --crank-deg 0:360:45' in commands
+    assert any(c.startswith('ros2 launch flexlink_ros') for c in commands)
     assert not any(invokes_package(c) for c in ('make demo', 'cd ~/ws', 'export A=1'))
 
 
@@ -232,7 +305,9 @@ def test_readme_command(command, tmp_path, run1):
         pytest.skip(SKIPPED[command])
     assert command in RUN, f'README command neither run nor listed in SKIPPED: {command!r}'
     case = RUN[command]
-    if case.setup:
+    if case.setup == 'my_linkage':
+        shutil.copy(ROOT / 'config' / 'cho1992.yaml', tmp_path / 'my_linkage.yaml')
+    elif case.setup:
         shutil.copytree(run1, tmp_path / 'run1')
         if case.setup == 'run1 killed':
             (tmp_path / 'run1' / 'metadata.yaml').unlink()
@@ -244,3 +319,14 @@ def test_readme_command(command, tmp_path, run1):
             assert fragment in result.stdout, (line, fragment, result.stdout[-2000:])
     for created in case.creates:
         assert (tmp_path / created).is_file(), created
+
+
+def test_readme_python_example_runs_and_prints_a_plausible_deflection(tmp_path):
+    section = README.read_text().split('## Python API', 1)[1].split('\n## ', 1)[0]
+    (example,) = re.findall(r'^```python\n(.*?)^```', section, flags=re.M | re.S)
+    result = subprocess.run([sys.executable, '-c', example], cwd=tmp_path, capture_output=True,
+                            text=True, timeout=600)
+    assert result.returncode == 0, result.stderr[-2000:]
+    micrometres = float(re.search(r'lever tip peak-to-peak dx: (\d+) um', result.stdout)[1])
+    # The node's default model at 391 rpm: about 10 800 um (make demo's and the reference's).
+    assert 5_000 < micrometres < 20_000, result.stdout

@@ -113,11 +113,6 @@ def missing_references(text):
     return sorted(missing)
 
 
-# Modules renamed while README.md is rewritten elsewhere: its old names of them, until the new
-# README lands (then this set is emptied; the test says so).
-README_RENAMED = {'core/estimation/_dynamic_second_order.c',
-                  'core/estimation/dynamic_second_order.py',
-                  'core/reduction/dynamic_second_order_tables.py'}
 SOURCES = sources()
 IDS = [str(path.relative_to(ROOT)) for path, _ in SOURCES]
 
@@ -129,8 +124,7 @@ def test_no_issue_numbers(path, text):
 
 @pytest.mark.parametrize('path, text', SOURCES, ids=IDS)
 def test_every_module_path_named_exists(path, text):
-    expected = sorted(README_RENAMED) if path == ROOT / 'README.md' else []
-    assert missing_references(text) == expected
+    assert missing_references(text) == []
 
 
 def test_the_checks_see_what_they_forbid():

@@ -39,7 +39,7 @@ resonance: where it is small the response amplitude hardly depends on the shift,
 state (and the second order computed from it) stands; where it approaches 1 the peer's resonance
 has moved by about its own width and one corrective pass cannot follow it.
 
-Choice, against the Exudyn peer (``python -m flexlink_ros.studies.validity_study``, rigid crank
+Choice, against the Exudyn peer (``python docs/studies/validity_study.py``, rigid crank
 and bearings, no gravity, 8 elements per link, 250-450 rpm; README note for the tables). Three
 candidates were computed from the linear state:
 

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..core.tmm import beams, eigen
 from ..core.tmm import exact as tmm_exact
-from ..studies.beam_study import (error_table, frequency_table, iteration_table, observed_order,
+from ..studies.beam_check import (error_table, frequency_table, iteration_table, observed_order,
                                   PAPER_SEGMENTS, PAPER_TABLE2_BISECTION, PAPER_TABLE3_MODE1,
                                   SCAN_STEPS_RAD_S, TIMING_REPEATS, timing_table)
 

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..core import spring_design
 from ..names import JOINT_NAMES
-from ..studies.criteria_study import criteria_data, criteria_text, TABLE_2
+from ..studies.criteria_check import criteria_data, criteria_text, TABLE_2
 
 # Joints named as the node names them (names.JOINT_NAMES, its /diagnostics and outputs), the
 # paper's numbers (Kang 1990: 1, 2, 3 for A, B, O4) after them.
@@ -48,7 +48,7 @@ def plot_criteria(out_dir, mechanism=None, data=None):
     mechanism : Mechanism or None
         Default: Kang 1990 (``config/kang1990.yaml``).
     data : dict or None
-        A :func:`studies.criteria_study.criteria_data` result to draw (computed for
+        A :func:`studies.criteria_check.criteria_data` result to draw (computed for
         ``mechanism`` if None).
 
     Returns

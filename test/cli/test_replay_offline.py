@@ -127,28 +127,34 @@ def test_replay_memory_does_not_grow_with_the_recording(tmp_path, chunk):
     assert peaks[1] - peaks[0] < 15.0, peaks
 
 
-def test_the_offline_replay_imports_neither_rclpy_nor_matplotlib(tmp_path):
-    """Their import alone costs a replay a good part of its time (0.3 s and more)."""
+HEAVY_IMPORTS = ("print(sorted(m for m in sys.modules if m.split('.')[0] in "
+                 "('rclpy', 'matplotlib') or m in ('scipy.linalg', 'scipy.optimize', "
+                 "'scipy.sparse')))\n")
+
+
+def test_a_replay_from_the_cache_imports_neither_ros_plotting_nor_scipy_solvers(tmp_path):
+    """Their imports alone cost a replay a good part of its time (scipy.linalg 0.2-0.4 s)."""
     bag = tmp_path / 'short.mcap'
     subprocess.run([sys.executable, str(BENCH), 'make-bag', str(bag), '--seconds', '0.3'],
                    check=True, capture_output=True, timeout=300)
     code = ('import sys\nfrom flexlink_ros.cli import main\nmain.main(sys.argv[1:])\n'
-            "print(sorted(m for m in sys.modules if m.split('.')[0] in "
-            "('rclpy', 'matplotlib')))\n")
-    result = subprocess.run([sys.executable, '-c', code, 'replay', str(bag), '--out',
-                             str(tmp_path / 'out.mcap'), '--mechanism', 'cho1992'],
-                            capture_output=True, text=True,
-                            timeout=300, cwd=REPO)
+            + HEAVY_IMPORTS)
+    replay = [sys.executable, '-c', code, 'replay', str(bag), '--mechanism', 'cho1992',
+              '--cache-dir', str(tmp_path / 'cache'), '--out']
+    first = subprocess.run(replay + [str(tmp_path / 'first.mcap')], capture_output=True,
+                           text=True, timeout=600, cwd=REPO)     # builds the model: needs scipy
+    assert first.returncode == 0, first.stderr
+    result = subprocess.run(replay + [str(tmp_path / 'out.mcap')], capture_output=True,
+                            text=True, timeout=300, cwd=REPO)
     assert result.returncode == 0, result.stderr
     assert 'wrote' in result.stdout and result.stdout.splitlines()[-1] == '[]'
 
 
-def test_replay_help_imports_neither_rclpy_nor_matplotlib():
-    """`flexlink replay --help` answers without loading ROS or plotting."""
+def test_replay_help_imports_neither_ros_plotting_nor_scipy_solvers():
+    """`flexlink replay --help` answers without loading ROS, plotting or scipy's solvers."""
     code = ('import sys\nfrom flexlink_ros.cli import main\n'
             'try:\n    main.main(sys.argv[1:])\nexcept SystemExit:\n    pass\n'
-            "print(sorted(m for m in sys.modules if m.split('.')[0] in "
-            "('rclpy', 'matplotlib')))\n")
+            + HEAVY_IMPORTS)
     result = subprocess.run([sys.executable, '-c', code, 'replay', '--help'],
                             capture_output=True, text=True, timeout=300, cwd=REPO)
     assert result.returncode == 0, result.stderr

@@ -2,7 +2,7 @@
 
 from flexlink_ros.core.tmm import beams
 from flexlink_ros.report import beam as beam_report
-from flexlink_ros.studies import beam_study
+from flexlink_ros.studies import beam_check
 from png_checks import has_colour, png_size
 import pytest
 
@@ -11,7 +11,7 @@ BEAM = beams.UniformBeam.kim_moon()
 
 @pytest.fixture(scope='module')
 def errors():
-    return beam_study.error_table(BEAM, segment_counts=(2, 4, 8, 12, 16))
+    return beam_check.error_table(BEAM, segment_counts=(2, 4, 8, 12, 16))
 
 
 def _method_colours(path):
@@ -26,7 +26,7 @@ def test_error_chart_draws_every_method(errors, tmp_path):
 
 
 def test_frequency_chart_draws_every_method(tmp_path):
-    table = beam_study.frequency_table(BEAM, max_segments=6)
+    table = beam_check.frequency_table(BEAM, max_segments=6)
     path = beam_report.plot_frequencies(table, BEAM, tmp_path / 'frequencies.png',
                                         max_segments=6)
     assert png_size(path)[0] > 500
@@ -34,14 +34,14 @@ def test_frequency_chart_draws_every_method(tmp_path):
 
 
 def test_speed_chart_draws_every_method(tmp_path):
-    table = beam_study.timing_table(BEAM, segment_counts=(6, 12), repeats=1, modes=1)
+    table = beam_check.timing_table(BEAM, segment_counts=(6, 12), repeats=1, modes=1)
     path = beam_report.plot_speed(table, tmp_path / 'speed.png')
     assert png_size(path)[0] > 500
     assert all(_method_colours(path).values()), _method_colours(path)
 
 
 def test_iteration_chart_renders(tmp_path):
-    table = beam_study.iteration_table(BEAM)
+    table = beam_check.iteration_table(BEAM)
     path = beam_report.plot_iterations(table, tmp_path / 'iterations.png')
     width, height = png_size(path)
     assert width > 500 and height > 300

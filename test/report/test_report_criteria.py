@@ -1,7 +1,7 @@
 """Criteria charts (report/criteria.py) drawn from the criteria study of Kang 1990."""
 
 from flexlink_ros.report import criteria as criteria_report
-from flexlink_ros.studies.criteria_study import criteria_data
+from flexlink_ros.studies.criteria_check import criteria_data
 from png_checks import has_colour, png_size
 
 

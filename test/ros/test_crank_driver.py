@@ -96,7 +96,9 @@ def receive_joint_states(extra_parameters, seconds):
 
 def test_driver_publishes_the_profile_at_rate(config_dir, monkeypatch):
     monkeypatch.chdir(config_dir.parent)
-    seconds = 3.0
+    # Long enough that the driver's writer matches the listener and publishes well over 100
+    # samples to it on a loaded machine (a 3 s run ended before any reached it once).
+    seconds = 10.0
     # The ramp outlasts the run: a late discovery on a loaded machine still sees it ramping.
     ramp_s = 60.0
     received = receive_joint_states(

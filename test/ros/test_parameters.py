@@ -102,9 +102,9 @@ def test_markdown_table_escapes_pipes_inside_cells():
         assert row.replace('\\|', '').count('|') == 5, row
 
 
-def test_readme_parameter_table_is_current():
-    readme = pathlib.Path(__file__).resolve().parents[2] / 'README.md'
-    assert node_params.markdown_table() in readme.read_text()
+def test_running_the_node_page_parameter_table_is_current():
+    page = pathlib.Path(__file__).resolve().parents[2] / 'docs' / 'running-the-node.md'
+    assert node_params.markdown_table() in page.read_text()
 
 
 @pytest.mark.parametrize('name, limit', [

@@ -18,7 +18,8 @@ rest). Only the record's deflections (lever tip, coupler mid-point) get the incr
 link shapes keep the quasi-static correction.
 
 Two things the reduced state does not hold, measured against the full-order pass (391 rpm,
-gravity, rigid crank and bearings, 8 elements per link; studies/dynamic_second_order_study.py):
+gravity, rigid crank and bearings, 8 elements per link;
+docs/studies/dynamic_second_order_study.py):
 the static axial stretch (the elastic axial force of V q alone is off by the rigid-body force
 F_r, 25 N against 1.5 N at 4 elements per link: the reference is therefore the axial force of
 the reduced static response K_r^-1 f_r at each stage), and, on the default basis (4 modes +
@@ -28,7 +29,7 @@ brings it to +0.6 / +1.0 %.
 """
 
 import numpy as np
-from scipy.linalg import lapack
+import scipy   # scipy.linalg loads on first use: the compiled step never needs it
 
 from . import native
 from .second_order_dynamic_kernel import dynamic_pass_compiled_available, DynamicPassKernel, impl
@@ -130,6 +131,7 @@ class DynamicSecondOrderStep(NumpyStep):
         system_t = blocks.reshape(2, 4, r, r).transpose(1, 3, 0, 2).reshape(4 * r, 2 * r)
         z, stored = self.z, self.stored
         loads = np.concatenate((stored[1 - parity, 3, :r], stored[parity, 3, :r]))
+        lapack = scipy.linalg.lapack
         lu, pivots, info = lapack.dgetrf(system_t[:2 * r].T)
         increment, info2 = lapack.dgetrs(lu, pivots, np.dot(z[:2 * r], system_t[2 * r:]) + loads)
         if info != 0 or info2 != 0 or not np.all(np.isfinite(increment)):

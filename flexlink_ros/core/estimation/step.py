@@ -17,7 +17,7 @@ chunk of rows) instead of about thirty numpy calls, the same arithmetic to round
 import math
 
 import numpy as np
-from scipy.linalg import lapack
+import scipy   # scipy.linalg loads on first use: the compiled step never needs it
 
 from . import native
 from .tables import hermite_basis
@@ -339,9 +339,9 @@ class NumpyStep:
         z = self.z
         stored = self.stored
         loads = np.concatenate((stored[1 - parity, 3, :r], stored[parity, 3, :r]))
-        _, _, increment, info = lapack.dgesv(system_t[:2 * r].T,
-                                             np.dot(z[:2 * r], system_t[2 * r:]) + loads,
-                                             overwrite_a=1, overwrite_b=1)
+        _, _, increment, info = scipy.linalg.lapack.dgesv(
+            system_t[:2 * r].T, np.dot(z[:2 * r], system_t[2 * r:]) + loads,
+            overwrite_a=1, overwrite_b=1)
         if info != 0 or not np.all(np.isfinite(increment)):
             raise ValueError('singular or non-finite Radau step')   # as the compiled step
         z[:2 * r] += increment

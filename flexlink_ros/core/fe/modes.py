@@ -16,7 +16,7 @@ share of its elastic strain energy; kinetic-energy shares are reported too.
 import dataclasses
 
 import numpy as np
-import scipy.linalg
+import scipy   # scipy.linalg loads on first use: a replay from the cache never needs it
 
 from ...names import LINK_NAMES
 

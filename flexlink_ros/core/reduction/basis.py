@@ -10,7 +10,7 @@ projected damping is fitted in w^2 over a few speeds (:func:`fit_in_w2`).
 import dataclasses
 
 import numpy as np
-import scipy.linalg
+import scipy   # scipy.linalg loads on first use: a replay from the cache never needs it
 
 from ..mechanism_checks import check_first_frequency
 

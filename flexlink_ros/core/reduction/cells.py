@@ -11,7 +11,7 @@ out with ``scipy.linalg.solve_banded`` (the same steps in the same order, so the
 """
 
 import numpy as np
-import scipy.linalg
+import scipy   # scipy.linalg loads on first use: a replay from the cache never needs it
 
 # Monomials of (w, a) that multiply the tabulated pieces, in table-row order ('w4': damping
 # fit; 'wa', 'w3': time derivative of the joint reactions).

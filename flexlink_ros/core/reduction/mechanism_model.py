@@ -10,7 +10,7 @@ import dataclasses
 import logging
 
 import numpy as np
-import scipy.linalg
+import scipy   # scipy.linalg loads on first use: a replay from the cache never needs it
 
 from . import second_order_dynamic_tables, second_order_tables, store
 from .basis import FrozenSamples

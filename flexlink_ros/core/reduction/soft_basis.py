@@ -15,7 +15,7 @@ every node and at the corners of the speed and acceleration ranges (:func:`gap_r
 """
 
 import numpy as np
-import scipy.linalg
+import scipy   # scipy.linalg loads on first use: a replay from the cache never needs it
 
 from ...errors import FlexlinkError
 

@@ -24,8 +24,10 @@ read, and into an untrusted directory nothing is written (the model is built in 
 """
 
 import hashlib
+import io
 import json
 import logging
+import mmap
 import os
 import pathlib
 import tempfile
@@ -49,6 +51,10 @@ MAX_HEADER_BYTES = 1 << 20
 # Refuse caches whose arrays together exceed this [bytes]: the node's default model is about
 # 30 MB; nothing a build can make in reasonable time comes near it.
 MAX_CACHE_BYTES = 2 << 30
+# Bytes of a member read to parse its .npy header (numpy refuses headers over 10 000 bytes).
+NPY_HEADER_READ = 1 << 16
+# Array data start at a multiple of this in the file, so a load maps them without a copy.
+ARRAY_ALIGNMENT = 64
 
 
 def default_cache_dir():
@@ -129,7 +135,7 @@ def save_cache(path, key, arrays, meta=None):
                                          dir=path.parent)
     try:
         with os.fdopen(handle, 'wb') as stream:
-            np.savez(stream, **{HEADER_NAME: header_bytes}, **arrays)
+            _write_archive(stream, {HEADER_NAME: header_bytes, **arrays})
             stream.flush()
             os.fsync(stream.fileno())
         os.replace(temp_name, path)
@@ -139,6 +145,30 @@ def save_cache(path, key, arrays, meta=None):
         except FileNotFoundError:
             pass
         raise
+
+
+def _write_archive(stream, arrays):
+    """
+    Write a zip of ``<name>.npy`` members (as ``np.savez`` does) with each array's data aligned.
+
+    Each member's local header gets an extra field of padding (id 0xD935, as Android's
+    zipalign uses; zip readers skip unknown extra fields) so that its data, after the .npy
+    header that numpy pads to 64 bytes, starts at a multiple of :data:`ARRAY_ALIGNMENT`.
+    """
+    with zipfile.ZipFile(stream, 'w', zipfile.ZIP_STORED) as archive:
+        for name, array in arrays.items():
+            npy = io.BytesIO()
+            np.lib.format.write_array(npy, array, allow_pickle=False)
+            info = zipfile.ZipInfo(name + '.npy', date_time=(1980, 1, 1, 0, 0, 0))
+            info.compress_type = zipfile.ZIP_STORED
+            before_data = stream.tell() + 30 + len(info.filename.encode()) + 4
+            info.extra = _padding_field(-before_data % ARRAY_ALIGNMENT)
+            archive.writestr(info, npy.getbuffer())
+
+
+def _padding_field(size):
+    """Return a zip extra field of ``size`` zero bytes after its 4-byte id and length."""
+    return (0xD935).to_bytes(2, 'little') + size.to_bytes(2, 'little') + bytes(size)
 
 
 def _read_npy_header(member, name, path):
@@ -155,44 +185,65 @@ def _read_npy_header(member, name, path):
     return dtype, shape, fortran_order
 
 
-def _read_member(archive, info, name, path, budget):
+def _member_data_offset(mapped, info, path):
     """
-    Read one array after checking the size its header announces.
+    Where the bytes of a stored zip member start in the file.
+
+    The local file header (zip APPNOTE 4.3.7: 30 bytes, then the name and the extra field)
+    precedes them; its lengths may differ from the central directory's, so they are read here.
+    """
+    local = mapped[info.header_offset:info.header_offset + 30]
+    if len(local) != 30 or local[:4] != b'PK\x03\x04':
+        raise CacheError(f'{path}: member {info.filename[:80]!r} has no local header')
+    start = info.header_offset + 30 + int.from_bytes(local[26:28], 'little') \
+        + int.from_bytes(local[28:30], 'little')
+    if start + info.file_size > len(mapped):
+        raise CacheError(f'{path}: member {info.filename[:80]!r} runs past the end of the file')
+    return start
+
+
+def _read_member(mapped, info, name, path, budget):
+    """
+    One array of the file mapped read-only in ``mapped``, after checking its announced size.
 
     The .npy header announces dtype and shape; their product must be exactly the bytes the
-    zip member stores (uncompressed, as ``np.savez`` writes) and fit the remaining
-    ``budget``, so nothing larger than the file itself is ever allocated.
+    zip member stores (uncompressed, as :func:`save_cache` writes) and fit the remaining
+    ``budget``. The array is a read-only view of the mapped file where its bytes are aligned
+    (as :func:`save_cache` places them): no copy, and no fresh memory to fault in, which in a
+    new process costs more than reading the file. Otherwise (a file written by an older
+    version) it is copied out.
     """
     if info.compress_type != zipfile.ZIP_STORED or info.compress_size != info.file_size:
         raise CacheError(f'{path}: array {name!r} is compressed (not written by this code)')
-    with archive.open(info) as member:
-        dtype, shape, fortran_order = _read_npy_header(member, name, path)
-        count = 1
-        for extent in shape:
-            count *= extent
-        announced = count * dtype.itemsize
-        stored = info.file_size - member.tell()
-        if announced != stored:
-            raise CacheError(f'{path}: array {name!r} announces {announced} bytes '
-                             f'({dtype.str} {list(shape)}), the file holds {stored}')
-        if announced > budget:
-            raise CacheError(f'{path}: array {name!r} announces {announced} bytes, more than '
-                             f'the file holds or {MAX_CACHE_BYTES} bytes in all')
-        array = np.empty(shape, dtype=dtype, order='F' if fortran_order else 'C')
-        view = memoryview(array.reshape(-1, order='A')).cast('B') if announced else b''
-        if announced and member.readinto(view) != announced:
-            raise CacheError(f'{path}: array {name!r} is truncated')
-    return array, announced
+    start = _member_data_offset(mapped, info, path)
+    npy = io.BytesIO(mapped[start:start + min(info.file_size, NPY_HEADER_READ)])
+    dtype, shape, fortran_order = _read_npy_header(npy, name, path)
+    count = 1
+    for extent in shape:
+        count *= extent
+    announced = count * dtype.itemsize
+    stored = info.file_size - npy.tell()
+    if announced != stored:
+        raise CacheError(f'{path}: array {name!r} announces {announced} bytes '
+                         f'({dtype.str} {list(shape)}), the file holds {stored}')
+    if announced > budget:
+        raise CacheError(f'{path}: array {name!r} announces {announced} bytes, more than '
+                         f'the file holds or {MAX_CACHE_BYTES} bytes in all')
+    offset = start + npy.tell()
+    flat = np.frombuffer(mapped, dtype=dtype, count=count, offset=offset)
+    if offset % dtype.alignment:
+        flat = flat.copy()
+        flat.flags.writeable = False
+    return flat.reshape(shape, order='F' if fortran_order else 'C'), announced
 
 
-def _read_header(archive, members, path, file_bytes):
+def _read_header(mapped, members, path):
     info = members.get(HEADER_NAME)
     if info is None:
         raise CacheError(f'{path}: not a flexlink_ros cache (no header)')
     if info.file_size > MAX_HEADER_BYTES + 1024:
         raise CacheError(f'{path}: malformed header (larger than {MAX_HEADER_BYTES} bytes)')
-    raw, _ = _read_member(archive, info, HEADER_NAME, path,
-                          min(MAX_HEADER_BYTES, file_bytes))
+    raw, _ = _read_member(mapped, info, HEADER_NAME, path, min(MAX_HEADER_BYTES, len(mapped)))
     if raw.dtype != np.uint8 or raw.ndim != 1:
         raise CacheError(f'{path}: malformed header')
     header = json.loads(raw.tobytes().decode())
@@ -258,8 +309,8 @@ def load_cache(path, key):
         raise CacheError(f'{path}: no cache file')
     try:
         with open_trusted(path) as stream, zipfile.ZipFile(stream) as archive:
-            header, arrays = _read_archive(archive, path, key,
-                                           os.fstat(stream.fileno()).st_size)
+            mapped = mmap.mmap(stream.fileno(), 0, access=mmap.ACCESS_READ)
+            header, arrays = _read_archive(mapped, archive, path, key)
     except CacheError:
         raise
     except (OSError, EOFError, ValueError, KeyError, TypeError, AttributeError, RuntimeError,
@@ -273,18 +324,18 @@ def load_cache(path, key):
     return arrays, meta if isinstance(meta, dict) else {}
 
 
-def _read_archive(archive, path, key, file_bytes):
+def _read_archive(mapped, archive, path, key):
     """Header and arrays of an open cache archive, each checked against the header."""
     members = _members(archive, path)
-    header = _read_header(archive, members, path, file_bytes)
+    header = _read_header(mapped, members, path)
     _check_header(header, key, path)
     announced = header.get('arrays')
     if not isinstance(announced, dict) or set(announced) != set(members) - {HEADER_NAME}:
         raise CacheError(f'{path}: arrays differ from the header')
     # The arrays are stored uncompressed in this file: together they fit in it.
-    arrays, budget = {}, min(MAX_CACHE_BYTES, file_bytes)
+    arrays, budget = {}, min(MAX_CACHE_BYTES, len(mapped))
     for name, spec in sorted(announced.items()):
-        array, size = _read_member(archive, members[name], name, path, budget)
+        array, size = _read_member(mapped, members[name], name, path, budget)
         budget -= size
         if not isinstance(spec, dict) or (array.dtype.str, list(array.shape)) != (
                 spec.get('dtype'), spec.get('shape')):

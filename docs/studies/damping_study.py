@@ -16,7 +16,7 @@ The full-order response is :func:`core.fe.simulate.periodic_response` with ``bet
 objective stiffness damping, zeta = 0) or ``zeta`` (beta = 0); the naive form passes its stage
 matrices in (``matrices``).
 
-Run: ``python -m flexlink_ros.studies.damping_study [--elements 8] [--gravity] [--rpm 269]``.
+Run: ``python docs/studies/damping_study.py [--elements 8] [--gravity] [--rpm 269]``.
 
 Measured (8 elements per link, 720 steps per revolution, beta = 1e-4 s, relative RMS per point
 with dX and dY together, :func:`point_rms`, against the peer's last revolution):
@@ -53,16 +53,16 @@ import math
 
 import numpy as np
 
-from .peer_exudyn import compare, peer_response, revolution_slice
-from ..core.estimation.offline import replay
-from ..core.fe.linkage import FlexibleLinkage
-from ..core.fe.simulate import periodic_response
-from ..core.fe.stiffness_damping import (element_resultants, link_local_rate,
+from flexlink_ros.studies.peer_exudyn import compare, peer_response, revolution_slice
+from flexlink_ros.core.estimation.offline import replay
+from flexlink_ros.core.fe.linkage import FlexibleLinkage
+from flexlink_ros.core.fe.simulate import periodic_response
+from flexlink_ros.core.fe.stiffness_damping import (element_resultants, link_local_rate,
                                          stiffness_damping_terms, system_matrices)
-from ..core.mechanism import Mechanism
-from ..core.mechanism_file import load_mechanism
-from ..core.options import ModelOptions
-from ..core.reduction import mechanism_model
+from flexlink_ros.core.mechanism import Mechanism
+from flexlink_ros.core.mechanism_file import load_mechanism
+from flexlink_ros.core.options import ModelOptions
+from flexlink_ros.core.reduction import mechanism_model
 
 DAMPING = ('objective', 'naive', 'modal')
 OUTPUT_KEYS = ('lever_tip_dx', 'lever_tip_dy', 'coupler_mid_dx', 'coupler_mid_dy')
@@ -226,7 +226,7 @@ def streaming_lines(peer, speed, elements, gravity, beta, zeta):
 
 def main(argv=None):
     """Print the package's beta-damped full order (objective, naive, modal) against the peer."""
-    parser = argparse.ArgumentParser(prog='python -m flexlink_ros.studies.damping_study',
+    parser = argparse.ArgumentParser(prog='python docs/studies/damping_study.py',
                                      description=main.__doc__)
     parser.add_argument('--rpm', type=float, default=269.0)
     parser.add_argument('--elements', type=int, default=8)

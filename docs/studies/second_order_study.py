@@ -1,7 +1,7 @@
 """
 Linear KED and linear + second order against the nonlinear Exudyn peer.
 
-``python -m flexlink_ros.studies.second_order_study [--rpm 269 391] [--gravity both]
+``python docs/studies/second_order_study.py [--rpm 269 391] [--gravity both]
 [--elements 8] [--json]`` prints, per speed and gravity setting (rigid crank, rigid bearings),
 the peer's peak-to-peak of the four outputs, the package's linear full-order response and the
 same plus the second-order motion of :mod:`core.fe.second_order_full` (p2p error and relative
@@ -15,21 +15,26 @@ import argparse
 import dataclasses
 import json
 import math
+import pathlib
+import sys
 
 import numpy as np
 
-from . import second_order_bench
-from .peer_exudyn import compare, peak_to_peak, peer_response
-from .peer_linear import linear_model
-from .peer_model import DEFAULT_ELEMENTS, OUTPUT_KEYS, resolve_mechanism
-from ..core.estimation.offline import replay
-from ..core.fe.linkage import FlexibleLinkage
-from ..core.fe.second_order_full import corrected_response
-from ..core.fe.second_order_geometry import FORMS
-from ..core.fe.second_order_reduced import factored_forms, step_cost
-from ..core.fe.simulate import periodic_response
-from ..core.options import DEFAULT_SIZES, ModelOptions
-from ..core.reduction.mechanism_model import fe_mechanism, model_for_mechanism
+from flexlink_ros.studies.peer_exudyn import compare, peak_to_peak, peer_response
+from flexlink_ros.studies.peer_linear import linear_model
+from flexlink_ros.studies.peer_model import DEFAULT_ELEMENTS, OUTPUT_KEYS, resolve_mechanism
+from flexlink_ros.core.estimation.offline import replay
+from flexlink_ros.core.fe.linkage import FlexibleLinkage
+from flexlink_ros.core.fe.second_order_full import corrected_response
+from flexlink_ros.core.fe.second_order_geometry import FORMS
+from flexlink_ros.core.fe.second_order_reduced import factored_forms, step_cost
+from flexlink_ros.core.fe.simulate import periodic_response
+from flexlink_ros.core.options import DEFAULT_SIZES, ModelOptions
+from flexlink_ros.core.reduction.mechanism_model import fe_mechanism, model_for_mechanism
+
+# The compiled kernels' timers live with the benchmarks, beside this folder.
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[2] / 'benchmarks'))
+import second_order_bench  # noqa: E402
 
 TARGETS = {'lever_tip': 0.10, 'coupler_mid': 0.03}
 # The streaming estimate's targets against the peer (p2p relative error).
@@ -187,7 +192,7 @@ def reduced_costs(mechanism):
 
 def main(argv=None):
     """Print the peer / linear / linear + second-order table (see the module notes)."""
-    parser = argparse.ArgumentParser(prog='python -m flexlink_ros.studies.second_order_study',
+    parser = argparse.ArgumentParser(prog='python docs/studies/second_order_study.py',
                                      description=__doc__.strip().splitlines()[0])
     parser.add_argument('--mechanism', default='cho1992')
     parser.add_argument('--rpm', type=float, nargs='+', default=[269.0, 391.0])

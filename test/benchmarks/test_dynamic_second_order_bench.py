@@ -2,11 +2,11 @@
 
 import shutil
 
+from dynamic_second_order_bench import time_pass
+from dynamic_second_order_study import case_options
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.reduction.mechanism_model import model_for_mechanism
 from flexlink_ros.core.reduction.second_order_dynamic_tables import load_for_model
-from flexlink_ros.studies.dynamic_second_order_bench import time_pass
-from flexlink_ros.studies.dynamic_second_order_study import case_options
 import pytest
 
 

@@ -1,9 +1,9 @@
-"""The dynamic-pass study (studies/dynamic_second_order_study.py) at a reduced size."""
+"""The dynamic-pass study (docs/studies/dynamic_second_order_study.py) at a reduced size."""
 
 import shutil
 
+import dynamic_second_order_study as study
 from flexlink_ros.core.mechanism_file import load_mechanism
-from flexlink_ros.studies import dynamic_second_order_study as study
 import numpy as np
 import pytest
 

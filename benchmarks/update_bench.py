@@ -10,7 +10,7 @@ many rows (step_rows, the replay's call: the rows the updates build, so the same
 median over chunks of CHUNK rows, which keep the GIL as a single sample does). The update
 minus the batched step is what the estimator adds around the step. Both estimators' last
 samples of each round are checked to agree before anything is reported.
-``python -m flexlink_ros.studies.update_bench`` prints it for the node's default model.
+``python benchmarks/update_bench.py`` prints it for the node's default model.
 """
 
 import argparse
@@ -19,13 +19,13 @@ import time
 
 import numpy as np
 
-from .synthetic import synthetic_signal
-from ..core.estimation.compiled_update import compiled_samples, use_python_path
-from ..core.estimation.step import MAX_SUBSTEP_NS
-from ..core.estimation.streaming import StreamingEstimator
-from ..core.mechanism_file import load_mechanism
-from ..core.options import ModelOptions
-from ..core.reduction.mechanism_model import model_for_mechanism
+from flexlink_ros.studies.synthetic import synthetic_signal
+from flexlink_ros.core.estimation.compiled_update import compiled_samples, use_python_path
+from flexlink_ros.core.estimation.step import MAX_SUBSTEP_NS
+from flexlink_ros.core.estimation.streaming import StreamingEstimator
+from flexlink_ros.core.mechanism_file import load_mechanism
+from flexlink_ros.core.options import ModelOptions
+from flexlink_ros.core.reduction.mechanism_model import model_for_mechanism
 
 # Rows per batched call of the step (below the compiled step's GIL release, as one sample).
 CHUNK = 50
@@ -141,7 +141,7 @@ def update_overhead(model, rpm=391.0, rounds=9, samples=3000, jitter=0.3):
 
 def main(argv=None):
     """Print :func:`update_overhead` for the node's default model (JSON with --json)."""
-    parser = argparse.ArgumentParser(prog='python -m flexlink_ros.studies.update_bench',
+    parser = argparse.ArgumentParser(prog='python benchmarks/update_bench.py',
                                      description=__doc__.strip().splitlines()[0])
     parser.add_argument('--mechanism', default='cho1992')
     parser.add_argument('--rpm', type=float, default=391.0)

@@ -6,8 +6,8 @@ gravity, rigid crank and bearings, where the quasi-static second order misses th
 on the coupler mid-point and the dynamic pass meets it.
 """
 
+import dynamic_second_order_peer as study
 from flexlink_ros.core.mechanism_file import load_mechanism
-from flexlink_ros.studies import dynamic_second_order_peer as study
 from flexlink_ros.studies import peer_exudyn
 import pytest
 

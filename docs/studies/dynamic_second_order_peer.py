@@ -1,7 +1,7 @@
 """
 The streaming estimator with ``second_order='dynamic'`` against the Exudyn peer.
 
-``python -m flexlink_ros.studies.dynamic_second_order_peer [--rpm 269 391] [--elements 8]
+``python docs/studies/dynamic_second_order_peer.py [--rpm 269 391] [--elements 8]
 [--no-gravity] [--cache DIR] [--cost] [--json]`` feeds :class:`StreamingEstimator` (the path of
 the node, ``flexlink estimate`` and ``replay``) a constant-speed crank stream with measured
 speeds, 720 samples per revolution (the peer's grid), rigid crank and rigid bearings, once
@@ -19,13 +19,13 @@ import time
 
 import numpy as np
 
-from .peer_exudyn import compare, revolution_slice
-from .peer_model import OUTPUT_KEYS
-from .validation import peer_run, Settings
-from ..core.estimation.streaming import StreamingEstimator
-from ..core.mechanism_file import load_mechanism
-from ..core.options import ModelOptions, SECOND_ORDER_PASSES
-from ..core.reduction.mechanism_model import model_for_mechanism
+from flexlink_ros.studies.peer_exudyn import compare, revolution_slice
+from flexlink_ros.studies.peer_model import OUTPUT_KEYS
+from flexlink_ros.studies.validation import peer_run, Settings
+from flexlink_ros.core.estimation.streaming import StreamingEstimator
+from flexlink_ros.core.mechanism_file import load_mechanism
+from flexlink_ros.core.options import ModelOptions, SECOND_ORDER_PASSES
+from flexlink_ros.core.reduction.mechanism_model import model_for_mechanism
 
 SAMPLES = 720
 REVOLUTIONS = 8
@@ -147,8 +147,7 @@ def format_result(result):
 
 def main(argv=None):
     """Print :func:`against_peer` per speed (and :func:`cost` with ``--cost``)."""
-    parser = argparse.ArgumentParser(prog='python -m flexlink_ros.studies.'
-                                     'dynamic_second_order_peer',
+    parser = argparse.ArgumentParser(prog='python docs/studies/dynamic_second_order_peer.py',
                                      description=__doc__.strip().splitlines()[0])
     parser.add_argument('--mechanism', default='cho1992')
     parser.add_argument('--rpm', type=float, nargs='+', default=[269.0, 391.0])

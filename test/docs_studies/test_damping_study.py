@@ -1,8 +1,8 @@
-"""Stiffness-proportional damping studied against the peer (studies/damping_study.py)."""
+"""Stiffness-proportional damping studied against the peer (docs/studies/damping_study.py)."""
 
 import math
 
-from flexlink_ros.studies import damping_study as ds
+import damping_study as ds
 import numpy as np
 import pytest
 

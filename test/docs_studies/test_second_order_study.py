@@ -1,4 +1,4 @@
-"""The reduced model's second order against the full order (studies/second_order_study.py)."""
+"""The reduced model's second order against the full order (docs/studies/second_order_study.py)."""
 
 import math
 
@@ -6,9 +6,9 @@ from flexlink_ros.core.fe import second_order_full as so_full
 from flexlink_ros.core.fe.simulate import periodic_response
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.studies import peer_exudyn as peer
-from flexlink_ros.studies import second_order_study
 import numpy as np
 import pytest
+import second_order_study
 
 ELEMENTS = 4
 

@@ -1,11 +1,11 @@
-"""The update timed around the step, compiled against Python path (studies/update_bench.py)."""
+"""The update timed around the step, compiled against Python path (benchmarks/update_bench.py)."""
 
 from flexlink_ros.core.estimation.native import compiled_step_available
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction import mechanism_model
-from flexlink_ros.studies import update_bench
 import pytest
+import update_bench
 
 
 @pytest.mark.skipif(not compiled_step_available(), reason='compiled step not built')

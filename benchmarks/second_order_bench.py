@@ -13,7 +13,7 @@ at run time.
 :func:`streaming_overhead` times what the second order costs in the package's own compiled
 step (core/estimation/_radau_step.c): the in-process streaming update and the batched step
 of an order-1 and an order-2 model of the same options, in alternating rounds, medians.
-``python -m flexlink_ros.studies.second_order_bench`` prints both for the node's default
+``python benchmarks/second_order_bench.py`` prints both for the node's default
 model and the rigid-crank ones.
 """
 
@@ -30,16 +30,16 @@ import time
 
 import numpy as np
 
-from ..core.estimation.streaming import StreamingEstimator
-from ..core.fe.linkage import FlexibleLinkage
-from ..core.fe.second_order_full import link_forms
-from ..core.fe.second_order_geometry import output_coefficients
-from ..core.fe.second_order_reduced import factored_forms, factored_second_order, gather_harmonics
-from ..core.kinematics import solve_kinematics
-from ..core.mechanism_file import load_mechanism
-from ..core.options import ModelOptions
-from ..core.reduction.cells import periodic_cell_coefficients
-from ..core.reduction.mechanism_model import fe_mechanism, model_for_mechanism
+from flexlink_ros.core.estimation.streaming import StreamingEstimator
+from flexlink_ros.core.fe.linkage import FlexibleLinkage
+from flexlink_ros.core.fe.second_order_full import link_forms
+from flexlink_ros.core.fe.second_order_geometry import output_coefficients
+from flexlink_ros.core.fe.second_order_reduced import factored_forms, factored_second_order, gather_harmonics
+from flexlink_ros.core.kinematics import solve_kinematics
+from flexlink_ros.core.mechanism_file import load_mechanism
+from flexlink_ros.core.options import ModelOptions
+from flexlink_ros.core.reduction.cells import periodic_cell_coefficients
+from flexlink_ros.core.reduction.mechanism_model import fe_mechanism, model_for_mechanism
 
 SCALARS = 22    # cos, sin of the three link angles, then kappa (4 x 4), per grid node
 GRID = 128
@@ -311,7 +311,7 @@ def streaming_overhead(mechanism, options, rpm=391.0, rounds=9, samples=3000):
 
 def main(argv=None):
     """Print :func:`streaming_overhead` for the node's default and the rigid-crank models."""
-    parser = argparse.ArgumentParser(prog='python -m flexlink_ros.studies.second_order_bench',
+    parser = argparse.ArgumentParser(prog='python benchmarks/second_order_bench.py',
                                      description=__doc__.strip().splitlines()[0])
     parser.add_argument('--mechanism', default='cho1992')
     parser.add_argument('--rounds', type=int, default=9)

@@ -16,7 +16,7 @@ grid, stepped by the estimator at :data:`REFERENCE_RATE_HZ` (20x the signal's ra
 same crank motion. It is first checked against :func:`reference_response` at constant speed
 (:func:`check_every_dof_reference`).
 
-``python -m flexlink_ros.studies.soft_basis_study`` prints the table. Measured (coupler
+``python docs/studies/soft_basis_study.py`` prints the table. Measured (coupler
 mid-point / lever tip, default model 24 + 2, grid 128, order 2):
 
 =================  =============  =============
@@ -41,16 +41,16 @@ import math
 
 import numpy as np
 
-from .peer_model import resolve_mechanism
-from .plan import full_order_dofs, scene_options
-from .synthetic import last_revolution, synthetic_signal
-from ..core.estimation.offline import replay
-from ..core.numerics import relative_rms, RPM
-from ..core.options import ModelOptions
-from ..core.reduction import mechanism_model
-from ..core.reduction import reference as reduction_reference
-from ..core.reduction.soft_basis import lowest_modes
-from ..core.reduction.soft_tables import node_values
+from flexlink_ros.studies.peer_model import resolve_mechanism
+from flexlink_ros.studies.plan import full_order_dofs, scene_options
+from flexlink_ros.studies.synthetic import last_revolution, synthetic_signal
+from flexlink_ros.core.estimation.offline import replay
+from flexlink_ros.core.numerics import relative_rms, RPM
+from flexlink_ros.core.options import ModelOptions
+from flexlink_ros.core.reduction import mechanism_model
+from flexlink_ros.core.reduction import reference as reduction_reference
+from flexlink_ros.core.reduction.soft_basis import lowest_modes
+from flexlink_ros.core.reduction.soft_tables import node_values
 
 # (label, rpm, jitter) of the constant-speed cases, and the targets (relative RMS).
 STEADY_CASES = (('269 rpm', 269.0, 0.0), ('391 rpm', 391.0, 0.0),

@@ -1,11 +1,11 @@
-"""The compiled factored second-order kernel timed (studies/second_order_bench.py)."""
+"""The compiled factored second-order kernel timed (benchmarks/second_order_bench.py)."""
 
 import shutil
 
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.studies import second_order_bench
 import pytest
+import second_order_bench
 
 
 @pytest.fixture(scope='module')
@@ -19,7 +19,7 @@ def test_compiled_factored_kernel_agrees_and_is_timed(mech):
     """
     The C kernel of the factored form agrees and is fast.
 
-    The C kernel of studies/second_order_bench.py equals factored_second_order (checked
+    The C kernel of benchmarks/second_order_bench.py equals factored_second_order (checked
     inside time_factored) and takes well under the 2 us per sample target (r = 26: 0.7 us).
     """
     ns = second_order_bench.time_factored(mech, 'flexible', False, 26, samples=2000, repeat=5)

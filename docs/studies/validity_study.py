@@ -1,7 +1,7 @@
 """
 Where linear + second order can be trusted: a speed sweep against the Exudyn peer.
 
-``python -m flexlink_ros.studies.validity_study [--rpm ...] [--elements 8] [--bearings rigid]
+``python docs/studies/validity_study.py [--rpm ...] [--elements 8] [--bearings rigid]
 [--chart validity.png] [--cache DIR] [--json]`` runs, per crank speed, the nonlinear peer
 (:mod:`studies.peer_exudyn`: rigid crank, no gravity) and the package's full-order linear
 response plus its second order (:func:`core.fe.second_order_full.corrected_response`), records the
@@ -37,12 +37,12 @@ import os
 
 import numpy as np
 
-from .peer_exudyn import compare, peer_response
-from .peer_linear import linear_model
-from .peer_model import BEARINGS, DEFAULT_BETA_S, DEFAULT_ELEMENTS, OUTPUT_KEYS, resolve_mechanism
-from ..core.fe.second_order_full import corrected_response
-from ..core.fe.simulate import periodic_response
-from ..core.validity import load_ratios, nonlinearity_indicator, VALIDITY_THRESHOLD
+from flexlink_ros.studies.peer_exudyn import compare, peer_response
+from flexlink_ros.studies.peer_linear import linear_model
+from flexlink_ros.studies.peer_model import BEARINGS, DEFAULT_BETA_S, DEFAULT_ELEMENTS, OUTPUT_KEYS, resolve_mechanism
+from flexlink_ros.core.fe.second_order_full import corrected_response
+from flexlink_ros.core.fe.simulate import periodic_response
+from flexlink_ros.core.validity import load_ratios, nonlinearity_indicator, VALIDITY_THRESHOLD
 
 TARGETS = {'lever_tip': 0.10, 'coupler_mid': 0.03}
 DEFAULT_RPM = tuple(sorted(set(range(250, 451, 10)) | set(range(385, 430, 10)) | {269, 391,
@@ -200,7 +200,7 @@ def plot_sweep(records, path, threshold=VALIDITY_THRESHOLD):
 
 def main(argv=None):
     """Run the sweep, print the table, optionally write the chart (see the module notes)."""
-    parser = argparse.ArgumentParser(prog='python -m flexlink_ros.studies.validity_study',
+    parser = argparse.ArgumentParser(prog='python docs/studies/validity_study.py',
                                      description=__doc__.strip().splitlines()[0])
     parser.add_argument('--mechanism', default='cho1992')
     parser.add_argument('--rpm', type=float, nargs='+', default=list(DEFAULT_RPM))

@@ -1,6 +1,6 @@
-"""The validity sweep's bookkeeping (studies/validity_study.py): separation and the table."""
+"""The validity sweep's bookkeeping (docs/studies/validity_study.py): separation and the table."""
 
-from flexlink_ros.studies import validity_study
+import validity_study
 
 
 def _record(rpm, accurate, indicator, load_ratio=0.01, second_ratio=0.5):

@@ -4,9 +4,9 @@ import dataclasses
 
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.reduction import mechanism_model
-from flexlink_ros.studies import soft_basis_study as study
 import numpy as np
 import pytest
+import soft_basis_study as study
 
 RPM_391 = 391.0 * 2.0 * np.pi / 60.0
 

@@ -1,7 +1,7 @@
 """
 The dynamic second-order pass per basis size: accuracy and cost of its step.
 
-``python -m flexlink_ros.studies.dynamic_second_order_study [--rpm 391] [--elements 8]
+``python docs/studies/dynamic_second_order_study.py [--rpm 391] [--elements 8]
 [--sizes 4,2 8,4] [--peer] [--cost] [--no-gravity] [--json]`` streams the numpy step of the
 pass (core/estimation/second_order_dynamic_step.py) at constant speed (rigid crank, rigid
 bearings, gravity unless ``--no-gravity``) per basis size and prints its coupler and lever
@@ -9,34 +9,39 @@ p2p against the full-order pass (core/fe/second_order_dynamic.py) and, with ``--
 against the Exudyn peer, next to the quasi-static estimate of the same model. ``--cost``
 times, in alternating rounds, the numpy step with and without the pass and the compiled
 order-2 step of each basis, and the pass's own work compiled
-(:mod:`.dynamic_second_order_bench`).
+(``benchmarks/dynamic_second_order_bench.py``).
 """
 
 import argparse
 import dataclasses
 import json
 import math
+import pathlib
+import sys
 import time
 
 import numpy as np
 
-from .dynamic_second_order_bench import time_pass
-from .peer_exudyn import compare, peer_response
-from .peer_model import OUTPUT_KEYS
-from ..core.estimation import native
-from ..core.estimation.second_order_dynamic_kernel import DynamicPassKernel
-from ..core.estimation.second_order_dynamic_step import DynamicSecondOrderStep, steady_revolution
-from ..core.estimation.step import NumpyStep
-from ..core.estimation.streaming import StreamingEstimator
-from ..core.estimation.tables import step_tables
-from ..core.fe.linkage import FlexibleLinkage
-from ..core.fe.second_order_dynamic import dynamic_pass
-from ..core.fe.second_order_full import corrected_response
-from ..core.fe.simulate import periodic_response
-from ..core.mechanism_file import load_mechanism
-from ..core.options import ModelOptions
-from ..core.reduction.mechanism_model import fe_mechanism, model_for_mechanism
-from ..core.reduction.second_order_dynamic_tables import load_for_model
+from flexlink_ros.studies.peer_exudyn import compare, peer_response
+from flexlink_ros.studies.peer_model import OUTPUT_KEYS
+from flexlink_ros.core.estimation import native
+from flexlink_ros.core.estimation.second_order_dynamic_kernel import DynamicPassKernel
+from flexlink_ros.core.estimation.second_order_dynamic_step import DynamicSecondOrderStep, steady_revolution
+from flexlink_ros.core.estimation.step import NumpyStep
+from flexlink_ros.core.estimation.streaming import StreamingEstimator
+from flexlink_ros.core.estimation.tables import step_tables
+from flexlink_ros.core.fe.linkage import FlexibleLinkage
+from flexlink_ros.core.fe.second_order_dynamic import dynamic_pass
+from flexlink_ros.core.fe.second_order_full import corrected_response
+from flexlink_ros.core.fe.simulate import periodic_response
+from flexlink_ros.core.mechanism_file import load_mechanism
+from flexlink_ros.core.options import ModelOptions
+from flexlink_ros.core.reduction.mechanism_model import fe_mechanism, model_for_mechanism
+from flexlink_ros.core.reduction.second_order_dynamic_tables import load_for_model
+
+# The compiled kernels' timers live with the benchmarks, beside this folder.
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[2] / 'benchmarks'))
+from dynamic_second_order_bench import time_pass  # noqa: E402
 
 SAMPLES = 720
 
@@ -142,7 +147,7 @@ def cost(mechanism, rpm, elements, sizes_list, rounds=5, samples=400, kernel_sam
     constant speed); 'compiled': the package's compiled order-2 step (the batched rows of the
     replay) of the same model; with ``kernel_samples`` (0: left out, it needs a C compiler)
     'kernel' and 'kernel_tabulated': the pass's own work compiled, with and without the
-    static solves (:func:`.dynamic_second_order_bench.time_pass`). Returns a list of dicts with
+    static solves (``time_pass`` of ``benchmarks/dynamic_second_order_bench.py``). Returns a list of dicts with
     'r' and these times.
     """
     speed = rpm * math.pi / 30.0
@@ -181,8 +186,7 @@ def cost(mechanism, rpm, elements, sizes_list, rounds=5, samples=400, kernel_sam
 
 def main(argv=None):
     """Print :func:`accuracy` (and :func:`cost` with ``--cost``)."""
-    parser = argparse.ArgumentParser(prog='python -m flexlink_ros.studies.'
-                                     'dynamic_second_order_study',
+    parser = argparse.ArgumentParser(prog='python docs/studies/dynamic_second_order_study.py',
                                      description=__doc__.strip().splitlines()[0])
     parser.add_argument('--mechanism', default='cho1992')
     parser.add_argument('--rpm', type=float, default=391.0)
