@@ -1,65 +1,146 @@
 """
-``replay --nonlinear auto|on|off``: the reduced nonlinear model on a recording's crank samples.
+``replay --nonlinear auto|on|off``: the reduced nonlinear model's deflections in the output.
 
 The same rule and the same ``model: ...`` line as ``estimate --nonlinear``
-(:func:`.estimate_nonlinear.choose_nonlinear`): ``auto`` (the default) adds the nonlinear
-estimate where the linear replay's validity indicator (the largest per-sample ``nonlinearity``
-of ``~/quality``) says the linear estimate is not valid. The JSON's ``model_choice`` is
-estimate's; ``nonlinear`` holds the nonlinear run's peak-to-peak deflections, refused samples
-and link slopes (None when it did not run). The output file still holds the linear estimate.
+(:func:`.estimate_nonlinear.choose_nonlinear`). ``on`` writes the nonlinear model's lever-tip
+and coupler-mid deflections in place of the linear ones, block by block as the replay writes
+(:class:`NonlinearRows`: memory independent of the recording's length). ``auto`` (the default)
+first runs the linear estimate alone over the recording and writes the nonlinear deflections
+only where its validity indicator (the largest per-sample ``nonlinearity`` of ``~/quality``)
+says the linear estimate is not valid. A recording that names its model is replayed with the
+model that made it (the nonlinear one if its provenance says ``nonlinear: on``, else the
+linear one) unless ``--nonlinear`` is given; ``auto`` is for recordings that name no model.
+The output's provenance records the choice (``nonlinear``: ``on`` or ``off``).
+
+The nonlinear model steps through the samples the linear estimator accepted, with the crank
+angle and speed of its crank filter (the same crank state the linear estimate used), and starts
+again, at its quasi-static deflection, where the linear estimator starts a new segment. The
+criteria, the quality topic (the linear model's error and validity indicators) and the markers
+(the linear model's modal shape) are the linear estimate's.
 """
+
+import math
 
 import numpy as np
 
 from .estimate_nonlinear import choose_nonlinear
-from ..core.estimation.nonlinear_stream import estimate_nonlinear, VON_KARMAN_SLOPE
+from ..core.estimation.nonlinear_stream import NonlinearStepper, VON_KARMAN_SLOPE
 from ..core.reduction.nonlinear_model import nonlinear_model_for
 from ..core.validity import is_valid
-from ..io.joint_states import read_input_samples
+
+TWO_PI = 2.0 * math.pi
 
 
-def increasing(stamps_ns):
-    """Mask of the samples whose stamp is above every earlier one (the stepper's input)."""
-    stamps = np.asarray(stamps_ns, dtype=np.int64)
-    if not stamps.size:
-        return np.zeros(0, dtype=bool)
-    before = np.maximum.accumulate(np.concatenate([[np.iinfo(np.int64).min], stamps[:-1]]))
-    return stamps > before
+def nonlinear_choice(args, recorded):
+    """
+    Return 'auto', 'on' or 'off': the flag if given, else what the recording was made with.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        ``nonlinear`` (None when the flag was not given).
+    recorded : io.provenance.Provenance or None
+        The recording's provenance.
+
+    """
+    if getattr(args, 'nonlinear', None):
+        return args.nonlinear
+    if recorded is not None and recorded.has_model:
+        # Recorded before the nonlinear model existed: the linear model made it.
+        return recorded.nonlinear or 'off'
+    return 'auto'
 
 
-def run_recording(tables, samples):
-    """Step the nonlinear model through a recording's samples; a JSON dict."""
-    keep = increasing(samples['stamps_ns'])
-    speeds = samples['speeds'][keep]
-    out = estimate_nonlinear(tables, samples['stamps_ns'][keep], samples['angles'][keep],
-                             None if np.isnan(speeds).all() else speeds)
-    rows = out['outputs'][np.all(np.isfinite(out['outputs']), axis=1)]
-    span = (1e6 * (rows.max(axis=0) - rows.min(axis=0))).tolist() if rows.size else \
-        [float('nan')] * tables.outputs
-    slope = out['link_slope'][np.isfinite(out['link_slope'])]
-    return {'samples': int(keep.sum()), 'not_increasing': int((~keep).sum()),
-            'refused_samples': out['refused'], 'lever_tip_peak_to_peak_um': span[0:2],
-            'coupler_mid_peak_to_peak_um': span[2:4], 'outputs': out['outputs'],
-            'link_slope_max_rad': float(slope.max()) if slope.size else None,
-            'beyond_von_karman_samples': out['beyond_von_karman']}
+def decide(choice, summary=None):
+    """Return (use the nonlinear model, why) for ``choice`` and a linear run's summary."""
+    if choice != 'auto':
+        return choose_nonlinear(choice, None)
+    largest = summary['quality'].get('nonlinearity_max') if summary else None
+    return choose_nonlinear('auto', is_valid([math.nan if largest is None else largest]))
 
 
-def add_replay_nonlinear(args, mechanism, options, result):
-    """Decide, run and add the nonlinear estimate of a replay to ``result``."""
-    verdict = is_valid([np.nan if result['quality']['nonlinearity_max'] is None
-                        else result['quality']['nonlinearity_max']])
-    use, why = choose_nonlinear(getattr(args, 'nonlinear', None) or 'auto', verdict)
-    result['model_choice'] = {'nonlinear': use, 'why': why}
-    result['nonlinear'] = None
-    if not use:
-        return
+class NonlinearRows:
+    """
+    Replace each block's linear deflections with the nonlinear model's (see the module notes).
+
+    Parameters
+    ----------
+    tables : NonlinearTables
+        The reduced nonlinear model.
+    reset_gap_s : float
+        A gap between accepted samples longer than this starts the model again (as the linear
+        estimator's segments).
+    damping : str
+        How the model is damped (:func:`core.reduction.nonlinear_model.nonlinear_model_for`).
+
+    """
+
+    def __init__(self, tables, reset_gap_s, damping=''):
+        self.tables, self.reset_gap_s, self.damping = tables, float(reset_gap_s), damping
+        self.stepper = NonlinearStepper(tables)
+        self.last = None          # (stamp [ns], unwrapped angle, speed) of the last sample
+        self.counts = {'samples': 0, 'refused_samples': 0, 'restarts': 0,
+                       'beyond_von_karman_samples': 0}
+        self.slope_max = 0.0
+        self.low = np.full(tables.outputs, np.inf)
+        self.high = np.full(tables.outputs, -np.inf)
+
+    def __call__(self, samples, estimate):
+        """Return ``estimate`` with the nonlinear 'lever_tip' and 'coupler_mid' rows."""
+        angles, speeds = estimate['crank_angle'], estimate['crank_speed']
+        accepted = (np.all(np.isfinite(estimate['lever_tip']), axis=1)
+                    & np.all(np.isfinite(estimate['coupler_mid']), axis=1)
+                    & np.isfinite(angles) & np.isfinite(speeds))
+        outputs = np.full((len(accepted), self.tables.outputs), np.nan)
+        stamps = samples['stamps_ns']
+        for n in np.flatnonzero(accepted).tolist():
+            outputs[n] = self._sample(int(stamps[n]), float(angles[n]), float(speeds[n]))
+        if accepted.any():
+            self.low = np.minimum(self.low, outputs[accepted].min(axis=0))
+            self.high = np.maximum(self.high, outputs[accepted].max(axis=0))
+        replaced = dict(estimate)
+        replaced['lever_tip'], replaced['coupler_mid'] = outputs[:, 0:2], outputs[:, 2:4]
+        return replaced
+
+    def _sample(self, stamp, angle, speed):
+        """Step to one accepted sample; its output deflections [m]."""
+        stepper, self.counts['samples'] = self.stepper, self.counts['samples'] + 1
+        h = None if self.last is None else (stamp - self.last[0]) * 1e-9
+        if h is None or not 0.0 < h <= self.reset_gap_s:
+            self.counts['restarts'] += self.last is not None
+            stepper.start(angle, speed)
+            self.last = (stamp, angle, speed)
+            return stepper.outputs(angle)
+        _, theta0, speed0 = self.last
+        predicted = 0.5 * (speed0 + speed) * h      # the change nearest the mean speed's
+        change = angle - theta0 - predicted
+        theta = theta0 + predicted + change - TWO_PI * round(change / TWO_PI)
+        if stepper.step(h, theta0, theta, speed0, speed):
+            output = stepper.output_operator @ stepper.q
+        else:
+            self.counts['refused_samples'] += 1
+            output = stepper.outputs(theta)
+        slope = float(np.max(stepper.slope)) if stepper.slope.size else 0.0
+        self.slope_max = max(self.slope_max, slope)
+        self.counts['beyond_von_karman_samples'] += slope > VON_KARMAN_SLOPE
+        self.last = (stamp, theta, speed)
+        return output
+
+    def summary(self):
+        """Return the JSON's ``nonlinear`` entry: peak-to-peak deflections [um] and counts."""
+        seen = bool(np.all(np.isfinite(self.high)))
+        span = (1e6 * (self.high - self.low)).tolist() if seen else [math.nan] * 4
+        return {**self.counts, 'lever_tip_peak_to_peak_um': span[0:2],
+                'coupler_mid_peak_to_peak_um': span[2:4],
+                'link_slope_max_rad': self.slope_max, 'size': self.tables.size,
+                'links': self.tables.links, 'damping': self.damping}
+
+
+def nonlinear_rows(args, mechanism, options, reset_gap_s):
+    """Return the :class:`NonlinearRows` of the replay's mechanism and options."""
     tables, damping = nonlinear_model_for(mechanism, options, args.cache_dir,
                                           not args.no_cache)
-    _, samples, _ = read_input_samples(args.input, result['topic'], args.joint, [])
-    nonlinear = run_recording(tables, samples)
-    del nonlinear['outputs']   # the per-sample rows are not part of the summary
-    nonlinear.update(damping=damping, size=tables.size, links=tables.links)
-    result['nonlinear'] = nonlinear
+    return NonlinearRows(tables, reset_gap_s, damping)
 
 
 def model_lines(result):
@@ -67,15 +148,11 @@ def model_lines(result):
     choice, nonlinear = result['model_choice'], result['nonlinear']
     if nonlinear is None:
         return [f"  model: linear ({choice['why']})"]
-    lever, coupler = nonlinear['lever_tip_peak_to_peak_um'], nonlinear[
-        'coupler_mid_peak_to_peak_um']
-    slope = nonlinear['link_slope_max_rad']
-    slope_text = 'n/a' if slope is None else f'{slope:.3g}'
-    return [f"  model: nonlinear ({choice['why']})",
-            f'  nonlinear lever tip peak-to-peak dx {lever[0]:.1f} um dy {lever[1]:.1f} um, '
-            f'coupler mid dx {coupler[0]:.1f} um dy {coupler[1]:.1f} um '
-            f"({nonlinear['refused_samples']} samples refused, link slope max {slope_text} "
-            f'rad, von Karman limit {VON_KARMAN_SLOPE:g})']
+    return [f"  model: nonlinear ({choice['why']}): the deflections above are its own",
+            f"  nonlinear: {nonlinear['samples']} samples, {nonlinear['refused_samples']} "
+            f"refused, {nonlinear['restarts']} restarts, link slope max "
+            f"{nonlinear['link_slope_max_rad']:.3g} rad (von Karman limit "
+            f'{VON_KARMAN_SLOPE:g}: {nonlinear["beyond_von_karman_samples"]} samples beyond)']
 
 
-__all__ = ['increasing', 'run_recording', 'add_replay_nonlinear', 'model_lines']
+__all__ = ['nonlinear_choice', 'decide', 'NonlinearRows', 'nonlinear_rows', 'model_lines']

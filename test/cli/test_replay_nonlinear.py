@@ -5,12 +5,13 @@ import math
 import subprocess
 import sys
 
-from flexlink_ros.cli.replay_nonlinear import increasing
 from flexlink_ros.core.estimation.nonlinear_stream import estimate_nonlinear
 from flexlink_ros.core.reduction.nonlinear_model import nonlinear_model_for
 from flexlink_ros.io.provenance import read_provenance
 from flexlink_ros.io.recorder import McapRecorder
+from flexlink_ros.names import NODE_NAME, output_topics
 from flexlink_ros.ros import messages as ros_messages
+from geometry_msgs.msg import Vector3Stamped
 from mcap.reader import make_reader
 import numpy as np
 from rclpy.serialization import deserialize_message, serialize_message
@@ -56,25 +57,61 @@ def read_samples(path):
     return np.array(stamps, dtype=np.int64), np.array(angles), np.array(speeds)
 
 
-def test_replay_nonlinear_on_equals_the_nonlinear_estimate_of_the_same_samples(tmp_path):
-    bag, out = tmp_path / 'bag', tmp_path / 'out'
+def written_rows(path, topic):
+    """{stamp: (x, y)} of a Vector3Stamped topic, read back by the mcap library."""
+    rows = {}
+    for file in sorted(path.glob('*.mcap')):
+        with open(file, 'rb') as stream:
+            for _, channel, record in make_reader(stream).iter_messages(topics=[topic]):
+                message = deserialize_message(record.data, Vector3Stamped)
+                stamp = message.header.stamp.sec * 10**9 + message.header.stamp.nanosec
+                rows[stamp] = (message.vector.x, message.vector.y)
+    return rows
+
+
+def test_replay_nonlinear_on_writes_the_nonlinear_deflections(tmp_path):
+    bag, out, linear = tmp_path / 'bag', tmp_path / 'out', tmp_path / 'linear'
     write_bag(bag, 391.0)
-    result = replay(str(bag), '--out', str(out), '--nonlinear', 'on', *SMALL_MODEL,
-                    '--cache-dir', str(tmp_path / 'cache'))
-    assert result['model_choice'] == {'nonlinear': True, 'why': 'asked for (--nonlinear on)'}
+    cache = ['--cache-dir', str(tmp_path / 'cache')]
+    result = replay(str(bag), '--out', str(out), '--nonlinear', 'on', *SMALL_MODEL, *cache)
+    assert result['model_choice'] == {'nonlinear': True, 'why': 'asked for (--nonlinear on)',
+                                      'asked': 'on'}
+    replay(str(bag), '--out', str(linear), '--nonlinear', 'off', *SMALL_MODEL, *cache)
     recorded = read_provenance(out)
+    assert recorded.nonlinear == 'on' and read_provenance(linear).nonlinear == 'off'
     tables, _ = nonlinear_model_for(recorded.mechanism(), recorded.options(), use_cache=False)
     stamps, angles, speeds = read_samples(bag)
     expected = estimate_nonlinear(tables, stamps, angles, speeds)['outputs']
-    assert np.isfinite(expected).all()
-    span = 1e6 * (expected.max(axis=0) - expected.min(axis=0))
+    topics = output_topics(NODE_NAME)
+    for key, columns in (('lever_tip', slice(0, 2)), ('coupler_mid', slice(2, 4))):
+        written = written_rows(out, topics[key])
+        assert len(written) == stamps.size
+        rows = np.array([written[stamp] for stamp in stamps.tolist()])
+        # The replay steps on its crank filter's angle and speed, the estimate on the raw
+        # samples: equal here but for the filter's start.
+        span = expected[:, columns].max(axis=0) - expected[:, columns].min(axis=0)
+        assert np.all(np.abs(rows - expected[:, columns]) <= 0.01 * span), key
+        linear_written = written_rows(linear, topics[key])
+        linear_rows = np.array([linear_written[stamp] for stamp in stamps.tolist()])
+        assert np.max(np.abs(rows - linear_rows)) > 0.05 * span.max(), key
     nonlinear = result['nonlinear']
     assert nonlinear['refused_samples'] == 0 and nonlinear['samples'] == stamps.size
-    np.testing.assert_allclose(nonlinear['lever_tip_peak_to_peak_um'], span[0:2], rtol=1e-9)
-    np.testing.assert_allclose(nonlinear['coupler_mid_peak_to_peak_um'], span[2:4], rtol=1e-9)
-    # the nonlinear estimate is not the linear one at this speed
-    assert not np.allclose(nonlinear['coupler_mid_peak_to_peak_um'],
-                           result['coupler_mid_peak_to_peak_um'], rtol=1e-3)
+    lever = written_rows(out, topics['lever_tip'])
+    written = np.array([lever[stamp] for stamp in stamps.tolist()])
+    np.testing.assert_allclose(nonlinear['lever_tip_peak_to_peak_um'],
+                               1e6 * (written.max(axis=0) - written.min(axis=0)), rtol=1e-12)
+    assert result['lever_tip_peak_to_peak_um'] == nonlinear['lever_tip_peak_to_peak_um']
+
+
+def test_a_nonlinear_replay_replayed_with_no_flags_reproduces_itself(tmp_path):
+    bag, first, second = tmp_path / 'bag', tmp_path / 'first', tmp_path / 'second'
+    write_bag(bag, 391.0, seconds=0.6)
+    cache = ['--cache-dir', str(tmp_path / 'cache')]
+    replay(str(bag), '--out', str(first), '--nonlinear', 'on', *SMALL_MODEL, *cache)
+    again = replay(str(first), '--out', str(second), *cache)     # the recording's own model
+    assert again['model_choice']['asked'] == 'on' and again['model_choice']['nonlinear']
+    topic = output_topics(NODE_NAME)['coupler_mid']
+    assert written_rows(second, topic) == written_rows(first, topic)
 
 
 def test_replay_auto_picks_the_linear_model_at_low_speed(tmp_path):
@@ -85,8 +122,3 @@ def test_replay_auto_picks_the_linear_model_at_low_speed(tmp_path):
     assert result['model_choice']['nonlinear'] is False, result['model_choice']
     assert result['model_choice']['why'].startswith('auto: the linear estimate is valid')
     assert result['nonlinear'] is None
-
-
-def test_only_increasing_stamps_are_stepped():
-    assert increasing([1, 2, 2, 5, 3, 6]).tolist() == [True, True, False, True, False, True]
-    assert increasing([]).tolist() == []
