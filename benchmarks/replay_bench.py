@@ -116,7 +116,15 @@ def run_measured(python, root, args):
 def replay_once(python, root, bag, out, extra=()):
     """Replay in a fresh process from ``root``: wall time [s], CPU time [s], peak RSS [MB]."""
     return run_measured(python, root, ['replay', str(pathlib.Path(bag).resolve()), '--out',
-                                       str(out), '--mechanism', 'cho1992', *extra])
+                                       str(out), '--mechanism', 'cho1992',
+                                       *linear_flag(python, root), *extra])
+
+
+def linear_flag(python, root):
+    """``--nonlinear off`` for a build that has the nonlinear model: the linear replay is timed."""
+    shown = subprocess.run([python, '-m', 'flexlink_ros.cli.main', 'replay', '--help'],
+                           capture_output=True, text=True, cwd=root, timeout=120)
+    return ['--nonlinear', 'off'] if '--nonlinear' in shown.stdout else []
 
 
 def messages(path):

@@ -37,12 +37,15 @@ import time
 
 import numpy as np
 
+from .estimate_nonlinear import CHOICES as NONLINEAR_CHOICES
 from .main import emit
 from .model_args import add_chart_argument, add_estimator_arguments, criterion_thresholds, \
     load_model
 from .progress import Progress
 from .replay_model import defer_model_defaults, MissingModel, replay_model
+from .replay_nonlinear import decide, model_lines, nonlinear_choice, nonlinear_rows
 from .replay_offline import CHUNK_SAMPLES, estimate_and_write, MAX_CHUNK_SAMPLES, open_input
+from ..core.estimation.gate import DEFAULT_RESET_GAP_S
 from ..core.estimation.marker_scale import model_exaggeration
 from ..core.estimation.tables import step_tables
 from ..io.joint_states import read_input_samples
@@ -123,9 +126,12 @@ def run_replay(args):
     model = load_model(mechanism, options, args)
     chart = ChartRows() if args.chart else None
     tables = step_tables(model)
+    choice, transform, (topic, rows, messages) = _choose_model(
+        args, mechanism, options, model, tables, (topic, rows, messages))
     estimate, summary, times = estimate_and_write(args, model, rows, messages,
                                                   _writer(args, model, topic, tables),
-                                                  on_block=chart and chart.add, tables=tables)
+                                                  on_block=chart and chart.add, tables=tables,
+                                                  transform=transform)
     count, span_s = rows.samples, rows.span_s()
     result = {'input': str(args.input), 'topic': topic, 'samples': count,
               'skipped': rows.skipped, 'skipped_reasons': rows.skipped_reasons,
@@ -148,6 +154,8 @@ def run_replay(args):
     result['samples_per_s'] = count / total if total > 0 else math.inf
     result['times_real_time'] = span_s / total if total > 0 else math.inf
     result.update(summary)
+    result['model_choice'] = choice
+    result['nonlinear'] = None if transform is None else transform.summary()
     if chart:
         result['chart'] = chart.draw(args.chart, estimate['criteria_available'],
                                      f'{mechanism.name}: {pathlib.Path(args.input).name} '
@@ -160,6 +168,27 @@ def run_replay(args):
         result.update(published=played['published'], playback=played)
         result['notes'] += played['notes']
     return result
+
+
+def _choose_model(args, mechanism, options, model, tables, opened):
+    """
+    Choose the linear or the nonlinear model (:mod:`.replay_nonlinear`).
+
+    Returns the JSON's ``model_choice``, the :class:`.replay_nonlinear.NonlinearRows` (None:
+    linear) and the input to estimate from (``opened`` again after a linear pass for
+    ``auto``); the output's provenance records the choice.
+    """
+    asked = nonlinear_choice(args, getattr(args, 'recorded_provenance', None))
+    linear_summary = None
+    if asked == 'auto':     # the linear estimate alone first: is it valid?
+        _, linear_summary, _ = estimate_and_write(args, model, opened[1], opened[2], None,
+                                                  tables=tables)
+        opened = open_input(args, [])
+    use, why = decide(asked, linear_summary)
+    transform = nonlinear_rows(args, mechanism, options, DEFAULT_RESET_GAP_S) if use else None
+    if args.provenance.get('model_options'):
+        args.provenance['nonlinear'] = 'on' if use else 'off'
+    return {'nonlinear': use, 'why': why, 'asked': asked}, transform, opened
 
 
 def playback_options(args):
@@ -234,6 +263,7 @@ def summary_text(result):
                  f"{result['coupler_mid_peak_to_peak_um'][0]:10.1f} um  dy "
                  f"{result['coupler_mid_peak_to_peak_um'][1]:10.1f} um")
     lines.append(quality_text(result['quality']))
+    lines += model_lines(result)
     if not result['criteria_available']:
         lines.append('  criteria unavailable: the model has no joint-reaction data '
                      '(written as zeros)')
@@ -324,6 +354,11 @@ def register(subparsers):
     parser.add_argument('--wait-timeout', type=float, default=DISCOVERY_TIMEOUT_S,
                         metavar='S', help='with --publish, longest wait for the subscriptions '
                         f'[s] (default {DISCOVERY_TIMEOUT_S:g})')
+    parser.add_argument('--nonlinear', choices=NONLINEAR_CHOICES, default=None,
+                        help='deflections of the reduced geometrically nonlinear model in the '
+                        'output: auto (the default unless the recording names its model: where '
+                        "the linear estimate's validity indicator says it is not valid), on or "
+                        'off')
     add_estimator_arguments(parser)
     add_chart_argument(parser)
     defer_model_defaults(parser)   # the recording's model unless a flag is given

@@ -89,6 +89,7 @@ def replay_model(args):
         recorded, broken = None, f'{exc}; using --mechanism {args.mechanism} and the flags'
     else:
         broken = None
+    args.recorded_provenance = recorded
     if recorded is None or not recorded.has_model:
         return _flags_model(args, recorded, broken)
     notes = []

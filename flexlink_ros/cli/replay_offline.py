@@ -248,7 +248,8 @@ class _Pipeline:
         self.thread.join()
 
 
-def estimate_and_write(args, model, rows, messages, write, on_block=None, tables=None):
+def estimate_and_write(args, model, rows, messages, write, on_block=None, tables=None,
+                       transform=None):
     """
     Estimate every sample and, with ``write``, write the output file meanwhile.
 
@@ -269,6 +270,9 @@ def estimate_and_write(args, model, rows, messages, write, on_block=None, tables
         ``on_block(estimate)`` with each block of estimated rows (the chart's rows).
     tables : object, optional
         The model's step tables (:func:`core.estimation.tables.step_tables`), when built.
+    transform : callable, optional
+        ``transform(samples, estimate)`` -> the estimate summed up and written in its place
+        (:class:`.replay_nonlinear.NonlinearRows`).
 
     Returns
     -------
@@ -286,11 +290,13 @@ def estimate_and_write(args, model, rows, messages, write, on_block=None, tables
     pipeline = _Pipeline(model, rows, not args.no_warm_start, tables)
 
     def blocks():
-        for block in pipeline:
-            summary.add(block[2])
+        for first, samples, estimate in pipeline:
+            if transform is not None:
+                estimate = transform(samples, estimate)
+            summary.add(estimate)
             if on_block is not None:
-                on_block(block[2])
-            yield block
+                on_block(estimate)
+            yield first, samples, estimate
     status = None
     try:
         if write is None:

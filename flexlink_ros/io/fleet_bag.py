@@ -70,6 +70,11 @@ class FleetSettings:
     markers_every_n: int = 10
 
 
+# The fleet recomputes with the linear model (`replay --nonlinear off`): the nonlinear step
+# costs some 20 times more per sample.
+LINEAR_CHOICE = {'nonlinear': False, 'why': 'the fleet runs the linear model', 'asked': 'off'}
+
+
 def bag_model(bag, fallback):
     """
     Choose the mechanism and model options a bag is recomputed with: the one place to decide.
@@ -159,7 +164,8 @@ def _replay_summary(bag, topic, samples, damaged, model, options, estimate, tota
                'second_order': options.second_order if model.order == 2 else None,
                'notes': [], 'segments': estimate['segments'],
                'outliers': estimate['outliers'], 'out_of_bound': estimate['out_of_bound'],
-               'criteria_available': estimate['criteria_available']}
+               'criteria_available': estimate['criteria_available'],
+               'model_choice': LINEAR_CHOICE, 'nonlinear': None}
     summary.update(totals)
     return summary
 

@@ -11,7 +11,9 @@ and the same entries, keys prefixed ``flexlink_ros.``, into ``metadata.yaml``'s
   model was built from it (its path as resolved, the SHA-256 of its bytes, its text);
 - ``damping_ratio``: the modal damping ratio the model used (the node's parameter may replace
   the file's), ``model_options``: the resolved :class:`core.options.ModelOptions` as JSON;
-- ``crank_joint``, ``warm_start``: what the estimator read and how it started.
+- ``crank_joint``, ``warm_start``: what the estimator read and how it started;
+- ``nonlinear``: ``on`` when the deflections are the reduced nonlinear model's, ``off`` when
+  the linear model's (absent in recordings made before the nonlinear model existed).
 
 ``mcap-record`` writes only the first two: such a bag says what wrote it, not a model.
 
@@ -62,6 +64,7 @@ class Provenance:
     model_options: dict = None
     crank_joint: str = ''
     warm_start: bool = True
+    nonlinear: str = ''
 
     @property
     def has_model(self):
@@ -87,6 +90,8 @@ class Provenance:
             lines.append(f'mechanism {self.mechanism_file} (sha256 {self.mechanism_sha256[:12]}'
                          f', damping ratio {self.damping_ratio:g})')
             lines.append('model ' + ', '.join(f'{k}={v}' for k, v in self.model_options.items()))
+            if self.nonlinear:
+                lines.append(f'nonlinear model {self.nonlinear}')
         return lines
 
 
@@ -108,7 +113,7 @@ def mechanism_bytes(path_or_name):
 
 
 def provenance_entries(producer, mechanism=None, options=None, damping_ratio=None,
-                       crank_joint='crank', warm_start=True, raw=None):
+                       crank_joint='crank', warm_start=True, raw=None, nonlinear=None):
     """
     Return the provenance map (str -> str) a recording carries.
 
@@ -129,6 +134,8 @@ def provenance_entries(producer, mechanism=None, options=None, damping_ratio=Non
     raw : bytes, optional
         The mechanism file's bytes when they come from a recording (``mechanism`` then is the
         path it was recorded under).
+    nonlinear : bool, optional
+        Whether the deflections are the reduced nonlinear model's (None: not said).
 
     """
     entries = {'format': PROVENANCE_FORMAT, 'producer': producer, 'version': __version__}
@@ -144,6 +151,8 @@ def provenance_entries(producer, mechanism=None, options=None, damping_ratio=Non
                    mechanism_yaml=raw.decode('utf-8'), damping_ratio=repr(float(damping_ratio)),
                    model_options=json.dumps(dataclasses.asdict(options)),
                    crank_joint=str(crank_joint), warm_start=str(bool(warm_start)).lower())
+    if nonlinear is not None:
+        entries['nonlinear'] = 'on' if nonlinear else 'off'
     return entries
 
 
@@ -260,7 +269,10 @@ def provenance_from_entries(entries, where='recording'):
             mechanism_yaml=text, damping_ratio=float(entries['damping_ratio']),
             model_options=json.loads(entries['model_options']),
             crank_joint=entries.get('crank_joint', 'crank'),
-            warm_start=entries.get('warm_start', 'true') == 'true')
+            warm_start=entries.get('warm_start', 'true') == 'true',
+            nonlinear=entries.get('nonlinear', ''))
+        if record.nonlinear not in ('', 'on', 'off'):
+            raise ValueError(f'nonlinear {record.nonlinear[:20]!r} is not on or off')
         record.options()
         mechanism = record.mechanism()
         stiffness_damping_from_file(record._where(), raw=text.encode('utf-8'))

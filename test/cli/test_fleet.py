@@ -106,7 +106,8 @@ def test_fleet_equals_one_replay_per_bag(bags, tmp_path):
     for name in ('steady', 'gappy.mcap'):
         replay_out = tmp_path / f'replay_{name}.mcap'
         replay = flexlink('replay', str(bags / name), '--out', str(replay_out), '--json',
-                          '--mechanism', 'cho1992', *MODEL_FLAGS)
+                          '--mechanism', 'cho1992', *MODEL_FLAGS,
+                          '--nonlinear', 'off')     # the fleet runs the linear model
         assert replay.returncode == 0, replay.stderr
         expected = json.loads(replay.stdout)
         got = summaries[name]
@@ -114,7 +115,8 @@ def test_fleet_equals_one_replay_per_bag(bags, tmp_path):
         assert set(expected) <= set(got)
         # Replay's note on where its model came from is the fleet's 'mechanism' column.
         assert got['mechanism'] == '--mechanism cho1992'
-        for key in set(expected) - TIMING_KEYS - {'notes'}:
+        assert got['model_choice']['nonlinear'] is expected['model_choice']['nonlinear'] is False
+        for key in set(expected) - TIMING_KEYS - {'notes', 'model_choice'}:
             if key.endswith('peak_to_peak_um'):
                 assert got[key] == pytest.approx(expected[key], rel=1e-9), key
             else:

@@ -140,6 +140,7 @@ def test_a_replay_from_the_cache_imports_neither_ros_plotting_nor_scipy_solvers(
     code = ('import sys\nfrom flexlink_ros.cli import main\nmain.main(sys.argv[1:])\n'
             + HEAVY_IMPORTS)
     replay = [sys.executable, '-c', code, 'replay', str(bag), '--mechanism', 'cho1992',
+              '--nonlinear', 'off',    # (the nonlinear step solves with scipy)
               '--cache-dir', str(tmp_path / 'cache'), '--out']
     first = subprocess.run(replay + [str(tmp_path / 'first.mcap')], capture_output=True,
                            text=True, timeout=600, cwd=REPO)     # builds the model: needs scipy

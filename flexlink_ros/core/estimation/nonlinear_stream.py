@@ -23,7 +23,7 @@ stiffness K_G is added: the Galerkin projection of the linear full order.
 import time
 
 import numpy as np
-import scipy.linalg
+import scipy   # scipy.linalg loads on first use: a linear replay never needs it
 
 from ..integrators import RadauIIA
 

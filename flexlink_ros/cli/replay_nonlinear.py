@@ -1,0 +1,158 @@
+"""
+``replay --nonlinear auto|on|off``: the reduced nonlinear model's deflections in the output.
+
+The same rule and the same ``model: ...`` line as ``estimate --nonlinear``
+(:func:`.estimate_nonlinear.choose_nonlinear`). ``on`` writes the nonlinear model's lever-tip
+and coupler-mid deflections in place of the linear ones, block by block as the replay writes
+(:class:`NonlinearRows`: memory independent of the recording's length). ``auto`` (the default)
+first runs the linear estimate alone over the recording and writes the nonlinear deflections
+only where its validity indicator (the largest per-sample ``nonlinearity`` of ``~/quality``)
+says the linear estimate is not valid. A recording that names its model is replayed with the
+model that made it (the nonlinear one if its provenance says ``nonlinear: on``, else the
+linear one) unless ``--nonlinear`` is given; ``auto`` is for recordings that name no model.
+The output's provenance records the choice (``nonlinear``: ``on`` or ``off``).
+
+The nonlinear model steps through the samples the linear estimator accepted, with the crank
+angle and speed of its crank filter (the same crank state the linear estimate used), and starts
+again, at its quasi-static deflection, where the linear estimator starts a new segment. The
+criteria, the quality topic (the linear model's error and validity indicators) and the markers
+(the linear model's modal shape) are the linear estimate's.
+"""
+
+import math
+
+import numpy as np
+
+from .estimate_nonlinear import choose_nonlinear
+from ..core.estimation.nonlinear_stream import NonlinearStepper, VON_KARMAN_SLOPE
+from ..core.reduction.nonlinear_model import nonlinear_model_for
+from ..core.validity import is_valid
+
+TWO_PI = 2.0 * math.pi
+
+
+def nonlinear_choice(args, recorded):
+    """
+    Return 'auto', 'on' or 'off': the flag if given, else what the recording was made with.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        ``nonlinear`` (None when the flag was not given).
+    recorded : io.provenance.Provenance or None
+        The recording's provenance.
+
+    """
+    if getattr(args, 'nonlinear', None):
+        return args.nonlinear
+    if recorded is not None and recorded.has_model:
+        # Recorded before the nonlinear model existed: the linear model made it.
+        return recorded.nonlinear or 'off'
+    return 'auto'
+
+
+def decide(choice, summary=None):
+    """Return (use the nonlinear model, why) for ``choice`` and a linear run's summary."""
+    if choice != 'auto':
+        return choose_nonlinear(choice, None)
+    largest = summary['quality'].get('nonlinearity_max') if summary else None
+    return choose_nonlinear('auto', is_valid([math.nan if largest is None else largest]))
+
+
+class NonlinearRows:
+    """
+    Replace each block's linear deflections with the nonlinear model's (see the module notes).
+
+    Parameters
+    ----------
+    tables : NonlinearTables
+        The reduced nonlinear model.
+    reset_gap_s : float
+        A gap between accepted samples longer than this starts the model again (as the linear
+        estimator's segments).
+    damping : str
+        How the model is damped (:func:`core.reduction.nonlinear_model.nonlinear_model_for`).
+
+    """
+
+    def __init__(self, tables, reset_gap_s, damping=''):
+        self.tables, self.reset_gap_s, self.damping = tables, float(reset_gap_s), damping
+        self.stepper = NonlinearStepper(tables)
+        self.last = None          # (stamp [ns], unwrapped angle, speed) of the last sample
+        self.counts = {'samples': 0, 'refused_samples': 0, 'restarts': 0,
+                       'beyond_von_karman_samples': 0}
+        self.slope_max = 0.0
+        self.low = np.full(tables.outputs, np.inf)
+        self.high = np.full(tables.outputs, -np.inf)
+
+    def __call__(self, samples, estimate):
+        """Return ``estimate`` with the nonlinear 'lever_tip' and 'coupler_mid' rows."""
+        angles, speeds = estimate['crank_angle'], estimate['crank_speed']
+        accepted = (np.all(np.isfinite(estimate['lever_tip']), axis=1)
+                    & np.all(np.isfinite(estimate['coupler_mid']), axis=1)
+                    & np.isfinite(angles) & np.isfinite(speeds))
+        outputs = np.full((len(accepted), self.tables.outputs), np.nan)
+        stamps = samples['stamps_ns']
+        for n in np.flatnonzero(accepted).tolist():
+            outputs[n] = self._sample(int(stamps[n]), float(angles[n]), float(speeds[n]))
+        if accepted.any():
+            self.low = np.minimum(self.low, outputs[accepted].min(axis=0))
+            self.high = np.maximum(self.high, outputs[accepted].max(axis=0))
+        replaced = dict(estimate)
+        replaced['lever_tip'], replaced['coupler_mid'] = outputs[:, 0:2], outputs[:, 2:4]
+        return replaced
+
+    def _sample(self, stamp, angle, speed):
+        """Step to one accepted sample; its output deflections [m]."""
+        stepper, self.counts['samples'] = self.stepper, self.counts['samples'] + 1
+        h = None if self.last is None else (stamp - self.last[0]) * 1e-9
+        if h is None or not 0.0 < h <= self.reset_gap_s:
+            self.counts['restarts'] += self.last is not None
+            stepper.start(angle, speed)
+            self.last = (stamp, angle, speed)
+            return stepper.outputs(angle)
+        _, theta0, speed0 = self.last
+        predicted = 0.5 * (speed0 + speed) * h      # the change nearest the mean speed's
+        change = angle - theta0 - predicted
+        theta = theta0 + predicted + change - TWO_PI * round(change / TWO_PI)
+        if stepper.step(h, theta0, theta, speed0, speed):
+            output = stepper.output_operator @ stepper.q
+        else:
+            self.counts['refused_samples'] += 1
+            output = stepper.outputs(theta)
+        slope = float(np.max(stepper.slope)) if stepper.slope.size else 0.0
+        self.slope_max = max(self.slope_max, slope)
+        self.counts['beyond_von_karman_samples'] += slope > VON_KARMAN_SLOPE
+        self.last = (stamp, theta, speed)
+        return output
+
+    def summary(self):
+        """Return the JSON's ``nonlinear`` entry: peak-to-peak deflections [um] and counts."""
+        seen = bool(np.all(np.isfinite(self.high)))
+        span = (1e6 * (self.high - self.low)).tolist() if seen else [math.nan] * 4
+        return {**self.counts, 'lever_tip_peak_to_peak_um': span[0:2],
+                'coupler_mid_peak_to_peak_um': span[2:4],
+                'link_slope_max_rad': self.slope_max, 'size': self.tables.size,
+                'links': self.tables.links, 'damping': self.damping}
+
+
+def nonlinear_rows(args, mechanism, options, reset_gap_s):
+    """Return the :class:`NonlinearRows` of the replay's mechanism and options."""
+    tables, damping = nonlinear_model_for(mechanism, options, args.cache_dir,
+                                          not args.no_cache)
+    return NonlinearRows(tables, reset_gap_s, damping)
+
+
+def model_lines(result):
+    """Say the model choice (as estimate) and the nonlinear run in text lines."""
+    choice, nonlinear = result['model_choice'], result['nonlinear']
+    if nonlinear is None:
+        return [f"  model: linear ({choice['why']})"]
+    return [f"  model: nonlinear ({choice['why']}): the deflections above are its own",
+            f"  nonlinear: {nonlinear['samples']} samples, {nonlinear['refused_samples']} "
+            f"refused, {nonlinear['restarts']} restarts, link slope max "
+            f"{nonlinear['link_slope_max_rad']:.3g} rad (von Karman limit "
+            f'{VON_KARMAN_SLOPE:g}: {nonlinear["beyond_von_karman_samples"]} samples beyond)']
+
+
+__all__ = ['nonlinear_choice', 'decide', 'NonlinearRows', 'nonlinear_rows', 'model_lines']
