@@ -1,18 +1,18 @@
 """
 Time, compiled, the per-sample work the dynamic second-order pass adds to the streaming step.
 
-A small C kernel (compiled here with ``cc -O3``, as ``benchmarks/second_order_bench.py`` does) runs per
-sample what a compiled step with the pass (core/estimation/second_order_dynamic_step.py) adds to
-the linear step: the reduced static responses K_r^-1 f_r at the two Radau stages (their axial
-forces are the reference of the elastic axial force), the reduced second-order load f2 at the
-two stages (:class:`core.reduction.second_order_dynamic_tables.DynamicLoad`: per link the
-rotated gather B = B0 + c Bc + s Bs, u = B q, the elements' eigenstrain and geometric-stiffness
-loads, B^T f), the second right-hand side and its forward and back substitution with the
-linear step's LU factors (2 r), K_r^-1 f2_eigenstrain at the sample and the output operator on
-q2. Not included: the spline of the angle scalars (a few hundred multiply-adds) and the larger
-basis the pass needs (timed in ``cost`` of ``docs/studies/dynamic_second_order_study.py``). The stage load is
-checked against the numpy load before it is timed. Needs a C compiler; nothing here is used by
-the package at run time.
+A small C kernel (compiled here with ``cc -O3``, as ``benchmarks/second_order_bench.py`` does) runs
+per sample what a compiled step with the pass (core/estimation/second_order_dynamic_step.py) adds
+to the linear step: the reduced static responses K_r^-1 f_r at the two Radau stages (their axial
+forces are the reference of the elastic axial force), the reduced second-order load f2 at the two
+stages (:class:`core.reduction.second_order_dynamic_tables.DynamicLoad`: per link the rotated
+gather B = B0 + c Bc + s Bs, u = B q, the elements' eigenstrain and geometric-stiffness loads,
+B^T f), the second right-hand side and its forward and back substitution with the linear step's LU
+factors (2 r), K_r^-1 f2_eigenstrain at the sample and the output operator on q2. Not included: the
+spline of the angle scalars (a few hundred multiply-adds) and the larger basis the pass needs
+(timed in ``cost`` of ``docs/studies/dynamic_second_order_study.py``). The stage load is checked
+against the numpy load before it is timed. Needs a C compiler; nothing here is used by the package
+at run time.
 """
 
 import ctypes

@@ -99,7 +99,7 @@ def split_warm_up(seconds):
     from flexlink_ros.core.reduction import mechanism_model
     from flexlink_ros.ros import parameters as node_params
     model = mechanism_model.model_for_mechanism(load_mechanism('cho1992'),
-                                         node_params.default_model_options())
+                                                node_params.default_model_options())
     for rpm in (300.0, 391.0):
         speed = rpm * 2.0 * math.pi / 60.0
         times = np.arange(int(seconds * RATE_HZ)) / RATE_HZ
@@ -120,7 +120,7 @@ def split_warm_up(seconds):
 
 
 def _settled(error, level):
-    """Samples until the error stays below ``level``."""
+    """Count the samples until the error stays below ``level``."""
     above = np.flatnonzero(error >= level)
     return int(above[-1]) + 1 if above.size else 0
 

@@ -20,18 +20,17 @@ import sys
 import tempfile
 import time
 
-import numpy as np
-
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from flexlink_ros.core.estimation.nonlinear_stream import estimate_nonlinear  # noqa: E402
 from flexlink_ros.core.mechanism_file import load_mechanism  # noqa: E402
 from flexlink_ros.core.options import ModelOptions  # noqa: E402
-from flexlink_ros.core.reduction.nonlinear_model import nonlinear_model_for  # noqa: E402
 from flexlink_ros.core.reduction.mechanism_model import model_for_mechanism  # noqa: E402
+from flexlink_ros.core.reduction.nonlinear_model import nonlinear_model_for  # noqa: E402
 from flexlink_ros.studies.synthetic import stream_timed, synthetic_signal  # noqa: E402
 from flexlink_ros.studies.synthetic import timing_summary  # noqa: E402
+import numpy as np  # noqa: E402
 
 OPTIONS = ModelOptions(rigid_crank=True, bearings='flexible', elements_per_link=8,
                        stiffness_damping=1e-4)
@@ -84,7 +83,7 @@ def main():
     medians = {kind: statistics.median(r['median_us'] for r in values)
                for kind, values in runs.items()}
     for kind, values in runs.items():
-        print(f"{kind:9s}: median of medians {medians[kind]:9.1f} us, median p99 "
+        print(f'{kind:9s}: median of medians {medians[kind]:9.1f} us, median p99 '
               f"{statistics.median(r['p99_us'] for r in values):9.1f} us, median "
               f"{statistics.median(r['samples_per_s'] for r in values):9.0f} samples/s")
     print(f"nonlinear / linear update median: {medians['nonlinear'] / medians['linear']:.1f}x")

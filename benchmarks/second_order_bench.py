@@ -28,18 +28,18 @@ import subprocess
 import tempfile
 import time
 
-import numpy as np
-
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
 from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.fe.second_order_full import link_forms
 from flexlink_ros.core.fe.second_order_geometry import output_coefficients
-from flexlink_ros.core.fe.second_order_reduced import factored_forms, factored_second_order, gather_harmonics
+from flexlink_ros.core.fe.second_order_reduced import (factored_forms, factored_second_order,
+                                                       gather_harmonics)
 from flexlink_ros.core.kinematics import solve_kinematics
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction.cells import periodic_cell_coefficients
 from flexlink_ros.core.reduction.mechanism_model import fe_mechanism, model_for_mechanism
+import numpy as np
 
 SCALARS = 22    # cos, sin of the three link angles, then kappa (4 x 4), per grid node
 GRID = 128

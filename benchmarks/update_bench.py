@@ -17,15 +17,14 @@ import argparse
 import json
 import time
 
-import numpy as np
-
-from flexlink_ros.studies.synthetic import synthetic_signal
 from flexlink_ros.core.estimation.compiled_update import compiled_samples, use_python_path
 from flexlink_ros.core.estimation.step import MAX_SUBSTEP_NS
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction.mechanism_model import model_for_mechanism
+from flexlink_ros.studies.synthetic import synthetic_signal
+import numpy as np
 
 # Rows per batched call of the step (below the compiled step's GIL release, as one sample).
 CHUNK = 50

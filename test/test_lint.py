@@ -1,4 +1,4 @@
-"""ament's own linters, with their own settings, over the package, the tests and setup.py."""
+"""ament's own linters, with their own settings, over the package, tests, lab scripts, setup.py."""
 
 import pathlib
 
@@ -9,7 +9,7 @@ import pytest
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 # Explicit paths: with none, the linters walk the working directory (.venv/ and build/ too).
 PATHS = [str(ROOT / 'flexlink_ros'), str(ROOT / 'test'), str(ROOT / 'launch'),
-         str(ROOT / 'setup.py')]
+         str(ROOT / 'benchmarks'), str(ROOT / 'docs' / 'studies'), str(ROOT / 'setup.py')]
 
 
 @pytest.mark.flake8

@@ -51,18 +51,17 @@ import argparse
 import dataclasses
 import math
 
-import numpy as np
-
-from flexlink_ros.studies.peer_exudyn import compare, peer_response, revolution_slice
 from flexlink_ros.core.estimation.offline import replay
 from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.fe.simulate import periodic_response
 from flexlink_ros.core.fe.stiffness_damping import (element_resultants, link_local_rate,
-                                         stiffness_damping_terms, system_matrices)
+                                                    stiffness_damping_terms, system_matrices)
 from flexlink_ros.core.mechanism import Mechanism
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction import mechanism_model
+from flexlink_ros.studies.peer_exudyn import compare, peer_response, revolution_slice
+import numpy as np
 
 DAMPING = ('objective', 'naive', 'modal')
 OUTPUT_KEYS = ('lever_tip_dx', 'lever_tip_dy', 'coupler_mid_dx', 'coupler_mid_dy')

@@ -17,15 +17,14 @@ import json
 import math
 import time
 
-import numpy as np
-
-from flexlink_ros.studies.peer_exudyn import compare, revolution_slice
-from flexlink_ros.studies.peer_model import OUTPUT_KEYS
-from flexlink_ros.studies.validation import peer_run, Settings
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions, SECOND_ORDER_PASSES
 from flexlink_ros.core.reduction.mechanism_model import model_for_mechanism
+from flexlink_ros.studies.peer_exudyn import compare, revolution_slice
+from flexlink_ros.studies.peer_model import OUTPUT_KEYS
+from flexlink_ros.studies.validation import peer_run, Settings
+import numpy as np
 
 SAMPLES = 720
 REVOLUTIONS = 8

@@ -20,13 +20,10 @@ import pathlib
 import sys
 import time
 
-import numpy as np
-
-from flexlink_ros.studies.peer_exudyn import compare, peer_response
-from flexlink_ros.studies.peer_model import OUTPUT_KEYS
 from flexlink_ros.core.estimation import native
 from flexlink_ros.core.estimation.second_order_dynamic_kernel import DynamicPassKernel
-from flexlink_ros.core.estimation.second_order_dynamic_step import DynamicSecondOrderStep, steady_revolution
+from flexlink_ros.core.estimation.second_order_dynamic_step import (DynamicSecondOrderStep,
+                                                                    steady_revolution)
 from flexlink_ros.core.estimation.step import NumpyStep
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
 from flexlink_ros.core.estimation.tables import step_tables
@@ -38,10 +35,13 @@ from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction.mechanism_model import fe_mechanism, model_for_mechanism
 from flexlink_ros.core.reduction.second_order_dynamic_tables import load_for_model
+from flexlink_ros.studies.peer_exudyn import compare, peer_response
+from flexlink_ros.studies.peer_model import OUTPUT_KEYS
+import numpy as np
 
 # The compiled kernels' timers live with the benchmarks, beside this folder.
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[2] / 'benchmarks'))
-from dynamic_second_order_bench import time_pass  # noqa: E402
+from dynamic_second_order_bench import time_pass  # noqa: E402, I100
 
 SAMPLES = 720
 
@@ -147,8 +147,8 @@ def cost(mechanism, rpm, elements, sizes_list, rounds=5, samples=400, kernel_sam
     constant speed); 'compiled': the package's compiled order-2 step (the batched rows of the
     replay) of the same model; with ``kernel_samples`` (0: left out, it needs a C compiler)
     'kernel' and 'kernel_tabulated': the pass's own work compiled, with and without the
-    static solves (``time_pass`` of ``benchmarks/dynamic_second_order_bench.py``). Returns a list of dicts with
-    'r' and these times.
+    static solves (``time_pass`` of ``benchmarks/dynamic_second_order_bench.py``). Returns a
+    list of dicts with 'r' and these times.
     """
     speed = rpm * math.pi / 30.0
     rows = _rows(speed, samples)

@@ -17,13 +17,12 @@ import argparse
 import json
 import math
 
-import numpy as np
-
 from flexlink_ros.core.fe.nonlinear_response import nonlinear_response
 from flexlink_ros.core.fe.nonlinear_validity import orbit_validity
 from flexlink_ros.studies.peer_linear import linear_model
 from flexlink_ros.studies.peer_model import resolve_mechanism
 from flexlink_ros.studies.validation import BEARINGS
+import numpy as np
 
 BETA = 1e-4
 

@@ -18,11 +18,6 @@ import math
 import pathlib
 import sys
 
-import numpy as np
-
-from flexlink_ros.studies.peer_exudyn import compare, peak_to_peak, peer_response
-from flexlink_ros.studies.peer_linear import linear_model
-from flexlink_ros.studies.peer_model import DEFAULT_ELEMENTS, OUTPUT_KEYS, resolve_mechanism
 from flexlink_ros.core.estimation.offline import replay
 from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.fe.second_order_full import corrected_response
@@ -31,6 +26,10 @@ from flexlink_ros.core.fe.second_order_reduced import factored_forms, step_cost
 from flexlink_ros.core.fe.simulate import periodic_response
 from flexlink_ros.core.options import DEFAULT_SIZES, ModelOptions
 from flexlink_ros.core.reduction.mechanism_model import fe_mechanism, model_for_mechanism
+from flexlink_ros.studies.peer_exudyn import compare, peak_to_peak, peer_response
+from flexlink_ros.studies.peer_linear import linear_model
+from flexlink_ros.studies.peer_model import DEFAULT_ELEMENTS, OUTPUT_KEYS, resolve_mechanism
+import numpy as np
 
 # The compiled kernels' timers live with the benchmarks, beside this folder.
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[2] / 'benchmarks'))

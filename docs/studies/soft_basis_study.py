@@ -39,11 +39,6 @@ import argparse
 import dataclasses
 import math
 
-import numpy as np
-
-from flexlink_ros.studies.peer_model import resolve_mechanism
-from flexlink_ros.studies.plan import full_order_dofs, scene_options
-from flexlink_ros.studies.synthetic import last_revolution, synthetic_signal
 from flexlink_ros.core.estimation.offline import replay
 from flexlink_ros.core.numerics import relative_rms, RPM
 from flexlink_ros.core.options import ModelOptions
@@ -51,6 +46,10 @@ from flexlink_ros.core.reduction import mechanism_model
 from flexlink_ros.core.reduction import reference as reduction_reference
 from flexlink_ros.core.reduction.soft_basis import lowest_modes
 from flexlink_ros.core.reduction.soft_tables import node_values
+from flexlink_ros.studies.peer_model import resolve_mechanism
+from flexlink_ros.studies.plan import full_order_dofs, scene_options
+from flexlink_ros.studies.synthetic import last_revolution, synthetic_signal
+import numpy as np
 
 # (label, rpm, jitter) of the constant-speed cases, and the targets (relative RMS).
 STEADY_CASES = (('269 rpm', 269.0, 0.0), ('391 rpm', 391.0, 0.0),

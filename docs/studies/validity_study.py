@@ -35,14 +35,14 @@ import json
 import math
 import os
 
-import numpy as np
-
-from flexlink_ros.studies.peer_exudyn import compare, peer_response
-from flexlink_ros.studies.peer_linear import linear_model
-from flexlink_ros.studies.peer_model import BEARINGS, DEFAULT_BETA_S, DEFAULT_ELEMENTS, OUTPUT_KEYS, resolve_mechanism
 from flexlink_ros.core.fe.second_order_full import corrected_response
 from flexlink_ros.core.fe.simulate import periodic_response
 from flexlink_ros.core.validity import load_ratios, nonlinearity_indicator, VALIDITY_THRESHOLD
+from flexlink_ros.studies.peer_exudyn import compare, peer_response
+from flexlink_ros.studies.peer_linear import linear_model
+from flexlink_ros.studies.peer_model import (BEARINGS, DEFAULT_BETA_S, DEFAULT_ELEMENTS,
+                                             OUTPUT_KEYS, resolve_mechanism)
+import numpy as np
 
 TARGETS = {'lever_tip': 0.10, 'coupler_mid': 0.03}
 DEFAULT_RPM = tuple(sorted(set(range(250, 451, 10)) | set(range(385, 430, 10)) | {269, 391,
