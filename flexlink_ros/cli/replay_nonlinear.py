@@ -24,11 +24,10 @@ import math
 import numpy as np
 
 from .estimate_nonlinear import choose_nonlinear
-from ..core.estimation.nonlinear_stream import NonlinearStepper, VON_KARMAN_SLOPE
+from ..core.estimation.nonlinear_stream import NonlinearStepper, unwrap_with_speed, \
+    VON_KARMAN_SLOPE
 from ..core.reduction.nonlinear_model import nonlinear_model_for
 from ..core.validity import is_valid
-
-TWO_PI = 2.0 * math.pi
 
 
 def nonlinear_choice(args, recorded):
@@ -112,9 +111,8 @@ class NonlinearRows:
             self.last = (stamp, angle, speed)
             return stepper.outputs(angle)
         _, theta0, speed0 = self.last
-        predicted = 0.5 * (speed0 + speed) * h      # the change nearest the mean speed's
-        change = angle - theta0 - predicted
-        theta = theta0 + predicted + change - TWO_PI * round(change / TWO_PI)
+        theta = float(unwrap_with_speed(np.array([0.0, h]), np.array([theta0, angle]),
+                                        np.array([speed0, speed]))[0][1])
         if stepper.step(h, theta0, theta, speed0, speed):
             output = stepper.output_operator @ stepper.q
         else:

@@ -113,7 +113,7 @@ def mechanism_bytes(path_or_name):
 
 
 def provenance_entries(producer, mechanism=None, options=None, damping_ratio=None,
-                       crank_joint='crank', warm_start=True, raw=None, nonlinear=None):
+                       crank_joint='crank', warm_start=True, raw=None):
     """
     Return the provenance map (str -> str) a recording carries.
 
@@ -134,8 +134,6 @@ def provenance_entries(producer, mechanism=None, options=None, damping_ratio=Non
     raw : bytes, optional
         The mechanism file's bytes when they come from a recording (``mechanism`` then is the
         path it was recorded under).
-    nonlinear : bool, optional
-        Whether the deflections are the reduced nonlinear model's (None: not said).
 
     """
     entries = {'format': PROVENANCE_FORMAT, 'producer': producer, 'version': __version__}
@@ -151,8 +149,6 @@ def provenance_entries(producer, mechanism=None, options=None, damping_ratio=Non
                    mechanism_yaml=raw.decode('utf-8'), damping_ratio=repr(float(damping_ratio)),
                    model_options=json.dumps(dataclasses.asdict(options)),
                    crank_joint=str(crank_joint), warm_start=str(bool(warm_start)).lower())
-    if nonlinear is not None:
-        entries['nonlinear'] = 'on' if nonlinear else 'off'
     return entries
 
 
