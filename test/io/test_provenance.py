@@ -86,6 +86,7 @@ def _rewrite_entry(path, key, value):
     ('mechanism_yaml', SOFT.read_text().replace('0.20,', '0.21,'), 'does not match its SHA-256'),
     ('model_options', '{"modes": -3}', 'cannot be used'),
     ('damping_ratio', 'lots', 'cannot be used'),
+    ('nonlinear', 'maybe', 'cannot be used'),
 ])
 def test_an_altered_record_is_refused_with_one_line(tmp_path, key, value, reason):
     record(tmp_path / 'good.mcap', soft_entries())
