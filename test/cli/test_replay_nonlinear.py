@@ -21,16 +21,23 @@ SMALL_MODEL = ['--mechanism', 'cho1992', '--elements-per-link', '2', '--rigid-cr
                '--bearings', 'flexible', '--stiffness-damping', '1e-4']
 
 
-def write_bag(path, rpm, seconds=1.5, rate_hz=1000.0):
-    """Write a bag of crank JointStates at ``rpm`` (stamps jittered by up to 20 %)."""
+def write_bag(path, rpm, seconds=1.5, rate_hz=1000.0, edit=None):
+    """
+    Write a bag of crank JointStates at ``rpm`` (stamps jittered by up to 20 %).
+
+    ``edit(times, angles)`` may alter the sample times and angles before they are written.
+    """
     rng = np.random.default_rng(5)
     steps = (1.0 + 0.2 * rng.uniform(-1, 1, int(seconds * rate_hz))) / rate_hz
     times = np.concatenate([[0.0], np.cumsum(steps)])
-    stamps = (1_700_000_000_000_000_000 + np.round(times * 1e9)).astype(np.int64)
     speed = rpm * math.pi / 30.0
+    angles = np.mod(speed * times, 2 * math.pi)
+    if edit is not None:
+        edit(times, angles)
+    stamps = (1_700_000_000_000_000_000 + np.round(times * 1e9)).astype(np.int64)
     with McapRecorder(path) as recorder:
         recorder.add_topic('/joint_states', JointState)
-        for stamp, angle in zip(stamps.tolist(), np.mod(speed * times, 2 * math.pi)):
+        for stamp, angle in zip(stamps.tolist(), angles):
             message = JointState(name=['crank'], position=[float(angle)], velocity=[speed])
             message.header.stamp = ros_messages.ns_to_stamp(stamp)
             recorder.write('/joint_states', serialize_message(message), stamp + 100_000)
@@ -112,6 +119,29 @@ def test_a_nonlinear_replay_replayed_with_no_flags_reproduces_itself(tmp_path):
     assert again['model_choice']['asked'] == 'on' and again['model_choice']['nonlinear']
     topic = output_topics(NODE_NAME)['coupler_mid']
     assert written_rows(second, topic) == written_rows(first, topic)
+
+
+def test_bad_samples_and_a_gap_are_skipped_and_counted_not_stepped(tmp_path):
+    """Bad angles (NaN, absurd) are refused before the model steps; a 2 s gap restarts it."""
+    def edit(times, angles):
+        angles[200:205] = np.nan
+        angles[300] = 1e12
+        times[700:] += 2.0
+
+    bag, out = tmp_path / 'bag', tmp_path / 'out'
+    write_bag(bag, 391.0, edit=edit)
+    result = replay(str(bag), '--out', str(out), '--nonlinear', 'on', *SMALL_MODEL,
+                    '--cache-dir', str(tmp_path / 'cache'))
+    nonlinear = result['nonlinear']
+    assert nonlinear['restarts'] == 1 and nonlinear['refused_samples'] == 0
+    # The five NaN are skipped on reading, the absurd angle refused by the estimate; the
+    # model steps exactly the samples the linear estimate published.
+    assert result['skipped'] == 5, result['skipped_reasons']
+    assert nonlinear['samples'] == result['quality']['messages'] <= result['samples'] - 1, (
+        result['samples'], result['quality'], nonlinear)
+    lever = written_rows(out, output_topics(NODE_NAME)['lever_tip'])
+    assert lever and np.isfinite(np.array(list(lever.values()))).all()
+    assert all(np.isfinite(result['lever_tip_peak_to_peak_um']))
 
 
 def test_replay_auto_picks_the_linear_model_at_low_speed(tmp_path):
