@@ -1,12 +1,12 @@
 """
 Time the factored second-order step compiled, per sample.
 
-The step is core.fe.second_order_reduced.FactoredForms. A small C kernel (compiled here with
-``cc -O3``, the flags of the package's compiled step, setup.py) does per sample what a compiled
+The step is FactoredForms (docs/studies/second_order_forms.py). A small C kernel (compiled here
+with ``cc -O3``, the flags of the package's compiled step, setup.py) does per sample what a compiled
 estimator step would add: the cubic-spline tables of cos/sin of the link angles and of kappa
 (22 scalars), the rows of V q the links read, the rotation of the end-node translations, the
 bands of G and the 4 x 4 output combination. It is checked against
-:func:`core.fe.second_order_reduced.factored_second_order` at the grid angles (where the spline
+:func:`second_order_forms.factored_second_order` at the grid angles (where the spline
 equals its samples) before it is timed. Needs a C compiler; nothing here is used by the package
 at run time.
 
@@ -25,6 +25,7 @@ import math
 import pathlib
 import shutil
 import subprocess
+import sys
 import tempfile
 import time
 
@@ -32,14 +33,17 @@ from flexlink_ros.core.estimation.streaming import StreamingEstimator
 from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.fe.second_order_full import link_forms
 from flexlink_ros.core.fe.second_order_geometry import output_coefficients
-from flexlink_ros.core.fe.second_order_reduced import (factored_forms, factored_second_order,
-                                                       gather_harmonics)
+from flexlink_ros.core.fe.second_order_reduced import gather_harmonics
 from flexlink_ros.core.kinematics import solve_kinematics
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction.cells import periodic_cell_coefficients
 from flexlink_ros.core.reduction.mechanism_model import fe_mechanism, model_for_mechanism
 import numpy as np
+
+# The factored forms this kernel evaluates live with the second-order study, beside this folder.
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / 'docs' / 'studies'))
+from second_order_forms import factored_forms, factored_second_order  # noqa: E402, I100
 
 SCALARS = 22    # cos, sin of the three link angles, then kappa (4 x 4), per grid node
 GRID = 128
