@@ -1,16 +1,18 @@
-"""The estimator bench's configurations and targets (studies/bench.py)."""
+"""The estimator's model configurations and their errors (studies/configurations.py)."""
 
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction import mechanism_model
+from flexlink_ros.core.reduction import reference as reduction_reference
 from flexlink_ros.core.reduction.soft_basis import gap_ratios, MIN_GAP_RATIO
 from flexlink_ros.core.reduction.soft_tables import node_values
-from flexlink_ros.studies import bench
+from flexlink_ros.studies import configurations
+from toy_system import toy_model, toy_reference
 
 
 def test_configurations_vary_one_size_at_a_time_around_the_default():
     base = ModelOptions.linear(modes=6, static=2, grid_size=128)
-    rows = bench.bench_configurations(base)
+    rows = configurations.model_configurations(base)
     assert rows[0] == ('default', base)
     by_label = dict(rows)
     assert len(by_label) == len(rows) == 6
@@ -20,29 +22,18 @@ def test_configurations_vary_one_size_at_a_time_around_the_default():
     for _, options in rows:
         assert options.bearings == base.bearings and options.rigid_crank == base.rigid_crank
     # a smaller basis keeps at least one mode
-    assert bench.bench_configurations(ModelOptions.linear(modes=3))[1][1].modes == 1
-
-
-def test_targets_are_judged_from_the_default_configuration():
-    fast = {'us_per_sample': 10.0, 'offline_samples_per_s': 100_000.0}
-    slow = {'us_per_sample': 10.5, 'offline_samples_per_s': 99_999.0}
-    met = bench.bench_targets({'configurations': [fast, slow], 'cpu_ratio': 100.0})
-    assert [t['name'] for t in met] == ['update median', 'offline', 'CPU vs full order at 1 kHz']
-    assert all(t['met'] for t in met)
-    missed = bench.bench_targets({'configurations': [slow, fast], 'cpu_ratio': None})
-    assert not any(t['met'] for t in missed)
-    assert missed[0]['value'] == 10.5 and missed[1]['unit'] == 'samples/s'
+    assert configurations.model_configurations(ModelOptions.linear(modes=3))[1][1].modes == 1
 
 
 def test_soft_rows_are_the_other_usable_gaps_and_soft_off():
     # the paper's rigid-crank scene, flexible bearings (16 + 2), grid 64: its model as loaded
     options = ModelOptions.linear(bearings='flexible', grid_size=64)
     model = mechanism_model.model_for_mechanism(load_mechanism('cho1992'), options)
-    sizes = bench.usable_soft_sizes(model)
+    sizes = configurations.usable_soft_sizes(model)
     ratios = gap_ratios(node_values(model, 'M')['1'], node_values(model, 'K'),
                         float(model.speed_max), 5000.0)
     assert sizes == [p for p in range(1, model.size) if ratios[p - 1] >= MIN_GAP_RATIO ** 2]
-    rows = bench.soft_configurations(options, model)
+    rows = configurations.soft_configurations(options, model)
     if model.soft is None:       # no usable gap: the default steps every coordinate already
         assert sizes == [] and rows == []
         return
@@ -52,3 +43,22 @@ def test_soft_rows_are_the_other_usable_gaps_and_soft_off():
     assert rows[-1][0] == f'soft off (r = {model.size})' and rows[-1][2].soft is None
     for _, _, soft in rows:     # the same reduced tables, only the step's basis differs
         assert soft.table is model.table
+
+
+def test_rows_measure_each_configuration_and_report_each_step(monkeypatch):
+    monkeypatch.setattr(mechanism_model, 'model_for_mechanism', toy_model)
+    monkeypatch.setattr(reduction_reference, 'reference_response', toy_reference)
+    calls = []
+    base = ModelOptions.linear(modes=4, static=2, grid_size=32)
+    rows = configurations.configuration_rows(None, base, lambda *call: calls.append(call))
+    labels = [label for label, _ in configurations.model_configurations(base)]
+    assert [row['label'] for row in rows][:1] == ['default'] and rows[0]['default']
+    assert set(labels) <= {row['label'] for row in rows}
+    assert [what for _, _, what in calls] == (
+        [f'building {label}' for label in labels] + [f'errors of {row["label"]}' for row in rows])
+    assert [done for done, _, _ in calls] == list(range(len(calls)))
+    for row in rows:
+        assert set(row['errors']) == {'269', '391'}
+        assert row['error_coupler_mid'] == max(e['error_coupler_mid']
+                                               for e in row['errors'].values())
+        assert 'us_per_sample' not in row           # the timing is a benchmark's
