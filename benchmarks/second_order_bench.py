@@ -1,10 +1,10 @@
 """
 Time the factored second-order step compiled, per sample.
 
-The step is FactoredForms (docs/studies/second_order_forms.py). A small C kernel (compiled here
-with ``cc -O3``, the flags of the package's compiled step, setup.py) does per sample what a compiled
-estimator step would add: the cubic-spline tables of cos/sin of the link angles and of kappa
-(22 scalars), the rows of V q the links read, the rotation of the end-node translations, the
+The step is FactoredForms (docs/studies/second_order_forms.py). A small C kernel (compiled
+here with ``cc -O3``, the flags of the package's compiled step, setup.py) does per sample what
+a compiled estimator step would add: the cubic-spline tables of cos/sin of the link angles
+and of kappa (22 scalars), the rows of V q the links read, the rotation of the end-node translations, the
 bands of G and the 4 x 4 output combination. It is checked against
 :func:`second_order_forms.factored_second_order` at the grid angles (where the spline
 equals its samples) before it is timed. Needs a C compiler; nothing here is used by the package
@@ -44,6 +44,7 @@ import numpy as np
 # The factored forms this kernel evaluates live with the second-order study, beside this folder.
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / 'docs' / 'studies'))
 from second_order_forms import factored_forms, factored_second_order  # noqa: E402, I100
+from update_bench import update_round  # noqa: E402, I100
 
 SCALARS = 22    # cos, sin of the three link angles, then kappa (4 x 4), per grid node
 GRID = 128
@@ -255,15 +256,10 @@ def time_factored(mechanism, bearings, rigid_crank, size, samples=20000, repeat=
 
 def _update_round(estimator, speed, samples, start):
     """Median ns of ``samples`` streaming updates at 1 kHz, constant speed, after ``start``."""
-    times = np.empty(samples)
-    clock = time.perf_counter_ns
-    for n in range(samples):
-        stamp = start + n + 1
-        angle = speed * stamp * 1e-3
-        before = clock()
-        estimator.update(stamp * 1_000_000, angle, speed)
-        times[n] = clock() - before
-    return float(np.median(times))
+    stamps = start + 1 + np.arange(samples)
+    signal = ((stamps * 1_000_000).tolist(), (speed * stamps * 1e-3).tolist(), [speed] * samples)
+    times_us, _ = update_round(estimator, signal, settle=0)
+    return float(np.median(times_us)) * 1e3
 
 
 def _rows_round(estimator, speed, samples):
