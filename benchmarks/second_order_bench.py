@@ -1,14 +1,14 @@
 """
 Time the factored second-order step compiled, per sample.
 
-The step is FactoredForms (docs/studies/second_order_forms.py). A small C kernel (compiled
-here with ``cc -O3``, the flags of the package's compiled step, setup.py) does per sample what
-a compiled estimator step would add: the cubic-spline tables of cos/sin of the link angles
-and of kappa (22 scalars), the rows of V q the links read, the rotation of the end-node translations, the
-bands of G and the 4 x 4 output combination. It is checked against
-:func:`second_order_forms.factored_second_order` at the grid angles (where the spline
-equals its samples) before it is timed. Needs a C compiler; nothing here is used by the package
-at run time.
+The step is FactoredForms (docs/studies/second_order_forms.py). A small C kernel (compiled here
+with ``cc -O3``, the flags of the package's compiled step, setup.py) does per sample what a
+compiled estimator step would add: the cubic-spline tables of cos/sin of the link angles and of
+kappa (22 scalars), the rows of V q the links read, the rotation of the end-node translations,
+the bands of G and the 4 x 4 output combination. It is checked against
+:func:`second_order_forms.factored_second_order` at the grid angles (where the spline equals
+its samples) before it is timed. Needs a C compiler; nothing here is used by the package at run
+time.
 
 :func:`streaming_overhead` times what the second order costs in the package's own compiled
 step (core/estimation/_radau_step.c): the in-process streaming update and the batched step
