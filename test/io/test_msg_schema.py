@@ -2,9 +2,9 @@
 
 import re
 
-from cdr_helpers import rclpy_exact
+from cdr_helpers import cdr_layout, rclpy_exact
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from flexlink_ros.io.msg_schema import cdr_layout, message_definition, serialize_exact, type_hash
+from flexlink_ros.io.msg_schema import message_definition, serialize_exact, type_hash
 from flexlink_ros.ros import messages as ros_messages
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
