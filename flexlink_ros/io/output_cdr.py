@@ -46,7 +46,7 @@ def vector3_stamped_cdr(sec, nanosec, frame, x, y, z=0.0):
 
 
 def criteria_cdr(sec, nanosec, frame, ratio, gamma_dot, force):
-    """CDR bytes of the criteria ``sensor_msgs/JointState`` (ros_messages.criteria_message)."""
+    """CDR bytes of the criteria ``sensor_msgs/JointState`` (fields: ros/messages.py)."""
     if len(ratio) == len(gamma_dot) == len(force) == len(JOINTS):
         # Per-sample path: the layout is fixed by the frame; patch a template (~1 us).
         template, offsets = criteria_template(frame)
@@ -101,7 +101,7 @@ def quality_template(frame):
 
 def quality_cdr(sec, nanosec, frame, error_indicator, nonlinearity):
     """
-    Return the CDR of the quality ``sensor_msgs/JointState`` (ros/messages.py quality_message).
+    Return the CDR of the quality ``sensor_msgs/JointState`` (fields: ros/messages.py).
 
     name = QUALITY_NAMES, position = the two indicators (frame as UTF-8 bytes). The per-sample
     path: the layout is fixed by the frame, so a template is patched (~1 us).
