@@ -113,6 +113,13 @@ PARAMETERS = (
                   f"mechanism file's crank_speed_rpm times {SPEED_MARGIN:g}, at least "
                   f'{int(DEFAULT_SPEED_MAX * 30.0 / math.pi)} rpm', low=0.0, high=1e5,
                   read_only=True),
+    ParameterSpec('model.nonlinear', 'auto', 'The lever-tip and coupler-mid deflections '
+                  'from the geometrically nonlinear model (true through resonance, about 15-30 '
+                  'times the linear update): on, off, or auto = on only if the linear '
+                  "model's validity indicator says it is not valid somewhere in the model's "
+                  'speed range (a ramp scan at start-up, logged); criteria and markers stay '
+                  "the linear model's", choices=('auto', 'on', 'off'), read_only=True,
+                  max_bytes=NAME_MAX_BYTES),
     ParameterSpec('model.cache_dir', '', 'Directory of precomputed-model cache files '
                   '(empty: ~/.cache/flexlink_ros)', read_only=True, max_bytes=PATH_MAX_BYTES),
     ParameterSpec('model.warm_start', True,

@@ -24,7 +24,7 @@ from ..validity import VALIDITY_THRESHOLD
 
 def nonlinear_validity(link_slope):
     """
-    Validity indicator of a nonlinear estimate: threshold x (slope / slope limit)^2.
+    Return the validity indicator of a nonlinear estimate: threshold x (slope / limit)^2.
 
     Parameters
     ----------

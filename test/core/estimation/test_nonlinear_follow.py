@@ -10,7 +10,7 @@ deflection; the validity indicator is the slope rule stated in the module.
 import dataclasses
 import math
 
-from flexlink_ros.core.estimation.nonlinear_follow import NonlinearFollower, nonlinear_validity
+from flexlink_ros.core.estimation.nonlinear_follow import nonlinear_validity, NonlinearFollower
 from flexlink_ros.core.estimation.nonlinear_stream import (estimate_nonlinear, NonlinearStepper,
                                                            VON_KARMAN_SLOPE)
 from flexlink_ros.core.fe.linkage import FlexibleLinkage
@@ -33,7 +33,7 @@ def tables():
 
 
 def _signal(count, rate_hz=1000.0, seed=3):
-    """A jittered 391 rpm crank: stamps [ns], wrapped angles, speeds."""
+    """Return a jittered 391 rpm crank: stamps [ns], wrapped angles, speeds."""
     steps = (1.0 + 0.3 * np.random.default_rng(seed).uniform(-1.0, 1.0, count - 1)) / rate_hz
     time_s = np.concatenate([[0.0], np.cumsum(steps)])
     return (np.round(time_s * 1e9).astype(np.int64), np.mod(SPEED * time_s, 2.0 * math.pi),
