@@ -139,7 +139,8 @@ RIGID_NODE = ('diagnostics.period_s:=0.1', 'model.bearings:=rigid', 'model.rigid
 
 
 def _watch(ros, facts=None):
-    """Publish crank input to the node; collect its lever tip outputs and estimator statuses.
+    """
+    Publish crank input to the node; collect its lever tip outputs and estimator statuses.
 
     ``facts``: a list given every estimator status's key values.
     """
