@@ -220,9 +220,11 @@ def test_the_nonlinear_node_judges_its_own_estimate_through_the_resonance(
     verdicts = _watch(ros, facts)
     found = verdicts(405.0, 10**18)
     print(found, facts[-1])
-    assert found and all('not valid' not in message
-                         and 0.0 < value < validity.VALIDITY_THRESHOLD
-                         for _, message, value, _ in found), found
+    # (the first period may hold only the model's start, which is not judged: NaN)
+    judged = [value for _, _, value, _ in found if not math.isnan(value)]
+    assert len(judged) >= len(found) - 1, found
+    assert all('not valid' not in message for _, message, _, _ in found), found
+    assert all(0.0 < value < validity.VALIDITY_THRESHOLD for value in judged), found
     last = facts[-1]
     assert last['model_nonlinear'] == 'on' and 'beta' in last['nonlinear_damping']
     assert int(last['nonlinear_samples']) >= 500
