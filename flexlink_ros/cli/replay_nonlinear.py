@@ -24,7 +24,7 @@ import math
 import numpy as np
 
 from .estimate_nonlinear import choose_nonlinear
-from ..core.estimation.nonlinear_follow import NonlinearFollower
+from ..core.estimation.nonlinear_follow import follow_rows, follow_summary, NonlinearFollower
 from ..core.estimation.nonlinear_stream import VON_KARMAN_SLOPE
 from ..core.reduction.nonlinear_model import nonlinear_model_for
 from ..core.validity import is_valid
@@ -82,14 +82,7 @@ class NonlinearRows:
 
     def __call__(self, samples, estimate):
         """Return ``estimate`` with the nonlinear 'lever_tip' and 'coupler_mid' rows."""
-        angles, speeds = estimate['crank_angle'], estimate['crank_speed']
-        accepted = (np.all(np.isfinite(estimate['lever_tip']), axis=1)
-                    & np.all(np.isfinite(estimate['coupler_mid']), axis=1)
-                    & np.isfinite(angles) & np.isfinite(speeds))
-        outputs = np.full((len(accepted), self.tables.outputs), np.nan)
-        stamps, follow = samples['stamps_ns'], self.follower.sample
-        for n in np.flatnonzero(accepted).tolist():
-            outputs[n] = follow(int(stamps[n]), float(angles[n]), float(speeds[n]))
+        outputs, accepted = follow_rows(self.follower, samples['stamps_ns'], estimate)
         if accepted.any():
             self.low = np.minimum(self.low, outputs[accepted].min(axis=0))
             self.high = np.maximum(self.high, outputs[accepted].max(axis=0))
@@ -99,13 +92,7 @@ class NonlinearRows:
 
     def summary(self):
         """Return the JSON's ``nonlinear`` entry: peak-to-peak deflections [um] and counts."""
-        seen = bool(np.all(np.isfinite(self.high)))
-        span = (1e6 * (self.high - self.low)).tolist() if seen else [math.nan] * 4
-        follower = self.follower
-        return {**follower.counts, 'lever_tip_peak_to_peak_um': span[0:2],
-                'coupler_mid_peak_to_peak_um': span[2:4],
-                'link_slope_max_rad': follower.slope_max, 'size': self.tables.size,
-                'links': self.tables.links, 'damping': self.damping}
+        return follow_summary(self.follower, self.low, self.high, self.damping)
 
 
 def nonlinear_rows(args, mechanism, options, reset_gap_s):
