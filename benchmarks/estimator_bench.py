@@ -4,7 +4,8 @@ Time the estimator's model configurations side by side, with their errors, and d
 In one run: streaming cost per sample (median, p99), offline samples per second, full-order
 CPU per simulated second, and each configuration's error against the full-order reference
 (the configurations and their errors: :mod:`studies.configurations`); every configuration is
-timed in interleaved rounds, best of three. It prints a table and writes a chart of error
+timed in interleaved rounds, best of three; the reduced nonlinear model's update against the
+default's in alternating rounds (:func:`nonlinear_timing`). It prints a table and writes a chart of error
 against cost. ``python benchmarks/estimator_bench.py`` runs it for the node's default model
 with the estimator's model flags (``--modes``, ``--grid-size``, ...).
 """
@@ -18,12 +19,14 @@ import time
 from flexlink_ros.cli.model_args import add_estimator_arguments, model_options
 from flexlink_ros.cli.progress import Progress
 from flexlink_ros.core.estimation.native import compiled_step_available
+from flexlink_ros.core.estimation.nonlinear_stream import estimate_nonlinear
 from flexlink_ros.core.estimation.offline import replay
 from flexlink_ros.core.fe import linkage as assembly
 from flexlink_ros.core.integrators import RadauIIA
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.numerics import RPM
 from flexlink_ros.core.reduction import mechanism_model
+from flexlink_ros.core.reduction.nonlinear_model import nonlinear_model_for
 from flexlink_ros.studies.configurations import configuration_row, model_configurations, \
     soft_configurations
 from flexlink_ros.studies.synthetic import PAPER_RPM, stream_timed, synthetic_signal, \
@@ -35,6 +38,11 @@ OFFLINE_SECONDS = 20.0
 # The estimator's targets (the soft basis's): median streaming update [us], offline samples/s.
 UPDATE_TARGET_US = 10.0
 OFFLINE_TARGET = 100_000.0
+# The nonlinear model's: its update's median over the linear one's, offline samples/s.
+NONLINEAR_RATIO_TARGET = 10.0
+NONLINEAR_OFFLINE_TARGET = 10_000.0
+# Length of the signal the nonlinear model's offline rate is measured on [s].
+NONLINEAR_OFFLINE_SECONDS = 4.0
 CHANNELS = (('coupler_mid', 'coupler mid-point'), ('lever_tip', 'lever tip'))
 # Markers of the configurations after the default's star (colours: matplotlib's tab10).
 MARKERS = ('o', 's', '^', 'v', 'D', 'P', 'X', '<', '>', 'h')
@@ -116,6 +124,43 @@ def interleaved_timing(entries, signal, long_signal, rounds=3, each_round=None):
     return best
 
 
+def nonlinear_timing(mechanism, options, model, signal, rounds=3):
+    """
+    Time the reduced nonlinear model's update against the linear model's, alternating.
+
+    Each round times the linear streaming update (``model``) and the nonlinear model's step
+    plus outputs over ``signal``, and the nonlinear model offline (the same loop, every
+    sample) over its first :data:`NONLINEAR_OFFLINE_SECONDS`; each keeps its best round.
+
+    Returns
+    -------
+    dict
+        'size', 'damping', 'us_per_sample', 'us_per_sample_p99', 'offline_samples_per_s',
+        'linear_us_per_sample' (the same rounds), 'ratio' (nonlinear / linear median),
+        'newton_per_sample', 'refused'.
+
+    """
+    tables, damping = nonlinear_model_for(mechanism, options, use_cache=False)
+    stamps = signal[0]
+    offline = stamps <= stamps[0] + int(NONLINEAR_OFFLINE_SECONDS * 1e9)
+    best = {'us_per_sample': math.inf, 'linear_us_per_sample': math.inf,
+            'offline_samples_per_s': 0.0}
+    for _ in range(rounds):
+        linear, _ = timing_summary(stream_timed(model, *signal)[1])
+        out = estimate_nonlinear(tables, *signal)
+        median, p99 = timing_summary(out['update_ns'][1:])
+        start = time.perf_counter()
+        estimate_nonlinear(tables, *(array[offline] for array in signal))
+        rate = int(offline.sum()) / (time.perf_counter() - start)
+        best['linear_us_per_sample'] = min(best['linear_us_per_sample'], linear)
+        if median < best['us_per_sample']:
+            best.update(us_per_sample=median, us_per_sample_p99=p99, refused=out['refused'],
+                        newton_per_sample=out['newton_iterations'] / max(1, stamps.size - 1))
+        best['offline_samples_per_s'] = max(best['offline_samples_per_s'], rate)
+    return {**best, 'size': tables.size, 'damping': damping,
+            'ratio': best['us_per_sample'] / best['linear_us_per_sample']}
+
+
 def bench_targets(result):
     """
     Judge the estimator's targets from the default configuration's figures.
@@ -141,7 +186,20 @@ def bench_targets(result):
          'met': default['offline_samples_per_s'] >= OFFLINE_TARGET},
         {'name': 'CPU vs full order at 1 kHz', 'value': result['cpu_ratio'], 'unit': 'x less',
          'target': '>= 100', 'met': bool(result['cpu_ratio'] and result['cpu_ratio'] >= 100.0)},
-    ]
+    ] + _nonlinear_targets(result.get('nonlinear'))
+
+
+def _nonlinear_targets(nonlinear):
+    """Judge the nonlinear model's targets (none without its timing)."""
+    if not nonlinear:
+        return []
+    return [
+        {'name': 'nonlinear update vs linear', 'value': nonlinear['ratio'], 'unit': 'x',
+         'target': f'<= {NONLINEAR_RATIO_TARGET:g}',
+         'met': nonlinear['ratio'] <= NONLINEAR_RATIO_TARGET},
+        {'name': 'nonlinear offline', 'value': nonlinear['offline_samples_per_s'],
+         'unit': 'samples/s', 'target': f'>= {NONLINEAR_OFFLINE_TARGET:g}',
+         'met': nonlinear['offline_samples_per_s'] >= NONLINEAR_OFFLINE_TARGET}]
 
 
 class _Steps:
@@ -158,7 +216,7 @@ class _Steps:
 
 
 def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM,
-              configurations=None, progress=None):
+              configurations=None, progress=None, nonlinear=True):
     """
     Side-by-side costs and errors of the configurations (see module docstring).
 
@@ -182,12 +240,16 @@ def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM
     progress : callable or None
         ``progress(done, total, what)`` before each step (a model built, a timing round, a
         configuration's errors, the full-order CPU) and once at the end.
+    nonlinear : bool
+        Also time the reduced nonlinear model of the default's options against the default
+        (:func:`nonlinear_timing`).
 
     Returns
     -------
     dict
         'configurations': per configuration us/sample (median, p99), offline samples/s,
-        errors per speed, model bytes; 'reference_cpu_s_per_s'; 'cpu_ratio'; 'targets'.
+        errors per speed, model bytes; 'reference_cpu_s_per_s'; 'cpu_ratio'; 'nonlinear'
+        (:func:`nonlinear_timing`, or False); 'targets'.
 
     """
     signal = synthetic_signal(max(speeds_rpm), seconds, rate_hz)
@@ -196,7 +258,7 @@ def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM
     soft_rows = configurations is None      # the default's soft basis sizes too
     configurations = configurations or model_configurations(base)
     rounds = 3
-    step = _Steps(progress, 2 * len(configurations) + rounds + 1)
+    step = _Steps(progress, 2 * len(configurations) + rounds + 1 + bool(nonlinear))
     for label, options in configurations:
         step(f'building {label}')
         models.append((label, options,
@@ -211,6 +273,10 @@ def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM
     timings = interleaved_timing(entries, signal, long_signal, rounds,
                                  lambda k: step(f'timing round {k + 1} of {rounds}'))
     numpy_step = timings.pop(numpy_key)
+    if nonlinear:
+        step('the nonlinear model against the default')
+        nonlinear = nonlinear_timing(mechanism, configurations[0][1], models[0][2], signal,
+                                     rounds)
     rows, reference_cpu = [], None
     for label, options, model in models:
         step(f'errors of {label}')
@@ -226,7 +292,7 @@ def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM
               'estimator_cpu_s_per_s': estimator_cpu,
               'cpu_ratio': (reference_cpu / estimator_cpu) if reference_cpu else None,
               'compiled_step': compiled_step_available(),
-              'numpy_step': numpy_step}
+              'numpy_step': numpy_step, 'nonlinear': nonlinear}
     result['targets'] = bench_targets(result)
     step('done')
     return result
@@ -325,6 +391,14 @@ def bench_lines(result):
                  f'{numpy_step["offline_samples_per_s"]:>10.0f}   (the same numbers; '
                  + ('every row timed in interleaved rounds, best of 3)'
                     if result['compiled_step'] else 'the compiled step is NOT built)'))
+    nonlinear = result.get('nonlinear')
+    if nonlinear:
+        lines.append(f'{"nonlinear (reduced)":<22} {nonlinear["size"]:>3} {"":>3} {"":>5} '
+                     f'{nonlinear["us_per_sample"]:>7.1f} {nonlinear["us_per_sample_p99"]:>7.1f} '
+                     f'{nonlinear["offline_samples_per_s"]:>10.0f}   ({nonlinear["ratio"]:.1f}x '
+                     f'the default linear update in the same rounds, '
+                     f'{nonlinear["newton_per_sample"]:.2f} Newton iterations per sample; '
+                     'its accuracy against the Exudyn peer: docs/nonlinear.md)')
     if result['cpu_ratio']:
         lines.append(f'full-order reference: {result["reference_cpu_s_per_s"]:.3g} CPU s per '
                      f'simulated s; estimator {result["estimator_cpu_s_per_s"]:.3g} '
@@ -352,13 +426,16 @@ def main(argv=None):
                         help='speeds of the error checks, comma list [rpm] (default: the paper)')
     parser.add_argument('--only-default', action='store_true',
                         help='the default configuration alone (a quick run)')
+    parser.add_argument('--no-nonlinear', action='store_true',
+                        help='leave out the reduced nonlinear model\'s row')
     args = parser.parse_args(argv)
     mechanism = load_mechanism(args.mechanism)
     base = model_options(args)
     speeds = tuple(float(s) for s in args.speeds.split(',')) if args.speeds else PAPER_RPM
     with Progress('bench', unit='step') as progress:
         result = run_bench(mechanism, base, args.rate_hz, args.seconds, speeds,
-                           [('default', base)] if args.only_default else None, progress)
+                           [('default', base)] if args.only_default else None, progress,
+                           nonlinear=not args.no_nonlinear)
     if not args.no_chart:
         chart = pathlib.Path(args.out) / 'estimator_error_vs_cost.png'
         result['chart'] = str(plot_error_vs_cost(result['configurations'], chart))

@@ -185,6 +185,8 @@ def _choose_model(args, mechanism, options, model, tables, opened):
                                                   tables=tables)
         opened = open_input(args, [])
     use, why = decide(asked, linear_summary)
+    if not getattr(args, 'nonlinear', None) and asked != 'auto':
+        why = f"the recording's model (its provenance says nonlinear: {asked})"
     transform = nonlinear_rows(args, mechanism, options, DEFAULT_RESET_GAP_S) if use else None
     if args.provenance.get('model_options'):
         args.provenance['nonlinear'] = 'on' if use else 'off'

@@ -1,11 +1,15 @@
 """The estimator's configurations timed side by side, and its chart (benchmarks/estimator_bench.py)."""
 
+import dataclasses
 import itertools
+import math
 
 import estimator_bench
+from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction import mechanism_model
 from flexlink_ros.core.reduction import reference as reduction_reference
+from flexlink_ros.studies.synthetic import synthetic_signal
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import to_rgba
 import pytest
@@ -41,7 +45,8 @@ def test_bench_table_and_chart(toy, tmp_path):
                       ('small', linear(modes=2, static=0, grid_size=32))]
     calls = []
     result = estimator_bench.run_bench(None, None, seconds=0.3, configurations=configurations,
-                                       progress=lambda *call: calls.append(call))
+                                       progress=lambda *call: calls.append(call),
+                                       nonlinear=False)
     rows = result['configurations']
     # every step reported before it runs, counted up to the total: 2 builds, 3 timing
     # rounds, 2 error rows, the full-order CPU, then the end
@@ -76,6 +81,25 @@ def test_targets_are_judged_from_the_default_configuration():
     missed = estimator_bench.bench_targets({'configurations': [slow, fast], 'cpu_ratio': None})
     assert not any(t['met'] for t in missed)
     assert missed[0]['value'] == 10.5 and missed[1]['unit'] == 'samples/s'
+
+
+def test_the_nonlinear_model_is_timed_against_the_linear_update_in_the_same_rounds():
+    mechanism = dataclasses.replace(load_mechanism('cho1992'), elements_per_link=2)
+    options = ModelOptions.linear(bearings='flexible', grid_size=32, elements_per_link=2)
+    model = mechanism_model.model_for_mechanism(mechanism, options)
+    timing = estimator_bench.nonlinear_timing(mechanism, options, model,
+                                              synthetic_signal(391.0, 0.3, 1000.0), rounds=2)
+    assert timing['refused'] == 0 and timing['newton_per_sample'] >= 1.0
+    assert timing['ratio'] == timing['us_per_sample'] / timing['linear_us_per_sample']
+    assert 0.0 < timing['us_per_sample'] <= timing['us_per_sample_p99']
+    assert timing['offline_samples_per_s'] > 0 and timing['size'] > 0
+    assert timing['damping'].startswith('beta')
+    targets = {t['name']: t for t in estimator_bench.bench_targets(
+        {'configurations': [{'us_per_sample': 5.0, 'offline_samples_per_s': 1e5}],
+         'cpu_ratio': 100.0, 'nonlinear': timing})}
+    assert targets['nonlinear update vs linear']['met'] == (timing['ratio'] <= 10.0)
+    assert targets['nonlinear offline']['met'] == (timing['offline_samples_per_s'] >= 1e4)
+    assert not math.isnan(targets['nonlinear update vs linear']['value'])
 
 
 def visible_texts(figure):

@@ -138,6 +138,35 @@ def test_fleet_equals_one_replay_per_bag(bags, tmp_path):
     assert failed_names == ['corrupt.mcap', 'no_such_*']
 
 
+def test_a_bag_made_with_the_nonlinear_model_is_recomputed_with_it(bags, tmp_path):
+    """A recording whose provenance says nonlinear: on (the node's default near resonance)."""
+    made = tmp_path / 'nonlinear.mcap'
+    first = flexlink('replay', str(bags / 'steady'), '--out', str(made), '--mechanism',
+                     'cho1992', *MODEL_FLAGS, '--nonlinear', 'on')
+    assert first.returncode == 0, first.stderr
+    replay_out = tmp_path / 'replayed.mcap'
+    replay = flexlink('replay', str(made), '--out', str(replay_out), '--json')
+    assert replay.returncode == 0, replay.stderr
+    expected = json.loads(replay.stdout)
+    assert expected['model_choice']['nonlinear'] is True
+    out = tmp_path / 'out'
+    result = flexlink('fleet', str(made), '--out', str(out), '--write-mcap', '--json',
+                      '--num-cpus', '1')
+    assert result.returncode == 0, result.stderr
+    (got,) = map(json.loads, result.stdout.splitlines())
+    assert got['error'] is None and got['model_choice'] == expected['model_choice']
+    assert got['nonlinear'] == expected['nonlinear'] and got['nonlinear']['samples'] > 1000
+    for key in set(expected) - TIMING_KEYS - {'notes'}:
+        if key.endswith('peak_to_peak_um'):
+            assert got[key] == pytest.approx(expected[key], rel=1e-9), key
+        else:
+            assert got[key] == expected[key], key
+    check_rows_against_replay(pd.read_parquet(out / 'summary.parquet'), replay_out)
+    for topic in ('lever_tip/deflection', 'coupler_mid/deflection'):
+        assert [b for _, _, b in messages(got['output'], topic)] == [
+            b for _, _, b in messages(replay_out, topic)]
+
+
 def test_without_a_mechanism_a_bag_fails_with_its_reason(bags, tmp_path):
     result = flexlink('fleet', str(bags / 'steady'), '--out', str(tmp_path), '--num-cpus', '1')
     assert result.returncode == 1 and 'Traceback' not in result.stderr

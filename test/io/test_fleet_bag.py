@@ -109,13 +109,13 @@ def test_a_bag_that_names_its_model_is_recomputed_with_it(tmp_path):
                                                           made)) as recorder:
         recorder.write('/joint_states', JointState(name=['crank'], position=[0.0]), 10**9)
     fallback = ('cho1992', node_params.default_model_options())
-    mechanism, options, source = bag_model(str(path), fallback)
-    assert (mechanism.name, options) == ('kang1990', made)
+    mechanism, options, source, nonlinear = bag_model(str(path), fallback)
+    assert (mechanism.name, options, nonlinear) == ('kang1990', made, False)
     assert source.startswith('recorded')
     plain = tmp_path / 'plain.mcap'
     with McapRecorder(plain) as recorder:
         recorder.write('/joint_states', JointState(name=['crank'], position=[0.0]), 10**9)
-    mechanism, options, source = bag_model(str(plain), fallback)
-    assert (mechanism.name, source) == ('cho1992', '--mechanism cho1992')
+    mechanism, options, source, nonlinear = bag_model(str(plain), fallback)
+    assert (mechanism.name, source, nonlinear) == ('cho1992', '--mechanism cho1992', False)
     with pytest.raises(ValueError, match='give `--mechanism`'):
         bag_model(str(plain), None)
