@@ -1,13 +1,13 @@
 """
 Time the estimator's model configurations side by side, with their errors, and draw the chart.
 
-In one run: streaming cost per sample (median, p99), offline samples per second, full-order
-CPU per simulated second, and each configuration's error against the full-order reference
-(the configurations and their errors: :mod:`studies.configurations`); every configuration is
-timed in interleaved rounds, best of three; the reduced nonlinear model's update against the
-default's in alternating rounds (:func:`nonlinear_timing`). It prints a table and writes a chart of error
-against cost. ``python benchmarks/estimator_bench.py`` runs it for the node's default model
-with the estimator's model flags (``--modes``, ``--grid-size``, ...).
+In one run: streaming cost per sample (median, p99), offline samples per second, full-order CPU
+per simulated second, and each configuration's error against the full-order reference (the
+configurations and their errors: :mod:`studies.configurations`); every configuration is timed
+in interleaved rounds, best of three; the reduced nonlinear model's update against the
+default's in alternating rounds (:func:`nonlinear_timing`). It prints a table and writes a
+chart of error against cost. ``python benchmarks/estimator_bench.py`` runs it for the node's
+default model with the estimator's model flags (``--modes``, ``--grid-size``, ...).
 """
 
 import argparse
@@ -427,7 +427,7 @@ def main(argv=None):
     parser.add_argument('--only-default', action='store_true',
                         help='the default configuration alone (a quick run)')
     parser.add_argument('--no-nonlinear', action='store_true',
-                        help='leave out the reduced nonlinear model\'s row')
+                        help="leave out the reduced nonlinear model's row")
     args = parser.parse_args(argv)
     mechanism = load_mechanism(args.mechanism)
     base = model_options(args)

@@ -1,4 +1,4 @@
-"""The estimator's configurations timed side by side, and its chart (benchmarks/estimator_bench.py)."""
+"""The configurations timed side by side, and their chart (benchmarks/estimator_bench.py)."""
 
 import dataclasses
 import itertools
