@@ -19,8 +19,8 @@ import subprocess
 
 from flexlink_ros.cli import main as cli
 from flexlink_ros.core.options import ModelOptions
-import numpy as np
 from node_runs import stream_node_with_driver, write_small_plan_params
+import numpy as np
 from test_readme import fenced_commands, SCRIPTS, VENV_BIN
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]

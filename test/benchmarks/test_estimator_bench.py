@@ -140,7 +140,7 @@ def test_error_vs_cost_names_every_configuration_once_with_no_text_overlapping_o
 
 
 def _marker_colours(figure):
-    """The face colours (RGBA tuples) of every scatter marker drawn in ``figure``."""
+    """Return the face colours (RGBA tuples) of every scatter marker drawn in ``figure``."""
     return {tuple(colour) for axes in figure.axes for collection in axes.collections
             for colour in collection.get_facecolor()}
 

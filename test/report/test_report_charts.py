@@ -3,6 +3,7 @@
 from flexlink_ros.names import JOINT_NAMES
 from flexlink_ros.report import criteria
 
+
 def test_criteria_charts_name_the_joints_as_the_node_does():
     assert tuple(criteria.JOINT_TITLE) == JOINT_NAMES
     for name, title in criteria.JOINT_TITLE.items():

@@ -10,7 +10,7 @@ from flexlink_ros.core.reduction.mechanism_model import frozen_samples_for
 from flexlink_ros.core.reduction.model import output_values
 from flexlink_ros.core.reduction.periodic import periodic_response
 from flexlink_ros.core.reduction.reference import REFERENCE_GRID, REFERENCE_POINT_STRIDE, \
-    REFERENCE_STEPS, reference_response
+    reference_response, REFERENCE_STEPS
 import numpy as np
 import pytest
 
