@@ -473,12 +473,20 @@ class EstimatorNode(NodeRecording):
                                             else self.recorder.status(list_files=False))]
 
     def _estimator_facts(self):
-        """Return the model's facts, and the nonlinear model's counts where it runs."""
+        """
+        Return the model's facts, and the nonlinear model's counts where it runs.
+
+        Also the markers dropped by a marker thread that fell far behind, if any.
+        """
+        facts = self.model_facts
+        dropped = self._marker_worker.dropped if self._marker_worker is not None else 0
+        if dropped:
+            facts = {**facts, 'markers_dropped': dropped}
         follower = self.follower
         if follower is None:
-            return self.model_facts
+            return facts
         counts = follower.counts
-        return {**self.model_facts, 'nonlinear_samples': counts['samples'],
+        return {**facts, 'nonlinear_samples': counts['samples'],
                 'nonlinear_refused_samples': counts['refused_samples'],
                 'nonlinear_restarts': counts['restarts'],
                 'nonlinear_link_slope_max_rad': follower.slope_max}
