@@ -43,7 +43,9 @@ MAX_HALVINGS = 6
 # The tables' fields the compiled step reads, in its order (_nonlinear_step.c).
 STEP_FIELDS = ('mass', 'gyroscopic', 'coupling_a', 'coupling_w2', 'elastic', 'elastic_rate',
                'geometric_1', 'geometric_a', 'geometric_w2', 'load_1', 'load_a', 'load_w2',
-               'chord', 'chord_rate', 'shortening', 'shortening_rate')
+               'chord', 'chord_rate', 'shortening', 'shortening_rate', 'output')
+# Samples per compiled call offline (the call holds no Python lock; Ctrl-C is seen between).
+MARCH_CHUNK = 4096
 
 
 def lumped_force(tables, fields, eta, rate, speed, nonlinear=True, tangents=True):
@@ -224,30 +226,49 @@ class NonlinearStepper:
         doubled = np.einsum('m,lmk,k->l', self.q, shortening, self.q)
         return np.sqrt(np.maximum(doubled, 0.0) / self.tables.link_length)
 
-    def _compiled_step(self, h, angles, speed, accel):
-        """Run the step in C from the interpolated rows; (acc or None, output operator)."""
-        tables, method = self.tables, self.method
-        layout = tables.layout()
-        offsets = self.__dict__.get('_offsets')
-        if offsets is None:
-            offsets = self._offsets = np.array(
-                [layout[name][0] for name in STEP_FIELDS], dtype=float)
-        row = tables.at_rows(angles)
-        acc = (np.zeros((angles.shape[0], tables.size)) if self.guess is None
-               else self.guess.copy())
-        axial = np.zeros(tables.links)
-        count = compiled_newton.step(
-            row, offsets, tables.bearing, np.ascontiguousarray(speed, dtype=float), float(accel),
-            self.q, self.v, acc, axial, tables.axial_stiffness, method.a, method.a2, method.c,
-            angles.shape[0], tables.size, tables.links, row.shape[1], float(h),
-            float(tables.beta), self.nonlinear, NEWTON_TOLERANCE, NEWTON_ITERATIONS)
-        start, shape = layout['output']
-        output = row[-1, start:start + shape[0] * shape[1]].reshape(shape)
-        if count == 0 or not np.all(np.isfinite(acc)):
-            return None, output
-        self.iterations += count
-        self.axial = axial
-        return acc, output
+    def _native_arguments(self):
+        """The compiled march's constant arguments: the tables and the tableau (made once)."""
+        cached = self.__dict__.get('_native')
+        if cached is None:
+            tables, method = self.tables, self.method
+            layout = tables.layout()
+            offsets = np.array([layout[name][0] for name in STEP_FIELDS], dtype=float)
+            arrays = (tables.values, tables.slopes, offsets, tables.bearing,
+                      tables.axial_stiffness, tables.link_length, method.a, method.a2,
+                      method.c)
+            cached = self._native = tuple(np.ascontiguousarray(a, dtype=float) for a in arrays)
+        return cached
+
+    def march(self, times, angles, speeds, halvings=MAX_HALVINGS):
+        """
+        Step the state through samples 1.. of ``times`` [s], unwrapped ``angles``, ``speeds``.
+
+        The compiled step, one call for every sample (sample 0 is where the state is).
+        Returns per sample the outputs (K, channels), axial forces and link slopes (K, E),
+        converged (K,) and the step's own time [ns] (K,); a sample whose step does not
+        converge keeps the state and reads the outputs at its angle.
+        """
+        tables, count = self.tables, len(times) - 1
+        out = (np.empty((count, tables.outputs)), np.empty((count, tables.links)),
+               np.empty((count, tables.links)), np.empty(count), np.empty(count))
+        if self.output_operator is None or not self.output_operator.flags.c_contiguous:
+            self.output_operator = np.zeros((tables.outputs, tables.size))
+        buffer = self.__dict__.get('_guess_buffer')
+        if buffer is None:
+            buffer = self._guess_buffer = np.zeros((self.method.stages, tables.size))
+        if self.guess is not None and self.guess is not buffer:
+            buffer[...] = self.guess
+        self.axial, self.slope = np.array(self.axial, float), np.array(self.slope, float)
+        iterations, has_guess = compiled_newton.march(
+            *self._native_arguments(), np.ascontiguousarray(times, dtype=float),
+            np.ascontiguousarray(angles, dtype=float), np.ascontiguousarray(speeds, dtype=float),
+            self.q, self.v, buffer, self.axial, self.slope, self.output_operator, *out,
+            tables.grid_size, tables.values.shape[1], self.method.stages, tables.size,
+            tables.links, tables.outputs, count, float(tables.beta), self.nonlinear,
+            NEWTON_TOLERANCE, NEWTON_ITERATIONS, int(halvings), self.guess is not None)
+        self.iterations += iterations
+        self.guess = buffer if has_guess else None
+        return out[0], out[1], out[2], out[3].astype(bool), out[4].astype(np.int64)
 
     def step(self, h, angle0, angle1, speed0, speed1, halvings=MAX_HALVINGS):
         """
@@ -258,16 +279,16 @@ class NonlinearStepper:
         """
         if not (np.isfinite([h, angle0, angle1, speed0, speed1]).all() and h > 0.0):
             return False
+        if self.compiled:
+            converged = self.march((0.0, h), (angle0, angle1), (speed0, speed1), halvings)[3]
+            return bool(converged[0])
         c = self.method.c
         angles = angle0 + c * (angle1 - angle0)
         speed = speed0 + c * (speed1 - speed0)
         accel = (speed1 - speed0) / h
-        if self.compiled:
-            acc, output = self._compiled_step(h, angles, speed, accel)
-        else:
-            fields = self.tables.at(angles)
-            acc = self._newton(h, fields, speed, accel)
-            output = fields['output'][-1]
+        fields = self.tables.at(angles)
+        acc = self._newton(h, fields, speed, accel)
+        output = fields['output'][-1]
         if acc is None:
             if halvings == 0:
                 return False
@@ -380,8 +401,25 @@ def _march(tables, stamps, theta, speeds, nonlinear, compiled):
     update_ns = np.zeros(count, dtype=np.int64)
     outputs[0] = stepper.outputs(theta[0])
     slope[0] = stepper._link_slopes(theta[0])
+    if stepper.compiled:
+        for first in range(0, count - 1, MARCH_CHUNK):
+            span = slice(first, min(count, first + MARCH_CHUNK + 1))
+            rows = slice(first + 1, span.stop)
+            (outputs[rows], axial[rows], slope[rows], converged[rows],
+             update_ns[rows]) = stepper.march(time_s[span], theta[span], speeds[span])
+    else:
+        _march_in_python(stepper, time_s, theta, speeds,
+                         (outputs, axial, slope, converged, update_ns))
+    return {'outputs': outputs, 'converged': converged, 'axial_force': axial,
+            'link_slope': slope, 'newton_iterations': stepper.iterations,
+            'update_ns': update_ns}
+
+
+def _march_in_python(stepper, time_s, theta, speeds, arrays):
+    """Step the numpy reference sample by sample into ``arrays`` (as the compiled march)."""
+    outputs, axial, slope, converged, update_ns = arrays
     clock = time.perf_counter_ns
-    for k in range(1, count):
+    for k in range(1, theta.shape[0]):
         begin = clock()
         converged[k] = stepper.step(time_s[k] - time_s[k - 1], theta[k - 1], theta[k],
                                     speeds[k - 1], speeds[k])
@@ -390,9 +428,6 @@ def _march(tables, stamps, theta, speeds, nonlinear, compiled):
         outputs[k], axial[k] = stepper.output_operator @ stepper.q, stepper.axial
         slope[k] = stepper.slope
         update_ns[k] = clock() - begin
-    return {'outputs': outputs, 'converged': converged, 'axial_force': axial,
-            'link_slope': slope, 'newton_iterations': stepper.iterations,
-            'update_ns': update_ns}
 
 
 __all__ = ['NonlinearStepper', 'lumped_force', 'linear_part', 'unwrap_with_speed',
