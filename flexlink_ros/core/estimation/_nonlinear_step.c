@@ -191,24 +191,36 @@ static void residual(const Problem *p, double *disp, double *vel, double *res, d
     }
 }
 
+/* The step matrix's LU factors (valid: formed in this step). */
+typedef struct {
+    double *lu;
+    Py_ssize_t *piv;
+    int valid;
+} Factor;
+
+/*
+ * Simplified Newton on the stage accelerations (p->acc holds the start): the step matrix is
+ * formed at the first iteration and again whenever an iteration contracts by less than half.
+ * Returns the iterations, 0 if not converged.
+ */
 static Py_ssize_t solve(Problem *p, double tolerance, Py_ssize_t iterations, double *mem,
-                        Py_ssize_t *piv)
+                        Factor *factor)
 {
     const Py_ssize_t s = p->s, m = p->m, n = s * m;
-    double *disp = mem, *vel = disp + n, *res = vel + n, *jac = res + n, *fq = jac + n * n;
+    double *disp = mem, *vel = disp + n, *res = vel + n, *fq = res + n;
     double *fv = fq + s * m * m, *work = fv + s * m * m;
-    int fresh = 0;
     double previous = INFINITY;
     for (Py_ssize_t count = 1; count <= iterations; count++) {
-        residual(p, disp, vel, res, fresh ? NULL : jac, fq, fv, work);
-        if (!fresh) {
-            if (!lu_factor(jac, n, piv))
+        const int form = !factor->valid;
+        residual(p, disp, vel, res, form ? factor->lu : NULL, fq, fv, work);
+        if (form) {
+            if (!lu_factor(factor->lu, n, factor->piv))
                 return 0;
-            fresh = 1;
+            factor->valid = 1;
         }
         for (Py_ssize_t i = 0; i < n; i++)
             res[i] = -res[i];
-        lu_solve(jac, n, piv, res);
+        lu_solve(factor->lu, n, factor->piv, res);
         double size = 0.0, scale = 0.0;
         for (Py_ssize_t i = 0; i < n; i++) {
             p->acc[i] += res[i];
@@ -220,7 +232,7 @@ static Py_ssize_t solve(Problem *p, double tolerance, Py_ssize_t iterations, dou
         if (size <= tolerance * scale || size == 0.0)
             return count;
         if (size > 0.5 * previous)
-            fresh = 0;
+            factor->valid = 0;
         previous = size;
     }
     return 0;
@@ -252,7 +264,7 @@ typedef struct {
 /* Workspace of one step. */
 typedef struct {
     double *tables, *mem, *acc, *angles, *speed, *axial, *output;
-    Py_ssize_t *piv;
+    Factor factor;
 } Work;
 
 /* Cubic Hermite weights of the grid cell holding theta (NonlinearTables._interpolate). */
@@ -362,8 +374,8 @@ static void accept(const Model *md, State *st, const Problem *p, const Work *wk,
         st->q[a] = st->q[a] + h * st->v[a] + h * h * dq;
         st->v[a] = st->v[a] + h * dv;
     }
-    for (Py_ssize_t i = 0; i < s; i++)
-        memcpy(st->guess + i * m, wk->acc + last * m, (size_t)m * sizeof(double));
+    memcpy(st->guess, wk->acc, (size_t)(s * m) * sizeof(double));
+    st->guess[s * m] = h;
     st->has_guess = 1;
     memcpy(st->axial, wk->axial, (size_t)e * sizeof(double));
     output_at(md, wk->angles[last], st->output);
@@ -378,6 +390,26 @@ static void accept(const Model *md, State *st, const Problem *p, const Work *wk,
             doubled += st->q[a] * t;
         }
         st->slope[l] = sqrt(fmax(doubled, 0.0) / md->length[l]);
+    }
+}
+
+/*
+ * The Newton start: the last step's stage accelerations extrapolated linearly in time from its
+ * last two stages to this step's stage times (guess[s m] holds that step's h); zero without.
+ */
+static void predict(const Model *md, const State *st, double h, double *acc)
+{
+    const Py_ssize_t s = md->s, m = md->m;
+    if (!st->has_guess) {
+        memset(acc, 0, (size_t)(s * m) * sizeof(double));
+        return;
+    }
+    const double *last = st->guess + (s - 1) * m, *before = st->guess + (s > 1 ? s - 2 : 0) * m;
+    const double span = s > 1 ? (md->c[s - 1] - md->c[s - 2]) * st->guess[s * m] : 1.0;
+    for (Py_ssize_t i = 0; i < s; i++) {
+        const double t = s > 1 ? md->c[i] * h / span : 0.0;
+        for (Py_ssize_t a = 0; a < m; a++)
+            acc[i * m + a] = last[a] + t * (last[a] - before[a]);
     }
 }
 
@@ -414,11 +446,9 @@ static Py_ssize_t advance(const Model *md, State *st, Work *wk, double h, double
     p.beta = md->beta;
     p.nonlinear = md->nonlinear;
     stage_tables(md, wk->angles, (w1 - w0) / h, &p, wk->tables);
-    if (st->has_guess)
-        memcpy(wk->acc, st->guess, (size_t)(s * m) * sizeof(double));
-    else
-        memset(wk->acc, 0, (size_t)(s * m) * sizeof(double));
-    Py_ssize_t count = solve(&p, md->tolerance, md->iterations, wk->mem, wk->piv);
+    predict(md, st, h, wk->acc);
+    wk->factor.valid = 0;
+    Py_ssize_t count = solve(&p, md->tolerance, md->iterations, wk->mem, &wk->factor);
     for (Py_ssize_t i = 0; count > 0 && i < s * m; i++)
         if (!isfinite(wk->acc[i]))
             count = 0;
@@ -429,13 +459,13 @@ static Py_ssize_t advance(const Model *md, State *st, Work *wk, double h, double
     }
     if (halvings == 0)
         return 0;
-    const size_t saved_size = (size_t)(2 * m + s * m);
+    const size_t saved_size = (size_t)(2 * m + s * m + 1);
     double *saved = malloc(saved_size * sizeof(double));
     if (saved == NULL)
         return 0;
     memcpy(saved, st->q, (size_t)m * sizeof(double));
     memcpy(saved + m, st->v, (size_t)m * sizeof(double));
-    memcpy(saved + 2 * m, st->guess, (size_t)(s * m) * sizeof(double));
+    memcpy(saved + 2 * m, st->guess, (size_t)(s * m + 1) * sizeof(double));
     const int had_guess = st->has_guess;
     const double th_mid = 0.5 * (th0 + th1), w_mid = 0.5 * (w0 + w1);
     st->has_guess = 0;
@@ -444,7 +474,7 @@ static Py_ssize_t advance(const Model *md, State *st, Work *wk, double h, double
     if (!ok) {
         memcpy(st->q, saved, (size_t)m * sizeof(double));
         memcpy(st->v, saved + m, (size_t)m * sizeof(double));
-        memcpy(st->guess, saved + 2 * m, (size_t)(s * m) * sizeof(double));
+        memcpy(st->guess, saved + 2 * m, (size_t)(s * m + 1) * sizeof(double));
         st->has_guess = had_guess;
     }
     free(saved);
@@ -550,8 +580,8 @@ static PyObject *run_march(Model *md, Py_buffer *views, Py_ssize_t samples, int 
 {
     const Py_ssize_t s = md->s, m = md->m, e = md->e, n = s * m, mm = m * m;
     const size_t tables = (size_t)(3 * s * mm + s * m + 2 * s * e * m + 2 * s * e * mm);
-    const size_t mem = (size_t)(3 * n + n * n + 2 * s * mm + 4 * m);
-    const size_t rest = (size_t)(s * m + 2 * s + e + md->outputs * m);
+    const size_t mem = (size_t)(3 * n + 2 * s * mm + 4 * m);
+    const size_t rest = (size_t)(n * n + s * m + 2 * s + e + md->outputs * m);
     double *buf = PyMem_Malloc((tables + mem + rest) * sizeof(double));
     Py_ssize_t *piv = PyMem_Malloc((size_t)n * sizeof(Py_ssize_t));
     if (buf == NULL || piv == NULL) {
@@ -559,7 +589,8 @@ static PyObject *run_march(Model *md, Py_buffer *views, Py_ssize_t samples, int 
         PyMem_Free(piv);
         return PyErr_NoMemory();
     }
-    Work wk = {buf, buf + tables, buf + tables + mem, NULL, NULL, NULL, NULL, piv};
+    Work wk = {buf, buf + tables, buf + tables + mem + n * n, NULL, NULL, NULL, NULL,
+               {buf + tables + mem, piv, 0}};
     wk.angles = wk.acc + s * m;
     wk.speed = wk.angles + s;
     wk.axial = wk.speed + s;
@@ -590,7 +621,7 @@ static PyObject *march(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     const Py_ssize_t s = md.s, m = md.m, e = md.e, k = samples, p = md.outputs;
     const Py_ssize_t counts[BUFFERS] = {md.nodes * md.fields, md.nodes * md.fields, FIELDS,
                                         m * m, e, e, s * s, s * s, s, k + 1, k + 1, k + 1, m, m,
-                                        s * m, e, e, p * m, k * p, k * e, k * e, k, k};
+                                        s * m + 1, e, e, p * m, k * p, k * e, k * e, k, k};
     static const char *const names[BUFFERS] = {
         "values", "slopes", "offsets", "bearing", "axial_stiffness", "link_length", "a", "a2",
         "c", "times", "angles", "speeds", "q", "v", "guess", "axial", "slope", "output",

@@ -158,7 +158,7 @@ class NonlinearStepper:
         self.guess = None
         self.iterations = 0
         self.axial = np.zeros(tables.links)
-        self.slope = np.zeros(tables.links)
+        self.slope = np.zeros(tables.links)     # written in place by the compiled march
         # output operator at the last step's end (the last stage: c_s = 1)
         self.output_operator = None
 
@@ -194,13 +194,13 @@ class NonlinearStepper:
         """
         Solve one step's stage accelerations; None if Newton does not converge.
 
-        Simplified Newton: the Jacobian is formed at the step's start and formed again only
-        when an iteration contracts the update by less than half.
+        Simplified Newton from the predicted start (:meth:`_predicted`): the Jacobian is
+        formed at the first iteration and formed again only when an iteration contracts the
+        update by less than half.
         """
         linear = linear_part(self.tables, fields, speed, accel, self.nonlinear)
         s, m = speed.shape[0], self.tables.size
-        acc = np.zeros((s, m)) if self.guess is None else self.guess.copy()
-        factor, previous = None, np.inf
+        acc, factor, previous = self._predicted(h), None, np.inf
         for count in range(1, NEWTON_ITERATIONS + 1):
             residual, jacobian, axial = self._residual(h, acc, fields, speed, linear,
                                                        factor is None)
@@ -220,6 +220,22 @@ class NonlinearStepper:
             previous = size
         return None
 
+    def _predicted(self, h):
+        """
+        Newton's start: the last step's stage accelerations extrapolated to this step's stages.
+
+        Linear in time through its last two stages (``guess`` = (stage accelerations, its h));
+        zero without a last step.
+        """
+        method, size = self.method, self.tables.size
+        if self.guess is None:
+            return np.zeros((method.stages, size))
+        acc, last_h = self.guess
+        if method.stages == 1:
+            return acc.copy()
+        fraction = method.c * h / ((method.c[-1] - method.c[-2]) * last_h)
+        return acc[-1] + fraction[:, None] * (acc[-1] - acc[-2])
+
     def _link_slopes(self, angle):
         """RMS slope of each link's bending [rad]: sqrt(2 S_L / L), S_L = eta^T g_L eta / 2."""
         shortening = self.tables.at(angle, ('shortening',))['shortening'][0]
@@ -227,7 +243,7 @@ class NonlinearStepper:
         return np.sqrt(np.maximum(doubled, 0.0) / self.tables.link_length)
 
     def _native_arguments(self):
-        """The compiled march's constant arguments: the tables and the tableau (made once)."""
+        """The compiled march's constant arguments: the tables, tableau and sizes (made once)."""
         cached = self.__dict__.get('_native')
         if cached is None:
             tables, method = self.tables, self.method
@@ -236,8 +252,32 @@ class NonlinearStepper:
             arrays = (tables.values, tables.slopes, offsets, tables.bearing,
                       tables.axial_stiffness, tables.link_length, method.a, method.a2,
                       method.c)
-            cached = self._native = tuple(np.ascontiguousarray(a, dtype=float) for a in arrays)
+            sizes = (tables.grid_size, tables.values.shape[1], method.stages, tables.size,
+                     tables.links, tables.outputs)
+            self._guess_buffer = np.zeros(method.stages * tables.size + 1)
+            self._guess_view = self._guess_buffer[:-1].reshape(method.stages, tables.size)
+            one = (np.empty(2), np.empty(2), np.empty(2), np.empty((1, tables.outputs)),
+                   np.empty((1, tables.links)), np.empty((1, tables.links)), np.empty(1),
+                   np.empty(1))
+            cached = self._native = (
+                tuple(np.ascontiguousarray(a, dtype=float) for a in arrays), sizes,
+                (float(tables.beta), self.nonlinear, NEWTON_TOLERANCE, NEWTON_ITERATIONS), one)
         return cached
+
+    def _call_march(self, times, angles, speeds, out, halvings):
+        """Run the compiled march over ``times`` etc. (float64 arrays) into ``out``."""
+        arrays, sizes, constants, _ = self._native_arguments()
+        tables, buffer = self.tables, self._guess_buffer
+        if self.output_operator is None:
+            self.output_operator = np.zeros((tables.outputs, tables.size))
+        if self.guess is not None and self.guess[0] is not self._guess_view:
+            buffer[:-1], buffer[-1] = self.guess[0].ravel(), self.guess[1]
+        iterations, has_guess = compiled_newton.march(
+            *arrays, times, angles, speeds, self.q, self.v, buffer, self.axial, self.slope,
+            self.output_operator, *out, *sizes, len(times) - 1, *constants, halvings,
+            self.guess is not None)
+        self.iterations += iterations
+        self.guess = (self._guess_view, buffer[-1]) if has_guess else None
 
     def march(self, times, angles, speeds, halvings=MAX_HALVINGS):
         """
@@ -251,23 +291,8 @@ class NonlinearStepper:
         tables, count = self.tables, len(times) - 1
         out = (np.empty((count, tables.outputs)), np.empty((count, tables.links)),
                np.empty((count, tables.links)), np.empty(count), np.empty(count))
-        if self.output_operator is None or not self.output_operator.flags.c_contiguous:
-            self.output_operator = np.zeros((tables.outputs, tables.size))
-        buffer = self.__dict__.get('_guess_buffer')
-        if buffer is None:
-            buffer = self._guess_buffer = np.zeros((self.method.stages, tables.size))
-        if self.guess is not None and self.guess is not buffer:
-            buffer[...] = self.guess
-        self.axial, self.slope = np.array(self.axial, float), np.array(self.slope, float)
-        iterations, has_guess = compiled_newton.march(
-            *self._native_arguments(), np.ascontiguousarray(times, dtype=float),
-            np.ascontiguousarray(angles, dtype=float), np.ascontiguousarray(speeds, dtype=float),
-            self.q, self.v, buffer, self.axial, self.slope, self.output_operator, *out,
-            tables.grid_size, tables.values.shape[1], self.method.stages, tables.size,
-            tables.links, tables.outputs, count, float(tables.beta), self.nonlinear,
-            NEWTON_TOLERANCE, NEWTON_ITERATIONS, int(halvings), self.guess is not None)
-        self.iterations += iterations
-        self.guess = buffer if has_guess else None
+        self._call_march(*(np.ascontiguousarray(values, dtype=float)
+                           for values in (times, angles, speeds)), out, int(halvings))
         return out[0], out[1], out[2], out[3].astype(bool), out[4].astype(np.int64)
 
     def step(self, h, angle0, angle1, speed0, speed1, halvings=MAX_HALVINGS):
@@ -277,11 +302,15 @@ class NonlinearStepper:
         Returns True if every (sub)step converged; the state is unchanged otherwise (and for
         a non-finite input or a step that is not positive).
         """
+        if self.compiled:          # the compiled march checks the input itself
+            times, angles, speeds, *out = self._native_arguments()[3]
+            times[1], angles[0], angles[1], speeds[0], speeds[1] = h, angle0, angle1, speed0, \
+                speed1
+            times[0] = 0.0
+            self._call_march(times, angles, speeds, out, halvings)
+            return bool(out[3][0])
         if not (np.isfinite([h, angle0, angle1, speed0, speed1]).all() and h > 0.0):
             return False
-        if self.compiled:
-            converged = self.march((0.0, h), (angle0, angle1), (speed0, speed1), halvings)[3]
-            return bool(converged[0])
         c = self.method.c
         angles = angle0 + c * (angle1 - angle0)
         speed = speed0 + c * (speed1 - speed0)
@@ -303,7 +332,7 @@ class NonlinearStepper:
             return True
         self.q = self.q + h * self.v + h * h * (self.method.a2[-1] @ acc)
         self.v = self.v + h * (self.method.a[-1] @ acc)
-        self.guess = np.broadcast_to(acc[-1], acc.shape).copy()
+        self.guess = (acc.copy(), h)
         self.output_operator = output.copy()
         self.slope = self._link_slopes(angle1)
         return True
