@@ -518,7 +518,7 @@ static void march_samples(const Model *md, State *st, Work *wk, const double *ti
 /*
  * march(values, slopes, offsets, bearing, axial_stiffness, link_length, a, a2, c,
  *       times, angles, speeds, q, v, guess, axial, slope, output,
- *       outputs, axial_out, slope_out, converged, update_ns,
+ *       outputs, axial_out, slope_out, converged, update_ns, work,
  *       nodes, fields, stages, size, links, channels, samples, beta, nonlinear, tolerance,
  *       iterations, halvings, has_guess) -> (newton iterations, has_guess)
  *
@@ -528,26 +528,27 @@ static void march_samples(const Model *md, State *st, Work *wk, const double *ti
  * Hermite interpolation. Per sample: outputs (channels), axial_out and slope_out (links),
  * converged (1.0 / 0.0) and update_ns (the step's own time). A step that does not converge
  * keeps the state, and its output operator is then the one at the sample's angle.
+ * work: scratch of workspace(stages, size, links, channels) doubles, made once by the caller.
  */
-#define MARCH_ARGS 36
-#define BUFFERS 23
+#define MARCH_ARGS 37
+#define BUFFERS 24
 
 static int march_sizes(Model *md, Py_ssize_t *samples, int *halvings, int *has_guess,
                        PyObject *const *args)
 {
-    md->nodes = PyLong_AsSsize_t(args[23]);
-    md->fields = PyLong_AsSsize_t(args[24]);
-    md->s = PyLong_AsSsize_t(args[25]);
-    md->m = PyLong_AsSsize_t(args[26]);
-    md->e = PyLong_AsSsize_t(args[27]);
-    md->outputs = PyLong_AsSsize_t(args[28]);
-    *samples = PyLong_AsSsize_t(args[29]);
-    md->beta = PyFloat_AsDouble(args[30]);
-    md->nonlinear = PyObject_IsTrue(args[31]);
-    md->tolerance = PyFloat_AsDouble(args[32]);
-    md->iterations = PyLong_AsSsize_t(args[33]);
-    *halvings = (int)PyLong_AsLong(args[34]);
-    *has_guess = PyObject_IsTrue(args[35]);
+    md->nodes = PyLong_AsSsize_t(args[24]);
+    md->fields = PyLong_AsSsize_t(args[25]);
+    md->s = PyLong_AsSsize_t(args[26]);
+    md->m = PyLong_AsSsize_t(args[27]);
+    md->e = PyLong_AsSsize_t(args[28]);
+    md->outputs = PyLong_AsSsize_t(args[29]);
+    *samples = PyLong_AsSsize_t(args[30]);
+    md->beta = PyFloat_AsDouble(args[31]);
+    md->nonlinear = PyObject_IsTrue(args[32]);
+    md->tolerance = PyFloat_AsDouble(args[33]);
+    md->iterations = PyLong_AsSsize_t(args[34]);
+    *halvings = (int)PyLong_AsLong(args[35]);
+    *has_guess = PyObject_IsTrue(args[36]);
     if (PyErr_Occurred())
         return -1;
     if (md->s < 1 || md->s > 3 || md->m < 1 || md->m > 512 || md->e < 0 || md->e > 64
@@ -575,22 +576,24 @@ static int check_offsets(const Model *md)
     return 0;
 }
 
+/* Doubles of march's workspace: the stage tables, Newton's arrays, the LU and the rest. */
+static Py_ssize_t workspace_doubles(Py_ssize_t s, Py_ssize_t m, Py_ssize_t e, Py_ssize_t outputs)
+{
+    const Py_ssize_t n = s * m, mm = m * m;
+    return (3 * s * mm + s * m + 2 * s * e * m + 2 * s * e * mm) + (3 * n + 2 * s * mm + 4 * m)
+           + (n * n + n + s * m + 2 * s + e + outputs * m);
+}
+
 static PyObject *run_march(Model *md, Py_buffer *views, Py_ssize_t samples, int halvings,
                            int has_guess)
 {
     const Py_ssize_t s = md->s, m = md->m, e = md->e, n = s * m, mm = m * m;
-    const size_t tables = (size_t)(3 * s * mm + s * m + 2 * s * e * m + 2 * s * e * mm);
-    const size_t mem = (size_t)(3 * n + 2 * s * mm + 4 * m);
-    const size_t rest = (size_t)(n * n + s * m + 2 * s + e + md->outputs * m);
-    double *buf = PyMem_Malloc((tables + mem + rest) * sizeof(double));
-    Py_ssize_t *piv = PyMem_Malloc((size_t)n * sizeof(Py_ssize_t));
-    if (buf == NULL || piv == NULL) {
-        PyMem_Free(buf);
-        PyMem_Free(piv);
-        return PyErr_NoMemory();
-    }
-    Work wk = {buf, buf + tables, buf + tables + mem + n * n, NULL, NULL, NULL, NULL,
-               {buf + tables + mem, piv, 0}};
+    const Py_ssize_t tables = 3 * s * mm + s * m + 2 * s * e * m + 2 * s * e * mm;
+    const Py_ssize_t mem = 3 * n + 2 * s * mm + 4 * m;
+    double *buf = views[23].buf;
+    /* the pivots, as Py_ssize_t in doubles' room (both 8 bytes here, checked at import) */
+    Work wk = {buf, buf + tables, buf + tables + mem + n * n + n, NULL, NULL, NULL, NULL,
+               {buf + tables + mem, (Py_ssize_t *)(buf + tables + mem + n * n), 0}};
     wk.angles = wk.acc + s * m;
     wk.speed = wk.angles + s;
     wk.axial = wk.speed + s;
@@ -601,8 +604,6 @@ static PyObject *run_march(Model *md, Py_buffer *views, Py_ssize_t samples, int 
     march_samples(md, &st, &wk, views[9].buf, views[10].buf, views[11].buf, samples, halvings,
                   views[18].buf, views[19].buf, views[20].buf, views[21].buf, views[22].buf);
     Py_END_ALLOW_THREADS
-    PyMem_Free(buf);
-    PyMem_Free(piv);
     return Py_BuildValue("(ni)", st.iterations, st.has_guess);
 }
 
@@ -610,7 +611,7 @@ static PyObject *march(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     (void)self;
     if (nargs != MARCH_ARGS) {
-        PyErr_SetString(PyExc_TypeError, "march takes 36 arguments (see the module notes)");
+        PyErr_SetString(PyExc_TypeError, "march takes 37 arguments (see the module notes)");
         return NULL;
     }
     Model md;
@@ -621,11 +622,12 @@ static PyObject *march(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     const Py_ssize_t s = md.s, m = md.m, e = md.e, k = samples, p = md.outputs;
     const Py_ssize_t counts[BUFFERS] = {md.nodes * md.fields, md.nodes * md.fields, FIELDS,
                                         m * m, e, e, s * s, s * s, s, k + 1, k + 1, k + 1, m, m,
-                                        s * m + 1, e, e, p * m, k * p, k * e, k * e, k, k};
+                                        s * m + 1, e, e, p * m, k * p, k * e, k * e, k, k,
+                                        workspace_doubles(s, m, e, p)};
     static const char *const names[BUFFERS] = {
         "values", "slopes", "offsets", "bearing", "axial_stiffness", "link_length", "a", "a2",
         "c", "times", "angles", "speeds", "q", "v", "guess", "axial", "slope", "output",
-        "outputs", "axial_out", "slope_out", "converged", "update_ns"};
+        "outputs", "axial_out", "slope_out", "converged", "update_ns", "work"};
     Py_buffer views[BUFFERS];
     Py_ssize_t taken = 0;
     PyObject *result = NULL;
@@ -650,7 +652,29 @@ release:
     return result;
 }
 
+static PyObject *workspace(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 4) {
+        PyErr_SetString(PyExc_TypeError, "workspace(stages, size, links, channels)");
+        return NULL;
+    }
+    Py_ssize_t v[4];
+    for (int i = 0; i < 4; i++)
+        v[i] = PyLong_AsSsize_t(args[i]);
+    if (PyErr_Occurred())
+        return NULL;
+    if (v[0] < 1 || v[0] > 3 || v[1] < 1 || v[1] > 512 || v[2] < 0 || v[2] > 64 || v[3] < 0
+        || v[3] > 64) {
+        PyErr_SetString(PyExc_ValueError, "workspace: sizes out of range");
+        return NULL;
+    }
+    return PyLong_FromSsize_t(workspace_doubles(v[0], v[1], v[2], v[3]));
+}
+
 static PyMethodDef METHODS[] = {
+    {"workspace", (PyCFunction)(void (*)(void))workspace, METH_FASTCALL,
+     "Doubles of march's scratch buffer for (stages, size, links, channels)."},
     {"march", (PyCFunction)(void (*)(void))march, METH_FASTCALL,
      "Step the reduced nonlinear model through samples, reading its tables (see the notes)."},
     {NULL, NULL, 0, NULL}};
@@ -658,4 +682,12 @@ static PyMethodDef METHODS[] = {
 static struct PyModuleDef MODULE = {PyModuleDef_HEAD_INIT, "_nonlinear_step",
                                     "The reduced nonlinear model's step (C).", -1, METHODS};
 
-PyMODINIT_FUNC PyInit__nonlinear_step(void) { return PyModule_Create(&MODULE); }
+PyMODINIT_FUNC PyInit__nonlinear_step(void)
+{
+    /* march keeps the LU's pivots in its float64 scratch */
+    if (sizeof(Py_ssize_t) > sizeof(double)) {
+        PyErr_SetString(PyExc_ImportError, "_nonlinear_step: Py_ssize_t wider than double");
+        return NULL;
+    }
+    return PyModule_Create(&MODULE);
+}

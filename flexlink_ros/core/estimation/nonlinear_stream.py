@@ -259,6 +259,8 @@ class NonlinearStepper:
             one = (np.empty(2), np.empty(2), np.empty(2), np.empty((1, tables.outputs)),
                    np.empty((1, tables.links)), np.empty((1, tables.links)), np.empty(1),
                    np.empty(1))
+            self._work = np.empty(compiled_newton.workspace(method.stages, tables.size,
+                                                            tables.links, tables.outputs))
             cached = self._native = (
                 tuple(np.ascontiguousarray(a, dtype=float) for a in arrays), sizes,
                 (float(tables.beta), self.nonlinear, NEWTON_TOLERANCE, NEWTON_ITERATIONS), one)
@@ -274,7 +276,7 @@ class NonlinearStepper:
             buffer[:-1], buffer[-1] = self.guess[0].ravel(), self.guess[1]
         iterations, has_guess = compiled_newton.march(
             *arrays, times, angles, speeds, self.q, self.v, buffer, self.axial, self.slope,
-            self.output_operator, *out, *sizes, len(times) - 1, *constants, halvings,
+            self.output_operator, *out, self._work, *sizes, len(times) - 1, *constants, halvings,
             self.guess is not None)
         self.iterations += iterations
         self.guess = (self._guess_view, buffer[-1]) if has_guess else None
@@ -353,6 +355,18 @@ def unwrap_with_speed(time_s, angles, speeds=None):
     change = np.diff(angles) - predicted
     change = predicted + change - 2.0 * np.pi * np.round(change / (2.0 * np.pi))
     return angles[0] + np.concatenate([[0.0], np.cumsum(change)]), speeds
+
+
+def unwrap_next(angle0, angle1, speed0, speed1, h):
+    """
+    Unwrap one sample's crank angle from the last one's: :func:`unwrap_with_speed` of a pair.
+
+    Plain floats (the streaming update's per-sample call); the same arithmetic.
+    """
+    predicted = 0.5 * (speed1 + speed0) * h
+    change = (angle1 - angle0) - predicted
+    two_pi = 2.0 * np.pi
+    return angle0 + (predicted + change - two_pi * round(change / two_pi))
 
 
 def estimate_nonlinear(tables, stamps_ns, angles, speeds=None, nonlinear=True, compiled=True):
@@ -459,5 +473,5 @@ def _march_in_python(stepper, time_s, theta, speeds, arrays):
         update_ns[k] = clock() - begin
 
 
-__all__ = ['NonlinearStepper', 'lumped_force', 'linear_part', 'unwrap_with_speed',
+__all__ = ['NonlinearStepper', 'lumped_force', 'linear_part', 'unwrap_with_speed', 'unwrap_next',
            'estimate_nonlinear']
