@@ -243,7 +243,7 @@ class NonlinearStepper:
         return np.sqrt(np.maximum(doubled, 0.0) / self.tables.link_length)
 
     def _native_arguments(self):
-        """The compiled march's constant arguments: the tables, tableau and sizes (made once)."""
+        """Return the compiled march's constant arguments: tables, tableau, sizes (made once)."""
         cached = self.__dict__.get('_native')
         if cached is None:
             tables, method = self.tables, self.method
