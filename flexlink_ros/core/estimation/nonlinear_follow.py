@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from .nonlinear_stream import NonlinearStepper, unwrap_with_speed, VON_KARMAN_SLOPE
+from .nonlinear_stream import NonlinearStepper, unwrap_next, VON_KARMAN_SLOPE
 from ..validity import VALIDITY_THRESHOLD
 
 
@@ -131,8 +131,7 @@ class NonlinearFollower:
             self.validity = float('nan')     # a start is not judged
             return stepper.outputs(angle)
         _, theta0, speed0 = self.last
-        theta = float(unwrap_with_speed(np.array([0.0, h]), np.array([theta0, angle]),
-                                        np.array([speed0, speed]))[0][1])
+        theta = unwrap_next(theta0, float(angle), speed0, float(speed), h)
         if stepper.step(h, theta0, theta, speed0, speed):
             output = stepper.output_operator @ stepper.q
         else:
