@@ -24,6 +24,7 @@ from visualization_msgs.msg import MarkerArray
 
 from . import diagnostics, parameters
 from .input_watch import InputWatch
+from .marker_worker import MarkerWorker
 from .message_outcomes import (ClippedSpeedLog, crank_sample, one_line, PeriodStats,
                                publishable, SKIP_KINDS, Totals)
 from .messages import diagnostics_message, joint_level, ns_to_stamp
@@ -83,7 +84,7 @@ class EstimatorNode(NodeRecording):
         self._deserialize = lambda data: deserialize_message(data, JointState)
         self._serialize = serialize_message
         self._frame = self.values['frame_id'].encode()
-        self._marker_encoder = None
+        self._marker_encoder = self._marker_worker = None
         self.totals = self.model_facts = None
         self._diagnostics_publisher = self.create_publisher(
             DiagnosticArray, TOPICS['diagnostics'], OTHER_OUTPUT_DEPTH)
@@ -120,6 +121,8 @@ class EstimatorNode(NodeRecording):
                             **nonlinear_facts, 'notes': '; '.join(self.notes)}
         self._create_publishers(make_publisher)
         self.recorder = self._open_recorder(self.qos) if values['record.enabled'] else None
+        self._marker_worker = MarkerWorker(self._markers, self._deliver_markers,
+                                           self._report_marker_error)
         self.totals = Totals()
         self.last_valid_wall = None
         self._clipped = ClippedSpeedLog(log.warning, self.context.ok, self.options.speed_max)
@@ -191,6 +194,7 @@ class EstimatorNode(NodeRecording):
         """Close the recording and drop publishers and model."""
         self._deactivate()
         self.close()
+        self._marker_worker = None
         for key, publisher in self.publishers_.items():
             if key != 'diagnostics':
                 self.destroy_publisher(publisher)
@@ -354,8 +358,8 @@ class EstimatorNode(NodeRecording):
     def _publish_sample(self, stamp_ns, sample, lever_tip, coupler_mid, validity):
         # Serialised once (exact CDR), published raw and recorded as the same bytes. The
         # per-sample outputs go out first, before any bookkeeping; the markers (every n-th
-        # sample: link shapes and a MarkerArray) after them, so they do not delay this
-        # sample's deflection.
+        # sample: link shapes and a MarkerArray) are drawn by their own thread, so they
+        # delay neither this sample nor the next.
         sec, nanosec = divmod(stamp_ns, 1_000_000_000)
         frame = self._frame
         outputs = [
@@ -370,14 +374,14 @@ class EstimatorNode(NodeRecording):
         if sample.message:
             self.get_logger().warning(f'estimator: {sample.message}',
                                       throttle_duration_sec=WARN_THROTTLE_S)
-        if published and self.totals.published % self.values['markers.every_n'] == 0:
-            markers = [('markers', self._markers(stamp_ns, sample))]
-            self._publish(markers)
-            outputs += markers
+        marked = published and self.totals.published % self.values['markers.every_n'] == 0
         self.totals.published += 1
+        log_ns = (self._log_time(self._clock.now().nanoseconds, stamp_ns)
+                  if self.recorder is not None or marked else 0)
         if self.recorder is not None:   # recorded even if shut down meanwhile: the input was
-            self._to_record = (outputs, self._log_time(self._clock.now().nanoseconds,
-                                                       stamp_ns))
+            self._to_record = (outputs, log_ns)
+        if marked:
+            self._marker_worker.submit(stamp_ns, sample, log_ns)
 
     def _record_outputs(self):
         """Record the outputs of the message just taken (after its input)."""
@@ -397,6 +401,21 @@ class EstimatorNode(NodeRecording):
                     raise
                 return False
         return True
+
+    def _deliver_markers(self, data, log_ns):
+        """Publish and record a MarkerArray (the marker thread's)."""
+        self._publish([('markers', data)])
+        self._record(self.output_topics['markers'], data, log_ns)   # as the other outputs
+
+    def _report_marker_error(self, exc):
+        self.get_logger().error(f'markers not drawn: {type(exc).__name__}: {one_line(exc)}',
+                                throttle_duration_sec=WARN_THROTTLE_S)
+
+    def close(self):
+        """Deliver the markers still waiting, then close the recording (idempotent)."""
+        if self._marker_worker is not None:
+            self._marker_worker.stop()
+        return super().close()
 
     def _markers(self, stamp_ns, sample):
         """CDR of the deformed-linkage markers (template encoder, rebuilt on changes)."""
@@ -454,12 +473,20 @@ class EstimatorNode(NodeRecording):
                                             else self.recorder.status(list_files=False))]
 
     def _estimator_facts(self):
-        """Return the model's facts, and the nonlinear model's counts where it runs."""
+        """
+        Return the model's facts, and the nonlinear model's counts where it runs.
+
+        Also the markers dropped by a marker thread that fell far behind, if any.
+        """
+        facts = self.model_facts
+        dropped = self._marker_worker.dropped if self._marker_worker is not None else 0
+        if dropped:
+            facts = {**facts, 'markers_dropped': dropped}
         follower = self.follower
         if follower is None:
-            return self.model_facts
+            return facts
         counts = follower.counts
-        return {**self.model_facts, 'nonlinear_samples': counts['samples'],
+        return {**facts, 'nonlinear_samples': counts['samples'],
                 'nonlinear_refused_samples': counts['refused_samples'],
                 'nonlinear_restarts': counts['restarts'],
                 'nonlinear_link_slope_max_rad': follower.slope_max}

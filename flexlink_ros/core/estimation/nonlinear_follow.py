@@ -20,8 +20,41 @@ import math
 
 import numpy as np
 
-from .nonlinear_stream import NonlinearStepper, unwrap_with_speed, VON_KARMAN_SLOPE
+from .nonlinear_stream import NonlinearStepper, unwrap_next, VON_KARMAN_SLOPE
 from ..validity import VALIDITY_THRESHOLD
+
+
+CHOICES = ('auto', 'on', 'off')
+
+
+def choose_nonlinear(choice, nonlinearity, recorded=False):
+    """
+    Return (use the nonlinear model, why) for a choice and the linear run's verdict.
+
+    Parameters
+    ----------
+    choice : str
+        'on', 'off' or 'auto' (by the verdict).
+    nonlinearity : dict or None
+        :func:`core.validity.is_valid` of the linear estimate ('valid', 'indicator_max',
+        'threshold'); only read for 'auto'.
+    recorded : bool
+        ``choice`` is what the recording's provenance says it was made with, not a flag.
+
+    """
+    if recorded and choice in ('on', 'off'):
+        return choice == 'on', f"the recording's model (its provenance says nonlinear: {choice})"
+    if choice == 'on':
+        return True, 'asked for (--nonlinear on)'
+    if choice == 'off':
+        return False, 'asked for (--nonlinear off)'
+    if nonlinearity['valid'] is None:
+        return False, 'auto: the linear model has no validity indicator to decide by'
+    reading = (f"validity indicator max {nonlinearity['indicator_max']:.3g}, threshold "
+               f"{nonlinearity['threshold']:g}")
+    if nonlinearity['valid']:
+        return False, f'auto: the linear estimate is valid ({reading})'
+    return True, f'auto: the linear estimate is not valid ({reading})'
 
 
 def nonlinear_validity(link_slope):
@@ -98,8 +131,7 @@ class NonlinearFollower:
             self.validity = float('nan')     # a start is not judged
             return stepper.outputs(angle)
         _, theta0, speed0 = self.last
-        theta = float(unwrap_with_speed(np.array([0.0, h]), np.array([theta0, angle]),
-                                        np.array([speed0, speed]))[0][1])
+        theta = unwrap_next(theta0, float(angle), speed0, float(speed), h)
         if stepper.step(h, theta0, theta, speed0, speed):
             output = stepper.output_operator @ stepper.q
         else:
@@ -160,4 +192,5 @@ def follow_summary(follower, low, high, damping):
             'links': follower.tables.links, 'damping': damping}
 
 
-__all__ = ['nonlinear_validity', 'NonlinearFollower', 'follow_rows', 'follow_summary']
+__all__ = ['CHOICES', 'choose_nonlinear', 'nonlinear_validity', 'NonlinearFollower',
+           'follow_rows', 'follow_summary']
