@@ -33,7 +33,7 @@ test: install
 	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q test
 
 bench: install
-	$(VENV)/bin/flexlink bench
+	$(VENV)/bin/python benchmarks/estimator_bench.py
 
 report: install
 	$(VENV)/bin/flexlink report --out out/report

@@ -1,14 +1,14 @@
 """
 Time the factored second-order step compiled, per sample.
 
-The step is core.fe.second_order_reduced.FactoredForms. A small C kernel (compiled here with
-``cc -O3``, the flags of the package's compiled step, setup.py) does per sample what a compiled
-estimator step would add: the cubic-spline tables of cos/sin of the link angles and of kappa
-(22 scalars), the rows of V q the links read, the rotation of the end-node translations, the
-bands of G and the 4 x 4 output combination. It is checked against
-:func:`core.fe.second_order_reduced.factored_second_order` at the grid angles (where the spline
-equals its samples) before it is timed. Needs a C compiler; nothing here is used by the package
-at run time.
+The step is FactoredForms (docs/studies/second_order_forms.py). A small C kernel (compiled here
+with ``cc -O3``, the flags of the package's compiled step, setup.py) does per sample what a
+compiled estimator step would add: the cubic-spline tables of cos/sin of the link angles and of
+kappa (22 scalars), the rows of V q the links read, the rotation of the end-node translations,
+the bands of G and the 4 x 4 output combination. It is checked against
+:func:`second_order_forms.factored_second_order` at the grid angles (where the spline equals
+its samples) before it is timed. Needs a C compiler; nothing here is used by the package at run
+time.
 
 :func:`streaming_overhead` times what the second order costs in the package's own compiled
 step (core/estimation/_radau_step.c): the in-process streaming update and the batched step
@@ -25,6 +25,7 @@ import math
 import pathlib
 import shutil
 import subprocess
+import sys
 import tempfile
 import time
 
@@ -32,14 +33,18 @@ from flexlink_ros.core.estimation.streaming import StreamingEstimator
 from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.fe.second_order_full import link_forms
 from flexlink_ros.core.fe.second_order_geometry import output_coefficients
-from flexlink_ros.core.fe.second_order_reduced import (factored_forms, factored_second_order,
-                                                       gather_harmonics)
+from flexlink_ros.core.fe.second_order_reduced import gather_harmonics
 from flexlink_ros.core.kinematics import solve_kinematics
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction.cells import periodic_cell_coefficients
 from flexlink_ros.core.reduction.mechanism_model import fe_mechanism, model_for_mechanism
 import numpy as np
+
+# The factored forms this kernel evaluates live with the second-order study, beside this folder.
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / 'docs' / 'studies'))
+from second_order_forms import factored_forms, factored_second_order  # noqa: E402, I100
+from update_bench import update_round  # noqa: E402, I100
 
 SCALARS = 22    # cos, sin of the three link angles, then kappa (4 x 4), per grid node
 GRID = 128
@@ -251,15 +256,10 @@ def time_factored(mechanism, bearings, rigid_crank, size, samples=20000, repeat=
 
 def _update_round(estimator, speed, samples, start):
     """Median ns of ``samples`` streaming updates at 1 kHz, constant speed, after ``start``."""
-    times = np.empty(samples)
-    clock = time.perf_counter_ns
-    for n in range(samples):
-        stamp = start + n + 1
-        angle = speed * stamp * 1e-3
-        before = clock()
-        estimator.update(stamp * 1_000_000, angle, speed)
-        times[n] = clock() - before
-    return float(np.median(times))
+    stamps = start + 1 + np.arange(samples)
+    signal = ((stamps * 1_000_000).tolist(), (speed * stamps * 1e-3).tolist(), [speed] * samples)
+    times_us, _ = update_round(estimator, signal, settle=0)
+    return float(np.median(times_us)) * 1e3
 
 
 def _rows_round(estimator, speed, samples):

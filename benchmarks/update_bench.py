@@ -36,7 +36,7 @@ CHUNK = 50
 SETTLE = 50
 
 
-def _update_round(estimator, signal):
+def update_round(estimator, signal, settle=SETTLE):
     """Durations [us] of the updates of ``signal`` (stamps, angles, speeds lists); the last."""
     clock = time.perf_counter_ns
     update = estimator.update
@@ -45,7 +45,7 @@ def _update_round(estimator, signal):
         before = clock()
         sample = update(stamp, angle, speed)
         times.append(clock() - before)
-    return np.array(times[SETTLE:]) * 1e-3, sample
+    return np.array(times[settle:]) * 1e-3, sample
 
 
 def step_rows_of(estimator, stamps_ns, angles, speeds):
@@ -126,7 +126,7 @@ def update_overhead(model, rpm=391.0, rounds=9, samples=3000, jitter=0.3):
         order = (('compiled', fast), ('python', python))
         results = {}
         for name, estimator in (order if k % 2 == 0 else order[::-1]):
-            times, results[name] = _update_round(estimator, part)
+            times, results[name] = update_round(estimator, part)
             timed[name].append((float(np.median(times)), float(np.percentile(times, 99))))
         _check_agree(results['compiled'], results['python'])
         steps.append(_rows_round(batched, rows[k * samples:(k + 1) * samples]))

@@ -21,3 +21,19 @@ CONFIG = REPO / 'config'
 def config_dir():
     """Path of the repository's config directory."""
     return CONFIG
+
+
+@pytest.fixture
+def processes():
+    """Every process a test starts, killed at the end whatever happens."""
+    started = []
+    try:
+        yield started
+    finally:
+        for item in started:
+            process = getattr(item, 'process', item)
+            if process.poll() is None:
+                process.kill()
+                process.wait()
+            if hasattr(item, 'log_file'):
+                item.log_file.close()

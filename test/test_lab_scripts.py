@@ -18,6 +18,9 @@ REPO = pathlib.Path(__file__).resolve().parents[1]
 TINY_RUNS = {
     'benchmarks/update_bench.py': ['--rounds', '2', '--samples', '300'],
     'benchmarks/second_order_bench.py': ['--rounds', '2', '--samples', '300'],
+    'benchmarks/estimator_bench.py': ['--only-default', '--speeds', '269', '--seconds', '0.2',
+                                      '--grid-size', '32', '--modes', '4', '--no-chart',
+                                      '--no-nonlinear'],
     'docs/studies/soft_basis_study.py': ['--no-ramp', '--no-paper'],
     'docs/studies/validity_study.py': ['--rpm', '150', '--elements', '2', '--json'],
     'docs/studies/damping_study.py': ['--elements', '2', '--steps', '120'],
@@ -49,6 +52,7 @@ def test_the_script_runs_at_a_tiny_size_and_prints_figures(script):
 def test_every_moved_lab_script_is_run_here():
     # dynamic_second_order_bench has no main: the dynamic study imports and runs it.
     moved = {'benchmarks/update_bench.py', 'benchmarks/second_order_bench.py',
+             'benchmarks/estimator_bench.py',
              'docs/studies/damping_study.py', 'docs/studies/validity_study.py',
              'docs/studies/second_order_study.py', 'docs/studies/dynamic_second_order_study.py',
              'docs/studies/dynamic_second_order_peer.py', 'docs/studies/soft_basis_study.py'}

@@ -10,22 +10,16 @@ parser and its ``--params-out`` file is written by the same function
 (:func:`cli.plan_params.write_params_file`) for a small model.
 """
 
-import argparse
 import math
 import os
 import pathlib
 import shlex
 import shutil
-import signal
 import subprocess
-import time
 
 from flexlink_ros.cli import main as cli
-from flexlink_ros.cli import plan_params
-from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.core.reduction import mechanism_model
-from flexlink_ros.names import FIRST_INPUT_MESSAGE, READY_MESSAGE
+from node_runs import stream_node_with_driver, write_small_plan_params
 import numpy as np
 from test_readme import fenced_commands, SCRIPTS, VENV_BIN
 
@@ -55,47 +49,17 @@ def _write_plan_params(command, cwd):
     """Parse the page's plan command and write its --params-out file for CHOICE."""
     args = cli.build_parser().parse_args(shlex.split(command)[1:])
     assert args.params_out == 'my_node.yaml' and args.rpm_max == 600.0
-    mechanism = load_mechanism(cwd / args.mechanism)
-    model = mechanism_model.model_for_mechanism(mechanism, CHOICE, cache_dir=cwd / 'cache')
-    plan_args = argparse.Namespace(mechanism=str(cwd / args.mechanism), rpm_max=args.rpm_max,
-                                   rate_hz=1000.0, tolerance=args.tolerance)
-    plan_params.write_params_file(cwd / args.params_out, mechanism, CHOICE, model, plan_args)
+    write_small_plan_params(cwd / args.params_out, cwd / args.mechanism, CHOICE, cwd / 'cache',
+                            args.rpm_max, args.tolerance)
 
 
 def _run_node_and_driver(commands, cwd):
     """Start the page's driver and node; stop both after STREAM_S of streaming."""
     driver_command, node_command = commands
-    log_path = cwd / 'node.log'
     env = dict(os.environ, PYTHONUNBUFFERED='1')
-    with open(log_path, 'w') as log:
-        node = subprocess.Popen(_argv(node_command) + ['-p', f'model.cache_dir:={cwd}/cache'],
-                                cwd=cwd, stdout=log, stderr=subprocess.STDOUT, env=env)
-        driver = None
-        try:
-            _wait_for(log_path, READY_MESSAGE, node, 300.0)
-            driver = subprocess.Popen(_argv(driver_command), cwd=cwd, env=env,
-                                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-            _wait_for(log_path, FIRST_INPUT_MESSAGE, node, 30.0)
-            time.sleep(STREAM_S)
-            driver.send_signal(signal.SIGINT)
-            driver.wait(timeout=20)
-            node.send_signal(signal.SIGINT)
-            assert node.wait(timeout=30) == 0, log_path.read_text()
-        finally:
-            for process in (driver, node):
-                if process is not None and process.poll() is None:
-                    process.kill()
-                    process.wait()
-
-
-def _wait_for(log_path, fragment, process, timeout_s):
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if fragment in log_path.read_text():
-            return
-        assert process.poll() is None, log_path.read_text()
-        time.sleep(0.05)
-    raise AssertionError(f'{fragment!r} not logged in {timeout_s} s:\n' + log_path.read_text())
+    node = _argv(node_command) + ['-p', f'model.cache_dir:={cwd}/cache']
+    stream_node_with_driver(node, _argv(driver_command), cwd / 'node.log', env, STREAM_S,
+                            cwd=cwd, first_input_timeout_s=30.0)
 
 
 def _lever_deflections(bag):

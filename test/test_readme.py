@@ -160,8 +160,6 @@ SKIPPED = {
     'flexlink validate --peer exudyn --rpm 269 391 --chart out/validate.png':
         'about a minute of peer and full-order runs at 8 elements per link: '
         'test/cli/test_cli_validate.py runs it at 4',
-    'flexlink bench': 'minutes of benchmarks (the estimator, offline and full-order): '
-                      'test/cli/test_cli_estimate.py::test_bench_table_and_chart runs a toy one',
     'flexlink design-spring --mechanism kang1990 --seed 1':
         'a global search of minutes: test/cli/test_cli_rigid.py'
         '::test_design_spring_json_small_budget runs it with a small budget',

@@ -41,6 +41,7 @@ def test_pip_install_installs_no_bench_or_study(tmp_path):
     assert built.returncode == 0, built.stderr
     names = [str(p.relative_to(prefix)) for p in prefix.rglob('*.py')]
     assert any(n.endswith('flexlink_ros/cli/__init__.py') for n in names)
-    assert any(n.endswith('flexlink_ros/studies/bench.py') for n in names)
+    assert any(n.endswith('flexlink_ros/studies/configurations.py') for n in names)
+    assert not any(n.endswith('flexlink_ros/studies/bench.py') for n in names)
     assert [n for n in names if LAB_MODULE.search(n)] == []
     assert not [n for n in names if '/benchmarks/' in n or '/docs/' in n or 'test_' in n]

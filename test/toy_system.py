@@ -2,8 +2,10 @@
 
 import pathlib
 
+from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction.basis import frozen_modes, FrozenSamples
 from flexlink_ros.core.reduction.build import reduce_samples
+from flexlink_ros.core.reduction.cells import periodic_cell_coefficients
 from flexlink_ros.core.reduction.model import output_values
 from flexlink_ros.core.reduction.periodic import periodic_response
 import numpy as np
@@ -72,3 +74,33 @@ def full_periodic_outputs(samples, speed, steps=720):
     angles, q, _ = periodic_response(model, speed, steps=steps)
     rows = model.evaluate(angles, speed, 0.0)
     return angles, output_values(model, rows, q)
+
+
+# Toy models by (modes, static, grid) (model_for_mechanism caches too).
+TOY_CACHE = {}
+
+
+def toy_model(mechanism, options=None, cache_dir=None, use_cache=True, progress=None):
+    """Stand in for model_for_mechanism: the toy system reduced at the options' sizes."""
+    options = options or ModelOptions.linear()
+    key = (min(options.modes, 6), min(options.static, 2), options.grid_size)
+    if key not in TOY_CACHE:
+        TOY_CACHE[key] = reduce_samples(
+            toy_samples(grid=options.grid_size), key[0], key[1],
+            speed_max=options.speed_max, zeta=ZETA, info={'options': {'modes': key[0]}})
+    return TOY_CACHE[key]
+
+
+def toy_reference(mechanism, options, speed, angles):
+    """Return the toy system with every direction kept, periodic at `speed`, at `angles`."""
+    full = toy_model(None, ModelOptions.linear(modes=10, static=0, grid_size=32,
+                                               speed_max=70.0))
+    steps = 1024
+    grid, q, _ = periodic_response(full, speed, start_angle=0.0, steps=steps)
+    out = output_values(full, full.evaluate(grid, speed, 0.0), q)[:-1]
+    coef = periodic_cell_coefficients(out)
+    phase = np.mod(angles, 2 * np.pi) / (2 * np.pi) * steps
+    k = np.floor(phase).astype(int) % steps
+    values = np.einsum('mp,mpc->mc', (phase - np.floor(phase))[:, None] ** np.arange(4),
+                       coef[k])
+    return {'lever_tip': values[:, :2], 'coupler_mid': values[:, 2:], 'source': 'toy'}

@@ -22,7 +22,6 @@ from flexlink_ros.core.estimation.offline import replay
 from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.fe.second_order_full import corrected_response
 from flexlink_ros.core.fe.second_order_geometry import FORMS
-from flexlink_ros.core.fe.second_order_reduced import factored_forms, step_cost
 from flexlink_ros.core.fe.simulate import periodic_response
 from flexlink_ros.core.options import DEFAULT_SIZES, ModelOptions
 from flexlink_ros.core.reduction.mechanism_model import fe_mechanism, model_for_mechanism
@@ -34,6 +33,7 @@ import numpy as np
 # The compiled kernels' timers live with the benchmarks, beside this folder.
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[2] / 'benchmarks'))
 import second_order_bench  # noqa: E402
+from second_order_forms import factored_forms, step_cost  # noqa: E402, I100
 
 TARGETS = {'lever_tip': 0.10, 'coupler_mid': 0.03}
 # The streaming estimate's targets against the peer (p2p relative error).
@@ -170,7 +170,7 @@ def reduced_costs(mechanism):
     """
     Count multiply-adds per sample of the reduced models.
 
-    By :func:`core.fe.second_order_reduced.step_cost`, for their default sizes
+    By :func:`second_order_forms.step_cost`, for their default sizes
     (core.options.DEFAULT_SIZES) with the mechanism's elements per link.
     """
     out = []

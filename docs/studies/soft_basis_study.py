@@ -11,7 +11,7 @@ revolution at constant speed (with and without +-30 % sample jitter) and over a
 
 The ramp has no periodic full-order reference, so it gets its own, independent of the
 reduction (:func:`every_dof_options`): the scene's tables with every FE DOF kept (identity
-basis, as :func:`core.reduction.reference.unreduced_revolution` builds them) on a 256-point
+basis, as the reference's own test builds them) on a 256-point
 grid, stepped by the estimator at :data:`REFERENCE_RATE_HZ` (20x the signal's rate) over the
 same crank motion. It is first checked against :func:`reference_response` at constant speed
 (:func:`check_every_dof_reference`).

@@ -1,5 +1,5 @@
 """
-`flexlink estimate`, `flexlink plan`, `flexlink bench`: the streaming estimator offline.
+`flexlink estimate`, `flexlink plan`: the streaming estimator offline.
 
 - ``estimate`` runs :class:`StreamingEstimator` on a synthetic constant-speed crank signal
   (optionally jittered) and prints the last full revolution (:mod:`studies.synthetic`); its
@@ -10,14 +10,10 @@
   full-order response of the richest model of the scene over a speed range, and shows the
   error and cost of the alternatives (:mod:`studies.plan`); ``--params-out FILE`` writes
   the choice as the node's parameters file (:mod:`.plan_params`).
-- ``bench`` measures, side by side in one run: streaming cost per sample (median, p99),
-  offline samples per second, full-order CPU per simulated second, and each configuration's
-  error; it prints a table and writes a chart of error against cost (:mod:`studies.bench`).
 """
 
 import argparse
 import dataclasses
-import pathlib
 
 import numpy as np
 
@@ -33,8 +29,6 @@ from ..core.mechanism_file import load_mechanism
 from ..core.numerics import RPM
 from ..core.reduction.soft_basis import soft_basis_text
 from ..report.cycle_chart import plot_cycle
-from ..report.estimator import plot_error_vs_cost
-from ..studies.bench import run_bench
 from ..studies.plan import run_plan
 from ..studies.synthetic import run_estimate
 
@@ -117,57 +111,8 @@ def _plan(args):
     return emit(result, text, args.json)
 
 
-def _bench_lines(result):
-    """Write the text of ``bench``: a row per configuration, numpy step, CPU ratio, targets."""
-    lines = [f'{"configuration":<22} {"r":>3} {"p":>3} {"grid":>5} {"us p50":>7} '
-             f'{"us p99":>7} {"offline/s":>10} {"coupler":>9} {"lever":>9} {"MB":>6}']
-    for row in result['configurations']:
-        lines.append(f'{row["label"]:<22} {row["size"]:>3} {row.get("step_size", "-"):>3} '
-                     f'{row["grid_size"]:>5} '
-                     f'{row["us_per_sample"]:>7.1f} {row["us_per_sample_p99"]:>7.1f} '
-                     f'{row["offline_samples_per_s"]:>10.0f} '
-                     f'{row["error_coupler_mid"]:>9.2e} {row["error_lever_tip"]:>9.2e} '
-                     f'{row["bytes"] / 1e6:>6.2f}')
-    numpy_step = result['numpy_step']
-    lines.append(f'{"default, numpy step":<22} {"":>3} {"":>3} {"":>5} '
-                 f'{numpy_step["us_per_sample"]:>7.1f} {numpy_step["us_per_sample_p99"]:>7.1f} '
-                 f'{numpy_step["offline_samples_per_s"]:>10.0f}   (the same numbers; '
-                 + ('every row timed in interleaved rounds, best of 3)'
-                    if result['compiled_step'] else 'the compiled step is NOT built)'))
-    nonlinear = result.get('nonlinear')
-    if nonlinear:
-        lines.append(f'{"nonlinear (reduced)":<22} {nonlinear["size"]:>3} {"":>3} {"":>5} '
-                     f'{nonlinear["us_per_sample"]:>7.1f} {nonlinear["us_per_sample_p99"]:>7.1f} '
-                     f'{nonlinear["offline_samples_per_s"]:>10.0f}   ({nonlinear["ratio"]:.1f}x '
-                     f'the default linear update in the same rounds, '
-                     f'{nonlinear["newton_per_sample"]:.2f} Newton iterations per sample; '
-                     'its accuracy against the Exudyn peer: docs/nonlinear.md)')
-    if result['cpu_ratio']:
-        lines.append(f'full-order reference: {result["reference_cpu_s_per_s"]:.3g} CPU s per '
-                     f'simulated s; estimator {result["estimator_cpu_s_per_s"]:.3g} '
-                     f'({result["cpu_ratio"]:.0f}x less)')
-    for target in result['targets']:
-        value = target['value']
-        lines.append(f'target {target["name"]}: {"n/a" if value is None else f"{value:.4g}"} '
-                     f'{target["unit"]} (target {target["target"]}) '
-                     f'{"met" if target["met"] else "NOT met"}')
-    if result.get('chart'):
-        lines.append(f'chart: {result["chart"]}')
-    return lines
-
-
-def _bench(args):
-    mechanism = load_mechanism(args.mechanism)
-    with Progress('bench', unit='step') as progress:
-        result = run_bench(mechanism, model_options(args), args.rate_hz, progress=progress)
-    if not args.no_chart:
-        chart = pathlib.Path(args.out) / 'estimator_error_vs_cost.png'
-        result['chart'] = str(plot_error_vs_cost(result['configurations'], chart))
-    return emit(result, '\n'.join(_bench_lines(result)), args.json)
-
-
 def register(subparsers):
-    """Add the estimate, plan and bench subcommands."""
+    """Add the estimate and plan subcommands."""
     parser = subparsers.add_parser('estimate', help='streaming estimator on a synthetic '
                                    'constant-speed crank signal (last revolution)')
     add_estimator_arguments(parser)
@@ -203,9 +148,3 @@ def register(subparsers):
                         help="write the choice as the node's parameters file (every model "
                         'choice, the speed range, criterion thresholds of this cycle)')
     parser.set_defaults(func=_plan)
-
-    parser = subparsers.add_parser('bench', help='estimator cost and accuracy side by side')
-    add_estimator_arguments(parser)
-    parser.add_argument('--out', default='out', help='directory of the chart (default out/)')
-    parser.add_argument('--no-chart', action='store_true', help='skip the chart')
-    parser.set_defaults(func=_bench)

@@ -25,7 +25,6 @@ COMMANDS = {
     'estimate': 'flexlink_ros.cli.estimate',
     'fleet': 'flexlink_ros.cli.fleet',
     'plan': 'flexlink_ros.cli.estimate',
-    'bench': 'flexlink_ros.cli.estimate',
     'modes': 'flexlink_ros.cli.flex',
     'simulate': 'flexlink_ros.cli.flex',
     'mcap-info': 'flexlink_ros.cli.mcap',

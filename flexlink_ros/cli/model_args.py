@@ -1,7 +1,7 @@
 """
 The model flags every model subcommand shares, and the options and model they give.
 
-``simulate``/``modes`` (full-order FE) and ``estimate``/``plan``/``bench``/``replay``
+``simulate``/``modes`` (full-order FE) and ``estimate``/``plan``/``replay``
 (reduced model) take the same spellings: ``--mechanism``, ``--rigid-crank`` /
 ``--flexible-crank``, ``--bearings {flexible,rigid}``, ``--elements-per-link N`` and
 ``--no-geometric-stiffness``; ``--order {1,2}`` (default 2: the linear outputs plus the
@@ -95,7 +95,7 @@ def add_model_arguments(parser, elements_alias=False):
 
 
 def add_stiffness_damping_argument(parser):
-    """Add ``--stiffness-damping BETA_S`` (simulate, estimate, plan, bench, replay)."""
+    """Add ``--stiffness-damping BETA_S`` (simulate, estimate, plan, replay)."""
     parser.add_argument('--stiffness-damping', type=float, default=None, metavar='BETA_S',
                         help='stiffness-proportional damping beta [s] on the link-frame strain '
                         'rates and c = beta k on the bearing springs, added to the modal '
@@ -205,7 +205,7 @@ def add_reduced_arguments(parser):
 
 def add_estimator_arguments(parser, second_order=True):
     """
-    Add the flags of the estimator's subcommands (estimate, plan, bench, replay).
+    Add the flags of the estimator's subcommands (estimate, plan, replay; the estimator benchmark).
 
     Parameters
     ----------

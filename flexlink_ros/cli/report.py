@@ -21,7 +21,7 @@ SECTIONS = (
     ('Transfer-matrix beam frequencies (Kim & Moon)', 'flexlink_ros.report.beam', 'plot_beam'),
     ('Flexible four-bar: frozen modes and response (Cho 1992)', 'flexlink_ros.report.flex',
      'plot_flex'),
-    ('Streaming estimator: speed against accuracy', 'flexlink_ros.report.estimator',
+    ('Streaming estimator: accuracy of each model configuration', 'flexlink_ros.report.estimator',
      'plot_estimator'),
 )
 

@@ -6,9 +6,9 @@ recording that is a large share of the node's time. :func:`parse_joint_state` re
 ``sensor_msgs/JointState`` directly (the node's outputs are written by :mod:`.output_cdr`).
 
 :func:`walk_message` walks any message object's fields (``SLOT_TYPES``) in CDR order for a
-:class:`CdrWriter` (the bytes, zeroed padding: :func:`serialize_message`) or a
-:class:`CdrSizer` (the exact length and where the padding lies, :mod:`.msg_schema`). Alignment
-(:func:`align`) counts from the end of the 4-byte encapsulation header.
+:class:`CdrWriter` (the bytes, zeroed padding: :func:`serialize_message`) or any target with
+the same four methods (the tests' sizer counts the exact length and where the padding lies).
+Alignment (:func:`align`) counts from the end of the 4-byte encapsulation header.
 """
 
 import struct
@@ -191,44 +191,13 @@ class CdrWriter:
         self.out += struct.pack(f'<{len(values)}{code}', *values)
 
 
-class CdrSizer:
-    """Walk target that only counts: the exact length and the padding's byte ranges."""
-
-    def __init__(self):
-        self.position = ENCAPSULATION_SIZE
-        self.padding = []
-
-    def pad(self, size):
-        """Skip to the next multiple of ``size``, noting the skipped range."""
-        start = self.position
-        self.position = align(start, size)
-        if self.position != start:
-            self.padding.append((start, self.position))
-
-    def count(self, value):
-        """Skip a uint32 length."""
-        self.pad(4)
-        self.position += 4
-
-    def string(self, text):
-        """Skip a string: length, UTF-8 bytes, NUL."""
-        self.count(0)
-        self.position += (len(text) if text.isascii() else len(text.encode('utf-8'))) + 1
-
-    def basics(self, typename, values):
-        """Skip values of one basic type, aligned to its size."""
-        size, _ = _basic_type(typename)
-        self.pad(min(size, 8))
-        self.position += size * len(values)
-
-
 def walk_message(target, message):
     """
-    Walk a message object's fields in CDR order for a :class:`CdrWriter` or :class:`CdrSizer`.
+    Walk a message object's fields in CDR order for a :class:`CdrWriter` or a sizer.
 
     Parameters
     ----------
-    target : CdrWriter or CdrSizer
+    target : CdrWriter or an object with its pad, count, string and basics methods
         What each field is given to.
     message : ROS 2 message instance
         Walked through its class's ``__slots__`` and ``SLOT_TYPES``.

@@ -12,8 +12,7 @@ What rosbag2 stores about a ROS 2 message type, rebuilt from the installed inter
   ``rclpy.serialization.serialize_message`` returns the rmw's estimated buffer size, which can
   carry trailing uninitialised bytes (an empty ``float64[]`` makes rosbags reject the record);
   here the message's ``SLOT_TYPES`` are walked with XCDR1 alignment (:mod:`.cdr`) and
-  alignment padding is zeroed as the DDS payload has it; :func:`cdr_layout` gives the exact
-  length and the padding's place.
+  alignment padding is zeroed as the DDS payload has it.
 """
 
 import functools
@@ -25,7 +24,7 @@ import sys
 
 from ament_index_python.packages import get_package_share_directory
 
-from .cdr import CdrSizer, serialize_message, walk_message
+from .cdr import serialize_message
 
 ROS2MSG_DELIMITER = '=' * 80 + '\n'
 RMW_DURATION_INFINITE = (9223372036, 854775807)  # sec, nsec as rmw reports "infinite"
@@ -271,28 +270,6 @@ def offered_qos_yaml(profiles):
             else:
                 lines.append(f'{prefix}{key}: {value}')
     return '\n'.join(lines) if lines else '[]'
-
-
-def cdr_layout(message):
-    """
-    Return the exact CDR length of a message and where its alignment padding lies.
-
-    Parameters
-    ----------
-    message : ROS 2 message instance
-        Walked by :func:`flexlink_ros.io.cdr.walk_message`.
-
-    Returns
-    -------
-    length : int
-        Bytes including the 4-byte encapsulation header.
-    padding : list of (int, int)
-        Half-open byte ranges of alignment padding, offsets into the whole buffer.
-
-    """
-    sizer = CdrSizer()
-    walk_message(sizer, message)
-    return sizer.position, sizer.padding
 
 
 def serialize_exact(message):

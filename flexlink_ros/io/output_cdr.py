@@ -46,7 +46,7 @@ def vector3_stamped_cdr(sec, nanosec, frame, x, y, z=0.0):
 
 
 def criteria_cdr(sec, nanosec, frame, ratio, gamma_dot, force):
-    """CDR bytes of the criteria ``sensor_msgs/JointState`` (ros_messages.criteria_message)."""
+    """CDR bytes of the criteria ``sensor_msgs/JointState`` (fields: ros/messages.py)."""
     if len(ratio) == len(gamma_dot) == len(force) == len(JOINTS):
         # Per-sample path: the layout is fixed by the frame; patch a template (~1 us).
         template, offsets = criteria_template(frame)
@@ -101,7 +101,7 @@ def quality_template(frame):
 
 def quality_cdr(sec, nanosec, frame, error_indicator, nonlinearity):
     """
-    Return the CDR of the quality ``sensor_msgs/JointState`` (ros/messages.py quality_message).
+    Return the CDR of the quality ``sensor_msgs/JointState`` (fields: ros/messages.py).
 
     name = QUALITY_NAMES, position = the two indicators (frame as UTF-8 bytes). The per-sample
     path: the layout is fixed by the frame, so a template is patched (~1 us).
@@ -289,10 +289,7 @@ class MarkerEncoder:
 
         """
         count = len(stamps_ns)
-        rows = _template_rows(self.template, count)
-        stamp = _stamp_columns(stamps_ns)
-        for position in self.stamp_offsets:
-            rows[:, position:position + 8] = stamp
+        rows = _stamped_rows(self.template, stamps_ns, self.stamp_offsets)
         link_points = np.asarray(link_points, dtype=float)
         shown = link_points + exaggeration * np.asarray(link_deflections, dtype=float)
         block = np.zeros((count, self.count, 3))
@@ -323,8 +320,13 @@ def _stamp_columns(stamps_ns):
     return stamp.view(np.uint8).reshape(sec.size, 8)
 
 
-def _template_rows(template, count):
-    return np.tile(np.frombuffer(template, dtype=np.uint8), (count, 1))
+def _stamped_rows(template, stamps_ns, stamp_offsets=(ENCAPSULATION_SIZE,)):
+    """One copy of ``template`` per stamp, the stamp (sec, nanosec) at each offset."""
+    rows = np.tile(np.frombuffer(template, dtype=np.uint8), (len(stamps_ns), 1))
+    stamp = _stamp_columns(stamps_ns)
+    for position in stamp_offsets:
+        rows[:, position:position + 8] = stamp
+    return rows
 
 
 def _put_doubles(rows, offset, values):
@@ -358,9 +360,7 @@ def vector3_stamped_rows(stamps_ns, frame, values):
 
     """
     template = vector3_stamped_cdr(0, 0, frame, 0.0, 0.0, 0.0)
-    count = len(stamps_ns)
-    rows = _template_rows(template, count)
-    rows[:, 4:12] = _stamp_columns(stamps_ns)
+    rows = _stamped_rows(template, stamps_ns)
     _put_doubles(rows, len(template) - 24, values)
     return rows
 
@@ -388,8 +388,7 @@ def criteria_rows(stamps_ns, frame, ratio, gamma_dot, force):
 
     """
     template, offsets = criteria_template(frame)
-    rows = _template_rows(template, len(stamps_ns))
-    rows[:, 4:12] = _stamp_columns(stamps_ns)
+    rows = _stamped_rows(template, stamps_ns)
     for offset, values in zip(offsets, (ratio, gamma_dot, force)):
         _put_doubles(rows, offset, values)
     return rows
@@ -414,7 +413,6 @@ def quality_rows(stamps_ns, frame, error_indicator, nonlinearity):
 
     """
     template, offset = quality_template(frame)
-    rows = _template_rows(template, len(stamps_ns))
-    rows[:, ENCAPSULATION_SIZE:ENCAPSULATION_SIZE + 8] = _stamp_columns(stamps_ns)
+    rows = _stamped_rows(template, stamps_ns)
     _put_doubles(rows, offset, np.column_stack([error_indicator, nonlinearity]))
     return rows

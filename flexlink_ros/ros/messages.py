@@ -2,7 +2,8 @@
 Translation between ROS 2 messages and the core's arrays (standard message types only).
 
 Input: the crank's angle and speed from a ``sensor_msgs/JointState``. Output topics (all
-stamped with the input's stamp, frame = the ground frame, SI units):
+stamped with the input's stamp, frame = the ground frame, SI units; the node writes their CDR
+directly, :mod:`io.output_cdr`):
 
 - deflections: ``geometry_msgs/Vector3Stamped``, x and y = elastic deflection [m], z = 0;
 - joint criteria: ``sensor_msgs/JointState`` with name = [O2, A, B, O4] and, per joint,
@@ -10,7 +11,7 @@ stamped with the input's stamp, frame = the ground frame, SI units):
   [rad/s], effort = R [N] (reaction force magnitude);
 - per-sample quality: ``sensor_msgs/JointState`` with name = [error_indicator, nonlinearity]
   and position = the two indicators (dimensionless; NaN = not available), velocity and effort
-  empty (:func:`quality_message`);
+  empty;
 - the deformed linkage: ``visualization_msgs/MarkerArray``;
 - health and per-joint levels: ``diagnostic_msgs/DiagnosticArray``.
 
@@ -21,13 +22,10 @@ import math
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import Vector3Stamped
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 
 from ..errors import InputRejected
-from ..names import JOINT_NAMES, QUALITY_NAMES
 
 OK, WARN, ERROR, STALE = (DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR,
                           DiagnosticStatus.STALE)
@@ -90,66 +88,6 @@ def crank_from_joint_state(msg, joint_name):
             raise InputRejected(f'non-finite velocity {value} for {joint_name!r}')
         speed = value
     return stamp_to_ns(msg.header.stamp), angle, speed
-
-
-def deflection_message(stamp, frame_id, dx, dy):
-    """Return the Vector3Stamped of an elastic deflection [m] in the ground frame."""
-    msg = Vector3Stamped()
-    msg.header = Header(stamp=stamp, frame_id=frame_id)
-    msg.vector.x, msg.vector.y, msg.vector.z = float(dx), float(dy), 0.0
-    return msg
-
-
-def criteria_message(stamp, frame_id, ratio, gamma_dot, force):
-    """
-    Return a JointState carrying the Earles-Wu criterion per joint (see the module docstring).
-
-    Parameters
-    ----------
-    stamp : builtin_interfaces.msg.Time
-        Stamp of the input.
-    frame_id : str
-        Ground frame.
-    ratio, gamma_dot, force : sequence of float, length 4
-        |dgamma/dt|/R [rad/(s N)], dgamma/dt [rad/s], R [N] for O2, A, B, O4.
-
-    """
-    msg = JointState()
-    msg.header = Header(stamp=stamp, frame_id=frame_id)
-    msg.name = list(JOINT_NAMES)
-    msg.position = [float(v) for v in ratio]
-    msg.velocity = [float(v) for v in gamma_dot]
-    msg.effort = [float(v) for v in force]
-    return msg
-
-
-def quality_message(stamp, frame_id, error_indicator, nonlinearity):
-    """
-    Return the JointState carrying the quality indicators of one estimate.
-
-    A JointState because it is a standard stamped message with named entries: a consumer
-    pairs it with the estimate of the same stamp (message_filters), a plot selects an entry by
-    index (``position[0]``), and further indicators can be added by name.
-
-    Parameters
-    ----------
-    stamp : builtin_interfaces.msg.Time
-        Stamp of the input (and of the estimate).
-    frame_id : str
-        Ground frame.
-    error_indicator : float
-        Size of the residual-flexibility correction relative to the deflection
-        (core/estimation/sample.py) [-]: large means the reduced basis misses response.
-    nonlinearity : float
-        The nonlinearity indicator (core/validity.py) [-]: the amplitude-dependent frequency
-        shift in units of the distance to resonance; NaN where the estimator does not compute it.
-
-    """
-    msg = JointState()
-    msg.header = Header(stamp=stamp, frame_id=frame_id)
-    msg.name = list(QUALITY_NAMES)
-    msg.position = [float(error_indicator), float(nonlinearity)]
-    return msg
 
 
 def joint_level(ratio, flagged, warn, error):

@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from .bench import usable_soft_sizes
+from .configurations import usable_soft_sizes
 from .synthetic import last_revolution, PAPER_RPM, stream_timed, synthetic_signal, timing_summary
 from ..core.estimation.offline import replay
 from ..core.fe import linkage as assembly
@@ -219,7 +219,7 @@ def soft_candidates(options, model):
     """
     List the soft basis sizes a plan tries on ``model``, cheapest first: (soft_modes, model).
 
-    ``options.soft_modes`` -1: every usable gap (:func:`studies.bench.usable_soft_sizes`),
+    ``options.soft_modes`` -1: every usable gap (:func:`studies.configurations.usable_soft_sizes`),
     then all r coordinates (soft_modes 0); otherwise only the size asked for.
     """
     bare = dataclasses.replace(model, soft=None)

@@ -3,8 +3,8 @@ Synthetic crank signals and the streaming estimator run and timed over them.
 
 :func:`synthetic_signal` is a constant-speed crank sampled with jitter; :func:`run_estimate`
 streams one through :class:`StreamingEstimator` (``flexlink estimate``) and keeps the last
-full revolution. ``plan`` and ``bench`` (:mod:`studies.plan`, :mod:`studies.bench`) measure
-models on the same signals.
+full revolution. ``plan`` and the configurations (:mod:`studies.plan`,
+:mod:`studies.configurations`) measure models on the same signals.
 """
 
 import math

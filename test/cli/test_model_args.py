@@ -9,7 +9,7 @@ from flexlink_ros.core.options import ModelOptions
 import pytest
 
 # Each model subcommand with the arguments it requires.
-MODEL_COMMANDS = {'estimate': ['--rpm', '391'], 'plan': ['--rpm-max', '391'], 'bench': [],
+MODEL_COMMANDS = {'estimate': ['--rpm', '391'], 'plan': ['--rpm-max', '391'],
                   'replay': ['bag'], 'simulate': [], 'modes': []}
 # One default model (core.options.ModelOptions): the same bearings everywhere.
 DEFAULT_BEARINGS = dict.fromkeys(MODEL_COMMANDS, ModelOptions().bearings)
@@ -61,7 +61,7 @@ def test_elements_is_a_deprecated_spelling_of_elements_per_link(command, capsys)
     assert '--elements ' not in cli.build_parser([command]).format_help()
 
 
-@pytest.mark.parametrize('command', ['estimate', 'plan', 'bench', 'replay', 'simulate'])
+@pytest.mark.parametrize('command', ['estimate', 'plan', 'replay', 'simulate'])
 def test_stiffness_damping_flag_beats_the_file_beats_zero(command, tmp_path, capsys):
     required = MODEL_COMMANDS[command]
     damped = tmp_path / 'damped.yaml'
@@ -88,7 +88,7 @@ def test_modes_has_no_stiffness_damping_flag():
     assert '--stiffness-damping' not in cli.build_parser(['modes']).format_help()
 
 
-@pytest.mark.parametrize('command', ['estimate', 'plan', 'bench', 'replay'])
+@pytest.mark.parametrize('command', ['estimate', 'plan', 'replay'])
 def test_soft_modes_flag_reaches_the_model_options_and_is_documented(command, capsys):
     required = MODEL_COMMANDS[command]
     assert model_args.model_options(parse(command, *required)).soft_modes == -1
@@ -101,7 +101,7 @@ def test_soft_modes_flag_reaches_the_model_options_and_is_documented(command, ca
     assert '--soft-modes P' in text and 'spectral gap' in text
 
 
-@pytest.mark.parametrize('command', ['estimate', 'bench', 'replay'])
+@pytest.mark.parametrize('command', ['estimate', 'replay'])
 def test_second_order_flag_of_the_estimator_commands(command):
     required = MODEL_COMMANDS[command]
     # the default: quasi-static, the options (and the model's cache key) as without the flag
@@ -124,12 +124,12 @@ def test_plan_and_simulate_keep_their_second_order_meaning():
     assert parse('simulate').second_order is None      # dynamic where it applies
 
 
-@pytest.mark.parametrize('command', ['estimate', 'bench', 'replay'])
+@pytest.mark.parametrize('command', ['estimate', 'replay'])
 def test_the_estimator_commands_build_the_default_model_without_flags(command):
     assert model_args.model_options(parse(command, *MODEL_COMMANDS[command])) == ModelOptions()
 
 
-@pytest.mark.parametrize('command', ['simulate', 'modes', 'estimate', 'plan', 'bench', 'replay'])
+@pytest.mark.parametrize('command', ['simulate', 'modes', 'estimate', 'plan', 'replay'])
 def test_every_model_command_defaults_to_the_default_models_physics(command):
     args = parse(command, *MODEL_COMMANDS[command])
     default = ModelOptions()

@@ -6,21 +6,14 @@ streams a stiff linkage's model without static directions (the plan's "static = 
 with its estimator status OK, not a permanent WARN of the error indicator.
 """
 
-import argparse
 import math
 import os
 import pathlib
-import signal
-import subprocess
 import sys
-import time
 
-from flexlink_ros.cli import plan_params
-from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.core.reduction import mechanism_model
-from flexlink_ros.names import FIRST_INPUT_MESSAGE, READY_MESSAGE
 from flexlink_ros.ros import parameters as node_params
+from node_runs import stream_node_with_driver, write_small_plan_params
 import pytest
 import yaml
 
@@ -63,14 +56,10 @@ def test_the_file_is_a_ros_parameters_file_with_floats_written_as_floats(tmp_pat
 
 def test_a_real_node_takes_the_file_as_it_is_and_its_estimator_is_not_stuck_at_warn(
         tmp_path):
-    mechanism_path = DATA / 'packaging_steel.yaml'
-    mechanism = load_mechanism(mechanism_path)
     cache = tmp_path / 'cache'
-    model = mechanism_model.model_for_mechanism(mechanism, CHOICE, cache_dir=cache)
-    args = argparse.Namespace(mechanism=str(mechanism_path), rpm_max=600.0, rate_hz=1000.0,
-                              tolerance=0.05)
     params = tmp_path / 'plan.yaml'
-    values = plan_params.write_params_file(params, mechanism, CHOICE, model, args)
+    values = write_small_plan_params(params, DATA / 'packaging_steel.yaml', CHOICE, cache,
+                                     rpm_max=600.0, tolerance=0.05)
     assert values['diagnostics.error_indicator_warn'] > 0.05     # calibrated on the model
     bag = tmp_path / 'bag'
     levels = run_node(tmp_path, params, bag, cache)
@@ -83,30 +72,13 @@ def run_node(tmp_path, params, bag, cache):
     from rosbags.highlevel import AnyReader
 
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path), PYTHONUNBUFFERED='1')
-    log_path = tmp_path / 'node.log'
-    with open(log_path, 'w') as log:
-        node = subprocess.Popen(
-            [sys.executable, '-m', 'flexlink_ros.ros.node', '--ros-args', '--params-file',
-             str(params), '-p', 'record.enabled:=true', '-p', f'record.path:={bag}',
-             '-p', f'model.cache_dir:={cache}'],
-            stdout=log, stderr=subprocess.STDOUT, env=env)
-        driver = None
-        try:
-            wait_for(log_path, READY_MESSAGE, node, 300.0)
-            driver = subprocess.Popen([sys.executable, '-m', 'flexlink_ros.ros.crank_driver',
-                                       '--ros-args', '-p', 'speed_rpm:=600.0'], env=env,
-                                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-            wait_for(log_path, FIRST_INPUT_MESSAGE, node, 20.0)
-            time.sleep(3.5)     # three diagnostics periods of streaming
-            driver.send_signal(signal.SIGINT)
-            driver.wait(timeout=20)
-            node.send_signal(signal.SIGINT)
-            assert node.wait(timeout=30) == 0, log_path.read_text()
-        finally:
-            for process in (driver, node):
-                if process is not None and process.poll() is None:
-                    process.kill()
-                    process.wait()
+    node = [sys.executable, '-m', 'flexlink_ros.ros.node', '--ros-args', '--params-file',
+            str(params), '-p', 'record.enabled:=true', '-p', f'record.path:={bag}',
+            '-p', f'model.cache_dir:={cache}']
+    driver = [sys.executable, '-m', 'flexlink_ros.ros.crank_driver', '--ros-args', '-p',
+              'speed_rpm:=600.0']
+    # three diagnostics periods of streaming
+    stream_node_with_driver(node, driver, tmp_path / 'node.log', env, stream_s=3.5)
     levels = []
     with AnyReader([bag]) as reader:
         for connection, _, raw in reader.messages():
@@ -119,14 +91,3 @@ def run_node(tmp_path, params, bag, cache):
                         levels.append(int.from_bytes(item.level, 'little')
                                       if isinstance(item.level, bytes) else int(item.level))
     return levels
-
-
-def wait_for(log_path, fragment, process, timeout_s):
-    """Wait until ``fragment`` is in the log; fail with the log if the process ends first."""
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if fragment in log_path.read_text():
-            return
-        assert process.poll() is None, log_path.read_text()
-        time.sleep(0.05)
-    raise AssertionError(f'{fragment!r} not logged in {timeout_s} s:\n' + log_path.read_text())

@@ -17,6 +17,7 @@ import time
 
 from flexlink_ros.names import FIRST_INPUT_MESSAGE, READY_MESSAGE
 from matplotlib import image
+from node_runs import wait_for_log
 import pytest
 from test_replay import deflections_by_stamp, joint_state, write_recording
 
@@ -32,28 +33,6 @@ LINKAGES = {'soft': (SOFT, 300.0, 20, 'auto'), 'steel': (STEEL, 600.0, 200, 'aut
 READY_TIMEOUT_S = 240.0     # node start-up incl. a first model build on a loaded machine
 ENV = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path), PYTHONUNBUFFERED='1',
            RCUTILS_LOGGING_BUFFERED_STREAM='0')
-
-
-@pytest.fixture
-def processes():
-    """Every process a test starts, killed at the end whatever happens."""
-    started = []
-    try:
-        yield started
-    finally:
-        for process in started:
-            if process.poll() is None:
-                process.kill()
-                process.wait()
-
-
-def wait_for(log, process, fragment, timeout_s):
-    """Wait until ``fragment`` is in the log file ``log`` of a running ``process``."""
-    deadline = time.monotonic() + timeout_s
-    while fragment not in log.read_text():
-        assert process.poll() is None, 'exited:\n' + log.read_text()
-        assert time.monotonic() < deadline, f'{fragment!r} not logged:\n' + log.read_text()
-        time.sleep(0.05)
 
 
 def replay(*arguments, timeout=600):
@@ -90,12 +69,12 @@ def _record_linkage(tmp_path, processes, mechanism, rpm, nonlinear='auto'):
              *[arg for item in parameters for arg in ('-p', item)]],
             env=ENV, stdout=stream, stderr=subprocess.STDOUT)
     processes.append(node)
-    wait_for(log, node, READY_MESSAGE, READY_TIMEOUT_S)
+    wait_for_log(log, READY_MESSAGE, node, READY_TIMEOUT_S)
     driver = subprocess.Popen([sys.executable, '-m', 'flexlink_ros.ros.crank_driver',
                                '--ros-args', '-p', f'speed_rpm:={rpm}', '-p', 'joint_name:=wheel'],
                               env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     processes.append(driver)
-    wait_for(log, node, FIRST_INPUT_MESSAGE, 20.0)
+    wait_for_log(log, FIRST_INPUT_MESSAGE, node, 20.0)
     time.sleep(2.0)     # recording time, not synchronisation
     driver.send_signal(signal.SIGINT)
     driver.wait(timeout=20)

@@ -2,10 +2,11 @@
 
 import re
 
-from cdr_helpers import rclpy_exact
+from cdr_helpers import cdr_layout, rclpy_exact
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from flexlink_ros.io.msg_schema import cdr_layout, message_definition, serialize_exact, type_hash
+from flexlink_ros.io.msg_schema import message_definition, serialize_exact, type_hash
 from flexlink_ros.ros import messages as ros_messages
+import output_messages
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from rosbags.typesys import get_types_from_msg
@@ -33,7 +34,7 @@ def diagnostics():
 @pytest.mark.parametrize('message', [
     JointState(), JointState(name=['a', 'bb'], position=[1.0, 2.0], velocity=[], effort=[3.0]),
     Marker(), Marker(points=[], text='é', frame_locked=True),
-    ros_messages.deflection_message(ros_messages.ns_to_stamp(7), 'ground', 1.0, 2.0),
+    output_messages.deflection_message(ros_messages.ns_to_stamp(7), 'ground', 1.0, 2.0),
     diagnostics(),
 ], ids=['empty', 'joints', 'marker', 'marker-text', 'vector', 'diagnostics'])
 def test_serialize_exact_equals_rclpy_trimmed_with_zeroed_padding(message):

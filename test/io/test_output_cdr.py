@@ -7,6 +7,7 @@ from flexlink_ros.io import output_cdr
 from flexlink_ros.io.cdr import serialize_message as exact_cdr
 from flexlink_ros.ros import messages as ros_messages
 import numpy as np
+import output_messages
 import pytest
 from rclpy.serialization import deserialize_message
 from rosbags.typesys import get_typestore, Stores
@@ -62,13 +63,13 @@ def test_output_cdr_decodes_with_rclpy_and_equals_the_node_messages():
     stamp = ros_messages.ns_to_stamp(1_234_567_890_123)
     vector = output_cdr.vector3_stamped_cdr(stamp.sec, stamp.nanosec, b'linkage_ground',
                                             1.5e-3, -2e-4)
-    node_vector = ros_messages.deflection_message(stamp, 'linkage_ground', 1.5e-3, -2e-4)
+    node_vector = output_messages.deflection_message(stamp, 'linkage_ground', 1.5e-3, -2e-4)
     assert vector == rclpy_exact(node_vector)   # rclpy leaves padding uninitialised
     criteria = output_cdr.criteria_cdr(stamp.sec, stamp.nanosec, b'g', [1.0, 2.0, 3.0, 4.0],
                                        [0.1, 0.2, 0.3, 0.4], [10.0, 20.0, 30.0, 40.0])
-    node_criteria = ros_messages.criteria_message(stamp, 'g', [1.0, 2.0, 3.0, 4.0],
-                                                  [0.1, 0.2, 0.3, 0.4],
-                                                  [10.0, 20.0, 30.0, 40.0])
+    node_criteria = output_messages.criteria_message(stamp, 'g', [1.0, 2.0, 3.0, 4.0],
+                                                     [0.1, 0.2, 0.3, 0.4],
+                                                     [10.0, 20.0, 30.0, 40.0])
     assert criteria == rclpy_exact(node_criteria)
     decoded = deserialize_message(criteria, JointState)
     assert list(decoded.name) == ['O2', 'A', 'B', 'O4'] and decoded.effort[3] == 40.0
@@ -82,7 +83,7 @@ def test_criteria_template_path_equals_rclpy_for_any_frame_length(frame):
     for stamp_ns in (1, 1_700_000_000_987_654_321):
         stamp = ros_messages.ns_to_stamp(stamp_ns)
         got = output_cdr.criteria_cdr(stamp.sec, stamp.nanosec, frame.encode(), *values)
-        assert got == rclpy_exact(ros_messages.criteria_message(stamp, frame, *values))
+        assert got == rclpy_exact(output_messages.criteria_message(stamp, frame, *values))
 
 
 def test_quality_rows_are_the_bytes_the_node_publishes():
@@ -99,8 +100,8 @@ def test_quality_rows_are_the_bytes_the_node_publishes():
 def test_quality_cdr_is_the_quality_message_read_back_by_rclpy_and_rosbags():
     stamp = ros_messages.ns_to_stamp(1_700_000_000_123_456_789)
     data = output_cdr.quality_cdr(stamp.sec, stamp.nanosec, b'linkage_ground', 0.031, math.nan)
-    assert data == exact_cdr(ros_messages.quality_message(stamp, 'linkage_ground', 0.031,
-                                                          math.nan))
+    assert data == exact_cdr(output_messages.quality_message(stamp, 'linkage_ground', 0.031,
+                                                             math.nan))
     message = deserialize_message(data, JointState)
     assert list(message.name) == ['error_indicator', 'nonlinearity']
     assert message.position[0] == 0.031 and math.isnan(message.position[1])
@@ -137,10 +138,10 @@ def test_every_row_encoder_equals_rclpy_for_each_output(frame):
     for n, stamp_ns in enumerate(stamps.tolist()):
         stamp = ros_messages.ns_to_stamp(stamp_ns)
         assert vectors[n].tobytes() == rclpy_exact(
-            ros_messages.deflection_message(stamp, frame, *deflections[n]))
+            output_messages.deflection_message(stamp, frame, *deflections[n]))
         assert criteria[n].tobytes() == rclpy_exact(
-            ros_messages.criteria_message(stamp, frame, ratio[n], rate[n], force[n]))
+            output_messages.criteria_message(stamp, frame, ratio[n], rate[n], force[n]))
         assert quality[n].tobytes() == rclpy_exact(
-            ros_messages.quality_message(stamp, frame, error[n], nonlinearity[n]))
+            output_messages.quality_message(stamp, frame, error[n], nonlinearity[n]))
         assert marker_rows[n].tobytes() == rclpy_exact(output_cdr.linkage_markers(
             stamp, frame, list(points[n]), list(bent[n]), 25.0, joints[n], levels))

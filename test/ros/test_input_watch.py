@@ -7,7 +7,7 @@ import sys
 from flexlink_ros.names import READY_MESSAGE
 from flexlink_ros.ros.input_watch import InputWatch, lost_messages
 import numpy as np
-from test_node import NodeProcess, processes, READY_TIMEOUT_S, ros, spin_until  # noqa: F401
+from test_node import NodeProcess, READY_TIMEOUT_S, ros, spin_until  # noqa: F401
 
 # A publisher of crank JointStates: argv mode ('plain' or 'pairs': each stamp twice, the
 # second 0.3 rad on), count, rate [Hz] (busy-waited), angle offset [rad], stamps ('fixed':

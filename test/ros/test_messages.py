@@ -5,6 +5,7 @@ import math
 from flexlink_ros.io import output_cdr
 from flexlink_ros.ros import messages as rm
 import numpy as np
+import output_messages
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
@@ -46,8 +47,8 @@ def test_stamp_round_trip():
 
 def test_criteria_message_round_trips_through_cdr():
     stamp = rm.ns_to_stamp(12_345)
-    msg = rm.criteria_message(stamp, 'g', [1.0, 2.0, 3.0, 4.0], [0.1, 0.2, 0.3, 0.4],
-                              [10.0, 20.0, 30.0, 40.0])
+    msg = output_messages.criteria_message(stamp, 'g', [1.0, 2.0, 3.0, 4.0],
+                                           [0.1, 0.2, 0.3, 0.4], [10.0, 20.0, 30.0, 40.0])
     back = deserialize_message(serialize_message(msg), JointState)
     assert list(back.name) == ['O2', 'A', 'B', 'O4']
     assert list(back.position) == [1.0, 2.0, 3.0, 4.0]

@@ -85,22 +85,6 @@ class NodeProcess:
 
 
 @pytest.fixture
-def processes():
-    """Every process a test starts, killed at the end whatever happens."""
-    started = []
-    try:
-        yield started
-    finally:
-        for item in started:
-            process = getattr(item, 'process', item)
-            if process.poll() is None:
-                process.kill()
-                process.wait()
-            if hasattr(item, 'log_file'):
-                item.log_file.close()
-
-
-@pytest.fixture
 def ros():
     """Give an rclpy context, a test node and its executor (shut down at the end)."""
     import rclpy

@@ -13,7 +13,7 @@ from flexlink_ros.ros.messages import stamp_to_ns
 from flexlink_ros.ros.node_model import load_node_model
 import numpy as np
 import pytest
-from test_node import (joint_state, NodeProcess, OUTPUTS, processes, READY_TIMEOUT_S,  # noqa
+from test_node import (joint_state, NodeProcess, OUTPUTS, READY_TIMEOUT_S,  # noqa
                        ros, spin_until)
 
 OTHER_UID = 65534

@@ -6,7 +6,7 @@ import subprocess
 import sys
 import time
 
-from test_node import NodeProcess, processes  # noqa: F401 (a fixture)
+from test_node import NodeProcess
 
 HAMMER_S = 30.0
 # A lifecycle client: random transitions (not shutdown) as fast as the node answers.

@@ -67,7 +67,32 @@ def stage_positions(h, q, v, dq, dv):
     return q + (STAGE1 - g1) * h * v + g1 * dq + g2 * h * dv
 
 
-class DynamicSecondOrderStep(NumpyStep):
+class _DynamicPassState:
+    """
+    The dynamic pass's state beside a linear step's: z2 = (q2, v2) and K_r^-1 f2_eigenstrain.
+
+    Shared by the numpy and the compiled step (listed first among their bases): both refuse a
+    model without the quasi-static correction and start the pass at rest with the linear state.
+    """
+
+    def _init_pass_state(self, model, tables):
+        """Refuse a model of order 1; allocate z2 and the quasi-static part of q2."""
+        if tables.second is None:
+            raise ValueError('the dynamic pass adds to the quasi-static correction: '
+                             'use a model of order 2')
+        self.z2 = np.zeros(2 * model.size)
+        # K_r^-1 f2_eigenstrain at the last sample: the part of q2 the quasi-static
+        # correction holds.
+        self.static2 = np.zeros(model.size)
+
+    def start(self, q0, v0, crank, record):
+        """Set the linear state (q2 = 0) and write its record (see NumpyStep.start)."""
+        self.z2[:] = 0.0
+        self.static2[:] = 0.0
+        super().start(q0, v0, crank, record)
+
+
+class DynamicSecondOrderStep(_DynamicPassState, NumpyStep):
     """
     :class:`NumpyStep` with the reduced dynamic second-order state z2 = (q2, v2).
 
@@ -85,21 +110,9 @@ class DynamicSecondOrderStep(NumpyStep):
 
     def __init__(self, model, tables, kernel):
         super().__init__(model, tables)
-        if tables.second is None:
-            raise ValueError('the dynamic pass adds to the quasi-static correction: '
-                             'use a model of order 2')
+        self._init_pass_state(model, tables)
         self.kernel = kernel
-        self.z2 = np.zeros(2 * model.size)
-        # K_r^-1 f2_eigenstrain at the last sample: the part of q2 the quasi-static
-        # correction holds.
-        self.static2 = np.zeros(model.size)
         self._points = np.zeros((2, model.size))     # the linear q at stage 1 and the sample
-
-    def start(self, q0, v0, crank, record):
-        """Set the linear state (q2 = 0) and write its record (see NumpyStep.start)."""
-        self.z2[:] = 0.0
-        self.static2[:] = 0.0
-        super().start(q0, v0, crank, record)
 
     def advance(self, rows, states, records):
         """Advance both states through sample rows; records add the output operator on q2."""
@@ -148,7 +161,7 @@ class DynamicSecondOrderStep(NumpyStep):
         self.z2 += increment2
 
 
-class CompiledDynamicStep(CompiledStep):
+class CompiledDynamicStep(_DynamicPassState, CompiledStep):
     """
     :class:`CompiledStep` (the linear state and its records) with z2 advanced in C.
 
@@ -171,9 +184,7 @@ class CompiledDynamicStep(CompiledStep):
 
     def __init__(self, model, tables):
         super().__init__(model, tables)
-        if tables.second is None:
-            raise ValueError('the dynamic pass adds to the quasi-static correction: '
-                             'use a model of order 2')
+        self._init_pass_state(model, tables)
         self.kernel = DynamicPassKernel(model.dynamic_second_order)
         if not self.kernel.compiled:
             raise RuntimeError('the compiled pass (_second_order_dynamic.c) is not built')
@@ -182,17 +193,9 @@ class CompiledDynamicStep(CompiledStep):
             t.size, model.grid_size, self.cells_per_radian, t.mass_groups, t.kf_groups,
             t.out_rows, STAGE1, *STAGE_WEIGHTS, t.FIRST_MC, t.GROUPS_C], dtype=float)
         self._out = np.ascontiguousarray(t.out)
-        self.z2 = np.zeros(2 * model.size)
-        self.static2 = np.zeros(model.size)
         # the linear state and crank state before a call's rows; one row's buffers
         self._z_start, self._previous = np.zeros(2 * model.size), np.zeros(3)
         self._one_state, self._one_increment = np.zeros((1, 2 * model.size)), np.zeros((1, 4))
-
-    def start(self, q0, v0, crank, record):
-        """Set the linear state (q2 = 0) and write its record (see NumpyStep.start)."""
-        self.z2[:] = 0.0
-        self.static2[:] = 0.0
-        super().start(q0, v0, crank, record)
 
     def advance(self, rows, states, records):
         """Advance the linear state (compiled step), then z2 through the same steps."""

@@ -1,20 +1,17 @@
 """
 Full-order reference response of a mechanism, the reduced model's yardstick.
 
-:func:`reference_response` is core/fe/simulate.py's full-order shooting at given crank angles;
-:func:`unreduced_revolution` integrates the reduced model's tables with every DOF kept, a
-check of the tables and the integrator against it.
+:func:`reference_response` is core/fe/simulate.py's full-order shooting at given crank angles
+(its test checks the reduced model's tables with every DOF kept, integrated as the reduced
+model is, against it).
 """
 
 import dataclasses
 
 import numpy as np
 
-from .build import reduce_samples
 from .cells import CELL_POWERS, periodic_cell_coefficients
-from .mechanism_model import fe_mechanism, frozen_samples_for
-from .model import output_values
-from .periodic import periodic_response
+from .mechanism_model import fe_mechanism
 from ..fe import linkage as assembly
 from ..fe import simulate
 from ..fe.second_order_full import corrected_response
@@ -81,19 +78,3 @@ def _reference_revolution(mechanism, options, speed, steps):
     if options.order == 2:
         return corrected_response(linkage, result)['total'], 'core.simulate full order + 2nd'
     return result.outputs, 'core.simulate full order'
-
-
-def unreduced_revolution(mechanism, options, speed, steps=REFERENCE_STEPS):
-    """
-    Return the outputs (points, 4) over one revolution of the unreduced tables, and their source.
-
-    The tables of :func:`reduce_samples` with every DOF kept, integrated as the reduced model
-    is: a check of the tables and the integrator against core.fe.simulate's full order.
-    """
-    full_options = dataclasses.replace(options, grid_size=REFERENCE_GRID, modes=1, static=0)
-    samples = frozen_samples_for(mechanism, full_options)
-    model = reduce_samples(samples, samples.dofs, 0, max(abs(speed), options.speed_max),
-                           mechanism.damping_ratio)
-    grid, q, _ = periodic_response(model, speed, start_angle=0.0, steps=steps)
-    outputs = output_values(model, model.evaluate(grid, speed, 0.0), q)[:-1]
-    return outputs[::REFERENCE_POINT_STRIDE], 'unreduced tables'

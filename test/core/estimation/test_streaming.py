@@ -17,7 +17,7 @@ from flexlink_ros.core.reduction import mechanism_model
 from flexlink_ros.core.reduction import model as tables
 from flexlink_ros.core.reduction import reference as reduction_reference
 from flexlink_ros.ros import parameters as node_params
-from flexlink_ros.studies import bench
+from flexlink_ros.studies import configurations
 import numpy as np
 import pytest
 from toy_system import toy_samples, ZETA
@@ -173,8 +173,8 @@ def test_cho1992_streaming_accuracy_at_269_and_391_rpm(cho, bearings):
     model = mechanism_model.model_for_mechanism(cho, options, use_cache=False)
     for rpm in (269.0, 391.0):
         for jitter, (coupler_limit, lever_limit) in TARGETS.items():
-            errors = bench.configuration_error(cho, model, options, rpm, 1000.0, jitter,
-                                               seed=3)
+            errors = configurations.configuration_error(cho, model, options, rpm, 1000.0,
+                                                        jitter, seed=3)
             assert errors['error_coupler_mid'] < coupler_limit, (rpm, jitter, errors)
             assert errors['error_lever_tip'] < lever_limit, (rpm, jitter, errors)
 
@@ -186,7 +186,7 @@ def test_cho1992_order_2_streaming_equals_the_full_order_plus_second_order(cho, 
     model = mechanism_model.model_for_mechanism(cho, options)
     assert model.order == 2
     for rpm in (269.0, 391.0):
-        errors = bench.configuration_error(cho, model, options, rpm, 1000.0, 0.0, seed=3)
+        errors = configurations.configuration_error(cho, model, options, rpm, 1000.0, 0.0, seed=3)
         assert errors['reference'] == 'core.simulate full order + 2nd'
         # Measured: rigid 0.11 / 0.27 % (lever tip, 269 / 391 rpm; order 1 vs the linear
         # reference 1.3 / 3.8 %), coupler <= 0.1 %; flexible 0.06 / 0.56 %, 0.08 / 0.38 %.

@@ -1,32 +1,37 @@
 """
-``flexlink bench``: the estimator's cost and accuracy, configuration by configuration.
+Time the estimator's model configurations side by side, with their errors, and draw the chart.
 
-Side by side in one run: streaming cost per sample (median, p99), offline samples per
-second, full-order CPU per simulated second, and each configuration's error against the
-full-order reference (:func:`run_bench`); the reduced nonlinear model's update against the
-default's in alternating rounds (:func:`nonlinear_timing`); :func:`estimator_report_data`
-adds the 391 rpm estimate and its reference for the report's charts.
+In one run: streaming cost per sample (median, p99), offline samples per second, full-order CPU
+per simulated second, and each configuration's error against the full-order reference (the
+configurations and their errors: :mod:`studies.configurations`); every configuration is timed
+in interleaved rounds, best of three; the reduced nonlinear model's update against the
+default's in alternating rounds (:func:`nonlinear_timing`). It prints a table and writes a
+chart of error against cost. ``python benchmarks/estimator_bench.py`` runs it for the node's
+default model with the estimator's model flags (``--modes``, ``--grid-size``, ...).
 """
 
-import dataclasses
+import argparse
+import json
 import math
+import pathlib
 import time
 
+from flexlink_ros.cli.model_args import add_estimator_arguments, model_options
+from flexlink_ros.cli.progress import Progress
+from flexlink_ros.core.estimation.native import compiled_step_available
+from flexlink_ros.core.estimation.nonlinear_stream import estimate_nonlinear
+from flexlink_ros.core.estimation.offline import replay
+from flexlink_ros.core.fe import linkage as assembly
+from flexlink_ros.core.integrators import RadauIIA
+from flexlink_ros.core.mechanism_file import load_mechanism
+from flexlink_ros.core.numerics import RPM
+from flexlink_ros.core.reduction import mechanism_model
+from flexlink_ros.core.reduction.nonlinear_model import nonlinear_model_for
+from flexlink_ros.studies.configurations import configuration_row, model_configurations, \
+    soft_configurations
+from flexlink_ros.studies.synthetic import PAPER_RPM, stream_nonlinear_timed, stream_timed, \
+    synthetic_signal, timing_summary
 import numpy as np
-
-from .synthetic import last_revolution, PAPER_RPM, run_estimate, stream_nonlinear_timed, \
-    stream_timed, synthetic_signal, timing_summary
-from ..core.estimation.native import compiled_step_available
-from ..core.estimation.nonlinear_stream import estimate_nonlinear
-from ..core.estimation.offline import replay
-from ..core.fe import linkage as assembly
-from ..core.integrators import RadauIIA
-from ..core.numerics import relative_rms, RPM
-from ..core.reduction import mechanism_model
-from ..core.reduction import reference as reduction_reference
-from ..core.reduction.nonlinear_model import nonlinear_model_for
-from ..core.reduction.soft_basis import gap_ratios, MIN_GAP_RATIO
-from ..core.reduction.soft_tables import node_values
 
 # Length of the signal the offline replay rate is measured on [s] (amortises the warm start).
 OFFLINE_SECONDS = 20.0
@@ -38,32 +43,9 @@ NONLINEAR_RATIO_TARGET = 10.0
 NONLINEAR_OFFLINE_TARGET = 10_000.0
 # Length of the signal the nonlinear model's offline rate is measured on [s].
 NONLINEAR_OFFLINE_SECONDS = 4.0
-
-
-def configuration_error(mechanism, model, options, rpm, rate_hz=1000.0, jitter=0.0,
-                        seconds=None, seed=0):
-    """
-    Streaming error of a model against the full-order reference at one speed.
-
-    The estimator replays (batched, the same numbers as streaming) a synthetic signal of
-    ``seconds`` (default: two revolutions after a warm start) and the last revolution is
-    compared with the reference response at the same crank angles.
-
-    Returns
-    -------
-    dict
-        error_lever_tip, error_coupler_mid (relative RMS), reference (its source).
-
-    """
-    period = 2.0 * math.pi / (rpm * RPM)
-    seconds = seconds or 2.0 * period
-    stamps, angles, speeds = synthetic_signal(rpm, seconds, rate_hz, jitter, seed)
-    out = replay(model, stamps, angles, speeds)
-    mask = last_revolution(stamps, rpm)
-    ref = reduction_reference.reference_response(mechanism, options, rpm * RPM, angles[mask])
-    return {'error_lever_tip': relative_rms(out['lever_tip'][mask], ref['lever_tip']),
-            'error_coupler_mid': relative_rms(out['coupler_mid'][mask], ref['coupler_mid']),
-            'reference': ref.get('source')}
+CHANNELS = (('coupler_mid', 'coupler mid-point'), ('lever_tip', 'lever tip'))
+# Markers of the configurations after the default's star (colours: matplotlib's tab10).
+MARKERS = ('o', 's', '^', 'v', 'D', 'P', 'X', '<', '>', 'h')
 
 
 def full_order_cpu_per_second(mechanism, options, rpm, rate_hz=1000.0, steps=40):
@@ -98,60 +80,6 @@ def reference_cpu_per_second(mechanism, options, rpm, rate_hz):
         return full_order_cpu_per_second(mechanism, options, rpm, rate_hz)
     except (ImportError, AttributeError, TypeError):
         return None
-
-
-def bench_configurations(base):
-    """
-    List the configurations compared by ``bench``: the default first.
-
-    Parameters
-    ----------
-    base : ModelOptions
-        The default configuration.
-
-    Returns
-    -------
-    list of (label, ModelOptions)
-
-    """
-    smaller = dataclasses.replace(base, modes=max(1, base.modes - 4))
-    larger = dataclasses.replace(base, modes=base.modes + 4)
-    return [('default', base),
-            (f'{smaller.modes} modes + {smaller.static} static', smaller),
-            (f'{larger.modes} modes + {larger.static} static', larger),
-            ('no static', dataclasses.replace(base, static=0)),
-            ('grid 64', dataclasses.replace(base, grid_size=64)),
-            ('grid 256', dataclasses.replace(base, grid_size=256))]
-
-
-def usable_soft_sizes(model, accel_limit=5000.0):
-    """
-    Return the soft basis sizes p at which ``model`` has a usable spectral gap, small first.
-
-    The gap check of the soft tables (:func:`.soft_basis.gap_ratios` over the crank angle,
-    the speed range and +-``accel_limit``, at least :data:`.soft_basis.MIN_GAP_RATIO` in
-    frequency).
-    """
-    ratios = gap_ratios(node_values(model, 'M')['1'], node_values(model, 'K'),
-                        float(model.speed_max), float(accel_limit))
-    return [int(p) for p in np.flatnonzero(ratios >= MIN_GAP_RATIO ** 2) + 1]
-
-
-def soft_configurations(options, model):
-    """
-    List the soft basis sizes of the default beside its own: (label, options, model).
-
-    Every other usable gap (:func:`usable_soft_sizes`) and soft off (the r-coordinate step),
-    made from the default's model (same tables, no rebuild).
-    """
-    bare = dataclasses.replace(model, soft=None)
-    rows = [(f'soft basis p = {p}', dataclasses.replace(options, soft_modes=p),
-             mechanism_model.with_soft_basis(bare, p))
-            for p in usable_soft_sizes(model) if p != model.step_size]
-    if model.soft is not None:
-        rows.append((f'soft off (r = {model.size})', dataclasses.replace(options, soft_modes=0),
-                     mechanism_model.with_soft_basis(bare, 0)))
-    return rows
 
 
 def interleaved_timing(entries, signal, long_signal, rounds=3, each_round=None):
@@ -201,7 +129,7 @@ def nonlinear_timing(mechanism, options, model, signal, rounds=3):
     Time the reduced nonlinear model's update against the linear model's, alternating.
 
     Each round times the linear streaming update (``model``) and the nonlinear model's
-    streaming update (:func:`.synthetic.stream_nonlinear_timed`, the node's call) over
+    streaming update (:func:`studies.synthetic.stream_nonlinear_timed`, the node's call) over
     ``signal``, and the nonlinear model offline (:func:`estimate_nonlinear`, many samples per
     compiled call) over its first :data:`NONLINEAR_OFFLINE_SECONDS`; each keeps its best
     round.
@@ -233,23 +161,6 @@ def nonlinear_timing(mechanism, options, model, signal, rounds=3):
         best['offline_samples_per_s'] = max(best['offline_samples_per_s'], rate)
     return {**best, 'size': tables.size, 'damping': damping,
             'ratio': best['us_per_sample'] / best['linear_us_per_sample']}
-
-
-def _configuration_row(mechanism, label, options, model, timing, speeds_rpm, rate_hz):
-    """One configuration's row: sizes, timings and errors per speed (the max over them)."""
-    errors = {}
-    for rpm in speeds_rpm:
-        errors[f'{rpm:g}'] = configuration_error(mechanism, model, options, rpm, rate_hz)
-    return {
-        'label': label, 'default': label == 'default', 'size': model.size,
-        'step_size': model.step_size,
-        'grid_size': model.grid_size, 'bytes': int(model.nbytes),
-        'us_per_sample': timing['us_per_sample'],
-        'us_per_sample_p99': timing['us_per_sample_p99'],
-        'offline_samples_per_s': timing['offline_samples_per_s'],
-        'error_coupler_mid': max(e['error_coupler_mid'] for e in errors.values()),
-        'error_lever_tip': max(e['error_lever_tip'] for e in errors.values()),
-        'errors': errors}
 
 
 def bench_targets(result):
@@ -316,7 +227,8 @@ def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM
     mechanism : Mechanism
         The mechanism.
     base : ModelOptions
-        The default configuration (:func:`bench_configurations` varies it).
+        The default configuration (:func:`studies.configurations.model_configurations`
+        varies it).
     rate_hz : float
         Sample rate of the synthetic signals [Hz].
     seconds : float
@@ -324,8 +236,9 @@ def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM
     speeds_rpm : sequence of float
         Speeds of the error checks [rpm].
     configurations : list of (label, ModelOptions), optional
-        The configurations (default :func:`bench_configurations`, and after the default the
-        other sizes of its soft basis and soft off, :func:`soft_configurations`).
+        The configurations (default :func:`studies.configurations.model_configurations`,
+        and after the default the other sizes of its soft basis and soft off,
+        :func:`studies.configurations.soft_configurations`).
     progress : callable or None
         ``progress(done, total, what)`` before each step (a model built, a timing round, a
         configuration's errors, the full-order CPU) and once at the end.
@@ -345,7 +258,7 @@ def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM
     long_signal = synthetic_signal(max(speeds_rpm), OFFLINE_SECONDS, rate_hz)
     models = []
     soft_rows = configurations is None      # the default's soft basis sizes too
-    configurations = configurations or bench_configurations(base)
+    configurations = configurations or model_configurations(base)
     rounds = 3
     step = _Steps(progress, 2 * len(configurations) + rounds + 1 + bool(nonlinear))
     for label, options in configurations:
@@ -369,8 +282,8 @@ def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM
     rows, reference_cpu = [], None
     for label, options, model in models:
         step(f'errors of {label}')
-        rows.append(_configuration_row(mechanism, label, options, model, timings[label],
-                                       speeds_rpm, rate_hz))
+        row = configuration_row(mechanism, label, options, model, speeds_rpm, rate_hz)
+        rows.append({**row, **timings[label]})
         if reference_cpu is None:
             step('full-order CPU')
             reference_cpu = reference_cpu_per_second(mechanism, options, max(speeds_rpm),
@@ -387,33 +300,150 @@ def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM
     return result
 
 
-def estimator_report_data(mechanism, options, progress=None):
+def error_vs_cost_figure(configurations, tolerance=None):
     """
-    Compute the report's estimator section: the bench, the 391 rpm estimate and reference.
+    Draw error against cost per sample, one marker per configuration, named in the legend.
+
+    The configurations sit close together (a few us apart, errors within a decade), so they
+    are named in one legend under both panels rather than beside their markers, where the
+    labels overlapped each other and the axes' edge.
 
     Parameters
     ----------
-    mechanism : Mechanism
-        The mechanism (Cho 1992).
-    options : ModelOptions
-        The default model.
-    progress : callable or None
-        ``progress(done, total, what)`` of the bench (:func:`run_bench`).
+    configurations : list of dict
+        Each with 'label' (str), 'us_per_sample' (float), 'error_coupler_mid' and
+        'error_lever_tip' (relative RMS, float) and optionally 'default' (bool).
+    tolerance : float or None
+        Relative error target, drawn as a horizontal line.
 
     Returns
     -------
-    dict
-        'bench' (:func:`run_bench`), 'crank_deg' (the estimate's last revolution),
-        'estimate' and 'reference' ({'lever_tip', 'coupler_mid'}: (m, 2) arrays), 'rpm'.
+    matplotlib.figure.Figure
 
     """
-    bench = run_bench(mechanism, options, progress=progress)
-    model = mechanism_model.model_for_mechanism(mechanism, options)
-    rpm = PAPER_RPM[-1]
-    estimate = run_estimate(model, rpm)
-    angles = np.radians(estimate['crank_deg'])
-    reference = reduction_reference.reference_response(mechanism, options, rpm * RPM, angles)
-    series = {key: np.column_stack([estimate[key]['dx_m'], estimate[key]['dy_m']])
-              for key in ('lever_tip', 'coupler_mid')}
-    return {'bench': bench, 'crank_deg': np.asarray(estimate['crank_deg']),
-            'estimate': series, 'reference': reference, 'rpm': rpm}
+    from matplotlib.figure import Figure   # only when drawing
+
+    figure = Figure(figsize=(10.0, 4.8), layout='constrained')
+    axes = figure.subplots(1, 2, sharex=True)
+    others = iter(zip(MARKERS * 2, ('tab:blue', 'tab:orange', 'tab:green', 'tab:purple',
+                                    'tab:brown', 'tab:pink', 'tab:gray', 'tab:olive',
+                                    'tab:cyan', 'k') * 2))
+    styles = [('*', 'tab:red', 140) if c.get('default') else (*next(others), 40)
+              for c in configurations]
+    for ax, (key, title) in zip(axes, CHANNELS):
+        for config, (marker, colour, size) in zip(configurations, styles):
+            ax.scatter(config['us_per_sample'], max(config[f'error_{key}'], 1e-6), s=size,
+                       marker=marker, color=colour, zorder=3, label=config['label'])
+        if tolerance is not None:
+            ax.axhline(tolerance, color='grey', linestyle='--', linewidth=1.0,
+                       label=f'tolerance {tolerance:g}')
+        errors = [max(c[f'error_{key}'], 1e-6) for c in configurations]
+        low, high = min(errors + [tolerance or errors[0]]), max(errors + [tolerance or 0.0])
+        ax.set_ylim(low / 3.0, high * 3.0)
+        ax.set_yscale('log')
+        ax.set_title(f'{title}: relative RMS error')
+        ax.set_xlabel('streaming update, median [us/sample]')
+        ax.grid(True, which='both', alpha=0.3)
+        ax.margins(x=0.15)
+    axes[0].set_ylabel('error vs full-order reference')
+    handles, labels = axes[0].get_legend_handles_labels()
+    figure.legend(handles, labels, loc='outside lower center', fontsize=8,
+                  ncols=min(len(labels), 4))
+    return figure
+
+
+def plot_error_vs_cost(configurations, path, tolerance=None):
+    """
+    Write :func:`error_vs_cost_figure` to a PNG file.
+
+    Parameters
+    ----------
+    configurations : list of dict
+        As :func:`error_vs_cost_figure`.
+    path : str or Path
+        PNG file to write.
+    tolerance : float or None
+        Relative error target, drawn as a horizontal line.
+
+    Returns
+    -------
+    pathlib.Path
+
+    """
+    path = pathlib.Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    error_vs_cost_figure(configurations, tolerance).savefig(path, dpi=120)
+    return path
+
+
+def bench_lines(result):
+    """Write the text of ``bench``: a row per configuration, numpy step, CPU ratio, targets."""
+    lines = [f'{"configuration":<22} {"r":>3} {"p":>3} {"grid":>5} {"us p50":>7} '
+             f'{"us p99":>7} {"offline/s":>10} {"coupler":>9} {"lever":>9} {"MB":>6}']
+    for row in result['configurations']:
+        lines.append(f'{row["label"]:<22} {row["size"]:>3} {row.get("step_size", "-"):>3} '
+                     f'{row["grid_size"]:>5} '
+                     f'{row["us_per_sample"]:>7.1f} {row["us_per_sample_p99"]:>7.1f} '
+                     f'{row["offline_samples_per_s"]:>10.0f} '
+                     f'{row["error_coupler_mid"]:>9.2e} {row["error_lever_tip"]:>9.2e} '
+                     f'{row["bytes"] / 1e6:>6.2f}')
+    numpy_step = result['numpy_step']
+    lines.append(f'{"default, numpy step":<22} {"":>3} {"":>3} {"":>5} '
+                 f'{numpy_step["us_per_sample"]:>7.1f} {numpy_step["us_per_sample_p99"]:>7.1f} '
+                 f'{numpy_step["offline_samples_per_s"]:>10.0f}   (the same numbers; '
+                 + ('every row timed in interleaved rounds, best of 3)'
+                    if result['compiled_step'] else 'the compiled step is NOT built)'))
+    nonlinear = result.get('nonlinear')
+    if nonlinear:
+        lines.append(f'{"nonlinear (reduced)":<22} {nonlinear["size"]:>3} {"":>3} {"":>5} '
+                     f'{nonlinear["us_per_sample"]:>7.1f} {nonlinear["us_per_sample_p99"]:>7.1f} '
+                     f'{nonlinear["offline_samples_per_s"]:>10.0f}   ({nonlinear["ratio"]:.1f}x '
+                     f'the default linear update in the same rounds, '
+                     f'{nonlinear["newton_per_sample"]:.2f} Newton iterations per sample; '
+                     'its accuracy against the Exudyn peer: docs/nonlinear.md)')
+    if result['cpu_ratio']:
+        lines.append(f'full-order reference: {result["reference_cpu_s_per_s"]:.3g} CPU s per '
+                     f'simulated s; estimator {result["estimator_cpu_s_per_s"]:.3g} '
+                     f'({result["cpu_ratio"]:.0f}x less)')
+    for target in result['targets']:
+        value = target['value']
+        lines.append(f'target {target["name"]}: {"n/a" if value is None else f"{value:.4g}"} '
+                     f'{target["unit"]} (target {target["target"]}) '
+                     f'{"met" if target["met"] else "NOT met"}')
+    if result.get('chart'):
+        lines.append(f'chart: {result["chart"]}')
+    return lines
+
+
+def main(argv=None):
+    """Run :func:`run_bench` with the estimator's model flags; print the table, draw the chart."""
+    parser = argparse.ArgumentParser(prog='python benchmarks/estimator_bench.py',
+                                     description=__doc__.strip().splitlines()[0])
+    add_estimator_arguments(parser)
+    parser.add_argument('--out', default='out', help='directory of the chart (default out/)')
+    parser.add_argument('--no-chart', action='store_true', help='skip the chart')
+    parser.add_argument('--seconds', type=float, default=2.0,
+                        help='length of the streamed signal [s]')
+    parser.add_argument('--speeds', default=None,
+                        help='speeds of the error checks, comma list [rpm] (default: the paper)')
+    parser.add_argument('--only-default', action='store_true',
+                        help='the default configuration alone (a quick run)')
+    parser.add_argument('--no-nonlinear', action='store_true',
+                        help="leave out the reduced nonlinear model's row")
+    args = parser.parse_args(argv)
+    mechanism = load_mechanism(args.mechanism)
+    base = model_options(args)
+    speeds = tuple(float(s) for s in args.speeds.split(',')) if args.speeds else PAPER_RPM
+    with Progress('bench', unit='step') as progress:
+        result = run_bench(mechanism, base, args.rate_hz, args.seconds, speeds,
+                           [('default', base)] if args.only_default else None, progress,
+                           nonlinear=not args.no_nonlinear)
+    if not args.no_chart:
+        chart = pathlib.Path(args.out) / 'estimator_error_vs_cost.png'
+        result['chart'] = str(plot_error_vs_cost(result['configurations'], chart))
+    print(json.dumps(result, indent=1, default=float) if args.json
+          else '\n'.join(bench_lines(result)))
+
+
+if __name__ == '__main__':
+    main()
