@@ -2,11 +2,11 @@
 ``replay --nonlinear auto|on|off``: the reduced nonlinear model's deflections in the output.
 
 The same rule and the same ``model: ...`` line as ``estimate --nonlinear``
-(:func:`.estimate_nonlinear.choose_nonlinear`). ``on`` writes the nonlinear model's lever-tip
-and coupler-mid deflections in place of the linear ones, block by block as the replay writes
-(:class:`NonlinearRows`: memory independent of the recording's length). ``auto`` (the default)
-first runs the linear estimate alone over the recording and writes the nonlinear deflections
-only where its validity indicator (the largest per-sample ``nonlinearity`` of ``~/quality``)
+(:func:`core.estimation.nonlinear_follow.choose_nonlinear`). ``on`` writes the nonlinear
+model's lever-tip and coupler-mid deflections in place of the linear ones, block by block as
+the replay writes (:class:`NonlinearRows`: memory independent of the recording's length).
+``auto`` (the default) first runs the linear estimate alone over the recording and writes
+the nonlinear deflections only where its validity indicator (the largest per-sample ``nonlinearity`` of ``~/quality``)
 says the linear estimate is not valid. A recording that names its model is replayed with the
 model that made it (the nonlinear one if its provenance says ``nonlinear: on``, else the
 linear one) unless ``--nonlinear`` is given; ``auto`` is for recordings that name no model.
@@ -23,8 +23,8 @@ import math
 
 import numpy as np
 
-from .estimate_nonlinear import choose_nonlinear
-from ..core.estimation.nonlinear_follow import NonlinearFollower
+from ..core.estimation.nonlinear_follow import choose_nonlinear, follow_rows, follow_summary, \
+    NonlinearFollower
 from ..core.estimation.nonlinear_stream import VON_KARMAN_SLOPE
 from ..core.reduction.nonlinear_model import nonlinear_model_for
 from ..core.validity import is_valid
@@ -50,10 +50,14 @@ def nonlinear_choice(args, recorded):
     return 'auto'
 
 
-def decide(choice, summary=None):
-    """Return (use the nonlinear model, why) for ``choice`` and a linear run's summary."""
+def decide(choice, summary=None, recorded=False):
+    """
+    Return (use the nonlinear model, why) for ``choice`` and a linear run's summary.
+
+    ``recorded``: the choice is the recording's own (no ``--nonlinear`` given).
+    """
     if choice != 'auto':
-        return choose_nonlinear(choice, None)
+        return choose_nonlinear(choice, None, recorded)
     largest = summary['quality'].get('nonlinearity_max') if summary else None
     return choose_nonlinear('auto', is_valid([math.nan if largest is None else largest]))
 
@@ -82,14 +86,7 @@ class NonlinearRows:
 
     def __call__(self, samples, estimate):
         """Return ``estimate`` with the nonlinear 'lever_tip' and 'coupler_mid' rows."""
-        angles, speeds = estimate['crank_angle'], estimate['crank_speed']
-        accepted = (np.all(np.isfinite(estimate['lever_tip']), axis=1)
-                    & np.all(np.isfinite(estimate['coupler_mid']), axis=1)
-                    & np.isfinite(angles) & np.isfinite(speeds))
-        outputs = np.full((len(accepted), self.tables.outputs), np.nan)
-        stamps, follow = samples['stamps_ns'], self.follower.sample
-        for n in np.flatnonzero(accepted).tolist():
-            outputs[n] = follow(int(stamps[n]), float(angles[n]), float(speeds[n]))
+        outputs, accepted = follow_rows(self.follower, samples['stamps_ns'], estimate)
         if accepted.any():
             self.low = np.minimum(self.low, outputs[accepted].min(axis=0))
             self.high = np.maximum(self.high, outputs[accepted].max(axis=0))
@@ -99,13 +96,7 @@ class NonlinearRows:
 
     def summary(self):
         """Return the JSON's ``nonlinear`` entry: peak-to-peak deflections [um] and counts."""
-        seen = bool(np.all(np.isfinite(self.high)))
-        span = (1e6 * (self.high - self.low)).tolist() if seen else [math.nan] * 4
-        follower = self.follower
-        return {**follower.counts, 'lever_tip_peak_to_peak_um': span[0:2],
-                'coupler_mid_peak_to_peak_um': span[2:4],
-                'link_slope_max_rad': follower.slope_max, 'size': self.tables.size,
-                'links': self.tables.links, 'damping': self.damping}
+        return follow_summary(self.follower, self.low, self.high, self.damping)
 
 
 def nonlinear_rows(args, mechanism, options, reset_gap_s):

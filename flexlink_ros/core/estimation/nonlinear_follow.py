@@ -16,10 +16,45 @@ threshold (:data:`core.validity.VALIDITY_THRESHOLD`) falls at the slope limit
 ``/diagnostics`` judge either model's estimate by one threshold.
 """
 
+import math
+
 import numpy as np
 
 from .nonlinear_stream import NonlinearStepper, unwrap_with_speed, VON_KARMAN_SLOPE
 from ..validity import VALIDITY_THRESHOLD
+
+
+CHOICES = ('auto', 'on', 'off')
+
+
+def choose_nonlinear(choice, nonlinearity, recorded=False):
+    """
+    Return (use the nonlinear model, why) for a choice and the linear run's verdict.
+
+    Parameters
+    ----------
+    choice : str
+        'on', 'off' or 'auto' (by the verdict).
+    nonlinearity : dict or None
+        :func:`core.validity.is_valid` of the linear estimate ('valid', 'indicator_max',
+        'threshold'); only read for 'auto'.
+    recorded : bool
+        ``choice`` is what the recording's provenance says it was made with, not a flag.
+
+    """
+    if recorded and choice in ('on', 'off'):
+        return choice == 'on', f"the recording's model (its provenance says nonlinear: {choice})"
+    if choice == 'on':
+        return True, 'asked for (--nonlinear on)'
+    if choice == 'off':
+        return False, 'asked for (--nonlinear off)'
+    if nonlinearity['valid'] is None:
+        return False, 'auto: the linear model has no validity indicator to decide by'
+    reading = (f"validity indicator max {nonlinearity['indicator_max']:.3g}, threshold "
+               f"{nonlinearity['threshold']:g}")
+    if nonlinearity['valid']:
+        return False, f'auto: the linear estimate is valid ({reading})'
+    return True, f'auto: the linear estimate is not valid ({reading})'
 
 
 def nonlinear_validity(link_slope):
@@ -111,4 +146,52 @@ class NonlinearFollower:
         return output
 
 
-__all__ = ['nonlinear_validity', 'NonlinearFollower']
+def follow_rows(follower, stamps_ns, estimate):
+    """
+    Step ``follower`` through an offline estimate's accepted rows; their outputs [m].
+
+    Parameters
+    ----------
+    follower : NonlinearFollower
+        Carries the state from one block of rows to the next.
+    stamps_ns : ndarray of int, shape (K,)
+        The rows' stamps.
+    estimate : dict
+        :func:`.offline.estimate_offline`'s arrays for the rows: 'lever_tip', 'coupler_mid'
+        (NaN where the linear estimator gave nothing), 'crank_angle', 'crank_speed'.
+
+    Returns
+    -------
+    outputs : ndarray, shape (K, channels)
+        NaN where the linear estimator gave nothing.
+    accepted : ndarray of bool, shape (K,)
+
+    """
+    angles, speeds = estimate['crank_angle'], estimate['crank_speed']
+    accepted = (np.all(np.isfinite(estimate['lever_tip']), axis=1)
+                & np.all(np.isfinite(estimate['coupler_mid']), axis=1)
+                & np.isfinite(angles) & np.isfinite(speeds))
+    outputs = np.full((len(accepted), follower.tables.outputs), np.nan)
+    step = follower.sample
+    for n in np.flatnonzero(accepted).tolist():
+        outputs[n] = step(int(stamps_ns[n]), float(angles[n]), float(speeds[n]))
+    return outputs, accepted
+
+
+def follow_summary(follower, low, high, damping):
+    """
+    Return a run's ``nonlinear`` JSON entry: peak-to-peak deflections [um] and counts.
+
+    ``low``, ``high``: the smallest and largest output per channel [m] (infinite: none);
+    ``damping``: how the model is damped (said as it was chosen).
+    """
+    seen = bool(np.all(np.isfinite(high)))
+    span = (1e6 * (np.asarray(high) - np.asarray(low))).tolist() if seen else [math.nan] * 4
+    return {**follower.counts, 'lever_tip_peak_to_peak_um': span[0:2],
+            'coupler_mid_peak_to_peak_um': span[2:4],
+            'link_slope_max_rad': follower.slope_max, 'size': follower.tables.size,
+            'links': follower.tables.links, 'damping': damping}
+
+
+__all__ = ['CHOICES', 'choose_nonlinear', 'nonlinear_validity', 'NonlinearFollower',
+           'follow_rows', 'follow_summary']
