@@ -32,7 +32,7 @@ BETA = 1e-4
 
 
 def load_or_run_peer(path, profile, args):
-    """The peer's ramp run, from ``path`` when it holds this profile, else run and kept."""
+    """Return the peer's ramp run: from ``path`` when it holds this profile, else run and kept."""
     if path and os.path.exists(path):
         with np.load(path) as data:
             run = {key: data[key] for key in data.files if key != 'info'}
