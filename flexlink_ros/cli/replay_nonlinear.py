@@ -6,10 +6,11 @@ The same rule and the same ``model: ...`` line as ``estimate --nonlinear``
 model's lever-tip and coupler-mid deflections in place of the linear ones, block by block as
 the replay writes (:class:`NonlinearRows`: memory independent of the recording's length).
 ``auto`` (the default) first runs the linear estimate alone over the recording and writes
-the nonlinear deflections only where its validity indicator (the largest per-sample ``nonlinearity`` of ``~/quality``)
-says the linear estimate is not valid. A recording that names its model is replayed with the
-model that made it (the nonlinear one if its provenance says ``nonlinear: on``, else the
-linear one) unless ``--nonlinear`` is given; ``auto`` is for recordings that name no model.
+the nonlinear deflections only where its validity indicator (the largest per-sample
+``nonlinearity`` of ``~/quality``) says the linear estimate is not valid. A recording that
+names its model is replayed with the model that made it (the nonlinear one if its
+provenance says ``nonlinear: on``, else the linear one) unless ``--nonlinear`` is given;
+``auto`` is for recordings that name no model.
 The output's provenance records the choice (``nonlinear``: ``on`` or ``off``).
 
 The nonlinear model steps through the samples the linear estimator accepted, with the crank
