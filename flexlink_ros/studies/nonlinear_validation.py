@@ -47,9 +47,12 @@ STEPS = 720
 STREAM_RATE_HZ = 1000.0
 
 
-def streaming_run(linkage, rpm, beta, revolutions, crank_angle):
+def streaming_run(linkage, rpm, beta, revolutions, crank_angle, jitter=0.0, tables=None):
     """
     Stream the reduced nonlinear model at one constant speed; its last turn on the points.
+
+    ``jitter``: each sample interval is (1 + jitter U(-1, 1)) / :data:`STREAM_RATE_HZ`;
+    ``tables``: the model when already built for ``linkage`` and ``beta``.
 
     Returns
     -------
@@ -57,9 +60,10 @@ def streaming_run(linkage, rpm, beta, revolutions, crank_angle):
         'outputs' (P, 4) [m] at ``crank_angle``, 'samples', 'refused', 'newton_per_sample'.
 
     """
-    tables = build_nonlinear_tables(linkage, beta)
+    if tables is None:
+        tables = build_nonlinear_tables(linkage, beta)
     seconds = revolutions * 60.0 / rpm
-    stamps, angles, speeds = synthetic_signal(rpm, seconds, STREAM_RATE_HZ)
+    stamps, angles, speeds = synthetic_signal(rpm, seconds, STREAM_RATE_HZ, jitter=jitter)
     out = estimate_nonlinear(tables, stamps, angles, speeds)
     mask = last_revolution(stamps, rpm)
     phase = np.mod(angles[mask], 2.0 * math.pi)

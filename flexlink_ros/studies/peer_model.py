@@ -132,12 +132,12 @@ class PeerModel:
     options: dict
 
 
-def _crank_offset(fun, crank, omega, theta0):
-    """Offset user function: displacement a fun(omega t + theta0) - a fun(theta0) of pin A."""
+def _crank_offset(fun, crank, angle_at, theta0):
+    """Offset user function: displacement a fun(theta(t)) - a fun(theta0) of pin A."""
     start = crank * fun(theta0)
 
     def offset(mbs, t, itemNumber, lOffset):
-        return crank * fun(omega * t + theta0) - start
+        return crank * fun(angle_at(t)) - start
     return offset
 
 
@@ -159,9 +159,9 @@ def _joint_masses(mech, placement):
 
 def build_peer(mechanism, rpm, *, elements_per_link=DEFAULT_ELEMENTS, bearings='rigid',
                gravity=True, beta_s=DEFAULT_BETA_S, mass_placement='coupler-end',
-               start_angle=0.0):
+               start_angle=0.0, crank_angle=None):
     """
-    Build (not solve) the Exudyn model of the linkage at constant crank speed.
+    Build (not solve) the Exudyn model of the linkage at constant crank speed (or a profile).
 
     Parameters
     ----------
@@ -183,6 +183,9 @@ def build_peer(mechanism, rpm, *, elements_per_link=DEFAULT_ELEMENTS, bearings='
         'coupler-end' or 'split' (see the module notes of :mod:`studies.peer_exudyn`).
     start_angle : float
         Crank angle theta0 at t = 0 [rad].
+    crank_angle : callable or None
+        theta(t) [rad] of a varying crank speed (a speed ramp), with theta(0) = ``start_angle``
+        and theta'(0) the speed of ``rpm``; None for omega t + theta0.
 
     Returns
     -------
@@ -206,8 +209,10 @@ def build_peer(mechanism, rpm, *, elements_per_link=DEFAULT_ELEMENTS, bearings='
     nodes, elements = _add_links(builder, state, elements_per_link)
     springs = set(mech.bearing_joints) if bearings == 'springs' else set()
     masses = _joint_masses(mech, mass_placement)
+    if crank_angle is None:
+        crank_angle = lambda t: omega * t + theta0  # noqa: E731
     _add_crank_drive(builder, nodes[1][0], 'A' in springs, masses[('pin', 'A')], state,
-                     omega, theta0)
+                     crank_angle, theta0)
     _add_joints(builder, nodes, springs, masses)
     sensors = _add_sensors(builder, exu, nodes[2][-1], elements[1], elements_per_link)
     builder.mbs.Assemble()
@@ -297,8 +302,8 @@ def _add_links(builder, state, elements_per_link):
     return nodes, elements
 
 
-def _add_crank_drive(builder, coupler_start, spring_at_a, pin_mass, state, omega, theta0):
-    """Joint A: the coupler's first node on crank pin A, a (cos, sin)(omega t + theta0)."""
+def _add_crank_drive(builder, coupler_start, spring_at_a, pin_mass, state, angle_at, theta0):
+    """Joint A: the coupler's first node on crank pin A, a (cos, sin)(theta(t))."""
     mbs, items = builder.mbs, builder.items
     crank = builder.mech.links[0].length
 
@@ -306,7 +311,7 @@ def _add_crank_drive(builder, coupler_start, spring_at_a, pin_mass, state, omega
         for index, fun in ((0, math.cos), (1, math.sin)):
             mbs.AddObject(items.ObjectConnectorCoordinate(
                 markerNumbers=[builder.ground_coord, builder.coordinate_marker(node, index)],
-                offsetUserFunction=_crank_offset(fun, crank, omega, theta0)))
+                offsetUserFunction=_crank_offset(fun, crank, angle_at, theta0)))
 
     if not spring_at_a:
         prescribe_crank_pin(coupler_start)
