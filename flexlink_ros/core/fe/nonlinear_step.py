@@ -28,7 +28,8 @@ import numpy as np
 import scipy.linalg
 
 from . import corotational_strain
-from .nonlinear_strain import element_coordinates, element_force, element_tangent, project_force
+from .nonlinear_strain import (element_coordinates, element_force, element_tangent,
+                               project_force, strain_energy)
 from ...errors import ConvergenceError
 
 # Newton stops when the stage-acceleration update is this small against the accelerations.
@@ -85,6 +86,12 @@ class ElementLaw:
         """Refuse an unknown strain."""
         if self.strain not in STRAINS:
             raise ValueError(f'`strain` must be one of {STRAINS}, got {self.strain!r}')
+
+    def strain_energy(self, q):
+        """Strain energy [J] of element coordinates q (..., E, 6), summed over the elements."""
+        if self.nonlinear and self.strain == 'corotational':
+            return corotational_strain.strain_energy(self.elements, q)
+        return strain_energy(self.elements, q, self.nonlinear)
 
     def force_and_tangent(self, q, rate, tangents=True):
         """Element forces, axial forces and (with ``tangents``) df/dq, df/dq'."""
