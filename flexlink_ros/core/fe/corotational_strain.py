@@ -36,12 +36,20 @@ import numpy as np
 ROTATIONS = np.array([2, 5])
 # d(dx, dy)/dq: the chord's components from the element coordinates.
 CHORD_MAP = np.array([[-1.0, 0.0, 0.0, 1.0, 0.0, 0.0], [0.0, -1.0, 0.0, 0.0, 1.0, 0.0]])
+# CHORD_MAP^T E_ij CHORD_MAP: where a second derivative in (dx, dy) lands in q.
+_XX, _YY = np.outer(CHORD_MAP[0], CHORD_MAP[0]), np.outer(CHORD_MAP[1], CHORD_MAP[1])
+_XY = np.outer(CHORD_MAP[0], CHORD_MAP[1]) + np.outer(CHORD_MAP[1], CHORD_MAP[0])
 
 
 def _rotation_blocks(elements):
     """``G_r`` and ``K_r``: the rotation blocks of A.4 (unit tension) and of K_b, (E, 2, 2)."""
-    rows = np.ix_(np.arange(len(elements)), ROTATIONS, ROTATIONS)
-    return elements.unit_geometric[rows], elements.bending[rows]
+    return (elements.unit_geometric[:, ROTATIONS][:, :, ROTATIONS],
+            elements.bending[:, ROTATIONS][:, :, ROTATIONS])
+
+
+def _in_q(xx, xy, yy):
+    """A symmetric second derivative in (dx, dy), entries (..., E), as (..., E, 6, 6) in q."""
+    return xx[..., None, None] * _XX + xy[..., None, None] * _XY + yy[..., None, None] * _YY
 
 
 def chord(elements, q):
@@ -71,22 +79,13 @@ def chord_derivatives(elements, q):
 
     """
     length, angle, _ = chord(elements, q)
-    c, s = np.cos(angle), np.sin(angle)
-    length_gradient = np.stack([c, s], axis=-1) @ CHORD_MAP
-    angle_gradient = (np.stack([-s, c], axis=-1) / length[..., None]) @ CHORD_MAP
-    length_r = np.stack([np.stack([s * s, -c * s], -1), np.stack([-c * s, c * c], -1)], -2)
-    angle_r = np.stack([np.stack([2 * c * s, s * s - c * c], -1),
-                        np.stack([s * s - c * c, -2 * c * s], -1)], -2)
-    length_hessian = CHORD_MAP.T @ (length_r / length[..., None, None]) @ CHORD_MAP
-    angle_hessian = CHORD_MAP.T @ (angle_r / (length ** 2)[..., None, None]) @ CHORD_MAP
+    c, s = np.cos(angle) / length, np.sin(angle) / length
+    length_gradient = length[..., None] * (c[..., None] * CHORD_MAP[0]
+                                           + s[..., None] * CHORD_MAP[1])
+    angle_gradient = c[..., None] * CHORD_MAP[1] - s[..., None] * CHORD_MAP[0]
+    length_hessian = length[..., None, None] * _in_q(s * s, -c * s, c * c)
+    angle_hessian = _in_q(2.0 * c * s, s * s - c * c, -2.0 * c * s)
     return length_gradient, angle_gradient, length_hessian, angle_hessian
-
-
-def _theta_gradient(angle_gradient):
-    """``d theta / dq`` (..., E, 2, 6): each node rotation less the chord's angle."""
-    unit = np.zeros((2, 6))
-    unit[0, ROTATIONS[0]] = unit[1, ROTATIONS[1]] = 1.0
-    return unit - angle_gradient[..., None, :]
 
 
 def element_strain(elements, q):
@@ -110,20 +109,45 @@ def strain_energy(elements, q):
     return (axial + 0.5 * np.einsum('...a,...ab,...b->...', theta, bending, theta)).sum(-1)
 
 
+def _dot(matrix, vector):
+    """Batched ``matrix @ vector``: (..., a, b) and (..., b) -> (..., a)."""
+    return (matrix @ vector[..., None])[..., 0]
+
+
+def _placed(pair):
+    """A pair over the node rotations (..., 2) as an element vector (..., 6)."""
+    out = np.zeros(pair.shape[:-1] + (6,))
+    out[..., ROTATIONS] = pair
+    return out
+
+
+def _through_theta(block, angle_gradient):
+    """``(dtheta/dq)^T B (dtheta/dq)`` for a symmetric 2 x 2 B (..., E, 2, 2), (..., E, 6, 6)."""
+    padded = np.zeros(block.shape[:-2] + (6, 6))
+    padded[..., ROTATIONS[:, None], ROTATIONS[None, :]] = block
+    row = _placed(block.sum(-1))
+    cross = row[..., :, None] * angle_gradient[..., None, :]
+    total = block.sum((-1, -2))[..., None, None]
+    return (padded - cross - np.swapaxes(cross, -1, -2)
+            + total * angle_gradient[..., :, None] * angle_gradient[..., None, :])
+
+
 def _kinematics(elements, q, rate):
     """Everything the force and its tangents share, as a dict of arrays."""
     length_gradient, angle_gradient, length_hessian, angle_hessian = chord_derivatives(
         elements, q)
     _, _, theta = chord(elements, q)
     geometric, bending = _rotation_blocks(elements)
-    theta_gradient = _theta_gradient(angle_gradient)
-    theta_moment = np.einsum('...ab,...b->...a', geometric, theta)
-    gradient = length_gradient + np.einsum('...ka,...k->...a', theta_gradient, theta_moment)
-    hessian = (length_hessian + np.swapaxes(theta_gradient, -1, -2) @ geometric @ theta_gradient
+    theta_moment = _dot(geometric, theta)
+    # (dtheta/dq)^T x for a pair x: x at the node rotations less (x1 + x2) d(alpha)/dq
+    gradient = (length_gradient + _placed(theta_moment)
+                - theta_moment.sum(-1)[..., None] * angle_gradient)
+    hessian = (length_hessian + _through_theta(geometric, angle_gradient)
                - theta_moment.sum(-1)[..., None, None] * angle_hessian)
-    return {'theta': theta, 'theta_gradient': theta_gradient, 'gradient': gradient,
+    theta_rate = rate[..., ROTATIONS] - np.sum(angle_gradient * rate, -1)[..., None]
+    return {'theta': theta, 'angle_gradient': angle_gradient, 'gradient': gradient,
             'hessian': hessian, 'angle_hessian': angle_hessian, 'bending': bending,
-            'theta_rate': np.einsum('...ka,...a->...k', theta_gradient, rate)}
+            'theta_rate': theta_rate}
 
 
 def element_force(elements, q, rate, beta):
@@ -153,10 +177,11 @@ def element_force(elements, q, rate, beta):
 def _force(elements, q, rate, beta, kin):
     """Force and axial force from the shared kinematics."""
     strain = element_strain(elements, q)
-    strain_rate = np.einsum('...a,...a->...', kin['gradient'], rate) / elements.length
+    strain_rate = np.sum(kin['gradient'] * rate, -1) / elements.length
     axial = elements.axial_stiffness * (strain + beta * strain_rate)
-    moment = np.einsum('...ab,...b->...a', kin['bending'], kin['theta'] + beta * kin['theta_rate'])
-    bending = np.einsum('...ka,...k->...a', kin['theta_gradient'], moment)
+    kin['moment'] = _dot(kin['bending'], kin['theta'] + beta * kin['theta_rate'])
+    bending = (_placed(kin['moment'])
+               - kin['moment'].sum(-1)[..., None] * kin['angle_gradient'])
     return axial[..., None] * kin['gradient'] + bending, axial
 
 
@@ -169,23 +194,30 @@ def element_tangent(elements, q, rate, beta):
     stiffness, damping : ndarray, shape (..., E, 6, 6)
 
     """
+    return force_and_tangent(elements, q, rate, beta)[2:]
+
+
+def force_and_tangent(elements, q, rate, beta):
+    """:func:`element_force` and :func:`element_tangent` in one evaluation (4 arrays)."""
     kin = _kinematics(elements, q, rate)
-    _, axial = _force(elements, q, rate, beta, kin)
-    gradient, hessian, theta_gradient = kin['gradient'], kin['hessian'], kin['theta_gradient']
+    force, axial = _force(elements, q, rate, beta, kin)
+    gradient, hessian, angle_gradient = kin['gradient'], kin['hessian'], kin['angle_gradient']
     scale = (elements.axial_stiffness / elements.length)[..., None, None]
     outer = scale * gradient[..., :, None] * gradient[..., None, :]
-    bending = np.swapaxes(theta_gradient, -1, -2) @ kin['bending'] @ theta_gradient
+    bending = _through_theta(kin['bending'], angle_gradient)
     damping = beta * (outer + bending)
-    curvature_rate = np.einsum('...ab,...b->...a', hessian, rate)
-    angle_rate = np.einsum('...ab,...b->...a', kin['angle_hessian'], rate)
-    moment = np.einsum('...ab,...b->...a', kin['bending'], kin['theta'] + beta * kin['theta_rate'])
-    moment_rate = np.einsum('...ka,...kb->...ab', theta_gradient,
-                            kin['bending'].sum(-1)[..., :, None] * angle_rate[..., None, :])
+    curvature_rate = _dot(hessian, rate)
+    angle_rate = _dot(kin['angle_hessian'], rate)
+    moment = kin['moment']
+    # sum_k (dtheta_k/dq) (K_r 1)_k (d^2 alpha/dq^2 q')^T: the rates' turn with the chord
+    row_sums = kin['bending'].sum(-1)
+    turned = _placed(row_sums) - row_sums.sum(-1)[..., None] * angle_gradient
+    moment_rate = turned[..., :, None] * angle_rate[..., None, :]
     stiffness = (outer + beta * scale * gradient[..., :, None] * curvature_rate[..., None, :]
                  + axial[..., None, None] * hessian + bending - beta * moment_rate
                  - moment.sum(-1)[..., None, None] * kin['angle_hessian'])
-    return stiffness, damping
+    return force, axial, stiffness, damping
 
 
 __all__ = ['chord', 'chord_derivatives', 'element_strain', 'strain_energy', 'element_force',
-           'element_tangent']
+           'element_tangent', 'force_and_tangent']

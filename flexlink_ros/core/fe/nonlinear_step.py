@@ -96,11 +96,10 @@ class ElementLaw:
     def force_and_tangent(self, q, rate, tangents=True):
         """Element forces, axial forces and (with ``tangents``) df/dq, df/dq'."""
         if self.nonlinear and self.strain == 'corotational':
-            force, axial = corotational_strain.element_force(self.elements, q, rate, self.beta)
             if not tangents:
-                return force, axial, None, None
-            return (force, axial) + corotational_strain.element_tangent(
-                self.elements, q, rate, self.beta)
+                return corotational_strain.element_force(self.elements, q, rate,
+                                                         self.beta) + (None, None)
+            return corotational_strain.force_and_tangent(self.elements, q, rate, self.beta)
         force, axial = element_force(self.elements, q, rate, self.beta, self.nonlinear)
         if not tangents:
             return force, axial, None, None

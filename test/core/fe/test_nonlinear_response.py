@@ -171,3 +171,41 @@ def test_mesh_converges():
     scale = np.abs(ends[8]).max()
     errors = [np.abs(ends[k] - ends[8]).max() / scale for k in (2, 4)]
     assert scale > 1e-4 and errors[1] < errors[0] / 3.0, errors
+
+
+def test_floquet_multipliers_are_the_finite_difference_monodromys():
+    """
+    The orbit's multipliers are the eigenvalues of its monodromy, and that monodromy is the
+    finite-difference derivative of one revolution.
+
+    The monodromy P of a revolution marched from the periodic state has the response's
+    multipliers as eigenvalues; along random directions d, P d equals the central difference
+    of two revolutions marched from the state perturbed by +-d (co-rotational strain, 391 rpm,
+    near resonance).
+    """
+    model = _model(elements=2, rigid_crank=True, bearings='flexible')
+    steps = 120
+    orbit = nr.nonlinear_response(model, SPEED, steps=steps, points=60, zeta=0.0, beta=1e-4)
+    assert orbit.info['strain'] == 'corotational'
+    run = nr.make_run(model, SPEED, steps, 60, 2, 0.0, 1e-4, True, 0.0)
+    n = model.size
+    start = np.concatenate([orbit.displacement[0], orbit.velocity[0]])
+    cache = []
+    monodromy = nr.march(model, run, start[:n], start[n:], steps, True, cache=cache)['monodromy']
+    mine = orbit.floquet_multipliers
+    assert 0.3 < abs(mine[0]) < 1.0
+    eigenvalues = np.linalg.eigvals(monodromy)
+    for mu in mine[:8]:
+        assert np.abs(eigenvalues - mu).min() < 1e-6 * abs(mine[0])
+    sizes = np.repeat([np.abs(start[:n]).max(), np.abs(start[n:]).max()], n)
+    rng = np.random.default_rng(5)
+    for _ in range(3):
+        direction = 1e-4 * sizes * rng.standard_normal(2 * n)
+        ends = [nr.march(model, run, z[:n], z[n:], steps, cache=cache)
+                for z in (start + direction, start - direction)]
+        numeric = 0.5 * np.concatenate([ends[0]['q'] - ends[1]['q'],
+                                        ends[0]['v'] - ends[1]['v']])
+        exact = monodromy @ direction
+        for block in (slice(0, n), slice(n, 2 * n)):
+            np.testing.assert_allclose(numeric[block], exact[block], rtol=0,
+                                       atol=1e-5 * np.abs(exact[block]).max())
