@@ -48,13 +48,13 @@ def _rotation_blocks(elements):
 
 
 def _in_q(xx, xy, yy):
-    """A symmetric second derivative in (dx, dy), entries (..., E), as (..., E, 6, 6) in q."""
+    """Place a symmetric (dx, dy) second derivative, entries (..., E), in q: (..., E, 6, 6)."""
     return xx[..., None, None] * _XX + xy[..., None, None] * _XY + yy[..., None, None] * _YY
 
 
 def chord(elements, q):
     """
-    The chord of each element: length L, angle alpha and node rotations theta against it.
+    Return each element's chord: length L, angle alpha and node rotations theta against it.
 
     Returns
     -------
@@ -94,8 +94,8 @@ def element_strain(elements, q):
     geometric, _ = _rotation_blocks(elements)
     stretch_x, dy = q[..., 3] - q[..., 0], q[..., 4] - q[..., 1]
     # L - l without cancellation: the strains are ~1e-6 of the lengths
-    stretch = (stretch_x * (2.0 * elements.length + stretch_x) + dy * dy) / (length
-                                                                              + elements.length)
+    stretch = ((stretch_x * (2.0 * elements.length + stretch_x) + dy * dy)
+               / (length + elements.length))
     shortening = 0.5 * np.einsum('...a,...ab,...b->...', theta, geometric, theta)
     return (stretch + shortening) / elements.length
 
@@ -115,7 +115,7 @@ def _dot(matrix, vector):
 
 
 def _placed(pair):
-    """A pair over the node rotations (..., 2) as an element vector (..., 6)."""
+    """Place a pair over the node rotations (..., 2) in an element vector (..., 6)."""
     out = np.zeros(pair.shape[:-1] + (6,))
     out[..., ROTATIONS] = pair
     return out

@@ -175,8 +175,7 @@ def test_mesh_converges():
 
 def test_floquet_multipliers_are_the_finite_difference_monodromys():
     """
-    The orbit's multipliers are the eigenvalues of its monodromy, and that monodromy is the
-    finite-difference derivative of one revolution.
+    Multipliers: the eigenvalues of the monodromy, itself the revolution's derivative.
 
     The monodromy P of a revolution marched from the periodic state has the response's
     multipliers as eigenvalues; along random directions d, P d equals the central difference
