@@ -9,8 +9,8 @@ conventions; kept in ``--cache``) and the package's linear and nonlinear full or
 the peer, one scene after another (the peer and the marching are CPU-heavy). Prints one
 Markdown row per scene as it finishes: relative RMS of the lever tip and coupler mid-point
 deflection vectors, the worst p2p error per point, the spectral radius of the orbit's
-monodromy, the orbit's largest element rotation relative to its link frame (what the
-nonlinear validity indicator reads), Newton iterations per step and cost per step.
+monodromy, the orbit's largest element rotation against its chord (co-rotational strain;
+what the nonlinear validity indicator reads), Newton iterations per step and cost per step.
 ``--peer-steps``: the peer's time steps per revolution (default 720; its phase converges
 only at about 2880 where the response is largest).
 """
