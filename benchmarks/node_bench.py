@@ -3,6 +3,7 @@ End-to-end latency, loss and footprint of flexlink_node next to a bare rclpy ech
 
     python benchmarks/node_bench.py [--rate-hz 1000] [--max-rate-hz 8000] [--seconds 3]
         [--runs 1] [--reference-root OTHER] [--no-recording] [--out DIR] [--json]
+        [--node-param NAME:=VALUE ...]
 
 Prints figures (it is not a timed test). One run measures, on loopback in a domain of its own,
 a bare rclpy echo node (JointState in, the same bytes out: the floor any Python node pays) and
@@ -255,10 +256,13 @@ def rate_steps(rate_hz, max_rate_hz):
     return rates
 
 
-def bench_targets(bag, recording=True, reference_root=None, reference_first=False):
+def bench_targets(bag, recording=True, reference_root=None, reference_first=False,
+                  node_params=()):
     """Return (name, argv, output topic, output type, source root) of every target of a run."""
     node = [sys.executable, '-m', 'flexlink_ros.ros.node', '--ros-args',
             '-p', f'input_topic:={INPUT_TOPIC}', '-p', 'qos.depth:=1000']
+    for item in node_params:
+        node += ['-p', item]
     joint_state, vector3_stamped = message_class(JOINT_STATE), message_class(VECTOR3_STAMPED)
     nodes = [('flexlink_node', node, NODE_OUTPUT, vector3_stamped, ROOT)]
     if reference_root is not None:
@@ -274,7 +278,8 @@ def bench_targets(bag, recording=True, reference_root=None, reference_first=Fals
 
 
 def run_node_bench(rate_hz=1000.0, max_rate_hz=8000.0, seconds=3.0, work_dir=None,
-                   recording=True, reference_root=None, reference_first=False):
+                   recording=True, reference_root=None, reference_first=False,
+                   node_params=()):
     """
     Run the benchmark once (see the module docstring).
 
@@ -294,6 +299,8 @@ def run_node_bench(rate_hz=1000.0, max_rate_hz=8000.0, seconds=3.0, work_dir=Non
         Source tree of a second node to measure (run with its root on PYTHONPATH).
     reference_first : bool
         Measure the reference node before this tree's.
+    node_params : sequence of str
+        ``name:=value`` parameters of every node measured (both trees).
 
     Returns
     -------
@@ -312,7 +319,7 @@ def run_node_bench(rate_hz=1000.0, max_rate_hz=8000.0, seconds=3.0, work_dir=Non
     results = []
     try:
         for name, argv, topic, msg_type, root in bench_targets(bag, recording, reference_root,
-                                                               reference_first):
+                                                               reference_first, node_params):
             env = dict(os.environ, PYTHONPATH=str(root))
             results.append(measure_target(source, name, argv, topic, msg_type, rates,
                                           seconds, env))
@@ -367,6 +374,9 @@ def build_parser():
                         help='leave out the node with recording on')
     parser.add_argument('--out', default=None, help='directory of the bench recordings '
                         '(default: a new temporary directory)')
+    parser.add_argument('--node-param', dest='node_params', action='append', default=[],
+                        metavar='NAME:=VALUE', help='a parameter of every node measured '
+                        '(repeatable), e.g. model.nonlinear:=off')
     parser.add_argument('--json', action='store_true', help='print one JSON object per run')
     parser.add_argument('--echo', action='store_true', help=argparse.SUPPRESS)
     return parser
@@ -382,7 +392,7 @@ def main(argv=None):
     for run in range(args.runs):
         result = run_node_bench(args.rate_hz, args.max_rate_hz, args.seconds,
                                 out / f'run{run + 1}', args.recording, args.reference_root,
-                                reference_first=run % 2 == 1)
+                                reference_first=run % 2 == 1, node_params=args.node_params)
         result['run'] = run + 1
         print(json.dumps(result) if args.json else f'run {run + 1}\n{_text(result)}',
               flush=True)

@@ -5,10 +5,12 @@ The reduced nonlinear update against the linear update, in alternating whole pro
 
 Each round runs two processes in alternating order: one times the linear streaming update
 (the compiled step, ``StreamingEstimator.update``) per sample, the other the reduced nonlinear
-model's step (``NonlinearStepper.step`` plus its outputs) per sample, on the same synthetic
-1 kHz signal (rigid crank, bearing springs, 8 elements per link, beta 1e-4 s). Both models
-come from the cache (built once before the rounds). Prints each run's median and p99 per
-sample and the offline samples per second, then the medians over the rounds and the ratio.
+model's streaming update (``NonlinearFollower.sample``, the node's call: one compiled step
+plus its outputs) per sample, on the same synthetic 1 kHz signal (rigid crank, bearing
+springs, 8 elements per link, beta 1e-4 s). Both models come from the cache (built once
+before the rounds). Prints each run's median and p99 per sample and the offline samples per
+second (the linear stream; the nonlinear ``estimate_nonlinear``, many samples per compiled
+call), then the medians over the rounds and the ratio.
 """
 
 import argparse
@@ -28,7 +30,8 @@ from flexlink_ros.core.mechanism_file import load_mechanism  # noqa: E402
 from flexlink_ros.core.options import ModelOptions  # noqa: E402
 from flexlink_ros.core.reduction.mechanism_model import model_for_mechanism  # noqa: E402
 from flexlink_ros.core.reduction.nonlinear_model import nonlinear_model_for  # noqa: E402
-from flexlink_ros.studies.synthetic import stream_timed, synthetic_signal  # noqa: E402
+from flexlink_ros.studies.synthetic import stream_nonlinear_timed, stream_timed  # noqa: E402
+from flexlink_ros.studies.synthetic import synthetic_signal  # noqa: E402
 from flexlink_ros.studies.synthetic import timing_summary  # noqa: E402
 import numpy as np  # noqa: E402
 
@@ -45,11 +48,14 @@ def measure(kind, rpm, seconds, cache):
         model = model_for_mechanism(mech, OPTIONS, cache_dir=cache)
         started = time.perf_counter()
         _, update_ns = stream_timed(model, stamps, angles, speeds)
+        wall = time.perf_counter() - started
     else:
         tables, _ = nonlinear_model_for(mech, OPTIONS, cache_dir=cache)
+        _, update_ns = stream_nonlinear_timed(tables, stamps, angles, speeds)
+        update_ns = update_ns[1:]
         started = time.perf_counter()
-        update_ns = estimate_nonlinear(tables, stamps, angles, speeds)['update_ns'][1:]
-    wall = time.perf_counter() - started
+        estimate_nonlinear(tables, stamps, angles, speeds)
+        wall = time.perf_counter() - started
     median, p99 = timing_summary(np.asarray(update_ns))
     return {'kind': kind, 'median_us': median, 'p99_us': p99,
             'samples_per_s': len(stamps) / wall}

@@ -10,7 +10,9 @@ many rows (step_rows, the replay's call: the rows the updates build, so the same
 median over chunks of CHUNK rows, which keep the GIL as a single sample does). The update
 minus the batched step is what the estimator adds around the step. Both estimators' last
 samples of each round are checked to agree before anything is reported.
-``python benchmarks/update_bench.py`` prints it for the node's default model.
+``python benchmarks/update_bench.py`` prints it for the node's default model;
+``--nonlinear`` times the reduced nonlinear update against the linear one instead
+(:func:`nonlinear_rounds`).
 """
 
 import argparse
@@ -18,11 +20,13 @@ import json
 import time
 
 from flexlink_ros.core.estimation.compiled_update import compiled_samples, use_python_path
+from flexlink_ros.core.estimation.nonlinear_follow import NonlinearFollower
 from flexlink_ros.core.estimation.step import MAX_SUBSTEP_NS
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction.mechanism_model import model_for_mechanism
+from flexlink_ros.core.reduction.nonlinear_model import nonlinear_model_for
 from flexlink_ros.studies.synthetic import synthetic_signal
 import numpy as np
 
@@ -138,6 +142,69 @@ def update_overhead(model, rpm=391.0, rounds=9, samples=3000, jitter=0.3):
     return out
 
 
+NONLINEAR_OPTIONS = ModelOptions(rigid_crank=True, bearings='flexible', elements_per_link=8,
+                                 stiffness_damping=1e-4)
+
+
+def nonlinear_rounds(mechanism, rpm=391.0, rounds=9, samples=3000, jitter=0.3):
+    """
+    Time the reduced nonlinear streaming update against the linear update, interleaved.
+
+    One process, one jittered 1 kHz signal: each round runs ``samples`` linear updates
+    (``StreamingEstimator.update``) and as many nonlinear updates (``NonlinearFollower.sample``,
+    the node's call: one compiled step and the outputs), which first alternating; both models
+    of rigid crank, bearing springs, 8 elements per link, beta 1e-4 s.
+
+    Returns
+    -------
+    dict
+        'linear', 'nonlinear': median and p99 [us] (medians over the rounds); 'ratio' (the
+        median of the rounds' median ratios); 'size' (the nonlinear model's m).
+
+    """
+    model = model_for_mechanism(mechanism, NONLINEAR_OPTIONS)
+    tables, _ = nonlinear_model_for(mechanism, NONLINEAR_OPTIONS)
+    signal = synthetic_signal(rpm, rounds * samples / 1000.0 + 1.0, 1000.0, jitter, seed=0)
+    signal = [values.tolist() for values in signal]
+    linear, follower = StreamingEstimator(model), NonlinearFollower(tables, reset_gap_s=1.0)
+    timed = {'linear': [], 'nonlinear': []}
+    for k in range(rounds):
+        part = [values[k * samples:(k + 1) * samples] for values in signal]
+        order = (('linear', linear.update), ('nonlinear', follower.sample))
+        for name, update in (order if k % 2 == 0 else order[::-1]):
+            times = _timed_calls(update, part)
+            timed[name].append((float(np.median(times)), float(np.percentile(times, 99))))
+    out = {name: {'median_us': float(np.median([m for m, _ in values])),
+                  'p99_us': float(np.median([p for _, p in values]))}
+           for name, values in timed.items()}
+    out['ratio'] = float(np.median([n[0] / m[0] for m, n in zip(timed['linear'],
+                                                                timed['nonlinear'])]))
+    out['size'] = tables.size
+    return out
+
+
+def _timed_calls(update, signal):
+    """Durations [us] of ``update(stamp, angle, speed)`` over ``signal``, after SETTLE."""
+    clock = time.perf_counter_ns
+    times = []
+    for stamp, angle, speed in zip(*signal):
+        before = clock()
+        update(stamp, angle, speed)
+        times.append(clock() - before)
+    return np.array(times[SETTLE:]) * 1e-3
+
+
+def _print_nonlinear(result, args):
+    """Print :func:`nonlinear_rounds`' result."""
+    print(f'reduced nonlinear update (m = {result["size"]}) against the linear update, '
+          f'{args.rpm:g} rpm, 1 kHz +-30 % jitter, {args.rounds} interleaved rounds of '
+          f'{args.samples} updates:')
+    for name in ('linear', 'nonlinear'):
+        print(f'  {name:9s} median {result[name]["median_us"]:7.2f} us, '
+              f'p99 {result[name]["p99_us"]:7.2f} us')
+    print(f'  nonlinear / linear median: {result["ratio"]:.1f}x')
+
+
 def main(argv=None):
     """Print :func:`update_overhead` for the node's default model (JSON with --json)."""
     parser = argparse.ArgumentParser(prog='python benchmarks/update_bench.py',
@@ -147,7 +214,14 @@ def main(argv=None):
     parser.add_argument('--rounds', type=int, default=9)
     parser.add_argument('--samples', type=int, default=3000)
     parser.add_argument('--json', action='store_true')
+    parser.add_argument('--nonlinear', action='store_true',
+                        help='time the reduced nonlinear update against the linear one')
     args = parser.parse_args(argv)
+    if args.nonlinear:
+        result = nonlinear_rounds(load_mechanism(args.mechanism), args.rpm, args.rounds,
+                                  args.samples)
+        print(json.dumps(result, indent=1)) if args.json else _print_nonlinear(result, args)
+        return
     model = model_for_mechanism(load_mechanism(args.mechanism), ModelOptions())
     result = update_overhead(model, args.rpm, args.rounds, args.samples)
     if args.json:

@@ -186,8 +186,18 @@ def run_demo(seconds=6.0, rpm=391.0, out='demo_out', rate_hz=1000.0, extra_node_
     result = summarise_recording(bag)
     result.update({'seconds': seconds, 'rpm': rpm, 'rate_hz': rate_hz, 'domain_id': domain,
                    'exit_codes': codes,
-                   'node_warnings': [line for line in node.lines if '[WARN]' in line]})
+                   'node_warnings': [line for line in node.lines if '[WARN]' in line],
+                   'model': _model_choice(node.lines)})
     return result
+
+
+def _model_choice(lines):
+    """Return the node's 'model: linear|nonlinear (why)' line, or None."""
+    for line in lines:
+        said = line.split(']: ', 1)[-1]
+        if said.startswith(('model: linear', 'model: nonlinear')):
+            return said
+    return None
 
 
 def _new_bag_path(out):
@@ -255,7 +265,10 @@ def summary_text(result):
         value = result['peak_to_peak_um'][key]
         lines.append(f'  {label:<36} {value[0]:>10.1f}  {value[1]:>10.1f}' if value
                      else f'  {label:<36} no data')
-    lines.extend(_quality_lines(result['quality']))
+    if result.get('model'):
+        lines.append(result['model'])
+    lines.extend(_quality_lines(result['quality'],
+                                (result.get('model') or '').startswith('model: nonlinear')))
     if result['criteria_max']:
         lines.append('Earles-Wu criterion |dgamma/dt|/R    max [rad/(s N)]   R there [N]  '
                      'median R [N]')
@@ -308,19 +321,26 @@ def register(subparsers):
     parser.set_defaults(func=_demo_command)
 
 
-def _quality_lines(quality):
-    """Say the largest error indicator and whether the estimates can be trusted (~/quality)."""
+def _quality_lines(quality, nonlinear=False):
+    """
+    Say the largest error indicator and whether the estimates can be trusted (~/quality).
+
+    ``nonlinear``: the nonlinear model made the deflections (the indicator is its own).
+    """
     if quality is None:
         return ['quality: no ~/quality messages recorded']
     verdict = quality['nonlinearity']
+    why_not = ("NOT valid: the links bend beyond the slope the nonlinear model's strain "
+               'carries (docs/nonlinear.md)' if nonlinear else
+               'NOT valid: at this speed a crank '
+               "harmonic drives a link near its resonance, where the vibration's own "
+               'axial force detunes the link and no linear estimate can follow it, so '
+               'read these deflections as a warning, not a measurement, or run the '
+               'nonlinear model (docs/validity.md)')
     if verdict['valid'] is None:
         validity = 'validity indicator not available for this model'
     else:
-        validity = (f"validity indicator max {verdict['indicator_max']:.3g} (threshold "
-                    f"{verdict['threshold']:g}): "
-                    + ('valid' if verdict['valid'] else 'NOT valid: at this speed a crank '
-                       "harmonic drives a link near its resonance, where the vibration's own "
-                       'axial force detunes the link and no linear estimate can follow it, so '
-                       'read these deflections as a warning, not a measurement '
-                       '(docs/validity.md)'))
+        validity = (f"{'nonlinear model ' if nonlinear else ''}validity indicator max "
+                    f"{verdict['indicator_max']:.3g} (threshold {verdict['threshold']:g}): "
+                    + ('valid' if verdict['valid'] else why_not))
     return [f"quality: error indicator max {quality['error_indicator_max']:.3g}; {validity}"]

@@ -134,6 +134,14 @@ def _bench_lines(result):
                  f'{numpy_step["offline_samples_per_s"]:>10.0f}   (the same numbers; '
                  + ('every row timed in interleaved rounds, best of 3)'
                     if result['compiled_step'] else 'the compiled step is NOT built)'))
+    nonlinear = result.get('nonlinear')
+    if nonlinear:
+        lines.append(f'{"nonlinear (reduced)":<22} {nonlinear["size"]:>3} {"":>3} {"":>5} '
+                     f'{nonlinear["us_per_sample"]:>7.1f} {nonlinear["us_per_sample_p99"]:>7.1f} '
+                     f'{nonlinear["offline_samples_per_s"]:>10.0f}   ({nonlinear["ratio"]:.1f}x '
+                     f'the default linear update in the same rounds, '
+                     f'{nonlinear["newton_per_sample"]:.2f} Newton iterations per sample; '
+                     'its accuracy against the Exudyn peer: docs/nonlinear.md)')
     if result['cpu_ratio']:
         lines.append(f'full-order reference: {result["reference_cpu_s_per_s"]:.3g} CPU s per '
                      f'simulated s; estimator {result["estimator_cpu_s_per_s"]:.3g} '

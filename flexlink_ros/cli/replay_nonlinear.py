@@ -2,14 +2,15 @@
 ``replay --nonlinear auto|on|off``: the reduced nonlinear model's deflections in the output.
 
 The same rule and the same ``model: ...`` line as ``estimate --nonlinear``
-(:func:`.estimate_nonlinear.choose_nonlinear`). ``on`` writes the nonlinear model's lever-tip
-and coupler-mid deflections in place of the linear ones, block by block as the replay writes
-(:class:`NonlinearRows`: memory independent of the recording's length). ``auto`` (the default)
-first runs the linear estimate alone over the recording and writes the nonlinear deflections
-only where its validity indicator (the largest per-sample ``nonlinearity`` of ``~/quality``)
-says the linear estimate is not valid. A recording that names its model is replayed with the
-model that made it (the nonlinear one if its provenance says ``nonlinear: on``, else the
-linear one) unless ``--nonlinear`` is given; ``auto`` is for recordings that name no model.
+(:func:`core.estimation.nonlinear_follow.choose_nonlinear`). ``on`` writes the nonlinear
+model's lever-tip and coupler-mid deflections in place of the linear ones, block by block as
+the replay writes (:class:`NonlinearRows`: memory independent of the recording's length).
+``auto`` (the default) first runs the linear estimate alone over the recording and writes
+the nonlinear deflections only where its validity indicator (the largest per-sample
+``nonlinearity`` of ``~/quality``) says the linear estimate is not valid. A recording that
+names its model is replayed with the model that made it (the nonlinear one if its
+provenance says ``nonlinear: on``, else the linear one) unless ``--nonlinear`` is given;
+``auto`` is for recordings that name no model.
 The output's provenance records the choice (``nonlinear``: ``on`` or ``off``).
 
 The nonlinear model steps through the samples the linear estimator accepted, with the crank
@@ -23,9 +24,9 @@ import math
 
 import numpy as np
 
-from .estimate_nonlinear import choose_nonlinear
-from ..core.estimation.nonlinear_stream import NonlinearStepper, unwrap_with_speed, \
-    VON_KARMAN_SLOPE
+from ..core.estimation.nonlinear_follow import choose_nonlinear, follow_rows, follow_summary, \
+    NonlinearFollower
+from ..core.estimation.nonlinear_stream import VON_KARMAN_SLOPE
 from ..core.reduction.nonlinear_model import nonlinear_model_for
 from ..core.validity import is_valid
 
@@ -50,10 +51,14 @@ def nonlinear_choice(args, recorded):
     return 'auto'
 
 
-def decide(choice, summary=None):
-    """Return (use the nonlinear model, why) for ``choice`` and a linear run's summary."""
+def decide(choice, summary=None, recorded=False):
+    """
+    Return (use the nonlinear model, why) for ``choice`` and a linear run's summary.
+
+    ``recorded``: the choice is the recording's own (no ``--nonlinear`` given).
+    """
     if choice != 'auto':
-        return choose_nonlinear(choice, None)
+        return choose_nonlinear(choice, None, recorded)
     largest = summary['quality'].get('nonlinearity_max') if summary else None
     return choose_nonlinear('auto', is_valid([math.nan if largest is None else largest]))
 
@@ -75,25 +80,14 @@ class NonlinearRows:
     """
 
     def __init__(self, tables, reset_gap_s, damping=''):
-        self.tables, self.reset_gap_s, self.damping = tables, float(reset_gap_s), damping
-        self.stepper = NonlinearStepper(tables)
-        self.last = None          # (stamp [ns], unwrapped angle, speed) of the last sample
-        self.counts = {'samples': 0, 'refused_samples': 0, 'restarts': 0,
-                       'beyond_von_karman_samples': 0}
-        self.slope_max = 0.0
+        self.tables, self.damping = tables, damping
+        self.follower = NonlinearFollower(tables, reset_gap_s)
         self.low = np.full(tables.outputs, np.inf)
         self.high = np.full(tables.outputs, -np.inf)
 
     def __call__(self, samples, estimate):
         """Return ``estimate`` with the nonlinear 'lever_tip' and 'coupler_mid' rows."""
-        angles, speeds = estimate['crank_angle'], estimate['crank_speed']
-        accepted = (np.all(np.isfinite(estimate['lever_tip']), axis=1)
-                    & np.all(np.isfinite(estimate['coupler_mid']), axis=1)
-                    & np.isfinite(angles) & np.isfinite(speeds))
-        outputs = np.full((len(accepted), self.tables.outputs), np.nan)
-        stamps = samples['stamps_ns']
-        for n in np.flatnonzero(accepted).tolist():
-            outputs[n] = self._sample(int(stamps[n]), float(angles[n]), float(speeds[n]))
+        outputs, accepted = follow_rows(self.follower, samples['stamps_ns'], estimate)
         if accepted.any():
             self.low = np.minimum(self.low, outputs[accepted].min(axis=0))
             self.high = np.maximum(self.high, outputs[accepted].max(axis=0))
@@ -101,37 +95,9 @@ class NonlinearRows:
         replaced['lever_tip'], replaced['coupler_mid'] = outputs[:, 0:2], outputs[:, 2:4]
         return replaced
 
-    def _sample(self, stamp, angle, speed):
-        """Step to one accepted sample; its output deflections [m]."""
-        stepper, self.counts['samples'] = self.stepper, self.counts['samples'] + 1
-        h = None if self.last is None else (stamp - self.last[0]) * 1e-9
-        if h is None or not 0.0 < h <= self.reset_gap_s:
-            self.counts['restarts'] += self.last is not None
-            stepper.start(angle, speed)
-            self.last = (stamp, angle, speed)
-            return stepper.outputs(angle)
-        _, theta0, speed0 = self.last
-        theta = float(unwrap_with_speed(np.array([0.0, h]), np.array([theta0, angle]),
-                                        np.array([speed0, speed]))[0][1])
-        if stepper.step(h, theta0, theta, speed0, speed):
-            output = stepper.output_operator @ stepper.q
-        else:
-            self.counts['refused_samples'] += 1
-            output = stepper.outputs(theta)
-        slope = float(np.max(stepper.slope)) if stepper.slope.size else 0.0
-        self.slope_max = max(self.slope_max, slope)
-        self.counts['beyond_von_karman_samples'] += slope > VON_KARMAN_SLOPE
-        self.last = (stamp, theta, speed)
-        return output
-
     def summary(self):
         """Return the JSON's ``nonlinear`` entry: peak-to-peak deflections [um] and counts."""
-        seen = bool(np.all(np.isfinite(self.high)))
-        span = (1e6 * (self.high - self.low)).tolist() if seen else [math.nan] * 4
-        return {**self.counts, 'lever_tip_peak_to_peak_um': span[0:2],
-                'coupler_mid_peak_to_peak_um': span[2:4],
-                'link_slope_max_rad': self.slope_max, 'size': self.tables.size,
-                'links': self.tables.links, 'damping': self.damping}
+        return follow_summary(self.follower, self.low, self.high, self.damping)
 
 
 def nonlinear_rows(args, mechanism, options, reset_gap_s):

@@ -7,9 +7,10 @@ reads the crank samples as ``flexlink replay`` does (:func:`io.recording.scan_re
 :func:`io.joint_states.read_crank_samples`), estimates them in one sequential pass
 (:func:`core.estimation.offline.estimate_offline`: the state carries from sample to
 sample, so a bag is one task, its split files in order), and summarises each revolution or
-minute (:mod:`core.estimation.summary`). Which mechanism and model options a bag is
-recomputed with is decided in one place, :func:`bag_model`. A bag that cannot be recomputed
-gives a result with its reason, never an exception.
+minute (:mod:`core.estimation.summary`). Which mechanism, model options and model (linear,
+or nonlinear where the recording says it was made with it) a bag is recomputed with is
+decided in one place, :func:`bag_model`. A bag that cannot be recomputed gives a result with
+its reason, never an exception.
 """
 
 import dataclasses
@@ -22,11 +23,15 @@ import numpy as np
 from .joint_states import parse_crank_states, read_input_samples, skip_reasons
 from .provenance import read_provenance
 from .replay_writer import write_replay
+from ..core.estimation.gate import DEFAULT_RESET_GAP_S
+from ..core.estimation.nonlinear_follow import choose_nonlinear, follow_rows, follow_summary, \
+    NonlinearFollower
 from ..core.estimation.offline import estimate_offline
 from ..core.estimation.summary import period_ids, recording_totals, summarize_periods
 from ..core.mechanism_file import load_mechanism
 from ..core.reduction import mechanism_model
-from ..core.validity import VALIDITY_THRESHOLD
+from ..core.reduction.nonlinear_model import nonlinear_model_for
+from ..core.validity import is_valid, VALIDITY_THRESHOLD
 from ..names import DEFAULT_FRAME_ID, NODE_NAME, output_topics
 
 # Models kept loaded in a worker process (a worker recomputes many bags of one linkage).
@@ -55,6 +60,9 @@ class FleetSettings:
         Nonlinearity indicator above which a sample is outside the validity range.
     node_name, frame_id, markers_every_n :
         The written MCAP's output namespace, frame and marker spacing (as replay's flags).
+    nonlinear : str or None
+        'auto', 'on' or 'off' (replay's ``--nonlinear``); None: the model the recording
+        says made it, else 'auto'.
 
     """
 
@@ -68,11 +76,7 @@ class FleetSettings:
     node_name: str = NODE_NAME
     frame_id: str = DEFAULT_FRAME_ID
     markers_every_n: int = 10
-
-
-# The fleet recomputes with the linear model (`replay --nonlinear off`): the nonlinear step
-# costs some 20 times more per sample.
-LINEAR_CHOICE = {'nonlinear': False, 'why': 'the fleet runs the linear model', 'asked': 'off'}
+    nonlinear: str = None
 
 
 def bag_model(bag, fallback):
@@ -93,15 +97,19 @@ def bag_model(bag, fallback):
     options : ModelOptions
     source : str
         Where they came from, for the table ('--mechanism <file>').
+    nonlinear : str or None
+        'on' or 'off': the model the recording says made it (a recording from before the
+        nonlinear model: 'off'); None where it names no model.
 
     """
     recorded = read_provenance(bag)    # a ProvenanceError fails this bag, saying why
     if recorded is not None and recorded.has_model:
-        return recorded.mechanism(), recorded.options(), f'recorded ({recorded.mechanism_file})'
+        return (recorded.mechanism(), recorded.options(),
+                f'recorded ({recorded.mechanism_file})', recorded.nonlinear or 'off')
     if fallback is None:
         raise ValueError(f'{bag} has no recorded mechanism: give `--mechanism`')
     mechanism_file, options = fallback
-    return load_mechanism(mechanism_file), options, f'--mechanism {mechanism_file}'
+    return load_mechanism(mechanism_file), options, f'--mechanism {mechanism_file}', None
 
 
 def _model(mechanism, options, settings):
@@ -113,6 +121,24 @@ def _model(mechanism, options, settings):
         _MODELS[key] = mechanism_model.model_for_mechanism(
             mechanism, options, cache_dir=settings.cache_dir, use_cache=settings.use_cache)
     return _MODELS[key]
+
+
+def _nonlinear_rows(mechanism, options, settings, stamps_ns, estimate):
+    """Put the nonlinear model's deflections into ``estimate``; its JSON entry."""
+    key = ('nonlinear', mechanism_model.model_key(mechanism, options), settings.cache_dir,
+           settings.use_cache)
+    if key not in _MODELS:
+        if len(_MODELS) >= _MODELS_KEPT:
+            _MODELS.pop(next(iter(_MODELS)))
+        _MODELS[key] = nonlinear_model_for(mechanism, options, settings.cache_dir,
+                                           settings.use_cache)
+    tables, damping = _MODELS[key]
+    follower = NonlinearFollower(tables, DEFAULT_RESET_GAP_S)
+    outputs, accepted = follow_rows(follower, stamps_ns, estimate)
+    estimate['lever_tip'], estimate['coupler_mid'] = outputs[:, 0:2], outputs[:, 2:4]
+    low = outputs[accepted].min(axis=0) if accepted.any() else np.full(outputs.shape[1], np.inf)
+    high = outputs[accepted].max(axis=0) if accepted.any() else -low
+    return follow_summary(follower, low, high, damping)
 
 
 def skipped_per_period(messages, samples, ids, joint_name):
@@ -150,7 +176,17 @@ def skipped_per_period(messages, samples, ids, joint_name):
     return periods
 
 
-def _replay_summary(bag, topic, samples, damaged, model, options, estimate, totals):
+def _choose_model(settings, recorded, estimate):
+    """Return replay's ``model_choice`` for a bag: (use the nonlinear model, its dict)."""
+    choice = settings.nonlinear or recorded or 'auto'
+    use, why = choose_nonlinear(choice, is_valid(estimate['nonlinearity'])
+                                if choice == 'auto' else None,
+                                recorded=settings.nonlinear is None)
+    return use, {'nonlinear': use, 'why': why, 'asked': choice}
+
+
+def _replay_summary(bag, topic, samples, damaged, model, options, estimate, totals,
+                    choice, nonlinear=None):
     """Return the keys of ``flexlink replay --json`` (and the bag's path) for one bag."""
     count = len(samples['data'])
     span_s = (samples['log_ns'][-1] - samples['log_ns'][0]) * 1e-9 if count > 1 else 0.0
@@ -165,7 +201,7 @@ def _replay_summary(bag, topic, samples, damaged, model, options, estimate, tota
                'notes': [], 'segments': estimate['segments'],
                'outliers': estimate['outliers'], 'out_of_bound': estimate['out_of_bound'],
                'criteria_available': estimate['criteria_available'],
-               'model_choice': LINEAR_CHOICE, 'nonlinear': None}
+               'model_choice': choice, 'nonlinear': nonlinear}
     summary.update(totals)
     return summary
 
@@ -209,13 +245,16 @@ def failed_row(bag, reason, per):
 
 def _recompute(bag, fallback, settings, output, start):
     damaged = []
-    mechanism, options, source = bag_model(bag, fallback)
+    mechanism, options, source, recorded = bag_model(bag, fallback)
     topic, samples, messages = read_input_samples(bag, settings.topic, settings.joint, damaged)
     read_s = time.perf_counter() - start
     model = _model(mechanism, options, settings)
     began = time.perf_counter()
     estimate = estimate_offline(model, samples['stamps_ns'], samples['angles'],
                                 samples['speeds'], warm_start=settings.warm_start)
+    use, choice = _choose_model(settings, recorded, estimate)
+    nonlinear = (_nonlinear_rows(mechanism, options, settings, samples['stamps_ns'], estimate)
+                 if use else None)
     estimate_s = time.perf_counter() - began
     finite = np.isfinite(estimate['lever_tip'][:, 0])
     ids = period_ids(samples['stamps_ns'], samples['angles'], finite, estimate['flags'],
@@ -223,7 +262,7 @@ def _recompute(bag, fallback, settings, output, start):
     columns = summarize_periods(samples['stamps_ns'], estimate, ids,
                                 settings.validity_threshold)
     summary = _replay_summary(bag, topic, samples, damaged, model, options, estimate,
-                              recording_totals(columns))
+                              recording_totals(columns), choice, nonlinear)
     summary.update(read_s=read_s, estimate_s=estimate_s, mechanism=source, error=None)
     if output is not None:
         status = write_replay(output, [(0, samples, estimate)], topic,

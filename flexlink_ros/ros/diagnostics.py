@@ -92,7 +92,8 @@ def input_counts(totals, period, values):
     return values
 
 
-def estimator_level(period, error_indicator_warn, nonlinearity_warn=VALIDITY_THRESHOLD):
+def estimator_level(period, error_indicator_warn, nonlinearity_warn=VALIDITY_THRESHOLD,
+                    nonlinear=False):
     """
     Grade the estimates: ERROR if out of bound, WARN if flagged or a large indicator.
 
@@ -105,6 +106,9 @@ def estimator_level(period, error_indicator_warn, nonlinearity_warn=VALIDITY_THR
     nonlinearity_warn : float
         WARN above this validity indicator (core/validity.py: near a resonance the
         amplitude-dependent detuning makes the linear estimate untrustworthy).
+    nonlinear : bool
+        The nonlinear model made the deflections: the indicator is its own
+        (core/estimation/nonlinear_follow.py: links bent beyond its strain's reach).
 
     Returns
     -------
@@ -125,9 +129,12 @@ def estimator_level(period, error_indicator_warn, nonlinearity_warn=VALIDITY_THR
     if indicator > error_indicator_warn:
         reasons.append(f'error indicator {indicator:.3g}')
     if period.max_nonlinearity > nonlinearity_warn:
-        reasons.append(f'linear estimate not valid: nonlinearity indicator '
-                       f'{period.max_nonlinearity:.3g} above {nonlinearity_warn:g} (near '
-                       'resonance, the amplitude detunes the links)')
+        reasons.append(
+            f'nonlinear estimate not valid: validity indicator {period.max_nonlinearity:.3g} '
+            f"above {nonlinearity_warn:g} (links bent beyond the slope the model's strain "
+            'carries)' if nonlinear else
+            f'linear estimate not valid: nonlinearity indicator {period.max_nonlinearity:.3g} '
+            f'above {nonlinearity_warn:g} (near resonance, the amplitude detunes the links)')
     return (WARN, ', '.join(reasons)) if reasons else (OK, 'ok')
 
 
@@ -137,7 +144,8 @@ def estimator_status(period, values, model_facts):
 
     'nonlinearity_max' is the largest validity indicator of the period (NaN when the model
     has no indicator tables or no sample came), 'nonlinearity_threshold' the WARN threshold
-    (``diagnostics.nonlinearity_warn``).
+    (``diagnostics.nonlinearity_warn``). Where the nonlinear model makes the deflections
+    (``model_nonlinear`` 'on') the indicator is the nonlinear model's.
 
     Parameters
     ----------
@@ -158,7 +166,8 @@ def estimator_status(period, values, model_facts):
     p99 = float(np.percentile(durations, 99)) if durations.size else math.nan
     flags = [flag.name for flag in SampleFlag if flag and period.flags & flag]
     level, message = estimator_level(period, values['diagnostics.error_indicator_warn'],
-                                     values['diagnostics.nonlinearity_warn'])
+                                     values['diagnostics.nonlinearity_warn'],
+                                     model_facts.get('model_nonlinear') == 'on')
     return status('estimator', level, message, {
         'error_indicator_max': period.max_error_indicator,
         'nonlinearity_max': (period.max_nonlinearity if math.isfinite(period.max_nonlinearity)

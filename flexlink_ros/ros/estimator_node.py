@@ -24,16 +24,19 @@ from visualization_msgs.msg import MarkerArray
 
 from . import diagnostics, parameters
 from .input_watch import InputWatch
+from .marker_worker import MarkerWorker
 from .message_outcomes import (ClippedSpeedLog, crank_sample, one_line, PeriodStats,
                                publishable, SKIP_KINDS, Totals)
 from .messages import diagnostics_message, joint_level, ns_to_stamp
-from .node_model import load_node_model, marker_exaggeration
+from .node_model import choose_nonlinear, load_node_model, load_nonlinear_model, \
+    marker_exaggeration
 from .node_recording import NodeRecording
 from .overrides import declare_table
 from .progress_log import ProgressLog
 from .runtime import is_shutdown_error
 from .sim_time import ClockWatch, LogTime
 from .startup import check_startup_signal
+from ..core.estimation.nonlinear_follow import NonlinearFollower
 from ..core.estimation.sample import SampleFlag
 from ..core.estimation.streaming import StreamingEstimator
 from ..core.mechanism_file import read_mechanism_source
@@ -54,7 +57,6 @@ OVERDUE_PERIODS = 2
 OUTPUT_TYPES = {'lever_tip': Vector3Stamped, 'coupler_mid': Vector3Stamped,
                 'criteria': JointState, 'quality': JointState, 'markers': MarkerArray}
 PER_SAMPLE_OUTPUTS = ('lever_tip', 'coupler_mid', 'criteria', 'quality')   # the input's QoS
-NAN = float('nan')
 OTHER_OUTPUT_DEPTH = 10   # history depth of markers and /diagnostics
 
 
@@ -74,7 +76,7 @@ class EstimatorNode(NodeRecording):
             {spec.name: self.get_parameter(spec.name).value for spec in parameters.PARAMETERS})
         self.add_on_set_parameters_callback(self._validate)
         self.add_post_set_parameters_callback(self._apply)
-        self.estimator = self.recorder = self.subscription = self._timer = None
+        self.estimator = self.follower = self.recorder = self.subscription = self._timer = None
         self.publishers_ = {}
         self._clock = self.get_clock()
         self._log_time = LogTime()
@@ -82,7 +84,7 @@ class EstimatorNode(NodeRecording):
         self._deserialize = lambda data: deserialize_message(data, JointState)
         self._serialize = serialize_message
         self._frame = self.values['frame_id'].encode()
-        self._marker_encoder = None
+        self._marker_encoder = self._marker_worker = None
         self.totals = self.model_facts = None
         self._diagnostics_publisher = self.create_publisher(
             DiagnosticArray, TOPICS['diagnostics'], OTHER_OUTPUT_DEPTH)
@@ -108,18 +110,36 @@ class EstimatorNode(NodeRecording):
                  f'criteria: {self.criteria_source}')
         self.estimator = StreamingEstimator(self.model, warm_start=values['model.warm_start'])
         self.auto_exaggeration = marker_exaggeration(self.estimator, log.info)
+        check_startup_signal()
+        self.follower, nonlinear_facts = self._nonlinear_model(log)
         # The node only streams: the step tables serve it, the full table can go.
         self.model = self.estimator.release_model_table()
         self.model_facts = {'model_size': self.model.size, 'model_grid': self.model.grid_size,
                             'model_step_size': self.model.step_size,
                             'model_options': str(self.options),
                             'criteria_source': self.criteria_source,
-                            'notes': '; '.join(self.notes)}
+                            **nonlinear_facts, 'notes': '; '.join(self.notes)}
         self._create_publishers(make_publisher)
         self.recorder = self._open_recorder(self.qos) if values['record.enabled'] else None
+        self._marker_worker = MarkerWorker(self._markers, self._deliver_markers,
+                                           self._report_marker_error)
         self.totals = Totals()
         self.last_valid_wall = None
         self._clipped = ClippedSpeedLog(log.warning, self.context.ok, self.options.speed_max)
+
+    def _nonlinear_model(self, log):
+        """Choose and load the nonlinear model (model.nonlinear); (follower or None, facts)."""
+        use, why = choose_nonlinear(self.values, self.model)
+        if not use:
+            log.info(f'model: linear ({why})')
+            return None, {'model_nonlinear': 'off', 'model_choice': why}
+        tables, damping = load_nonlinear_model(self.values, self.mechanism_source,
+                                               self.options)
+        log.info(f'model: nonlinear ({why}): the lever-tip and coupler-mid deflections are '
+                 f"the nonlinear model's ({tables.size} coordinates, {damping}); criteria "
+                 "and markers the linear model's")
+        return (NonlinearFollower(tables, self.estimator.reset_gap_s),
+                {'model_nonlinear': 'on', 'model_choice': why, 'nonlinear_damping': damping})
 
     def _create_publishers(self, make_publisher):
         """Create the output publishers with the QoS the parameters select."""
@@ -140,6 +160,8 @@ class EstimatorNode(NodeRecording):
         """Subscribe and start the diagnostics timer: estimates flow from now on."""
         values = self.values
         self.estimator.reset()
+        if self.follower is not None:
+            self.follower.restart()
         self.period, self.watch = PeriodStats(), InputWatch()
         self._period_start = time.monotonic()
         self.subscription = self.create_subscription(
@@ -172,11 +194,12 @@ class EstimatorNode(NodeRecording):
         """Close the recording and drop publishers and model."""
         self._deactivate()
         self.close()
+        self._marker_worker = None
         for key, publisher in self.publishers_.items():
             if key != 'diagnostics':
                 self.destroy_publisher(publisher)
         self.publishers_ = {}
-        self.estimator = self.recorder = None
+        self.estimator = self.follower = self.recorder = None
 
     # -- parameters -----------------------------------------------------------------------
 
@@ -277,11 +300,41 @@ class EstimatorNode(NodeRecording):
             self.get_logger().warning(f'estimate not published: {reason}',
                                       throttle_duration_sec=WARN_THROTTLE_S)
             return
+        deflections = self._deflections(stamp_ns, sample)
+        if deflections is None:
+            return
         if self.last_valid_wall is None:
             self.get_logger().info(f'{FIRST_INPUT_MESSAGE}: angle {angle:.4f} rad, '
                                    f'speed {speed} rad/s')
         self.last_valid_wall = time.monotonic()
-        self._publish_sample(stamp_ns, sample)
+        self._publish_sample(stamp_ns, sample, *deflections)
+
+    def _deflections(self, stamp_ns, sample):
+        """
+        Return (lever tip, coupler mid, validity indicator) to publish, or None (counted).
+
+        The nonlinear model's where it runs (stepped on the linear estimator's crank angle
+        and speed, its time counted in the update's), else the linear sample's.
+        """
+        follower = self.follower
+        if follower is None:
+            return sample.lever_tip, sample.coupler_mid, sample.nonlinearity
+        start = time.perf_counter_ns()
+        values = follower.sample(stamp_ns, sample.crank_angle, sample.crank_speed).tolist()
+        self.period.update_ns[-1] += time.perf_counter_ns() - start
+        largest = max(abs(value) for value in values)
+        bound = self.estimator.deflection_bound_m
+        if not largest <= bound:      # also NaN
+            follower.restart()
+            self._count('out_of_bound')
+            self.period.flags |= SampleFlag.OUT_OF_BOUND
+            self.period.last_out_of_bound = (f'nonlinear deflection {largest:.6g} m beyond '
+                                             f'the bound {bound:.6g} m')
+            self.get_logger().warning('estimate not published: '
+                                      + self.period.last_out_of_bound,
+                                      throttle_duration_sec=WARN_THROTTLE_S)
+            return None
+        return values[0:2], values[2:4], follower.validity
 
     def _count(self, kind):
         self.totals.counts[kind] += 1
@@ -302,34 +355,33 @@ class EstimatorNode(NodeRecording):
             self.get_logger().warning(f'input skipped as {reason}',
                                       throttle_duration_sec=WARN_THROTTLE_S)
 
-    def _publish_sample(self, stamp_ns, sample):
+    def _publish_sample(self, stamp_ns, sample, lever_tip, coupler_mid, validity):
         # Serialised once (exact CDR), published raw and recorded as the same bytes. The
         # per-sample outputs go out first, before any bookkeeping; the markers (every n-th
-        # sample: link shapes and a MarkerArray) after them, so they do not delay this
-        # sample's deflection.
+        # sample: link shapes and a MarkerArray) are drawn by their own thread, so they
+        # delay neither this sample nor the next.
         sec, nanosec = divmod(stamp_ns, 1_000_000_000)
         frame = self._frame
         outputs = [
-            ('lever_tip', vector3_stamped_cdr(sec, nanosec, frame, *sample.lever_tip)),
-            ('coupler_mid', vector3_stamped_cdr(sec, nanosec, frame, *sample.coupler_mid)),
+            ('lever_tip', vector3_stamped_cdr(sec, nanosec, frame, *lever_tip)),
+            ('coupler_mid', vector3_stamped_cdr(sec, nanosec, frame, *coupler_mid)),
             ('criteria', criteria_cdr(sec, nanosec, frame, sample.criterion,
                                       sample.gamma_dot, sample.reaction_n)),
-            ('quality', quality_cdr(sec, nanosec, frame, sample.error_indicator,
-                                    getattr(sample, 'nonlinearity', NAN)))]
+            ('quality', quality_cdr(sec, nanosec, frame, sample.error_indicator, validity))]
         published = self._publish(outputs)
-        self.period.add_sample(sample)
+        self.period.add_sample(sample, validity)
         self._clipped.add(sample)     # beyond the model's speed range: counted and said
         if sample.message:
             self.get_logger().warning(f'estimator: {sample.message}',
                                       throttle_duration_sec=WARN_THROTTLE_S)
-        if published and self.totals.published % self.values['markers.every_n'] == 0:
-            markers = [('markers', self._markers(stamp_ns, sample))]
-            self._publish(markers)
-            outputs += markers
+        marked = published and self.totals.published % self.values['markers.every_n'] == 0
         self.totals.published += 1
+        log_ns = (self._log_time(self._clock.now().nanoseconds, stamp_ns)
+                  if self.recorder is not None or marked else 0)
         if self.recorder is not None:   # recorded even if shut down meanwhile: the input was
-            self._to_record = (outputs, self._log_time(self._clock.now().nanoseconds,
-                                                       stamp_ns))
+            self._to_record = (outputs, log_ns)
+        if marked:
+            self._marker_worker.submit(stamp_ns, sample, log_ns)
 
     def _record_outputs(self):
         """Record the outputs of the message just taken (after its input)."""
@@ -349,6 +401,21 @@ class EstimatorNode(NodeRecording):
                     raise
                 return False
         return True
+
+    def _deliver_markers(self, data, log_ns):
+        """Publish and record a MarkerArray (the marker thread's)."""
+        self._publish([('markers', data)])
+        self._record(self.output_topics['markers'], data, log_ns)   # as the other outputs
+
+    def _report_marker_error(self, exc):
+        self.get_logger().error(f'markers not drawn: {type(exc).__name__}: {one_line(exc)}',
+                                throttle_duration_sec=WARN_THROTTLE_S)
+
+    def close(self):
+        """Deliver the markers still waiting, then close the recording (idempotent)."""
+        if self._marker_worker is not None:
+            self._marker_worker.stop()
+        return super().close()
 
     def _markers(self, stamp_ns, sample):
         """CDR of the deformed-linkage markers (template encoder, rebuilt on changes)."""
@@ -400,10 +467,29 @@ class EstimatorNode(NodeRecording):
                                       throttle_duration_sec=INPUT_NOTE_THROTTLE_S)
         return [diagnostics.input_status(self.totals, period, values, self.input_topic,
                                          rate, stale, watch),
-                diagnostics.estimator_status(period, values, self.model_facts),
+                diagnostics.estimator_status(period, values, self._estimator_facts()),
                 *diagnostics.joint_statuses(period, values, self.criteria_source),
                 diagnostics.recorder_status(None if self.recorder is None
                                             else self.recorder.status(list_files=False))]
+
+    def _estimator_facts(self):
+        """
+        Return the model's facts, and the nonlinear model's counts where it runs.
+
+        Also the markers dropped by a marker thread that fell far behind, if any.
+        """
+        facts = self.model_facts
+        dropped = self._marker_worker.dropped if self._marker_worker is not None else 0
+        if dropped:
+            facts = {**facts, 'markers_dropped': dropped}
+        follower = self.follower
+        if follower is None:
+            return facts
+        counts = follower.counts
+        return {**facts, 'nonlinear_samples': counts['samples'],
+                'nonlinear_refused_samples': counts['refused_samples'],
+                'nonlinear_restarts': counts['restarts'],
+                'nonlinear_link_slope_max_rad': follower.slope_max}
 
     def _publish_diagnostics(self):
         self._set_overdue()

@@ -167,7 +167,7 @@ class PeriodStats:
     near_zero: list = dataclasses.field(default_factory=lambda: [False] * 4)
     flags: int = 0
 
-    def add_sample(self, sample):
+    def add_sample(self, sample, validity=None):
         """
         Count a published sample: its flags, error and validity indicators, joint criteria.
 
@@ -175,13 +175,17 @@ class PeriodStats:
         ----------
         sample : core.estimation.sample.Sample
             The estimate published.
+        validity : float or None
+            The published validity indicator (the nonlinear model's where it made the
+            deflections); None: the sample's.
 
         """
         self.valid += 1
         self.flags |= sample.flags
         self.max_error_indicator = max(self.max_error_indicator, sample.error_indicator)
-        if sample.nonlinearity > self.max_nonlinearity:
-            self.max_nonlinearity = sample.nonlinearity
+        validity = sample.nonlinearity if validity is None else validity
+        if validity > self.max_nonlinearity:
+            self.max_nonlinearity = validity
         for j, value in enumerate(sample.criterion):
             if value > self.max_criterion[j]:
                 self.max_criterion[j] = value

@@ -191,7 +191,9 @@ def parameter_descriptor(spec):
     rcl_interfaces.msg.ParameterDescriptor
 
     """
-    descriptor = ParameterDescriptor(description=spec.description, read_only=spec.read_only)
+    # A switch also takes YAML's booleans (unquoted on / off): its type may change.
+    descriptor = ParameterDescriptor(description=spec.description, read_only=spec.read_only,
+                                     dynamic_typing=spec.switch)
     if spec.choices:
         descriptor.additional_constraints = 'one of: ' + ', '.join(spec.choices)
     elif spec.max_bytes is not None:

@@ -76,9 +76,12 @@ class NodeRecording:
         values = self.values
         path, raw = self.mechanism_source       # the bytes the model was built from
         try:
-            return provenance_entries(NODE_NAME, str(path.resolve()), self.options,
-                                      self.model.zeta, values['crank_joint'],
-                                      values['model.warm_start'], raw=raw)
+            entries = provenance_entries(NODE_NAME, str(path.resolve()), self.options,
+                                         self.model.zeta, values['crank_joint'],
+                                         values['model.warm_start'], raw=raw)
+            # What made the deflections: replay runs the same model on the recording.
+            entries['nonlinear'] = 'off' if self.follower is None else 'on'
+            return entries
         except (FlexlinkError, OSError) as exc:   # the recording goes on without it
             self.get_logger().warning(f'the recording will not name its mechanism: {exc}')
             return provenance_entries(NODE_NAME)

@@ -39,6 +39,10 @@ class ParameterSpec:
         True if it can only be set at start-up (changing it needs a rebuilt model).
     max_bytes : int or None
         Longest accepted string (UTF-8 bytes); every string parameter has one.
+    switch : bool
+        A string choice with 'on' and 'off' that also takes booleans: YAML 1.1, which ROS
+        params files and ``-p name:=value`` follow, reads an unquoted on / off as true /
+        false (:func:`switch_value`).
 
     """
 
@@ -50,6 +54,7 @@ class ParameterSpec:
     choices: Optional[tuple] = None
     read_only: bool = False
     max_bytes: Optional[int] = None
+    switch: bool = False
 
 
 # The default model, defined once (core.options): the model.* defaults are its fields.
@@ -113,6 +118,13 @@ PARAMETERS = (
                   f"mechanism file's crank_speed_rpm times {SPEED_MARGIN:g}, at least "
                   f'{int(DEFAULT_SPEED_MAX * 30.0 / math.pi)} rpm', low=0.0, high=1e5,
                   read_only=True),
+    ParameterSpec('model.nonlinear', 'auto', 'The lever-tip and coupler-mid deflections '
+                  'from the geometrically nonlinear model (true through resonance, about 15-30 '
+                  'times the linear update): on, off, or auto = on only if the linear '
+                  "model's validity indicator says it is not valid somewhere in the model's "
+                  'speed range (a ramp scan at start-up, logged); criteria and markers stay '
+                  "the linear model's", choices=('auto', 'on', 'off'), read_only=True,
+                  max_bytes=NAME_MAX_BYTES, switch=True),
     ParameterSpec('model.cache_dir', '', 'Directory of precomputed-model cache files '
                   '(empty: ~/.cache/flexlink_ros)', read_only=True, max_bytes=PATH_MAX_BYTES),
     ParameterSpec('model.warm_start', True,
@@ -206,6 +218,8 @@ def validate_parameter(name, value, current=None):
     spec = SPECS.get(name)
     if spec is None:
         return f'unknown parameter {name!r}'
+    if spec.switch:
+        value = switch_value(value)
     expected = type(spec.default)
     if expected is float and isinstance(value, int) and not isinstance(value, bool):
         value = float(value)
@@ -239,12 +253,26 @@ def validate_parameter(name, value, current=None):
     return None
 
 
+def switch_value(value):
+    """Return a switch parameter's value as its string: True -> 'on', False -> 'off'."""
+    if isinstance(value, bool):
+        return 'on' if value else 'off'
+    return value
+
+
 def validate_all(values):
-    """Validate a full mapping of parameter values; raise ValueError with every reason."""
+    """
+    Validate a full mapping of parameter values; raise ValueError with every reason.
+
+    Returns ``values`` with the switches' booleans as their strings (:func:`switch_value`).
+    """
     reasons = [reason for name, value in values.items()
                if (reason := validate_parameter(name, value, values)) is not None]
     if reasons:
         raise ValueError('; '.join(reasons))
+    for name, value in values.items():
+        if name in SPECS and SPECS[name].switch:
+            values[name] = switch_value(value)
     return values
 
 

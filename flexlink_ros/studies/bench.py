@@ -3,8 +3,9 @@
 
 Side by side in one run: streaming cost per sample (median, p99), offline samples per
 second, full-order CPU per simulated second, and each configuration's error against the
-full-order reference (:func:`run_bench`); :func:`estimator_report_data` adds the 391 rpm
-estimate and its reference for the report's charts.
+full-order reference (:func:`run_bench`); the reduced nonlinear model's update against the
+default's in alternating rounds (:func:`nonlinear_timing`); :func:`estimator_report_data`
+adds the 391 rpm estimate and its reference for the report's charts.
 """
 
 import dataclasses
@@ -13,15 +14,17 @@ import time
 
 import numpy as np
 
-from .synthetic import last_revolution, PAPER_RPM, run_estimate, stream_timed, \
-    synthetic_signal, timing_summary
+from .synthetic import last_revolution, PAPER_RPM, run_estimate, stream_nonlinear_timed, \
+    stream_timed, synthetic_signal, timing_summary
 from ..core.estimation.native import compiled_step_available
+from ..core.estimation.nonlinear_stream import estimate_nonlinear
 from ..core.estimation.offline import replay
 from ..core.fe import linkage as assembly
 from ..core.integrators import RadauIIA
 from ..core.numerics import relative_rms, RPM
 from ..core.reduction import mechanism_model
 from ..core.reduction import reference as reduction_reference
+from ..core.reduction.nonlinear_model import nonlinear_model_for
 from ..core.reduction.soft_basis import gap_ratios, MIN_GAP_RATIO
 from ..core.reduction.soft_tables import node_values
 
@@ -30,6 +33,11 @@ OFFLINE_SECONDS = 20.0
 # The estimator's targets (the soft basis's): median streaming update [us], offline samples/s.
 UPDATE_TARGET_US = 10.0
 OFFLINE_TARGET = 100_000.0
+# The nonlinear model's: its update's median over the linear one's, offline samples/s.
+NONLINEAR_RATIO_TARGET = 10.0
+NONLINEAR_OFFLINE_TARGET = 10_000.0
+# Length of the signal the nonlinear model's offline rate is measured on [s].
+NONLINEAR_OFFLINE_SECONDS = 4.0
 
 
 def configuration_error(mechanism, model, options, rpm, rate_hz=1000.0, jitter=0.0,
@@ -188,6 +196,45 @@ def interleaved_timing(entries, signal, long_signal, rounds=3, each_round=None):
     return best
 
 
+def nonlinear_timing(mechanism, options, model, signal, rounds=3):
+    """
+    Time the reduced nonlinear model's update against the linear model's, alternating.
+
+    Each round times the linear streaming update (``model``) and the nonlinear model's
+    streaming update (:func:`.synthetic.stream_nonlinear_timed`, the node's call) over
+    ``signal``, and the nonlinear model offline (:func:`estimate_nonlinear`, many samples per
+    compiled call) over its first :data:`NONLINEAR_OFFLINE_SECONDS`; each keeps its best
+    round.
+
+    Returns
+    -------
+    dict
+        'size', 'damping', 'us_per_sample', 'us_per_sample_p99', 'offline_samples_per_s',
+        'linear_us_per_sample' (the same rounds), 'ratio' (nonlinear / linear median),
+        'newton_per_sample', 'refused'.
+
+    """
+    tables, damping = nonlinear_model_for(mechanism, options, use_cache=False)
+    stamps = signal[0]
+    offline = stamps <= stamps[0] + int(NONLINEAR_OFFLINE_SECONDS * 1e9)
+    best = {'us_per_sample': math.inf, 'linear_us_per_sample': math.inf,
+            'offline_samples_per_s': 0.0}
+    for _ in range(rounds):
+        linear, _ = timing_summary(stream_timed(model, *signal)[1])
+        out = estimate_nonlinear(tables, *signal)
+        median, p99 = timing_summary(stream_nonlinear_timed(tables, *signal)[1][1:])
+        start = time.perf_counter()
+        estimate_nonlinear(tables, *(array[offline] for array in signal))
+        rate = int(offline.sum()) / (time.perf_counter() - start)
+        best['linear_us_per_sample'] = min(best['linear_us_per_sample'], linear)
+        if median < best['us_per_sample']:
+            best.update(us_per_sample=median, us_per_sample_p99=p99, refused=out['refused'],
+                        newton_per_sample=out['newton_iterations'] / max(1, stamps.size - 1))
+        best['offline_samples_per_s'] = max(best['offline_samples_per_s'], rate)
+    return {**best, 'size': tables.size, 'damping': damping,
+            'ratio': best['us_per_sample'] / best['linear_us_per_sample']}
+
+
 def _configuration_row(mechanism, label, options, model, timing, speeds_rpm, rate_hz):
     """One configuration's row: sizes, timings and errors per speed (the max over them)."""
     errors = {}
@@ -230,7 +277,20 @@ def bench_targets(result):
          'met': default['offline_samples_per_s'] >= OFFLINE_TARGET},
         {'name': 'CPU vs full order at 1 kHz', 'value': result['cpu_ratio'], 'unit': 'x less',
          'target': '>= 100', 'met': bool(result['cpu_ratio'] and result['cpu_ratio'] >= 100.0)},
-    ]
+    ] + _nonlinear_targets(result.get('nonlinear'))
+
+
+def _nonlinear_targets(nonlinear):
+    """Judge the nonlinear model's targets (none without its timing)."""
+    if not nonlinear:
+        return []
+    return [
+        {'name': 'nonlinear update vs linear', 'value': nonlinear['ratio'], 'unit': 'x',
+         'target': f'<= {NONLINEAR_RATIO_TARGET:g}',
+         'met': nonlinear['ratio'] <= NONLINEAR_RATIO_TARGET},
+        {'name': 'nonlinear offline', 'value': nonlinear['offline_samples_per_s'],
+         'unit': 'samples/s', 'target': f'>= {NONLINEAR_OFFLINE_TARGET:g}',
+         'met': nonlinear['offline_samples_per_s'] >= NONLINEAR_OFFLINE_TARGET}]
 
 
 class _Steps:
@@ -247,7 +307,7 @@ class _Steps:
 
 
 def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM,
-              configurations=None, progress=None):
+              configurations=None, progress=None, nonlinear=True):
     """
     Side-by-side costs and errors of the configurations (see module docstring).
 
@@ -269,12 +329,16 @@ def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM
     progress : callable or None
         ``progress(done, total, what)`` before each step (a model built, a timing round, a
         configuration's errors, the full-order CPU) and once at the end.
+    nonlinear : bool
+        Also time the reduced nonlinear model of the default's options against the default
+        (:func:`nonlinear_timing`).
 
     Returns
     -------
     dict
         'configurations': per configuration us/sample (median, p99), offline samples/s,
-        errors per speed, model bytes; 'reference_cpu_s_per_s'; 'cpu_ratio'; 'targets'.
+        errors per speed, model bytes; 'reference_cpu_s_per_s'; 'cpu_ratio'; 'nonlinear'
+        (:func:`nonlinear_timing`, or False); 'targets'.
 
     """
     signal = synthetic_signal(max(speeds_rpm), seconds, rate_hz)
@@ -283,7 +347,7 @@ def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM
     soft_rows = configurations is None      # the default's soft basis sizes too
     configurations = configurations or bench_configurations(base)
     rounds = 3
-    step = _Steps(progress, 2 * len(configurations) + rounds + 1)
+    step = _Steps(progress, 2 * len(configurations) + rounds + 1 + bool(nonlinear))
     for label, options in configurations:
         step(f'building {label}')
         models.append((label, options,
@@ -298,6 +362,10 @@ def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM
     timings = interleaved_timing(entries, signal, long_signal, rounds,
                                  lambda k: step(f'timing round {k + 1} of {rounds}'))
     numpy_step = timings.pop(numpy_key)
+    if nonlinear:
+        step('the nonlinear model against the default')
+        nonlinear = nonlinear_timing(mechanism, configurations[0][1], models[0][2], signal,
+                                     rounds)
     rows, reference_cpu = [], None
     for label, options, model in models:
         step(f'errors of {label}')
@@ -313,7 +381,7 @@ def run_bench(mechanism, base, rate_hz=1000.0, seconds=2.0, speeds_rpm=PAPER_RPM
               'estimator_cpu_s_per_s': estimator_cpu,
               'cpu_ratio': (reference_cpu / estimator_cpu) if reference_cpu else None,
               'compiled_step': compiled_step_available(),
-              'numpy_step': numpy_step}
+              'numpy_step': numpy_step, 'nonlinear': nonlinear}
     result['targets'] = bench_targets(result)
     step('done')
     return result

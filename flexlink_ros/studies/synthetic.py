@@ -12,6 +12,7 @@ import time
 
 import numpy as np
 
+from ..core.estimation.nonlinear_follow import NonlinearFollower
 from ..core.estimation.streaming import StreamingEstimator
 from ..core.numerics import RPM
 from ..core.validity import is_valid
@@ -87,6 +88,30 @@ def stream_timed(model, stamps_ns, angles, speeds, warm_start=True, compiled=Tru
         samples.append(estimator.update(stamp, angle, speed))
         durations.append(clock() - start)
     return samples, np.array(durations)
+
+
+def stream_nonlinear_timed(tables, stamps_ns, angles, speeds):
+    """
+    Step the reduced nonlinear model sample by sample as the node does; time every update.
+
+    Each update is :meth:`NonlinearFollower.sample` (unwrapping, the compiled step of one
+    sample, the outputs and the validity), the call the node and ``replay --nonlinear`` make.
+
+    Returns
+    -------
+    outputs : ndarray, shape (K, channels)
+    update_ns : ndarray of int
+        perf_counter_ns duration of each update.
+
+    """
+    follower = NonlinearFollower(tables, reset_gap_s=math.inf)
+    outputs, durations = [], []
+    clock, sample = time.perf_counter_ns, follower.sample
+    for stamp, angle, speed in zip(stamps_ns.tolist(), angles.tolist(), speeds.tolist()):
+        start = clock()
+        outputs.append(sample(stamp, angle, speed))
+        durations.append(clock() - start)
+    return np.array(outputs), np.array(durations)
 
 
 def timing_summary(update_ns):

@@ -176,7 +176,7 @@ def test_bench_table_and_chart(toy, tmp_path):
                       ('small', linear(modes=2, static=0, grid_size=32))]
     calls = []
     result = bench.run_bench(None, None, seconds=0.3, configurations=configurations,
-                             progress=lambda *call: calls.append(call))
+                             progress=lambda *call: calls.append(call), nonlinear=False)
     rows = result['configurations']
     # every step reported before it runs, counted up to the total: 2 builds, 3 timing
     # rounds, 2 error rows, the full-order CPU, then the end

@@ -3,6 +3,7 @@
 import json
 import os
 import pathlib
+import re
 import subprocess
 import sys
 
@@ -52,13 +53,19 @@ def test_demo_runs_records_and_summarises(tmp_path):
         assert all(value > 0 for value in summary['reaction_median_n'].values())
         assert 'Earles-Wu criterion' in cli_demo.summary_text(summary)
     assert summary['latency_us']['median'] > 0 and summary['update_us']['median'] > 0
-    # The default model at 391 rpm is near its coupler and lever resonances (README, "where
-    # the estimate holds"): the ~/quality record says so.
+    # The default model at 391 rpm is near its coupler and lever resonances, where the linear
+    # model is not valid: model.nonlinear auto found it so over the model's speed range and
+    # runs the nonlinear model, whose own validity indicator holds there.
+    assert summary['model'].startswith('model: nonlinear (auto: the linear model is not '
+                                       'valid at ')
+    ranges = summary['model'].split(' of its speed range ', 1)[0]
+    assert any(int(low) <= 391 < int(high) for low, high in re.findall(r'(\d+)-(\d+)', ranges))
     verdict = summary['quality']['nonlinearity']
-    assert verdict['valid'] is False and verdict['indicator_max'] > verdict['threshold']
+    assert verdict['valid'] is True and 0.0 < verdict['indicator_max'] < verdict['threshold']
     assert 0.0 <= summary['quality']['error_indicator_max'] < 0.5
     text = cli_demo.summary_text(summary)
-    assert 'validity indicator max' in text and 'NOT valid' in text
+    assert 'nonlinear model validity indicator max' in text and 'NOT valid' not in text
+    assert summary['model'] in text
     for fragment in ('peak-to-peak', 'lever tip', 'coupler mid-point', 'Foxglove',
                      'estimator update per sample', summary['path']):
         assert fragment in text
@@ -90,3 +97,6 @@ def test_the_not_valid_line_says_why_in_one_sentence_and_where_to_read_more():
     assert (pathlib.Path(__file__).resolve().parents[2] / doc).is_file()
     assert 'Where the estimate holds' in (pathlib.Path(__file__).resolve().parents[2]
                                           / doc).read_text()
+    (line,) = cli_demo._quality_lines(quality, nonlinear=True)
+    assert 'nonlinear model validity indicator max 3.9' in line
+    assert "beyond the slope the nonlinear model's strain carries (docs/nonlinear.md)" in line

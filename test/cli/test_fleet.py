@@ -106,8 +106,7 @@ def test_fleet_equals_one_replay_per_bag(bags, tmp_path):
     for name in ('steady', 'gappy.mcap'):
         replay_out = tmp_path / f'replay_{name}.mcap'
         replay = flexlink('replay', str(bags / name), '--out', str(replay_out), '--json',
-                          '--mechanism', 'cho1992', *MODEL_FLAGS,
-                          '--nonlinear', 'off')     # the fleet runs the linear model
+                          '--mechanism', 'cho1992', *MODEL_FLAGS)
         assert replay.returncode == 0, replay.stderr
         expected = json.loads(replay.stdout)
         got = summaries[name]
@@ -115,8 +114,10 @@ def test_fleet_equals_one_replay_per_bag(bags, tmp_path):
         assert set(expected) <= set(got)
         # Replay's note on where its model came from is the fleet's 'mechanism' column.
         assert got['mechanism'] == '--mechanism cho1992'
-        assert got['model_choice']['nonlinear'] is expected['model_choice']['nonlinear'] is False
-        for key in set(expected) - TIMING_KEYS - {'notes', 'model_choice'}:
+        # Both chose by the linear estimate's validity (auto: the bag names no model).
+        assert got['model_choice'] == expected['model_choice']
+        assert got['model_choice']['asked'] == 'auto'
+        for key in set(expected) - TIMING_KEYS - {'notes'}:
             if key.endswith('peak_to_peak_um'):
                 assert got[key] == pytest.approx(expected[key], rel=1e-9), key
             else:
@@ -136,6 +137,35 @@ def test_fleet_equals_one_replay_per_bag(bags, tmp_path):
     failed = table[table['index'] == -1]
     failed_names = sorted(failed['bag'].map(lambda b: pathlib.Path(b).name))
     assert failed_names == ['corrupt.mcap', 'no_such_*']
+
+
+def test_a_bag_made_with_the_nonlinear_model_is_recomputed_with_it(bags, tmp_path):
+    """A recording whose provenance says nonlinear: on (the node's default near resonance)."""
+    made = tmp_path / 'nonlinear.mcap'
+    first = flexlink('replay', str(bags / 'steady'), '--out', str(made), '--mechanism',
+                     'cho1992', *MODEL_FLAGS, '--nonlinear', 'on')
+    assert first.returncode == 0, first.stderr
+    replay_out = tmp_path / 'replayed.mcap'
+    replay = flexlink('replay', str(made), '--out', str(replay_out), '--json')
+    assert replay.returncode == 0, replay.stderr
+    expected = json.loads(replay.stdout)
+    assert expected['model_choice']['nonlinear'] is True
+    out = tmp_path / 'out'
+    result = flexlink('fleet', str(made), '--out', str(out), '--write-mcap', '--json',
+                      '--num-cpus', '1')
+    assert result.returncode == 0, result.stderr
+    (got,) = map(json.loads, result.stdout.splitlines())
+    assert got['error'] is None and got['model_choice'] == expected['model_choice']
+    assert got['nonlinear'] == expected['nonlinear'] and got['nonlinear']['samples'] > 1000
+    for key in set(expected) - TIMING_KEYS - {'notes'}:
+        if key.endswith('peak_to_peak_um'):
+            assert got[key] == pytest.approx(expected[key], rel=1e-9), key
+        else:
+            assert got[key] == expected[key], key
+    check_rows_against_replay(pd.read_parquet(out / 'summary.parquet'), replay_out)
+    for topic in ('lever_tip/deflection', 'coupler_mid/deflection'):
+        assert [b for _, _, b in messages(got['output'], topic)] == [
+            b for _, _, b in messages(replay_out, topic)]
 
 
 def test_without_a_mechanism_a_bag_fails_with_its_reason(bags, tmp_path):

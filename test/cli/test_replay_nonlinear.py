@@ -117,6 +117,8 @@ def test_a_nonlinear_replay_replayed_with_no_flags_reproduces_itself(tmp_path):
     replay(str(bag), '--out', str(first), '--nonlinear', 'on', *SMALL_MODEL, *cache)
     again = replay(str(first), '--out', str(second), *cache)     # the recording's own model
     assert again['model_choice']['asked'] == 'on' and again['model_choice']['nonlinear']
+    assert again['model_choice']['why'] == \
+        "the recording's model (its provenance says nonlinear: on)"
     topic = output_topics(NODE_NAME)['coupler_mid']
     assert written_rows(second, topic) == written_rows(first, topic)
 

@@ -132,12 +132,18 @@ def _feed(publisher, executor, rpm, first_ns, count=500):
 
 
 # A small rigid model (rigid crank and bearings), diagnostics every 0.1 s.
+# The linear model's own validity indicator (model.nonlinear off: the nonlinear one's is
+# tested with it on).
 RIGID_NODE = ('diagnostics.period_s:=0.1', 'model.bearings:=rigid', 'model.rigid_crank:=true',
-              'model.grid_size:=64')
+              'model.grid_size:=64', 'model.nonlinear:=off')
 
 
-def _watch(ros):
-    """Publish crank input to the node; collect its lever tip outputs and estimator statuses."""
+def _watch(ros, facts=None):
+    """
+    Publish crank input to the node; collect its lever tip outputs and estimator statuses.
+
+    ``facts``: a list given every estimator status's key values.
+    """
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import Vector3Stamped
     from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -154,6 +160,8 @@ def _watch(ros):
         for item in message.status:
             if item.name == f'/{NODE_NAME}: estimator':
                 keys = {kv.key: kv.value for kv in item.values}
+                if facts is not None:
+                    facts.append(keys)
                 statuses.append((int(keys.get('samples_in_period', 0)), item.level,
                                  item.message, float(keys.get('nonlinearity_max', 'nan')),
                                  float(keys.get('nonlinearity_threshold', 'nan'))))
@@ -197,6 +205,30 @@ def test_node_estimator_warns_past_the_validity_threshold(tmp_path, processes, r
     for value, message in warned:
         assert value > validity.VALIDITY_THRESHOLD
         assert 'linear estimate not valid: nonlinearity indicator' in message
+    assert node.stop() == 0
+
+
+def test_the_nonlinear_node_judges_its_own_estimate_through_the_resonance(
+        tmp_path, processes, ros):
+    """model.nonlinear on: at 405 rpm no validity WARN; the status names the model."""
+    node = NodeProcess(tmp_path, *RIGID_NODE[:-1], 'model.nonlinear:=on',
+                       f'model.cache_dir:={tmp_path}')
+    processes.append(node)
+    node.wait_for(READY_MESSAGE, READY_TIMEOUT_S)
+    assert 'model: nonlinear (asked for (model.nonlinear on))' in node.log()
+    facts = []
+    verdicts = _watch(ros, facts)
+    found = verdicts(405.0, 10**18)
+    print(found, facts[-1])
+    # (the first period may hold only the model's start, which is not judged: NaN)
+    judged = [value for _, _, value, _ in found if not math.isnan(value)]
+    assert len(judged) >= len(found) - 1, found
+    assert all('not valid' not in message for _, message, _, _ in found), found
+    assert all(0.0 < value < validity.VALIDITY_THRESHOLD for value in judged), found
+    last = facts[-1]
+    assert last['model_nonlinear'] == 'on' and 'beta' in last['nonlinear_damping']
+    assert int(last['nonlinear_samples']) >= 500
+    assert int(last['nonlinear_refused_samples']) == 0
     assert node.stop() == 0
 
 

@@ -33,7 +33,8 @@ def test_published_outputs_are_the_estimate_and_the_recorded_bytes(
     from sensor_msgs.msg import JointState
 
     bag = tmp_path / 'bag'
-    node_process = NodeProcess(tmp_path, 'record.enabled:=true', f'record.path:={bag}')
+    node_process = NodeProcess(tmp_path, 'record.enabled:=true', f'record.path:={bag}',
+                               'model.nonlinear:=off')     # the linear estimate's numbers
     processes.append(node_process)
     model = node_model()
     node_process.wait_for(READY_MESSAGE, READY_TIMEOUT_S)

@@ -177,8 +177,10 @@ def test_node_end_to_end(tmp_path, processes, ros):
     from sensor_msgs.msg import JointState
 
     bag = tmp_path / 'bag'
+    # The linear estimate's own numbers (the nonlinear model's: test_diagnostics, replay).
     node_process = NodeProcess(tmp_path, 'record.enabled:=true', f'record.path:={bag}',
-                               'diagnostics.period_s:=0.2', 'markers.every_n:=25')
+                               'diagnostics.period_s:=0.2', 'markers.every_n:=25',
+                               'model.nonlinear:=off')
     processes.append(node_process)
     model = node_model()              # meanwhile: the reference's model, from the cache
     node_process.wait_for(READY_MESSAGE, READY_TIMEOUT_S)
@@ -662,7 +664,7 @@ def test_node_publishes_the_dynamic_pass(tmp_path, processes):
 
     params = {'model.second_order': 'dynamic', 'model.rigid_crank': True,
               'model.bearings': 'rigid', 'model.elements_per_link': 3, 'model.grid_size': 32,
-              'model.cache_dir': str(tmp_path / 'cache')}
+              'model.cache_dir': str(tmp_path / 'cache'), 'model.nonlinear': 'off'}
     bag = tmp_path / 'bag'
     node_process = NodeProcess(tmp_path, 'record.enabled:=true', f'record.path:={bag}',
                                *(f'{name}:={value}' for name, value in params.items()))
@@ -749,7 +751,7 @@ def test_a_stiff_linkage_above_620_rpm_follows_its_files_speed_range(tmp_path, p
     cache = tmp_path / 'cache'
     bag, log = _drive(tmp_path, processes, 700.0, f'mechanism:={mechanism}',
                       'model.grid_size:=64', f'model.cache_dir:={cache}')
-    assert 'speed range' not in log, log
+    assert 'beyond the speed range' not in log, log
     assert re.search(r'speed_max=78\.53981', log), log      # 1.25 x 600 rpm
     done = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'estimate', '--mechanism',
                            str(mechanism), '--rpm', '700', '--grid-size', '64', '--cache-dir',
@@ -786,3 +788,64 @@ def test_samples_beyond_the_speed_range_are_logged_with_their_count(tmp_path, pr
     assert found and int(found[0]) >= 1, log
     assert len(found) <= 4       # at most once a second
     assert int(found[-1]) > 500 and 'Traceback' not in log     # counted, every sample
+
+
+def test_markers_arrive_every_nth_sample_with_its_stamp_and_are_recorded(tmp_path, processes,
+                                                                         ros):
+    """Markers drawn off the input callback: every 10th published sample, its stamp, recorded."""
+    from geometry_msgs.msg import Vector3Stamped
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import JointState
+    from visualization_msgs.msg import MarkerArray
+
+    bag = tmp_path / 'markers'
+    node_process = NodeProcess(tmp_path, 'record.enabled:=true', f'record.path:={bag}')
+    processes.append(node_process)
+    node_process.wait_for(READY_MESSAGE, READY_TIMEOUT_S)
+    test_node, executor = ros
+    qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+    publisher = test_node.create_publisher(JointState, 'joint_states', qos)
+    lever, markers = [], []
+    test_node.create_subscription(Vector3Stamped, OUTPUTS[0], lever.append, qos)
+    test_node.create_subscription(MarkerArray, OUTPUTS[3], markers.append, qos)
+    spin_until(executor, lambda: publisher.get_subscription_count() > 0
+               and test_node.count_publishers(OUTPUTS[3]) > 0, DISCOVERY_TIMEOUT_S, 'discovery')
+    speed, count = 391.0 * 2.0 * math.pi / 60.0, 400
+    for n in range(count):
+        publisher.publish(joint_state(1_800_000_000 * 10**9 + n * 10**6, ['crank'],
+                                      [speed * n * 1e-3], [speed]))
+        time.sleep(1e-3)
+        executor.spin_once(timeout_sec=0.0)
+    spin_until(executor, lambda: len(lever) >= count and len(markers) >= count // 10, 30.0,
+               'outputs')
+    assert node_process.stop(signal.SIGINT) == 0, node_process.log()
+
+    def stamp_of(message):
+        return message.header.stamp.sec * 10**9 + message.header.stamp.nanosec
+    published = [stamp_of(message) for message in lever]
+    assert len(published) == count
+    # The markers.every_n default (10): published samples 0, 10, 20, ... each drawn once, in
+    # order, with the stamp of its sample on the array and on every marker in it.
+    assert [stamp_of(m.markers[0]) for m in markers] == published[::10]
+    assert all(stamp_of(marker) == stamp_of(m.markers[0]) for m in markers for marker in m.markers)
+    assert all(marker.header.frame_id == 'linkage_ground' for m in markers for marker in m.markers)
+    # The recording holds the same arrays (read back by an independent reader), each at the
+    # log time of its sample's deflection.
+    recorded, log_times = {}, {}
+    with open(next(bag.glob('*.mcap')), 'rb') as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        for _, channel, message, decoded in reader.iter_decoded_messages(
+                topics=[OUTPUTS[0], OUTPUTS[3]]):
+            is_marker = channel.topic == OUTPUTS[3]
+            stamp = stamp_of(decoded.markers[0] if is_marker else decoded)
+            log_times.setdefault(stamp, {})[channel.topic] = message.log_time
+            if is_marker:
+                recorded[stamp] = decoded
+    assert sorted(recorded) == published[::10]
+    assert all(len(log_times[s]) == 2 and len(set(log_times[s].values())) == 1 for s in recorded)
+    for message in markers:
+        stored = recorded[stamp_of(message.markers[0])]
+        assert [[(p.x, p.y) for p in m.points] for m in stored.markers] == \
+            [[(p.x, p.y) for p in m.points] for m in message.markers]

@@ -236,6 +236,23 @@ def test_second_order_parameter_selects_the_dynamic_pass():
     assert node_params.validate_parameter('model.second_order', 'dynamic') is None
 
 
+def test_nonlinear_switch_takes_yamls_booleans_for_on_and_off():
+    # A params file's unquoted `nonlinear: off` and `-p model.nonlinear:=on` reach the node
+    # as YAML 1.1 booleans.
+    assert node_params.defaults()['model.nonlinear'] == 'auto'
+    parsed = yaml.safe_load('nonlinear: off')['nonlinear']
+    assert parsed is False
+    for value in ('auto', 'on', 'off', True, False):
+        assert node_params.validate_parameter('model.nonlinear', value) is None
+    values = node_params.validate_all({**node_params.defaults(), 'model.nonlinear': parsed})
+    assert values['model.nonlinear'] == 'off'
+    assert node_params.validate_all({**node_params.defaults(),
+                                     'model.nonlinear': True})['model.nonlinear'] == 'on'
+    reason = node_params.validate_parameter('model.nonlinear', 'yes')
+    assert reason == "model.nonlinear must be one of auto, on, off, got 'yes'"
+    assert 'must be of type str' in node_params.validate_parameter('model.nonlinear', 1)
+
+
 def test_node_model_reads_the_mechanism_file_once_and_takes_its_damping_ratio(
         tmp_path, monkeypatch):
     from flexlink_ros.core import mechanism_file

@@ -1,11 +1,15 @@
 """The estimator bench's configurations and targets (studies/bench.py)."""
 
+import dataclasses
+import math
+
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction import mechanism_model
 from flexlink_ros.core.reduction.soft_basis import gap_ratios, MIN_GAP_RATIO
 from flexlink_ros.core.reduction.soft_tables import node_values
 from flexlink_ros.studies import bench
+from flexlink_ros.studies.synthetic import synthetic_signal
 
 
 def test_configurations_vary_one_size_at_a_time_around_the_default():
@@ -52,3 +56,22 @@ def test_soft_rows_are_the_other_usable_gaps_and_soft_off():
     assert rows[-1][0] == f'soft off (r = {model.size})' and rows[-1][2].soft is None
     for _, _, soft in rows:     # the same reduced tables, only the step's basis differs
         assert soft.table is model.table
+
+
+def test_the_nonlinear_model_is_timed_against_the_linear_update_in_the_same_rounds():
+    mechanism = dataclasses.replace(load_mechanism('cho1992'), elements_per_link=2)
+    options = ModelOptions.linear(bearings='flexible', grid_size=32, elements_per_link=2)
+    model = mechanism_model.model_for_mechanism(mechanism, options)
+    timing = bench.nonlinear_timing(mechanism, options, model,
+                                    synthetic_signal(391.0, 0.3, 1000.0), rounds=2)
+    assert timing['refused'] == 0 and timing['newton_per_sample'] >= 1.0
+    assert timing['ratio'] == timing['us_per_sample'] / timing['linear_us_per_sample']
+    assert 0.0 < timing['us_per_sample'] <= timing['us_per_sample_p99']
+    assert timing['offline_samples_per_s'] > 0 and timing['size'] > 0
+    assert timing['damping'].startswith('beta')
+    targets = {t['name']: t for t in bench.bench_targets(
+        {'configurations': [{'us_per_sample': 5.0, 'offline_samples_per_s': 1e5}],
+         'cpu_ratio': 100.0, 'nonlinear': timing})}
+    assert targets['nonlinear update vs linear']['met'] == (timing['ratio'] <= 10.0)
+    assert targets['nonlinear offline']['met'] == (timing['offline_samples_per_s'] >= 1e4)
+    assert not math.isnan(targets['nonlinear update vs linear']['value'])

@@ -1,19 +1,21 @@
 /*
- * One Radau IIA step of the reduced nonlinear model by simplified Newton, compiled: the twin of
- * NonlinearStepper._newton in flexlink_ros/core/estimation/nonlinear_stream.py (its numpy
+ * The reduced nonlinear model stepped through samples, compiled: the twin of
+ * NonlinearStepper's numpy step in flexlink_ros/core/estimation/nonlinear_stream.py (its
  * reference; a test compares the two). Plain C API, no numpy headers.
  *
- * step(...): see its notes below. The linear part is formed from the interpolated table rows,
- * then the stage accelerations are solved by simplified Newton (the Jacobian formed at the
- * step's start and again when an iteration contracts by less than half).
- *
- * Returns the Newton iterations taken, 0 if Newton did not converge (acc is then not a solution
- * and the caller keeps its state).
+ * march(...): see its notes below. One call steps one sample (the streaming update) or many
+ * (offline): per step the tables are read at the stage angles by cubic Hermite interpolation
+ * (only the fields the step uses), the linear part is formed from them, and the stage
+ * accelerations are solved by simplified Newton (the Jacobian formed at the step's start and
+ * again when an iteration contracts by less than half); a step that fails is retried as two
+ * halves. No Python object is touched between the samples.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #include <math.h>
+#include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #include "_doubles.h"
 
@@ -189,24 +191,36 @@ static void residual(const Problem *p, double *disp, double *vel, double *res, d
     }
 }
 
+/* The step matrix's LU factors (valid: formed in this step). */
+typedef struct {
+    double *lu;
+    Py_ssize_t *piv;
+    int valid;
+} Factor;
+
+/*
+ * Simplified Newton on the stage accelerations (p->acc holds the start): the step matrix is
+ * formed at the first iteration and again whenever an iteration contracts by less than half.
+ * Returns the iterations, 0 if not converged.
+ */
 static Py_ssize_t solve(Problem *p, double tolerance, Py_ssize_t iterations, double *mem,
-                        Py_ssize_t *piv)
+                        Factor *factor)
 {
     const Py_ssize_t s = p->s, m = p->m, n = s * m;
-    double *disp = mem, *vel = disp + n, *res = vel + n, *jac = res + n, *fq = jac + n * n;
+    double *disp = mem, *vel = disp + n, *res = vel + n, *fq = res + n;
     double *fv = fq + s * m * m, *work = fv + s * m * m;
-    int fresh = 0;
     double previous = INFINITY;
     for (Py_ssize_t count = 1; count <= iterations; count++) {
-        residual(p, disp, vel, res, fresh ? NULL : jac, fq, fv, work);
-        if (!fresh) {
-            if (!lu_factor(jac, n, piv))
+        const int form = !factor->valid;
+        residual(p, disp, vel, res, form ? factor->lu : NULL, fq, fv, work);
+        if (form) {
+            if (!lu_factor(factor->lu, n, factor->piv))
                 return 0;
-            fresh = 1;
+            factor->valid = 1;
         }
         for (Py_ssize_t i = 0; i < n; i++)
             res[i] = -res[i];
-        lu_solve(jac, n, piv, res);
+        lu_solve(factor->lu, n, factor->piv, res);
         double size = 0.0, scale = 0.0;
         for (Py_ssize_t i = 0; i < n; i++) {
             p->acc[i] += res[i];
@@ -218,157 +232,462 @@ static Py_ssize_t solve(Problem *p, double tolerance, Py_ssize_t iterations, dou
         if (size <= tolerance * scale || size == 0.0)
             return count;
         if (size > 0.5 * previous)
-            fresh = 0;
+            factor->valid = 0;
         previous = size;
     }
     return 0;
 }
 
 /*
- * step(row, offsets, bearing, speed, accel, q, v, acc, axial, axial_stiffness, a, a2, c,
- *      stages, size, links, fields, h, beta, nonlinear, tolerance, iterations) -> int
- *
- * As newton, with the linear part formed here from the interpolated table rows (s x fields,
- * NonlinearTables.at's flat row) at the offsets (float64) of mass, gyroscopic, coupling_a,
- * coupling_w2, elastic, elastic_rate, geometric_1, geometric_a, geometric_w2, load_1,
- * load_a, load_w2, chord, chord_rate, shortening, shortening_rate (the layout's order):
- * C = w G + beta (K_el + K_bear), K = K_el + K_bear + beta w K1 + a K_a + w^2 K_w2 (+ K_G
- * for the linear model), R = f_1 + a f_a + w^2 f_w2, as linear_part in nonlinear_stream.py.
+ * The tables over the crank angle and the model's constants (march's arguments).
+ * off: the flat row's offsets of the FIELDS fields, in STEP_FIELDS order (nonlinear_stream.py):
+ * mass, gyroscopic, coupling_a, coupling_w2, elastic, elastic_rate, geometric_1, geometric_a,
+ * geometric_w2, load_1, load_a, load_w2, chord, chord_rate, shortening, shortening_rate, output.
  */
-#define STEP_ARGS 22
-#define OFFSETS 16
+#define FIELDS 17
+#define TWO_PI (2.0 * 3.141592653589793)
 
-static void gather_linear(const double *row, const double *off, const double *bearing,
-                          const Problem *p, double accel, Py_ssize_t fields, double *mass,
-                          double *damping, double *stiffness, double *load, double *tables)
+typedef struct {
+    const double *values, *slopes, *off, *bearing, *k, *length, *a, *a2, *c;
+    Py_ssize_t nodes, fields, s, m, e, outputs, iterations;
+    double beta, tolerance;
+    int nonlinear;
+} Model;
+
+/* The estimator's state: written only by a step that converges (NonlinearStepper's). */
+typedef struct {
+    double *q, *v, *guess, *axial, *slope, *output;
+    int has_guess;
+    Py_ssize_t iterations;
+} State;
+
+/* Workspace of one step. */
+typedef struct {
+    double *tables, *mem, *acc, *angles, *speed, *axial, *output;
+    Factor factor;
+} Work;
+
+/* Cubic Hermite weights of the grid cell holding theta (NonlinearTables._interpolate). */
+typedef struct {
+    const double *p0, *p1, *d0, *d1;
+    double w00, w10, w01, w11;
+} Hermite;
+
+static void hermite_at(const Model *md, double theta, Hermite *hm)
 {
-    const Py_ssize_t m = p->m, mm = m * m, e = p->e, s = p->s;
+    double x = fmod(theta, TWO_PI);
+    if (x < 0.0)
+        x += TWO_PI;
+    const double position = x * ((double)md->nodes / TWO_PI);
+    Py_ssize_t cell = (Py_ssize_t)position;
+    if (cell > md->nodes - 1)
+        cell = md->nodes - 1;
+    const Py_ssize_t next = cell + 1 == md->nodes ? 0 : cell + 1;
+    const double t = position - (double)cell, t2 = t * t, t3 = t2 * t;
+    const double spacing = TWO_PI / (double)md->nodes;
+    hm->p0 = md->values + cell * md->fields;
+    hm->p1 = md->values + next * md->fields;
+    hm->d0 = md->slopes + cell * md->fields;
+    hm->d1 = md->slopes + next * md->fields;
+    hm->w00 = 2.0 * t3 - 3.0 * t2 + 1.0;
+    hm->w10 = spacing * (t3 - 2.0 * t2 + t);
+    hm->w01 = 3.0 * t2 - 2.0 * t3;
+    hm->w11 = spacing * (t3 - t2);
+}
+
+static inline double hv(const Hermite *hm, Py_ssize_t col)
+{
+    return hm->w00 * hm->p0[col] + hm->w10 * hm->d0[col] + hm->w01 * hm->p1[col]
+           + hm->w11 * hm->d1[col];
+}
+
+/*
+ * The linear part and the link tables at the stages into p (buf holds them), read from the
+ * tables: C = w G + beta (K_el + K_bear), K = K_el + K_bear + beta w K1 + a K_a + w^2 K_w2
+ * (+ K_G for the linear model), R = f_1 + a f_a + w^2 f_w2, as linear_part.
+ */
+static void stage_tables(const Model *md, const double *angles, double accel, Problem *p,
+                         double *buf)
+{
+    const Py_ssize_t m = md->m, mm = m * m, e = md->e, s = md->s;
+    double *mass = buf, *damping = mass + s * mm, *stiffness = damping + s * mm;
+    double *load = stiffness + s * mm, *chord = load + s * m, *chord_rate = chord + s * e * m;
+    double *shortening = chord_rate + s * e * m, *shortening_rate = shortening + s * e * mm;
+    Py_ssize_t o[FIELDS];
+    for (Py_ssize_t k = 0; k < FIELDS; k++)
+        o[k] = (Py_ssize_t)md->off[k];
     for (Py_ssize_t i = 0; i < s; i++) {
-        const double *r = row + i * fields, w = p->speed[i];
-#define AT(k) (r + (Py_ssize_t)off[k])
-        const double *gy = AT(1), *ca = AT(2), *cw = AT(3), *el = AT(4), *er = AT(5),
-                     *g1 = AT(6), *ga = AT(7), *gw = AT(8);
-        memcpy(mass + i * mm, AT(0), (size_t)mm * sizeof(double));
+        Hermite hm;
+        hermite_at(md, angles[i], &hm);
+        const double w = p->speed[i];
         for (Py_ssize_t j = 0; j < mm; j++) {
-            const double elastic = el[j] + bearing[j];
-            damping[i * mm + j] = w * gy[j] + p->beta * elastic;
-            double k = elastic + p->beta * w * er[j] + accel * ca[j] + w * w * cw[j];
-            if (!p->nonlinear)
-                k += g1[j] + accel * ga[j] + w * w * gw[j];
+            const double elastic = hv(&hm, o[4] + j) + md->bearing[j];
+            mass[i * mm + j] = hv(&hm, o[0] + j);
+            damping[i * mm + j] = w * hv(&hm, o[1] + j) + md->beta * elastic;
+            double k = elastic + md->beta * w * hv(&hm, o[5] + j) + accel * hv(&hm, o[2] + j)
+                       + w * w * hv(&hm, o[3] + j);
+            if (!md->nonlinear)
+                k += hv(&hm, o[6] + j) + accel * hv(&hm, o[7] + j) + w * w * hv(&hm, o[8] + j);
             stiffness[i * mm + j] = k;
         }
         for (Py_ssize_t j = 0; j < m; j++)
-            load[i * m + j] = AT(9)[j] + accel * AT(10)[j] + w * w * AT(11)[j];
-        /* chord, chord_rate (s E m) and shortening, shortening_rate (s E m m), contiguous */
-        memcpy(tables + i * e * m, AT(12), (size_t)(e * m) * sizeof(double));
-        memcpy(tables + s * e * m + i * e * m, AT(13), (size_t)(e * m) * sizeof(double));
-        memcpy(tables + 2 * s * e * m + i * e * mm, AT(14), (size_t)(e * mm) * sizeof(double));
-        memcpy(tables + 2 * s * e * m + s * e * mm + i * e * mm, AT(15),
-               (size_t)(e * mm) * sizeof(double));
-#undef AT
+            load[i * m + j] = hv(&hm, o[9] + j) + accel * hv(&hm, o[10] + j)
+                              + w * w * hv(&hm, o[11] + j);
+        for (Py_ssize_t j = 0; j < e * m; j++) {
+            chord[i * e * m + j] = hv(&hm, o[12] + j);
+            chord_rate[i * e * m + j] = hv(&hm, o[13] + j);
+        }
+        for (Py_ssize_t j = 0; j < e * mm; j++) {
+            shortening[i * e * mm + j] = hv(&hm, o[14] + j);
+            shortening_rate[i * e * mm + j] = hv(&hm, o[15] + j);
+        }
+    }
+    p->mass = mass;
+    p->damping = damping;
+    p->stiffness = stiffness;
+    p->load = load;
+    p->chord = chord;
+    p->chord_rate = chord_rate;
+    p->shortening = shortening;
+    p->shortening_rate = shortening_rate;
+}
+
+/* The output operator (outputs x m) at theta into out. */
+static void output_at(const Model *md, double theta, double *out)
+{
+    Hermite hm;
+    hermite_at(md, theta, &hm);
+    for (Py_ssize_t j = 0; j < md->outputs * md->m; j++)
+        out[j] = hv(&hm, (Py_ssize_t)md->off[16] + j);
+}
+
+/* After a converged step: the new state, its output operator and link slopes. */
+static void accept(const Model *md, State *st, const Problem *p, const Work *wk, double h)
+{
+    const Py_ssize_t s = md->s, m = md->m, e = md->e, last = s - 1;
+    for (Py_ssize_t a = 0; a < m; a++) {
+        double dq = 0.0, dv = 0.0;
+        for (Py_ssize_t j = 0; j < s; j++) {
+            dq += md->a2[last * s + j] * wk->acc[j * m + a];
+            dv += md->a[last * s + j] * wk->acc[j * m + a];
+        }
+        st->q[a] = st->q[a] + h * st->v[a] + h * h * dq;
+        st->v[a] = st->v[a] + h * dv;
+    }
+    memcpy(st->guess, wk->acc, (size_t)(s * m) * sizeof(double));
+    st->guess[s * m] = h;
+    st->has_guess = 1;
+    memcpy(st->axial, wk->axial, (size_t)e * sizeof(double));
+    output_at(md, wk->angles[last], st->output);
+    /* RMS slope of each link's bending: sqrt(2 S_L / L), S_L = q^T g_L q / 2 */
+    for (Py_ssize_t l = 0; l < e; l++) {
+        const double *g = p->shortening + (last * e + l) * m * m;
+        double doubled = 0.0;
+        for (Py_ssize_t a = 0; a < m; a++) {
+            double t = 0.0;
+            for (Py_ssize_t b = 0; b < m; b++)
+                t += g[a * m + b] * st->q[b];
+            doubled += st->q[a] * t;
+        }
+        st->slope[l] = sqrt(fmax(doubled, 0.0) / md->length[l]);
     }
 }
 
-static PyObject *step(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+/*
+ * The Newton start: the last step's stage accelerations extrapolated linearly in time from its
+ * last two stages to this step's stage times (guess[s m] holds that step's h); zero without.
+ */
+static void predict(const Model *md, const State *st, double h, double *acc)
+{
+    const Py_ssize_t s = md->s, m = md->m;
+    if (!st->has_guess) {
+        memset(acc, 0, (size_t)(s * m) * sizeof(double));
+        return;
+    }
+    const double *last = st->guess + (s - 1) * m, *before = st->guess + (s > 1 ? s - 2 : 0) * m;
+    const double span = s > 1 ? (md->c[s - 1] - md->c[s - 2]) * st->guess[s * m] : 1.0;
+    for (Py_ssize_t i = 0; i < s; i++) {
+        const double t = s > 1 ? md->c[i] * h / span : 0.0;
+        for (Py_ssize_t a = 0; a < m; a++)
+            acc[i * m + a] = last[a] + t * (last[a] - before[a]);
+    }
+}
+
+/*
+ * One step of length h between two samples (angle, speed linear between them); a step whose
+ * Newton fails is retried as two halves, at most `halvings` times deep. Returns 0 if it
+ * failed (the state is then as before), else a positive count.
+ */
+static Py_ssize_t advance(const Model *md, State *st, Work *wk, double h, double th0,
+                          double th1, double w0, double w1, int halvings)
+{
+    if (!(isfinite(h) && isfinite(th0) && isfinite(th1) && isfinite(w0) && isfinite(w1)
+          && h > 0.0))
+        return 0;
+    const Py_ssize_t s = md->s, m = md->m;
+    Problem p;
+    for (Py_ssize_t i = 0; i < s; i++) {
+        wk->angles[i] = th0 + md->c[i] * (th1 - th0);
+        wk->speed[i] = w0 + md->c[i] * (w1 - w0);
+    }
+    p.speed = wk->speed;
+    p.q = st->q;
+    p.v = st->v;
+    p.a = md->a;
+    p.a2 = md->a2;
+    p.c = md->c;
+    p.k = md->k;
+    p.acc = wk->acc;
+    p.axial = wk->axial;
+    p.s = s;
+    p.m = m;
+    p.e = md->e;
+    p.h = h;
+    p.beta = md->beta;
+    p.nonlinear = md->nonlinear;
+    stage_tables(md, wk->angles, (w1 - w0) / h, &p, wk->tables);
+    predict(md, st, h, wk->acc);
+    wk->factor.valid = 0;
+    Py_ssize_t count = solve(&p, md->tolerance, md->iterations, wk->mem, &wk->factor);
+    for (Py_ssize_t i = 0; count > 0 && i < s * m; i++)
+        if (!isfinite(wk->acc[i]))
+            count = 0;
+    if (count > 0) {
+        st->iterations += count;
+        accept(md, st, &p, wk, h);
+        return count;
+    }
+    if (halvings == 0)
+        return 0;
+    const size_t saved_size = (size_t)(2 * m + s * m + 1);
+    double *saved = malloc(saved_size * sizeof(double));
+    if (saved == NULL)
+        return 0;
+    memcpy(saved, st->q, (size_t)m * sizeof(double));
+    memcpy(saved + m, st->v, (size_t)m * sizeof(double));
+    memcpy(saved + 2 * m, st->guess, (size_t)(s * m + 1) * sizeof(double));
+    const int had_guess = st->has_guess;
+    const double th_mid = 0.5 * (th0 + th1), w_mid = 0.5 * (w0 + w1);
+    st->has_guess = 0;
+    const int ok = advance(md, st, wk, 0.5 * h, th0, th_mid, w0, w_mid, halvings - 1) > 0
+                   && advance(md, st, wk, 0.5 * h, th_mid, th1, w_mid, w1, halvings - 1) > 0;
+    if (!ok) {
+        memcpy(st->q, saved, (size_t)m * sizeof(double));
+        memcpy(st->v, saved + m, (size_t)m * sizeof(double));
+        memcpy(st->guess, saved + 2 * m, (size_t)(s * m + 1) * sizeof(double));
+        st->has_guess = had_guess;
+    }
+    free(saved);
+    return ok;
+}
+
+static double now_ns(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec * 1e9 + (double)ts.tv_nsec;
+}
+
+/* Step through samples 1..K; per sample its outputs, axial forces, slopes, flag, time. */
+static void march_samples(const Model *md, State *st, Work *wk, const double *times,
+                          const double *angles, const double *speeds, Py_ssize_t samples,
+                          int halvings, double *outputs, double *axial, double *slope,
+                          double *converged, double *update_ns)
+{
+    const Py_ssize_t m = md->m, e = md->e, n_out = md->outputs;
+    for (Py_ssize_t k = 1; k <= samples; k++) {
+        const double begin = now_ns();
+        const int ok = advance(md, st, wk, times[k] - times[k - 1], angles[k - 1], angles[k],
+                               speeds[k - 1], speeds[k], halvings) > 0;
+        if (!ok && isfinite(angles[k]))
+            output_at(md, angles[k], st->output);
+        double *out = outputs + (k - 1) * n_out;
+        for (Py_ssize_t o = 0; o < n_out; o++) {
+            double t = 0.0;
+            for (Py_ssize_t a = 0; a < m; a++)
+                t += st->output[o * m + a] * st->q[a];
+            out[o] = t;
+        }
+        memcpy(axial + (k - 1) * e, st->axial, (size_t)e * sizeof(double));
+        memcpy(slope + (k - 1) * e, st->slope, (size_t)e * sizeof(double));
+        converged[k - 1] = ok;
+        update_ns[k - 1] = now_ns() - begin;
+    }
+}
+
+/*
+ * march(values, slopes, offsets, bearing, axial_stiffness, link_length, a, a2, c,
+ *       times, angles, speeds, q, v, guess, axial, slope, output,
+ *       outputs, axial_out, slope_out, converged, update_ns, work,
+ *       nodes, fields, stages, size, links, channels, samples, beta, nonlinear, tolerance,
+ *       iterations, halvings, has_guess) -> (newton iterations, has_guess)
+ *
+ * Steps the state (q, v, guess, axial, slope, output: written in place) from sample 0 through
+ * `samples` more samples (times [s], unwrapped angles, speeds: samples + 1 each), reading the
+ * tables (values, slopes: nodes x fields, NonlinearTables) at the stage angles by cubic
+ * Hermite interpolation. Per sample: outputs (channels), axial_out and slope_out (links),
+ * converged (1.0 / 0.0) and update_ns (the step's own time). A step that does not converge
+ * keeps the state, and its output operator is then the one at the sample's angle.
+ * work: scratch of workspace(stages, size, links, channels) doubles, made once by the caller.
+ */
+#define MARCH_ARGS 37
+#define BUFFERS 24
+
+static int march_sizes(Model *md, Py_ssize_t *samples, int *halvings, int *has_guess,
+                       PyObject *const *args)
+{
+    md->nodes = PyLong_AsSsize_t(args[24]);
+    md->fields = PyLong_AsSsize_t(args[25]);
+    md->s = PyLong_AsSsize_t(args[26]);
+    md->m = PyLong_AsSsize_t(args[27]);
+    md->e = PyLong_AsSsize_t(args[28]);
+    md->outputs = PyLong_AsSsize_t(args[29]);
+    *samples = PyLong_AsSsize_t(args[30]);
+    md->beta = PyFloat_AsDouble(args[31]);
+    md->nonlinear = PyObject_IsTrue(args[32]);
+    md->tolerance = PyFloat_AsDouble(args[33]);
+    md->iterations = PyLong_AsSsize_t(args[34]);
+    *halvings = (int)PyLong_AsLong(args[35]);
+    *has_guess = PyObject_IsTrue(args[36]);
+    if (PyErr_Occurred())
+        return -1;
+    if (md->s < 1 || md->s > 3 || md->m < 1 || md->m > 512 || md->e < 0 || md->e > 64
+        || md->outputs < 0 || md->outputs > 64 || md->nodes < 2 || md->fields < 1
+        || *samples < 0 || *halvings < 0 || *halvings > 20 || md->iterations < 1) {
+        PyErr_SetString(PyExc_ValueError, "march: sizes out of range");
+        return -1;
+    }
+    return 0;
+}
+
+/* Every field's offset and extent inside the flat row; -1 with an exception if not. */
+static int check_offsets(const Model *md)
+{
+    const Py_ssize_t m = md->m, mm = m * m, e = md->e;
+    const Py_ssize_t extent[FIELDS] = {mm, mm, mm, mm, mm, mm, mm, mm, mm, m, m, m, e * m, e * m,
+                                       e * mm, e * mm, md->outputs * m};
+    for (Py_ssize_t k = 0; k < FIELDS; k++) {
+        const double o = md->off[k];
+        if (!(o >= 0.0 && o == floor(o) && o + (double)extent[k] <= (double)md->fields)) {
+            PyErr_SetString(PyExc_ValueError, "march: a field lies outside the table's row");
+            return -1;
+        }
+    }
+    return 0;
+}
+
+/* Doubles of march's workspace: the stage tables, Newton's arrays, the LU and the rest. */
+static Py_ssize_t workspace_doubles(Py_ssize_t s, Py_ssize_t m, Py_ssize_t e, Py_ssize_t outputs)
+{
+    const Py_ssize_t n = s * m, mm = m * m;
+    return (3 * s * mm + s * m + 2 * s * e * m + 2 * s * e * mm) + (3 * n + 2 * s * mm + 4 * m)
+           + (n * n + n + s * m + 2 * s + e + outputs * m);
+}
+
+static PyObject *run_march(Model *md, Py_buffer *views, Py_ssize_t samples, int halvings,
+                           int has_guess)
+{
+    const Py_ssize_t s = md->s, m = md->m, e = md->e, n = s * m, mm = m * m;
+    const Py_ssize_t tables = 3 * s * mm + s * m + 2 * s * e * m + 2 * s * e * mm;
+    const Py_ssize_t mem = 3 * n + 2 * s * mm + 4 * m;
+    double *buf = views[23].buf;
+    /* the pivots, as Py_ssize_t in doubles' room (both 8 bytes here, checked at import) */
+    Work wk = {buf, buf + tables, buf + tables + mem + n * n + n, NULL, NULL, NULL, NULL,
+               {buf + tables + mem, (Py_ssize_t *)(buf + tables + mem + n * n), 0}};
+    wk.angles = wk.acc + s * m;
+    wk.speed = wk.angles + s;
+    wk.axial = wk.speed + s;
+    wk.output = wk.axial + e;
+    State st = {views[12].buf, views[13].buf, views[14].buf, views[15].buf, views[16].buf,
+                views[17].buf, has_guess, 0};
+    Py_BEGIN_ALLOW_THREADS
+    march_samples(md, &st, &wk, views[9].buf, views[10].buf, views[11].buf, samples, halvings,
+                  views[18].buf, views[19].buf, views[20].buf, views[21].buf, views[22].buf);
+    Py_END_ALLOW_THREADS
+    return Py_BuildValue("(ni)", st.iterations, st.has_guess);
+}
+
+static PyObject *march(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     (void)self;
-    if (nargs != STEP_ARGS) {
-        PyErr_SetString(PyExc_TypeError, "step takes 22 arguments (see the module notes)");
+    if (nargs != MARCH_ARGS) {
+        PyErr_SetString(PyExc_TypeError, "march takes 37 arguments (see the module notes)");
         return NULL;
     }
-    Problem p;
-    p.s = PyLong_AsSsize_t(args[13]);
-    p.m = PyLong_AsSsize_t(args[14]);
-    p.e = PyLong_AsSsize_t(args[15]);
-    const Py_ssize_t fields = PyLong_AsSsize_t(args[16]);
-    p.h = PyFloat_AsDouble(args[17]);
-    p.beta = PyFloat_AsDouble(args[18]);
-    p.nonlinear = PyObject_IsTrue(args[19]);
-    const double tolerance = PyFloat_AsDouble(args[20]);
-    const Py_ssize_t iterations = PyLong_AsSsize_t(args[21]);
-    const double accel = PyFloat_AsDouble(args[4]);
-    if (PyErr_Occurred())
+    Model md;
+    Py_ssize_t samples;
+    int halvings, has_guess;
+    if (march_sizes(&md, &samples, &halvings, &has_guess, args) < 0)
         return NULL;
-    if (p.s < 1 || p.s > 8 || p.m < 1 || p.m > 4096 || p.e < 0 || p.e > 64 || fields < 1) {
-        PyErr_SetString(PyExc_ValueError, "step: sizes out of range");
-        return NULL;
-    }
-    const Py_ssize_t s = p.s, m = p.m, e = p.e, n = s * m;
-    const Py_ssize_t counts[13] = {s * fields, OFFSETS, m * m, s, 1, m, m, s * m, e, e, s * s,
-                                   s * s, s};
-    static const char *const names[13] = {"row", "offsets", "bearing", "speed", "accel", "q",
-                                          "v", "acc", "axial", "axial_stiffness", "a", "a2",
-                                          "c"};
-    Py_buffer views[13];
+    const Py_ssize_t s = md.s, m = md.m, e = md.e, k = samples, p = md.outputs;
+    const Py_ssize_t counts[BUFFERS] = {md.nodes * md.fields, md.nodes * md.fields, FIELDS,
+                                        m * m, e, e, s * s, s * s, s, k + 1, k + 1, k + 1, m, m,
+                                        s * m + 1, e, e, p * m, k * p, k * e, k * e, k, k,
+                                        workspace_doubles(s, m, e, p)};
+    static const char *const names[BUFFERS] = {
+        "values", "slopes", "offsets", "bearing", "axial_stiffness", "link_length", "a", "a2",
+        "c", "times", "angles", "speeds", "q", "v", "guess", "axial", "slope", "output",
+        "outputs", "axial_out", "slope_out", "converged", "update_ns", "work"};
+    Py_buffer views[BUFFERS];
     Py_ssize_t taken = 0;
     PyObject *result = NULL;
-    for (; taken < 13; taken++) {
-        if (taken == 4)
-            continue;       /* accel is a float */
-        if (get_doubles(args[taken], &views[taken], counts[taken], names[taken],
-                        taken == 7 || taken == 8) < 0)
+    for (; taken < BUFFERS; taken++)
+        if (get_doubles(args[taken], &views[taken], counts[taken], names[taken], taken >= 12)
+            < 0)
             goto release;
-    }
-    const double *off = views[1].buf;
-    for (Py_ssize_t k = 0; k < OFFSETS; k++)
-        if (off[k] < 0.0 || off[k] >= (double)fields) {
-            PyErr_SetString(PyExc_ValueError, "step: an offset is outside the row");
-            goto release;
-        }
-    if (off[15] + (double)(e * m * m) > (double)fields) {
-        PyErr_SetString(PyExc_ValueError, "step: the row is shorter than its layout");
-        goto release;
-    }
-    p.speed = views[3].buf;
-    p.q = views[5].buf;
-    p.v = views[6].buf;
-    p.acc = views[7].buf;
-    p.axial = views[8].buf;
-    p.k = views[9].buf;
-    p.a = views[10].buf;
-    p.a2 = views[11].buf;
-    p.c = views[12].buf;
-    const size_t linear = (size_t)(3 * s * m * m + s * m + 2 * s * e * m + 2 * s * e * m * m);
-    double *lin = PyMem_Malloc(linear * sizeof(double));
-    double *mem = PyMem_Malloc((size_t)(3 * n + n * n + 2 * s * m * m + 4 * m) * sizeof(double));
-    Py_ssize_t *piv = PyMem_Malloc((size_t)n * sizeof(Py_ssize_t));
-    if (lin == NULL || mem == NULL || piv == NULL) {
-        PyErr_NoMemory();
-    } else {
-        double *mass = lin, *damping = mass + s * m * m, *stiffness = damping + s * m * m;
-        double *load = stiffness + s * m * m, *tables = load + s * m;
-        Py_ssize_t count;
-        Py_BEGIN_ALLOW_THREADS
-        gather_linear(views[0].buf, off, views[2].buf, &p, accel, fields, mass, damping,
-                      stiffness, load, tables);
-        p.mass = mass;
-        p.damping = damping;
-        p.stiffness = stiffness;
-        p.load = load;
-        p.chord = tables;
-        p.chord_rate = tables + s * e * m;
-        p.shortening = tables + 2 * s * e * m;
-        p.shortening_rate = tables + 2 * s * e * m + s * e * m * m;
-        count = solve(&p, tolerance, iterations, mem, piv);
-        Py_END_ALLOW_THREADS
-        result = PyLong_FromSsize_t(count);
-    }
-    PyMem_Free(lin);
-    PyMem_Free(mem);
-    PyMem_Free(piv);
+    md.values = views[0].buf;
+    md.slopes = views[1].buf;
+    md.off = views[2].buf;
+    md.bearing = views[3].buf;
+    md.k = views[4].buf;
+    md.length = views[5].buf;
+    md.a = views[6].buf;
+    md.a2 = views[7].buf;
+    md.c = views[8].buf;
+    if (check_offsets(&md) == 0)
+        result = run_march(&md, views, samples, halvings, has_guess);
 release:
     for (Py_ssize_t i = 0; i < taken; i++)
-        if (i != 4)
-            PyBuffer_Release(&views[i]);
+        PyBuffer_Release(&views[i]);
     return result;
 }
 
+static PyObject *workspace(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    (void)self;
+    if (nargs != 4) {
+        PyErr_SetString(PyExc_TypeError, "workspace(stages, size, links, channels)");
+        return NULL;
+    }
+    Py_ssize_t v[4];
+    for (int i = 0; i < 4; i++)
+        v[i] = PyLong_AsSsize_t(args[i]);
+    if (PyErr_Occurred())
+        return NULL;
+    if (v[0] < 1 || v[0] > 3 || v[1] < 1 || v[1] > 512 || v[2] < 0 || v[2] > 64 || v[3] < 0
+        || v[3] > 64) {
+        PyErr_SetString(PyExc_ValueError, "workspace: sizes out of range");
+        return NULL;
+    }
+    return PyLong_FromSsize_t(workspace_doubles(v[0], v[1], v[2], v[3]));
+}
+
 static PyMethodDef METHODS[] = {
-    {"step", (PyCFunction)(void (*)(void))step, METH_FASTCALL,
-     "One Radau IIA step of the reduced nonlinear model from its interpolated table rows."},
+    {"workspace", (PyCFunction)(void (*)(void))workspace, METH_FASTCALL,
+     "Doubles of march's scratch buffer for (stages, size, links, channels)."},
+    {"march", (PyCFunction)(void (*)(void))march, METH_FASTCALL,
+     "Step the reduced nonlinear model through samples, reading its tables (see the notes)."},
     {NULL, NULL, 0, NULL}};
 
 static struct PyModuleDef MODULE = {PyModuleDef_HEAD_INIT, "_nonlinear_step",
                                     "The reduced nonlinear model's step (C).", -1, METHODS};
 
-PyMODINIT_FUNC PyInit__nonlinear_step(void) { return PyModule_Create(&MODULE); }
+PyMODINIT_FUNC PyInit__nonlinear_step(void)
+{
+    /* march keeps the LU's pivots in its float64 scratch */
+    if (sizeof(Py_ssize_t) > sizeof(double)) {
+        PyErr_SetString(PyExc_ImportError, "_nonlinear_step: Py_ssize_t wider than double");
+        return NULL;
+    }
+    return PyModule_Create(&MODULE);
+}

@@ -43,7 +43,9 @@ MAX_HALVINGS = 6
 # The tables' fields the compiled step reads, in its order (_nonlinear_step.c).
 STEP_FIELDS = ('mass', 'gyroscopic', 'coupling_a', 'coupling_w2', 'elastic', 'elastic_rate',
                'geometric_1', 'geometric_a', 'geometric_w2', 'load_1', 'load_a', 'load_w2',
-               'chord', 'chord_rate', 'shortening', 'shortening_rate')
+               'chord', 'chord_rate', 'shortening', 'shortening_rate', 'output')
+# Samples per compiled call offline (the call holds no Python lock; Ctrl-C is seen between).
+MARCH_CHUNK = 4096
 
 
 def lumped_force(tables, fields, eta, rate, speed, nonlinear=True, tangents=True):
@@ -156,7 +158,7 @@ class NonlinearStepper:
         self.guess = None
         self.iterations = 0
         self.axial = np.zeros(tables.links)
-        self.slope = np.zeros(tables.links)
+        self.slope = np.zeros(tables.links)     # written in place by the compiled march
         # output operator at the last step's end (the last stage: c_s = 1)
         self.output_operator = None
 
@@ -192,13 +194,13 @@ class NonlinearStepper:
         """
         Solve one step's stage accelerations; None if Newton does not converge.
 
-        Simplified Newton: the Jacobian is formed at the step's start and formed again only
-        when an iteration contracts the update by less than half.
+        Simplified Newton from the predicted start (:meth:`_predicted`): the Jacobian is
+        formed at the first iteration and formed again only when an iteration contracts the
+        update by less than half.
         """
         linear = linear_part(self.tables, fields, speed, accel, self.nonlinear)
         s, m = speed.shape[0], self.tables.size
-        acc = np.zeros((s, m)) if self.guess is None else self.guess.copy()
-        factor, previous = None, np.inf
+        acc, factor, previous = self._predicted(h), None, np.inf
         for count in range(1, NEWTON_ITERATIONS + 1):
             residual, jacobian, axial = self._residual(h, acc, fields, speed, linear,
                                                        factor is None)
@@ -218,36 +220,82 @@ class NonlinearStepper:
             previous = size
         return None
 
+    def _predicted(self, h):
+        """
+        Newton's start: the last step's stage accelerations extrapolated to this step's stages.
+
+        Linear in time through its last two stages (``guess`` = (stage accelerations, its h));
+        zero without a last step.
+        """
+        method, size = self.method, self.tables.size
+        if self.guess is None:
+            return np.zeros((method.stages, size))
+        acc, last_h = self.guess
+        if method.stages == 1:
+            return acc.copy()
+        fraction = method.c * h / ((method.c[-1] - method.c[-2]) * last_h)
+        return acc[-1] + fraction[:, None] * (acc[-1] - acc[-2])
+
     def _link_slopes(self, angle):
         """RMS slope of each link's bending [rad]: sqrt(2 S_L / L), S_L = eta^T g_L eta / 2."""
         shortening = self.tables.at(angle, ('shortening',))['shortening'][0]
         doubled = np.einsum('m,lmk,k->l', self.q, shortening, self.q)
         return np.sqrt(np.maximum(doubled, 0.0) / self.tables.link_length)
 
-    def _compiled_step(self, h, angles, speed, accel):
-        """Run the step in C from the interpolated rows; (acc or None, output operator)."""
-        tables, method = self.tables, self.method
-        layout = tables.layout()
-        offsets = self.__dict__.get('_offsets')
-        if offsets is None:
-            offsets = self._offsets = np.array(
-                [layout[name][0] for name in STEP_FIELDS], dtype=float)
-        row = tables.at_rows(angles)
-        acc = (np.zeros((angles.shape[0], tables.size)) if self.guess is None
-               else self.guess.copy())
-        axial = np.zeros(tables.links)
-        count = compiled_newton.step(
-            row, offsets, tables.bearing, np.ascontiguousarray(speed, dtype=float), float(accel),
-            self.q, self.v, acc, axial, tables.axial_stiffness, method.a, method.a2, method.c,
-            angles.shape[0], tables.size, tables.links, row.shape[1], float(h),
-            float(tables.beta), self.nonlinear, NEWTON_TOLERANCE, NEWTON_ITERATIONS)
-        start, shape = layout['output']
-        output = row[-1, start:start + shape[0] * shape[1]].reshape(shape)
-        if count == 0 or not np.all(np.isfinite(acc)):
-            return None, output
-        self.iterations += count
-        self.axial = axial
-        return acc, output
+    def _native_arguments(self):
+        """Return the compiled march's constant arguments: tables, tableau, sizes (made once)."""
+        cached = self.__dict__.get('_native')
+        if cached is None:
+            tables, method = self.tables, self.method
+            layout = tables.layout()
+            offsets = np.array([layout[name][0] for name in STEP_FIELDS], dtype=float)
+            arrays = (tables.values, tables.slopes, offsets, tables.bearing,
+                      tables.axial_stiffness, tables.link_length, method.a, method.a2,
+                      method.c)
+            sizes = (tables.grid_size, tables.values.shape[1], method.stages, tables.size,
+                     tables.links, tables.outputs)
+            self._guess_buffer = np.zeros(method.stages * tables.size + 1)
+            self._guess_view = self._guess_buffer[:-1].reshape(method.stages, tables.size)
+            one = (np.empty(2), np.empty(2), np.empty(2), np.empty((1, tables.outputs)),
+                   np.empty((1, tables.links)), np.empty((1, tables.links)), np.empty(1),
+                   np.empty(1))
+            self._work = np.empty(compiled_newton.workspace(method.stages, tables.size,
+                                                            tables.links, tables.outputs))
+            cached = self._native = (
+                tuple(np.ascontiguousarray(a, dtype=float) for a in arrays), sizes,
+                (float(tables.beta), self.nonlinear, NEWTON_TOLERANCE, NEWTON_ITERATIONS), one)
+        return cached
+
+    def _call_march(self, times, angles, speeds, out, halvings):
+        """Run the compiled march over ``times`` etc. (float64 arrays) into ``out``."""
+        arrays, sizes, constants, _ = self._native_arguments()
+        tables, buffer = self.tables, self._guess_buffer
+        if self.output_operator is None:
+            self.output_operator = np.zeros((tables.outputs, tables.size))
+        if self.guess is not None and self.guess[0] is not self._guess_view:
+            buffer[:-1], buffer[-1] = self.guess[0].ravel(), self.guess[1]
+        iterations, has_guess = compiled_newton.march(
+            *arrays, times, angles, speeds, self.q, self.v, buffer, self.axial, self.slope,
+            self.output_operator, *out, self._work, *sizes, len(times) - 1, *constants, halvings,
+            self.guess is not None)
+        self.iterations += iterations
+        self.guess = (self._guess_view, buffer[-1]) if has_guess else None
+
+    def march(self, times, angles, speeds, halvings=MAX_HALVINGS):
+        """
+        Step the state through samples 1.. of ``times`` [s], unwrapped ``angles``, ``speeds``.
+
+        The compiled step, one call for every sample (sample 0 is where the state is).
+        Returns per sample the outputs (K, channels), axial forces and link slopes (K, E),
+        converged (K,) and the step's own time [ns] (K,); a sample whose step does not
+        converge keeps the state and reads the outputs at its angle.
+        """
+        tables, count = self.tables, len(times) - 1
+        out = (np.empty((count, tables.outputs)), np.empty((count, tables.links)),
+               np.empty((count, tables.links)), np.empty(count), np.empty(count))
+        self._call_march(*(np.ascontiguousarray(values, dtype=float)
+                           for values in (times, angles, speeds)), out, int(halvings))
+        return out[0], out[1], out[2], out[3].astype(bool), out[4].astype(np.int64)
 
     def step(self, h, angle0, angle1, speed0, speed1, halvings=MAX_HALVINGS):
         """
@@ -256,18 +304,22 @@ class NonlinearStepper:
         Returns True if every (sub)step converged; the state is unchanged otherwise (and for
         a non-finite input or a step that is not positive).
         """
+        if self.compiled:          # the compiled march checks the input itself
+            times, angles, speeds, *out = self._native_arguments()[3]
+            times[1], angles[0], angles[1], speeds[0], speeds[1] = h, angle0, angle1, speed0, \
+                speed1
+            times[0] = 0.0
+            self._call_march(times, angles, speeds, out, halvings)
+            return bool(out[3][0])
         if not (np.isfinite([h, angle0, angle1, speed0, speed1]).all() and h > 0.0):
             return False
         c = self.method.c
         angles = angle0 + c * (angle1 - angle0)
         speed = speed0 + c * (speed1 - speed0)
         accel = (speed1 - speed0) / h
-        if self.compiled:
-            acc, output = self._compiled_step(h, angles, speed, accel)
-        else:
-            fields = self.tables.at(angles)
-            acc = self._newton(h, fields, speed, accel)
-            output = fields['output'][-1]
+        fields = self.tables.at(angles)
+        acc = self._newton(h, fields, speed, accel)
+        output = fields['output'][-1]
         if acc is None:
             if halvings == 0:
                 return False
@@ -282,7 +334,7 @@ class NonlinearStepper:
             return True
         self.q = self.q + h * self.v + h * h * (self.method.a2[-1] @ acc)
         self.v = self.v + h * (self.method.a[-1] @ acc)
-        self.guess = np.broadcast_to(acc[-1], acc.shape).copy()
+        self.guess = (acc.copy(), h)
         self.output_operator = output.copy()
         self.slope = self._link_slopes(angle1)
         return True
@@ -303,6 +355,18 @@ def unwrap_with_speed(time_s, angles, speeds=None):
     change = np.diff(angles) - predicted
     change = predicted + change - 2.0 * np.pi * np.round(change / (2.0 * np.pi))
     return angles[0] + np.concatenate([[0.0], np.cumsum(change)]), speeds
+
+
+def unwrap_next(angle0, angle1, speed0, speed1, h):
+    """
+    Unwrap one sample's crank angle from the last one's: :func:`unwrap_with_speed` of a pair.
+
+    Plain floats (the streaming update's per-sample call); the same arithmetic.
+    """
+    predicted = 0.5 * (speed1 + speed0) * h
+    change = (angle1 - angle0) - predicted
+    two_pi = 2.0 * np.pi
+    return angle0 + (predicted + change - two_pi * round(change / two_pi))
 
 
 def estimate_nonlinear(tables, stamps_ns, angles, speeds=None, nonlinear=True, compiled=True):
@@ -380,8 +444,25 @@ def _march(tables, stamps, theta, speeds, nonlinear, compiled):
     update_ns = np.zeros(count, dtype=np.int64)
     outputs[0] = stepper.outputs(theta[0])
     slope[0] = stepper._link_slopes(theta[0])
+    if stepper.compiled:
+        for first in range(0, count - 1, MARCH_CHUNK):
+            span = slice(first, min(count, first + MARCH_CHUNK + 1))
+            rows = slice(first + 1, span.stop)
+            (outputs[rows], axial[rows], slope[rows], converged[rows],
+             update_ns[rows]) = stepper.march(time_s[span], theta[span], speeds[span])
+    else:
+        _march_in_python(stepper, time_s, theta, speeds,
+                         (outputs, axial, slope, converged, update_ns))
+    return {'outputs': outputs, 'converged': converged, 'axial_force': axial,
+            'link_slope': slope, 'newton_iterations': stepper.iterations,
+            'update_ns': update_ns}
+
+
+def _march_in_python(stepper, time_s, theta, speeds, arrays):
+    """Step the numpy reference sample by sample into ``arrays`` (as the compiled march)."""
+    outputs, axial, slope, converged, update_ns = arrays
     clock = time.perf_counter_ns
-    for k in range(1, count):
+    for k in range(1, theta.shape[0]):
         begin = clock()
         converged[k] = stepper.step(time_s[k] - time_s[k - 1], theta[k - 1], theta[k],
                                     speeds[k - 1], speeds[k])
@@ -390,10 +471,7 @@ def _march(tables, stamps, theta, speeds, nonlinear, compiled):
         outputs[k], axial[k] = stepper.output_operator @ stepper.q, stepper.axial
         slope[k] = stepper.slope
         update_ns[k] = clock() - begin
-    return {'outputs': outputs, 'converged': converged, 'axial_force': axial,
-            'link_slope': slope, 'newton_iterations': stepper.iterations,
-            'update_ns': update_ns}
 
 
-__all__ = ['NonlinearStepper', 'lumped_force', 'linear_part', 'unwrap_with_speed',
+__all__ = ['NonlinearStepper', 'lumped_force', 'linear_part', 'unwrap_with_speed', 'unwrap_next',
            'estimate_nonlinear']

@@ -217,3 +217,64 @@ def test_link_slopes_are_reported_and_counted_beyond_the_von_karman_limit(tables
     flagged = estimate_nonlinear(tables, stamps, angles, np.full(count, SPEED))
     expected = int((out['link_slope'] > 1e-3).any(axis=1).sum())
     assert flagged['beyond_von_karman'] == expected > 0
+
+
+def test_ten_microsecond_jittered_steps_agree_with_one_millisecond_steps(tables):
+    # the same motion stepped 100 times finer with +-30 % jitter: the fine run read at the
+    # coarse run's times agrees with it (a step size the estimator follows, not just bounded)
+    rng = np.random.default_rng(5)
+    fine_steps = np.round((1.0 + 0.3 * rng.uniform(-1.0, 1.0, 6000)) * 1e4).astype(np.int64)
+    fine = np.concatenate([[0], np.cumsum(fine_steps)])
+    fine = fine[fine <= 50_000_000]
+    coarse = np.arange(51, dtype=np.int64) * 1_000_000
+    runs = [estimate_nonlinear(tables, stamps, SPEED * stamps * 1e-9,
+                               np.full(stamps.size, SPEED)) for stamps in (fine, coarse)]
+    assert runs[0]['refused'] == 0 and runs[1]['refused'] == 0
+    resampled = np.column_stack([np.interp(coarse, fine, runs[0]['outputs'][:, c])
+                                 for c in range(4)])
+    span = np.ptp(runs[1]['outputs'], axis=0).max()
+    assert np.abs(resampled - runs[1]['outputs']).max() < 0.01 * span      # measured 0.09 %
+
+
+def test_march_steps_many_samples_as_one_sample_calls(tables):
+    # the offline batch (one compiled call for many samples) and the streaming update (one
+    # call per sample) are the same step: the same state, outputs to their rounding
+    pytest.importorskip('flexlink_ros.core.estimation._nonlinear_step')
+    count = 300
+    stamps = np.arange(count, dtype=np.int64) * 1_000_000
+    times, angles = stamps * 1e-9, SPEED * stamps * 1e-9
+    batch, single = NonlinearStepper(tables), NonlinearStepper(tables)
+    for stepper in (batch, single):
+        stepper.start(angles[0], SPEED)
+    outputs = batch.march(times, angles, np.full(count, SPEED))[0]
+    for k in range(1, count):
+        assert single.step(times[k] - times[k - 1], angles[k - 1], angles[k], SPEED, SPEED)
+        np.testing.assert_allclose(single.output_operator @ single.q, outputs[k - 1],
+                                   rtol=1e-12, atol=1e-18)
+    np.testing.assert_array_equal(single.q, batch.q)
+    assert single.iterations == batch.iterations > count
+
+
+def test_march_refuses_a_table_layout_outside_its_rows(tables):
+    pytest.importorskip('flexlink_ros.core.estimation._nonlinear_step')
+    stepper = NonlinearStepper(tables)
+    stepper.start(0.0, SPEED)
+    arrays, sizes, constants, _ = stepper._native_arguments()
+    bad = arrays[2].copy()
+    bad[-1] = tables.values.shape[1] - 1.0           # the output operator past the row's end
+    out = (np.empty((1, tables.outputs)), np.empty((1, tables.links)),
+           np.empty((1, tables.links)), np.empty(1), np.empty(1))
+    state = stepper.q.copy()
+    with pytest.raises(ValueError, match='outside'):
+        nonlinear_stream.compiled_newton.march(
+            *arrays[:2], bad, *arrays[3:], np.array([0.0, 1e-3]), np.array([0.0, 0.04]),
+            np.full(2, SPEED), stepper.q, stepper.v, stepper._guess_buffer, stepper.axial,
+            stepper.slope, stepper.output_operator, *out, stepper._work, *sizes, 1,
+            *constants, 0, False)
+    with pytest.raises(ValueError, match='holds'):   # a workspace too small
+        nonlinear_stream.compiled_newton.march(
+            *arrays, np.array([0.0, 1e-3]), np.array([0.0, 0.04]), np.full(2, SPEED),
+            stepper.q, stepper.v, stepper._guess_buffer, stepper.axial, stepper.slope,
+            stepper.output_operator, *out, stepper._work[:10], *sizes, 1, *constants, 0,
+            False)
+    np.testing.assert_array_equal(stepper.q, state)

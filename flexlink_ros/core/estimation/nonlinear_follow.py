@@ -1,0 +1,196 @@
+"""
+The reduced nonlinear model following a linear estimator, one accepted sample at a time.
+
+The node (``model.nonlinear``) and ``flexlink replay --nonlinear`` run the same thing: the
+linear estimator filters the crank signal and decides which samples it accepts; the nonlinear
+model (:class:`.nonlinear_stream.NonlinearStepper`) steps from one accepted sample to the next
+on that estimator's crank angle and speed, and starts again, at its quasi-static deflection,
+after a gap longer than the estimator's reset gap. Fed the same samples, both give the same
+doubles, so a recording replays to what the node published.
+
+Its validity (:func:`nonlinear_validity`) is what the model cannot carry: the von Karman
+strain keeps ``v'^2 / 2`` of a link's stretch and drops ``v'^4 / 8``, a relative error of
+``v'^2 / 4`` at bending slope ``v'``. The indicator is scaled so that the linear model's
+threshold (:data:`core.validity.VALIDITY_THRESHOLD`) falls at the slope limit
+:data:`.nonlinear_stream.VON_KARMAN_SLOPE` (1 % strain error): the node's ``~/quality`` and
+``/diagnostics`` judge either model's estimate by one threshold.
+"""
+
+import math
+
+import numpy as np
+
+from .nonlinear_stream import NonlinearStepper, unwrap_next, VON_KARMAN_SLOPE
+from ..validity import VALIDITY_THRESHOLD
+
+
+CHOICES = ('auto', 'on', 'off')
+
+
+def choose_nonlinear(choice, nonlinearity, recorded=False):
+    """
+    Return (use the nonlinear model, why) for a choice and the linear run's verdict.
+
+    Parameters
+    ----------
+    choice : str
+        'on', 'off' or 'auto' (by the verdict).
+    nonlinearity : dict or None
+        :func:`core.validity.is_valid` of the linear estimate ('valid', 'indicator_max',
+        'threshold'); only read for 'auto'.
+    recorded : bool
+        ``choice`` is what the recording's provenance says it was made with, not a flag.
+
+    """
+    if recorded and choice in ('on', 'off'):
+        return choice == 'on', f"the recording's model (its provenance says nonlinear: {choice})"
+    if choice == 'on':
+        return True, 'asked for (--nonlinear on)'
+    if choice == 'off':
+        return False, 'asked for (--nonlinear off)'
+    if nonlinearity['valid'] is None:
+        return False, 'auto: the linear model has no validity indicator to decide by'
+    reading = (f"validity indicator max {nonlinearity['indicator_max']:.3g}, threshold "
+               f"{nonlinearity['threshold']:g}")
+    if nonlinearity['valid']:
+        return False, f'auto: the linear estimate is valid ({reading})'
+    return True, f'auto: the linear estimate is not valid ({reading})'
+
+
+def nonlinear_validity(link_slope):
+    """
+    Return the validity indicator of a nonlinear estimate: threshold x (slope / limit)^2.
+
+    Parameters
+    ----------
+    link_slope : array_like
+        RMS bending slope of each flexible link [rad]
+        (:attr:`.nonlinear_stream.NonlinearStepper.slope`).
+
+    Returns
+    -------
+    float
+        Below :data:`core.validity.VALIDITY_THRESHOLD` where the strain's dropped term is
+        under 1 % (NaN for a non-finite slope, 0 without links).
+
+    """
+    slope = np.asarray(link_slope, dtype=float)
+    largest = float(np.max(np.abs(slope))) if slope.size else 0.0
+    return VALIDITY_THRESHOLD * (largest / VON_KARMAN_SLOPE) ** 2
+
+
+class NonlinearFollower:
+    """
+    Step the nonlinear model through a linear estimator's accepted samples (module notes).
+
+    Parameters
+    ----------
+    tables : NonlinearTables
+        The reduced nonlinear model.
+    reset_gap_s : float
+        A gap between accepted samples longer than this starts the model again (as the linear
+        estimator's segments).
+
+    Attributes
+    ----------
+    counts : dict
+        'samples', 'refused_samples' (a step Newton did not converge: the state is kept),
+        'restarts', 'beyond_von_karman_samples'.
+    slope_max : float
+        Largest RMS link slope seen [rad].
+    validity : float
+        :func:`nonlinear_validity` of the last sample (NaN at a start).
+
+    """
+
+    def __init__(self, tables, reset_gap_s):
+        self.tables, self.reset_gap_s = tables, float(reset_gap_s)
+        self.stepper = NonlinearStepper(tables)
+        self.last = None          # (stamp [ns], unwrapped angle, speed) of the last sample
+        self.counts = {'samples': 0, 'refused_samples': 0, 'restarts': 0,
+                       'beyond_von_karman_samples': 0}
+        self.slope_max = 0.0
+        self.validity = 0.0
+
+    def restart(self):
+        """Start again at the next sample (as after a gap)."""
+        self.last = None
+
+    def sample(self, stamp_ns, angle, speed):
+        """
+        Step to one accepted sample; return its output deflections [m], shape (channels,).
+
+        ``angle`` may be wrapped: it is unwrapped by the speed from the previous sample.
+        """
+        stepper, self.counts['samples'] = self.stepper, self.counts['samples'] + 1
+        h = None if self.last is None else (stamp_ns - self.last[0]) * 1e-9
+        if h is None or not 0.0 < h <= self.reset_gap_s:
+            self.counts['restarts'] += self.last is not None
+            stepper.start(angle, speed)
+            self.last = (stamp_ns, angle, speed)
+            self.validity = float('nan')     # a start is not judged
+            return stepper.outputs(angle)
+        _, theta0, speed0 = self.last
+        theta = unwrap_next(theta0, float(angle), speed0, float(speed), h)
+        if stepper.step(h, theta0, theta, speed0, speed):
+            output = stepper.output_operator @ stepper.q
+        else:
+            self.counts['refused_samples'] += 1
+            output = stepper.outputs(theta)
+        slope = float(np.max(stepper.slope)) if stepper.slope.size else 0.0
+        self.slope_max = max(self.slope_max, slope)
+        self.counts['beyond_von_karman_samples'] += slope > VON_KARMAN_SLOPE
+        self.validity = nonlinear_validity(stepper.slope)
+        self.last = (stamp_ns, theta, speed)
+        return output
+
+
+def follow_rows(follower, stamps_ns, estimate):
+    """
+    Step ``follower`` through an offline estimate's accepted rows; their outputs [m].
+
+    Parameters
+    ----------
+    follower : NonlinearFollower
+        Carries the state from one block of rows to the next.
+    stamps_ns : ndarray of int, shape (K,)
+        The rows' stamps.
+    estimate : dict
+        :func:`.offline.estimate_offline`'s arrays for the rows: 'lever_tip', 'coupler_mid'
+        (NaN where the linear estimator gave nothing), 'crank_angle', 'crank_speed'.
+
+    Returns
+    -------
+    outputs : ndarray, shape (K, channels)
+        NaN where the linear estimator gave nothing.
+    accepted : ndarray of bool, shape (K,)
+
+    """
+    angles, speeds = estimate['crank_angle'], estimate['crank_speed']
+    accepted = (np.all(np.isfinite(estimate['lever_tip']), axis=1)
+                & np.all(np.isfinite(estimate['coupler_mid']), axis=1)
+                & np.isfinite(angles) & np.isfinite(speeds))
+    outputs = np.full((len(accepted), follower.tables.outputs), np.nan)
+    step = follower.sample
+    for n in np.flatnonzero(accepted).tolist():
+        outputs[n] = step(int(stamps_ns[n]), float(angles[n]), float(speeds[n]))
+    return outputs, accepted
+
+
+def follow_summary(follower, low, high, damping):
+    """
+    Return a run's ``nonlinear`` JSON entry: peak-to-peak deflections [um] and counts.
+
+    ``low``, ``high``: the smallest and largest output per channel [m] (infinite: none);
+    ``damping``: how the model is damped (said as it was chosen).
+    """
+    seen = bool(np.all(np.isfinite(high)))
+    span = (1e6 * (np.asarray(high) - np.asarray(low))).tolist() if seen else [math.nan] * 4
+    return {**follower.counts, 'lever_tip_peak_to_peak_um': span[0:2],
+            'coupler_mid_peak_to_peak_um': span[2:4],
+            'link_slope_max_rad': follower.slope_max, 'size': follower.tables.size,
+            'links': follower.tables.links, 'damping': damping}
+
+
+__all__ = ['CHOICES', 'choose_nonlinear', 'nonlinear_validity', 'NonlinearFollower',
+           'follow_rows', 'follow_summary']

@@ -1,0 +1,92 @@
+"""
+The nonlinear model following accepted samples (core/estimation/nonlinear_follow.py).
+
+At reduced size (2 elements per link): fed the samples of one segment it gives
+estimate_nonlinear's outputs (to the rounding of the angle's unwrapping: a running sum here,
+a cumulative sum there); a gap beyond the reset gap starts it again at the quasi-static
+deflection; the validity indicator is the slope rule stated in the module.
+"""
+
+import dataclasses
+import math
+
+from flexlink_ros.core.estimation.nonlinear_follow import nonlinear_validity, NonlinearFollower
+from flexlink_ros.core.estimation.nonlinear_stream import (estimate_nonlinear, NonlinearStepper,
+                                                           VON_KARMAN_SLOPE)
+from flexlink_ros.core.fe.linkage import FlexibleLinkage
+from flexlink_ros.core.mechanism_file import load_mechanism
+from flexlink_ros.core.options import ModelOptions
+from flexlink_ros.core.reduction.nonlinear_tables import build_nonlinear_tables
+from flexlink_ros.core.validity import VALIDITY_THRESHOLD
+import numpy as np
+import pytest
+
+SPEED = 391.0 * math.pi / 30.0
+
+
+@pytest.fixture(scope='module')
+def tables():
+    mech = dataclasses.replace(load_mechanism('cho1992'), elements_per_link=2)
+    linkage = FlexibleLinkage(mech, ModelOptions.full_model(rigid_crank=True,
+                                                            bearings='flexible'))
+    return build_nonlinear_tables(linkage, 1e-4, size=12, modes=10)
+
+
+def _signal(count, rate_hz=1000.0, seed=3):
+    """Return a jittered 391 rpm crank: stamps [ns], wrapped angles, speeds."""
+    steps = (1.0 + 0.3 * np.random.default_rng(seed).uniform(-1.0, 1.0, count - 1)) / rate_hz
+    time_s = np.concatenate([[0.0], np.cumsum(steps)])
+    return (np.round(time_s * 1e9).astype(np.int64), np.mod(SPEED * time_s, 2.0 * math.pi),
+            np.full(count, SPEED))
+
+
+def _assert_same(mine, reference):
+    scale = np.abs(reference).max()
+    assert np.abs(mine - reference).max() <= 1e-9 * scale
+
+
+def test_one_segment_gives_estimate_nonlinear(tables):
+    stamps, angles, speeds = _signal(600)
+    reference = estimate_nonlinear(tables, stamps, angles, speeds)
+    follower = NonlinearFollower(tables, reset_gap_s=0.5)
+    mine = np.array([follower.sample(int(s), float(a), float(w))
+                     for s, a, w in zip(stamps, angles, speeds)])
+    _assert_same(mine, reference['outputs'])
+    assert follower.counts == {'samples': 600, 'refused_samples': 0, 'restarts': 0,
+                               'beyond_von_karman_samples': 0}
+    assert follower.slope_max == pytest.approx(np.nanmax(reference['link_slope']), rel=1e-12)
+    assert np.ptp(mine[:, 2]) > 1e-5     # a real response, not the static deflection
+
+
+def test_a_gap_beyond_the_reset_gap_starts_again_at_the_quasi_static_deflection(tables):
+    stamps, angles, speeds = _signal(400)
+    stamps[200:] += 2_000_000_000        # a 2 s gap
+    follower = NonlinearFollower(tables, reset_gap_s=0.5)
+    mine = np.array([follower.sample(int(s), float(a), float(w))
+                     for s, a, w in zip(stamps, angles, speeds)])
+    assert follower.counts['restarts'] == 1
+    start = NonlinearStepper(tables)
+    start.start(float(angles[200]), SPEED)
+    assert np.array_equal(mine[200], start.outputs(float(angles[200])))
+    after = estimate_nonlinear(tables, stamps[200:], angles[200:], speeds[200:])
+    _assert_same(mine[200:], after['outputs'])
+
+
+def test_validity_is_the_threshold_at_the_slope_limit():
+    assert nonlinear_validity([0.5 * VON_KARMAN_SLOPE, VON_KARMAN_SLOPE]) == \
+        pytest.approx(VALIDITY_THRESHOLD)
+    assert nonlinear_validity([0.5 * VON_KARMAN_SLOPE]) == pytest.approx(
+        VALIDITY_THRESHOLD / 4.0)
+    assert nonlinear_validity([]) == 0.0
+    assert math.isnan(nonlinear_validity([math.nan]))
+
+
+def test_validity_follows_the_last_samples_slope(tables):
+    stamps, angles, speeds = _signal(300)
+    follower = NonlinearFollower(tables, reset_gap_s=0.5)
+    follower.sample(int(stamps[0]), float(angles[0]), SPEED)
+    assert math.isnan(follower.validity)     # a start is not judged
+    for s, a in zip(stamps[1:], angles[1:]):
+        follower.sample(int(s), float(a), SPEED)
+    assert follower.validity == pytest.approx(nonlinear_validity(follower.stepper.slope))
+    assert 0.0 < follower.validity < VALIDITY_THRESHOLD
