@@ -1,7 +1,7 @@
 """
 ``flexlink simulate --nonlinear``: the geometrically nonlinear full order's periodic orbit.
 
-The model of :mod:`core.fe.nonlinear_response` (element-averaged von Karman strain, Kelvin-Voigt
+The model of :mod:`core.fe.nonlinear_response` (co-rotational element strain, Kelvin-Voigt
 damping on its rate, the rigid-body K_G dropped) with the same model flags as ``simulate``
 (crank, bearings, elements, gravity, ``--damping-ratio``, ``--stiffness-damping``, steps,
 points, stages). Full order only: ``--method modal`` and ``--second-order`` are refused (the
@@ -11,7 +11,8 @@ linear full order with the same damping, the shooting's start), ``floquet_multip
 (the 8 largest as [re, im]), ``floquet_spectral_radius``, ``newton_iterations_per_step``
 (mean and max over the periodic revolution), ``step_cost_s`` and ``step_cpu_s`` (wall and
 CPU time per step), ``revolutions`` marched,
-``shooting_updates`` and ``periodicity`` (the last revolution-to-revolution change), and
+``shooting_updates`` and ``periodicity`` (the last revolution-to-revolution change),
+``strain`` (the element strain: corotational), and
 ``nonlinear_validity`` (:mod:`core.fe.nonlinear_validity`: the orbit's largest element
 rotation and its nearest multiplier to +1, whether the model can carry them).
 """
@@ -71,7 +72,7 @@ def simulate_nonlinear(args, mech, model, rpm, numbers):
               'periodicity': info['periodicity'],
               'nonlinear_validity': validity_record(orbit_validity(model, response)),
               'rpm': rpm, 'method': 'full',
-              'model': 'nonlinear', 'damping_ratio': info['zeta'],
+              'model': 'nonlinear', 'strain': info['strain'], 'damping_ratio': info['zeta'],
               'stiffness_damping_s': info['stiffness_damping_s'],
               'steps_per_rev': numbers['steps'], 'stages': numbers['stages'],
               'options': numbers['options'], 'mechanism': mech.name,
@@ -87,7 +88,8 @@ def _text(mech, model, args, result):
     names = ('lever tip dX', 'dY', 'coupler mid dX', 'dY')
     moduli = np.hypot(*np.asarray(result['floquet_multipliers'][:4]).T)
     newton = result['newton_iterations_per_step']
-    return (f'{mech.name} at {result["rpm"]:g} rpm, nonlinear full order, {model.size} DOFs, '
+    return (f'{mech.name} at {result["rpm"]:g} rpm, nonlinear full order ({result["strain"]} '
+            f'strain), {model.size} DOFs, '
             f'bearings {args.bearings}, rigid crank {args.rigid_crank}, damping zeta '
             f'{result["damping_ratio"]:g} and beta {result["stiffness_damping_s"]:g} s\n'
             'peak-to-peak [mm]: ' + ', '.join(
@@ -109,7 +111,8 @@ def _validity_line(validity):
     """One line: the nonlinear model's validity on this orbit."""
     verdict = 'valid' if validity['valid'] else f"NOT valid: {validity['reason']}"
     return (f"nonlinear validity indicator {validity['indicator']:.2f} (threshold 1; largest "
-            f"element rotation {validity['max_element_rotation_rad']:.3f} rad, nearest "
+            f"element rotation {validity['max_element_rotation_rad']:.3f} rad against its "
+            f"{validity['rotation_frame']}, nearest "
             f"multiplier {validity['fold_distance']:.3f} from +1): {verdict}")
 
 

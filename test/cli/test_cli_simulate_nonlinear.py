@@ -53,6 +53,8 @@ def test_json_is_the_cores_nonlinear_orbit(capsys):
     newton = result['newton_iterations_per_step']
     assert 2.0 <= newton['mean'] <= newton['max'] <= 10
     assert result['model'] == 'nonlinear' and result['stiffness_damping_s'] == 1e-4
+    assert result['strain'] == 'corotational'
+    assert result['nonlinear_validity']['rotation_frame'] == 'chord'
     assert result['periodicity'] < 1e-8 and result['step_cpu_s'] > 0.0
     assert len(result['crank_deg']) == 60
     validity = result['nonlinear_validity']
@@ -68,12 +70,14 @@ def test_text_report(capsys):
     code, out, _ = _run(capsys, *SMALL)
     assert code == 0
     lines = out.splitlines()
-    assert lines[0].startswith('cho1992 at 391 rpm, nonlinear full order, 18 DOFs')
+    assert lines[0].startswith('cho1992 at 391 rpm, nonlinear full order (corotational '
+                               'strain), 18 DOFs')
     assert lines[1].startswith('peak-to-peak [mm]: lever tip dX')
     assert lines[2].startswith('  linear full order: lever tip dX')
     assert lines[3].startswith('Floquet multipliers |mu|') and lines[3].endswith('stable)')
     assert lines[4].startswith('Newton ') and 'ms per step' in lines[4]
     assert lines[5].startswith('nonlinear validity indicator ') and 'element rotation' in lines[5]
+    assert 'against its chord' in lines[5]
 
 
 @pytest.mark.parametrize('extra, message', [(('--method', 'modal', '--modes', '4'), 'full'),

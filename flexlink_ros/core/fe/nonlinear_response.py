@@ -28,7 +28,7 @@ import time
 import numpy as np
 
 from .modes import modal_damping
-from .nonlinear_step import ElementLaw, newton_step, StageSystem
+from .nonlinear_step import ElementLaw, newton_step, StageSystem, STRAINS
 from .nonlinear_strain import element_gather, model_elements
 from .simulate import (DEFAULT_POINTS, DEFAULT_STAGES, DEFAULT_STEPS, frozen_eigen,
                        periodic_response, PeriodicResponse)
@@ -200,12 +200,14 @@ def _check(model, speed, steps, points):
         raise ValueError(f'`steps` ({steps}) must be a positive multiple of `points` ({points})')
 
 
-def make_run(model, speed, steps, points, stages, zeta, beta, nonlinear, start_angle):
+def make_run(model, speed, steps, points, stages, zeta, beta, nonlinear, start_angle,
+             strain=STRAINS[0]):
     """Return the :class:`Run` of :func:`nonlinear_response` (defaults from the model)."""
     beta = getattr(model.options, 'stiffness_damping', 0.0) if beta is None else beta
     if not (np.isfinite(beta) and beta >= 0.0):
         raise ValueError(f'`beta` must be >= 0 [s], got {beta!r}')
-    law = ElementLaw(elements=model_elements(model), beta=float(beta), nonlinear=nonlinear)
+    law = ElementLaw(elements=model_elements(model), beta=float(beta), nonlinear=nonlinear,
+                     strain=strain)
     return Run(law=law, integrator=RadauIIA(stages), speed=float(speed),
                h=2.0 * np.pi / abs(speed) / steps, steps=steps, stride=steps // points,
                start_angle=float(start_angle),
@@ -215,7 +217,7 @@ def make_run(model, speed, steps, points, stages, zeta, beta, nonlinear, start_a
 def nonlinear_response(model, speed, steps=DEFAULT_STEPS, points=DEFAULT_POINTS,
                        stages=DEFAULT_STAGES, zeta=None, beta=None, nonlinear=True,
                        start_angle=0.0, start=None, tolerance=PERIODIC_TOLERANCE,
-                       max_revolutions=MAX_REVOLUTIONS):
+                       max_revolutions=MAX_REVOLUTIONS, strain=STRAINS[0]):
     """
     Periodic steady state of the nonlinear full order over one revolution.
 
@@ -242,6 +244,9 @@ def nonlinear_response(model, speed, steps=DEFAULT_STEPS, points=DEFAULT_POINTS,
         Relative revolution-to-revolution change accepted as periodic.
     max_revolutions : int
         Revolutions marched at most (ConvergenceError beyond).
+    strain : str
+        The nonlinear element strain, one of :data:`core.fe.nonlinear_step.STRAINS`:
+        'corotational' (exact in an element's rigid turn) or 'von-karman'.
 
     Returns
     -------
@@ -255,7 +260,8 @@ def nonlinear_response(model, speed, steps=DEFAULT_STEPS, points=DEFAULT_POINTS,
     """
     _check(model, speed, steps, points)
     started = time.perf_counter()
-    run = make_run(model, speed, steps, points, stages, zeta, beta, nonlinear, start_angle)
+    run = make_run(model, speed, steps, points, stages, zeta, beta, nonlinear, start_angle,
+                   strain)
     if start is None:
         linear = periodic_response(model, speed, steps=steps, points=points, stages=stages,
                                    zeta=run.zeta, start_angle=start_angle, beta=run.law.beta)
@@ -271,6 +277,7 @@ def nonlinear_response(model, speed, steps=DEFAULT_STEPS, points=DEFAULT_POINTS,
     multipliers = np.linalg.eigvals(orbit['monodromy'])
     multipliers = multipliers[np.argsort(-np.abs(multipliers))]
     info = {'method': 'nonlinear' if nonlinear else 'full', 'nonlinear': bool(nonlinear),
+            'strain': run.law.strain if nonlinear else 'linear',
             'steps': steps, 'points': points, 'stages': stages, 'zeta': run.zeta,
             'stiffness_damping_s': run.law.beta, 'speed_rad_s': float(speed),
             'dofs': model.size, 'spectral_radius': float(np.abs(multipliers[0])),

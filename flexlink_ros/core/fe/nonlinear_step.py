@@ -27,7 +27,9 @@ import dataclasses
 import numpy as np
 import scipy.linalg
 
-from .nonlinear_strain import element_coordinates, element_force, element_tangent, project_force
+from . import corotational_strain
+from .nonlinear_strain import (element_coordinates, element_force, element_tangent,
+                               project_force, strain_energy)
 from ...errors import ConvergenceError
 
 # Newton stops when the stage-acceleration update is this small against the accelerations.
@@ -61,13 +63,48 @@ class StageSystem:
     rate_gather: np.ndarray
 
 
+# The nonlinear element strains: co-rotational (exact in an element's rigid turn) or the
+# element-averaged von Karman strain (exact to second order in the turn).
+STRAINS = ('corotational', 'von-karman')
+
+
 @dataclasses.dataclass(frozen=True)
 class ElementLaw:
-    """The element force: :class:`nonlinear_strain.Elements`, beta [s], nonlinear or not."""
+    """
+    The element force: :class:`nonlinear_strain.Elements`, beta [s], nonlinear or not.
+
+    ``strain`` (one of :data:`STRAINS`) chooses the nonlinear strain; with ``nonlinear``
+    False the strain is the linear one whatever ``strain`` says.
+    """
 
     elements: object
     beta: float = 0.0
     nonlinear: bool = True
+    strain: str = STRAINS[0]
+
+    def __post_init__(self):
+        """Refuse an unknown strain."""
+        if self.strain not in STRAINS:
+            raise ValueError(f'`strain` must be one of {STRAINS}, got {self.strain!r}')
+
+    def strain_energy(self, q):
+        """Strain energy [J] of element coordinates q (..., E, 6), summed over the elements."""
+        if self.nonlinear and self.strain == 'corotational':
+            return corotational_strain.strain_energy(self.elements, q)
+        return strain_energy(self.elements, q, self.nonlinear)
+
+    def force_and_tangent(self, q, rate, tangents=True):
+        """Element forces, axial forces and (with ``tangents``) df/dq, df/dq'."""
+        if self.nonlinear and self.strain == 'corotational':
+            if not tangents:
+                return corotational_strain.element_force(self.elements, q, rate,
+                                                         self.beta) + (None, None)
+            return corotational_strain.force_and_tangent(self.elements, q, rate, self.beta)
+        force, axial = element_force(self.elements, q, rate, self.beta, self.nonlinear)
+        if not tangents:
+            return force, axial, None, None
+        return (force, axial) + element_tangent(self.elements, q, rate, self.beta,
+                                                self.nonlinear, axial)
 
 
 def stage_forces(law, stage, disp, vel, tangents=True):
@@ -80,11 +117,10 @@ def stage_forces(law, stage, disp, vel, tangents=True):
     shape = gather.shape[:-1]
     q = element_coordinates(gather, disp)
     rate = (element_coordinates(gather, vel) + element_coordinates(rate_gather, disp))
-    force, axial = element_force(law.elements, q, rate, law.beta, law.nonlinear)
+    force, _, k_t, c_t = law.force_and_tangent(q, rate, tangents)
     out = project_force(gather, force)
     if not tangents:
         return out, None, None
-    k_t, c_t = element_tangent(law.elements, q, rate, law.beta, law.nonlinear, axial)
     flat = np.swapaxes(gather.reshape(shape[0], -1, gather.shape[-1]), -1, -2)
     f_q = flat @ (k_t @ gather + c_t @ rate_gather).reshape(flat.shape[0], -1, flat.shape[1])
     f_v = flat @ (c_t @ gather).reshape(flat.shape[0], -1, flat.shape[1])

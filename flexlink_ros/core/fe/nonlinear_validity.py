@@ -3,7 +3,11 @@ What the geometrically nonlinear model cannot carry: the validity of a nonlinear
 
 Two limits, each a dimensionless indicator that reaches 1 at its bound:
 
-- **The strain's truncation.** The element-averaged von Karman strain
+- **The strain's truncation.** The co-rotational strain (:mod:`core.fe.corotational_strain`,
+  the full order's default) is exact in an element's rigid turn and second order in its
+  bending against its chord: there phi is the node rotations' largest angle to the chord
+  (``element_rotations(..., frame='chord')``), and the same bound applies. The
+  element-averaged von Karman strain
   (:mod:`core.fe.nonlinear_strain`) is exact to second order in each element's rotation phi
   relative to its link frame; an element turned rigidly by phi strains ``-phi^4 / 8`` instead
   of 0, an axial force ``E A phi^4 / 8`` the model invents. :func:`element_rotations` gives
@@ -57,6 +61,9 @@ class NonlinearValidity:
         The largest element rotation relative to its link frame [rad].
     fold_distance : float
         ``min |1 - mu|`` over the multipliers (inf when not given).
+    frame : str
+        What the rotations are measured against: 'link' (the von Karman strain's
+        truncation) or 'chord' (the co-rotational strain's).
 
     """
 
@@ -64,6 +71,7 @@ class NonlinearValidity:
     fold: float
     max_rotation: float
     fold_distance: float
+    frame: str = 'link'
 
     @property
     def indicator(self):
@@ -83,13 +91,16 @@ class NonlinearValidity:
         if self.fold >= self.rotation:
             return (f'a Floquet multiplier is {self.fold_distance:.3f} from +1 (margin '
                     f'{FOLD_MARGIN:g}): near a fold the periodic response is not unique')
+        if self.frame == 'chord':
+            return (f'element bending rotation {self.max_rotation:.3f} rad against its chord '
+                    f'beyond {ROTATION_LIMIT:g} rad: the element strain is second order in it')
         return (f'element rotation {self.max_rotation:.3f} rad beyond {ROTATION_LIMIT:g} rad: '
                 'the von Karman strain invents an axial force growing as phi^4')
 
 
-def element_rotations(q, length):
+def element_rotations(q, length, frame='link'):
     """
-    Return every element's rotation relative to its link frame [rad], shape (..., E).
+    Return every element's rotation relative to its link frame or chord [rad], shape (..., E).
 
     Parameters
     ----------
@@ -97,16 +108,22 @@ def element_rotations(q, length):
         Element coordinates ``(u1, v1, phi1, u2, v2, phi2)`` in the link frames.
     length : ndarray, shape (E,)
         Element lengths l [m].
+    frame : str
+        'link': the largest of ``|phi1|``, ``|phi2|`` and the chord's angle
+        ``alpha = atan2(v2 - v1, l + u2 - u1)``; 'chord': the larger of ``|phi1 - alpha|`` and
+        ``|phi2 - alpha|`` (the bending the co-rotational strain keeps to second order).
 
     Returns
     -------
     ndarray
-        The largest of ``|phi1|``, ``|phi2|`` and the chord's angle
-        ``|atan2(v2 - v1, l + u2 - u1)|``.
 
     """
+    if frame not in ('link', 'chord'):
+        raise ValueError(f"`frame` must be 'link' or 'chord', got {frame!r}")
     q = np.asarray(q, dtype=float)
     chord = np.arctan2(q[..., 4] - q[..., 1], length + q[..., 3] - q[..., 0])
+    if frame == 'chord':
+        return np.maximum(np.abs(q[..., 2] - chord), np.abs(q[..., 5] - chord))
     return np.max(np.abs(np.stack([q[..., 2], q[..., 5], chord], axis=-1)), axis=-1)
 
 
@@ -135,7 +152,7 @@ def fold_indicator(multipliers, margin=FOLD_MARGIN):
     return float('inf') if distance == 0.0 else margin / distance
 
 
-def nonlinear_validity(rotations=None, multipliers=None):
+def nonlinear_validity(rotations=None, multipliers=None, frame='link'):
     """
     Judge a nonlinear estimate by its element rotations and/or its orbit's multipliers.
 
@@ -146,6 +163,8 @@ def nonlinear_validity(rotations=None, multipliers=None):
         elements): the largest counts.
     multipliers : array_like or None
         Floquet multipliers of the periodic orbit at the speed.
+    frame : str
+        What ``rotations`` are measured against (:func:`element_rotations`).
 
     Returns
     -------
@@ -156,7 +175,7 @@ def nonlinear_validity(rotations=None, multipliers=None):
     distance = float('inf') if multipliers is None else fold_distance(multipliers)
     fold = 0.0 if multipliers is None else fold_indicator(multipliers)
     return NonlinearValidity(rotation=float(rotation_indicator(largest)), fold=fold,
-                             max_rotation=largest, fold_distance=distance)
+                             max_rotation=largest, fold_distance=distance, frame=frame)
 
 
 def orbit_rotations(model, response):
@@ -165,17 +184,25 @@ def orbit_rotations(model, response):
 
     ``model`` a :class:`core.fe.linkage.FlexibleLinkage`; ``response`` its
     :class:`core.fe.simulate.PeriodicResponse` (displacements at the output points).
+    Measured against each element's chord where the orbit's strain is co-rotational
+    (:func:`orbit_frame`), else against its link frame.
     """
     elements = model_elements(model)
     link_angle = model.kinematic_coefficients(response.crank_angle)[0]
     gathers = {link: model.gather(link, link_angle[link], 0) for link in model.links}
     q = element_coordinates(element_gather(elements, gathers), response.displacement)
-    return element_rotations(q, elements.length)
+    return element_rotations(q, elements.length, orbit_frame(response))
+
+
+def orbit_frame(response):
+    """'chord' for an orbit of the co-rotational strain, else 'link'."""
+    return 'chord' if response.info.get('strain') == 'corotational' else 'link'
 
 
 def orbit_validity(model, response):
     """:func:`nonlinear_validity` of a periodic orbit: its rotations and its multipliers."""
-    return nonlinear_validity(orbit_rotations(model, response), response.floquet_multipliers)
+    return nonlinear_validity(orbit_rotations(model, response), response.floquet_multipliers,
+                              orbit_frame(response))
 
 
 def validity_record(validity):
@@ -183,9 +210,11 @@ def validity_record(validity):
     return {'valid': validity.valid, 'indicator': validity.indicator,
             'rotation_indicator': validity.rotation, 'fold_indicator': validity.fold,
             'max_element_rotation_rad': validity.max_rotation,
+            'rotation_frame': validity.frame,
             'fold_distance': validity.fold_distance, 'reason': validity.reason}
 
 
 __all__ = ['ROTATION_LIMIT', 'FOLD_MARGIN', 'THRESHOLD', 'NonlinearValidity',
            'element_rotations', 'rotation_indicator', 'fold_distance', 'fold_indicator',
-           'nonlinear_validity', 'orbit_rotations', 'orbit_validity', 'validity_record']
+           'nonlinear_validity', 'orbit_rotations', 'orbit_frame', 'orbit_validity',
+           'validity_record']

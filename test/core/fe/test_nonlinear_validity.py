@@ -74,3 +74,17 @@ def test_validity_combines_and_says_why(elements):
     turned = nv.nonlinear_validity(np.array([0.05, 0.12]))
     assert not turned.valid and 'rotation' in turned.reason and turned.fold == 0.0
     assert nv.nonlinear_validity().valid
+
+
+def test_chord_frame_sees_bending_not_a_rigid_turn(elements):
+    """Against the chord a rigid turn is no rotation; bending against it counts as it is."""
+    turned = _rigidly_turned(elements, 0.3)
+    np.testing.assert_allclose(nv.element_rotations(turned, elements.length, 'chord'), 0.0,
+                               atol=1e-14)
+    turned[:, 2] += 0.05                           # the first node bent 0.05 rad further
+    np.testing.assert_allclose(nv.element_rotations(turned, elements.length, 'chord'), 0.05,
+                               rtol=1e-9)
+    judged = nv.nonlinear_validity([0.2], [0.5], frame='chord')
+    assert not judged.valid and 'chord' in judged.reason
+    with pytest.raises(ValueError, match='frame'):
+        nv.element_rotations(turned, elements.length, 'world')
