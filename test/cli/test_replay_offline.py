@@ -185,3 +185,17 @@ def test_a_damaged_chunk_of_a_replayed_bag_is_listed_once(tmp_path):
     result = json.loads(done.stdout)
     assert [d['offset'] for d in result['damaged']] == [offset]
     assert 0 < result['samples'] < 3000
+
+
+def test_a_replay_reads_only_its_first_chunk_before_the_estimate_starts(tmp_path):
+    """The rest is read beside the writing: the first chunk is the only read alone."""
+    from flexlink_ros.cli.main import build_parser
+    from flexlink_ros.cli.replay_offline import open_input
+    bag = tmp_path / 'bag.mcap'
+    subprocess.run([sys.executable, str(BENCH), 'make-bag', str(bag), '--seconds', '20'],
+                   check=True, capture_output=True, timeout=300)
+    argv = ['replay', str(bag), '--out', str(tmp_path / 'out.mcap'), '--joint', 'crank']
+    args = build_parser(argv).parse_args(argv)
+    topic, rows, messages = open_input(args, [])
+    assert topic == '/joint_states' and messages > 19000
+    assert 0 < rows.samples <= messages // 2
