@@ -291,5 +291,4 @@ def _channel_message_counts(buffer, offset, end):
     (length,) = struct.unpack_from('<I', buffer, offset)
     if length % 10 or offset + 4 + length > end:
         raise DamagedRecord('statistics: channel message counts do not fit their record')
-    return {channel_id: count for channel_id, count in
-            struct.iter_unpack('<HQ', bytes(buffer[offset + 4:offset + 4 + length]))}
+    return dict(struct.iter_unpack('<HQ', bytes(buffer[offset + 4:offset + 4 + length])))
