@@ -8,9 +8,9 @@ per-channel counts) and their first chunks alone, where every file has an intact
 a whole recording is read once, not twice; :func:`iter_topic_messages` then yields the
 messages of the chosen topic in blocks of at most a given count. They take the messages of a
 chunk together (their heads read with numpy), through the same salvaging reader as the rest
-(:func:`.mcap_reader.iter_message_units`: damaged chunks are skipped and listed). Memory: one decompressed chunk (at most
-``mcap_records.MAX_CHUNK_BYTES``), one block of messages and ``RELEASE_BYTES`` of the mapped
-file.
+(:func:`.mcap_reader.iter_message_units`: damaged chunks are skipped and listed). Memory: one
+decompressed chunk (at most ``mcap_records.MAX_CHUNK_BYTES``), one block of messages and
+``RELEASE_BYTES`` of the mapped file.
 """
 
 import mmap
