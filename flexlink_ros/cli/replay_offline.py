@@ -2,7 +2,8 @@
 The offline path of `flexlink replay`: a recording read, estimated and written in chunks.
 
 The input topic is chosen from a survey of the recording (:mod:`io.recording_stream`: topic
-counts and the first messages of each JointState topic), then its samples are read
+counts and the first messages of each JointState topic; from the files' summaries and first
+chunks where they have them, so the recording is read once), then its samples are read
 ``--chunk-samples`` messages at a time and estimated in a thread
 (:func:`core.estimation.offline.estimate_stream`; the compiled step runs without the GIL)
 while this thread encodes and writes the rows already final (:mod:`io.replay_writer`), so the
@@ -24,18 +25,19 @@ from .progress import Progress
 from ..core.estimation.offline import estimate_stream
 from ..io.joint_states import iter_crank_samples
 from ..io.recording import choose_input_topic, damage_note
-from ..io.recording_stream import survey_recording
+from ..io.recording_stream import survey_recording, survey_summaries
 from ..io.replay_writer import WRITE_BATCH
 from ..names import OUTPUT_POINTS, QUALITY_NAMES
 
-# Input messages read at a time (the --chunk-samples default) ...
-CHUNK_SAMPLES = 65536
-# ... and the most the flag accepts (a bound on what one chunk may hold).
-MAX_CHUNK_SAMPLES = 1 << 22
 # Rows handed from the estimate to the writer at a time, and blocks waiting for the writer
 # (the estimate waits when it is that far ahead).
 BLOCK_ROWS = 8 * WRITE_BATCH
 QUEUED_BLOCKS = 2
+# Input messages read at a time (the --chunk-samples default): the first chunk is read before
+# the estimate starts, the others beside the writing, so a small one (one block) starts sooner.
+CHUNK_SAMPLES = BLOCK_ROWS
+# ... and the most the flag accepts (a bound on what one chunk may hold).
+MAX_CHUNK_SAMPLES = 1 << 22
 _COLUMNS = ('data', 'log_ns', 'publish_ns', 'stamps_ns', 'angles', 'speeds')
 
 
@@ -51,12 +53,14 @@ class InputRows:
         The input topic and the crank joint.
     chunk : int
         Messages read at a time.
+    damaged : list, optional
+        Receives (file, offset, reason) of what the reading skips (when no survey listed it).
 
     """
 
-    def __init__(self, path, topic, joint_name, chunk):
+    def __init__(self, path, topic, joint_name, chunk, damaged=None):
         self.topic, self.joint_name = topic, joint_name
-        self.chunks = iter_crank_samples(path, topic, joint_name, block=chunk)
+        self.chunks = iter_crank_samples(path, topic, joint_name, block=chunk, damaged=damaged)
         self.samples = self.skipped = 0
         self.skipped_reasons = {}
         self.first_log_ns = self.last_log_ns = None
@@ -136,14 +140,24 @@ def open_input(args, damaged):
         The topic, its samples (the first read) and its message count.
 
     """
-    counts, kept = survey_recording(args.input, topic=args.topic, damaged=damaged)
+    # The summaries name the topics without a pass over the chunks; the reading then lists
+    # what is damaged. Without summaries, or when they name no usable topic, a whole survey.
+    surveyed = survey_summaries(args.input, topic=args.topic)
+    if surveyed is not None:
+        try:
+            topic = choose_input_topic(args.input, args.joint, args.topic, surveyed)
+        except ValueError:
+            surveyed = None
+    read_damage = damaged if surveyed else None
     try:
-        topic = choose_input_topic(args.input, args.joint, args.topic, (counts, kept))
-        rows = InputRows(args.input, topic, args.joint, args.chunk_samples)
+        if surveyed is None:
+            surveyed = survey_recording(args.input, topic=args.topic, damaged=damaged)
+            topic = choose_input_topic(args.input, args.joint, args.topic, surveyed)
+        rows = InputRows(args.input, topic, args.joint, args.chunk_samples, read_damage)
         rows.find_first()
     except ValueError as exc:
         raise ValueError(f'{exc}{damage_note(damaged)}') from None
-    return topic, rows, counts[topic][1]
+    return topic, rows, surveyed[0][topic][1]
 
 
 class EstimateSummary:

@@ -53,6 +53,7 @@ class Salvage:
     damaged: list = dataclasses.field(default_factory=list)   # (offset, reason)
     damaged_count: int = 0
     summary: dict = None          # 'message_count', 'chunk_count' of an intact summary
+    channel_counts: dict = None   # channel id -> messages, from an intact summary's statistics
     budget: list = None           # [bytes still to decompress]; set by iter_messages
     end_reason: str = 'empty'
     readable_bytes: int = 0       # offset where reading ended
@@ -122,7 +123,7 @@ def iter_message_units(buffer, salvage):
     """
     size = salvage.size = len(buffer)
     salvage.budget = [decompression_budget(size)]
-    _read_summary(buffer, salvage)
+    read_summary(buffer, salvage)
     offset = len(MCAP_MAGIC)
     while True:
         salvage.readable_bytes = offset
@@ -247,8 +248,8 @@ def _chunk_with_crc(buffer, start, end, budget):
     return True
 
 
-def _read_summary(buffer, salvage):
-    # Schemas, channels and statistics of an intact summary section (else nothing).
+def read_summary(buffer, salvage):
+    """Fill ``salvage`` from an intact summary section (schemas, channels, statistics)."""
     size = len(buffer)
     footer = size - len(MCAP_MAGIC) - RECORD_PREFIX.size - 20
     if footer < len(MCAP_MAGIC) or buffer[size - len(MCAP_MAGIC):] != MCAP_MAGIC:
@@ -261,7 +262,7 @@ def _read_summary(buffer, salvage):
         return
     if crc and zlib.crc32(buffer[summary_start:footer + RECORD_PREFIX.size + 16]) != crc:
         return
-    schemas, channels, statistics = {}, {}, None
+    schemas, channels, statistics, channel_counts = {}, {}, None, None
     try:
         for code, body, offset in records_in(buffer, summary_start, footer):
             length = offset - body
@@ -274,8 +275,20 @@ def _read_summary(buffer, salvage):
             elif code == STATISTICS and length >= 42:
                 message_count, *_, chunk_count = struct.unpack_from('<QHIIII', buffer, body)
                 statistics = {'message_count': message_count, 'chunk_count': chunk_count}
+                channel_counts = _channel_message_counts(buffer, body + 42, offset)
     except (DamagedRecord, struct.error):
         return
     salvage.schemas.update(schemas)
     salvage.channels.update(channels)
     salvage.summary = statistics or {}
+    salvage.channel_counts = channel_counts
+
+
+def _channel_message_counts(buffer, offset, end):
+    # The statistics' map of channel id (uint16) -> message count (uint64), or None.
+    if offset + 4 > end:
+        return None
+    (length,) = struct.unpack_from('<I', buffer, offset)
+    if length % 10 or offset + 4 + length > end:
+        raise DamagedRecord('statistics: channel message counts do not fit their record')
+    return dict(struct.iter_unpack('<HQ', bytes(buffer[offset + 4:offset + 4 + length])))

@@ -3,19 +3,21 @@ A recording read in bounded memory: its topics surveyed, then one topic's messag
 
 :func:`survey_recording` counts the messages of every topic and keeps only the first
 ``JOINT_PROBE_MESSAGES`` of each JointState topic (what :func:`.recording.choose_input_topic`
-looks at); :func:`iter_topic_messages` then yields the messages of the chosen topic in blocks
-of at most a given count. Both take the messages of a chunk together (their heads read with
-numpy), through the same salvaging reader as the rest (:func:`.mcap_reader.iter_message_units`:
-damaged chunks are skipped and listed). Memory: one decompressed chunk (at most
-``mcap_records.MAX_CHUNK_BYTES``), one block of messages and ``RELEASE_BYTES`` of the mapped
-file.
+looks at); :func:`survey_summaries` gives the same from the files' summaries (their statistics'
+per-channel counts) and their first chunks alone, where every file has an intact one, so that
+a whole recording is read once, not twice; :func:`iter_topic_messages` then yields the
+messages of the chosen topic in blocks of at most a given count. They take the messages of a
+chunk together (their heads read with numpy), through the same salvaging reader as the rest
+(:func:`.mcap_reader.iter_message_units`: damaged chunks are skipped and listed). Memory: one
+decompressed chunk (at most ``mcap_records.MAX_CHUNK_BYTES``), one block of messages and
+``RELEASE_BYTES`` of the mapped file.
 """
 
 import mmap
 
 import numpy as np
 
-from .mcap_reader import iter_message_units, map_file, Salvage
+from .mcap_reader import iter_message_units, map_file, read_summary, Salvage
 from .mcap_records import MESSAGE_HEAD_SIZE
 from .recording import JOINT_PROBE_MESSAGES, recording_files
 from ..errors import McapFileError
@@ -115,6 +117,63 @@ def survey_recording(path, topic=None, damaged=None):
                 if type_name == JOINT_STATE and topic is None:
                     _probe(kept.setdefault(name, []), heads, records, messages, channel_id)
     return counts, kept
+
+
+def survey_summaries(path, topic=None):
+    """
+    :func:`survey_recording` from the files' summaries, reading only the first chunks.
+
+    The topic counts come from each file's summary (its statistics' per-channel message
+    counts), the kept messages from the chunks up to the first ``JOINT_PROBE_MESSAGES`` of
+    every JointState topic. Nothing damaged is listed: the reading that follows does it.
+
+    Returns
+    -------
+    (counts, kept) or None
+        As :func:`survey_recording`; None when a file has no intact summary with
+        per-channel counts (the recording must then be surveyed whole).
+
+    """
+    counts, files = {}, recording_files(path)
+    for file in files:
+        salvage = Salvage()
+        try:
+            buffer = map_file(file)
+        except McapFileError:
+            return None
+        try:
+            read_summary(buffer, salvage)
+        finally:
+            buffer.close()
+        if salvage.channel_counts is None:
+            return None
+        topics = _topics_of(salvage, sorted(salvage.channel_counts))
+        for channel_id, number in salvage.channel_counts.items():
+            if channel_id in topics and number:
+                name, type_name = topics[channel_id]
+                counts.setdefault(name, [type_name, 0])[1] += number
+    wanted = {name: min(number, JOINT_PROBE_MESSAGES) for name, (type_name, number)
+              in counts.items() if type_name == JOINT_STATE and topic is None}
+    return counts, _first_messages(files, wanted)
+
+
+def _first_messages(files, wanted):
+    """{topic: its first messages} of JointState topics, read until each has its count."""
+    kept = {}
+    for file in files:
+        units = _file_units(file, None)
+        try:
+            for salvage, records, messages in units:
+                if all(len(kept.get(name, ())) >= count for name, count in wanted.items()):
+                    return kept
+                heads = message_heads(records, messages)
+                for channel_id, (name, type_name) in _topics_of(
+                        salvage, np.unique(heads['channel']).tolist()).items():
+                    if name in wanted and type_name == JOINT_STATE:
+                        _probe(kept.setdefault(name, []), heads, records, messages, channel_id)
+        finally:
+            units.close()
+    return kept
 
 
 def _probe(store, heads, records, messages, channel_id):

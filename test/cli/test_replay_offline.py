@@ -160,3 +160,42 @@ def test_replay_help_imports_neither_ros_plotting_nor_scipy_solvers():
                             capture_output=True, text=True, timeout=300, cwd=REPO)
     assert result.returncode == 0, result.stderr
     assert '--chunk-samples' in result.stdout and result.stdout.splitlines()[-1] == '[]'
+
+
+def test_a_damaged_chunk_of_a_replayed_bag_is_listed_once(tmp_path):
+    """The survey comes from the summary; the reading lists the chunk it skipped, once."""
+    bag = tmp_path / 'bag.mcap'
+    with McapRecorder(bag, chunk_size_bytes=8192) as recorder:
+        recorder.add_topic('/joint_states', JointState)
+        for row in range(3000):
+            stamp_ns = 1_700_000_000_000_000_000 + row * 1_000_000
+            recorder.write('/joint_states', crank_state(stamp_ns, math.remainder(
+                SPEED * row * 1e-3, 2 * math.pi)), stamp_ns + 200_000)
+    with open(bag, 'rb') as stream:
+        offset = make_reader(stream).get_summary().chunk_indexes[-2].chunk_start_offset
+    data = bytearray(bag.read_bytes())
+    data[offset + 9 + 24] ^= 0xFF       # the chunk's uncompressed CRC
+    bad = tmp_path / 'damaged.mcap'
+    bad.write_bytes(bytes(data))
+    done = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'replay', str(bad),
+                           '--out', str(tmp_path / 'out.mcap'), '--json', '--nonlinear', 'off',
+                           '--mechanism', 'cho1992'], capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr
+    result = json.loads(done.stdout)
+    assert [d['offset'] for d in result['damaged']] == [offset]
+    assert 0 < result['samples'] < 3000
+
+
+def test_a_replay_reads_only_its_first_chunk_before_the_estimate_starts(tmp_path):
+    """The rest is read beside the writing: the first chunk is the only read alone."""
+    from flexlink_ros.cli.main import build_parser
+    from flexlink_ros.cli.replay_offline import open_input
+    bag = tmp_path / 'bag.mcap'
+    subprocess.run([sys.executable, str(BENCH), 'make-bag', str(bag), '--seconds', '20'],
+                   check=True, capture_output=True, timeout=300)
+    argv = ['replay', str(bag), '--out', str(tmp_path / 'out.mcap'), '--joint', 'crank']
+    args = build_parser(argv).parse_args(argv)
+    topic, rows, messages = open_input(args, [])
+    assert topic == '/joint_states' and messages > 19000
+    assert 0 < rows.samples <= messages // 2

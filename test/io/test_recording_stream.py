@@ -87,3 +87,38 @@ def test_a_damaged_chunk_is_skipped_and_listed_once_by_each_pass(tmp_path):
     whole = joint_states.read_crank_samples(bad, '/joint_states', 'crank')
     np.testing.assert_array_equal(stamps, whole['stamps_ns'])
     assert stamps.size == counts['/joint_states'][1] < 2500
+
+
+def test_the_summaries_survey_as_a_whole_pass_does(tmp_path):
+    """One file and a split bag: the same counts and first messages from the summaries."""
+    for bag in (write_bag(tmp_path / 'one.mcap', 2500),
+                write_bag(tmp_path / 'split', 2500, split_s=0.4)):
+        whole = recording_stream.survey_recording(bag)
+        assert recording_stream.survey_summaries(bag) == whole
+        assert recording_stream.survey_summaries(bag, topic='/other_states') == (whole[0], {})
+
+
+def test_the_summaries_survey_reads_no_chunk_past_the_first_messages(tmp_path):
+    """A damaged late chunk is neither read nor listed (the reading lists it), yet counted."""
+    bag = write_bag(tmp_path / 'one.mcap', 5000)
+    offset = chunks_of(bag)[-2][0]
+
+    def break_crc(data):
+        data[offset + 9 + 24] ^= 0xFF       # the chunk's uncompressed CRC
+    bad = damaged_copy(bag, tmp_path, break_crc)
+    counts, kept = recording_stream.survey_summaries(bad)
+    assert counts == {'/joint_states': [JOINT_STATE, 5000], '/other_states': [JOINT_STATE, 1667]}
+    assert kept == recording_stream.survey_recording(bag)[1]
+    damaged = []
+    assert recording_stream.survey_recording(bad, damaged=damaged)[0] != counts
+    assert [o for _, o, _ in damaged] == [offset]
+
+
+def test_a_file_without_a_summary_is_surveyed_whole(tmp_path):
+    """A file cut before its summary, or a bag with one such file: no summaries survey."""
+    bag = write_bag(tmp_path / 'split', 2500, split_s=0.4)
+    last = sorted(bag.glob('*.mcap'))[-1]
+    data = last.read_bytes()
+    last.write_bytes(data[:len(data) - 200])
+    assert recording_stream.survey_summaries(bag) is None
+    assert recording_stream.survey_summaries(last) is None
