@@ -35,7 +35,7 @@ def rosbags_messages(bag):
 
 
 def _recorded(path):
-    """Count the messages of a file being recorded that are readable (0 while its header is written)."""
+    """Count the readable messages of a file being recorded (0 while its header is written)."""
     try:
         return scan_mcap(path)['message_count']
     except McapFileError:   # created, magic not written yet
