@@ -12,26 +12,10 @@ import math
 
 import numpy as np
 
+from ..core.estimation.nonlinear_follow import CHOICES, choose_nonlinear
 from ..core.estimation.nonlinear_stream import estimate_nonlinear, VON_KARMAN_SLOPE
 from ..core.reduction.nonlinear_model import nonlinear_model_for
 from ..studies.synthetic import last_revolution, synthetic_signal, timing_summary
-
-CHOICES = ('auto', 'on', 'off')
-
-
-def choose_nonlinear(choice, nonlinearity):
-    """Return (use the nonlinear model, why) for ``choice`` and the linear run's verdict."""
-    if choice == 'on':
-        return True, 'asked for (--nonlinear on)'
-    if choice == 'off':
-        return False, 'asked for (--nonlinear off)'
-    if nonlinearity['valid'] is None:
-        return False, 'auto: the linear model has no validity indicator to decide by'
-    reading = (f"validity indicator max {nonlinearity['indicator_max']:.3g}, threshold "
-               f"{nonlinearity['threshold']:g}")
-    if nonlinearity['valid']:
-        return False, f'auto: the linear estimate is valid ({reading})'
-    return True, f'auto: the linear estimate is not valid ({reading})'
 
 
 def run_nonlinear(args, mechanism, options):

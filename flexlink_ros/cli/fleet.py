@@ -22,6 +22,7 @@ from .fleet_table import TABLE_NAME, write_table
 from .main import emit
 from .model_args import add_estimator_arguments, model_options
 from .progress import Progress
+from ..core.estimation.nonlinear_follow import CHOICES
 from ..core.estimation.summary import PERIODS
 from ..io.fleet_bag import failed_row, FleetSettings, recompute_bag
 from ..io.recorder_files import refuse_existing
@@ -170,7 +171,8 @@ def run_fleet(args):
     settings = FleetSettings(per=args.per, joint=args.joint, topic=args.topic,
                              warm_start=not args.no_warm_start, cache_dir=args.cache_dir,
                              use_cache=not args.no_cache, node_name=args.node_name,
-                             frame_id=args.frame_id, markers_every_n=args.markers_every_n)
+                             frame_id=args.frame_id, markers_every_n=args.markers_every_n,
+                             nonlinear=args.nonlinear)
     ray = import_ray(embedded=not args.address)
     times = {}
     results = []
@@ -248,6 +250,11 @@ def register(subparsers):
                         help='markers on every n-th sample of --write-mcap (0: none)')
     parser.add_argument('--no-warm-start', action='store_true',
                         help='start from the static deflection, not the periodic state')
+    parser.add_argument('--nonlinear', choices=CHOICES, default=None,
+                        help="the reduced geometrically nonlinear model's deflections: auto "
+                        '(where the linear estimate of the bag is not valid), on, off '
+                        '(default: the model the recording says made it, else auto; as '
+                        'replay)')
     add_estimator_arguments(parser)
     parser.set_defaults(func=_fleet_command, mechanism=None)
     fleet_help = {'mechanism': 'mechanism YAML file or bare name for the bags that carry no '

@@ -184,9 +184,7 @@ def _choose_model(args, mechanism, options, model, tables, opened):
         _, linear_summary, _ = estimate_and_write(args, model, opened[1], opened[2], None,
                                                   tables=tables)
         opened = open_input(args, [])
-    use, why = decide(asked, linear_summary)
-    if not getattr(args, 'nonlinear', None) and asked != 'auto':
-        why = f"the recording's model (its provenance says nonlinear: {asked})"
+    use, why = decide(asked, linear_summary, recorded=not getattr(args, 'nonlinear', None))
     transform = nonlinear_rows(args, mechanism, options, DEFAULT_RESET_GAP_S) if use else None
     if args.provenance.get('model_options'):
         args.provenance['nonlinear'] = 'on' if use else 'off'

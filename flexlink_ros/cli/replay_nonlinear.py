@@ -2,14 +2,15 @@
 ``replay --nonlinear auto|on|off``: the reduced nonlinear model's deflections in the output.
 
 The same rule and the same ``model: ...`` line as ``estimate --nonlinear``
-(:func:`.estimate_nonlinear.choose_nonlinear`). ``on`` writes the nonlinear model's lever-tip
-and coupler-mid deflections in place of the linear ones, block by block as the replay writes
-(:class:`NonlinearRows`: memory independent of the recording's length). ``auto`` (the default)
-first runs the linear estimate alone over the recording and writes the nonlinear deflections
-only where its validity indicator (the largest per-sample ``nonlinearity`` of ``~/quality``)
-says the linear estimate is not valid. A recording that names its model is replayed with the
-model that made it (the nonlinear one if its provenance says ``nonlinear: on``, else the
-linear one) unless ``--nonlinear`` is given; ``auto`` is for recordings that name no model.
+(:func:`core.estimation.nonlinear_follow.choose_nonlinear`). ``on`` writes the nonlinear
+model's lever-tip and coupler-mid deflections in place of the linear ones, block by block as
+the replay writes (:class:`NonlinearRows`: memory independent of the recording's length).
+``auto`` (the default) first runs the linear estimate alone over the recording and writes
+the nonlinear deflections only where its validity indicator (the largest per-sample
+``nonlinearity`` of ``~/quality``) says the linear estimate is not valid. A recording that
+names its model is replayed with the model that made it (the nonlinear one if its
+provenance says ``nonlinear: on``, else the linear one) unless ``--nonlinear`` is given;
+``auto`` is for recordings that name no model.
 The output's provenance records the choice (``nonlinear``: ``on`` or ``off``).
 
 The nonlinear model steps through the samples the linear estimator accepted, with the crank
@@ -23,8 +24,8 @@ import math
 
 import numpy as np
 
-from .estimate_nonlinear import choose_nonlinear
-from ..core.estimation.nonlinear_follow import follow_rows, follow_summary, NonlinearFollower
+from ..core.estimation.nonlinear_follow import choose_nonlinear, follow_rows, follow_summary, \
+    NonlinearFollower
 from ..core.estimation.nonlinear_stream import VON_KARMAN_SLOPE
 from ..core.reduction.nonlinear_model import nonlinear_model_for
 from ..core.validity import is_valid
@@ -50,10 +51,14 @@ def nonlinear_choice(args, recorded):
     return 'auto'
 
 
-def decide(choice, summary=None):
-    """Return (use the nonlinear model, why) for ``choice`` and a linear run's summary."""
+def decide(choice, summary=None, recorded=False):
+    """
+    Return (use the nonlinear model, why) for ``choice`` and a linear run's summary.
+
+    ``recorded``: the choice is the recording's own (no ``--nonlinear`` given).
+    """
     if choice != 'auto':
-        return choose_nonlinear(choice, None)
+        return choose_nonlinear(choice, None, recorded)
     largest = summary['quality'].get('nonlinearity_max') if summary else None
     return choose_nonlinear('auto', is_valid([math.nan if largest is None else largest]))
 

@@ -24,13 +24,14 @@ from .joint_states import parse_crank_states, read_input_samples, skip_reasons
 from .provenance import read_provenance
 from .replay_writer import write_replay
 from ..core.estimation.gate import DEFAULT_RESET_GAP_S
-from ..core.estimation.nonlinear_follow import follow_rows, follow_summary, NonlinearFollower
+from ..core.estimation.nonlinear_follow import choose_nonlinear, follow_rows, follow_summary, \
+    NonlinearFollower
 from ..core.estimation.offline import estimate_offline
 from ..core.estimation.summary import period_ids, recording_totals, summarize_periods
 from ..core.mechanism_file import load_mechanism
 from ..core.reduction import mechanism_model
 from ..core.reduction.nonlinear_model import nonlinear_model_for
-from ..core.validity import VALIDITY_THRESHOLD
+from ..core.validity import is_valid, VALIDITY_THRESHOLD
 from ..names import DEFAULT_FRAME_ID, NODE_NAME, output_topics
 
 # Models kept loaded in a worker process (a worker recomputes many bags of one linkage).
@@ -59,6 +60,9 @@ class FleetSettings:
         Nonlinearity indicator above which a sample is outside the validity range.
     node_name, frame_id, markers_every_n :
         The written MCAP's output namespace, frame and marker spacing (as replay's flags).
+    nonlinear : str or None
+        'auto', 'on' or 'off' (replay's ``--nonlinear``); None: the model the recording
+        says made it, else 'auto'.
 
     """
 
@@ -72,14 +76,7 @@ class FleetSettings:
     node_name: str = NODE_NAME
     frame_id: str = DEFAULT_FRAME_ID
     markers_every_n: int = 10
-
-
-# A bag is recomputed with the model that made it, as `replay BAG` does: the nonlinear one where
-# its provenance says `nonlinear: on` (some 20 times the linear cost per sample), else the
-# linear one (`replay --nonlinear off`: no linear pass first to decide by).
-LINEAR_CHOICE = {'nonlinear': False, 'why': 'the fleet runs the linear model', 'asked': 'off'}
-NONLINEAR_CHOICE = {'nonlinear': True, 'asked': 'on',
-                    'why': "the recording's model (its provenance says nonlinear: on)"}
+    nonlinear: str = None
 
 
 def bag_model(bag, fallback):
@@ -100,18 +97,19 @@ def bag_model(bag, fallback):
     options : ModelOptions
     source : str
         Where they came from, for the table ('--mechanism <file>').
-    nonlinear : bool
-        The recording was made with the nonlinear model (its provenance says so).
+    nonlinear : str or None
+        'on' or 'off': the model the recording says made it (a recording from before the
+        nonlinear model: 'off'); None where it names no model.
 
     """
     recorded = read_provenance(bag)    # a ProvenanceError fails this bag, saying why
     if recorded is not None and recorded.has_model:
         return (recorded.mechanism(), recorded.options(),
-                f'recorded ({recorded.mechanism_file})', recorded.nonlinear == 'on')
+                f'recorded ({recorded.mechanism_file})', recorded.nonlinear or 'off')
     if fallback is None:
         raise ValueError(f'{bag} has no recorded mechanism: give `--mechanism`')
     mechanism_file, options = fallback
-    return load_mechanism(mechanism_file), options, f'--mechanism {mechanism_file}', False
+    return load_mechanism(mechanism_file), options, f'--mechanism {mechanism_file}', None
 
 
 def _model(mechanism, options, settings):
@@ -178,8 +176,17 @@ def skipped_per_period(messages, samples, ids, joint_name):
     return periods
 
 
+def _choose_model(settings, recorded, estimate):
+    """Return replay's ``model_choice`` for a bag: (use the nonlinear model, its dict)."""
+    choice = settings.nonlinear or recorded or 'auto'
+    use, why = choose_nonlinear(choice, is_valid(estimate['nonlinearity'])
+                                if choice == 'auto' else None,
+                                recorded=settings.nonlinear is None)
+    return use, {'nonlinear': use, 'why': why, 'asked': choice}
+
+
 def _replay_summary(bag, topic, samples, damaged, model, options, estimate, totals,
-                    nonlinear=None):
+                    choice, nonlinear=None):
     """Return the keys of ``flexlink replay --json`` (and the bag's path) for one bag."""
     count = len(samples['data'])
     span_s = (samples['log_ns'][-1] - samples['log_ns'][0]) * 1e-9 if count > 1 else 0.0
@@ -194,8 +201,7 @@ def _replay_summary(bag, topic, samples, damaged, model, options, estimate, tota
                'notes': [], 'segments': estimate['segments'],
                'outliers': estimate['outliers'], 'out_of_bound': estimate['out_of_bound'],
                'criteria_available': estimate['criteria_available'],
-               'model_choice': LINEAR_CHOICE if nonlinear is None else NONLINEAR_CHOICE,
-               'nonlinear': nonlinear}
+               'model_choice': choice, 'nonlinear': nonlinear}
     summary.update(totals)
     return summary
 
@@ -239,15 +245,16 @@ def failed_row(bag, reason, per):
 
 def _recompute(bag, fallback, settings, output, start):
     damaged = []
-    mechanism, options, source, use_nonlinear = bag_model(bag, fallback)
+    mechanism, options, source, recorded = bag_model(bag, fallback)
     topic, samples, messages = read_input_samples(bag, settings.topic, settings.joint, damaged)
     read_s = time.perf_counter() - start
     model = _model(mechanism, options, settings)
     began = time.perf_counter()
     estimate = estimate_offline(model, samples['stamps_ns'], samples['angles'],
                                 samples['speeds'], warm_start=settings.warm_start)
+    use, choice = _choose_model(settings, recorded, estimate)
     nonlinear = (_nonlinear_rows(mechanism, options, settings, samples['stamps_ns'], estimate)
-                 if use_nonlinear else None)
+                 if use else None)
     estimate_s = time.perf_counter() - began
     finite = np.isfinite(estimate['lever_tip'][:, 0])
     ids = period_ids(samples['stamps_ns'], samples['angles'], finite, estimate['flags'],
@@ -255,7 +262,7 @@ def _recompute(bag, fallback, settings, output, start):
     columns = summarize_periods(samples['stamps_ns'], estimate, ids,
                                 settings.validity_threshold)
     summary = _replay_summary(bag, topic, samples, damaged, model, options, estimate,
-                              recording_totals(columns), nonlinear)
+                              recording_totals(columns), choice, nonlinear)
     summary.update(read_s=read_s, estimate_s=estimate_s, mechanism=source, error=None)
     if output is not None:
         status = write_replay(output, [(0, samples, estimate)], topic,

@@ -106,8 +106,7 @@ def test_fleet_equals_one_replay_per_bag(bags, tmp_path):
     for name in ('steady', 'gappy.mcap'):
         replay_out = tmp_path / f'replay_{name}.mcap'
         replay = flexlink('replay', str(bags / name), '--out', str(replay_out), '--json',
-                          '--mechanism', 'cho1992', *MODEL_FLAGS,
-                          '--nonlinear', 'off')     # the fleet runs the linear model
+                          '--mechanism', 'cho1992', *MODEL_FLAGS)
         assert replay.returncode == 0, replay.stderr
         expected = json.loads(replay.stdout)
         got = summaries[name]
@@ -115,8 +114,10 @@ def test_fleet_equals_one_replay_per_bag(bags, tmp_path):
         assert set(expected) <= set(got)
         # Replay's note on where its model came from is the fleet's 'mechanism' column.
         assert got['mechanism'] == '--mechanism cho1992'
-        assert got['model_choice']['nonlinear'] is expected['model_choice']['nonlinear'] is False
-        for key in set(expected) - TIMING_KEYS - {'notes', 'model_choice'}:
+        # Both chose by the linear estimate's validity (auto: the bag names no model).
+        assert got['model_choice'] == expected['model_choice']
+        assert got['model_choice']['asked'] == 'auto'
+        for key in set(expected) - TIMING_KEYS - {'notes'}:
             if key.endswith('peak_to_peak_um'):
                 assert got[key] == pytest.approx(expected[key], rel=1e-9), key
             else:

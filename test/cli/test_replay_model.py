@@ -133,7 +133,8 @@ def test_replay_of_a_node_bag_reproduces_the_node_with_no_flags(tmp_path, proces
     assert summary['notes'] == [] and 'grid_size=96' in summary['model']['options']
     assert summary['model_choice']['nonlinear'] is node_nonlinear, (choice, summary)
     node, replayed = deflections_by_stamp(bag), deflections_by_stamp(out)
-    assert len(node) > 1000 and sorted(replayed) == sorted(node)
+    # (hundreds of samples: on a loaded machine the driver sends fewer than its 1 kHz)
+    assert len(node) > 300 and sorted(replayed) == sorted(node)
     worst = max(abs(a - b) / max(abs(b), 1e-9) for stamp, values in node.items()
                 for a, b in zip(replayed[stamp], values))
     assert worst < 1e-6

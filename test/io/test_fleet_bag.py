@@ -53,8 +53,10 @@ def test_the_numbers_are_the_offline_estimate_s(tmp_path, options):
     bag = tmp_path / 'one.mcap'
     write_bag(bag, stamps, angles, speeds)
     out = tmp_path / 'out.mcap'
-    result = recompute_bag(str(bag), ('cho1992', options), FleetSettings(per='minute'),
-                           output=str(out))
+    result = recompute_bag(str(bag), ('cho1992', options),
+                           FleetSettings(per='minute', nonlinear='off'), output=str(out))
+    assert result['summary']['model_choice'] == {
+        'nonlinear': False, 'why': 'asked for (--nonlinear off)', 'asked': 'off'}
     model = mechanism_model.model_for_mechanism(load_mechanism('cho1992'), options)
     samples = read_crank_samples(bag, '/joint_states', 'crank')
     estimate = estimate_offline(model, samples['stamps_ns'], samples['angles'],
@@ -110,12 +112,12 @@ def test_a_bag_that_names_its_model_is_recomputed_with_it(tmp_path):
         recorder.write('/joint_states', JointState(name=['crank'], position=[0.0]), 10**9)
     fallback = ('cho1992', node_params.default_model_options())
     mechanism, options, source, nonlinear = bag_model(str(path), fallback)
-    assert (mechanism.name, options, nonlinear) == ('kang1990', made, False)
+    assert (mechanism.name, options, nonlinear) == ('kang1990', made, 'off')
     assert source.startswith('recorded')
     plain = tmp_path / 'plain.mcap'
     with McapRecorder(plain) as recorder:
         recorder.write('/joint_states', JointState(name=['crank'], position=[0.0]), 10**9)
     mechanism, options, source, nonlinear = bag_model(str(plain), fallback)
-    assert (mechanism.name, source, nonlinear) == ('cho1992', '--mechanism cho1992', False)
+    assert (mechanism.name, source, nonlinear) == ('cho1992', '--mechanism cho1992', None)
     with pytest.raises(ValueError, match='give `--mechanism`'):
         bag_model(str(plain), None)

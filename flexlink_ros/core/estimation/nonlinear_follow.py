@@ -24,6 +24,39 @@ from .nonlinear_stream import NonlinearStepper, unwrap_with_speed, VON_KARMAN_SL
 from ..validity import VALIDITY_THRESHOLD
 
 
+CHOICES = ('auto', 'on', 'off')
+
+
+def choose_nonlinear(choice, nonlinearity, recorded=False):
+    """
+    Return (use the nonlinear model, why) for a choice and the linear run's verdict.
+
+    Parameters
+    ----------
+    choice : str
+        'on', 'off' or 'auto' (by the verdict).
+    nonlinearity : dict or None
+        :func:`core.validity.is_valid` of the linear estimate ('valid', 'indicator_max',
+        'threshold'); only read for 'auto'.
+    recorded : bool
+        ``choice`` is what the recording's provenance says it was made with, not a flag.
+
+    """
+    if recorded and choice in ('on', 'off'):
+        return choice == 'on', f"the recording's model (its provenance says nonlinear: {choice})"
+    if choice == 'on':
+        return True, 'asked for (--nonlinear on)'
+    if choice == 'off':
+        return False, 'asked for (--nonlinear off)'
+    if nonlinearity['valid'] is None:
+        return False, 'auto: the linear model has no validity indicator to decide by'
+    reading = (f"validity indicator max {nonlinearity['indicator_max']:.3g}, threshold "
+               f"{nonlinearity['threshold']:g}")
+    if nonlinearity['valid']:
+        return False, f'auto: the linear estimate is valid ({reading})'
+    return True, f'auto: the linear estimate is not valid ({reading})'
+
+
 def nonlinear_validity(link_slope):
     """
     Return the validity indicator of a nonlinear estimate: threshold x (slope / limit)^2.
@@ -160,4 +193,5 @@ def follow_summary(follower, low, high, damping):
             'links': follower.tables.links, 'damping': damping}
 
 
-__all__ = ['nonlinear_validity', 'NonlinearFollower', 'follow_rows', 'follow_summary']
+__all__ = ['CHOICES', 'choose_nonlinear', 'nonlinear_validity', 'NonlinearFollower',
+           'follow_rows', 'follow_summary']
