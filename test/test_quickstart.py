@@ -2,34 +2,31 @@
 docs/quickstart-own-linkage.md, run as a new user would on a linkage not in config/.
 
 Every command of the page's fenced ``bash`` blocks runs, in page order, in one directory
-holding the stiff steel linkage as ``my_linkage.yaml``: modes, estimate with its chart, the
-node with the crank driver recording ``run1`` (real processes), mcap-info naming the
-mechanism, and replay with no model flag reproducing the node's deflections. The one
-exception is ``flexlink plan`` (a quarter of an hour on 2 cores): it is parsed by the real
-parser and its ``--params-out`` file is written by the same function
-(:func:`cli.plan_params.write_params_file`) for a small model.
+holding a linkage not in config/ as ``my_linkage.yaml`` (the stiff steel one at 600 rpm, the
+soft aluminium one at its 300 rpm, the page's speed replaced): modes, estimate with its
+chart, ``flexlink plan --quick --params-out`` writing the node's parameters file, the node
+started with that file as it is and the crank driver recording ``run1`` (real processes),
+mcap-info naming the mechanism and the plan's model, and replay with no model flag
+reproducing the node's deflections per stamp.
 """
 
-import math
 import os
 import pathlib
 import shlex
 import shutil
 import subprocess
 
-from flexlink_ros.cli import main as cli
-from flexlink_ros.core.options import ModelOptions
-from node_runs import stream_node_with_driver, write_small_plan_params
+from node_runs import stream_node_with_driver
 import numpy as np
+import pytest
 from test_readme import fenced_commands, SCRIPTS, VENV_BIN
+import yaml
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 PAGE = ROOT / 'docs' / 'quickstart-own-linkage.md'
-LINKAGE = ROOT / 'test' / 'data' / 'packaging_steel.yaml'
-# A small model of the steel linkage (what the plan writes, smaller): few elements and modes.
-CHOICE = ModelOptions(modes=8, static=2, grid_size=64, rigid_crank=False, elements_per_link=3,
-                      speed_max=1.05 * 600.0 * math.pi / 30.0, soft_modes=0)
-STREAM_S = 3.0          # of the crank driver at 600 rpm
+DATA = ROOT / 'test' / 'data'
+PAGE_RPM = '600'        # the page's speed, replaced by each linkage's own
+STREAM_S = 3.0          # of the crank driver
 
 
 def _argv(command):
@@ -43,14 +40,6 @@ def _run(command, cwd):
     assert result.returncode == 0, (command, result.stdout, result.stderr)
     assert 'Traceback' not in result.stderr, (command, result.stderr)
     return result.stdout
-
-
-def _write_plan_params(command, cwd):
-    """Parse the page's plan command and write its --params-out file for CHOICE."""
-    args = cli.build_parser().parse_args(shlex.split(command)[1:])
-    assert args.params_out == 'my_node.yaml' and args.rpm_max == 600.0
-    write_small_plan_params(cwd / args.params_out, cwd / args.mechanism, CHOICE, cwd / 'cache',
-                            args.rpm_max, args.tolerance)
 
 
 def _run_node_and_driver(commands, cwd):
@@ -76,21 +65,31 @@ def _lever_deflections(bag):
     return found
 
 
-def test_every_quickstart_command_runs_on_a_linkage_not_in_config(tmp_path):
-    commands = list(fenced_commands(PAGE.read_text()))
+def _plan_model(params_path):
+    """Return the model choices of the plan's parameters file as mcap-info prints them."""
+    model = yaml.safe_load(params_path.read_text())['/**']['ros__parameters']['model']
+    return f"modes={model['modes']}, static={model['static']}"
+
+
+@pytest.mark.parametrize('linkage, rpm', [('packaging_steel.yaml', '600'),
+                                          ('soft_linkage.yaml', '300')])
+def test_every_quickstart_command_runs_on_a_linkage_not_in_config(tmp_path, linkage, rpm):
+    commands = [c.replace(PAGE_RPM, rpm) for c in fenced_commands(PAGE.read_text())]
     names = [c.split()[:2] for c in commands]
     assert names == [['flexlink', 'modes'], ['flexlink', 'estimate'], ['flexlink', 'plan'],
                      ['crank_driver', '--ros-args'], ['flexlink_node', '--ros-args'],
                      ['flexlink', 'mcap-info'], ['flexlink', 'replay']], commands
-    shutil.copy(LINKAGE, tmp_path / 'my_linkage.yaml')
+    shutil.copy(DATA / linkage, tmp_path / 'my_linkage.yaml')
     modes = _run(commands[0], tmp_path)
     assert 'Hz' in modes
     _run(commands[1] + ' --cache-dir cache', tmp_path)
-    assert (tmp_path / 'my_600rpm.png').stat().st_size > 10_000
-    _write_plan_params(commands[2], tmp_path)
+    assert (tmp_path / f'my_{rpm}rpm.png').stat().st_size > 10_000
+    planned = _run(commands[2] + ' --cache-dir cache', tmp_path)
+    assert 'choice:' in planned and 'node parameters: my_node.yaml' in planned, planned
     _run_node_and_driver(commands[3:5], tmp_path)
     info = _run(commands[5], tmp_path)
-    assert 'my_linkage.yaml (sha256' in info and 'modes=8, static=2' in info, info
+    assert 'my_linkage.yaml (sha256' in info and _plan_model(tmp_path / 'my_node.yaml') in info, (
+        info)
     replayed = _run(commands[6] + ' --out rerun.mcap --cache-dir cache', tmp_path)
     assert (tmp_path / 'run1.png').stat().st_size > 10_000, replayed
     node = _lever_deflections(tmp_path / 'run1')

@@ -199,10 +199,10 @@ SKIPPED = {
     '-p record.path:=run1':
         'runs until stopped and needs a crank driver: '
         'test/ros/test_node.py::test_node_end_to_end records from one',
-    'flexlink plan --mechanism my_linkage.yaml --rpm-max 600 --tolerance 0.02 '
+    'flexlink plan --mechanism my_linkage.yaml --rpm-max 600 --tolerance 0.02 --quick '
     '--params-out my_node.yaml':
-        'minutes of full-order references: test/cli/test_plan_params.py writes and checks '
-        'the parameters file of a small plan',
+        'a quick plan of the quick start: test/test_quickstart.py'
+        '::test_every_quickstart_command_runs_on_a_linkage_not_in_config runs it',
     'flexlink estimate --rpm 391 --rigid-crank --bearings flexible --stiffness-damping 1e-4 '
     '--nonlinear on':
         'builds the reduced nonlinear model (minutes on a loaded machine): '

@@ -29,7 +29,7 @@ from ..core.mechanism_file import load_mechanism
 from ..core.numerics import RPM
 from ..core.reduction.soft_basis import soft_basis_text
 from ..report.cycle_chart import plot_cycle
-from ..studies.plan import run_plan
+from ..studies.plan import quick_plan, run_plan
 from ..studies.synthetic import run_estimate
 
 
@@ -96,9 +96,11 @@ def _plan(args):
     # the scene (the reference) is the richest model whatever the user fixed
     scene_args = argparse.Namespace(**{**vars(args), 'rigid_crank': False,
                                        'no_geometric_stiffness': False})
+    base, fixed = model_options(scene_args), plan_fixed(args)
+    search = quick_plan(mechanism, base, args.rpm_max, fixed) if args.quick else {}
     with Progress('plan', unit='step') as progress:
-        result = run_plan(mechanism, model_options(scene_args), args.rpm_max, args.tolerance,
-                          args.rate_hz, fixed=plan_fixed(args), progress=progress)
+        result = run_plan(mechanism, base, args.rpm_max, args.tolerance, args.rate_hz,
+                          fixed=fixed, progress=progress, **search)
     text = plan_table(result)
     if args.params_out:
         if not result.get('choice'):
@@ -147,4 +149,8 @@ def register(subparsers):
     parser.add_argument('--params-out', default=None, metavar='FILE',
                         help="write the choice as the node's parameters file (every model "
                         'choice, the speed range, criterion thresholds of this cycle)')
+    parser.add_argument('--quick', action='store_true',
+                        help="size the reduction only: the reference is the file's own "
+                        'physics (its elements per link, flexible crank), one speed '
+                        '(--rpm-max), one grid; minutes instead of a quarter of an hour')
     parser.set_defaults(func=_plan)

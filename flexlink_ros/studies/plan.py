@@ -28,19 +28,21 @@ PLAN_ELEMENTS = (2, 3, 4)
 PLAN_MODES = (2, 4, 6, 8, 10, 12, 16, 20, 24)
 PLAN_STATIC = (0, 2, 4)
 PLAN_GRIDS = (64, 128, 256)
+# The quick plan's one grid: the finest (a 128-point grid leaves ~1 % on a flexible crank).
+QUICK_GRIDS = (256,)
 
 
-def plan_candidates(base):
+def plan_candidates(base, grids=PLAN_GRIDS):
     """
     Size candidates (modes, static, grid) of one physics, from small to large.
 
-    Sorted by basis size r = modes + static, then grid points; the last is the generous size
-    at which :func:`run_plan` screens a physics choice.
+    Sorted by basis size r = modes + static, then grid points (of ``grids``); the last is the
+    generous size at which :func:`run_plan` screens a physics choice.
     """
     candidates = []
     for modes in PLAN_MODES:
         for static in PLAN_STATIC:
-            for grid in PLAN_GRIDS:
+            for grid in grids:
                 candidates.append(dataclasses.replace(base, modes=modes, static=static,
                                                       grid_size=grid))
     return sorted(candidates, key=lambda o: (o.modes + o.static, o.grid_size))
@@ -57,6 +59,22 @@ def scene_options(mechanism, base):
     elements = base.elements_per_link or 2 * mechanism.elements_per_link
     return dataclasses.replace(base, elements_per_link=int(elements), rigid_crank=False,
                                geometric_stiffness=True)
+
+
+def quick_plan(mechanism, base, rpm_max, fixed=None):
+    """
+    Give :func:`run_plan`'s scene, physics, speeds and grids of a quick plan (``--quick``).
+
+    The reference is the user's own physics (the file's elements per link, flexible crank,
+    geometric stiffness, the requested bearings) rather than a refined one, no simpler physics
+    is screened, the only speed is ``rpm_max`` and the only grid :data:`QUICK_GRIDS`: the
+    plan then measures the reduction alone (modes, static directions, soft basis) against the
+    full order of the model the node builds, in a few reduced models instead of dozens.
+    """
+    own = dataclasses.replace(base, elements_per_link=mechanism.elements_per_link)
+    scene = scene_options(mechanism, own)
+    return {'scene': scene, 'physics': constrain_physics([scene], fixed or {}),
+            'speeds_rpm': [rpm_max], 'grids': QUICK_GRIDS}
 
 
 def full_order_dofs(mechanism, options):
@@ -307,8 +325,10 @@ def _size_cost(options):
 class _Search:
     """The rows of a plan so far, the number of reduced models built, and its progress."""
 
-    def __init__(self, signals, scene, tolerance, rate_hz, max_candidates, progress):
+    def __init__(self, signals, scene, tolerance, rate_hz, max_candidates, progress,
+                 grids=PLAN_GRIDS):
         self.signals, self.scene, self.tolerance = signals, scene, tolerance
+        self.grids = grids
         self.rate_hz, self.max_candidates = rate_hz, max_candidates
         self.rows, self.built = [], 0
         self.progress, self.done, self.total = progress, 0, None
@@ -382,7 +402,7 @@ def _screen_physics(search, mechanism, physics):
                                 'label': describe_physics(options), **extra,
                                 **dict.fromkeys(_NOT_BUILT), 'meets_tolerance': False})
             continue
-        sizes = plan_candidates(options)
+        sizes = plan_candidates(options, search.grids)
         row = search.build(sizes[-1], 'physics', extra)
         if row['meets_tolerance']:
             return sizes, extra, row
@@ -432,7 +452,8 @@ def _size_search(search, sizes, extra, choice):
 
 
 def run_plan(mechanism, base, rpm_max, tolerance, rate_hz=1000.0, speeds_rpm=None,
-             max_candidates=None, physics=None, scene=None, fixed=None, progress=None):
+             max_candidates=None, physics=None, scene=None, fixed=None, progress=None,
+             grids=PLAN_GRIDS):
     """
     Find the smallest model (physics and size) meeting ``tolerance`` against the scene.
 
@@ -493,6 +514,8 @@ def run_plan(mechanism, base, rpm_max, tolerance, rate_hz=1000.0, speeds_rpm=Non
     progress : callable or None
         ``progress(done, total, what)`` before each step (a full-order reference, a physics
         screened, a reduced model built; ``total`` an upper bound until the end).
+    grids : tuple of int
+        Grid sizes of the size candidates (:func:`quick_plan` gives one).
 
     Returns
     -------
@@ -510,10 +533,10 @@ def run_plan(mechanism, base, rpm_max, tolerance, rate_hz=1000.0, speeds_rpm=Non
     if physics is None:
         physics = constrain_physics(physics_candidates(mechanism, base, scene), fixed or {})
     signals = PlanSignals(mechanism, speeds_rpm, rate_hz)
-    search = _Search(signals, scene, tolerance, rate_hz, max_candidates, progress)
+    search = _Search(signals, scene, tolerance, rate_hz, max_candidates, progress, grids)
     # steps: the scene's references, each physics screened and built, the size stage at most
     search.total = (len(speeds_rpm) + 2 * len(physics)
-                    + size_steps(plan_candidates(physics[-1] if physics else scene)))
+                    + size_steps(plan_candidates(physics[-1] if physics else scene, grids)))
     reference = _scene_reference(search, mechanism, scene, signals)
     chosen_physics = _screen_physics(search, mechanism, physics)
     rows, choice = search.rows, None

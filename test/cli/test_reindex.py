@@ -35,31 +35,41 @@ def rosbags_messages(bag):
 
 
 def _recorded(path):
-    """Tell whether a file being recorded holds a message (False while its header is written)."""
+    """Count the readable messages of a file being recorded (0 while its header is written)."""
     try:
-        return scan_mcap(path)['message_count'] > 0
+        return scan_mcap(path)['message_count']
     except McapFileError:   # created, magic not written yet
-        return False
+        return 0
 
 
-def record_then_kill(bag, record_s=2.5):
-    """Record crank_driver's 1 kHz /joint_states into a split bag directory; SIGKILL it."""
+def _wait_for_recording(bag, files, messages, timeout_s):
+    """Wait until ``bag`` holds ``files`` split files and ``messages`` readable messages."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:  # discovery, then flushed chunks in a split file
+        paths = sorted(bag.glob('*.mcap'))
+        if len(paths) >= files and _recorded(paths[-1]) and sum(
+                _recorded(path) for path in paths) >= messages:
+            return
+        time.sleep(0.1)
+    pytest.fail(f'not {files} files and {messages} messages recorded within {timeout_s} s: '
+                f'{sorted(bag.glob("*.mcap"))}')
+
+
+def record_then_kill(bag, files=2, messages=1200):
+    """
+    Record crank_driver's 1 kHz /joint_states into a split bag directory; SIGKILL it.
+
+    The kill waits for ``files`` split files and ``messages`` readable messages, however
+    loaded the machine (no fixed recording time).
+    """
     driver = subprocess.Popen([sys.executable, '-m', 'flexlink_ros.ros.crank_driver', '--ros-args',
-                               '-p', 'duration_s:=30.0'], cwd=REPO)
+                               '-p', 'duration_s:=120.0'], cwd=REPO)
     recorder = subprocess.Popen(
         [sys.executable, '-m', 'flexlink_ros.cli.main', 'mcap-record', str(bag),
          '--topic', 'joint_states:sensor_msgs/msg/JointState', '--split-duration-s', '1.0'],
         cwd=REPO, stdout=subprocess.DEVNULL)
-    first = bag / f'{bag.name}_0.mcap'
     try:
-        deadline = time.monotonic() + 15.0
-        while time.monotonic() < deadline:  # discovery, then the first flushed chunk
-            if first.exists() and _recorded(first):
-                break
-            time.sleep(0.1)
-        else:
-            pytest.fail('nothing recorded within 15 s')
-        time.sleep(record_s)
+        _wait_for_recording(bag, files, messages, 90.0)
         recorder.send_signal(signal.SIGKILL)
         recorder.wait(timeout=10)
     finally:

@@ -149,21 +149,35 @@ def _publish_crank(publisher, executor, count, rate_hz=1000.0):
             executor.spin_once(timeout_sec=0.0)
 
 
-def _settled_count(executor, reports, key='received'):
-    """Spin until the node's input count on /diagnostics stops changing for a second."""
-    def latest():
-        values = [kv.value for report in reports for status in report.status
-                  if status.name.endswith('input') for kv in status.values if kv.key == key]
-        return int(values[-1]) if values else None
+def _settled_count(executor, reports, key='received', unchanged_reports=10):
+    """
+    Spin until the node's input count on /diagnostics is the same in ``unchanged_reports``.
 
-    last, since = None, time.monotonic()
-    deadline = since + DISCOVERY_TIMEOUT_S
-    while time.monotonic() - since < 1.0 or last is None:
-        assert time.monotonic() < deadline, 'the input count did not settle'
+    Counted in the node's own reports, not in seconds: a node stalled on a loaded machine
+    publishes no report, so a backlog it has yet to take cannot pass for a settled count.
+    """
+    def counts():
+        return [int(kv.value) for report in reports for status in report.status
+                if status.name.endswith('input') for kv in status.values if kv.key == key]
+
+    deadline = time.monotonic() + 3 * DISCOVERY_TIMEOUT_S
+    while True:
+        seen = counts()
+        if len(seen) >= unchanged_reports and len(set(seen[-unchanged_reports:])) == 1:
+            return seen[-1]
+        assert time.monotonic() < deadline, f'the input count did not settle: {seen[-20:]}'
         executor.spin_once(timeout_sec=0.05)
-        if latest() != last:
-            last, since = latest(), time.monotonic()
-    return last
+
+
+def _log_time_spans_s(files):
+    """Seconds between the first and last message log time of each MCAP file of ``files``."""
+    from mcap.reader import make_reader
+    spans = []
+    for path in files:
+        with open(path, 'rb') as stream:
+            times = [message.log_time for _, _, message in make_reader(stream).iter_messages()]
+        spans.append((max(times) - min(times)) * 1e-9 if times else 0.0)
+    return spans
 
 
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
@@ -198,8 +212,10 @@ def test_a_signal_ends_a_split_recording_at_the_floor_within_five_seconds_comple
     sent = 4000
     _publish_crank(publisher, executor, sent)
     node_process.wait_for(FIRST_INPUT_MESSAGE, DISCOVERY_TIMEOUT_S)
-    received = _settled_count(executor, reports)    # what reached the node (a loaded machine
-    assert received > sent // 2                     # may lose some between the processes)
+    # what reached the node: a loaded machine loses inputs between the processes (a quarter
+    # reached it at a load of 21 on 2 cores); what reached it must all be on disk
+    received = _settled_count(executor, reports)
+    assert received >= sent // 10, received
     start = time.monotonic()
     node_process.process.send_signal(sig)
     code = node_process.process.wait(timeout=60)
@@ -208,7 +224,10 @@ def test_a_signal_ends_a_split_recording_at_the_floor_within_five_seconds_comple
     assert code == 0 and ended_s < 5.0, (ended_s, node_process.log())
 
     files = sorted(bag.glob('*.mcap'))
-    assert len(files) >= 4               # 4 s of input, split every second
+    # split every second of log time (4 s of input and the diagnostics until the signal):
+    # several files, none spanning more than a second however the load spread the messages
+    spans = _log_time_spans_s(files)
+    assert len(files) >= 2 and max(spans) <= 1.0, spans
     metadata = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
     assert metadata['relative_file_paths'] == [f'floor_{n}.mcap' for n in range(len(files))]
     counts, _ = read_with_rosbags(bag)

@@ -84,3 +84,18 @@ def test_signals_are_two_revolutions_with_the_last_one_marked():
         assert mask[-1] and not mask[0]
         assert np.ptp(angles[mask]) < 2.0 * math.pi <= np.ptp(angles[mask]) + speed / 500.0
     assert signals.references == {} and signals.reference_seconds(ModelOptions.linear()) == 0
+
+
+def test_the_quick_plan_sizes_the_reduction_against_the_files_own_physics(cho):
+    base = ModelOptions.linear(bearings='rigid', elements_per_link=8)
+    quick = plan.quick_plan(cho, base, 391.0, fixed={'rigid_crank': True})
+    scene = quick['scene']
+    assert scene.elements_per_link == cho.elements_per_link       # not refined
+    assert scene.rigid_crank is False and scene.geometric_stiffness is True
+    assert scene.bearings == 'rigid'
+    assert quick['speeds_rpm'] == [391.0] and quick['grids'] == plan.QUICK_GRIDS
+    assert [physics_key(o) for o in quick['physics']] == [
+        physics_key(dataclasses.replace(scene, rigid_crank=True))]     # the user's fixed crank
+    sizes = plan.plan_candidates(scene, quick['grids'])
+    assert {o.grid_size for o in sizes} == set(plan.QUICK_GRIDS)
+    assert plan.size_steps(sizes) < plan.size_steps(plan.plan_candidates(scene)) / 2
