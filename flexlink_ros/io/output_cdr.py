@@ -330,6 +330,8 @@ def _stamped_rows(template, stamps_ns, stamp_offsets=(ENCAPSULATION_SIZE,)):
 
 
 def _put_doubles(rows, offset, values):
+    if not rows.shape[0]:       # no messages (a block without markers): reshape(0, -1) fails
+        return
     values = np.ascontiguousarray(values, dtype='<f8').reshape(rows.shape[0], -1)
     rows[:, offset:offset + 8 * values.shape[1]] = values.view(np.uint8)
 

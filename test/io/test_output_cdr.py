@@ -59,6 +59,18 @@ def test_row_encoders_equal_the_one_message_encoders(frame):
                                                 11.0, joints[n], levels)
 
 
+def test_row_encoders_take_no_rows():
+    # A replay block may hold no sample of an output (markers every n-th sample).
+    stamps, encoded = np.zeros(0, dtype=np.int64), b'linkage_ground'
+    assert output_cdr.vector3_stamped_rows(stamps, encoded, np.zeros((0, 2))).shape[0] == 0
+    assert output_cdr.criteria_rows(stamps, encoded, *(np.zeros((0, 4)),) * 3).shape[0] == 0
+    assert output_cdr.quality_rows(stamps, encoded, np.zeros(0), np.zeros(0)).shape[0] == 0
+    encoder = output_cdr.MarkerEncoder('linkage_ground', 5)
+    rows = encoder.encode_rows(stamps, np.zeros((0, 3, 5, 2)), np.zeros((0, 3, 5, 2)), 1.0,
+                               np.zeros((0, 4, 2)), [ros_messages.OK] * 4)
+    assert output_cdr.rows_to_bytes(rows) == []
+
+
 def test_output_cdr_decodes_with_rclpy_and_equals_the_node_messages():
     stamp = ros_messages.ns_to_stamp(1_234_567_890_123)
     vector = output_cdr.vector3_stamped_cdr(stamp.sec, stamp.nanosec, b'linkage_ground',
