@@ -9,7 +9,7 @@ from flexlink_ros.ros.estimator_node import linear_resampling, OUTPUT_TYPES, PER
 import numpy as np
 import pytest
 from test_node import (DISCOVERY_TIMEOUT_S, joint_state, node_model, NodeProcess,  # noqa: F401
-                       processes, READY_TIMEOUT_S, ros, spin_until)
+                       READY_TIMEOUT_S, ros, spin_until)
 
 FRAME = 'linkage_ground'
 

@@ -17,7 +17,6 @@ from sensor_msgs.msg import JointState
 import test_node
 from test_node import DISCOVERY_TIMEOUT_S, NodeProcess, OUTPUTS, READY_TIMEOUT_S, spin_until
 
-processes = test_node.processes   # fixtures of test_node, used here by name
 ros = test_node.ros
 
 STAMP0_NS = 1_800_000_000 * 10**9

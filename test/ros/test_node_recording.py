@@ -20,7 +20,6 @@ from test_node import (DISCOVERY_TIMEOUT_S, NodeProcess, read_with_mcap_ros2, re
                        READY_TIMEOUT_S, spin_until)
 import yaml
 
-processes = test_node.processes   # fixtures of test_node, used here by name
 ros = test_node.ros
 INPUT = '/joint_states'
 QUALITY = '/flexlink_node/quality'

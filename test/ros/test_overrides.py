@@ -13,7 +13,6 @@ import test_node
 from test_node import NodeProcess, PARAMS_FILE, READY_TIMEOUT_S, spin_until
 import yaml
 
-processes = test_node.processes   # fixtures of test_node, used here by name
 ros = test_node.ros
 NAMESPACE = '/robot1'
 

@@ -25,7 +25,6 @@ from sensor_msgs.msg import JointState
 import test_node
 from test_node import NodeProcess, READY_TIMEOUT_S
 
-processes = test_node.processes   # every process a test starts, killed at its end
 
 START = 1_700_000_000_000_000_000
 COUNT = 201                      # 100 Hz for 2 s

@@ -9,7 +9,6 @@ from flexlink_ros.ros.sim_time import (cdr_stamp_ns, CLOCK_STARTED, ClockWatch, 
 import test_node
 from test_node import DISCOVERY_TIMEOUT_S, joint_state, NodeProcess, READY_TIMEOUT_S, spin_until
 
-processes = test_node.processes   # fixtures of test_node, used here by name
 ros = test_node.ros
 
 
