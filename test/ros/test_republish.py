@@ -22,7 +22,6 @@ import numpy as np
 import pytest
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
-import test_node
 from test_node import NodeProcess, READY_TIMEOUT_S
 
 
