@@ -62,7 +62,7 @@ def test_estimate_matches_the_reference_over_the_last_revolution(toy):
 
 
 def test_plan_picks_the_first_candidate_within_tolerance(toy, monkeypatch):
-    monkeypatch.setattr(plan, 'plan_candidates', lambda base: [
+    monkeypatch.setattr(plan, 'plan_candidates', lambda base, grids=None: [
         core_options.ModelOptions.linear(modes=1, static=0, grid_size=32),
         core_options.ModelOptions.linear(modes=4, static=2, grid_size=32),
         core_options.ModelOptions.linear(modes=6, static=3, grid_size=32)])
@@ -105,7 +105,7 @@ def test_plan_on_cho1992_compares_every_physics_with_the_scene(config_dir, monke
     """
     mechanism = load_mechanism(config_dir / 'cho1992.yaml')
     sizes = [(4, 2, 64), (8, 4, 128), (16, 4, 128)]
-    monkeypatch.setattr(plan, 'plan_candidates', lambda base: [
+    monkeypatch.setattr(plan, 'plan_candidates', lambda base, grids=None: [
         dataclasses.replace(base, modes=m, static=s, grid_size=g) for m, s, g in sizes])
     base = core_options.ModelOptions.linear(bearings='rigid', elements_per_link=4,
                                             speed_max=1.05 * 391.0 * RPM)
@@ -169,7 +169,7 @@ def test_the_reports_default_model_is_the_nodes():
      {'rigid_crank': False, 'geometric_stiffness': False})])
 def test_plan_keeps_the_crank_and_geometric_stiffness_the_user_fixed(toy, monkeypatch, capsys,
                                                                      flags, fixed):
-    monkeypatch.setattr(plan, 'plan_candidates', lambda base: [
+    monkeypatch.setattr(plan, 'plan_candidates', lambda base, grids=None: [
         dataclasses.replace(base, modes=m, static=s, grid_size=32) for m, s in ((1, 0), (4, 2))])
     code = cli.main(['plan', '--rpm-max', '391', '--bearings', 'rigid', '--json', *flags])
     captured = capsys.readouterr()
@@ -191,7 +191,7 @@ def test_plan_keeps_the_crank_and_geometric_stiffness_the_user_fixed(toy, monkey
 
 
 def test_plan_says_when_the_fixed_choices_leave_no_candidate(toy, monkeypatch, capsys):
-    monkeypatch.setattr(plan, 'plan_candidates', lambda base: [
+    monkeypatch.setattr(plan, 'plan_candidates', lambda base, grids=None: [
         dataclasses.replace(base, modes=1, static=0, grid_size=32)])
     assert cli.main(['plan', '--rpm-max', '391', '--bearings', 'rigid', '--tolerance', '1e-9',
                      '--rigid-crank']) == 0
