@@ -17,7 +17,10 @@ cannot keep up) is counted, its reason kept, and playback goes on. Log times tha
 are replaced as :func:`.playback_schedule.playback_times` says, with a note.
 """
 
+import contextlib
 import itertools
+import signal
+import threading
 import time
 
 from rosgraph_msgs.msg import Clock
@@ -34,10 +37,36 @@ ACK_TIMEOUT_S = 5.0      # a reliable subscriber gets the last messages before t
 SIGNAL_CHECK_S = 0.1     # longest sleep between two looks at the context (SIGINT shuts it down)
 
 
-def _wait_for_subscribers(rclpy, publisher, count, timeout_s):
+@contextlib.contextmanager
+def _signals_end_between_messages():
+    """
+    Yield ``running()``: False once SIGINT or SIGTERM came or the ROS context was shut down.
+
+    Python's own SIGINT handler raises KeyboardInterrupt wherever the main thread is, for
+    example between a publish and its count, so the summary could miss a message that went
+    out. The handlers installed here only record the signal (rclpy, initialised after them,
+    still shuts its context down and then calls them); the playback loop looks between two
+    messages. Off the main thread signals cannot be handled, and rclpy's shutdown alone ends it.
+    """
+    import rclpy
+
+    received = []
+    if threading.current_thread() is not threading.main_thread():
+        yield lambda: rclpy.ok()
+        return
+    previous = {number: signal.signal(number, lambda number, frame: received.append(number))
+                for number in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield lambda: not received and rclpy.ok()
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+
+
+def _wait_for_subscribers(running, publisher, count, timeout_s):
     """Wait until ``publisher`` matched ``count`` subscriptions, ``timeout_s`` or a signal."""
     deadline = time.monotonic() + timeout_s
-    while (rclpy.ok() and time.monotonic() < deadline
+    while (running() and time.monotonic() < deadline
            and publisher.get_subscription_count() < count):
         time.sleep(0.05)
     return publisher.get_subscription_count()
@@ -58,9 +87,9 @@ def _publish(publisher, message, counts):
     return 'sent'
 
 
-def _sleep_until(rclpy, wall):
+def _sleep_until(running, wall):
     """Sleep until monotonic time ``wall`` in short steps, so that a signal ends it soon."""
-    while rclpy.ok():
+    while running():
         delay = wall - time.monotonic()
         if delay <= 0:
             return
@@ -79,15 +108,15 @@ def _clock_message(clock_ns):
     return message
 
 
-def _play_pass(rclpy, publishers, samples, options, counts, progress):
+def _play_pass(running, publishers, samples, options, counts, progress):
     """Publish one pass; return False when interrupted (the context was shut down)."""
     joint_states, clock = publishers
     data = samples['data']
     start_wall = time.monotonic()
     for wall_s, kind, value in pass_events(samples['play_ns'], options['rate'],
                                            options['clock_hz'], options['clock_per_message']):
-        _sleep_until(rclpy, start_wall + wall_s)
-        if not rclpy.ok():
+        _sleep_until(running, start_wall + wall_s)
+        if not running():
             return False
         outcome = _publish(*((clock, _clock_message(value)) if kind == CLOCK
                              else (joint_states, data[value])), counts)
@@ -117,16 +146,16 @@ def _create_publishers(node, topic, options):
     return joint_states, clock
 
 
-def _wait_for_matches(rclpy, publishers, options, counts):
+def _wait_for_matches(running, publishers, options, counts):
     """Wait for the subscriptions asked for (a note if too few came); /clock's briefly."""
     wanted = options.get('subscribers', 1)
     timeout_s = options.get('discovery_timeout_s', DISCOVERY_TIMEOUT_S)
-    counts['matched'] = _wait_for_subscribers(rclpy, publishers[0], wanted, timeout_s)
-    if counts['matched'] < wanted and rclpy.ok():
+    counts['matched'] = _wait_for_subscribers(running, publishers[0], wanted, timeout_s)
+    if counts['matched'] < wanted and running():
         counts['notes'].append(f"{counts['matched']} of {wanted} subscriptions matched "
                                f"{counts['topic']} within {timeout_s:g} s: played anyway")
     if publishers[1] is not None:    # /clock listeners, if any, are found by now
-        _wait_for_subscribers(rclpy, publishers[1], 1, CLOCK_DISCOVERY_S)
+        _wait_for_subscribers(running, publishers[1], 1, CLOCK_DISCOVERY_S)
 
 
 def publish_recording(samples, topic, options, progress=None):
@@ -171,17 +200,18 @@ def publish_recording(samples, topic, options, progress=None):
     counts['notes'] += [note] if note else []
     start = time.monotonic()
     try:
-        with rclpy.init(args=['--ros-args', *options.get('ros_args', ())]):
+        with (_signals_end_between_messages() as running,
+              rclpy.init(args=['--ros-args', *options.get('ros_args', ())])):
             node = rclpy.create_node('flexlink_replay')
             publishers = _create_publishers(node, topic, options)
             counts.update(topic=publishers[0].topic_name,
                           node=node.get_fully_qualified_name())
-            _wait_for_matches(rclpy, publishers, options, counts)
+            _wait_for_matches(running, publishers, options, counts)
             start = time.monotonic()
             passes = options['passes']
             for _ in (itertools.count() if passes == 0 else range(passes)):
                 counts['passes'] += 1
-                if not _play_pass(rclpy, publishers, samples, options, counts, progress):
+                if not _play_pass(running, publishers, samples, options, counts, progress):
                     break
             else:
                 counts['interrupted'] = False

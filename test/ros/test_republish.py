@@ -13,10 +13,12 @@ import sys
 import threading
 import time
 
+from flexlink_ros.io.joint_states import read_crank_samples
 from flexlink_ros.io.recorder import McapRecorder
 from flexlink_ros.names import READY_MESSAGE
 from flexlink_ros.ros import messages as ros_messages
 from flexlink_ros.ros.playback_schedule import ticks_in_pass
+from flexlink_ros.ros.republish import publish_recording
 from mcap.reader import make_reader
 import numpy as np
 import pytest
@@ -179,6 +181,32 @@ def test_sigint_ends_an_endless_loop_with_a_summary_and_exit_code_0(bag, tmp_pat
     assert played['interrupted'] and played['passes'] >= 2
     assert played['published'] > COUNT and result['published'] == played['published']
     assert stamps[:COUNT] == (LOG_NS - 200_000).tolist()
+
+
+def test_a_signal_ends_the_playback_between_messages_and_every_sent_message_is_counted(bag):
+    """
+    SIGINT in the middle of the loop's work lets that work finish.
+
+    Here it lands in the progress callback, as it could between a publish and its count; the
+    loop ends before the next message, the count is exact, and the handlers are given back.
+    """
+    samples = read_crank_samples(bag, '/joint_states', 'crank')
+    before = signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)
+    reported = []
+
+    def progress(position, force=False):
+        reported.append(position)
+        if position == 9 and not force:     # the 10th message is out and counted
+            os.kill(os.getpid(), signal.SIGINT)
+            reported.append('finished after the signal')
+
+    played = publish_recording(samples, '/joint_states',
+                               {'rate': 50.0, 'clock_hz': 0.0, 'clock_per_message': False,
+                                'passes': 0, 'subscribers': 0}, progress)
+    assert played['interrupted'] and played['passes'] == 1
+    assert reported[-3:] == [9, 'finished after the signal', 10]     # the last is the final one
+    assert played['published'] == played['pass_position'] == 10
+    assert (signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)) == before
 
 
 def test_playback_flags_need_publish_and_a_positive_rate(bag):
