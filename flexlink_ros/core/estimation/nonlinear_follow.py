@@ -1,12 +1,16 @@
 """
-The reduced nonlinear model following a linear estimator, one accepted sample at a time.
+The reduced nonlinear model following a linear estimator through its accepted samples.
 
 The node (``model.nonlinear``) and ``flexlink replay --nonlinear`` run the same thing: the
 linear estimator filters the crank signal and decides which samples it accepts; the nonlinear
 model (:class:`.nonlinear_stream.NonlinearStepper`) steps from one accepted sample to the next
 on that estimator's crank angle and speed, and starts again, at its quasi-static deflection,
 after a gap longer than the estimator's reset gap. Fed the same samples, both give the same
-doubles, so a recording replays to what the node published.
+numbers, so a recording replays to what the node published: the node steps sample by sample
+(:meth:`NonlinearFollower.sample`), the replay a block of samples at a time
+(:meth:`NonlinearFollower.follow`, one compiled call per run: 1.3 times as fast), which agrees
+to rounding (the steps' lengths are differences of the run's times; about 1e-11 of the
+deflections' range on the paper's linkage).
 
 Its validity (:func:`nonlinear_validity`) is what the model cannot carry: the von Karman
 strain keeps ``v'^2 / 2`` of a link's stretch and drops ``v'^4 / 8``, a relative error of
@@ -144,6 +148,61 @@ class NonlinearFollower:
         self.last = (stamp_ns, theta, speed)
         return output
 
+    def follow(self, stamps_ns, angles, speeds):
+        """
+        Step to many accepted samples in order; their output deflections [m], (K, channels).
+
+        :meth:`sample` for each, with every run between starts marched in one call of the
+        compiled step (no Python between its samples, the GIL released throughout): the same
+        numbers to rounding (the steps are the stamps' differences in seconds taken from the
+        run's first stamp, and the outputs summed in C). Without the compiled step, or for a
+        single sample, :meth:`sample` itself.
+        """
+        stamps_ns = np.asarray(stamps_ns, dtype=np.int64)
+        outputs = np.empty((stamps_ns.size, self.tables.outputs))
+        if not self.stepper.compiled:
+            for n, (stamp, angle, speed) in enumerate(zip(stamps_ns.tolist(), angles, speeds)):
+                outputs[n] = self.sample(stamp, float(angle), float(speed))
+            return outputs
+        # Where sample() would start again: the first sample without a state, and gaps.
+        steps_s = np.diff(stamps_ns, prepend=-1 if self.last is None else self.last[0]) * 1e-9
+        starts = set(np.flatnonzero(~((steps_s > 0.0) & (steps_s <= self.reset_gap_s))).tolist())
+        if self.last is None:
+            starts.add(0)
+        bounds = sorted({0, stamps_ns.size} | starts)
+        for first, stop in zip(bounds[:-1], bounds[1:]):
+            self._run(stamps_ns[first:stop], angles[first:stop], speeds[first:stop],
+                      outputs[first:stop], starts=first in starts)
+        return outputs
+
+    def _run(self, stamps_ns, angles, speeds, outputs, starts):
+        """March samples with no start among them but perhaps the first (``starts``)."""
+        if starts:
+            outputs[0] = self.sample(int(stamps_ns[0]), float(angles[0]), float(speeds[0]))
+            stamps_ns, angles, speeds, outputs = (stamps_ns[1:], angles[1:], speeds[1:],
+                                                  outputs[1:])
+        if not stamps_ns.size:
+            return
+        stepper, counts = self.stepper, self.counts
+        counts['samples'] += stamps_ns.size
+        origin_ns, theta0, speed0 = self.last
+        times_ns = np.concatenate([[origin_ns], stamps_ns])
+        speeds = np.concatenate([[speed0], np.asarray(speeds, dtype=float)])
+        theta = np.empty(times_ns.size)
+        theta[0] = theta0
+        for k, angle in enumerate(np.asarray(angles, dtype=float).tolist(), start=1):
+            # sample()'s unwrapping, sample by sample (cheap beside the step)
+            theta[k] = unwrap_next(theta[k - 1], angle, speeds[k - 1], speeds[k],
+                                   int(times_ns[k] - times_ns[k - 1]) * 1e-9)
+        outputs[:], _, slope, converged, _ = stepper.march((times_ns - origin_ns) * 1e-9,
+                                                           theta, speeds)
+        counts['refused_samples'] += int(np.count_nonzero(~converged))
+        largest = np.max(slope, axis=1) if slope.shape[1] else np.zeros(slope.shape[0])
+        self.slope_max = max(self.slope_max, float(np.max(largest)))
+        counts['beyond_von_karman_samples'] += int(np.count_nonzero(largest > VON_KARMAN_SLOPE))
+        self.validity = nonlinear_validity(stepper.slope)
+        self.last = (int(stamps_ns[-1]), float(theta[-1]), float(speeds[-1]))
+
 
 def follow_rows(follower, stamps_ns, estimate):
     """
@@ -171,9 +230,8 @@ def follow_rows(follower, stamps_ns, estimate):
                 & np.all(np.isfinite(estimate['coupler_mid']), axis=1)
                 & np.isfinite(angles) & np.isfinite(speeds))
     outputs = np.full((len(accepted), follower.tables.outputs), np.nan)
-    step = follower.sample
-    for n in np.flatnonzero(accepted).tolist():
-        outputs[n] = step(int(stamps_ns[n]), float(angles[n]), float(speeds[n]))
+    outputs[accepted] = follower.follow(np.asarray(stamps_ns)[accepted], angles[accepted],
+                                        speeds[accepted])
     return outputs, accepted
 
 

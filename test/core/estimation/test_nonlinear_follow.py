@@ -90,3 +90,26 @@ def test_validity_follows_the_last_samples_slope(tables):
         follower.sample(int(s), float(a), SPEED)
     assert follower.validity == pytest.approx(nonlinear_validity(follower.stepper.slope))
     assert 0.0 < follower.validity < VALIDITY_THRESHOLD
+
+
+def test_following_blocks_of_samples_gives_what_sample_by_sample_gives(tables):
+    """follow() marches runs in one compiled call: sample()'s numbers, gaps and counts."""
+    stamps, angles, speeds = _signal(900)
+    stamps[400:] += 2_000_000_000        # a 2 s gap: a restart
+    stamps[650:] += 300_000_000          # 0.3 s: within the reset gap, stepped over
+    speeds = speeds * (1.0 + 0.01 * np.sin(np.arange(900) / 50.0))
+    one = NonlinearFollower(tables, reset_gap_s=0.5)
+    expected = np.array([one.sample(int(s), float(a), float(w))
+                         for s, a, w in zip(stamps, angles, speeds)])
+    many = NonlinearFollower(tables, reset_gap_s=0.5)
+    # Blocks that cut a run, start at the restart, and hold a single sample.
+    bounds = [0, 1, 137, 400, 401, 402, 777, 900]
+    got = np.concatenate([many.follow(stamps[a:b], angles[a:b], speeds[a:b])
+                          for a, b in zip(bounds[:-1], bounds[1:])])
+    span = np.ptp(expected, axis=0)
+    assert np.all(np.abs(got - expected) <= 1e-12 * span), np.max(np.abs(got - expected) / span)
+    assert many.counts == one.counts and one.counts['restarts'] == 1
+    assert many.slope_max == pytest.approx(one.slope_max, rel=1e-12) and many.slope_max > 0
+    assert many.validity == pytest.approx(one.validity, rel=1e-9)
+    assert many.last[0] == one.last[0] and many.last[1:] == pytest.approx(one.last[1:],
+                                                                          rel=1e-15)
