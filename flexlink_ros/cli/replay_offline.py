@@ -284,9 +284,9 @@ def estimate_and_write(args, model, rows, messages, write, on_block=None, tables
         ``on_block(estimate)`` with each block of estimated rows (the chart's rows).
     tables : object, optional
         The model's step tables (:func:`core.estimation.tables.step_tables`), when built.
-    transform : callable, optional
-        ``transform(samples, estimate)`` -> the estimate summed up and written in its place
-        (:class:`.replay_nonlinear.NonlinearRows`).
+    transform : NonlinearRows, optional
+        Its ``blocks(blocks, messages)`` gives each block's estimate to sum up and write in
+        place of the linear one (:class:`.replay_nonlinear.NonlinearRows`).
 
     Returns
     -------
@@ -304,9 +304,9 @@ def estimate_and_write(args, model, rows, messages, write, on_block=None, tables
     pipeline = _Pipeline(model, rows, not args.no_warm_start, tables)
 
     def blocks():
-        for first, samples, estimate in pipeline:
-            if transform is not None:
-                estimate = transform(samples, estimate)
+        # The nonlinear deflections replace the linear ones (a span of blocks per thread).
+        source = pipeline if transform is None else transform.blocks(pipeline, messages)
+        for first, samples, estimate in source:
             summary.add(estimate)
             if on_block is not None:
                 on_block(estimate)

@@ -1,12 +1,18 @@
 """``flexlink replay --nonlinear`` (cli/replay_nonlinear.py): a real bag, a 2-element model."""
 
+import dataclasses
 import json
 import math
 import subprocess
 import sys
 
+from flexlink_ros.cli.replay_nonlinear import NonlinearRows
 from flexlink_ros.core.estimation.nonlinear_stream import estimate_nonlinear
+from flexlink_ros.core.fe.linkage import FlexibleLinkage
+from flexlink_ros.core.mechanism_file import load_mechanism
+from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction.nonlinear_model import nonlinear_model_for
+from flexlink_ros.core.reduction.nonlinear_tables import build_nonlinear_tables
 from flexlink_ros.io.provenance import read_provenance
 from flexlink_ros.io.recorder import McapRecorder
 from flexlink_ros.names import NODE_NAME, output_topics
@@ -14,6 +20,7 @@ from flexlink_ros.ros import messages as ros_messages
 from geometry_msgs.msg import Vector3Stamped
 from mcap.reader import make_reader
 import numpy as np
+import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 
@@ -154,3 +161,70 @@ def test_replay_auto_picks_the_linear_model_at_low_speed(tmp_path):
     assert result['model_choice']['nonlinear'] is False, result['model_choice']
     assert result['model_choice']['why'].startswith('auto: the linear estimate is valid')
     assert result['nonlinear'] is None
+
+
+@pytest.fixture(scope='module')
+def damped_tables():
+    """Return a small nonlinear model damped to fade a start in 0.25 s (a test's spans)."""
+    mech = dataclasses.replace(load_mechanism('cho1992'), elements_per_link=2)
+    linkage = FlexibleLinkage(mech, ModelOptions.full_model(rigid_crank=True,
+                                                            bearings='flexible'))
+    return build_nonlinear_tables(linkage, 5e-3, size=12, modes=10)
+
+
+def _linear_blocks(count, block_rows, gaps=(), outliers=()):
+    """Blocks of (first, samples, estimate) as the linear replay hands them on."""
+    rng = np.random.default_rng(7)
+    time_s = np.concatenate([[0.0], np.cumsum(1e-3 * (1.0 + 0.3 * rng.uniform(-1, 1,
+                                                                              count - 1)))])
+    speeds = 41.0 * (1.0 + 0.05 * np.sin(3.0 * time_s))
+    stamps = np.round(time_s * 1e9).astype(np.int64)
+    for row in gaps:
+        stamps[row:] += 1_000_000_000
+    angles = np.mod(41.0 * time_s, 2.0 * math.pi)
+    lever = np.zeros((count, 2))
+    lever[list(outliers)] = np.nan
+    for first in range(0, count, block_rows):
+        rows = slice(first, first + block_rows)
+        yield first, {'stamps_ns': stamps[rows]}, {
+            'lever_tip': lever[rows], 'coupler_mid': lever[rows].copy(),
+            'crank_angle': angles[rows], 'crank_speed': speeds[rows],
+            'criterion': np.full((len(angles[rows]), 4), 0.5)}
+
+
+def test_spans_followed_in_threads_give_the_block_by_block_follower(damped_tables):
+    """Three spans (two threads) with outliers, a gap in a warm-up and one in a span."""
+    count, gaps, outliers = 12_000, (3_900, 9_000), (5, 4_100, 4_101, 11_999)
+    reference = NonlinearRows(damped_tables, 0.1, speed_max=60.0)
+    expected = [(first, reference(samples, estimate)) for first, samples, estimate
+                in _linear_blocks(count, 1000, gaps, outliers)]
+    spans = NonlinearRows(damped_tables, 0.1, speed_max=60.0)
+    got = list(spans.blocks(_linear_blocks(count, 1000, gaps, outliers), count,
+                            max_span_rows=4096))
+    assert [first for first, _, _ in got] == [first for first, _ in expected]
+    for (_, _, mine), (_, theirs) in zip(got, expected):
+        assert np.array_equal(mine['criterion'], theirs['criterion'])     # passed through
+        for key in ('lever_tip', 'coupler_mid'):
+            assert np.array_equal(np.isnan(mine[key]), np.isnan(theirs[key]))
+    outputs = {key: np.concatenate([block[key] for _, _, block in got])
+               for key in ('lever_tip', 'coupler_mid')}
+    for key, values in outputs.items():
+        reference_values = np.concatenate([block[key] for _, block in expected])
+        span = np.nanmax(reference_values, axis=0) - np.nanmin(reference_values, axis=0)
+        assert np.nanmax(np.abs(values - reference_values) / span) <= 1e-11, key
+    mine, theirs = spans.summary(), reference.summary()
+    assert {k: mine[k] for k in ('samples', 'refused_samples', 'restarts')} == \
+        {k: theirs[k] for k in ('samples', 'refused_samples', 'restarts')} == \
+        {'samples': count - len(outliers), 'refused_samples': 0, 'restarts': 2}
+    np.testing.assert_allclose(mine['lever_tip_peak_to_peak_um'],
+                               theirs['lever_tip_peak_to_peak_um'], rtol=1e-9)
+    assert mine['link_slope_max_rad'] == pytest.approx(theirs['link_slope_max_rad'], rel=1e-9)
+
+
+def test_a_recording_too_short_for_two_spans_is_followed_block_by_block(damped_tables):
+    blocks = list(_linear_blocks(1500, 500))
+    reference = NonlinearRows(damped_tables, 0.1, speed_max=60.0)
+    expected = [reference(samples, estimate)['lever_tip'] for _, samples, estimate in blocks]
+    got = NonlinearRows(damped_tables, 0.1, speed_max=60.0).blocks(iter(blocks), 1500)
+    assert all(np.array_equal(mine['lever_tip'], theirs)
+               for (_, _, mine), theirs in zip(got, expected))

@@ -226,13 +226,18 @@ def follow_rows(follower, stamps_ns, estimate):
 
     """
     angles, speeds = estimate['crank_angle'], estimate['crank_speed']
-    accepted = (np.all(np.isfinite(estimate['lever_tip']), axis=1)
-                & np.all(np.isfinite(estimate['coupler_mid']), axis=1)
-                & np.isfinite(angles) & np.isfinite(speeds))
+    accepted = accepted_rows(estimate)
     outputs = np.full((len(accepted), follower.tables.outputs), np.nan)
     outputs[accepted] = follower.follow(np.asarray(stamps_ns)[accepted], angles[accepted],
                                         speeds[accepted])
     return outputs, accepted
+
+
+def accepted_rows(estimate):
+    """Return the rows the follower steps: those the linear estimate published (bool)."""
+    return (np.all(np.isfinite(estimate['lever_tip']), axis=1)
+            & np.all(np.isfinite(estimate['coupler_mid']), axis=1)
+            & np.isfinite(estimate['crank_angle']) & np.isfinite(estimate['crank_speed']))
 
 
 def follow_summary(follower, low, high, damping):
@@ -251,4 +256,4 @@ def follow_summary(follower, low, high, damping):
 
 
 __all__ = ['CHOICES', 'choose_nonlinear', 'nonlinear_validity', 'NonlinearFollower',
-           'follow_rows', 'follow_summary']
+           'follow_rows', 'accepted_rows', 'follow_summary']
