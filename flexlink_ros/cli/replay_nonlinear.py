@@ -44,7 +44,7 @@ from ..core.validity import is_valid
 # warm-up is stepped twice: a span of 2 warm-ups keeps two thirds of the work useful).
 SPAN_WORKERS = 2
 MIN_SPAN_ROWS = 4096
-MAX_SPAN_ROWS = 1 << 16
+MAX_SPAN_ROWS = 1 << 15
 SPANS_PER_WARM_UP = 2.0
 
 
