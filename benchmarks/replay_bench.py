@@ -4,6 +4,7 @@
     python benchmarks/replay_bench.py make-bag BAG [--seconds 60] [--rate 1000]
     python benchmarks/replay_bench.py compare BAG [--pairs 7]
         [--reference-python OTHER/.venv/bin/python --reference-root OTHER] [--same-output]
+        [--nonlinear]
 
 ``make-bag`` writes a rosbag2 MCAP of one crank ``sensor_msgs/JointState`` topic: the
 synthetic signal the estimator benches use (:func:`flexlink_ros.studies.synthetic
@@ -18,7 +19,10 @@ time (``os.wait4``) and peak resident size (the child's own ``VmHWM``, read as i
 ``ru_maxrss`` of ``wait4`` also counts the parent's pages the child held between fork and
 exec), the medians and the ratio of the medians. Timing is
 printed, never asserted: the machine is shared. ``--same-output`` also checks that the two
-builds wrote the same messages (topic, log and publish time, sequence, bytes).
+builds wrote the same messages (topic, log and publish time, sequence, bytes). The replay is
+the linear model's (``--nonlinear off``), or with ``--nonlinear`` the reduced nonlinear
+model's (``--nonlinear on``; its deflections agree between builds to rounding, not to the
+byte, where one steps runs of samples at once).
 """
 
 import argparse
@@ -155,18 +159,20 @@ def compare(args):
     if args.reference_python:
         builds.append(('reference', args.reference_python, args.reference_root))
     work = pathlib.Path(tempfile.mkdtemp(prefix='replay_bench_'))
+    # --nonlinear given last wins over the linear_flag before it.
+    extra = ('--nonlinear', 'on') if args.nonlinear else ()
     times = {name: [] for name, _, _ in builds}
     cpu = {name: [] for name, _, _ in builds}
     try:
         for name, python, root in builds:       # fill each build's model cache, untimed
-            replay_once(python, root, args.bag, work / f'warm_{name}.mcap')
+            replay_once(python, root, args.bag, work / f'warm_{name}.mcap', extra)
         if args.same_output and len(builds) == 2:
             same = same_messages(work / 'warm_this.mcap', work / 'warm_reference.mcap')
             print(f'same messages in both outputs: {same}')
         for pair in range(args.pairs):
             for name, python, root in builds:
                 out = work / f'{name}_{pair}.mcap'
-                seconds, cpu_s, peak_mb = replay_once(python, root, args.bag, out)
+                seconds, cpu_s, peak_mb = replay_once(python, root, args.bag, out, extra)
                 times[name].append(seconds)
                 cpu[name].append(cpu_s)
                 print(f'pair {pair + 1} {name:9s} {seconds:6.3f} s  CPU {cpu_s:6.3f} s  '
@@ -201,6 +207,8 @@ def main(argv=None):
     runs.add_argument('--root', type=pathlib.Path, default=ROOT)
     runs.add_argument('--reference-python')
     runs.add_argument('--reference-root', type=pathlib.Path)
+    runs.add_argument('--nonlinear', action='store_true',
+                      help='time the replay with the reduced nonlinear model (--nonlinear on)')
     runs.add_argument('--same-output', action='store_true',
                       help='check that both builds write the same messages')
     args = parser.parse_args(argv)
