@@ -163,7 +163,7 @@ class SpanFollower:
 
     def __init__(self, rows, warm_up, span_rows):
         self.rows, self.warm_up, self.span_rows = rows, warm_up, span_rows
-        self.tail = None            # the accepted samples of the last span (the next warm-up)
+        self.tail = None            # the last warm-up's length of accepted samples
         self.accepted_before = False
 
     def _inputs(self, span):
@@ -185,8 +185,13 @@ class SpanFollower:
             warm = tuple(values[keep] for values in self.tail)
         future = pool.submit(follow_span, self.rows.tables, self.rows.reset_gap_s, warm,
                              inputs, self.accepted_before)
-        self.accepted_before = self.accepted_before or bool(len(inputs[0]))
-        self.tail = inputs if len(inputs[0]) else self.tail
+        if len(inputs[0]):
+            # The accepted samples of the last warm-up's length, over as many spans as it takes.
+            joined = inputs if self.tail is None else tuple(
+                np.concatenate([before, now]) for before, now in zip(self.tail, inputs))
+            keep = joined[0] >= joined[0][-1] - round(self.warm_up * 1e9)
+            self.tail = tuple(values[keep] for values in joined)
+            self.accepted_before = True
         return span, masks, future
 
     def _finish(self, span, masks, future):

@@ -172,11 +172,13 @@ def damped_tables():
     return build_nonlinear_tables(linkage, 5e-3, size=12, modes=10)
 
 
-def _linear_blocks(count, block_rows, gaps=(), outliers=()):
-    """Blocks of (first, samples, estimate) as the linear replay hands them on."""
+def _linear_blocks(count, block_rows, gaps=(), outliers=(), faster_after=None):
+    """Blocks of (first, samples, estimate) as the linear replay hands them on (1 kHz)."""
     rng = np.random.default_rng(7)
-    time_s = np.concatenate([[0.0], np.cumsum(1e-3 * (1.0 + 0.3 * rng.uniform(-1, 1,
-                                                                              count - 1)))])
+    steps = 1e-3 * (1.0 + 0.3 * rng.uniform(-1, 1, count - 1))
+    if faster_after is not None:
+        steps[faster_after:] *= 0.025       # then 40 kHz: a span shorter than a warm-up
+    time_s = np.concatenate([[0.0], np.cumsum(steps)])
     speeds = 41.0 * (1.0 + 0.05 * np.sin(3.0 * time_s))
     stamps = np.round(time_s * 1e9).astype(np.int64)
     for row in gaps:
@@ -219,6 +221,19 @@ def test_spans_followed_in_threads_give_the_block_by_block_follower(damped_table
     np.testing.assert_allclose(mine['lever_tip_peak_to_peak_um'],
                                theirs['lever_tip_peak_to_peak_um'], rtol=1e-9)
     assert mine['link_slope_max_rad'] == pytest.approx(theirs['link_slope_max_rad'], rel=1e-9)
+
+
+def test_a_warm_up_reaches_back_over_spans_shorter_than_it(damped_tables):
+    """The rate rises 40-fold after the first spans: a span lasts 0.1 s, a warm-up 0.25 s."""
+    count, args = 20_000, (1000, (), (), 9_000)
+    reference = NonlinearRows(damped_tables, 0.1, speed_max=60.0)
+    expected = np.concatenate([reference(samples, estimate)['lever_tip'] for _, samples, estimate
+                               in _linear_blocks(count, *args)])
+    got = np.concatenate([block['lever_tip'] for _, _, block in NonlinearRows(
+        damped_tables, 0.1, speed_max=60.0).blocks(_linear_blocks(count, *args), count,
+                                                   max_span_rows=4096)])
+    span = np.ptp(expected, axis=0)
+    assert np.max(np.abs(got - expected) / span) <= 1e-11
 
 
 def test_a_recording_too_short_for_two_spans_is_followed_block_by_block(damped_tables):
