@@ -131,7 +131,8 @@ class NonlinearRows:
             return
         span_rows = min(max_span_rows, -(-rows // SPAN_WORKERS))
         stamps = head[1]['stamps_ns']
-        rate = (len(stamps) - 1) / ((stamps[-1] - stamps[0]) * 1e-9) if len(stamps) > 1 else 0
+        lasted_ns = int(stamps[-1]) - int(stamps[0]) if len(stamps) else 0
+        rate = (len(stamps) - 1) / (lasted_ns * 1e-9) if lasted_ns > 0 else 0.0   # samples/s
         warm_up = (warm_up_s(self.tables, self.speed_max, self.reset_gap_s)
                    if span_rows >= MIN_SPAN_ROWS and rate > 0 else math.inf)
         chained = _chain(head, source)

@@ -5,6 +5,7 @@ import json
 import math
 import subprocess
 import sys
+import warnings
 
 from flexlink_ros.cli.replay_nonlinear import NonlinearRows
 from flexlink_ros.core.estimation.nonlinear_stream import estimate_nonlinear
@@ -243,3 +244,15 @@ def test_a_recording_too_short_for_two_spans_is_followed_block_by_block(damped_t
     got = NonlinearRows(damped_tables, 0.1, speed_max=60.0).blocks(iter(blocks), 1500)
     assert all(np.array_equal(mine['lever_tip'], theirs)
                for (_, _, mine), theirs in zip(got, expected))
+
+
+def test_a_first_block_of_one_repeated_stamp_is_followed_block_by_block(damped_tables):
+    """No rate to size the spans by (and no division by zero said on stderr)."""
+    blocks = list(_linear_blocks(12_000, 1000))
+    blocks[0][1]['stamps_ns'][:] = blocks[0][1]['stamps_ns'][0]
+    expected = [NonlinearRows(damped_tables, 0.1, speed_max=60.0)(blocks[0][1], blocks[0][2])]
+    with warnings.catch_warnings():
+        warnings.simplefilter('error')
+        got = next(NonlinearRows(damped_tables, 0.1, speed_max=60.0).blocks(
+            iter(blocks), 12_000, max_span_rows=4096))
+    assert np.array_equal(got[2]['lever_tip'], expected[0]['lever_tip'], equal_nan=True)
