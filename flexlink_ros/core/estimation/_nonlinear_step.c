@@ -263,7 +263,7 @@ typedef struct {
 
 /* Workspace of one step. */
 typedef struct {
-    double *tables, *mem, *acc, *angles, *speed, *axial, *output;
+    double *tables, *mem, *acc, *angles, *speed, *axial, *output, *raw;
     Factor factor;
 } Work;
 
@@ -295,53 +295,115 @@ static void hermite_at(const Model *md, double theta, Hermite *hm)
     hm->w11 = spacing * (t3 - t2);
 }
 
-static inline double hv(const Hermite *hm, Py_ssize_t col)
+/* count columns from col of one stage's Hermite cell into out (hv, vectorised). */
+static void interpolate_one(const Hermite *hm, Py_ssize_t col, Py_ssize_t count,
+                            double *restrict out)
 {
-    return hm->w00 * hm->p0[col] + hm->w10 * hm->d0[col] + hm->w01 * hm->p1[col]
-           + hm->w11 * hm->d1[col];
+    const double *restrict p0 = hm->p0 + col, *restrict p1 = hm->p1 + col,
+                           *restrict d0 = hm->d0 + col, *restrict d1 = hm->d1 + col;
+    const double w00 = hm->w00, w10 = hm->w10, w01 = hm->w01, w11 = hm->w11;
+    for (Py_ssize_t j = 0; j < count; j++)
+        out[j] = w00 * p0[j] + w10 * d0[j] + w01 * p1[j] + w11 * d1[j];
+}
+
+/*
+ * Two stages whose cells share their nodes (the same cell, or b's first node is a's second):
+ * one pass over the three or two nodes' rows. The rows are far larger than the caches, so
+ * reading them is the cost.
+ */
+static void interpolate_pair(const Hermite *a, const Hermite *b, Py_ssize_t col,
+                             Py_ssize_t count, double *restrict oa, double *restrict ob)
+{
+    const double *restrict p0 = a->p0 + col, *restrict p1 = a->p1 + col,
+                           *restrict d0 = a->d0 + col, *restrict d1 = a->d1 + col;
+    const double *restrict p2 = b->p1 + col, *restrict d2 = b->d1 + col;
+    if (b->p0 == a->p0) {
+        for (Py_ssize_t j = 0; j < count; j++) {
+            const double x0 = p0[j], y0 = d0[j], x1 = p1[j], y1 = d1[j];
+            oa[j] = a->w00 * x0 + a->w10 * y0 + a->w01 * x1 + a->w11 * y1;
+            ob[j] = b->w00 * x0 + b->w10 * y0 + b->w01 * x1 + b->w11 * y1;
+        }
+        return;
+    }
+    for (Py_ssize_t j = 0; j < count; j++) {
+        const double x1 = p1[j], y1 = d1[j];
+        oa[j] = a->w00 * p0[j] + a->w10 * d0[j] + a->w01 * x1 + a->w11 * y1;
+        ob[j] = b->w00 * x1 + b->w10 * y1 + b->w01 * p2[j] + b->w11 * d2[j];
+    }
+}
+
+/* count columns from col of the tables at every stage into out (stage i at out + i stride). */
+static void interpolate(const Hermite *hm, Py_ssize_t s, Py_ssize_t col, Py_ssize_t count,
+                        double *out, Py_ssize_t stride)
+{
+    if (s == 2 && (hm[1].p0 == hm[0].p0 || hm[1].p0 == hm[0].p1)) {
+        interpolate_pair(&hm[0], &hm[1], col, count, out, out + stride);
+        return;
+    }
+    for (Py_ssize_t i = 0; i < s; i++)
+        interpolate_one(&hm[i], col, count, out + i * stride);
 }
 
 /*
  * The linear part and the link tables at the stages into p (buf holds them), read from the
  * tables: C = w G + beta (K_el + K_bear), K = K_el + K_bear + beta w K1 + a K_a + w^2 K_w2
- * (+ K_G for the linear model), R = f_1 + a f_a + w^2 f_w2, as linear_part.
+ * (+ K_G for the linear model), R = f_1 + a f_a + w^2 f_w2, as linear_part. raw: room for
+ * three m x m and three m fields per stage.
  */
 static void stage_tables(const Model *md, const double *angles, double accel, Problem *p,
-                         double *buf)
+                         double *buf, double *raw)
 {
     const Py_ssize_t m = md->m, mm = m * m, e = md->e, s = md->s;
     double *mass = buf, *damping = mass + s * mm, *stiffness = damping + s * mm;
     double *load = stiffness + s * mm, *chord = load + s * m, *chord_rate = chord + s * e * m;
     double *shortening = chord_rate + s * e * m, *shortening_rate = shortening + s * e * mm;
+    double *r1 = raw, *r2 = r1 + s * mm, *r3 = r2 + s * mm, *v1 = r3 + s * mm, *v2 = v1 + s * m,
+           *v3 = v2 + s * m;
     Py_ssize_t o[FIELDS];
     for (Py_ssize_t k = 0; k < FIELDS; k++)
         o[k] = (Py_ssize_t)md->off[k];
+    Hermite hm[3] = {0};
+    for (Py_ssize_t i = 0; i < s; i++)
+        hermite_at(md, angles[i], &hm[i]);
+    interpolate(hm, s, o[0], mm, mass, mm);
+    interpolate(hm, s, o[4], mm, stiffness, mm);            /* K_el, then K */
+    interpolate(hm, s, o[1], mm, damping, mm);              /* G, then C */
+    interpolate(hm, s, o[5], mm, r1, mm);
+    interpolate(hm, s, o[2], mm, r2, mm);
+    interpolate(hm, s, o[3], mm, r3, mm);
     for (Py_ssize_t i = 0; i < s; i++) {
-        Hermite hm;
-        hermite_at(md, angles[i], &hm);
         const double w = p->speed[i];
         for (Py_ssize_t j = 0; j < mm; j++) {
-            const double elastic = hv(&hm, o[4] + j) + md->bearing[j];
-            mass[i * mm + j] = hv(&hm, o[0] + j);
-            damping[i * mm + j] = w * hv(&hm, o[1] + j) + md->beta * elastic;
-            double k = elastic + md->beta * w * hv(&hm, o[5] + j) + accel * hv(&hm, o[2] + j)
-                       + w * w * hv(&hm, o[3] + j);
-            if (!md->nonlinear)
-                k += hv(&hm, o[6] + j) + accel * hv(&hm, o[7] + j) + w * w * hv(&hm, o[8] + j);
-            stiffness[i * mm + j] = k;
-        }
-        for (Py_ssize_t j = 0; j < m; j++)
-            load[i * m + j] = hv(&hm, o[9] + j) + accel * hv(&hm, o[10] + j)
-                              + w * w * hv(&hm, o[11] + j);
-        for (Py_ssize_t j = 0; j < e * m; j++) {
-            chord[i * e * m + j] = hv(&hm, o[12] + j);
-            chord_rate[i * e * m + j] = hv(&hm, o[13] + j);
-        }
-        for (Py_ssize_t j = 0; j < e * mm; j++) {
-            shortening[i * e * mm + j] = hv(&hm, o[14] + j);
-            shortening_rate[i * e * mm + j] = hv(&hm, o[15] + j);
+            const Py_ssize_t ij = i * mm + j;
+            const double elastic = stiffness[ij] + md->bearing[j];
+            damping[ij] = w * damping[ij] + md->beta * elastic;
+            stiffness[ij] = elastic + md->beta * w * r1[ij] + accel * r2[ij] + w * w * r3[ij];
         }
     }
+    if (!md->nonlinear) {
+        interpolate(hm, s, o[6], mm, r1, mm);
+        interpolate(hm, s, o[7], mm, r2, mm);
+        interpolate(hm, s, o[8], mm, r3, mm);
+        for (Py_ssize_t i = 0; i < s; i++) {
+            const double w = p->speed[i];
+            for (Py_ssize_t j = 0; j < mm; j++) {
+                const Py_ssize_t ij = i * mm + j;
+                stiffness[ij] += r1[ij] + accel * r2[ij] + w * w * r3[ij];
+            }
+        }
+    }
+    interpolate(hm, s, o[9], m, v1, m);
+    interpolate(hm, s, o[10], m, v2, m);
+    interpolate(hm, s, o[11], m, v3, m);
+    for (Py_ssize_t i = 0; i < s; i++) {
+        const double w = p->speed[i];
+        for (Py_ssize_t j = 0; j < m; j++)
+            load[i * m + j] = v1[i * m + j] + accel * v2[i * m + j] + w * w * v3[i * m + j];
+    }
+    interpolate(hm, s, o[12], e * m, chord, e * m);
+    interpolate(hm, s, o[13], e * m, chord_rate, e * m);
+    interpolate(hm, s, o[14], e * mm, shortening, e * mm);
+    interpolate(hm, s, o[15], e * mm, shortening_rate, e * mm);
     p->mass = mass;
     p->damping = damping;
     p->stiffness = stiffness;
@@ -357,8 +419,7 @@ static void output_at(const Model *md, double theta, double *out)
 {
     Hermite hm;
     hermite_at(md, theta, &hm);
-    for (Py_ssize_t j = 0; j < md->outputs * md->m; j++)
-        out[j] = hv(&hm, (Py_ssize_t)md->off[16] + j);
+    interpolate_one(&hm, (Py_ssize_t)md->off[16], md->outputs * md->m, out);
 }
 
 /* After a converged step: the new state, its output operator and link slopes. */
@@ -445,7 +506,7 @@ static Py_ssize_t advance(const Model *md, State *st, Work *wk, double h, double
     p.h = h;
     p.beta = md->beta;
     p.nonlinear = md->nonlinear;
-    stage_tables(md, wk->angles, (w1 - w0) / h, &p, wk->tables);
+    stage_tables(md, wk->angles, (w1 - w0) / h, &p, wk->tables, wk->raw);
     predict(md, st, h, wk->acc);
     wk->factor.valid = 0;
     Py_ssize_t count = solve(&p, md->tolerance, md->iterations, wk->mem, &wk->factor);
@@ -581,7 +642,7 @@ static Py_ssize_t workspace_doubles(Py_ssize_t s, Py_ssize_t m, Py_ssize_t e, Py
 {
     const Py_ssize_t n = s * m, mm = m * m;
     return (3 * s * mm + s * m + 2 * s * e * m + 2 * s * e * mm) + (3 * n + 2 * s * mm + 4 * m)
-           + (n * n + n + s * m + 2 * s + e + outputs * m);
+           + (n * n + n + s * m + 2 * s + e + outputs * m) + 3 * s * (mm + m);
 }
 
 static PyObject *run_march(Model *md, Py_buffer *views, Py_ssize_t samples, int halvings,
@@ -592,12 +653,13 @@ static PyObject *run_march(Model *md, Py_buffer *views, Py_ssize_t samples, int 
     const Py_ssize_t mem = 3 * n + 2 * s * mm + 4 * m;
     double *buf = views[23].buf;
     /* the pivots, as Py_ssize_t in doubles' room (both 8 bytes here, checked at import) */
-    Work wk = {buf, buf + tables, buf + tables + mem + n * n + n, NULL, NULL, NULL, NULL,
+    Work wk = {buf, buf + tables, buf + tables + mem + n * n + n, NULL, NULL, NULL, NULL, NULL,
                {buf + tables + mem, (Py_ssize_t *)(buf + tables + mem + n * n), 0}};
     wk.angles = wk.acc + s * m;
     wk.speed = wk.angles + s;
     wk.axial = wk.speed + s;
     wk.output = wk.axial + e;
+    wk.raw = wk.output + md->outputs * m;
     State st = {views[12].buf, views[13].buf, views[14].buf, views[15].buf, views[16].buf,
                 views[17].buf, has_guess, 0};
     Py_BEGIN_ALLOW_THREADS
