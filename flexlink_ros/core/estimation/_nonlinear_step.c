@@ -34,7 +34,7 @@ static void lumped(const Problem *p, const double *disp, const double *vel, doub
                    double *fq, double *fv, double *axial_last, double *work)
 {
     const Py_ssize_t m = p->m, e = p->e;
-    double *gq = work, *grad = work + m, *dax = work + 2 * m, *sq = work + 3 * m;
+    double *ht = work, *grad = work + m, *dax = work + 2 * m, *sq = work + 3 * m;
     memset(force, 0, (size_t)(p->s * m) * sizeof(double));
     for (Py_ssize_t i = 0; i < p->s; i++) {
         const double w = p->speed[i], *x = disp + i * m, *xd = vel + i * m;
@@ -44,6 +44,7 @@ static void lumped(const Problem *p, const double *disp, const double *vel, doub
             const double *hr = p->shortening_rate + (i * e + l) * m * m;
             const double k = p->k[l];
             double ce = 0.0, cv = 0.0, crx = 0.0;
+#pragma omp simd reduction(+ : ce, cv, crx)
             for (Py_ssize_t a = 0; a < m; a++) {
                 ce += ch[a] * x[a];
                 cv += ch[a] * xd[a];
@@ -56,20 +57,34 @@ static void lumped(const Problem *p, const double *disp, const double *vel, doub
                 continue;
             }
             double half = 0.0, rate = 0.0, quad = 0.0;
+            if (fq != NULL)
+                memset(ht, 0, (size_t)m * sizeof(double));
             for (Py_ssize_t a = 0; a < m; a++) {
+                const double *restrict ga = g + a * m, *restrict ha = hr + a * m;
                 double sg = 0.0, sh = 0.0, sv = 0.0;
-                for (Py_ssize_t b = 0; b < m; b++) {
-                    sg += g[a * m + b] * x[b];
-                    sh += hr[a * m + b] * x[b];
-                    sv += g[a * m + b] * xd[b];
+                if (fq != NULL) {       /* and g xd, h^T x for the tangents */
+                    const double xa = x[a];
+#pragma omp simd reduction(+ : sg, sh, sv)
+                    for (Py_ssize_t b = 0; b < m; b++) {
+                        sg += ga[b] * x[b];
+                        sh += ha[b] * x[b];
+                        sv += ga[b] * xd[b];
+                        ht[b] += ha[b] * xa;
+                    }
+                } else {
+#pragma omp simd reduction(+ : sg, sh)
+                    for (Py_ssize_t b = 0; b < m; b++) {
+                        sg += ga[b] * x[b];
+                        sh += ha[b] * x[b];
+                    }
                 }
-                gq[a] = sg;
                 sq[a] = sh;
                 grad[a] = ch[a] + sg;
                 dax[a] = sv;
                 half += sg * x[a];
                 quad += x[a] * sh;
             }
+#pragma omp simd reduction(+ : rate)
             for (Py_ssize_t a = 0; a < m; a++)
                 rate += grad[a] * xd[a];
             rate += w * (crx + quad);
@@ -81,13 +96,9 @@ static void lumped(const Problem *p, const double *disp, const double *vel, doub
                 f[a] += n * grad[a] - lin * ch[a];
             if (fq == NULL)
                 continue;
-            /* (h + h^T) x: sq holds h x; add h^T x */
-            for (Py_ssize_t a = 0; a < m; a++) {
-                double t = 0.0;
-                for (Py_ssize_t b = 0; b < m; b++)
-                    t += hr[b * m + a] * x[b];
-                dax[a] = k * (grad[a] + p->beta * (dax[a] + w * (cr[a] + sq[a] + t)));
-            }
+            /* (h + h^T) x: sq holds h x, ht h^T x */
+            for (Py_ssize_t a = 0; a < m; a++)
+                dax[a] = k * (grad[a] + p->beta * (dax[a] + w * (cr[a] + sq[a] + ht[a])));
             double *kq = fq + i * m * m, *kv = fv + i * m * m;
             const double bw = p->beta * w, bk = p->beta * k;
             for (Py_ssize_t a = 0; a < m; a++) {
@@ -99,7 +110,6 @@ static void lumped(const Problem *p, const double *disp, const double *vel, doub
             }
         }
     }
-    (void)gq;
 }
 
 /* LU with partial pivoting in place (n x n, row-major); 0 if singular. */
@@ -120,11 +130,21 @@ static int lu_factor(double *a, Py_ssize_t n, Py_ssize_t *piv)
                 a[best * n + j] = t;
             }
         const double inv = 1.0 / a[col * n + col];
-        for (Py_ssize_t r = col + 1; r < n; r++) {
-            const double f = (a[r * n + col] *= inv);
-            if (f != 0.0)
-                for (Py_ssize_t j = col + 1; j < n; j++)
-                    a[r * n + j] -= f * a[col * n + j];
+        const double *restrict pivot = a + col * n;
+        Py_ssize_t r = col + 1;
+        for (; r + 1 < n; r += 2) {     /* two rows per pass: the pivot row is read once */
+            double *restrict r0 = a + r * n, *restrict r1 = r0 + n;
+            const double f0 = (r0[col] *= inv), f1 = (r1[col] *= inv);
+            for (Py_ssize_t j = col + 1; j < n; j++) {
+                r0[j] -= f0 * pivot[j];
+                r1[j] -= f1 * pivot[j];
+            }
+        }
+        for (; r < n; r++) {
+            double *restrict r0 = a + r * n;
+            const double f0 = (r0[col] *= inv);
+            for (Py_ssize_t j = col + 1; j < n; j++)
+                r0[j] -= f0 * pivot[j];
         }
     }
     return 1;
@@ -133,16 +153,19 @@ static int lu_factor(double *a, Py_ssize_t n, Py_ssize_t *piv)
 static void lu_solve(const double *a, Py_ssize_t n, const Py_ssize_t *piv, double *b)
 {
     for (Py_ssize_t i = 0; i < n; i++) {
-        double t = b[piv[i]];
+        double t = b[piv[i]], sum = 0.0;
         b[piv[i]] = b[i];
-        b[i] = t;
+#pragma omp simd reduction(+ : sum)
         for (Py_ssize_t j = 0; j < i; j++)
-            b[i] -= a[i * n + j] * b[j];
+            sum += a[i * n + j] * b[j];
+        b[i] = t - sum;
     }
     for (Py_ssize_t i = n - 1; i >= 0; i--) {
+        double sum = 0.0;
+#pragma omp simd reduction(+ : sum)
         for (Py_ssize_t j = i + 1; j < n; j++)
-            b[i] -= a[i * n + j] * b[j];
-        b[i] /= a[i * n + i];
+            sum += a[i * n + j] * b[j];
+        b[i] = (b[i] - sum) / a[i * n + i];
     }
 }
 
@@ -170,11 +193,12 @@ static void residual(const Problem *p, double *disp, double *vel, double *res, d
         const double *mm = p->mass + i * m * m, *cc = p->damping + i * m * m,
                      *kk = p->stiffness + i * m * m;
         for (Py_ssize_t a = 0; a < m; a++) {
-            double r = res[i * m + a] - p->load[i * m + a];
+            double r = 0.0;
+#pragma omp simd reduction(+ : r)
             for (Py_ssize_t b = 0; b < m; b++)
                 r += mm[a * m + b] * p->acc[i * m + b] + cc[a * m + b] * vel[i * m + b]
                      + kk[a * m + b] * disp[i * m + b];
-            res[i * m + a] = r;
+            res[i * m + a] = r + (res[i * m + a] - p->load[i * m + a]);
         }
         if (jac == NULL)
             continue;
