@@ -19,6 +19,13 @@
 
 #include "_doubles.h"
 
+/* The hot loops also built for AVX2, chosen at load time where the CPU has it (GCC, x86-64). */
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
+#define VECTOR_CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define VECTOR_CLONES
+#endif
+
 
 typedef struct {
     const double *mass, *damping, *stiffness, *load, *chord, *chord_rate, *shortening,
@@ -30,7 +37,7 @@ typedef struct {
 } Problem;
 
 /* Lumped force change (force: s m) and, if fq, its tangents (fq, fv: s m m, added to). */
-static void lumped(const Problem *p, const double *disp, const double *vel, double *force,
+VECTOR_CLONES static void lumped(const Problem *p, const double *disp, const double *vel, double *force,
                    double *fq, double *fv, double *axial_last, double *work)
 {
     const Py_ssize_t m = p->m, e = p->e;
@@ -113,7 +120,7 @@ static void lumped(const Problem *p, const double *disp, const double *vel, doub
 }
 
 /* LU with partial pivoting in place (n x n, row-major); 0 if singular. */
-static int lu_factor(double *a, Py_ssize_t n, Py_ssize_t *piv)
+VECTOR_CLONES static int lu_factor(double *a, Py_ssize_t n, Py_ssize_t *piv)
 {
     for (Py_ssize_t col = 0; col < n; col++) {
         Py_ssize_t best = col;
@@ -150,7 +157,7 @@ static int lu_factor(double *a, Py_ssize_t n, Py_ssize_t *piv)
     return 1;
 }
 
-static void lu_solve(const double *a, Py_ssize_t n, const Py_ssize_t *piv, double *b)
+VECTOR_CLONES static void lu_solve(const double *a, Py_ssize_t n, const Py_ssize_t *piv, double *b)
 {
     for (Py_ssize_t i = 0; i < n; i++) {
         double t = b[piv[i]], sum = 0.0;
@@ -170,7 +177,7 @@ static void lu_solve(const double *a, Py_ssize_t n, const Py_ssize_t *piv, doubl
 }
 
 /* Stage states, the residual (res: s m) and, if jac, the step matrix (s m x s m). */
-static void residual(const Problem *p, double *disp, double *vel, double *res, double *jac,
+VECTOR_CLONES static void residual(const Problem *p, double *disp, double *vel, double *res, double *jac,
                      double *fq, double *fv, double *work)
 {
     const Py_ssize_t s = p->s, m = p->m, n = s * m;
@@ -320,7 +327,7 @@ static void hermite_at(const Model *md, double theta, Hermite *hm)
 }
 
 /* count columns from col of one stage's Hermite cell into out (hv, vectorised). */
-static void interpolate_one(const Hermite *hm, Py_ssize_t col, Py_ssize_t count,
+VECTOR_CLONES static void interpolate_one(const Hermite *hm, Py_ssize_t col, Py_ssize_t count,
                             double *restrict out)
 {
     const double *restrict p0 = hm->p0 + col, *restrict p1 = hm->p1 + col,
@@ -335,7 +342,7 @@ static void interpolate_one(const Hermite *hm, Py_ssize_t col, Py_ssize_t count,
  * one pass over the three or two nodes' rows. The rows are far larger than the caches, so
  * reading them is the cost.
  */
-static void interpolate_pair(const Hermite *a, const Hermite *b, Py_ssize_t col,
+VECTOR_CLONES static void interpolate_pair(const Hermite *a, const Hermite *b, Py_ssize_t col,
                              Py_ssize_t count, double *restrict oa, double *restrict ob)
 {
     const double *restrict p0 = a->p0 + col, *restrict p1 = a->p1 + col,
