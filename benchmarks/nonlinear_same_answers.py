@@ -66,7 +66,7 @@ def compare(paths, iterations, limit):
         same = bool(np.array_equal(mine[f'{index}_converged'], theirs[f'{index}_converged']))
         agree &= same
         print(f"{label:22s}: largest difference / range: {', '.join(parts)}; converged "
-              f"{'same' if same else 'DIFFERENT'}; Newton iterations "
+              f'{"same" if same else "DIFFERENT"}; Newton iterations '
               f"{iterations[0][str(index)]} here, {iterations[1][str(index)]} reference")
     return agree
 

@@ -52,9 +52,10 @@ def test_reading_the_tables_keeps_no_copy_of_them(tables):
     # the read is the Hermite cubic through the two nodes' values and slopes
     spacing = 2 * np.pi / tables.grid_size
     t = 0.1 / spacing
-    first = tables.values[0] * (2 * t ** 3 - 3 * t ** 2 + 1) \
-        + spacing * tables.slopes[0] * (t ** 3 - 2 * t ** 2 + t) \
-        + tables.values[1] * (3 * t ** 2 - 2 * t ** 3) + spacing * tables.slopes[1] * (t ** 3 - t ** 2)
+    first = (tables.values[0] * (2 * t ** 3 - 3 * t ** 2 + 1)
+             + spacing * tables.slopes[0] * (t ** 3 - 2 * t ** 2 + t)
+             + tables.values[1] * (3 * t ** 2 - 2 * t ** 3)
+             + spacing * tables.slopes[1] * (t ** 3 - t ** 2))
     start, shape = tables.layout()['mass']
     np.testing.assert_allclose(read['mass'][0].ravel(), first[start:start + shape[0] * shape[1]],
                                rtol=1e-12, atol=1e-12 * np.abs(first).max())
