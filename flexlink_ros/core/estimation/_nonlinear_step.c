@@ -37,8 +37,9 @@ typedef struct {
 } Problem;
 
 /* Lumped force change (force: s m) and, if fq, its tangents (fq, fv: s m m, added to). */
-VECTOR_CLONES static void lumped(const Problem *p, const double *disp, const double *vel, double *force,
-                   double *fq, double *fv, double *axial_last, double *work)
+VECTOR_CLONES static void lumped(const Problem *p, const double *disp, const double *vel,
+                                 double *force, double *fq, double *fv, double *axial_last,
+                                 double *work)
 {
     const Py_ssize_t m = p->m, e = p->e;
     double *ht = work, *grad = work + m, *dax = work + 2 * m, *sq = work + 3 * m;
@@ -157,28 +158,43 @@ VECTOR_CLONES static int lu_factor(double *a, Py_ssize_t n, Py_ssize_t *piv)
     return 1;
 }
 
-VECTOR_CLONES static void lu_solve(const double *a, Py_ssize_t n, const Py_ssize_t *piv, double *b)
+/* The LU factors transposed (lut: n x n), so that both substitutions run along rows. */
+static void transpose(const double *a, Py_ssize_t n, double *lut)
+{
+    for (Py_ssize_t i = 0; i < n; i++)
+        for (Py_ssize_t j = 0; j < n; j++)
+            lut[j * n + i] = a[i * n + j];
+}
+
+/*
+ * Solve with the LU factors (lut: transposed, piv: lu_factor's row swaps) in place. The swaps
+ * touch only rows not yet reached, so they are applied first; each solved value is then
+ * subtracted from the rows below (above) it, along a row of lut.
+ */
+VECTOR_CLONES static void lu_solve(const double *lut, Py_ssize_t n, const Py_ssize_t *piv,
+                                   double *b)
 {
     for (Py_ssize_t i = 0; i < n; i++) {
-        double t = b[piv[i]], sum = 0.0;
+        const double t = b[piv[i]];
         b[piv[i]] = b[i];
-#pragma omp simd reduction(+ : sum)
-        for (Py_ssize_t j = 0; j < i; j++)
-            sum += a[i * n + j] * b[j];
-        b[i] = t - sum;
+        b[i] = t;
     }
-    for (Py_ssize_t i = n - 1; i >= 0; i--) {
-        double sum = 0.0;
-#pragma omp simd reduction(+ : sum)
-        for (Py_ssize_t j = i + 1; j < n; j++)
-            sum += a[i * n + j] * b[j];
-        b[i] = (b[i] - sum) / a[i * n + i];
+    for (Py_ssize_t j = 0; j < n; j++) {
+        const double bj = b[j], *restrict column = lut + j * n;
+        for (Py_ssize_t i = j + 1; i < n; i++)
+            b[i] -= column[i] * bj;
+    }
+    for (Py_ssize_t j = n - 1; j >= 0; j--) {
+        const double *restrict column = lut + j * n;
+        const double bj = (b[j] /= column[j]);
+        for (Py_ssize_t i = 0; i < j; i++)
+            b[i] -= column[i] * bj;
     }
 }
 
 /* Stage states, the residual (res: s m) and, if jac, the step matrix (s m x s m). */
-VECTOR_CLONES static void residual(const Problem *p, double *disp, double *vel, double *res, double *jac,
-                     double *fq, double *fv, double *work)
+VECTOR_CLONES static void residual(const Problem *p, double *disp, double *vel, double *res,
+                                   double *jac, double *fq, double *fv, double *work)
 {
     const Py_ssize_t s = p->s, m = p->m, n = s * m;
     for (Py_ssize_t i = 0; i < s; i++)
@@ -224,7 +240,7 @@ VECTOR_CLONES static void residual(const Problem *p, double *disp, double *vel, 
 
 /* The step matrix's LU factors (valid: formed in this step). */
 typedef struct {
-    double *lu;
+    double *lu, *lut;
     Py_ssize_t *piv;
     int valid;
 } Factor;
@@ -247,11 +263,12 @@ static Py_ssize_t solve(Problem *p, double tolerance, Py_ssize_t iterations, dou
         if (form) {
             if (!lu_factor(factor->lu, n, factor->piv))
                 return 0;
+            transpose(factor->lu, n, factor->lut);
             factor->valid = 1;
         }
         for (Py_ssize_t i = 0; i < n; i++)
             res[i] = -res[i];
-        lu_solve(factor->lu, n, factor->piv, res);
+        lu_solve(factor->lut, n, factor->piv, res);
         double size = 0.0, scale = 0.0;
         for (Py_ssize_t i = 0; i < n; i++) {
             p->acc[i] += res[i];
@@ -673,7 +690,7 @@ static Py_ssize_t workspace_doubles(Py_ssize_t s, Py_ssize_t m, Py_ssize_t e, Py
 {
     const Py_ssize_t n = s * m, mm = m * m;
     return (3 * s * mm + s * m + 2 * s * e * m + 2 * s * e * mm) + (3 * n + 2 * s * mm + 4 * m)
-           + (n * n + n + s * m + 2 * s + e + outputs * m) + 3 * s * (mm + m);
+           + (n * n + n + s * m + 2 * s + e + outputs * m) + 3 * s * (mm + m) + n * n;
 }
 
 static PyObject *run_march(Model *md, Py_buffer *views, Py_ssize_t samples, int halvings,
@@ -685,12 +702,13 @@ static PyObject *run_march(Model *md, Py_buffer *views, Py_ssize_t samples, int 
     double *buf = views[23].buf;
     /* the pivots, as Py_ssize_t in doubles' room (both 8 bytes here, checked at import) */
     Work wk = {buf, buf + tables, buf + tables + mem + n * n + n, NULL, NULL, NULL, NULL, NULL,
-               {buf + tables + mem, (Py_ssize_t *)(buf + tables + mem + n * n), 0}};
+               {buf + tables + mem, NULL, (Py_ssize_t *)(buf + tables + mem + n * n), 0}};
     wk.angles = wk.acc + s * m;
     wk.speed = wk.angles + s;
     wk.axial = wk.speed + s;
     wk.output = wk.axial + e;
     wk.raw = wk.output + md->outputs * m;
+    wk.factor.lut = wk.raw + 3 * s * (mm + m);
     State st = {views[12].buf, views[13].buf, views[14].buf, views[15].buf, views[16].buf,
                 views[17].buf, has_guess, 0};
     Py_BEGIN_ALLOW_THREADS
