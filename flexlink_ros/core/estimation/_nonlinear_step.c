@@ -140,12 +140,17 @@ VECTOR_CLONES static int lu_factor(double *a, Py_ssize_t n, Py_ssize_t *piv)
         const double inv = 1.0 / a[col * n + col];
         const double *restrict pivot = a + col * n;
         Py_ssize_t r = col + 1;
-        for (; r + 1 < n; r += 2) {     /* two rows per pass: the pivot row is read once */
-            double *restrict r0 = a + r * n, *restrict r1 = r0 + n;
-            const double f0 = (r0[col] *= inv), f1 = (r1[col] *= inv);
+        for (; r + 3 < n; r += 4) {     /* four rows per pass: the pivot row is read once */
+            double *restrict r0 = a + r * n, *restrict r1 = r0 + n, *restrict r2 = r1 + n,
+                             *restrict r3 = r2 + n;
+            const double f0 = (r0[col] *= inv), f1 = (r1[col] *= inv), f2 = (r2[col] *= inv),
+                         f3 = (r3[col] *= inv);
             for (Py_ssize_t j = col + 1; j < n; j++) {
-                r0[j] -= f0 * pivot[j];
-                r1[j] -= f1 * pivot[j];
+                const double pj = pivot[j];
+                r0[j] -= f0 * pj;
+                r1[j] -= f1 * pj;
+                r2[j] -= f2 * pj;
+                r3[j] -= f3 * pj;
             }
         }
         for (; r < n; r++) {
