@@ -277,8 +277,10 @@ static Py_ssize_t solve(Problem *p, double tolerance, Py_ssize_t iterations, dou
         double size = 0.0, scale = 0.0;
         for (Py_ssize_t i = 0; i < n; i++) {
             p->acc[i] += res[i];
-            size = fmax(size, fabs(res[i]));
-            scale = fmax(scale, fabs(p->acc[i]));
+            /* as fmax (a NaN is passed over: the caller checks acc), without its call */
+            const double du = fabs(res[i]), ua = fabs(p->acc[i]);
+            size = du > size ? du : size;
+            scale = ua > scale ? ua : scale;
         }
         if (!isfinite(size))
             return 0;
