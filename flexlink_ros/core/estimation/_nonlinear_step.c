@@ -19,8 +19,9 @@
 
 #include "_doubles.h"
 
-/* The hot loops also built for AVX2, chosen at load time where the CPU has it (GCC, x86-64). */
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
+/* The hot loops also built for AVX2, chosen at load time where the CPU has it (GCC, x86-64,
+ * glibc: the choice is an ifunc). */
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__GLIBC__)
 #define VECTOR_CLONES __attribute__((target_clones("avx2", "default")))
 #else
 #define VECTOR_CLONES
