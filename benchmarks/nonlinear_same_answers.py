@@ -65,9 +65,10 @@ def compare(paths, iterations, limit):
                 agree &= bool(relative.max() <= limit)
         same = bool(np.array_equal(mine[f'{index}_converged'], theirs[f'{index}_converged']))
         agree &= same
-        print(f"{label:22s}: largest difference / range: {', '.join(parts)}; converged "
-              f'{"same" if same else "DIFFERENT"}; Newton iterations '
-              f"{iterations[0][str(index)]} here, {iterations[1][str(index)]} reference")
+        verdict, joined = ('same' if same else 'DIFFERENT'), ', '.join(parts)
+        here, there = iterations[0][str(index)], iterations[1][str(index)]
+        print(f'{label:22s}: largest difference / range: {joined}; converged {verdict}; '
+              f'Newton iterations {here} here, {there} reference')
     return agree
 
 

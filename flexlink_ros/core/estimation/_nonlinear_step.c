@@ -396,6 +396,10 @@ static void interpolate(const Hermite *hm, Py_ssize_t s, Py_ssize_t col, Py_ssiz
         interpolate_pair(&hm[0], &hm[1], col, count, out, out + stride);
         return;
     }
+    if (s == 2 && hm[0].p0 == hm[1].p1) {      /* the crank turning backwards */
+        interpolate_pair(&hm[1], &hm[0], col, count, out + stride, out);
+        return;
+    }
     for (Py_ssize_t i = 0; i < s; i++)
         interpolate_one(&hm[i], col, count, out + i * stride);
 }
