@@ -5,7 +5,8 @@
  *
  * march(...): see its notes below. One call steps one sample (the streaming update) or many
  * (offline): per step the tables are read at the stage angles by cubic Hermite interpolation
- * (only the fields the step uses), the linear part is formed from them, and the stage
+ * (only the fields the step uses; both stages in one pass over the rows of the grid nodes
+ * they share), the linear part is formed from them, and the stage
  * accelerations are solved by simplified Newton (the Jacobian formed at the step's start and
  * again when an iteration contracts by less than half); a step that fails is retried as two
  * halves. No Python object is touched between the samples.
