@@ -76,11 +76,11 @@ def nonlinear_validity(link_slope):
     """
     # plain floats: this runs per sample of the node, and numpy's reductions cost more than
     # the arithmetic on a few links
-    slope = (link_slope.ravel().tolist() if isinstance(link_slope, np.ndarray)
-             else [float(value) for value in link_slope])
-    if any(math.isnan(value) for value in slope):
+    slope = link_slope.ravel().tolist() if isinstance(link_slope, np.ndarray) else link_slope
+    magnitudes = [abs(float(value)) for value in slope]
+    if math.isnan(sum(magnitudes)):      # the sum of magnitudes is NaN only with a NaN
         return math.nan
-    largest = max(map(abs, slope), default=0.0)
+    largest = max(magnitudes, default=0.0)
     return VALIDITY_THRESHOLD * (largest / VON_KARMAN_SLOPE) ** 2
 
 
