@@ -21,8 +21,8 @@ exec), the medians and the ratio of the medians. Timing is
 printed, never asserted: the machine is shared. ``--same-output`` also checks that the two
 builds wrote the same messages (topic, log and publish time, sequence, bytes). The replay is
 the linear model's (``--nonlinear off``), or with ``--nonlinear`` the reduced nonlinear
-model's (``--nonlinear on``; its deflections agree between builds to rounding, not to the
-byte, where one steps runs of samples at once).
+model's (``--nonlinear on``, and ``--threads 2`` for a build that has it; its deflections
+agree between builds to rounding, not to the byte, where one steps runs of samples at once).
 """
 
 import argparse
@@ -119,9 +119,16 @@ def run_measured(python, root, args):
 
 def replay_once(python, root, bag, out, extra=()):
     """Replay in a fresh process from ``root``: wall time [s], CPU time [s], peak RSS [MB]."""
+    threads = ['--threads', '2'] if extra and '--threads' in replay_help(python, root) else []
     return run_measured(python, root, ['replay', str(pathlib.Path(bag).resolve()), '--out',
                                        str(out), '--mechanism', 'cho1992',
-                                       *linear_flag(python, root), *extra])
+                                       *linear_flag(python, root), *extra, *threads])
+
+
+def replay_help(python, root):
+    """Return the build's ``replay --help`` text."""
+    return subprocess.run([python, '-m', 'flexlink_ros.cli.main', 'replay', '--help'],
+                          capture_output=True, text=True, cwd=root, timeout=120).stdout
 
 
 def linear_flag(python, root):
@@ -159,7 +166,7 @@ def compare(args):
     if args.reference_python:
         builds.append(('reference', args.reference_python, args.reference_root))
     work = pathlib.Path(tempfile.mkdtemp(prefix='replay_bench_'))
-    # --nonlinear given last wins over the linear_flag before it.
+    # --nonlinear given last wins over the linear_flag before it; --threads where a build has it.
     extra = ('--nonlinear', 'on') if args.nonlinear else ()
     times = {name: [] for name, _, _ in builds}
     cpu = {name: [] for name, _, _ in builds}

@@ -43,7 +43,7 @@ from .model_args import add_chart_argument, add_estimator_arguments, criterion_t
     load_model
 from .progress import Progress
 from .replay_model import defer_model_defaults, MissingModel, replay_model
-from .replay_nonlinear import decide, model_lines, nonlinear_choice, nonlinear_rows
+from .replay_nonlinear import decide, MAX_THREADS, model_lines, nonlinear_choice, nonlinear_rows
 from .replay_offline import CHUNK_SAMPLES, estimate_and_write, MAX_CHUNK_SAMPLES, open_input
 from ..core.estimation.gate import DEFAULT_RESET_GAP_S
 from ..core.estimation.marker_scale import model_exaggeration
@@ -226,6 +226,8 @@ def _check_arguments(args):
         raise ValueError('`--wait-for-subscribers` and `--wait-timeout` must be >= 0')
     if args.markers_every_n < 0:
         raise ValueError(f'`--markers-every-n` must be >= 0, got {args.markers_every_n}')
+    if not 1 <= args.threads <= MAX_THREADS:
+        raise ValueError(f'`--threads` must be in 1..{MAX_THREADS}, got {args.threads}')
     if not 1 <= args.chunk_samples <= MAX_CHUNK_SAMPLES:
         raise ValueError(f'`--chunk-samples` must be in 1..{MAX_CHUNK_SAMPLES}, '
                          f'got {args.chunk_samples}')
@@ -331,6 +333,10 @@ def register(subparsers):
     parser.add_argument('--chunk-samples', type=int, default=CHUNK_SAMPLES, metavar='N',
                         help='input messages read and estimated at a time: memory grows with '
                         f'it, not with the recording (default {CHUNK_SAMPLES})')
+    parser.add_argument('--threads', type=int, default=1, metavar='N',
+                        help='with the nonlinear model, follow a long recording in N spans at '
+                        'once, each from a warm-up (the same deflections to rounding; memory '
+                        f'grows with N, about 32 MB each; 1..{MAX_THREADS}, default 1)')
     parser.add_argument('--no-warm-start', action='store_true',
                         help='start from the static deflection, not the periodic state')
     parser.add_argument('--publish', action='store_true',

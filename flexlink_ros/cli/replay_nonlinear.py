@@ -19,11 +19,12 @@ again, at its quasi-static deflection, where the linear estimator starts a new s
 criteria, the quality topic (the linear model's error and validity indicators) and the markers
 (the linear model's modal shape) are the linear estimate's.
 
-The nonlinear step costs 10-20 times the linear one, so a recording long enough is cut into
-spans followed in two threads at once (:class:`SpanFollower`; the compiled step releases the
-GIL), each from a warm-up before it as long as the model's slowest decay needs to fade a start
-to 1e-12 (:mod:`core.estimation.follow_spans`: about 8 s for the paper's linkage): the same
-deflections and counts as one follower, to rounding, in bounded memory (a few spans of rows).
+The nonlinear step costs 10-20 times the linear one: with ``--threads N`` a recording long
+enough is cut into spans followed in N threads at once (:class:`SpanFollower`; the compiled
+step releases the GIL), each from a warm-up before it as long as the model's slowest decay
+needs to fade a start to 1e-12 (:mod:`core.estimation.follow_spans`: about 8 s for the paper's
+linkage): the same deflections and counts as one follower, to rounding, for memory that grows
+with N but not with the recording (N + 1 spans of up to 32 768 rows, about 1 KB each).
 """
 
 import collections
@@ -39,10 +40,10 @@ from ..core.estimation.nonlinear_stream import VON_KARMAN_SLOPE
 from ..core.reduction.nonlinear_model import nonlinear_model_for
 from ..core.validity import is_valid
 
-# Spans followed at once (threads: the compiled step releases the GIL), the fewest rows worth a
-# span, the most (what a span holds), and the least span length in warm-ups (each span's
-# warm-up is stepped twice: a span of 2 warm-ups keeps two thirds of the work useful).
-SPAN_WORKERS = 2
+# The most threads `--threads` accepts (each holds a span), the fewest rows worth a span, the
+# most (what a span holds: about 1 KB a row, input and estimate), and the least span length in
+# warm-ups (each span's warm-up is stepped twice: 2 warm-ups keep two thirds of the work useful).
+MAX_THREADS = 16
 MIN_SPAN_ROWS = 4096
 MAX_SPAN_ROWS = 1 << 15
 SPANS_PER_WARM_UP = 2.0
@@ -96,9 +97,9 @@ class NonlinearRows:
 
     """
 
-    def __init__(self, tables, reset_gap_s, damping='', speed_max=0.0):
+    def __init__(self, tables, reset_gap_s, damping='', speed_max=0.0, threads=1):
         self.tables, self.damping = tables, damping
-        self.reset_gap_s, self.speed_max = reset_gap_s, speed_max
+        self.reset_gap_s, self.speed_max, self.threads = reset_gap_s, speed_max, threads
         self.follower = NonlinearFollower(tables, reset_gap_s)
         self.low = np.full(tables.outputs, np.inf)
         self.high = np.full(tables.outputs, -np.inf)
@@ -120,21 +121,22 @@ class NonlinearRows:
         """
         Yield the (first, samples, estimate) of ``source`` with the nonlinear deflections.
 
-        A recording of ``rows`` rows long enough for :data:`SPAN_WORKERS` spans (of at most
-        ``max_span_rows``) of at least :data:`SPANS_PER_WARM_UP` warm-ups
+        With ``threads`` > 1, a recording of ``rows`` rows long enough for that many spans (of
+        at most ``max_span_rows``) of at least :data:`SPANS_PER_WARM_UP` warm-ups
         (:func:`core.estimation.follow_spans.warm_up_s`) is followed a span per thread
-        (:class:`SpanFollower`), else block by block here.
+        (:class:`SpanFollower`: up to ``threads`` + 1 spans held), else block by block here.
         """
         source = iter(source)
         head = next(source, None)
         if head is None:
             return
-        span_rows = min(max_span_rows, -(-rows // SPAN_WORKERS))
+        span_rows = min(max_span_rows, -(-rows // self.threads))
         stamps = head[1]['stamps_ns']
         lasted_ns = int(stamps[-1]) - int(stamps[0]) if len(stamps) else 0
         rate = (len(stamps) - 1) / (lasted_ns * 1e-9) if lasted_ns > 0 else 0.0   # samples/s
         warm_up = (warm_up_s(self.tables, self.speed_max, self.reset_gap_s)
-                   if span_rows >= MIN_SPAN_ROWS and rate > 0 else math.inf)
+                   if self.threads > 1 and span_rows >= MIN_SPAN_ROWS and rate > 0
+                   else math.inf)
         chained = _chain(head, source)
         if not span_rows >= SPANS_PER_WARM_UP * warm_up * rate:
             for first, samples, estimate in chained:
@@ -157,7 +159,7 @@ class SpanFollower:
     Follow spans of blocks in parallel threads, each from a warm-up before it (bounded memory).
 
     A span is ``span_rows`` rows of whole blocks; its follower (:func:`follow_span`) starts
-    ``warm_up`` seconds of accepted samples before it. At most :data:`SPAN_WORKERS` spans are
+    ``warm_up`` seconds of accepted samples before it. At most ``rows.threads`` spans are
     followed at once and one more read: what is held is a few spans' rows, however long the
     recording. Counts and extremes go to ``rows`` (the :class:`NonlinearRows`).
     """
@@ -215,7 +217,8 @@ class SpanFollower:
         """Yield the blocks of ``source`` in order, followed a span per thread."""
         running = collections.deque()
         span, size = [], 0
-        with concurrent.futures.ThreadPoolExecutor(SPAN_WORKERS) as pool:
+        threads = self.rows.threads
+        with concurrent.futures.ThreadPoolExecutor(threads) as pool:
             try:
                 for block in source:
                     span.append(block)
@@ -224,7 +227,7 @@ class SpanFollower:
                         continue
                     running.append(self._submit(pool, span))
                     span, size = [], 0
-                    if len(running) == SPAN_WORKERS:
+                    if len(running) == threads:
                         yield from self._finish(*running.popleft())
                 if span:
                     running.append(self._submit(pool, span))
@@ -239,7 +242,8 @@ def nonlinear_rows(args, mechanism, options, reset_gap_s):
     """Return the :class:`NonlinearRows` of the replay's mechanism and options."""
     tables, damping = nonlinear_model_for(mechanism, options, args.cache_dir,
                                           not args.no_cache)
-    return NonlinearRows(tables, reset_gap_s, damping, options.speed_max)
+    return NonlinearRows(tables, reset_gap_s, damping, options.speed_max,
+                         getattr(args, 'threads', 1))
 
 
 def model_lines(result):

@@ -201,7 +201,7 @@ def test_spans_followed_in_threads_give_the_block_by_block_follower(damped_table
     reference = NonlinearRows(damped_tables, 0.1, speed_max=60.0)
     expected = [(first, reference(samples, estimate)) for first, samples, estimate
                 in _linear_blocks(count, 1000, gaps, outliers)]
-    spans = NonlinearRows(damped_tables, 0.1, speed_max=60.0)
+    spans = NonlinearRows(damped_tables, 0.1, speed_max=60.0, threads=2)
     got = list(spans.blocks(_linear_blocks(count, 1000, gaps, outliers), count,
                             max_span_rows=4096))
     assert [first for first, _, _ in got] == [first for first, _ in expected]
@@ -230,9 +230,9 @@ def test_a_warm_up_reaches_back_over_spans_shorter_than_it(damped_tables):
     reference = NonlinearRows(damped_tables, 0.1, speed_max=60.0)
     expected = np.concatenate([reference(samples, estimate)['lever_tip'] for _, samples, estimate
                                in _linear_blocks(count, *args)])
-    got = np.concatenate([block['lever_tip'] for _, _, block in NonlinearRows(
-        damped_tables, 0.1, speed_max=60.0).blocks(_linear_blocks(count, *args), count,
-                                                   max_span_rows=4096)])
+    spans = NonlinearRows(damped_tables, 0.1, speed_max=60.0, threads=2)
+    got = np.concatenate([block['lever_tip'] for _, _, block in spans.blocks(
+        _linear_blocks(count, *args), count, max_span_rows=4096)])
     span = np.ptp(expected, axis=0)
     assert np.max(np.abs(got - expected) / span) <= 1e-11
 
@@ -241,7 +241,7 @@ def test_a_recording_too_short_for_two_spans_is_followed_block_by_block(damped_t
     blocks = list(_linear_blocks(1500, 500))
     reference = NonlinearRows(damped_tables, 0.1, speed_max=60.0)
     expected = [reference(samples, estimate)['lever_tip'] for _, samples, estimate in blocks]
-    got = NonlinearRows(damped_tables, 0.1, speed_max=60.0).blocks(iter(blocks), 1500)
+    got = NonlinearRows(damped_tables, 0.1, speed_max=60.0, threads=2).blocks(iter(blocks), 1500)
     assert all(np.array_equal(mine['lever_tip'], theirs)
                for (_, _, mine), theirs in zip(got, expected))
 
@@ -253,6 +253,25 @@ def test_a_first_block_of_one_repeated_stamp_is_followed_block_by_block(damped_t
     expected = [NonlinearRows(damped_tables, 0.1, speed_max=60.0)(blocks[0][1], blocks[0][2])]
     with warnings.catch_warnings():
         warnings.simplefilter('error')
-        got = next(NonlinearRows(damped_tables, 0.1, speed_max=60.0).blocks(
+        got = next(NonlinearRows(damped_tables, 0.1, speed_max=60.0, threads=2).blocks(
             iter(blocks), 12_000, max_span_rows=4096))
     assert np.array_equal(got[2]['lever_tip'], expected[0]['lever_tip'], equal_nan=True)
+
+
+def test_threads_is_taken_and_bounded(tmp_path):
+    """`--threads 2` on a recording too short for spans writes what one thread writes."""
+    bag = tmp_path / 'bag'
+    write_bag(bag, 391.0, seconds=0.6)
+    cache = ['--cache-dir', str(tmp_path / 'cache')]
+    one = replay(str(bag), '--out', str(tmp_path / 'one'), '--nonlinear', 'on', *SMALL_MODEL,
+                 *cache)
+    two = replay(str(bag), '--out', str(tmp_path / 'two'), '--nonlinear', 'on', '--threads',
+                 '2', *SMALL_MODEL, *cache)
+    assert two['nonlinear'] == one['nonlinear']
+    topic = output_topics(NODE_NAME)['lever_tip']
+    assert written_rows(tmp_path / 'two', topic) == written_rows(tmp_path / 'one', topic)
+    refused = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', 'replay', str(bag),
+                              '--out', str(tmp_path / 'none'), '--threads', '0', *SMALL_MODEL],
+                             capture_output=True, text=True, timeout=600)
+    assert refused.returncode == 1 and '`--threads` must be in 1..16, got 0' in refused.stderr
+    assert not (tmp_path / 'none').exists()
