@@ -99,7 +99,7 @@ def test_default_basis_has_the_size_its_singular_values_give(bearings, expected)
 
 
 def _streamed_last_revolution(tables, speed, steps, points, revolutions=20):
-    """The reduced model stepped from rest at ``steps`` per revolution; its last turn's points."""
+    """Step the reduced model from rest at ``steps`` per revolution; its last turn's points."""
     count = revolutions * steps + 1
     stamps = np.round(np.arange(count) * 2.0 * math.pi / speed / steps * 1e9).astype(np.int64)
     out = estimate_nonlinear(tables, stamps, speed * stamps * 1e-9, np.full(count, speed))
