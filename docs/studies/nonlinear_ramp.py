@@ -5,7 +5,7 @@ A crank speed ramp up and down through 360-440 rpm in the Exudyn peer and the st
         [--hold 10] [--elements 8] [--peer-steps 720] [--bearings flexible|rigid]
         [--rate 1000] [--jitter 0.3] [--peer PATH.npz] [--chart PATH] [--json PATH]
 
-The same ramp (:class:`flexlink_ros.studies.ramp_sweep.RampProfile`: settle at the low speed,
+The same ramp (:class:`ramp_sweep.RampProfile`: settle at the low speed,
 ramp up, hold, ramp down, hold) drives the peer (8 ANCF elements per link, beta = 1e-4 s,
 bearing springs, gravity; kept in ``--peer`` so a second run only streams) and the streaming
 estimate (the reduced nonlinear model at 1 kHz, once evenly sampled and once with +-30 %
@@ -23,10 +23,10 @@ import os
 from flexlink_ros.core.reduction.nonlinear_tables import build_nonlinear_tables
 from flexlink_ros.studies.peer_linear import linear_model
 from flexlink_ros.studies.peer_model import resolve_mechanism
-from flexlink_ros.studies.ramp_sweep import branch_gap, peer_ramp, per_revolution, POINTS, \
-    ramp_halves, RampProfile, stream_ramp, time_series_error
 from flexlink_ros.studies.validation import BEARINGS
 import numpy as np
+from ramp_sweep import branch_gap, peer_ramp, per_revolution, POINTS, \
+    ramp_halves, RampProfile, stream_ramp, time_series_error
 
 BETA = 1e-4
 

@@ -108,10 +108,11 @@ class InputWatch:
                         f'({100 * lost / (lost + len(stamps)):.0f} %) missing in the last '
                         f'{elapsed_s:.3g} s (gaps in the stamps, spaced {spacing * 1e-6:.3g} ms)')
             if busy >= BUSY_FRACTION:
-                capacity = received / max(busy_ns * 1e-9, 1e-9)
-                sentence += (f'; busy {100 * min(busy, 1.0):.0f} % of the time: the input rate '
-                             f'({(lost + received) / elapsed_s:.0f} Hz) exceeds what this node '
-                             f'takes (about {capacity:.0f} Hz)')
+                # The input's rate is the stamps' (a node behind its input takes in a period
+                # the messages of a shorter span); what the node took is what it received.
+                sentence += (f': the input rate ({1e9 / spacing:.0f} Hz, from the stamps) '
+                             f'exceeds what this node took ({received / elapsed_s:.0f} Hz; '
+                             f'busy {100 * min(busy, 1.0):.0f} % of the time)')
             sentences.append(sentence)
         if publishers > 1 and refused >= MIN_REFUSED and refused >= REFUSED_FRACTION * received:
             sentences.append(f'{publishers} publishers feed the input topic while '

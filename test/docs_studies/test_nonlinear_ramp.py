@@ -11,10 +11,10 @@ import importlib.util
 import pathlib
 
 from flexlink_ros.studies.peer_model import exudyn_available
-from flexlink_ros.studies.ramp_sweep import POINTS, RampProfile
 import matplotlib.image
 import numpy as np
 import pytest
+from ramp_sweep import POINTS, RampProfile
 
 PATH = pathlib.Path(__file__).resolve().parents[2] / 'docs' / 'studies' / 'nonlinear_ramp.py'
 PROFILE = RampProfile(390.0, 410.0, 1.0, 3.0, 2.0)

@@ -68,12 +68,27 @@ def test_lost_messages_from_the_stamps():
     facts, sentences = watch.judge(1.0, 0, 1, 0.5)
     assert facts == {'lost_in_period': 310, 'busy_fraction': 0.9, 'publishers': 1}
     assert len(sentences) == 1 and '310 of 1000' in sentences[0]
-    assert 'exceeds what this node takes' in sentences[0]
+    assert ('the input rate (1000 Hz, from the stamps) exceeds what this node took (690 Hz'
+            in sentences[0])
     assert watch.judge(1.0, 0, 1, 0.5) == ({'lost_in_period': 0, 'busy_fraction': 0.0,
                                             'publishers': 1}, [])
     watch.received = 100
     facts, sentences = watch.judge(1.0, 80, 10, 0.5)
     assert facts['publishers'] == 10 and '10 publishers feed' in sentences[0]
+
+
+def test_a_node_behind_its_input_says_the_rate_of_the_stamps_and_what_it_took():
+    # As the demo saw under load: a 1 kHz crank; in a 1.95 s period the node took 885
+    # messages whose stamps span about 0.98 s, 93 of them missing, busy 65 % of the period.
+    stamps = np.delete(np.arange(978) * 1_000_000, np.arange(5, 978, 10)[:93])
+    watch = InputWatch()
+    for stamp in stamps:
+        watch.note(int(stamp))
+    watch.received, watch.busy_ns = stamps.size, int(0.65 * 1.95e9)
+    _, sentences = watch.judge(1.95, 0, 1, 0.5)
+    assert len(sentences) == 1
+    assert 'the input rate (1000 Hz, from the stamps) exceeds what this node took' in sentences[0]
+    assert '(454 Hz; busy 65 % of the time)' in sentences[0]
 
 
 def test_a_burst_beyond_what_the_node_takes_is_said(tmp_path, processes):  # noqa: F811

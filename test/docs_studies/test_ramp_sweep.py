@@ -1,5 +1,5 @@
 """
-The ramp sweep (flexlink_ros/studies/ramp_sweep.py) at a reduced size in CI time.
+The ramp sweep (docs/studies/ramp_sweep.py) at a reduced size in CI time.
 
 The profile's crank angle is the integral of its speed; a ramp that does not change the speed
 drives the Exudyn peer exactly as the constant-speed peer; the streaming estimate steps
@@ -10,12 +10,12 @@ there is one and none where ramp-up and ramp-down agree; the ramp's size is boun
 import math
 
 from flexlink_ros.core.reduction.nonlinear_tables import build_nonlinear_tables
-from flexlink_ros.studies import ramp_sweep
 from flexlink_ros.studies.peer_exudyn import peer_response
 from flexlink_ros.studies.peer_linear import linear_model
 from flexlink_ros.studies.peer_model import exudyn_available, OUTPUT_KEYS, resolve_mechanism
 import numpy as np
 import pytest
+import ramp_sweep
 
 needs_exudyn = pytest.mark.skipif(not exudyn_available(), reason='exudyn is not installed')
 

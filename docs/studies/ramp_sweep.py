@@ -26,13 +26,13 @@ import dataclasses
 import math
 import time
 
+from flexlink_ros.core.estimation.nonlinear_follow import nonlinear_validity
+from flexlink_ros.core.estimation.nonlinear_stream import estimate_nonlinear
+from flexlink_ros.studies.peer_model import build_peer, deflections, OUTPUT_KEYS, require_exudyn
+from flexlink_ros.studies.peer_model import DEFAULT_SPECTRAL_RADIUS, resolve_mechanism
+from flexlink_ros.studies.peer_model import solver_settings
+from flexlink_ros.studies.peer_solver import solve_or_explain
 import numpy as np
-
-from .peer_model import build_peer, deflections, OUTPUT_KEYS, require_exudyn
-from .peer_model import DEFAULT_SPECTRAL_RADIUS, resolve_mechanism, solver_settings
-from .peer_solver import solve_or_explain
-from ..core.estimation.nonlinear_follow import nonlinear_validity
-from ..core.estimation.nonlinear_stream import estimate_nonlinear
 
 POINTS = ('lever_tip', 'coupler_mid')
 # Largest number of peer steps (or estimator samples) a ramp may ask for: bounds the memory.
