@@ -48,8 +48,8 @@ GRID_NODES = 120
 BASIS_ANGLES = 24
 BASIS_MODES = 8
 # The basis keeps every POD direction whose singular value is at least this fraction of the
-# largest: the snapshot set's numerical rank, where its singular values fall by orders of
-# magnitude (cho1992, 8 elements per link: 20 directions with bearing springs, 14 with pins).
+# largest, the snapshot set's numerical rank at that tolerance (cho1992, 8 elements per link:
+# 20 directions with bearing springs, 14 with pins, 27 with a flexible crank).
 BASIS_TOLERANCE = 1e-3
 # Matrices (m x m) and vectors (m) of the linear part, by name.
 MATRICES = ('mass', 'gyroscopic', 'coupling_a', 'coupling_w2', 'elastic', 'elastic_rate',
