@@ -5,7 +5,8 @@
  *
  * march(...): see its notes below. One call steps one sample (the streaming update) or many
  * (offline): per step the tables are read at the stage angles by cubic Hermite interpolation
- * (only the fields the step uses), the linear part is formed from them, and the stage
+ * (only the fields the step uses; both stages in one pass over the rows of the grid nodes
+ * they share), the linear part is formed from them, and the stage
  * accelerations are solved by simplified Newton (the Jacobian formed at the step's start and
  * again when an iteration contracts by less than half); a step that fails is retried as two
  * halves. No Python object is touched between the samples.
@@ -19,6 +20,14 @@
 
 #include "_doubles.h"
 
+/* The hot loops also built for AVX2, chosen at load time where the CPU has it (GCC, x86-64,
+ * glibc: the choice is an ifunc). */
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__GLIBC__)
+#define VECTOR_CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define VECTOR_CLONES
+#endif
+
 
 typedef struct {
     const double *mass, *damping, *stiffness, *load, *chord, *chord_rate, *shortening,
@@ -30,11 +39,12 @@ typedef struct {
 } Problem;
 
 /* Lumped force change (force: s m) and, if fq, its tangents (fq, fv: s m m, added to). */
-static void lumped(const Problem *p, const double *disp, const double *vel, double *force,
-                   double *fq, double *fv, double *axial_last, double *work)
+VECTOR_CLONES static void lumped(const Problem *p, const double *disp, const double *vel,
+                                 double *force, double *fq, double *fv, double *axial_last,
+                                 double *work)
 {
     const Py_ssize_t m = p->m, e = p->e;
-    double *gq = work, *grad = work + m, *dax = work + 2 * m, *sq = work + 3 * m;
+    double *ht = work, *grad = work + m, *dax = work + 2 * m, *sq = work + 3 * m;
     memset(force, 0, (size_t)(p->s * m) * sizeof(double));
     for (Py_ssize_t i = 0; i < p->s; i++) {
         const double w = p->speed[i], *x = disp + i * m, *xd = vel + i * m;
@@ -44,6 +54,7 @@ static void lumped(const Problem *p, const double *disp, const double *vel, doub
             const double *hr = p->shortening_rate + (i * e + l) * m * m;
             const double k = p->k[l];
             double ce = 0.0, cv = 0.0, crx = 0.0;
+#pragma omp simd reduction(+ : ce, cv, crx)
             for (Py_ssize_t a = 0; a < m; a++) {
                 ce += ch[a] * x[a];
                 cv += ch[a] * xd[a];
@@ -56,20 +67,34 @@ static void lumped(const Problem *p, const double *disp, const double *vel, doub
                 continue;
             }
             double half = 0.0, rate = 0.0, quad = 0.0;
+            if (fq != NULL)
+                memset(ht, 0, (size_t)m * sizeof(double));
             for (Py_ssize_t a = 0; a < m; a++) {
+                const double *restrict ga = g + a * m, *restrict ha = hr + a * m;
                 double sg = 0.0, sh = 0.0, sv = 0.0;
-                for (Py_ssize_t b = 0; b < m; b++) {
-                    sg += g[a * m + b] * x[b];
-                    sh += hr[a * m + b] * x[b];
-                    sv += g[a * m + b] * xd[b];
+                if (fq != NULL) {       /* and g xd, h^T x for the tangents */
+                    const double xa = x[a];
+#pragma omp simd reduction(+ : sg, sh, sv)
+                    for (Py_ssize_t b = 0; b < m; b++) {
+                        sg += ga[b] * x[b];
+                        sh += ha[b] * x[b];
+                        sv += ga[b] * xd[b];
+                        ht[b] += ha[b] * xa;
+                    }
+                } else {
+#pragma omp simd reduction(+ : sg, sh)
+                    for (Py_ssize_t b = 0; b < m; b++) {
+                        sg += ga[b] * x[b];
+                        sh += ha[b] * x[b];
+                    }
                 }
-                gq[a] = sg;
                 sq[a] = sh;
                 grad[a] = ch[a] + sg;
                 dax[a] = sv;
                 half += sg * x[a];
                 quad += x[a] * sh;
             }
+#pragma omp simd reduction(+ : rate)
             for (Py_ssize_t a = 0; a < m; a++)
                 rate += grad[a] * xd[a];
             rate += w * (crx + quad);
@@ -81,13 +106,9 @@ static void lumped(const Problem *p, const double *disp, const double *vel, doub
                 f[a] += n * grad[a] - lin * ch[a];
             if (fq == NULL)
                 continue;
-            /* (h + h^T) x: sq holds h x; add h^T x */
-            for (Py_ssize_t a = 0; a < m; a++) {
-                double t = 0.0;
-                for (Py_ssize_t b = 0; b < m; b++)
-                    t += hr[b * m + a] * x[b];
-                dax[a] = k * (grad[a] + p->beta * (dax[a] + w * (cr[a] + sq[a] + t)));
-            }
+            /* (h + h^T) x: sq holds h x, ht h^T x */
+            for (Py_ssize_t a = 0; a < m; a++)
+                dax[a] = k * (grad[a] + p->beta * (dax[a] + w * (cr[a] + sq[a] + ht[a])));
             double *kq = fq + i * m * m, *kv = fv + i * m * m;
             const double bw = p->beta * w, bk = p->beta * k;
             for (Py_ssize_t a = 0; a < m; a++) {
@@ -99,11 +120,10 @@ static void lumped(const Problem *p, const double *disp, const double *vel, doub
             }
         }
     }
-    (void)gq;
 }
 
 /* LU with partial pivoting in place (n x n, row-major); 0 if singular. */
-static int lu_factor(double *a, Py_ssize_t n, Py_ssize_t *piv)
+VECTOR_CLONES static int lu_factor(double *a, Py_ssize_t n, Py_ssize_t *piv)
 {
     for (Py_ssize_t col = 0; col < n; col++) {
         Py_ssize_t best = col;
@@ -120,35 +140,68 @@ static int lu_factor(double *a, Py_ssize_t n, Py_ssize_t *piv)
                 a[best * n + j] = t;
             }
         const double inv = 1.0 / a[col * n + col];
-        for (Py_ssize_t r = col + 1; r < n; r++) {
-            const double f = (a[r * n + col] *= inv);
-            if (f != 0.0)
-                for (Py_ssize_t j = col + 1; j < n; j++)
-                    a[r * n + j] -= f * a[col * n + j];
+        const double *restrict pivot = a + col * n;
+        Py_ssize_t r = col + 1;
+        for (; r + 3 < n; r += 4) {     /* four rows per pass: the pivot row is read once */
+            double *restrict r0 = a + r * n, *restrict r1 = r0 + n, *restrict r2 = r1 + n,
+                             *restrict r3 = r2 + n;
+            const double f0 = (r0[col] *= inv), f1 = (r1[col] *= inv), f2 = (r2[col] *= inv),
+                         f3 = (r3[col] *= inv);
+            for (Py_ssize_t j = col + 1; j < n; j++) {
+                const double pj = pivot[j];
+                r0[j] -= f0 * pj;
+                r1[j] -= f1 * pj;
+                r2[j] -= f2 * pj;
+                r3[j] -= f3 * pj;
+            }
+        }
+        for (; r < n; r++) {
+            double *restrict r0 = a + r * n;
+            const double f0 = (r0[col] *= inv);
+            for (Py_ssize_t j = col + 1; j < n; j++)
+                r0[j] -= f0 * pivot[j];
         }
     }
     return 1;
 }
 
-static void lu_solve(const double *a, Py_ssize_t n, const Py_ssize_t *piv, double *b)
+/* The LU factors transposed (lut: n x n), so that both substitutions run along rows. */
+static void transpose(const double *a, Py_ssize_t n, double *lut)
+{
+    for (Py_ssize_t i = 0; i < n; i++)
+        for (Py_ssize_t j = 0; j < n; j++)
+            lut[j * n + i] = a[i * n + j];
+}
+
+/*
+ * Solve with the LU factors (lut: transposed, piv: lu_factor's row swaps) in place. The swaps
+ * touch only rows not yet reached, so they are applied first; each solved value is then
+ * subtracted from the rows below (above) it, along a row of lut.
+ */
+VECTOR_CLONES static void lu_solve(const double *lut, Py_ssize_t n, const Py_ssize_t *piv,
+                                   double *b)
 {
     for (Py_ssize_t i = 0; i < n; i++) {
-        double t = b[piv[i]];
+        const double t = b[piv[i]];
         b[piv[i]] = b[i];
         b[i] = t;
-        for (Py_ssize_t j = 0; j < i; j++)
-            b[i] -= a[i * n + j] * b[j];
     }
-    for (Py_ssize_t i = n - 1; i >= 0; i--) {
-        for (Py_ssize_t j = i + 1; j < n; j++)
-            b[i] -= a[i * n + j] * b[j];
-        b[i] /= a[i * n + i];
+    for (Py_ssize_t j = 0; j < n; j++) {
+        const double bj = b[j], *restrict column = lut + j * n;
+        for (Py_ssize_t i = j + 1; i < n; i++)
+            b[i] -= column[i] * bj;
+    }
+    for (Py_ssize_t j = n - 1; j >= 0; j--) {
+        const double *restrict column = lut + j * n;
+        const double bj = (b[j] /= column[j]);
+        for (Py_ssize_t i = 0; i < j; i++)
+            b[i] -= column[i] * bj;
     }
 }
 
 /* Stage states, the residual (res: s m) and, if jac, the step matrix (s m x s m). */
-static void residual(const Problem *p, double *disp, double *vel, double *res, double *jac,
-                     double *fq, double *fv, double *work)
+VECTOR_CLONES static void residual(const Problem *p, double *disp, double *vel, double *res,
+                                   double *jac, double *fq, double *fv, double *work)
 {
     const Py_ssize_t s = p->s, m = p->m, n = s * m;
     for (Py_ssize_t i = 0; i < s; i++)
@@ -170,11 +223,12 @@ static void residual(const Problem *p, double *disp, double *vel, double *res, d
         const double *mm = p->mass + i * m * m, *cc = p->damping + i * m * m,
                      *kk = p->stiffness + i * m * m;
         for (Py_ssize_t a = 0; a < m; a++) {
-            double r = res[i * m + a] - p->load[i * m + a];
+            double r = 0.0;
+#pragma omp simd reduction(+ : r)
             for (Py_ssize_t b = 0; b < m; b++)
                 r += mm[a * m + b] * p->acc[i * m + b] + cc[a * m + b] * vel[i * m + b]
                      + kk[a * m + b] * disp[i * m + b];
-            res[i * m + a] = r;
+            res[i * m + a] = r + (res[i * m + a] - p->load[i * m + a]);
         }
         if (jac == NULL)
             continue;
@@ -193,7 +247,7 @@ static void residual(const Problem *p, double *disp, double *vel, double *res, d
 
 /* The step matrix's LU factors (valid: formed in this step). */
 typedef struct {
-    double *lu;
+    double *lu, *lut;
     Py_ssize_t *piv;
     int valid;
 } Factor;
@@ -216,16 +270,19 @@ static Py_ssize_t solve(Problem *p, double tolerance, Py_ssize_t iterations, dou
         if (form) {
             if (!lu_factor(factor->lu, n, factor->piv))
                 return 0;
+            transpose(factor->lu, n, factor->lut);
             factor->valid = 1;
         }
         for (Py_ssize_t i = 0; i < n; i++)
             res[i] = -res[i];
-        lu_solve(factor->lu, n, factor->piv, res);
+        lu_solve(factor->lut, n, factor->piv, res);
         double size = 0.0, scale = 0.0;
         for (Py_ssize_t i = 0; i < n; i++) {
             p->acc[i] += res[i];
-            size = fmax(size, fabs(res[i]));
-            scale = fmax(scale, fabs(p->acc[i]));
+            /* as fmax (a NaN is passed over: the caller checks acc), without its call */
+            const double du = fabs(res[i]), ua = fabs(p->acc[i]);
+            size = du > size ? du : size;
+            scale = ua > scale ? ua : scale;
         }
         if (!isfinite(size))
             return 0;
@@ -263,7 +320,7 @@ typedef struct {
 
 /* Workspace of one step. */
 typedef struct {
-    double *tables, *mem, *acc, *angles, *speed, *axial, *output;
+    double *tables, *mem, *acc, *angles, *speed, *axial, *output, *raw;
     Factor factor;
 } Work;
 
@@ -295,53 +352,119 @@ static void hermite_at(const Model *md, double theta, Hermite *hm)
     hm->w11 = spacing * (t3 - t2);
 }
 
-static inline double hv(const Hermite *hm, Py_ssize_t col)
+/* count columns from col of one stage's Hermite cell into out (hv, vectorised). */
+VECTOR_CLONES static void interpolate_one(const Hermite *hm, Py_ssize_t col, Py_ssize_t count,
+                            double *restrict out)
 {
-    return hm->w00 * hm->p0[col] + hm->w10 * hm->d0[col] + hm->w01 * hm->p1[col]
-           + hm->w11 * hm->d1[col];
+    const double *restrict p0 = hm->p0 + col, *restrict p1 = hm->p1 + col,
+                           *restrict d0 = hm->d0 + col, *restrict d1 = hm->d1 + col;
+    const double w00 = hm->w00, w10 = hm->w10, w01 = hm->w01, w11 = hm->w11;
+    for (Py_ssize_t j = 0; j < count; j++)
+        out[j] = w00 * p0[j] + w10 * d0[j] + w01 * p1[j] + w11 * d1[j];
+}
+
+/*
+ * Two stages whose cells share their nodes (the same cell, or b's first node is a's second):
+ * one pass over the three or two nodes' rows. The rows are far larger than the caches, so
+ * reading them is the cost.
+ */
+VECTOR_CLONES static void interpolate_pair(const Hermite *a, const Hermite *b, Py_ssize_t col,
+                             Py_ssize_t count, double *restrict oa, double *restrict ob)
+{
+    const double *restrict p0 = a->p0 + col, *restrict p1 = a->p1 + col,
+                           *restrict d0 = a->d0 + col, *restrict d1 = a->d1 + col;
+    const double *restrict p2 = b->p1 + col, *restrict d2 = b->d1 + col;
+    if (b->p0 == a->p0) {
+        for (Py_ssize_t j = 0; j < count; j++) {
+            const double x0 = p0[j], y0 = d0[j], x1 = p1[j], y1 = d1[j];
+            oa[j] = a->w00 * x0 + a->w10 * y0 + a->w01 * x1 + a->w11 * y1;
+            ob[j] = b->w00 * x0 + b->w10 * y0 + b->w01 * x1 + b->w11 * y1;
+        }
+        return;
+    }
+    for (Py_ssize_t j = 0; j < count; j++) {
+        const double x1 = p1[j], y1 = d1[j];
+        oa[j] = a->w00 * p0[j] + a->w10 * d0[j] + a->w01 * x1 + a->w11 * y1;
+        ob[j] = b->w00 * x1 + b->w10 * y1 + b->w01 * p2[j] + b->w11 * d2[j];
+    }
+}
+
+/* count columns from col of the tables at every stage into out (stage i at out + i stride). */
+static void interpolate(const Hermite *hm, Py_ssize_t s, Py_ssize_t col, Py_ssize_t count,
+                        double *out, Py_ssize_t stride)
+{
+    if (s == 2 && (hm[1].p0 == hm[0].p0 || hm[1].p0 == hm[0].p1)) {
+        interpolate_pair(&hm[0], &hm[1], col, count, out, out + stride);
+        return;
+    }
+    if (s == 2 && hm[0].p0 == hm[1].p1) {      /* the crank turning backwards */
+        interpolate_pair(&hm[1], &hm[0], col, count, out + stride, out);
+        return;
+    }
+    for (Py_ssize_t i = 0; i < s; i++)
+        interpolate_one(&hm[i], col, count, out + i * stride);
 }
 
 /*
  * The linear part and the link tables at the stages into p (buf holds them), read from the
  * tables: C = w G + beta (K_el + K_bear), K = K_el + K_bear + beta w K1 + a K_a + w^2 K_w2
- * (+ K_G for the linear model), R = f_1 + a f_a + w^2 f_w2, as linear_part.
+ * (+ K_G for the linear model), R = f_1 + a f_a + w^2 f_w2, as linear_part. raw: room for
+ * three m x m and three m fields per stage.
  */
 static void stage_tables(const Model *md, const double *angles, double accel, Problem *p,
-                         double *buf)
+                         double *buf, double *raw)
 {
     const Py_ssize_t m = md->m, mm = m * m, e = md->e, s = md->s;
     double *mass = buf, *damping = mass + s * mm, *stiffness = damping + s * mm;
     double *load = stiffness + s * mm, *chord = load + s * m, *chord_rate = chord + s * e * m;
     double *shortening = chord_rate + s * e * m, *shortening_rate = shortening + s * e * mm;
+    double *r1 = raw, *r2 = r1 + s * mm, *r3 = r2 + s * mm, *v1 = r3 + s * mm, *v2 = v1 + s * m,
+           *v3 = v2 + s * m;
     Py_ssize_t o[FIELDS];
     for (Py_ssize_t k = 0; k < FIELDS; k++)
         o[k] = (Py_ssize_t)md->off[k];
+    Hermite hm[3] = {0};
+    for (Py_ssize_t i = 0; i < s; i++)
+        hermite_at(md, angles[i], &hm[i]);
+    interpolate(hm, s, o[0], mm, mass, mm);
+    interpolate(hm, s, o[4], mm, stiffness, mm);            /* K_el, then K */
+    interpolate(hm, s, o[1], mm, damping, mm);              /* G, then C */
+    interpolate(hm, s, o[5], mm, r1, mm);
+    interpolate(hm, s, o[2], mm, r2, mm);
+    interpolate(hm, s, o[3], mm, r3, mm);
     for (Py_ssize_t i = 0; i < s; i++) {
-        Hermite hm;
-        hermite_at(md, angles[i], &hm);
         const double w = p->speed[i];
         for (Py_ssize_t j = 0; j < mm; j++) {
-            const double elastic = hv(&hm, o[4] + j) + md->bearing[j];
-            mass[i * mm + j] = hv(&hm, o[0] + j);
-            damping[i * mm + j] = w * hv(&hm, o[1] + j) + md->beta * elastic;
-            double k = elastic + md->beta * w * hv(&hm, o[5] + j) + accel * hv(&hm, o[2] + j)
-                       + w * w * hv(&hm, o[3] + j);
-            if (!md->nonlinear)
-                k += hv(&hm, o[6] + j) + accel * hv(&hm, o[7] + j) + w * w * hv(&hm, o[8] + j);
-            stiffness[i * mm + j] = k;
-        }
-        for (Py_ssize_t j = 0; j < m; j++)
-            load[i * m + j] = hv(&hm, o[9] + j) + accel * hv(&hm, o[10] + j)
-                              + w * w * hv(&hm, o[11] + j);
-        for (Py_ssize_t j = 0; j < e * m; j++) {
-            chord[i * e * m + j] = hv(&hm, o[12] + j);
-            chord_rate[i * e * m + j] = hv(&hm, o[13] + j);
-        }
-        for (Py_ssize_t j = 0; j < e * mm; j++) {
-            shortening[i * e * mm + j] = hv(&hm, o[14] + j);
-            shortening_rate[i * e * mm + j] = hv(&hm, o[15] + j);
+            const Py_ssize_t ij = i * mm + j;
+            const double elastic = stiffness[ij] + md->bearing[j];
+            damping[ij] = w * damping[ij] + md->beta * elastic;
+            stiffness[ij] = elastic + md->beta * w * r1[ij] + accel * r2[ij] + w * w * r3[ij];
         }
     }
+    if (!md->nonlinear) {
+        interpolate(hm, s, o[6], mm, r1, mm);
+        interpolate(hm, s, o[7], mm, r2, mm);
+        interpolate(hm, s, o[8], mm, r3, mm);
+        for (Py_ssize_t i = 0; i < s; i++) {
+            const double w = p->speed[i];
+            for (Py_ssize_t j = 0; j < mm; j++) {
+                const Py_ssize_t ij = i * mm + j;
+                stiffness[ij] += r1[ij] + accel * r2[ij] + w * w * r3[ij];
+            }
+        }
+    }
+    interpolate(hm, s, o[9], m, v1, m);
+    interpolate(hm, s, o[10], m, v2, m);
+    interpolate(hm, s, o[11], m, v3, m);
+    for (Py_ssize_t i = 0; i < s; i++) {
+        const double w = p->speed[i];
+        for (Py_ssize_t j = 0; j < m; j++)
+            load[i * m + j] = v1[i * m + j] + accel * v2[i * m + j] + w * w * v3[i * m + j];
+    }
+    interpolate(hm, s, o[12], e * m, chord, e * m);
+    interpolate(hm, s, o[13], e * m, chord_rate, e * m);
+    interpolate(hm, s, o[14], e * mm, shortening, e * mm);
+    interpolate(hm, s, o[15], e * mm, shortening_rate, e * mm);
     p->mass = mass;
     p->damping = damping;
     p->stiffness = stiffness;
@@ -357,8 +480,7 @@ static void output_at(const Model *md, double theta, double *out)
 {
     Hermite hm;
     hermite_at(md, theta, &hm);
-    for (Py_ssize_t j = 0; j < md->outputs * md->m; j++)
-        out[j] = hv(&hm, (Py_ssize_t)md->off[16] + j);
+    interpolate_one(&hm, (Py_ssize_t)md->off[16], md->outputs * md->m, out);
 }
 
 /* After a converged step: the new state, its output operator and link slopes. */
@@ -445,7 +567,7 @@ static Py_ssize_t advance(const Model *md, State *st, Work *wk, double h, double
     p.h = h;
     p.beta = md->beta;
     p.nonlinear = md->nonlinear;
-    stage_tables(md, wk->angles, (w1 - w0) / h, &p, wk->tables);
+    stage_tables(md, wk->angles, (w1 - w0) / h, &p, wk->tables, wk->raw);
     predict(md, st, h, wk->acc);
     wk->factor.valid = 0;
     Py_ssize_t count = solve(&p, md->tolerance, md->iterations, wk->mem, &wk->factor);
@@ -581,7 +703,7 @@ static Py_ssize_t workspace_doubles(Py_ssize_t s, Py_ssize_t m, Py_ssize_t e, Py
 {
     const Py_ssize_t n = s * m, mm = m * m;
     return (3 * s * mm + s * m + 2 * s * e * m + 2 * s * e * mm) + (3 * n + 2 * s * mm + 4 * m)
-           + (n * n + n + s * m + 2 * s + e + outputs * m);
+           + (n * n + n + s * m + 2 * s + e + outputs * m) + 3 * s * (mm + m) + n * n;
 }
 
 static PyObject *run_march(Model *md, Py_buffer *views, Py_ssize_t samples, int halvings,
@@ -592,12 +714,14 @@ static PyObject *run_march(Model *md, Py_buffer *views, Py_ssize_t samples, int 
     const Py_ssize_t mem = 3 * n + 2 * s * mm + 4 * m;
     double *buf = views[23].buf;
     /* the pivots, as Py_ssize_t in doubles' room (both 8 bytes here, checked at import) */
-    Work wk = {buf, buf + tables, buf + tables + mem + n * n + n, NULL, NULL, NULL, NULL,
-               {buf + tables + mem, (Py_ssize_t *)(buf + tables + mem + n * n), 0}};
+    Work wk = {buf, buf + tables, buf + tables + mem + n * n + n, NULL, NULL, NULL, NULL, NULL,
+               {buf + tables + mem, NULL, (Py_ssize_t *)(buf + tables + mem + n * n), 0}};
     wk.angles = wk.acc + s * m;
     wk.speed = wk.angles + s;
     wk.axial = wk.speed + s;
     wk.output = wk.axial + e;
+    wk.raw = wk.output + md->outputs * m;
+    wk.factor.lut = wk.raw + 3 * s * (mm + m);
     State st = {views[12].buf, views[13].buf, views[14].buf, views[15].buf, views[16].buf,
                 views[17].buf, has_guess, 0};
     Py_BEGIN_ALLOW_THREADS

@@ -74,8 +74,13 @@ def nonlinear_validity(link_slope):
         under 1 % (NaN for a non-finite slope, 0 without links).
 
     """
-    slope = np.asarray(link_slope, dtype=float)
-    largest = float(np.max(np.abs(slope))) if slope.size else 0.0
+    # plain floats: this runs per sample of the node, and numpy's reductions cost more than
+    # the arithmetic on a few links
+    slope = link_slope.ravel().tolist() if isinstance(link_slope, np.ndarray) else link_slope
+    magnitudes = [abs(float(value)) for value in slope]
+    if math.isnan(sum(magnitudes)):      # the sum of magnitudes is NaN only with a NaN
+        return math.nan
+    largest = max(magnitudes, default=0.0)
     return VALIDITY_THRESHOLD * (largest / VON_KARMAN_SLOPE) ** 2
 
 
@@ -137,10 +142,11 @@ class NonlinearFollower:
         else:
             self.counts['refused_samples'] += 1
             output = stepper.outputs(theta)
-        slope = float(np.max(stepper.slope)) if stepper.slope.size else 0.0
+        slopes = stepper.slope.tolist()
+        self.validity = nonlinear_validity(slopes)
+        slope = max(slopes, default=0.0) if not math.isnan(self.validity) else math.nan
         self.slope_max = max(self.slope_max, slope)
         self.counts['beyond_von_karman_samples'] += slope > VON_KARMAN_SLOPE
-        self.validity = nonlinear_validity(stepper.slope)
         self.last = (stamp_ns, theta, speed)
         return output
 

@@ -138,35 +138,35 @@ class NonlinearTables:
         """Return every field at theta (s,) as flat rows (s, F): a buffer the next call reuses."""
         return self._interpolate(theta, slice(None), reuse=True)
 
-    def cell_coefficients(self):
-        """Per grid cell the coefficients of 1, t, t^2, t^3 of the Hermite cubic, (N, 4, F)."""
-        cached = self.__dict__.get('_cells')
-        if cached is None:
-            spacing = 2.0 * np.pi / self.grid_size
-            p0, p1 = self.values, np.roll(self.values, -1, axis=0)
-            d0, d1 = spacing * self.slopes, spacing * np.roll(self.slopes, -1, axis=0)
-            cached = np.stack([p0, d0, -3.0 * p0 + 3.0 * p1 - 2.0 * d0 - d1,
-                               2.0 * p0 - 2.0 * p1 + d0 + d1], axis=1)
-            self.__dict__['_cells'] = cached
-        return cached
-
     def _interpolate(self, theta, columns, reuse=False):
-        """Hermite-interpolated flat rows (s, F') of the columns ``columns``."""
+        """
+        Hermite-interpolated flat rows (s, F') of the columns ``columns``.
+
+        Read from the node values and slopes as the compiled step reads them (the same
+        weights, the same order of the sums); no per-cell copy of the tables is kept (it
+        would be twice their size).
+        """
         theta = np.atleast_1d(np.asarray(theta, dtype=float))
         nodes = self.grid_size
         position = np.mod(theta, 2.0 * np.pi) * (nodes / (2.0 * np.pi))
         cell = np.minimum(position.astype(int), nodes - 1)
         t = position - cell
-        cells = self.cell_coefficients()[:, :, columns]
+        spacing = 2.0 * np.pi / nodes
+        values, slopes = self.values[:, columns], self.slopes[:, columns]
         out = None
         if reuse:
             out = self.__dict__.get('_row')
             if out is None or out.shape[0] != theta.shape[0]:
-                out = self.__dict__['_row'] = np.empty((theta.shape[0], cells.shape[2]))
+                out = self.__dict__['_row'] = np.empty((theta.shape[0], values.shape[1]))
         else:
-            out = np.empty((theta.shape[0], cells.shape[2]))
+            out = np.empty((theta.shape[0], values.shape[1]))
         for i, (k, ti) in enumerate(zip(cell.tolist(), t.tolist())):
-            np.matmul(np.array([1.0, ti, ti * ti, ti * ti * ti]), cells[k], out=out[i])
+            following = k + 1 if k + 1 < nodes else 0
+            t2, t3 = ti * ti, ti * ti * ti
+            out[i] = ((2.0 * t3 - 3.0 * t2 + 1.0) * values[k]
+                      + spacing * (t3 - 2.0 * t2 + ti) * slopes[k]
+                      + (3.0 * t2 - 2.0 * t3) * values[following]
+                      + spacing * (t3 - t2) * slopes[following])
         return out
 
     def to_arrays(self):

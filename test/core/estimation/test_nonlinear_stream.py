@@ -187,6 +187,44 @@ def test_compiled_newton_equals_the_numpy_reference(tables):
         assert c_run['newton_iterations'] == numpy_run['newton_iterations']
 
 
+def _stage_cells(tables, stamps, angles):
+    """Grid cells of the two Radau stages (c = 1/3, 1) of every step, (K - 1, 2)."""
+    theta = np.unwrap(angles)
+    stage_angles = theta[:-1, None] + np.array([1.0 / 3.0, 1.0]) * np.diff(theta)[:, None]
+    position = np.mod(stage_angles, 2 * math.pi) * tables.grid_size / (2 * math.pi)
+    return np.minimum(position.astype(int), tables.grid_size - 1)
+
+
+@pytest.mark.parametrize('direction', [1.0, -1.0])
+def test_compiled_step_equals_the_numpy_reference_wherever_the_stages_fall_in_the_grid(
+        tables, direction):
+    # the compiled step reads both stages' rows in one pass when their cells share grid nodes
+    # (one cell, or neighbours, also across 2 pi, in either direction of turning) and apart
+    # otherwise: every case, the same answers
+    pytest.importorskip('flexlink_ros.core.estimation._nonlinear_step')
+    rng = np.random.default_rng(5)
+    count = 500
+    steps = np.round(rng.uniform(0.2e6, 6e6, count - 1)).astype(np.int64)
+    stamps = np.concatenate([[0], np.cumsum(steps)])
+    speed = direction * SPEED
+    angles = np.mod(speed * stamps * 1e-9, 2 * math.pi)
+    cells = _stage_cells(tables, stamps, angles)
+    gap = np.mod(direction * (cells[:, 1] - cells[:, 0]), tables.grid_size)
+    last = tables.grid_size - 1
+    wraps = {(last, 0), (0, last)} & set(map(tuple, cells.tolist()))
+    assert (gap == 0).sum() > 20 and (gap == 1).sum() > 20 and (gap > 1).sum() > 20
+    assert wraps
+    numpy_run = estimate_nonlinear(tables, stamps, angles, np.full(count, speed),
+                                   compiled=False)
+    c_run = estimate_nonlinear(tables, stamps, angles, np.full(count, speed))
+    assert c_run['refused'] == numpy_run['refused'] == 0
+    scale = np.abs(numpy_run['outputs']).max()
+    assert np.abs(c_run['outputs'] - numpy_run['outputs']).max() < 1e-9 * scale
+    np.testing.assert_allclose(c_run['link_slope'], numpy_run['link_slope'], rtol=1e-9,
+                               atol=1e-12)
+    assert c_run['newton_iterations'] == numpy_run['newton_iterations']
+
+
 def test_non_finite_samples_are_refused_counted_and_do_not_poison_the_rest(tables):
     count = 600
     stamps = np.arange(count, dtype=np.int64) * 1_000_000

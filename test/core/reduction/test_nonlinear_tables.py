@@ -45,6 +45,28 @@ def test_interpolated_tables_equal_the_projected_matrices_between_nodes(model, t
         assert np.abs(read[name] - value).max() <= 1e-4 * scale, name
 
 
+def test_reading_the_tables_keeps_no_copy_of_them(tables):
+    # a process streaming the model holds its tables once: reading every field (the numpy
+    # step's call) adds one row per stage angle, not a per-cell copy of the tables
+    theta = np.array([0.1, 0.1 + 2 * np.pi / tables.grid_size, 6.2])
+    read = tables.at(theta)
+    tables.at(theta[:1], ('output',))
+    kept = sum(value.nbytes for value in vars(tables).values() if isinstance(value, np.ndarray))
+    stored = sum(tables.to_arrays()[0][name].nbytes for name in tables.to_arrays()[0])
+    row = tables.values.shape[1] * 8
+    assert kept <= stored + len(theta) * row
+    # the read is the Hermite cubic through the two nodes' values and slopes
+    spacing = 2 * np.pi / tables.grid_size
+    t = 0.1 / spacing
+    first = (tables.values[0] * (2 * t ** 3 - 3 * t ** 2 + 1)
+             + spacing * tables.slopes[0] * (t ** 3 - 2 * t ** 2 + t)
+             + tables.values[1] * (3 * t ** 2 - 2 * t ** 3)
+             + spacing * tables.slopes[1] * (t ** 3 - t ** 2))
+    start, shape = tables.layout()['mass']
+    np.testing.assert_allclose(read['mass'][0].ravel(), first[start:start + shape[0] * shape[1]],
+                               rtol=1e-12, atol=1e-12 * np.abs(first).max())
+
+
 def test_lumped_shortening_is_the_sum_of_the_elements_von_karman_shortening(model, tables):
     theta = np.array([1.3])
     elements = model_elements(model)
