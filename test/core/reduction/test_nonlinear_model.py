@@ -37,3 +37,14 @@ def test_tables_are_cached_and_read_back(tmp_path):
     np.testing.assert_array_equal(again.values, built.values)
     np.testing.assert_array_equal(again.basis, built.basis)
     assert again.at(0.3)['mass'].shape == (1, built.size, built.size)
+
+
+def test_basis_size_is_part_of_the_cache_key(tmp_path):
+    mech = load_mechanism('cho1992')
+    ruled, _ = nonlinear_model.nonlinear_model_for(mech, OPTIONS, cache_dir=tmp_path)
+    fixed, _ = nonlinear_model.nonlinear_model_for(mech, OPTIONS, cache_dir=tmp_path,
+                                                   basis_size=ruled.size - 2)
+    assert fixed.size == ruled.size - 2
+    assert len(list(tmp_path.rglob('*-nonlinear.npz'))) == 2
+    again, _ = nonlinear_model.nonlinear_model_for(mech, OPTIONS, cache_dir=tmp_path)
+    assert again.size == ruled.size
