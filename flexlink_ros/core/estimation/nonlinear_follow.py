@@ -9,7 +9,7 @@ after a gap longer than the estimator's reset gap. Fed the same samples, both gi
 numbers, so a recording replays to what the node published: the node steps sample by sample
 (:meth:`NonlinearFollower.sample`), the replay a block of samples at a time
 (:meth:`NonlinearFollower.follow`, one compiled call per run: 1.3 times as fast), which agrees
-to rounding (the steps' lengths are differences of the run's times; about 1e-11 of the
+to rounding (the steps' lengths are differences of the run's times; within 3e-11 of the
 deflections' range on the paper's linkage).
 
 Its validity (:func:`nonlinear_validity`) is what the model cannot carry: the von Karman
