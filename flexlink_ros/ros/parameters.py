@@ -119,7 +119,7 @@ PARAMETERS = (
                   f'{int(DEFAULT_SPEED_MAX * 30.0 / math.pi)} rpm', low=0.0, high=1e5,
                   read_only=True),
     ParameterSpec('model.nonlinear', 'auto', 'The lever-tip and coupler-mid deflections '
-                  'from the geometrically nonlinear model (true through resonance, about 13-25 '
+                  'from the geometrically nonlinear model (true through resonance, about 6-10 '
                   'times the linear update): on, off, or auto = on only if the linear '
                   "model's validity indicator says it is not valid somewhere in the model's "
                   'speed range (a ramp scan at start-up, logged); criteria and markers stay '
