@@ -6,12 +6,15 @@ End-to-end latency, loss and footprint of flexlink_node next to a bare rclpy ech
         [--node-param NAME:=VALUE ...]
 
 Prints figures (it is not a timed test). One run measures, on loopback in a domain of its own,
-a bare rclpy echo node (JointState in, the same bytes out: the floor any Python node pays) and
-flexlink_node without and with recording, each in its own process with the same executor
-(the node of this source tree, not an installed copy):
+a bare rclpy echo node (JointState in, the same bytes out: the floor any Python node pays)
+under rclpy's EventsExecutor (the node's executor) and under ``rclpy.spin`` (the
+SingleThreadedExecutor a plain rclpy node spins in), and flexlink_node without and with
+recording, each in its own process (the node of this source tree, not an installed copy):
 
 - latency JointState -> output (the output carries the input's stamp, which is the send time):
   p50 and p99 at each rate;
+- CPU: the target process's CPU time (all its threads, user and system) per input message at
+  each rate, a figure that the machine's load disturbs less than the latency;
 - loss: inputs sent minus outputs received at each rate; the highest rate without loss;
 - RSS of the node process; recording throughput (messages and bytes per second written).
 
@@ -70,7 +73,7 @@ def _rss_mb(pid):
     return None
 
 
-def echo_main():
+def echo_main(executor_kind):
     """Run the bare echo node: republish every JointState unchanged (raw bytes)."""
     import rclpy
     from rclpy.executors import ExternalShutdownException
@@ -83,9 +86,12 @@ def echo_main():
             qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
             publisher = node.create_publisher(joint_state, ECHO_TOPIC, qos)
             node.create_subscription(joint_state, INPUT_TOPIC, publisher.publish, qos, raw=True)
-            executor = make_executor()
-            executor.add_node(node)
-            spin_until_shutdown(executor)
+            if executor_kind == 'spin':
+                rclpy.spin(node)      # a plain rclpy node: the SingleThreadedExecutor
+            else:
+                executor = make_executor()
+                executor.add_node(node)
+                spin_until_shutdown(executor)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
 
@@ -183,7 +189,7 @@ def measure_target(source, name, argv, output_topic, output_type, rates, seconds
         if process.poll() is not None:
             raise RuntimeError(f'{name} exited with code {process.returncode}')
         _warm_up(source, name, process)
-        rows = _step_rates(source, rates, seconds)
+        rows = _step_rates(source, rates, seconds, process.pid)
         rss = _rss_mb(process.pid)
     finally:
         process.send_signal(2)   # SIGINT: the node closes its recording
@@ -225,13 +231,24 @@ def _warm_up(source, name, process):
         raise RuntimeError(f'{name} did not answer its last warm-up message in time')
 
 
-def _step_rates(source, rates, seconds):
+def _cpu_s(pid):
+    """CPU time [s] a process used so far, all its threads, user and system (None: gone)."""
+    try:
+        fields = pathlib.Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+    except (OSError, IndexError):
+        return None
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
+def _step_rates(source, rates, seconds, pid):
     """Stream at each rate in turn until one loses messages; return a row per rate."""
     rows = []
     for rate in rates:
         source.drain(0.2)
         source.received.clear()
+        cpu_before = _cpu_s(pid)
         sent = source.stream(rate, seconds)
+        cpu_after = _cpu_s(pid)
         source.drain()
         wanted = set(sent)
         latency = np.array([recv - stamp for recv, stamp in source.received
@@ -240,7 +257,9 @@ def _step_rates(source, rates, seconds):
                      'received': int(latency.size), 'lost': len(sent) - int(latency.size),
                      'latency_us_p50': float(np.median(latency)) if latency.size else None,
                      'latency_us_p99': (float(np.percentile(latency, 99))
-                                        if latency.size else None)})
+                                        if latency.size else None),
+                     'cpu_us_per_message': (None if None in (cpu_before, cpu_after) else
+                                            (cpu_after - cpu_before) * 1e6 / len(sent))})
         if rows[-1]['lost'] > 0:
             break
     return rows
@@ -268,8 +287,9 @@ def bench_targets(bag, recording=True, reference_root=None, reference_first=Fals
     if reference_root is not None:
         nodes.insert(1 - reference_first, ('flexlink_node (reference)', node, NODE_OUTPUT,
                                            vector3_stamped, pathlib.Path(reference_root)))
-    targets = [('echo (bare rclpy)', [sys.executable, str(pathlib.Path(__file__).resolve()),
-                                      '--echo'], ECHO_TOPIC, joint_state, ROOT), *nodes]
+    echo = [sys.executable, str(pathlib.Path(__file__).resolve()), '--echo']
+    targets = [('echo (EventsExecutor)', echo + ['events'], ECHO_TOPIC, joint_state, ROOT),
+               ('echo (rclpy.spin)', echo + ['spin'], ECHO_TOPIC, joint_state, ROOT), *nodes]
     if recording:
         targets.append(('flexlink_node + recording', node + [
             '-p', 'record.enabled:=true', '-p', f'record.path:={bag}'],
@@ -341,22 +361,45 @@ def recording_figures(bag):
 
 def _text(result):
     lines = [f'{"target":<27} {"rate Hz":>8} {"sent":>6} {"lost":>5} {"p50 us":>7} '
-             f'{"p99 us":>7}']
+             f'{"p99 us":>7} {"CPU us":>7}']
     for target in result['targets']:
         for row in target['rows']:
             p50 = '-' if row['latency_us_p50'] is None else f'{row["latency_us_p50"]:.0f}'
             p99 = '-' if row['latency_us_p99'] is None else f'{row["latency_us_p99"]:.0f}'
+            cpu = ('-' if row['cpu_us_per_message'] is None
+                   else f'{row["cpu_us_per_message"]:.0f}')
             lines.append(f'{target["name"]:<27} {row["rate_hz"]:>8.0f} {row["sent"]:>6} '
-                         f'{row["lost"]:>5} {p50:>7} {p99:>7}')
+                         f'{row["lost"]:>5} {p50:>7} {p99:>7} {cpu:>7}')
     for target in result['targets']:
         rss = '?' if target['rss_mb'] is None else f'{target["rss_mb"]:.0f} MB'
         lines.append(f'{target["name"]}: highest rate without loss '
                      f'{target["max_rate_without_loss_hz"]:.0f} Hz, RSS {rss}')
+    lines += _overhead_lines(result['targets'])
     rec = result['recording']
     if rec is not None:
         lines.append(f'recording: {rec["messages_per_s"]:.0f} messages/s, '
                      f'{rec["bytes_per_s"] / 1e3:.0f} kB/s ({rec["path"]})')
     return '\n'.join(lines)
+
+
+def _overhead_lines(targets):
+    """Each node's latency at the first rate against each echo's: p50 above, p99 ratio."""
+    def first_row(target):
+        row = target['rows'][0] if target['rows'] else {}
+        return row if row.get('latency_us_p50') is not None else None
+
+    echoes = [(t['name'], first_row(t)) for t in targets if t['name'].startswith('echo')]
+    lines = []
+    for target in targets:
+        row = first_row(target)
+        if target['name'].startswith('echo') or row is None:
+            continue
+        for name, echo in echoes:
+            if echo is not None:
+                lines.append(f'{target["name"]} vs {name} at {row["rate_hz"]:.0f} Hz: p50 '
+                             f'{row["latency_us_p50"] - echo["latency_us_p50"]:+.0f} us, p99 '
+                             f'{row["latency_us_p99"] / echo["latency_us_p99"]:.2f}x')
+    return lines
 
 
 def build_parser():
@@ -378,7 +421,7 @@ def build_parser():
                         metavar='NAME:=VALUE', help='a parameter of every node measured '
                         '(repeatable), e.g. model.nonlinear:=off')
     parser.add_argument('--json', action='store_true', help='print one JSON object per run')
-    parser.add_argument('--echo', action='store_true', help=argparse.SUPPRESS)
+    parser.add_argument('--echo', choices=('events', 'spin'), help=argparse.SUPPRESS)
     return parser
 
 
@@ -386,7 +429,7 @@ def main(argv=None):
     """Run the benchmark (or, with ``--echo``, be the echo node it starts)."""
     args = build_parser().parse_args(argv)
     if args.echo:
-        echo_main()
+        echo_main(args.echo)
         return 0
     out = pathlib.Path(args.out or tempfile.mkdtemp(prefix='flexlink_node_bench_'))
     for run in range(args.runs):

@@ -19,12 +19,14 @@ def test_node_bench_measures_every_target(tmp_path):
     summary = json.loads(result.stdout)
     assert summary['run'] == 1
     names = [target['name'] for target in summary['targets']]
-    assert names == ['echo (bare rclpy)', 'flexlink_node', 'flexlink_node + recording']
+    assert names == ['echo (EventsExecutor)', 'echo (rclpy.spin)', 'flexlink_node',
+                     'flexlink_node + recording']
     for target in summary['targets']:
         (row,) = target['rows']
         assert row['sent'] >= 150, target          # 1 s at 200 Hz
         assert row['received'] >= 0.9 * row['sent'], target
         assert 0 < row['latency_us_p50'] <= row['latency_us_p99'], target
+        assert 0 <= row['cpu_us_per_message'] < 1e6 / 200, target   # the target's own CPU
         assert target['rss_mb'] > 0
     recording = summary['recording']
     assert recording['complete'] and recording['messages'] > 0
@@ -41,8 +43,10 @@ def test_node_bench_alternates_this_node_and_a_reference_tree(tmp_path):
     runs = [json.loads(line) for line in result.stdout.splitlines()]
     assert [run['run'] for run in runs] == [1, 2]
     assert [[t['name'] for t in run['targets']] for run in runs] == [
-        ['echo (bare rclpy)', 'flexlink_node', 'flexlink_node (reference)'],
-        ['echo (bare rclpy)', 'flexlink_node (reference)', 'flexlink_node']]
+        ['echo (EventsExecutor)', 'echo (rclpy.spin)', 'flexlink_node',
+         'flexlink_node (reference)'],
+        ['echo (EventsExecutor)', 'echo (rclpy.spin)', 'flexlink_node (reference)',
+         'flexlink_node']]
     assert all(run['recording'] is None for run in runs)
     for run in runs:
         for target in run['targets']:

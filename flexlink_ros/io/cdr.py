@@ -106,6 +106,11 @@ def parse_joint_state(data, joint_name):
         Not a JointState within the bounds (the message names the field).
 
     """
+    return _read_joint_state(data, joint_name)[:3]
+
+
+def _read_joint_state(data, joint_name):
+    """parse_joint_state's three values and the message's :class:`JointLayout` (or None)."""
     if len(data) > MAX_MESSAGE_BYTES:
         raise MalformedCdr(f'{len(data)} bytes, beyond the bound of {MAX_MESSAGE_BYTES}')
     if len(data) < 16:
@@ -125,14 +130,89 @@ def parse_joint_state(data, joint_name):
         name, offset = _read_string(data, offset, endian, 'name')
         if index is None and name == joint_name:
             index = k
-    positions, offset = _read_doubles(data, offset, endian, 'position')
-    velocities, offset = _read_doubles(data, offset, endian, 'velocity')
-    _, offset = _read_doubles(data, offset, endian, 'effort')
+    positions, position_end = _read_doubles(data, offset, endian, 'position')
+    velocities, velocity_end = _read_doubles(data, position_end, endian, 'velocity')
+    efforts, effort_end = _read_doubles(data, velocity_end, endian, 'effort')
     stamp_ns = sec * 1_000_000_000 + nanosec
     if index is None or index >= len(positions):
-        return stamp_ns, None, None
+        return stamp_ns, None, None, None
     velocity = velocities[index] if index < len(velocities) else None
-    return stamp_ns, positions[index], velocity
+    starts = [end - 8 * len(values) for end, values in
+              ((position_end, positions), (velocity_end, velocities), (effort_end, efforts))]
+    layout = JointLayout(data, endian, starts[0] + 8 * index,
+                         None if velocity is None else starts[1] + 8 * index,
+                         ((12, starts[0]), (position_end, starts[1]), (velocity_end, starts[2])))
+    return stamp_ns, positions[index], velocity, layout
+
+
+class JointLayout:
+    """
+    Where one joint's values lie in a JointState's CDR, and the bytes that put them there.
+
+    Every offset and length of the message follows from its size, byte order, frame id,
+    names and the three arrays' length fields (their padding included): a message with the
+    same bytes there has the joint's position and velocity at the same offsets and passes
+    every bound check this one passed. Those bytes are kept as (start, bytes) runs: from the
+    frame id to the first position, and each of the velocity's and effort's length fields.
+    """
+
+    def __init__(self, data, endian, position_at, velocity_at, runs):
+        self.size, self.encapsulation = len(data), bytes(data[:2])
+        self.stamp, self.value = struct.Struct(endian + 'iI'), struct.Struct(endian + 'd')
+        self.position_at, self.velocity_at = position_at, velocity_at
+        self.runs = tuple((start, end, bytes(data[start:end])) for start, end in runs)
+
+    def read(self, data):
+        """
+        Stamp, position and velocity of a message with this layout, as parsing gives them.
+
+        None if ``data`` has another layout or an impossible stamp (then parse it).
+        """
+        if len(data) != self.size or data[:2] != self.encapsulation:
+            return None
+        (start, end, fixed), (start2, end2, fixed2), (start3, end3, fixed3) = self.runs
+        if data[start:end] != fixed or data[start2:end2] != fixed2 \
+                or data[start3:end3] != fixed3:
+            return None
+        sec, nanosec = self.stamp.unpack_from(data, 4)
+        if nanosec >= 1_000_000_000:
+            return None
+        velocity = (None if self.velocity_at is None
+                    else self.value.unpack_from(data, self.velocity_at)[0])
+        return (sec * 1_000_000_000 + nanosec, self.value.unpack_from(data, self.position_at)[0],
+                velocity)
+
+
+class JointStateReader:
+    """
+    :func:`parse_joint_state` for a stream of messages: the same results, checked as much.
+
+    A publisher's JointStates keep one layout (frame, names and array lengths); only the
+    stamp and the values change. The reader parses a message in full only when its layout
+    differs from the last one parsed (compared byte for byte, :class:`JointLayout`): at
+    1 kHz that saves most of the parse (about 1 us instead of 5-10 us).
+
+    Parameters
+    ----------
+    joint_name : bytes
+        UTF-8 name of the joint.
+
+    """
+
+    def __init__(self, joint_name):
+        self.joint_name = joint_name
+        self.full_parses = 0
+        self._layout = None
+
+    def __call__(self, data):
+        """Return (stamp_ns, position, velocity) as :func:`parse_joint_state` does."""
+        if self._layout is not None:
+            values = self._layout.read(data)
+            if values is not None:
+                return values
+        self.full_parses += 1
+        stamp_ns, position, velocity, self._layout = _read_joint_state(data, self.joint_name)
+        return stamp_ns, position, velocity
 
 
 # -- any message object, walked field by field ------------------------------------------------

@@ -37,7 +37,7 @@ from .runtime import is_shutdown_error
 from .sim_time import ClockWatch, LogTime
 from .startup import check_startup_signal
 from ..core.estimation.nonlinear_follow import NonlinearFollower
-from ..core.estimation.sample import SampleFlag
+from ..core.estimation.sample import OUT_OF_BOUND, OUTLIER, REPEATED
 from ..core.estimation.streaming import StreamingEstimator
 from ..core.mechanism_file import read_mechanism_source
 from ..core.reduction.soft_basis import soft_basis_text
@@ -84,6 +84,7 @@ class EstimatorNode(NodeRecording):
         self._deserialize = lambda data: deserialize_message(data, JointState)
         self._serialize = serialize_message
         self._frame = self.values['frame_id'].encode()
+        self._read_crank = cdr.JointStateReader(self.values['crank_joint'].encode())
         self._marker_encoder = self._marker_worker = None
         self.totals = self.model_facts = None
         self._diagnostics_publisher = self.create_publisher(
@@ -221,6 +222,8 @@ class EstimatorNode(NodeRecording):
         if self.estimator is not None:
             self.estimator.warm_start = self.values['model.warm_start']
         self._frame = self.values['frame_id'].encode()
+        if self._read_crank.joint_name != self.values['crank_joint'].encode():
+            self._read_crank = cdr.JointStateReader(self.values['crank_joint'].encode())
         if period_changed and self._timer is not None:
             self._start_diagnostics_timer()
 
@@ -271,7 +274,7 @@ class EstimatorNode(NodeRecording):
     def _estimate(self, data, estimator):
         try:
             stamp_ns, angle, speed = crank_sample(data, self.values['crank_joint'],
-                                                  self._deserialize)
+                                                  self._deserialize, self._read_crank)
             self.watch.note(stamp_ns)
             start = time.perf_counter_ns()
             sample = estimator.update(stamp_ns, angle, speed)
@@ -280,7 +283,7 @@ class EstimatorNode(NodeRecording):
             self._refuse(exc.kind, str(exc))
             return
         except OutlierSample as exc:
-            self.period.flags |= SampleFlag.OUTLIER
+            self.period.flags |= OUTLIER
             self._refuse('outlier', str(exc))
             return
         except ConflictingSample as exc:
@@ -289,13 +292,13 @@ class EstimatorNode(NodeRecording):
         except (FlexlinkError, ValueError) as exc:
             self._refuse('estimator', one_line(exc))
             return
-        if sample.flags & SampleFlag.REPEATED:
+        if sample.flags & REPEATED:
             self._count('repeated')
             return
         reason = publishable(sample)
         if reason is not None:
             self._count('out_of_bound')
-            self.period.flags |= sample.flags | SampleFlag.OUT_OF_BOUND
+            self.period.flags |= sample.flags | OUT_OF_BOUND
             self.period.last_out_of_bound = reason
             self.get_logger().warning(f'estimate not published: {reason}',
                                       throttle_duration_sec=WARN_THROTTLE_S)
@@ -327,7 +330,7 @@ class EstimatorNode(NodeRecording):
         if not largest <= bound:      # also NaN
             follower.restart()
             self._count('out_of_bound')
-            self.period.flags |= SampleFlag.OUT_OF_BOUND
+            self.period.flags |= OUT_OF_BOUND
             self.period.last_out_of_bound = (f'nonlinear deflection {largest:.6g} m beyond '
                                              f'the bound {bound:.6g} m')
             self.get_logger().warning('estimate not published: '
@@ -357,18 +360,19 @@ class EstimatorNode(NodeRecording):
 
     def _publish_sample(self, stamp_ns, sample, lever_tip, coupler_mid, validity):
         # Serialised once (exact CDR), published raw and recorded as the same bytes. The
-        # per-sample outputs go out first, before any bookkeeping; the markers (every n-th
-        # sample: link shapes and a MarkerArray) are drawn by their own thread, so they
-        # delay neither this sample nor the next.
+        # per-sample outputs go out first, before any bookkeeping, the lever tip before the
+        # others are encoded; the markers (every n-th sample: link shapes and a MarkerArray)
+        # are drawn by their own thread, so they delay neither this sample nor the next.
         sec, nanosec = divmod(stamp_ns, 1_000_000_000)
         frame = self._frame
-        outputs = [
-            ('lever_tip', vector3_stamped_cdr(sec, nanosec, frame, *lever_tip)),
+        outputs = [('lever_tip', vector3_stamped_cdr(sec, nanosec, frame, *lever_tip))]
+        published = self._publish(outputs)
+        outputs += [
             ('coupler_mid', vector3_stamped_cdr(sec, nanosec, frame, *coupler_mid)),
             ('criteria', criteria_cdr(sec, nanosec, frame, sample.criterion,
                                       sample.gamma_dot, sample.reaction_n)),
             ('quality', quality_cdr(sec, nanosec, frame, sample.error_indicator, validity))]
-        published = self._publish(outputs)
+        published = published and self._publish(outputs[1:])
         self.period.add_sample(sample, validity)
         self._clipped.add(sample)     # beyond the model's speed range: counted and said
         if sample.message:

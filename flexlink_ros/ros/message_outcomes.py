@@ -11,7 +11,7 @@ import math
 import time
 
 from .messages import crank_from_joint_state
-from ..core.estimation.sample import SampleFlag
+from ..core.estimation.sample import CLIPPED_SPEED, OUT_OF_BOUND, SampleFlag
 from ..core.numerics import RPM
 from ..errors import InputRejected, MalformedCdr
 from ..io import cdr
@@ -33,13 +33,14 @@ def one_line(text):
     return line if len(line) <= MAX_REASON_CHARS else line[:MAX_REASON_CHARS - 3] + '...'
 
 
-def crank_sample(data, joint_name, deserialize):
+def crank_sample(data, joint_name, deserialize, read=None):
     """
     Read stamp, angle and speed of the crank from JointState CDR; InputRejected says why not.
 
-    The fast parser (cdr.parse_joint_state) checks the bytes against the input bounds; only a
-    message without a usable sample is deserialised by rclpy, to name what is wrong, and an
-    error there (rclpy raises RMWError on truncated CDR) is a refusal too.
+    The fast parser (cdr.parse_joint_state, or a cdr.JointStateReader of the stream) checks
+    the bytes against the input bounds; only a message without a usable sample is
+    deserialised by rclpy, to name what is wrong, and an error there (rclpy raises RMWError
+    on truncated CDR) is a refusal too.
 
     Parameters
     ----------
@@ -49,6 +50,9 @@ def crank_sample(data, joint_name, deserialize):
         Name of the crank joint.
     deserialize : callable
         bytes -> sensor_msgs.msg.JointState (rclpy's deserialize_message).
+    read : callable or None
+        bytes -> (stamp_ns, angle, speed) of the joint, as cdr.parse_joint_state returns
+        them (the node's cdr.JointStateReader); None: cdr.parse_joint_state.
 
     Returns
     -------
@@ -63,7 +67,8 @@ def crank_sample(data, joint_name, deserialize):
 
     """
     try:
-        stamp_ns, angle, speed = cdr.parse_joint_state(data, joint_name.encode())
+        stamp_ns, angle, speed = (read(data) if read is not None
+                                  else cdr.parse_joint_state(data, joint_name.encode()))
     except MalformedCdr as exc:
         raise InputRejected(f'malformed JointState: {one_line(exc)}', 'malformed') from None
     if angle is None or not math.isfinite(angle) or (
@@ -93,7 +98,7 @@ def publishable(sample):
         One estimate.
 
     """
-    if sample.flags & SampleFlag.OUT_OF_BOUND:
+    if sample.flags & OUT_OF_BOUND:
         return sample.message or "deflection beyond the model's bound"
     return None
 
@@ -126,7 +131,7 @@ class ClippedSpeedLog:
 
     def add(self, sample):
         """Count ``sample`` if its speed was clipped; warn at most once per throttle period."""
-        if not sample.flags & SampleFlag.CLIPPED_SPEED:
+        if not sample.flags & CLIPPED_SPEED:
             return
         self.count += 1
         now = time.monotonic()
