@@ -152,8 +152,9 @@ class JointLayout:
     Every offset and length of the message follows from its size, byte order, frame id,
     names and the three arrays' length fields (their padding included): a message with the
     same bytes there has the joint's position and velocity at the same offsets and passes
-    every bound check this one passed. Those bytes are kept as (start, bytes) runs: from the
-    frame id to the first position, and each of the velocity's and effort's length fields.
+    every bound check this one passed. Those bytes are kept as (start, end, bytes) runs: from
+    the frame id to the first position, and each of the velocity's and effort's length fields
+    with the padding after it.
     """
 
     def __init__(self, data, endian, position_at, velocity_at, runs):
