@@ -109,8 +109,8 @@ def parse_joint_state(data, joint_name):
     return _read_joint_state(data, joint_name)[:3]
 
 
-def _read_joint_state(data, joint_name):
-    """parse_joint_state's three values and the message's :class:`JointLayout` (or None)."""
+def _read_joint_state(data, joint_name, with_layout=False):
+    """parse_joint_state's three values and (``with_layout``) the :class:`JointLayout` or None."""
     if len(data) > MAX_MESSAGE_BYTES:
         raise MalformedCdr(f'{len(data)} bytes, beyond the bound of {MAX_MESSAGE_BYTES}')
     if len(data) < 16:
@@ -137,12 +137,18 @@ def _read_joint_state(data, joint_name):
     if index is None or index >= len(positions):
         return stamp_ns, None, None, None
     velocity = velocities[index] if index < len(velocities) else None
+    if not with_layout:
+        return stamp_ns, positions[index], velocity, None
     starts = [end - 8 * len(values) for end, values in
               ((position_end, positions), (velocity_end, velocities), (effort_end, efforts))]
     layout = JointLayout(data, endian, starts[0] + 8 * index,
                          None if velocity is None else starts[1] + 8 * index,
                          ((12, starts[0]), (position_end, starts[1]), (velocity_end, starts[2])))
     return stamp_ns, positions[index], velocity, layout
+
+
+_STAMP_AND_VALUE = {endian: (struct.Struct(endian + 'iI'), struct.Struct(endian + 'd'))
+                    for endian in _ENCAPSULATIONS.values()}
 
 
 class JointLayout:
@@ -159,7 +165,7 @@ class JointLayout:
 
     def __init__(self, data, endian, position_at, velocity_at, runs):
         self.size, self.encapsulation = len(data), bytes(data[:2])
-        self.stamp, self.value = struct.Struct(endian + 'iI'), struct.Struct(endian + 'd')
+        self.stamp, self.value = _STAMP_AND_VALUE[endian]
         self.position_at, self.velocity_at = position_at, velocity_at
         self.runs = tuple((start, end, bytes(data[start:end])) for start, end in runs)
 
@@ -212,7 +218,8 @@ class JointStateReader:
             if values is not None:
                 return values
         self.full_parses += 1
-        stamp_ns, position, velocity, self._layout = _read_joint_state(data, self.joint_name)
+        stamp_ns, position, velocity, self._layout = _read_joint_state(data, self.joint_name,
+                                                                       with_layout=True)
         return stamp_ns, position, velocity
 
 
