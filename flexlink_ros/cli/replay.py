@@ -60,13 +60,14 @@ from ..ros.republish import DISCOVERY_TIMEOUT_S, publish_recording
 CHART_ROWS = 200_000   # the chart shows the last 200 s at 1 kHz: enough revolutions to read
 
 
-def _writer(args, model, topic, tables):
+def _writer(args, model, topic, tables, mechanism=None):
     """``write(blocks, progress)`` of the output file (:func:`write_replay`), or None."""
     if not args.out:
         return None
-    # The estimator's step tables: the quasi-static peak that scales the markers is computed
-    # once, for the deflection bound and the markers.
-    exaggeration = model_exaggeration(model, tables) if args.markers_every_n else 1.0
+    # The estimator's step tables: the quasi-static peaks of the deflection bound and of the
+    # markers (up to the recorded machine's speed) are computed on them once each.
+    exaggeration = (model_exaggeration(model, tables, mechanism) if args.markers_every_n
+                    else 1.0)
     return functools.partial(_write_blocks, args.out, topic=topic, model=model, args=args,
                              exaggeration=exaggeration)
 
@@ -129,7 +130,7 @@ def run_replay(args):
     choice, transform, (topic, rows, messages) = _choose_model(
         args, mechanism, options, model, tables, (topic, rows, messages))
     estimate, summary, times = estimate_and_write(args, model, rows, messages,
-                                                  _writer(args, model, topic, tables),
+                                                  _writer(args, model, topic, tables, mechanism),
                                                   on_block=chart and chart.add, tables=tables,
                                                   transform=transform)
     count, span_s = rows.samples, rows.span_s()
