@@ -92,7 +92,7 @@ class ChartRows:
         while self.count - len(self.parts[0]['crank_angle']) >= CHART_ROWS:
             self.count -= len(self.parts.pop(0)['crank_angle'])
 
-    def draw(self, path, criteria_available, title):
+    def draw(self, path, criteria_available, title, thresholds):
         """Draw the kept rows over crank angle (:func:`plot_cycle`); the PNG's path."""
         rows = {key: np.concatenate([part[key] for part in self.parts])[-CHART_ROWS:]
                 for key in self.parts[0]} if self.parts else None
@@ -101,7 +101,7 @@ class ChartRows:
         return str(plot_cycle(path, rows['crank_angle'], rows['lever_tip'],
                               rows['coupler_mid'],
                               rows['criterion'] if criteria_available else None,
-                              title=title, thresholds=criterion_thresholds()))
+                              title=title, thresholds=thresholds))
 
 
 def run_replay(args):
@@ -160,7 +160,8 @@ def run_replay(args):
     if chart:
         result['chart'] = chart.draw(args.chart, estimate['criteria_available'],
                                      f'{mechanism.name}: {pathlib.Path(args.input).name} '
-                                     f'({count} samples, order {model.order}, flexlink replay)')
+                                     f'({count} samples, order {model.order}, flexlink replay)',
+                                     criterion_thresholds(mechanism))
     if args.publish:
         _, samples, _ = read_input_samples(args.input, args.topic, args.joint, [])
         with Progress(f'publishing {topic}', count, unit='msg') as progress:
