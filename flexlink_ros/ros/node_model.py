@@ -133,6 +133,6 @@ def marker_exaggeration(estimator, log, source=None):
     top = machine_speed(mechanism, estimator.model.speed_max)
     factor, peak, length = default_exaggeration(estimator, mechanism)
     log(f'markers: deflections drawn x{factor:g} when markers.exaggeration is 0 (the expected '
-        f"peak up to {top * RPM:.0f} rpm, {peak * 1e6:.3g} um, as at least {MARKER_SHARE:.0%} "
+        f'peak up to {top * RPM:.0f} rpm, {peak * 1e6:.3g} um, as at least {MARKER_SHARE:.0%} '
         f"of the coupler's {length:g} m)")
     return factor

@@ -171,7 +171,7 @@ def package_runs(mech, rpm, settings):
 
 def flexible_crank_check(mechanism, rpm, settings, rigid_outputs):
     """
-    The node's crank model (a flexible beam) against this comparison's rigid crank.
+    Compare the node's crank model (a flexible beam) with this comparison's rigid crank.
 
     The peer's crank is rigid, the node's and ``flexlink estimate``'s is not: a long or slender
     crank's bending then moves every output and the peer cannot check it. The package's linear
@@ -180,8 +180,11 @@ def flexible_crank_check(mechanism, rpm, settings, rigid_outputs):
     Parameters
     ----------
     mechanism : Mechanism or str
+        The linkage, or a mechanism file path or bare name.
     rpm : float
+        Crank speed [rpm].
     settings : Settings
+        The comparison's elements, bearings, gravity, damping and output points.
     rigid_outputs : ndarray, shape (P, 4)
         The rigid-crank linear outputs of :func:`package_runs` [m].
 
@@ -211,9 +214,9 @@ def format_crank(check):
         return ''
     p2p = ' / '.join(f"{check['p2p'][k] * 1e6:.3g}" for k in OUTPUT_KEYS)
     worst = max(check['ratio'].values(), key=lambda r: abs(math.log(max(r, 1e-300))))
-    return (f'crank: the peer\'s is rigid, the node\'s and estimate\'s bend (flexible crank, '
+    return (f"crank: the peer's is rigid, the node's and estimate's bend (flexible crank, "
             f'their default): with it the package gives p2p {p2p} um ({worst:.3g} times the '
-            'rigid crank\'s at worst); the crank\'s bending is not checked here')
+            "rigid crank's at worst); the crank's bending is not checked here")
 
 
 def _as_response(angles, values):

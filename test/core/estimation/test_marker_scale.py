@@ -2,8 +2,6 @@
 
 import pathlib
 
-import numpy as np
-
 from flexlink_ros.core.estimation.marker_scale import (default_exaggeration, MARKER_SHARE,
                                                        MAX_EXAGGERATION, round_exaggeration)
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
@@ -13,6 +11,7 @@ from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import SPEED_MARGIN
 from flexlink_ros.core.reduction.mechanism_model import model_for_mechanism
 from flexlink_ros.ros.parameters import default_model_options
+import numpy as np
 import pytest
 
 SOFT = str(pathlib.Path(__file__).resolve().parents[2] / 'data' / 'soft_linkage.yaml')
