@@ -355,16 +355,22 @@ def _worst(table, point, kind='p2p_error'):
     return max((table[f'{point}_{axis}'][kind] for axis in ('dx', 'dy')), key=abs)
 
 
+def scene_heading(record, damping, peer_beta_s, width):
+    """Return the first lines of one speed's table: the scene, the outputs, the peer's p2p."""
+    s = record['settings']
+    return [f"{record['rpm']:g} rpm, {s['bearings']} bearings, gravity "
+            f"{'on' if s['gravity'] else 'off'}, {s['elements_per_link']} elements per link, "
+            f"rigid crank ({record['mechanism']}; {damping}, peer beta {peer_beta_s:g} s)",
+            f"{'':{width}s}" + ''.join(f'{LABELS[k]:>16s}' for k in OUTPUT_KEYS),
+            f"{'Exudyn peer p2p [um]':{width}s}" + ''.join(
+                f"{record['peer_p2p'][k] * 1e6:16.1f}" for k in OUTPUT_KEYS)]
+
+
 def format_speed(record):
     """Text table of one speed: the peer's p2p and each model's p2p, p2p error and rel RMS."""
-    s, info = record['settings'], record['nonlinearity']
-    lines = [f"{record['rpm']:g} rpm, {s['bearings']} bearings, gravity "
-             f"{'on' if s['gravity'] else 'off'}, {s['elements_per_link']} elements per link, "
-             f"rigid crank ({record['mechanism']}; package {record['damping']}, "
-             f"peer beta {s['beta_s']:g} s)",
-             f"{'':30s}" + ''.join(f'{LABELS[k]:>16s}' for k in OUTPUT_KEYS),
-             f"{'Exudyn peer p2p [um]':30s}" + ''.join(
-                 f"{record['peer_p2p'][k] * 1e6:16.1f}" for k in OUTPUT_KEYS)]
+    info = record['nonlinearity']
+    lines = scene_heading(record, f"package {record['damping']}",
+                          record['settings']['beta_s'], 30)
     for name in MODELS:
         table = record['models'][name]
         rows = (('other_p2p', ' p2p [um]', 1e6), ('p2p_error', ' p2p error', 100.0),
