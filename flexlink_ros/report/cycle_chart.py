@@ -98,4 +98,6 @@ def _criteria_panel(ax, degrees, criterion, thresholds):
         ax.axhline(value, color='black', linestyle=style, linewidth=1.0,
                    label=f'{level} {value:.3g}{note}')
     ax.set_yscale('log')
-    ax.legend(loc='upper right', markerscale=6, fontsize=8, ncol=3)
+    # Below the panel: inside it the legend hid the highest criteria and the threshold lines.
+    ax.legend(loc='upper center', bbox_to_anchor=(0.5, -0.2), markerscale=6, fontsize=8,
+              ncol=3)
