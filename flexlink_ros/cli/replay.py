@@ -60,13 +60,14 @@ from ..ros.republish import DISCOVERY_TIMEOUT_S, publish_recording
 CHART_ROWS = 200_000   # the chart shows the last 200 s at 1 kHz: enough revolutions to read
 
 
-def _writer(args, model, topic, tables):
+def _writer(args, model, topic, tables, mechanism=None):
     """``write(blocks, progress)`` of the output file (:func:`write_replay`), or None."""
     if not args.out:
         return None
-    # The estimator's step tables: the quasi-static peak that scales the markers is computed
-    # once, for the deflection bound and the markers.
-    exaggeration = model_exaggeration(model, tables) if args.markers_every_n else 1.0
+    # The estimator's step tables: the quasi-static peaks of the deflection bound and of the
+    # markers (up to the recorded machine's speed) are computed on them once each.
+    exaggeration = (model_exaggeration(model, tables, mechanism) if args.markers_every_n
+                    else 1.0)
     return functools.partial(_write_blocks, args.out, topic=topic, model=model, args=args,
                              exaggeration=exaggeration)
 
@@ -91,7 +92,7 @@ class ChartRows:
         while self.count - len(self.parts[0]['crank_angle']) >= CHART_ROWS:
             self.count -= len(self.parts.pop(0)['crank_angle'])
 
-    def draw(self, path, criteria_available, title):
+    def draw(self, path, criteria_available, title, thresholds):
         """Draw the kept rows over crank angle (:func:`plot_cycle`); the PNG's path."""
         rows = {key: np.concatenate([part[key] for part in self.parts])[-CHART_ROWS:]
                 for key in self.parts[0]} if self.parts else None
@@ -100,7 +101,7 @@ class ChartRows:
         return str(plot_cycle(path, rows['crank_angle'], rows['lever_tip'],
                               rows['coupler_mid'],
                               rows['criterion'] if criteria_available else None,
-                              title=title, thresholds=criterion_thresholds()))
+                              title=title, thresholds=thresholds))
 
 
 def run_replay(args):
@@ -129,7 +130,7 @@ def run_replay(args):
     choice, transform, (topic, rows, messages) = _choose_model(
         args, mechanism, options, model, tables, (topic, rows, messages))
     estimate, summary, times = estimate_and_write(args, model, rows, messages,
-                                                  _writer(args, model, topic, tables),
+                                                  _writer(args, model, topic, tables, mechanism),
                                                   on_block=chart and chart.add, tables=tables,
                                                   transform=transform)
     count, span_s = rows.samples, rows.span_s()
@@ -159,7 +160,8 @@ def run_replay(args):
     if chart:
         result['chart'] = chart.draw(args.chart, estimate['criteria_available'],
                                      f'{mechanism.name}: {pathlib.Path(args.input).name} '
-                                     f'({count} samples, order {model.order}, flexlink replay)')
+                                     f'({count} samples, order {model.order}, flexlink replay)',
+                                     criterion_thresholds(mechanism))
     if args.publish:
         _, samples, _ = read_input_samples(args.input, args.topic, args.joint, [])
         with Progress(f'publishing {topic}', count, unit='msg') as progress:
