@@ -45,12 +45,13 @@ from .progress import Progress
 from .replay_model import defer_model_defaults, MissingModel, replay_model
 from .replay_nonlinear import decide, MAX_THREADS, model_lines, nonlinear_choice, nonlinear_rows
 from .replay_offline import CHUNK_SAMPLES, estimate_and_write, MAX_CHUNK_SAMPLES, open_input
+from .replay_split import default_processes, Splitter, warm_up_seconds
 from ..core.estimation.gate import DEFAULT_RESET_GAP_S
 from ..core.estimation.marker_scale import model_exaggeration
 from ..core.estimation.tables import step_tables
 from ..io.joint_states import read_input_samples
 from ..io.recorder_files import refuse_existing
-from ..io.replay_writer import write_replay
+from ..io.replay_writer import replay_topics, write_replay, write_rows
 from ..names import DEFAULT_FRAME_ID, NODE_NAME, output_topics, QUALITY_NAMES
 from ..report.cycle_chart import plot_cycle
 from ..ros.messages import OK
@@ -71,10 +72,23 @@ def _writer(args, model, topic, tables):
                              exaggeration=exaggeration)
 
 
-def _write_blocks(out, blocks, progress, topic, model, args, exaggeration):
+def _write_blocks(out, blocks, progress, topic, model, args, exaggeration, tail=None):
     return write_replay(out, blocks, topic, output_topics(args.node_name), args.frame_id, model,
                         args.markers_every_n, exaggeration, progress=progress,
-                        joint_levels=[OK] * 4, provenance=args.provenance)
+                        joint_levels=[OK] * 4, provenance=args.provenance, tail=tail)
+
+
+def _splitter(args, model, topic, tables, mechanism, options):
+    """Return the replay's :class:`.replay_split.Splitter` (None: one process)."""
+    if not args.out or (getattr(args, 'processes', None) or 1) < 2:
+        return None
+    exaggeration = model_exaggeration(model, tables) if args.markers_every_n else 1.0
+    declared = replay_topics(topic, output_topics(args.node_name), args.markers_every_n)
+    rows_writer = functools.partial(write_rows, declared=declared, frame_id=args.frame_id,
+                                    model=model, markers_every_n=args.markers_every_n,
+                                    exaggeration=exaggeration, joint_levels=[OK] * 4)
+    return Splitter(args, model, tables, (declared, rows_writer),
+                    warm_up_seconds(model, tables, mechanism, options, args))
 
 
 class ChartRows:
@@ -128,10 +142,12 @@ def run_replay(args):
     tables = step_tables(model)
     choice, transform, (topic, rows, messages) = _choose_model(
         args, mechanism, options, model, tables, (topic, rows, messages))
+    splitter = (None if transform is not None or chart
+                else _splitter(args, model, topic, tables, mechanism, options))
     estimate, summary, times = estimate_and_write(args, model, rows, messages,
                                                   _writer(args, model, topic, tables),
                                                   on_block=chart and chart.add, tables=tables,
-                                                  transform=transform)
+                                                  transform=transform, splitter=splitter)
     count, span_s = rows.samples, rows.span_s()
     result = {'input': str(args.input), 'topic': topic, 'samples': count,
               'skipped': rows.skipped, 'skipped_reasons': rows.skipped_reasons,
@@ -147,7 +163,8 @@ def run_replay(args):
         result['output'] = times['status']['path']
         result['output_files'] = times['status']['files']
         result['output_topics'] = times['status']['topics']
-    result.update(estimate_s=times['estimate_s'], segments=estimate['segments'],
+    result.update(estimate_s=times['estimate_s'], processes=times['processes'],
+                  segments=estimate['segments'],
                   outliers=estimate['outliers'], out_of_bound=estimate['out_of_bound'],
                   criteria_available=estimate['criteria_available'])
     total = read_s + times['write_s']
@@ -228,6 +245,10 @@ def _check_arguments(args):
         raise ValueError(f'`--markers-every-n` must be >= 0, got {args.markers_every_n}')
     if not 1 <= args.threads <= MAX_THREADS:
         raise ValueError(f'`--threads` must be in 1..{MAX_THREADS}, got {args.threads}')
+    if args.processes is None:
+        args.processes = default_processes()
+    if args.processes not in (1, 2):
+        raise ValueError(f'`--processes` must be 1 or 2, got {args.processes}')
     if not 1 <= args.chunk_samples <= MAX_CHUNK_SAMPLES:
         raise ValueError(f'`--chunk-samples` must be in 1..{MAX_CHUNK_SAMPLES}, '
                          f'got {args.chunk_samples}')
@@ -312,6 +333,24 @@ def _replay_command(args):
     return 1 if result.get('playback', {}).get('failed') else code
 
 
+def _add_work_arguments(parser):
+    """Add the flags of how the work is cut: chunks, threads, processes."""
+    parser.add_argument('--chunk-samples', type=int, default=CHUNK_SAMPLES, metavar='N',
+                        help='input messages read and estimated at a time: memory grows with '
+                        f'it, not with the recording (default {CHUNK_SAMPLES})')
+    parser.add_argument('--threads', type=int, default=1, metavar='N',
+                        help='with the nonlinear model, follow a long recording in N spans at '
+                        'once, each from a warm-up (the same deflections to rounding; memory '
+                        f'grows with N, about 32 MB each; 1..{MAX_THREADS}, default 1)')
+    parser.add_argument('--processes', type=int, default=None, metavar='N',
+                        help='with the linear model and --out, estimate and write the second '
+                        'part of a recording in a second process, from a warm-up before it '
+                        '(the same messages; values to rounding: the deflections within '
+                        '5e-12 of their range): 1 or 2; default 2 where the system can fork '
+                        'and has 2 or more cores, else 1; a recording shorter than about '
+                        'two warm-ups (10 s each for the default model) runs in one process')
+
+
 def register(subparsers):
     """Add the replay subcommand."""
     parser = subparsers.add_parser(
@@ -330,13 +369,7 @@ def register(subparsers):
     parser.add_argument('--frame-id', default=DEFAULT_FRAME_ID, help='frame of the outputs')
     parser.add_argument('--markers-every-n', type=int, default=10,
                         help='markers on every n-th sample (0: none; default 10, as the node)')
-    parser.add_argument('--chunk-samples', type=int, default=CHUNK_SAMPLES, metavar='N',
-                        help='input messages read and estimated at a time: memory grows with '
-                        f'it, not with the recording (default {CHUNK_SAMPLES})')
-    parser.add_argument('--threads', type=int, default=1, metavar='N',
-                        help='with the nonlinear model, follow a long recording in N spans at '
-                        'once, each from a warm-up (the same deflections to rounding; memory '
-                        f'grows with N, about 32 MB each; 1..{MAX_THREADS}, default 1)')
+    _add_work_arguments(parser)
     parser.add_argument('--no-warm-start', action='store_true',
                         help='start from the static deflection, not the periodic state')
     parser.add_argument('--publish', action='store_true',

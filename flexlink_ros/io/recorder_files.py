@@ -240,6 +240,24 @@ def add_batch(current, topics, names, index, messages, log, publish, flush_perio
                                        last_flush_log_ns, sequences)
 
 
+def count_appended(topics, current, appended, times):
+    """
+    Count messages appended to the open file ``current`` in bulk; return how many.
+
+    ``appended``: channel id -> messages (:meth:`McapFileWriter.append_chunks`, which also
+    gives their least and greatest log ``times``): each topic's count and last sequence
+    number (the messages carry theirs) and the file's span take them in.
+    """
+    names = {number: name for name, number in current.channel_ids.items()}
+    for channel, number in appended.items():
+        topics[names[channel]].message_count += number
+        topics[names[channel]].sequence += number
+    count = sum(appended.values())
+    if count:
+        current.note(times[0], times[1], count)
+    return count
+
+
 def file_path(path, bare, index):
     """
     Return the path of a recording's file number ``index``.
