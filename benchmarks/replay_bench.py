@@ -14,7 +14,9 @@ an encoder gives it, logged 150 us after its stamp, written in batches (bounded 
 ``compare`` replays the bag with this build and, given ``--reference-python``, with another
 (a worktree of an older commit with its own venv, run from its root), in turn: A B A B ...,
 each a fresh process ``PY -m flexlink_ros.cli replay BAG --out TMP`` with the default model
-(its cache filled by a first, untimed run of each build). It prints every run's wall time, CPU
+and flags (its cache, and each build's compiled modules in a directory of the benchmark's own,
+filled by a first, untimed run of each build: an installed package has its modules compiled).
+It prints every run's wall time, CPU
 time (``os.wait4``) and peak resident size (the child's own ``VmHWM``, read as it exits: the
 ``ru_maxrss`` of ``wait4`` also counts the parent's pages the child held between fork and
 exec), the medians and the ratio of the medians. Timing is
@@ -95,18 +97,26 @@ _PEAK_WRAPPER = (
     "runpy.run_module('flexlink_ros.cli', run_name='__main__', alter_sys=True)\n")
 
 
-def run_measured(python, root, args):
+def run_measured(python, root, args, bytecode=None):
     """
     Run ``python -m flexlink_ros.cli ARGS`` from ``root`` to its end.
 
-    Returns wall time [s], CPU time [s] (``os.wait4``) and the process's own peak resident size
-    [MB]: the ``ru_maxrss`` of ``wait4`` would also count the parent's pages the child held
-    between fork and exec (a large parent makes every child look as large).
+    Returns wall time [s], CPU time [s] (``os.wait4``: the process's and the children it
+    waited for, a forked part of the replay included) and the process's own peak resident
+    size [MB]: the ``ru_maxrss`` of ``wait4`` would also count the parent's pages the child
+    held between fork and exec (a large parent makes every child look as large).
+    ``bytecode``: a directory where Python keeps the compiled modules
+    (``PYTHONPYCACHEPREFIX``), as an installed package has them, even where the environment
+    says not to write them (``PYTHONDONTWRITEBYTECODE``): the source trees stay untouched.
     """
     argv = [python, '-c', _PEAK_WRAPPER, *args]
+    environment = dict(os.environ)
+    if bytecode is not None:
+        environment.pop('PYTHONDONTWRITEBYTECODE', None)
+        environment['PYTHONPYCACHEPREFIX'] = str(bytecode)
     start = time.perf_counter()
     process = subprocess.Popen(argv, cwd=root, stdout=subprocess.DEVNULL,
-                               stderr=subprocess.PIPE)
+                               stderr=subprocess.PIPE, env=environment)
     _, status, usage = os.wait4(process.pid, 0)
     seconds = time.perf_counter() - start
     error = process.stderr.read().decode(errors='replace')
@@ -117,12 +127,13 @@ def run_measured(python, root, args):
     return seconds, usage.ru_utime + usage.ru_stime, int(peaks[-1]) / 1024.0
 
 
-def replay_once(python, root, bag, out, extra=()):
+def replay_once(python, root, bag, out, extra=(), bytecode=None):
     """Replay in a fresh process from ``root``: wall time [s], CPU time [s], peak RSS [MB]."""
     threads = ['--threads', '2'] if extra and '--threads' in replay_help(python, root) else []
     return run_measured(python, root, ['replay', str(pathlib.Path(bag).resolve()), '--out',
                                        str(out), '--mechanism', 'cho1992',
-                                       *linear_flag(python, root), *extra, *threads])
+                                       *linear_flag(python, root), *extra, *threads],
+                        bytecode)
 
 
 def replay_help(python, root):
@@ -171,15 +182,17 @@ def compare(args):
     times = {name: [] for name, _, _ in builds}
     cpu = {name: [] for name, _, _ in builds}
     try:
-        for name, python, root in builds:       # fill each build's model cache, untimed
-            replay_once(python, root, args.bag, work / f'warm_{name}.mcap', extra)
+        for name, python, root in builds:       # fill each build's caches, untimed
+            replay_once(python, root, args.bag, work / f'warm_{name}.mcap', extra,
+                        work / f'bytecode_{name}')
         if args.same_output and len(builds) == 2:
             same = same_messages(work / 'warm_this.mcap', work / 'warm_reference.mcap')
             print(f'same messages in both outputs: {same}')
         for pair in range(args.pairs):
             for name, python, root in builds:
                 out = work / f'{name}_{pair}.mcap'
-                seconds, cpu_s, peak_mb = replay_once(python, root, args.bag, out, extra)
+                seconds, cpu_s, peak_mb = replay_once(python, root, args.bag, out, extra,
+                                                      work / f'bytecode_{name}')
                 times[name].append(seconds)
                 cpu[name].append(cpu_s)
                 print(f'pair {pair + 1} {name:9s} {seconds:6.3f} s  CPU {cpu_s:6.3f} s  '

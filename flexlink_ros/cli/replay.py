@@ -32,6 +32,7 @@ restarts, as in the node.
 import functools
 import math
 import pathlib
+import shutil
 import sys
 import time
 
@@ -97,6 +98,10 @@ class ChartRows:
     def __init__(self):
         self.parts, self.count = [], 0
 
+    def clear(self):
+        """Forget the kept rows (the estimate runs again)."""
+        self.parts, self.count = [], 0
+
     def add(self, estimate):
         """Keep a block's crank angle, deflections and criteria."""
         self.parts.append({key: np.array(estimate[key][-CHART_ROWS:]) for key in
@@ -140,14 +145,12 @@ def run_replay(args):
     model = load_model(mechanism, options, args)
     chart = ChartRows() if args.chart else None
     tables = step_tables(model)
-    choice, transform, (topic, rows, messages) = _choose_model(
-        args, mechanism, options, model, tables, (topic, rows, messages))
-    splitter = (None if transform is not None or chart
-                else _splitter(args, model, topic, tables, mechanism, options))
-    estimate, summary, times = estimate_and_write(args, model, rows, messages,
-                                                  _writer(args, model, topic, tables),
-                                                  on_block=chart and chart.add, tables=tables,
-                                                  transform=transform, splitter=splitter)
+    choice, transform, (topic, rows, messages), outcome = _choose_model(
+        args, (mechanism, options, model, tables), (topic, rows, messages), chart, damaged)
+    if outcome is None:
+        outcome = _estimate(args, (mechanism, options, model, tables), (topic, rows, messages),
+                            chart, transform)
+    estimate, summary, times = outcome
     count, span_s = rows.samples, rows.span_s()
     result = {'input': str(args.input), 'topic': topic, 'samples': count,
               'skipped': rows.skipped, 'skipped_reasons': rows.skipped_reasons,
@@ -187,25 +190,66 @@ def run_replay(args):
     return result
 
 
-def _choose_model(args, mechanism, options, model, tables, opened):
+def _estimate(args, made, opened, chart, transform=None):
+    """Estimate (and write) the input ``opened`` with the model ``made``."""
+    mechanism, options, model, tables = made
+    topic, rows, messages = opened
+    splitter = (None if transform is not None or chart
+                else _splitter(args, model, topic, tables, mechanism, options))
+    return estimate_and_write(args, model, rows, messages, _writer(args, model, topic, tables),
+                              on_block=chart and chart.add, tables=tables,
+                              transform=transform, splitter=splitter)
+
+
+def _choose_model(args, made, opened, chart, damaged):
     """
     Choose the linear or the nonlinear model (:mod:`.replay_nonlinear`).
 
     Returns the JSON's ``model_choice``, the :class:`.replay_nonlinear.NonlinearRows` (None:
-    linear) and the input to estimate from (``opened`` again after a linear pass for
-    ``auto``); the output's provenance records the choice.
+    linear), the input to estimate from and, where the choice took a linear pass that stays
+    the result, its :func:`estimate_and_write` outcome (else None). For ``auto`` with an output
+    file, the linear pass writes it, kept where the linear estimate is valid: the recording
+    is read once. Else (or where it is not valid) the input is opened again. The output's
+    provenance records the choice.
     """
+    mechanism, options, model, tables = made
     asked = nonlinear_choice(args, getattr(args, 'recorded_provenance', None))
-    linear_summary = None
-    if asked == 'auto':     # the linear estimate alone first: is it valid?
-        _, linear_summary, _ = estimate_and_write(args, model, opened[1], opened[2], None,
-                                                  tables=tables)
-        opened = open_input(args, [])
-    use, why = decide(asked, linear_summary, recorded=not getattr(args, 'nonlinear', None))
+    recorded = not getattr(args, 'nonlinear', None)
+    linear_summary = outcome = None
+    if asked == 'auto':     # the linear estimate first: is it valid?
+        if args.out:
+            _record_choice(args, False)
+            outcome = _estimate(args, made, opened, chart)
+            linear_summary = outcome[1]
+        else:
+            _, linear_summary, _ = estimate_and_write(args, model, opened[1], opened[2], None,
+                                                      tables=tables)
+    use, why = decide(asked, linear_summary, recorded=recorded)
+    if asked == 'auto' and (use or not args.out):
+        if outcome is not None:
+            remove_output(args.out)
+            outcome = None
+            if chart:
+                chart.clear()
+        del damaged[:]
+        opened = open_input(args, damaged)
     transform = nonlinear_rows(args, mechanism, options, DEFAULT_RESET_GAP_S) if use else None
+    _record_choice(args, use)
+    return {'nonlinear': use, 'why': why, 'asked': asked}, transform, opened, outcome
+
+
+def _record_choice(args, use):
     if args.provenance.get('model_options'):
         args.provenance['nonlinear'] = 'on' if use else 'off'
-    return {'nonlinear': use, 'why': why, 'asked': asked}, transform, opened
+
+
+def remove_output(out):
+    """Remove the output this replay wrote (a file or a bag directory), to write it again."""
+    path = pathlib.Path(out)
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path)
+    else:
+        path.unlink()
 
 
 def playback_options(args):
