@@ -20,8 +20,10 @@ It prints every run's wall time, CPU
 time (``os.wait4``) and peak resident size (the child's own ``VmHWM``, read as it exits: the
 ``ru_maxrss`` of ``wait4`` also counts the parent's pages the child held between fork and
 exec), the medians and the ratio of the medians. Timing is
-printed, never asserted: the machine is shared. ``--same-output`` also checks that the two
-builds wrote the same messages (topic, log and publish time, sequence, bytes). The replay is
+printed, never asserted: the machine is shared. ``--same-output`` also compares what the two
+builds wrote: every message's topic, log and publish time, sequence number and length, how many
+messages' bytes differ and, where they do, each topic's largest difference over the range of
+the value (a replay in two processes writes its second part's values to rounding). The replay is
 the linear model's (``--nonlinear off``), or with ``--nonlinear`` the reduced nonlinear
 model's (``--nonlinear on``, and ``--threads 2`` for a build that has it; its deflections
 agree between builds to rounding, not to the byte, where one steps runs of samples at once).
@@ -171,6 +173,45 @@ def same_messages(first, second):
             return True
 
 
+def _doubles(data):
+    """Read a message's bytes after the CDR encapsulation as little-endian doubles."""
+    size = (len(data) - 4) // 8 * 8
+    return np.frombuffer(data[4:4 + size], dtype='<f8')
+
+
+def compare_outputs(first, second):
+    """
+    Compare two outputs message by message.
+
+    Returns whether every message's topic, times, sequence and length agree, how many
+    messages' bytes differ, and each topic's largest difference over the range of the value
+    (the doubles of the message, compared where they differ).
+    """
+    ranges = {}
+    for topic, *_, data in messages(first):
+        values = _doubles(data)
+        low, high = ranges.get(topic, (values, values))
+        if len(low) == len(values):
+            ranges[topic] = (np.minimum(low, values), np.maximum(high, values))
+    missing = (None,) * 5
+    heads, differing, worst = True, 0, {}
+    left, right = messages(first), messages(second)
+    while True:
+        a, b = next(left, missing), next(right, missing)
+        if a is missing and b is missing:
+            return heads, differing, worst
+        if a[:4] != b[:4] or len(a[4] or b'') != len(b[4] or b''):
+            heads = False
+            continue
+        if a[4] != b[4]:
+            differing += 1
+            x, y = _doubles(a[4]), _doubles(b[4])
+            changed = x != y
+            span = (ranges[a[0]][1] - ranges[a[0]][0])[changed]
+            scaled = np.abs(x - y)[changed] / np.where(span > 0, span, np.inf)
+            worst[a[0]] = max(worst.get(a[0], 0.0), float(np.max(scaled, initial=0.0)))
+
+
 def compare(args):
     """Alternate the builds; print each run, the medians and the ratio."""
     builds = [('this', args.python, args.root)]
@@ -186,8 +227,12 @@ def compare(args):
             replay_once(python, root, args.bag, work / f'warm_{name}.mcap', extra,
                         work / f'bytecode_{name}')
         if args.same_output and len(builds) == 2:
-            same = same_messages(work / 'warm_this.mcap', work / 'warm_reference.mcap')
-            print(f'same messages in both outputs: {same}')
+            heads, differing, worst = compare_outputs(work / 'warm_reference.mcap',
+                                                      work / 'warm_this.mcap')
+            print(f'same topics, times and sequence numbers: {heads}; messages whose bytes '
+                  f'differ: {differing}' + ''.join(f'\n  {topic}: largest difference '
+                                                   f'{value:.2g} of its range'
+                                                   for topic, value in worst.items()))
         for pair in range(args.pairs):
             for name, python, root in builds:
                 out = work / f'{name}_{pair}.mcap'
