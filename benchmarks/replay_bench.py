@@ -4,7 +4,7 @@
     python benchmarks/replay_bench.py make-bag BAG [--seconds 60] [--rate 1000]
     python benchmarks/replay_bench.py compare BAG [--pairs 7]
         [--reference-python OTHER/.venv/bin/python --reference-root OTHER] [--same-output]
-        [--nonlinear]
+        [--nonlinear] [--flags 'F...'] [--reference-flags 'F...']
 
 ``make-bag`` writes a rosbag2 MCAP of one crank ``sensor_msgs/JointState`` topic: the
 synthetic signal the estimator benches use (:func:`flexlink_ros.studies.synthetic
@@ -27,6 +27,8 @@ the value (a replay in two processes writes its second part's values to rounding
 the linear model's (``--nonlinear off``), or with ``--nonlinear`` the reduced nonlinear
 model's (``--nonlinear on``, and ``--threads 2`` for a build that has it; its deflections
 agree between builds to rounding, not to the byte, where one steps runs of samples at once).
+``--flags`` / ``--reference-flags`` add replay flags to one build's runs (``--flags
+'--processes 1'`` against this build's default times the second process).
 """
 
 import argparse
@@ -131,7 +133,8 @@ def run_measured(python, root, args, bytecode=None):
 
 def replay_once(python, root, bag, out, extra=(), bytecode=None):
     """Replay in a fresh process from ``root``: wall time [s], CPU time [s], peak RSS [MB]."""
-    threads = ['--threads', '2'] if extra and '--threads' in replay_help(python, root) else []
+    threads = (['--threads', '2'] if '--nonlinear' in extra
+               and '--threads' in replay_help(python, root) else [])
     return run_measured(python, root, ['replay', str(pathlib.Path(bag).resolve()), '--out',
                                        str(out), '--mechanism', 'cho1992',
                                        *linear_flag(python, root), *extra, *threads],
@@ -214,17 +217,18 @@ def compare_outputs(first, second):
 
 def compare(args):
     """Alternate the builds; print each run, the medians and the ratio."""
-    builds = [('this', args.python, args.root)]
+    builds = [('this', args.python, args.root, tuple(args.flags.split()))]
     if args.reference_python:
-        builds.append(('reference', args.reference_python, args.reference_root))
+        builds.append(('reference', args.reference_python, args.reference_root,
+                       tuple(args.reference_flags.split())))
     work = pathlib.Path(tempfile.mkdtemp(prefix='replay_bench_'))
     # --nonlinear given last wins over the linear_flag before it; --threads where a build has it.
     extra = ('--nonlinear', 'on') if args.nonlinear else ()
-    times = {name: [] for name, _, _ in builds}
-    cpu = {name: [] for name, _, _ in builds}
+    times = {name: [] for name, *_ in builds}
+    cpu = {name: [] for name, *_ in builds}
     try:
-        for name, python, root in builds:       # fill each build's caches, untimed
-            replay_once(python, root, args.bag, work / f'warm_{name}.mcap', extra,
+        for name, python, root, flags in builds:       # fill each build's caches, untimed
+            replay_once(python, root, args.bag, work / f'warm_{name}.mcap', extra + flags,
                         work / f'bytecode_{name}')
         if args.same_output and len(builds) == 2:
             heads, differing, worst = compare_outputs(work / 'warm_reference.mcap',
@@ -234,10 +238,10 @@ def compare(args):
                                                    f'{value:.2g} of its range'
                                                    for topic, value in worst.items()))
         for pair in range(args.pairs):
-            for name, python, root in builds:
+            for name, python, root, flags in builds:
                 out = work / f'{name}_{pair}.mcap'
-                seconds, cpu_s, peak_mb = replay_once(python, root, args.bag, out, extra,
-                                                      work / f'bytecode_{name}')
+                seconds, cpu_s, peak_mb = replay_once(python, root, args.bag, out,
+                                                      extra + flags, work / f'bytecode_{name}')
                 times[name].append(seconds)
                 cpu[name].append(cpu_s)
                 print(f'pair {pair + 1} {name:9s} {seconds:6.3f} s  CPU {cpu_s:6.3f} s  '
@@ -274,6 +278,10 @@ def main(argv=None):
     runs.add_argument('--reference-root', type=pathlib.Path)
     runs.add_argument('--nonlinear', action='store_true',
                       help='time the replay with the reduced nonlinear model (--nonlinear on)')
+    runs.add_argument('--flags', default='', help="more flags of this build's replay, e.g. "
+                      "'--processes 1'")
+    runs.add_argument('--reference-flags', default='',
+                      help="more flags of the reference build's replay")
     runs.add_argument('--same-output', action='store_true',
                       help='check that both builds write the same messages')
     args = parser.parse_args(argv)

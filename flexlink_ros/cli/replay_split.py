@@ -38,7 +38,7 @@ from ..io.replay_writer import PartWriter
 
 # The warm-up in rows is the warm-up in seconds at the first chunk's sample rate, with this
 # margin (the child checks the time its warm-up spans and gives its part up if short) ...
-WARM_UP_MARGIN = 1.15
+WARM_UP_MARGIN = 1.03
 # ... and at most this many rows (a denser recording runs in one process).
 MAX_WARM_UP_ROWS = 1 << 17
 # The parent's share of the rows (its warm-up included, the child's work is the rest): the
