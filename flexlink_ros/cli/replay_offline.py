@@ -407,8 +407,8 @@ def estimate_and_write(args, model, rows, messages, write, on_block=None, tables
         outcome = _merge_part(rows, outcome, summary, splitter.report)
     times = {'estimate_s': pipeline.seconds, 'write_s': time.perf_counter() - start,
              'processes': ({'used': 2, 'split_row': splitter.split,
-                            'second_part': 'forked' if splitter.report['forked']
-                            else 'sequential'} if split else {'used': 1})}
+                            'second_part': splitter.report['second_part']}
+                           if split else {'used': 1})}
     if status is not None:
         times['status'] = status
     return outcome, summary.result(), times

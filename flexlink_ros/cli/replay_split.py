@@ -211,17 +211,19 @@ class Splitter:
         """
         report = self._report()
         written = recorder.status(list_files=False)['topics']
-        exact = (report.get('exact') and parent_rows.samples == self.split
-                 and all(written[name] == count for name, count in self.guesses.items()))
+        # No row from the split on (fewer usable rows than messages): the child only counted.
+        exact = not report['samples'] or (
+            report['exact'] and parent_rows.samples == self.split
+            and all(written[name] == count for name, count in self.guesses.items()))
         if exact:
             self.part.seek(0)
             recorder.append_part(self.part)
-            report['forked'] = True
+            report['second_part'] = 'forked' if report['samples'] else 'empty'
         else:
             # The sequential estimate of the rest, written here.
             report = self.run_part(recorder, 0, report.get('damaged') is not None,
                                    not self.args.no_warm_start)
-            report['forked'] = False
+            report['second_part'] = 'sequential'
         self.part.close()
         self.report = report
         return report['samples']

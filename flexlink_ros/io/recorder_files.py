@@ -16,7 +16,7 @@ import os
 import pathlib
 import stat
 
-from mcap import __version__ as MCAP_VERSION
+import mcap
 import numpy as np
 
 from .mcap_writer import COMPRESSIONS, DEFAULT_ZSTD_LEVEL, McapFileWriter
@@ -25,7 +25,7 @@ from .provenance import PROVENANCE_RECORD
 
 # mcap.writer's LIBRARY_IDENTIFIER, without importing mcap.writer (which asks the installed
 # packages' metadata for its version: about 40 ms of every replay's start).
-LIBRARY = f'flexlink_ros recorder; mcap-python/{MCAP_VERSION}'
+LIBRARY = f'flexlink_ros recorder; mcap-python/{mcap.__version__}'
 # Smallest split a live recording accepts (0: never split). Each split finishes a file
 # (summary, indexes, metadata) and starts the next (header, schemas, channels): far below
 # these a recorder fed at 1 kHz would do little but split, and fall behind.

@@ -28,8 +28,12 @@ def bench():
     return module
 
 
-def recording(path, seconds=60.0, gaps=(), outliers=()):
-    """Write the benchmark's 1 kHz crank signal; stamps from each gap row on 0.8 s later."""
+def recording(path, seconds=60.0, gaps=(), outliers=(), other_joint=False):
+    """
+    Write the benchmark's 1 kHz crank signal; stamps from each gap row on 0.8 s later.
+
+    ``other_joint``: each sample followed by a message of another joint (skipped by a replay).
+    """
     module = bench()
     stamps, angles, speeds = module.synthetic_signal(391.0, seconds, 1000.0, jitter=0.3,
                                                      seed=1)
@@ -39,10 +43,15 @@ def recording(path, seconds=60.0, gaps=(), outliers=()):
     speeds = np.array(speeds, dtype=float)
     speeds[list(outliers)] = 1e6               # implausible speeds: the gate refuses them
     angles = np.mod(angles + np.pi, 2.0 * np.pi) - np.pi
+    data = module.crank_messages(stamps, angles, speeds)
+    log = stamps + module.LOG_DELAY_NS
+    if other_joint:
+        wheel = [row.replace(b'crank\x00', b'wheel\x00') for row in data]
+        data = [message for pair in zip(data, wheel) for message in pair]
+        log = np.repeat(log, 2)
     with McapRecorder(path) as recorder:
         recorder.add_topic('/joint_states', JointState)
-        recorder.write_batch('/joint_states', module.crank_messages(stamps, angles, speeds),
-                             stamps + module.LOG_DELAY_NS)
+        recorder.write_batch('/joint_states', data, log)
     return path
 
 
@@ -207,3 +216,14 @@ def test_a_short_recording_runs_in_one_process(tmp_path):
     """Too short for a warm-up and a part of its own: one process, whatever is asked."""
     bag = recording(tmp_path / 'bag.mcap', seconds=12.0)
     assert replay(bag, tmp_path / 'out.mcap', '--processes', '2')['processes'] == {'used': 1}
+
+
+def test_a_split_past_the_last_usable_row_leaves_the_parent_all_rows(tmp_path):
+    """As many messages of another joint as samples: the child only counts what it skips."""
+    bag = recording(tmp_path / 'bag.mcap', seconds=40.0, other_joint=True)
+    one = replay(bag, tmp_path / 'one.mcap', '--processes', '1')
+    two = replay(bag, tmp_path / 'two.mcap', '--processes', '2')
+    assert two['processes']['second_part'] == 'empty'
+    assert two['processes']['split_row'] > one['samples'] == one['skipped'] > 39_000
+    assert summary_keys(two) == summary_keys(one)
+    assert messages(tmp_path / 'two.mcap') == messages(tmp_path / 'one.mcap')
