@@ -9,12 +9,20 @@
 # --params-out`), starts the node with that parameters file and the crank driver at 600 rpm
 # for STREAM_S seconds recording run1, then `flexlink mcap-info` and `flexlink replay` with
 # no model flag. Prints each step's wall time; a step that fails stops the script.
+# LINKAGE=FILE uses that mechanism file (with its crank_speed_rpm) in place of the steel one.
 # ROS stays on this machine: LOCALHOST discovery and a run-unique domain id.
 set -euo pipefail
 
 REPOSITORY=${1:-$(git -C "$(dirname "$0")/.." rev-parse --show-toplevel)}
 WORKDIR=${2:-$(mktemp -d -t flexlink-new-user.XXXXXX)}
 STREAM_S=${STREAM_S:-5}
+LINKAGE=${LINKAGE:+$(realpath "$LINKAGE")}
+RPM=600.0
+if [[ -n $LINKAGE ]]; then
+    RPM=$(sed -n 's/^crank_speed_rpm: *\([0-9.e+]*\).*/\1/p' "$LINKAGE")
+    [[ -n $RPM ]] || { echo "$LINKAGE states no crank_speed_rpm" >&2; exit 2; }
+    RPM=$(printf '%.1f' "$RPM")     # a ROS double parameter needs its decimal point
+fi
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$((RANDOM % 102))}
 export OPENBLAS_NUM_THREADS=${OPENBLAS_NUM_THREADS:-1}
@@ -31,6 +39,10 @@ step() {   # step NAME COMMAND...: run, time, remember
 }
 
 write_linkage() {
+    if [[ -n $LINKAGE ]]; then
+        cp "$LINKAGE" my_linkage.yaml
+        return
+    fi
     cat > my_linkage.yaml <<'EOF'
 # 20 x 6 mm steel bars, the 20 mm side in the plane: A = 0.006 * 0.020, I = 0.006 * 0.020^3 / 12
 name: my_packaging_linkage
@@ -64,7 +76,7 @@ node_and_driver() {
         -p record.enabled:=true -p record.path:=run1 > node.log 2>&1 &
     local node=$!
     wait_for_line node.log 'ready: listening on' "$node" 600
-    .venv/bin/crank_driver --ros-args -p speed_rpm:=600.0 > driver.log 2>&1 &
+    ".venv/bin/crank_driver" --ros-args -p speed_rpm:="$RPM" > driver.log 2>&1 &
     local driver=$!
     wait_for_line node.log 'first crank sample' "$node" 60
     sleep "$STREAM_S"
@@ -79,7 +91,7 @@ step 'make install' make -s install
 step 'write my_linkage.yaml' write_linkage
 step 'flexlink modes' .venv/bin/flexlink modes --mechanism my_linkage.yaml --crank-deg 0:360:45
 step 'flexlink plan --quick' .venv/bin/flexlink plan --mechanism my_linkage.yaml \
-    --rpm-max 600 --tolerance 0.02 --quick --params-out my_node.yaml
+    --rpm-max "$RPM" --tolerance 0.02 --quick --params-out my_node.yaml
 step "node + driver (${STREAM_S} s)" node_and_driver
 step 'flexlink mcap-info' .venv/bin/flexlink mcap-info run1
 step 'flexlink replay' .venv/bin/flexlink replay run1 --chart run1.png

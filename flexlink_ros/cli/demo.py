@@ -12,6 +12,7 @@ prints what it holds.
 import os
 import pathlib
 import queue
+import re
 import signal
 import subprocess
 import sys
@@ -28,6 +29,9 @@ READY_TIMEOUT_S = 300.0    # node start-up, including a first model build on a s
 FIRST_SAMPLE_TIMEOUT_S = 30.0  # discovery between driver and node (0-3 s on loopback)
 STOP_TIMEOUT_S = 20.0      # after SIGINT, before SIGTERM, then SIGKILL
 FOXGLOVE_URL = 'https://app.foxglove.dev'
+# The driver's exit line (ros/crank_driver.py CrankDriver.summary).
+DRIVER_SUMMARY = re.compile(r'crank_driver: published (\d+) JointState messages \((\d+) while '
+                            r'a subscriber was matched\); the timer skipped (\d+) periods')
 
 
 class ManagedProcess:
@@ -187,8 +191,18 @@ def run_demo(seconds=6.0, rpm=391.0, out='demo_out', rate_hz=1000.0, extra_node_
     result.update({'seconds': seconds, 'rpm': rpm, 'rate_hz': rate_hz, 'domain_id': domain,
                    'exit_codes': codes,
                    'node_warnings': [line for line in node.lines if '[WARN]' in line],
+                   'driver': _driver_summary(processes['crank_driver'].lines),
                    'model': _model_choice(node.lines)})
     return result
+
+
+def _driver_summary(lines):
+    """Return the driver's exit counts {'published', 'heard', 'periods_skipped'}, or None."""
+    for line in reversed(lines):
+        found = DRIVER_SUMMARY.search(line)
+        if found:
+            return dict(zip(('published', 'heard', 'periods_skipped'), map(int, found.groups())))
+    return None
 
 
 def _model_choice(lines):
@@ -251,6 +265,13 @@ def summary_text(result):
              f"(ROS_DOMAIN_ID={result['domain_id']}, localhost only)"]
     for warning in result['node_warnings']:
         lines.append('  node warning: ' + warning.split(']: ', 1)[-1])
+    driver = result.get('driver')
+    if driver:
+        skipped = (f" (its timer skipped {driver['periods_skipped']} periods, running late on "
+                   f"this machine: the gaps in the input's stamps)"
+                   if driver['periods_skipped'] else '')
+        lines.append(f"  crank_driver sent {driver['heard']} messages while the node listened"
+                     f"{skipped}; the node received {result['samples']}")
     lines.append(f"recording: {result['path']} (rosbag2 bag: metadata.yaml + "
                  f"{len(result['files'])} MCAP file(s), {result['bytes'] / 1e6:.2f} MB, "
                  f"{'complete' if result['complete'] else 'INCOMPLETE'})")

@@ -70,7 +70,8 @@ def _estimate_chart(args, mechanism, model, result):
         return np.column_stack([result[point]['dx_m'], result[point]['dy_m']])
     criterion = np.asarray(result['criterion']) if model.force_moments.any() else None
     return plot_cycle(args.chart, np.radians(result['crank_deg']), columns('lever_tip'),
-                      columns('coupler_mid'), criterion, thresholds=criterion_thresholds(),
+                      columns('coupler_mid'), criterion,
+                      thresholds=criterion_thresholds(mechanism),
                       title=f'{mechanism.name} at {args.rpm:g} rpm (last revolution, order '
                       f'{model.order}, flexlink estimate)')
 

@@ -18,6 +18,7 @@ import argparse
 import sys
 
 from .progress import OnDemandProgress
+from ..core.criteria_thresholds import suggest_thresholds
 from ..core.mechanism_file import read_mechanism_file
 from ..core.numerics import RPM
 from ..core.options import DEFAULT_SPEED_MAX, ModelOptions, SECOND_ORDER_PASSES, speed_range
@@ -267,10 +268,26 @@ def add_chart_argument(parser):
                         'into this PNG')
 
 
-def criterion_thresholds():
-    """Return the node's default WARN and ERROR criterion levels [rad/(s N)] (the charts')."""
+def criterion_thresholds(mechanism=None):
+    """
+    Return the charts' WARN and ERROR criterion levels [rad/(s N)] and what they are.
+
+    A mechanism file with a ``crank_speed_rpm``: its own cycle's at that speed, the levels
+    ``flexlink plan --params-out`` gives the node (:func:`core.criteria_thresholds.
+    suggest_thresholds`); the paper's 100 / 1000 mean nothing for another machine. Otherwise
+    the node's defaults.
+
+    Returns
+    -------
+    (float, float, str)
+
+    """
+    if mechanism is not None and mechanism.crank_speed:
+        found = suggest_thresholds(mechanism, mechanism.crank_speed)
+        return found['warn'], found['error'], f"this linkage's cycle at {found['rpm']:.4g} rpm"
     values = node_params.defaults()
-    return values['diagnostics.criterion_warn'], values['diagnostics.criterion_error']
+    return (values['diagnostics.criterion_warn'], values['diagnostics.criterion_error'],
+            'node default')
 
 
 def load_model(mechanism, options, args):

@@ -62,13 +62,10 @@ from ..ros.republish import DISCOVERY_TIMEOUT_S, publish_recording
 CHART_ROWS = 200_000   # the chart shows the last 200 s at 1 kHz: enough revolutions to read
 
 
-def _writer(args, model, topic, tables):
+def _writer(args, model, topic, exaggeration):
     """``write(blocks, progress)`` of the output file (:func:`write_replay`), or None."""
     if not args.out:
         return None
-    # The estimator's step tables: the quasi-static peak that scales the markers is computed
-    # once, for the deflection bound and the markers.
-    exaggeration = model_exaggeration(model, tables) if args.markers_every_n else 1.0
     return functools.partial(_write_blocks, args.out, topic=topic, model=model, args=args,
                              exaggeration=exaggeration)
 
@@ -79,11 +76,11 @@ def _write_blocks(out, blocks, progress, topic, model, args, exaggeration, tail=
                         joint_levels=[OK] * 4, provenance=args.provenance, tail=tail)
 
 
-def _splitter(args, model, topic, tables, mechanism, options):
+def _splitter(args, made, topic, exaggeration):
     """Return the replay's :class:`.replay_split.Splitter` (None: one process)."""
+    mechanism, options, model, tables = made
     if not args.out or (getattr(args, 'processes', None) or 1) < 2:
         return None
-    exaggeration = model_exaggeration(model, tables) if args.markers_every_n else 1.0
     declared = replay_topics(topic, output_topics(args.node_name), args.markers_every_n)
     rows_writer = functools.partial(write_rows, declared=declared, frame_id=args.frame_id,
                                     model=model, markers_every_n=args.markers_every_n,
@@ -110,7 +107,7 @@ class ChartRows:
         while self.count - len(self.parts[0]['crank_angle']) >= CHART_ROWS:
             self.count -= len(self.parts.pop(0)['crank_angle'])
 
-    def draw(self, path, criteria_available, title):
+    def draw(self, path, criteria_available, title, thresholds):
         """Draw the kept rows over crank angle (:func:`plot_cycle`); the PNG's path."""
         rows = {key: np.concatenate([part[key] for part in self.parts])[-CHART_ROWS:]
                 for key in self.parts[0]} if self.parts else None
@@ -119,7 +116,7 @@ class ChartRows:
         return str(plot_cycle(path, rows['crank_angle'], rows['lever_tip'],
                               rows['coupler_mid'],
                               rows['criterion'] if criteria_available else None,
-                              title=title, thresholds=criterion_thresholds()))
+                              title=title, thresholds=thresholds))
 
 
 def run_replay(args):
@@ -179,7 +176,8 @@ def run_replay(args):
     if chart:
         result['chart'] = chart.draw(args.chart, estimate['criteria_available'],
                                      f'{mechanism.name}: {pathlib.Path(args.input).name} '
-                                     f'({count} samples, order {model.order}, flexlink replay)')
+                                     f'({count} samples, order {model.order}, flexlink replay)',
+                                     criterion_thresholds(mechanism))
     if args.publish:
         _, samples, _ = read_input_samples(args.input, args.topic, args.joint, [])
         with Progress(f'publishing {topic}', count, unit='msg') as progress:
@@ -192,11 +190,16 @@ def run_replay(args):
 
 def _estimate(args, made, opened, chart, transform=None):
     """Estimate (and write) the input ``opened`` with the model ``made``."""
-    mechanism, options, model, tables = made
+    mechanism, _, model, tables = made
     topic, rows, messages = opened
+    # On the estimator's step tables: the quasi-static peaks of the deflection bound and of
+    # the markers (up to the recorded machine's speed) are computed on them once each.
+    exaggeration = (model_exaggeration(model, tables, mechanism)
+                    if args.out and args.markers_every_n else 1.0)
     splitter = (None if transform is not None or chart
-                else _splitter(args, model, topic, tables, mechanism, options))
-    return estimate_and_write(args, model, rows, messages, _writer(args, model, topic, tables),
+                else _splitter(args, made, topic, exaggeration))
+    return estimate_and_write(args, model, rows, messages,
+                              _writer(args, model, topic, exaggeration),
                               on_block=chart and chart.add, tables=tables,
                               transform=transform, splitter=splitter)
 

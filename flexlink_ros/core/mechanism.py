@@ -175,6 +175,13 @@ def check_elements_per_link(elements):
                              f'1..{MAX_ELEMENTS_PER_LINK}, got {elements!r:.40}')
 
 
+# What a Grashof linkage is when this link, not the crank, is the shortest.
+GRASHOF_KINDS = {
+    'ground': 'a double crank (drag link), crank and lever both turn fully',
+    'coupler': 'a double rocker, crank and lever only rock',
+    'lever': 'a rocker-crank, the lever turns fully and the crank only rocks (swap the two)'}
+
+
 def check_crank_rocker(ground, crank, coupler, lever):
     """
     Raise MechanismError unless the four lengths make a Grashof crank-rocker.
@@ -186,13 +193,14 @@ def check_crank_rocker(ground, crank, coupler, lever):
     shortest = min(lengths.values())
     longest = max(lengths.values())
     total = sum(lengths.values())
-    if crank > shortest:
-        name = min(lengths, key=lengths.get)
-        raise MechanismError(
-            'links', f'not a crank-rocker: the {name} ({shortest:g} m) is shorter than the '
-            f'crank ({crank:g} m), so the crank cannot fully rotate')
     s_plus_l = shortest + longest
     p_plus_q = total - s_plus_l
+    if crank > shortest:
+        name = min(lengths, key=lengths.get)
+        kind = GRASHOF_KINDS[name] if s_plus_l <= p_plus_q else 'no link turns fully'
+        raise MechanismError(
+            'links', f'not a crank-rocker: the {name} ({shortest:g} m) is shorter than the '
+            f'crank ({crank:g} m): {kind}')
     if s_plus_l > p_plus_q:
         raise MechanismError(
             'links', f'not a crank-rocker: Grashof condition s + l <= p + q fails '

@@ -102,11 +102,17 @@ def _check_material(mechanism):
         _refuse('material.density_kg_m3', density, f'kg/m^3 expected, {cause}')
 
 
+def check_lengths(ground, lengths):
+    """Refuse a ground or link length off by orders of magnitude (before the Grashof sums)."""
+    _check_length('ground_length_m', ground)
+    for name, length in zip(LINK_NAMES, lengths):
+        _check_length(f'links.{name}.length_m', length)
+
+
 def _check_links(mechanism):
-    _check_length('ground_length_m', mechanism.ground_length)
+    check_lengths(mechanism.ground_length, [link.length for link in mechanism.links])
     for name, link in zip(LINK_NAMES, mechanism.links):
         where = f'links.{name}'
-        _check_length(f'{where}.length_m', link.length)
         if link.area is not None and link.second_moment is not None:
             _check_section(where, link.length, link.area, link.second_moment)
         rod = link.mass * link.length ** 2 / 12.0

@@ -25,7 +25,7 @@ import yaml
 
 from .mechanism import (BRANCHES, check_crank_rocker, check_elements_per_link, check_name,
                         Link, Mechanism, Spring)
-from .mechanism_checks import check_keys, check_plausible
+from .mechanism_checks import check_keys, check_lengths, check_plausible
 from ..errors import MechanismError
 from ..names import JOINT_NAMES, LINK_NAMES
 
@@ -241,6 +241,8 @@ def mechanism_from_dict(data):
     ground = _number(data, 'ground_length_m', '')
     youngs, density = _material_from(data)
     links = _links_from(data, density)
+    # a length in mm is named as such, not as a failed Grashof sum
+    check_lengths(ground, [link.length for link in links])
     check_crank_rocker(ground, *(link.length for link in links))
     joint_masses = _joint_masses_from(data)
     bearing_k, bearing_joints, split = _bearings_from(data)

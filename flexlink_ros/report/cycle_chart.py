@@ -24,7 +24,7 @@ def _thinned(count):
 
 
 def plot_cycle(path, crank_rad, lever_tip, coupler_mid, criterion, title='',
-               thresholds=(100.0, 1000.0)):
+               thresholds=(100.0, 1000.0, '')):
     """
     Draw deflections and joint criteria over crank angle into a PNG.
 
@@ -40,8 +40,9 @@ def plot_cycle(path, crank_rad, lever_tip, coupler_mid, criterion, title='',
         |dgamma/dt|/R of O2, A, B, O4 [rad/(s N)]; None or all zero: the panel says so.
     title : str
         Figure title (the mechanism, speed, model).
-    thresholds : (float, float)
-        WARN and ERROR levels of the criterion, drawn as dashed lines.
+    thresholds : (float, float) or (float, float, str)
+        WARN and ERROR levels of the criterion, drawn as dashed lines, and what they are
+        (in the legend: "this linkage's cycle at 60 rpm", "node default").
 
     Returns
     -------
@@ -92,8 +93,11 @@ def _criteria_panel(ax, degrees, criterion, thresholds):
         positive = criterion[:, joint] > 0.0
         ax.plot(degrees[positive], criterion[positive, joint], '.', markersize=1.5,
                 color=colour, label=f'joint {name}')
-    for level, value, style in zip(('WARN', 'ERROR'), thresholds, ('--', '-.')):
+    note = f' ({thresholds[2]})' if len(thresholds) > 2 and thresholds[2] else ''
+    for level, value, style in zip(('WARN', 'ERROR'), thresholds[:2], ('--', '-.')):
         ax.axhline(value, color='black', linestyle=style, linewidth=1.0,
-                   label=f'{level} {value:g}')
+                   label=f'{level} {value:.3g}{note}')
     ax.set_yscale('log')
-    ax.legend(loc='upper right', markerscale=6, fontsize=8, ncol=3)
+    # Below the panel: inside it the legend hid the highest criteria and the threshold lines.
+    ax.legend(loc='upper center', bbox_to_anchor=(0.5, -0.2), markerscale=6, fontsize=8,
+              ncol=3)

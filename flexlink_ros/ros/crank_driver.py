@@ -142,6 +142,16 @@ def build_parser():
         epilog=parameter_help(PARAMETERS))
 
 
+def periods_skipped(gap_ns, period_ns):
+    """
+    Return how many timer periods passed without a message between two sent ``gap_ns`` apart.
+
+    rclpy's timer does not run a late callback once per missed period: it runs it once and
+    waits for the next period, so a callback later than a period leaves a gap in the stamps.
+    """
+    return max(0, round(gap_ns / period_ns) - 1)
+
+
 class CrankDriver(Node):
     """Publishes the crank JointState on a timer; see the module docstring."""
 
@@ -162,6 +172,10 @@ class CrankDriver(Node):
         timer_period = 1.0 / values['rate_hz']  # seconds
         self.create_timer(timer_period, self._publish)
         self.published = 0
+        self.published_while_heard = 0
+        self.periods_skipped = 0
+        self._period_ns = round(timer_period * 1e9)
+        self._last_ns = None
 
     def _values(self):
         return {spec.name: self.get_parameter(spec.name).value for spec in PARAMETERS}
@@ -174,6 +188,12 @@ class CrankDriver(Node):
                     successful=False,
                     reason=f'{spec.name} must be one of {", ".join(spec.choices)}')
         return SetParametersResult(successful=True)
+
+    def summary(self):
+        """Return the exit line: messages published (heard), periods that passed without one."""
+        return (f'crank_driver: published {self.published} JointState messages '
+                f'({self.published_while_heard} while a subscriber was matched); the timer '
+                f'skipped {self.periods_skipped} periods (its callback ran late)')
 
     def _restart_profile(self, parameters):
         now_ns = self.get_clock().now().nanoseconds
@@ -196,8 +216,14 @@ class CrankDriver(Node):
         message.header.stamp = now.to_msg()
         message.position = [wrap_to_pi(self._angle_at(now.nanoseconds))]
         message.velocity = [self._profile.speed(elapsed_s)]
+        heard = self._publisher.get_subscription_count() > 0
         self._publisher.publish(message)
         self.published += 1
+        self.published_while_heard += heard
+        if self._last_ns is not None:
+            self.periods_skipped += periods_skipped(now.nanoseconds - self._last_ns,
+                                                    self._period_ns)
+        self._last_ns = now.nanoseconds
         duration_s = self.get_parameter('duration_s').value
         if duration_s > 0 and (now.nanoseconds - self._start_ns) * 1e-9 >= duration_s:
             if not self.finished.done():
@@ -216,6 +242,7 @@ def main(args=None):
     """
     argv = sys.argv if args is None else ['crank_driver', *args]
     build_parser().parse_args(remove_ros_args(argv)[1:])
+    node = None
     try:
         with rclpy.init(args=argv):
             try:
@@ -229,6 +256,8 @@ def main(args=None):
             runtime.spin_until_shutdown(executor, node.finished.done)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    if node is not None:
+        print(node.summary(), file=sys.stderr, flush=True)
     return 0
 
 

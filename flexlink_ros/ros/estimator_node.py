@@ -109,7 +109,8 @@ class EstimatorNode(NodeRecording):
                  f'{self.options} ({time.perf_counter() - start:.2f} s); '
                  f'criteria: {self.criteria_source}')
         self.estimator = StreamingEstimator(self.model, warm_start=values['model.warm_start'])
-        self.auto_exaggeration = marker_exaggeration(self.estimator, log.info)
+        self.auto_exaggeration = marker_exaggeration(self.estimator, log.info,
+                                                     self.mechanism_source)
         check_startup_signal()
         self.follower, nonlinear_facts = self._nonlinear_model(log)
         # The node only streams: the step tables serve it, the full table can go.

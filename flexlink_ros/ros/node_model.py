@@ -10,7 +10,7 @@ import dataclasses
 import time
 
 from . import parameters
-from ..core.estimation.marker_scale import default_exaggeration, MARKER_SHARE
+from ..core.estimation.marker_scale import default_exaggeration, machine_speed, MARKER_SHARE
 from ..core.estimation.validity_scan import ranges_text, RPM, validity_over_speeds
 from ..core.mechanism_file import read_mechanism_file, read_mechanism_source
 from ..core.options import PLANNED_TOLERANCE
@@ -114,7 +114,7 @@ def load_nonlinear_model(values, source, options):
     return nonlinear_model_for(mechanism, options, values['model.cache_dir'] or None)
 
 
-def marker_exaggeration(estimator, log):
+def marker_exaggeration(estimator, log, source=None):
     """
     Return the markers' exaggeration when ``markers.exaggeration`` is 0, and log the rule.
 
@@ -124,10 +124,15 @@ def marker_exaggeration(estimator, log):
         The node's estimator (:func:`core.estimation.marker_scale.default_exaggeration`).
     log : callable
         Called with the sentence the node logs.
+    source : (str, bytes) or None
+        The mechanism file as the node read it: the expected peak is its machine's, up to the
+        file's ``crank_speed_rpm`` with the speed range's margin (None: the whole range).
 
     """
-    factor, peak, length = default_exaggeration(estimator)
+    mechanism = read_mechanism_file(source[0], raw=source[1])[0] if source else None
+    top = machine_speed(mechanism, estimator.model.speed_max)
+    factor, peak, length = default_exaggeration(estimator, mechanism)
     log(f'markers: deflections drawn x{factor:g} when markers.exaggeration is 0 (the expected '
-        f"peak, {peak * 1e6:.3g} um, as at least {MARKER_SHARE:.0%} of the coupler's "
-        f'{length:g} m)')
+        f'peak up to {top * RPM:.0f} rpm, {peak * 1e6:.3g} um, as at least {MARKER_SHARE:.0%} '
+        f"of the coupler's {length:g} m)")
     return factor

@@ -28,7 +28,7 @@ from .peer_linear import linear_model
 from .peer_model import OUTPUT_KEYS, resolve_mechanism
 from .synthetic import last_revolution, synthetic_signal
 from .validation import _as_response, BEARINGS, peer_run, point_rms_errors, require_peer, \
-    Settings
+    scene_heading, Settings
 from ..core.estimation.nonlinear_stream import estimate_nonlinear
 from ..core.fe.nonlinear_response import nonlinear_response
 from ..core.fe.nonlinear_validity import orbit_validity, validity_record
@@ -175,15 +175,8 @@ def validate_nonlinear(mechanism, rpm, settings=None):
 
 def format_nonlinear(record):
     """Text table of one speed: p2p, p2p error and relative RMS of both models, Floquet."""
-    s = record['settings']
-    labels = ('lever tip dX', 'lever tip dY', 'coupler mid dX', 'coupler mid dY')
-    lines = [f"{record['rpm']:g} rpm, {s['bearings']} bearings, gravity "
-             f"{'on' if s['gravity'] else 'off'}, {s['elements_per_link']} elements per link, "
-             f"rigid crank ({record['mechanism']}; both damped {record['damping']}, peer beta "
-             f"{record['peer_beta_s']:g} s)",
-             f"{'':26s}" + ''.join(f'{label:>16s}' for label in labels),
-             f"{'Exudyn peer p2p [um]':26s}" + ''.join(
-                 f"{record['peer_p2p'][k] * 1e6:16.1f}" for k in OUTPUT_KEYS)]
+    lines = scene_heading(record, f"both damped {record['damping']}", record['peer_beta_s'],
+                          26)
     for name in MODELS:
         table = record['models'][name]
         lines.append(f"{LABELS[name] + ' p2p [um]':26s}" + ''.join(

@@ -47,7 +47,10 @@ its difference to the one before (``periodicity``), so a run that is not yet ste
 
 Integration: Exudyn's implicit generalized-alpha (index 3, spectral radius 0.9 by default),
 constant step ``1 / steps_per_revolution`` of a revolution; outputs sampled at every step by
-default (``samples_per_revolution``, a divisor of the steps).
+default (``samples_per_revolution``, a divisor of the steps). Where its Newton iterations
+diverge (light pins on stiff bearing springs: a light plastic linkage's 0.5 g pin halves on
+1e6 N/m at 720 steps) the run is repeated with 2, 4 and 8 times the steps, the samples as
+asked; ``info['steps_per_revolution']`` says the steps used.
 
 The model itself is built by :mod:`studies.peer_model`. Exudyn is optional: this module
 imports without it, and the functions that need it raise :class:`errors.FlexlinkError` naming
@@ -72,6 +75,8 @@ from ..errors import FlexlinkError
 
 # The transient is let decay to this fraction of its start (ln(1/1e-3) = 6.9 time constants).
 SETTLE_FRACTION = 1e-3
+# Step refinements tried in turn when the solver fails (light pins on stiff bearing springs).
+STEP_REFINEMENTS = (1, 2, 4, 8)
 
 
 def lowest_bending_frequency(mechanism):
@@ -152,15 +157,25 @@ def peer_response(mechanism, rpm, *, elements_per_link=DEFAULT_ELEMENTS, bearing
     revolutions, samples_per_revolution = _run_length(
         mech, rpm, beta_s, revolutions, steps_per_revolution, samples_per_revolution)
     wall0, cpu0 = time.perf_counter(), time.process_time()
-    model = build_peer(mech, rpm, elements_per_link=elements_per_link, bearings=bearings,
-                       gravity=gravity, beta_s=beta_s, mass_placement=mass_placement,
-                       start_angle=start_angle)
-    period = 2.0 * math.pi / abs(model.omega)
-    steps = revolutions * steps_per_revolution
-    h = period / steps_per_revolution
-    settings = solver_settings(exu, revolutions * period, steps, spectral_radius, 0.5 * h)
-    solve_or_explain(exu, model.mbs, settings, f'{rpm:g} rpm ({elements_per_link} elements '
-                     f'per link, {bearings} bearings)', bearings)
+    for refinement in STEP_REFINEMENTS:
+        # light pins on stiff bearing springs: Newton diverges on too long a step
+        model = build_peer(mech, rpm, elements_per_link=elements_per_link, bearings=bearings,
+                           gravity=gravity, beta_s=beta_s, mass_placement=mass_placement,
+                           start_angle=start_angle)
+        period = 2.0 * math.pi / abs(model.omega)
+        h = period / (refinement * steps_per_revolution)
+        settings = solver_settings(exu, revolutions * period,
+                                   revolutions * refinement * steps_per_revolution,
+                                   spectral_radius, 0.5 * h)
+        case = (f'{rpm:g} rpm ({elements_per_link} elements per link, {bearings} bearings, '
+                f'{refinement * steps_per_revolution} steps a revolution)')
+        try:
+            solve_or_explain(exu, model.mbs, settings, case, bearings)
+            break
+        except FlexlinkError:
+            if refinement == STEP_REFINEMENTS[-1]:
+                raise
+    steps_per_revolution *= refinement     # the samples stay as asked
     data, index, wanted = _stored_samples(model, revolutions * samples_per_revolution + 1,
                                           steps_per_revolution // samples_per_revolution, h)
     t = data['lever_tip'][:, 0][index]

@@ -58,8 +58,8 @@ def solve_or_explain(exu, mbs, settings, case, bearings):
     if ok:
         return
     said = ' "DYNAMIC SOLVER FAILED"' if 'SOLVER FAILED' in banner else ''
-    hint = ('stiff bearing springs on short elements make its implicit steps diverge: '
-            'compare with --bearings rigid, or fewer elements (--elements-per-link 4)'
+    hint = ('stiff bearing springs on light pins and short elements make its implicit steps '
+            'diverge: compare with --bearings rigid, or fewer elements (--elements-per-link)'
             if bearings != 'rigid' else
             'try fewer elements per link (--elements-per-link) or another speed')
     raise FlexlinkError(f'the Exudyn peer failed at {case}{said}{reason}; hint: {hint}')

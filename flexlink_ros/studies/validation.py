@@ -38,10 +38,12 @@ from .peer_exudyn import compare, peak_to_peak, peer_response, revolution_slice
 from .peer_linear import linear_model
 from .peer_model import (DEFAULT_BETA_S, DEFAULT_ELEMENTS, DEFAULT_STEPS, exudyn_available,
                          EXUDYN_REQUIREMENT, OUTPUT_KEYS, resolve_mechanism)
+from ..core.fe.linkage import FlexibleLinkage
 from ..core.fe.second_order_dynamic import dynamic_pass
 from ..core.fe.second_order_full import corrected_response
 from ..core.fe.simulate import periodic_response
 from ..core.fe.stiffness_damping import system_matrices
+from ..core.options import ModelOptions
 from ..core.reduction.cache_location import cache_file
 from ..core.validity import is_valid, nonlinearity_indicator, VALIDITY_THRESHOLD
 from ..errors import FlexlinkError
@@ -167,6 +169,56 @@ def package_runs(mech, rpm, settings):
             'wall_s': {'linear': linear.info['wall_s'], 'dynamic': dynamic['info']['wall_s']}}
 
 
+def flexible_crank_check(mechanism, rpm, settings, rigid_outputs):
+    """
+    Compare the node's crank model (a flexible beam) with this comparison's rigid crank.
+
+    The peer's crank is rigid, the node's and ``flexlink estimate``'s is not: a long or slender
+    crank's bending then moves every output and the peer cannot check it. The package's linear
+    full order with the flexible crank, the comparison's other settings, says by how much.
+
+    Parameters
+    ----------
+    mechanism : Mechanism or str
+        The linkage, or a mechanism file path or bare name.
+    rpm : float
+        Crank speed [rpm].
+    settings : Settings
+        The comparison's elements, bearings, gravity, damping and output points.
+    rigid_outputs : ndarray, shape (P, 4)
+        The rigid-crank linear outputs of :func:`package_runs` [m].
+
+    Returns
+    -------
+    dict
+        'p2p' and 'ratio' (flexible over rigid crank) per output, 'differs' (a ratio off 1 by
+        more than the lever tip's target of :data:`TARGETS`).
+
+    """
+    mech = dataclasses.replace(resolve_mechanism(mechanism),
+                               elements_per_link=settings.elements_per_link)
+    options = ModelOptions.full_model(rigid_crank=False, bearings=settings.bearings,
+                                      geometric_stiffness=True, gravity=settings.gravity)
+    response = periodic_response(FlexibleLinkage(mech, options), rpm * math.pi / 30.0,
+                                 method='full', points=settings.points, zeta=settings.zeta)
+    flexible = np.ptp(response.outputs, axis=0)
+    rigid = np.maximum(np.ptp(np.asarray(rigid_outputs), axis=0), 1e-300)
+    ratio = dict(zip(OUTPUT_KEYS, (flexible / rigid).tolist()))
+    return {'p2p': dict(zip(OUTPUT_KEYS, flexible.tolist())), 'ratio': ratio,
+            'differs': any(abs(r - 1.0) > TARGETS['lever_tip'] for r in ratio.values())}
+
+
+def format_crank(check):
+    """One line where the node's flexible crank differs from the peer's rigid one, else ''."""
+    if not check['differs']:
+        return ''
+    p2p = ' / '.join(f"{check['p2p'][k] * 1e6:.3g}" for k in OUTPUT_KEYS)
+    worst = max(check['ratio'].values(), key=lambda r: abs(math.log(max(r, 1e-300))))
+    return (f"crank: the peer's is rigid, the node's and estimate's bend (flexible crank, "
+            f'their default): with it the package gives p2p {p2p} um ({worst:.3g} times the '
+            "rigid crank's at worst); the crank's bending is not checked here")
+
+
 def _as_response(angles, values):
     out = {'crank_angle': angles}
     out.update(zip(OUTPUT_KEYS, np.asarray(values).T))
@@ -218,8 +270,9 @@ def validate_speed(mechanism, rpm, settings=None):
         (per model and output point), 'point_rms_error' (per model and output point: the
         deflection vector's relative RMS), 'nonlinearity' ({'indicator_max', 'valid'}),
         'threshold', 'zeta', 'damping', 'peer_beta_s' (the peer's beta [s]), 'peer_cpu_s',
-        'wall_s', and 'series' (for charts: crank angle [deg] and outputs [m] of the peer's last
-        revolution and of every model).
+        'crank' (:func:`flexible_crank_check`: the node's flexible crank against the rigid one
+        compared here), 'wall_s', and 'series' (for charts: crank angle [deg] and outputs [m]
+        of the peer's last revolution and of every model).
 
     """
     settings = Settings() if settings is None else settings
@@ -250,6 +303,7 @@ def validate_speed(mechanism, rpm, settings=None):
             'nonlinearity': is_valid(runs['indicator']), 'threshold': VALIDITY_THRESHOLD,
             'zeta': runs['zeta'], 'damping': runs['damping'],
             'peer_beta_s': peer['info']['beta_s'], 'peer_cpu_s': peer['info']['cpu_s'],
+            'crank': flexible_crank_check(mech, rpm, settings, runs['linear']),
             'wall_s': runs['wall_s'], 'series': series}
 
 
@@ -301,16 +355,22 @@ def _worst(table, point, kind='p2p_error'):
     return max((table[f'{point}_{axis}'][kind] for axis in ('dx', 'dy')), key=abs)
 
 
+def scene_heading(record, damping, peer_beta_s, width):
+    """Return the first lines of one speed's table: the scene, the outputs, the peer's p2p."""
+    s = record['settings']
+    return [f"{record['rpm']:g} rpm, {s['bearings']} bearings, gravity "
+            f"{'on' if s['gravity'] else 'off'}, {s['elements_per_link']} elements per link, "
+            f"rigid crank ({record['mechanism']}; {damping}, peer beta {peer_beta_s:g} s)",
+            f"{'':{width}s}" + ''.join(f'{LABELS[k]:>16s}' for k in OUTPUT_KEYS),
+            f"{'Exudyn peer p2p [um]':{width}s}" + ''.join(
+                f"{record['peer_p2p'][k] * 1e6:16.1f}" for k in OUTPUT_KEYS)]
+
+
 def format_speed(record):
     """Text table of one speed: the peer's p2p and each model's p2p, p2p error and rel RMS."""
-    s, info = record['settings'], record['nonlinearity']
-    lines = [f"{record['rpm']:g} rpm, {s['bearings']} bearings, gravity "
-             f"{'on' if s['gravity'] else 'off'}, {s['elements_per_link']} elements per link, "
-             f"rigid crank ({record['mechanism']}; package {record['damping']}, "
-             f"peer beta {s['beta_s']:g} s)",
-             f"{'':30s}" + ''.join(f'{LABELS[k]:>16s}' for k in OUTPUT_KEYS),
-             f"{'Exudyn peer p2p [um]':30s}" + ''.join(
-                 f"{record['peer_p2p'][k] * 1e6:16.1f}" for k in OUTPUT_KEYS)]
+    info = record['nonlinearity']
+    lines = scene_heading(record, f"package {record['damping']}",
+                          record['settings']['beta_s'], 30)
     for name in MODELS:
         table = record['models'][name]
         rows = (('other_p2p', ' p2p [um]', 1e6), ('p2p_error', ' p2p error', 100.0),
@@ -324,7 +384,8 @@ def format_speed(record):
         f" ; {100 * record['point_rms_error'][name]['coupler_mid']:.1f} %" for name in MODELS))
     lines.append(f"validity indicator {info['indicator_max']:.3f} (threshold "
                  f"{record['threshold']:g}): {'valid' if info['valid'] else 'NOT valid'}")
-    return '\n'.join(lines)
+    crank = format_crank(record['crank']) if 'crank' in record else ''
+    return '\n'.join(lines + ([crank] if crank else []))
 
 
 def format_sweep(records):

@@ -40,6 +40,13 @@ def test_demo_runs_records_and_summarises(tmp_path):
                  '/flexlink_node/joint_criteria', '/flexlink_node/quality'):
         assert topics[name] == inputs     # one estimate per sample, none lost in the node
     assert summary['samples'] == summary['outputs'] == inputs
+    # The driver says what it sent while the node listened: the node received every one (the
+    # driver asks for its matched subscribers before each publish: the match may land between).
+    driver = summary['driver']
+    assert driver['published'] >= driver['heard'] and driver['periods_skipped'] >= 0
+    assert abs(driver['heard'] - inputs) <= 2, (driver, inputs)
+    assert f"crank_driver sent {driver['heard']} messages while the node listened" in \
+        cli_demo.summary_text(summary)
     assert inputs // 10 <= topics['/flexlink_node/markers'] <= inputs // 10 + 1
     assert topics['/diagnostics'] >= 2
     lever, coupler = summary['peak_to_peak_um']['lever_tip'], \

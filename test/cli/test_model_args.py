@@ -4,7 +4,7 @@ import pathlib
 
 from flexlink_ros.cli import main as cli
 from flexlink_ros.cli import model_args, replay_model
-from flexlink_ros.core.mechanism_file import find_config
+from flexlink_ros.core.mechanism_file import find_config, load_mechanism
 from flexlink_ros.core.options import ModelOptions
 import pytest
 
@@ -137,3 +137,21 @@ def test_every_model_command_defaults_to_the_default_models_physics(command):
     assert (args.rigid_crank, args.bearings) == (crank, default.bearings)
     assert model_args.elements_per_link(args) == default.elements_per_link
     assert getattr(args, 'order', default.order) == default.order
+
+
+SLOW = str(pathlib.Path(__file__).resolve().parents[1] / 'data' / 'slow_heavy_steel.yaml')
+
+
+def test_the_charts_draw_the_linkages_own_criterion_thresholds_not_the_papers():
+    """
+    A 60 rpm linkage's charts drew the paper's WARN 100 / ERROR 1000, 12 times its cycle.
+
+    Its own (what ``plan --params-out`` gives the node): 1.5 and 3 times the cycle's largest
+    criterion, joint B's 8.56 rad/(s N) at 108 deg by an independent Newton-Euler hand solution.
+    """
+    warn, error, note = model_args.criterion_thresholds(load_mechanism(SLOW))
+    assert (warn, error) == pytest.approx((1.5 * 8.559, 3.0 * 8.559), rel=2e-3)
+    assert '60 rpm' in note
+    # a file without crank_speed_rpm: the node's defaults, said so
+    warn, error, note = model_args.criterion_thresholds(load_mechanism('cho1992'))
+    assert (warn, error) == (100.0, 1000.0) and 'node default' in note

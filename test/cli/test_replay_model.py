@@ -25,11 +25,12 @@ ROOT = pathlib.Path(__file__).resolve().parents[2]
 SOFT = ROOT / 'test' / 'data' / 'soft_linkage.yaml'
 STEEL = ROOT / 'test' / 'data' / 'steel_linkage.yaml'
 # Each linkage, its crank speed [rpm] and the markers' exaggeration the node derives for it.
-# The markers' exaggeration the node derives: the expected peak over the model's speed range
-# (1.25 x the file's speed) drawn as at least 5 % of the coupler, on a 1-2-5 scale.
+# The markers' exaggeration the node derives: the expected peak up to the machine's speed
+# (1.25 x the file's speed, not the range's 620 rpm floor) drawn as at least 5 % of the
+# coupler, on a 1-2-5 scale (soft: 250 um up to 375 rpm on a 0.2 m coupler, x50).
 # Last: the node's model.nonlinear (auto: whatever the node chose, replay must choose too).
-LINKAGES = {'soft': (SOFT, 300.0, 20, 'auto'), 'steel': (STEEL, 600.0, 200, 'auto'),
-            'soft_nonlinear': (SOFT, 300.0, 20, 'on')}
+LINKAGES = {'soft': (SOFT, 300.0, 50, 'auto'), 'steel': (STEEL, 600.0, 200, 'auto'),
+            'soft_nonlinear': (SOFT, 300.0, 50, 'on')}
 READY_TIMEOUT_S = 240.0     # node start-up incl. a first model build on a loaded machine
 ENV = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path), PYTHONUNBUFFERED='1',
            RCUTILS_LOGGING_BUFFERED_STREAM='0')

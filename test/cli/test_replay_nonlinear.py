@@ -1,7 +1,6 @@
 """``flexlink replay --nonlinear`` (cli/replay_nonlinear.py): a real bag, a 2-element model."""
 
 import ctypes
-import dataclasses
 import json
 import math
 import os
@@ -11,11 +10,7 @@ import warnings
 
 from flexlink_ros.cli.replay_nonlinear import NonlinearRows
 from flexlink_ros.core.estimation.nonlinear_stream import estimate_nonlinear
-from flexlink_ros.core.fe.linkage import FlexibleLinkage
-from flexlink_ros.core.mechanism_file import load_mechanism
-from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction.nonlinear_model import nonlinear_model_for
-from flexlink_ros.core.reduction.nonlinear_tables import build_nonlinear_tables
 from flexlink_ros.io.provenance import read_provenance
 from flexlink_ros.io.recorder import McapRecorder
 from flexlink_ros.names import NODE_NAME, output_topics
@@ -26,6 +21,7 @@ import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
+from small_nonlinear import small_nonlinear_tables
 
 SMALL_MODEL = ['--mechanism', 'cho1992', '--elements-per-link', '2', '--rigid-crank',
                '--bearings', 'flexible', '--stiffness-damping', '1e-4']
@@ -235,10 +231,7 @@ def test_replay_auto_reads_a_recording_it_keeps_linear_once(tmp_path, rpm, kept)
 @pytest.fixture(scope='module')
 def damped_tables():
     """Return a small nonlinear model damped to fade a start in 0.25 s (a test's spans)."""
-    mech = dataclasses.replace(load_mechanism('cho1992'), elements_per_link=2)
-    linkage = FlexibleLinkage(mech, ModelOptions.full_model(rigid_crank=True,
-                                                            bearings='flexible'))
-    return build_nonlinear_tables(linkage, 5e-3, size=12, modes=10)
+    return small_nonlinear_tables(5e-3)
 
 
 def _linear_blocks(count, block_rows, gaps=(), outliers=(), faster_after=None):

@@ -39,6 +39,16 @@ def test_real_linkages_load(name):
 
 
 @pytest.mark.parametrize('name', LINKAGES)
+def test_one_length_in_mm_in_a_file_names_its_key_not_the_grashof_sum(name):
+    """One link in mm in a file: the loader's crank-rocker check spoke first, of a 60 m sum."""
+    data = file_data(name)
+    data['links']['coupler']['length_m'] *= 1000.0
+    text = refusal(data)
+    assert re.match(r'links\.coupler\.length_m = \d+: metres expected, was this mm\?', text), \
+        text
+
+
+@pytest.mark.parametrize('name', LINKAGES)
 def test_lengths_in_mm_are_refused_naming_the_key_and_the_cause(name):
     data = file_data(name)
     data['ground_length_m'] *= 1000.0

@@ -1,13 +1,14 @@
 """crank_driver: speed profiles against quadrature, and the real node received over rclpy."""
 
 import math
+import re
 import signal
 import subprocess
 import sys
 import time
 
 from flexlink_ros.core.numerics import RPM, wrap_to_pi
-from flexlink_ros.ros.crank_driver import build_parser, SpeedProfile
+from flexlink_ros.ros.crank_driver import build_parser, periods_skipped, SpeedProfile
 import numpy as np
 import pytest
 from scipy.integrate import quad
@@ -135,6 +136,29 @@ def test_driver_publishes_the_profile_at_rate(config_dir, monkeypatch):
     increments = np.diff(np.unwrap(position))
     trapezoid = 0.5 * (velocity[1:] + velocity[:-1]) * np.diff(stamp) * 1e-9
     assert increments == pytest.approx(trapezoid, abs=1e-6 + slope * 1e-6)
+
+
+@pytest.mark.parametrize('gap_ms, skipped', [(1.0, 0), (1.4, 0), (0.6, 0), (2.0, 1), (2.6, 2),
+                                             (10.0, 9)])
+def test_periods_skipped_counts_the_periods_a_late_timer_left_empty(gap_ms, skipped):
+    assert periods_skipped(round(gap_ms * 1e6), 1_000_000) == skipped
+
+
+def test_the_driver_says_what_it_published_as_it_exits():
+    # A real driver stopped by SIGINT: its last line counts the messages and skipped periods.
+    driver = subprocess.Popen([sys.executable, '-m', 'flexlink_ros.ros.crank_driver',
+                               '--ros-args', '-p', 'rate_hz:=200.0'],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(3.0)
+    driver.send_signal(signal.SIGINT)
+    _, err = driver.communicate(timeout=30)
+    assert driver.returncode == 0, err
+    last = err.strip().splitlines()[-1]
+    published, heard, skipped = (int(x) for x in re.findall(
+        r'(\d+) (?:JointState messages|while|periods)', last))
+    # Nobody subscribes to this driver's topic in its run-unique domain.
+    assert last.startswith('crank_driver: published') and published > 100 and heard == 0, last
+    assert 0 <= skipped < published, last
 
 
 @pytest.mark.parametrize('parameter, reason', [

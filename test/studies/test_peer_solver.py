@@ -10,12 +10,23 @@ import pytest
 DATA = pathlib.Path(__file__).resolve().parents[1] / 'data'
 
 
+def stiff_springs_on_light_pins(folder):
+    """Write the stiff steel linkage with 1e12 N/m bearing springs on 0.1 g pins; its path."""
+    text = (DATA / 'packaging_steel.yaml').read_text()
+    text = text.replace('stiffness_n_m: 5.0e+7', 'stiffness_n_m: 1.0e+12').replace(
+        'O2: 0.02, A: 0.02, B: 0.02, O4: 0.02', 'O2: 0.0001, A: 0.0001, B: 0.0001, O4: 0.0001')
+    assert '1.0e+12' in text and '0.0001' in text
+    path = folder / 'stiff_springs_light_pins.yaml'
+    path.write_text(text)
+    return path
+
+
 @pytest.mark.skipif(not exudyn_available(), reason='exudyn is not installed')
-def test_a_solver_failure_is_one_flexlink_error_with_a_hint_and_no_banner(capfd):
-    # The stiff steel linkage on bearing springs of 5e7 N/m at 600 rpm, 8 elements per link:
-    # the peer's implicit steps diverge.
+def test_a_solver_failure_is_one_flexlink_error_with_a_hint_and_no_banner(capfd, tmp_path):
+    # The stiff steel linkage on bearing springs of 1e12 N/m with 0.1 g pins at 600 rpm, 8
+    # elements per link: the peer's implicit steps diverge, also at 8 times the steps.
     with pytest.raises(FlexlinkError) as info:
-        peer_response(str(DATA / 'packaging_steel.yaml'), 600.0, elements_per_link=8,
+        peer_response(str(stiff_springs_on_light_pins(tmp_path)), 600.0, elements_per_link=8,
                       bearings='springs', mass_placement='split', revolutions=1,
                       steps_per_revolution=720)
     text = str(info.value)

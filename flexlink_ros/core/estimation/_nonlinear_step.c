@@ -406,6 +406,23 @@ static void interpolate(const Hermite *hm, Py_ssize_t s, Py_ssize_t col, Py_ssiz
 }
 
 /*
+ * f_1 + a f_a + w^2 f_w2 of n entries per stage (w the stage's speed, a the acceleration):
+ * written into out, or added to it (add != 0).
+ */
+static void speed_polynomial(const double *speed, double accel, Py_ssize_t s, Py_ssize_t n,
+                             const double *f1, const double *fa, const double *fw2, int add,
+                             double *out)
+{
+    for (Py_ssize_t i = 0; i < s; i++) {
+        const double w2 = speed[i] * speed[i];
+        for (Py_ssize_t j = i * n; j < (i + 1) * n; j++) {
+            const double value = f1[j] + accel * fa[j] + w2 * fw2[j];
+            out[j] = add ? out[j] + value : value;
+        }
+    }
+}
+
+/*
  * The linear part and the link tables at the stages into p (buf holds them), read from the
  * tables: C = w G + beta (K_el + K_bear), K = K_el + K_bear + beta w K1 + a K_a + w^2 K_w2
  * (+ K_G for the linear model), R = f_1 + a f_a + w^2 f_w2, as linear_part. raw: room for
@@ -445,22 +462,12 @@ static void stage_tables(const Model *md, const double *angles, double accel, Pr
         interpolate(hm, s, o[6], mm, r1, mm);
         interpolate(hm, s, o[7], mm, r2, mm);
         interpolate(hm, s, o[8], mm, r3, mm);
-        for (Py_ssize_t i = 0; i < s; i++) {
-            const double w = p->speed[i];
-            for (Py_ssize_t j = 0; j < mm; j++) {
-                const Py_ssize_t ij = i * mm + j;
-                stiffness[ij] += r1[ij] + accel * r2[ij] + w * w * r3[ij];
-            }
-        }
+        speed_polynomial(p->speed, accel, s, mm, r1, r2, r3, 1, stiffness);
     }
     interpolate(hm, s, o[9], m, v1, m);
     interpolate(hm, s, o[10], m, v2, m);
     interpolate(hm, s, o[11], m, v3, m);
-    for (Py_ssize_t i = 0; i < s; i++) {
-        const double w = p->speed[i];
-        for (Py_ssize_t j = 0; j < m; j++)
-            load[i * m + j] = v1[i * m + j] + accel * v2[i * m + j] + w * w * v3[i * m + j];
-    }
+    speed_polynomial(p->speed, accel, s, m, v1, v2, v3, 0, load);
     interpolate(hm, s, o[12], e * m, chord, e * m);
     interpolate(hm, s, o[13], e * m, chord_rate, e * m);
     interpolate(hm, s, o[14], e * mm, shortening, e * mm);

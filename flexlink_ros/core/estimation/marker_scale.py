@@ -5,9 +5,12 @@ Rule: the deflections are drawn ``k`` times their size, ``k`` the smallest round
 (1, 2, 5 times a power of ten, from 1 to 10^6) that draws the expected peak deflection as at
 least :data:`MARKER_SHARE` (5 %) of the coupler's length. The expected peak is the model's
 quasi-static one: the largest deflection component of K q = f over the crank-angle grid at
-constant speeds up to the top of the model's speed range
-(:meth:`StreamingEstimator.quasi_static_peak`); a dynamic response near resonance can be a few
-times larger. Cho 1992's default model gets x2, a steel linkage bending 30 um at 600 rpm x500.
+constant speeds up to the machine's speed (:func:`machine_speed`: the mechanism file's
+``crank_speed_rpm`` with the speed range's margin, else the top of the model's speed range;
+:meth:`StreamingEstimator.quasi_static_peak`); a dynamic response near resonance can be a few
+times larger. The range's top alone would not do: a 60 rpm machine's model serves at least
+620 rpm, where it bends a hundred times as much. Cho 1992's default model gets x2, a steel
+linkage bending 30 um at 600 rpm x500.
 """
 
 import math
@@ -15,6 +18,7 @@ import math
 import numpy as np
 
 from .streaming import StreamingEstimator
+from ..options import SPEED_MARGIN
 
 MARKER_SHARE = 0.05   # the expected peak deflection drawn as this share of the coupler length
 MAX_EXAGGERATION = 1e6   # the node's parameter range
@@ -52,12 +56,32 @@ def round_exaggeration(peak_m, length_m, share=MARKER_SHARE):
     return MAX_EXAGGERATION
 
 
-def model_exaggeration(model, step_tables=None):
+def machine_speed(mechanism, speed_max):
+    """
+    Return the top speed [rad/s] of the expected peak: the machine's, within the model's range.
+
+    Parameters
+    ----------
+    mechanism : Mechanism or None
+        The linkage; its ``crank_speed`` (the file's ``crank_speed_rpm``) times
+        :data:`core.options.SPEED_MARGIN`, if it states one.
+    speed_max : float
+        The top of the model's speed range [rad/s] (the answer without a machine speed).
+
+    """
+    crank_speed = getattr(mechanism, 'crank_speed', None)
+    if crank_speed:
+        return min(float(speed_max), SPEED_MARGIN * abs(float(crank_speed)))
+    return float(speed_max)
+
+
+def model_exaggeration(model, step_tables=None, mechanism=None):
     """Return :func:`default_exaggeration` of a reduced model (its step tables, if given)."""
-    return default_exaggeration(StreamingEstimator(model, step_tables=step_tables))[0]
+    estimator = StreamingEstimator(model, step_tables=step_tables)
+    return default_exaggeration(estimator, mechanism)[0]
 
 
-def default_exaggeration(estimator):
+def default_exaggeration(estimator, mechanism=None):
     """
     Return the markers' default exaggeration of a model, with what it was derived from.
 
@@ -65,6 +89,8 @@ def default_exaggeration(estimator):
     ----------
     estimator : StreamingEstimator
         An estimator of the model (its step tables give the quasi-static peak).
+    mechanism : Mechanism or None
+        The linkage: the expected peak is taken up to its :func:`machine_speed`.
 
     Returns
     -------
@@ -79,5 +105,5 @@ def default_exaggeration(estimator):
     positions, _ = model.shapes(0.0, np.zeros(model.size))
     coupler = positions[1]
     length = float(np.hypot(*(coupler[-1] - coupler[0])))
-    peak = float(estimator.quasi_static_peak())
+    peak = float(estimator.quasi_static_peak(machine_speed(mechanism, model.speed_max)))
     return round_exaggeration(peak, length), peak, length

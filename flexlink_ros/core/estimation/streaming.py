@@ -171,14 +171,15 @@ class StreamingEstimator:
         self._last = None
         self._pending_warm_start = False
 
-    def quasi_static_peak(self):
+    def quasi_static_peak(self, speed_max=None):
         """
         Return the largest |deflection component| of the quasi-static response over the grid [m].
 
-        See :func:`~.tables.quasi_static_peak`; the deflection bound is
-        DEFLECTION_SAFETY_FACTOR / (2 zeta) times it.
+        At constant speeds up to ``speed_max`` [rad/s] (default: the model's range). See
+        :func:`~.tables.quasi_static_peak`; the deflection bound is
+        DEFLECTION_SAFETY_FACTOR / (2 zeta) times it over the whole range.
         """
-        return self._tables.quasi_static_peak(self.model)
+        return self._tables.quasi_static_peak(self.model, speed_max)
 
     def periodic_state(self, angle, speed):
         """

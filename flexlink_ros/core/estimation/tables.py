@@ -244,11 +244,12 @@ class _StepTables:
             self._bounds[key] = bound if math.isfinite(bound) and bound > 0.0 else math.inf
         return self._bounds[key]
 
-    def quasi_static_peak(self, model):
-        """Return :func:`quasi_static_peak` of the model of these tables (computed once)."""
-        if model.speed_max not in self._peaks:
-            self._peaks[model.speed_max] = quasi_static_peak(model, self)
-        return self._peaks[model.speed_max]
+    def quasi_static_peak(self, model, speed_max=None):
+        """Return :func:`quasi_static_peak` of the model of these tables (once per speed)."""
+        top = float(model.speed_max if speed_max is None else speed_max)
+        if top not in self._peaks:
+            self._peaks[top] = quasi_static_peak(model, self, top)
+        return self._peaks[top]
 
     def record(self, weights, k, z, out):
         """
@@ -334,7 +335,7 @@ def system_blocks(model, tables, theta, w, a):
             kf[:, r * r:])
 
 
-def quasi_static_peak(model, tables):
+def quasi_static_peak(model, tables, speed_max=None):
     """
     Return the largest |deflection component| of the quasi-static response over the grid [m].
 
@@ -350,13 +351,16 @@ def quasi_static_peak(model, tables):
         The model of ``tables``.
     tables : _StepTables
         :func:`step_tables` of the model.
+    speed_max : float or None
+        The top speed [rad/s] (default: the model's ``speed_max``).
 
     """
     r = tables.record_size
     theta = np.arange(model.grid_size) / (model.grid_size / TWO_PI)
     operator_rows = np.zeros(tables.out_rows)
     peak = 0.0
-    for w in np.linspace(0.0, float(model.speed_max), QUASI_STATIC_SPEEDS).tolist():
+    top = float(model.speed_max if speed_max is None else speed_max)
+    for w in np.linspace(0.0, top, QUASI_STATIC_SPEEDS).tolist():
         _, _, stiffness, load = system_blocks(model, tables, theta, w, 0.0)
         q = np.linalg.solve(stiffness, load[..., None])[..., 0]
         if tables.lift is not None:

@@ -8,20 +8,16 @@ followed from its warm-up gives the sequential follower's outputs and counts, to
 with gaps inside the warm-up, inside the span and longer than the warm-up.
 """
 
-import dataclasses
 import math
 
 from flexlink_ros.core.estimation.follow_spans import follow_span, slowest_decay_rate, \
     warm_up_s
 from flexlink_ros.core.estimation.nonlinear_follow import NonlinearFollower
 from flexlink_ros.core.estimation.nonlinear_stream import linear_part
-from flexlink_ros.core.fe.linkage import FlexibleLinkage
-from flexlink_ros.core.mechanism_file import load_mechanism
-from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.core.reduction.nonlinear_tables import build_nonlinear_tables
 import numpy as np
 import pytest
 import scipy.linalg
+from small_nonlinear import small_nonlinear_tables
 
 SPEED = 391.0 * math.pi / 30.0
 BETA = 5e-3
@@ -29,10 +25,7 @@ BETA = 5e-3
 
 @pytest.fixture(scope='module')
 def tables():
-    mech = dataclasses.replace(load_mechanism('cho1992'), elements_per_link=2)
-    linkage = FlexibleLinkage(mech, ModelOptions.full_model(rigid_crank=True,
-                                                            bearings='flexible'))
-    return build_nonlinear_tables(linkage, BETA, size=12, modes=10)
+    return small_nonlinear_tables(BETA)
 
 
 def test_the_slowest_decay_is_the_least_damped_frozen_mode(tables):

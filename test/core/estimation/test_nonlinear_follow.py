@@ -7,29 +7,22 @@ a cumulative sum there); a gap beyond the reset gap starts it again at the quasi
 deflection; the validity indicator is the slope rule stated in the module.
 """
 
-import dataclasses
 import math
 
 from flexlink_ros.core.estimation.nonlinear_follow import nonlinear_validity, NonlinearFollower
 from flexlink_ros.core.estimation.nonlinear_stream import (estimate_nonlinear, NonlinearStepper,
                                                            VON_KARMAN_SLOPE)
-from flexlink_ros.core.fe.linkage import FlexibleLinkage
-from flexlink_ros.core.mechanism_file import load_mechanism
-from flexlink_ros.core.options import ModelOptions
-from flexlink_ros.core.reduction.nonlinear_tables import build_nonlinear_tables
 from flexlink_ros.core.validity import VALIDITY_THRESHOLD
 import numpy as np
 import pytest
+from small_nonlinear import small_nonlinear_tables
 
 SPEED = 391.0 * math.pi / 30.0
 
 
 @pytest.fixture(scope='module')
 def tables():
-    mech = dataclasses.replace(load_mechanism('cho1992'), elements_per_link=2)
-    linkage = FlexibleLinkage(mech, ModelOptions.full_model(rigid_crank=True,
-                                                            bearings='flexible'))
-    return build_nonlinear_tables(linkage, 1e-4, size=12, modes=10)
+    return small_nonlinear_tables(1e-4)
 
 
 def _signal(count, rate_hz=1000.0, seed=3):
