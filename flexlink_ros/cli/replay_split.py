@@ -23,6 +23,7 @@ recording's start (the sequential numbers, at the sequential cost).
 import json
 import math
 import os
+import pathlib
 import tempfile
 
 import numpy as np
@@ -69,6 +70,18 @@ def warm_up_seconds(model, tables, mechanism, options, args):
     return warm_up_for_rate(min(rate, 1.0 / DEFAULT_FIT_TIME_CONSTANT_S), DEFAULT_RESET_GAP_S)
 
 
+def part_directory(out):
+    """
+    Return the folder of the child's part: the output's, or its nearest existing parent.
+
+    The recorder makes the missing ones when it opens the output, after the fork.
+    """
+    directory = pathlib.Path(os.path.abspath(out)).parent
+    while not directory.is_dir() and directory != directory.parent:
+        directory = directory.parent
+    return directory
+
+
 class Splitter:
     """
     Where to split a replay and the forked child's work (see the module notes).
@@ -112,8 +125,8 @@ class Splitter:
 
     def fork(self, rows):
         """Start the child on the rows from the split row; the parent keeps those before it."""
-        directory = os.path.dirname(os.path.abspath(self.args.out)) or '.'
-        self.part = tempfile.TemporaryFile(dir=directory, prefix='.replay-part-')
+        self.part = tempfile.TemporaryFile(dir=part_directory(self.args.out),
+                                           prefix='.replay-part-')
         self.read_fd, write_fd = os.pipe()
         guesses = self._sequences()
         self.pid = os.fork()
@@ -150,8 +163,7 @@ class Splitter:
             os._exit(code)
 
     def _part_target(self, sequences):
-        directory = os.path.dirname(os.path.abspath(self.args.out)) or '.'
-        return PartWriter(self.part, self.declared, sequences, directory)
+        return PartWriter(self.part, self.declared, sequences, part_directory(self.args.out))
 
     def run_part(self, target, start, damage_listed, warm_start):
         """

@@ -227,3 +227,12 @@ def test_a_split_past_the_last_usable_row_leaves_the_parent_all_rows(tmp_path):
     assert two['processes']['split_row'] > one['samples'] == one['skipped'] > 39_000
     assert summary_keys(two) == summary_keys(one)
     assert messages(tmp_path / 'two.mcap') == messages(tmp_path / 'one.mcap')
+
+
+def test_a_forked_replay_into_a_folder_not_made_yet(smooth, tmp_path):
+    """The child's part waits in the nearest folder that exists, and is gone afterwards."""
+    bag, _, expected = smooth
+    out = tmp_path / 'new' / 'deeper' / 'two.mcap'
+    assert replay(bag, out, '--processes', '2')['processes']['second_part'] == 'forked'
+    assert len(messages(out)) == len(expected)
+    assert sorted(p.name for p in tmp_path.rglob('*')) == ['deeper', 'new', 'two.mcap']
