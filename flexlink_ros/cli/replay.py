@@ -46,7 +46,7 @@ from .progress import Progress
 from .replay_model import defer_model_defaults, MissingModel, replay_model
 from .replay_nonlinear import decide, MAX_THREADS, model_lines, nonlinear_choice, nonlinear_rows
 from .replay_offline import CHUNK_SAMPLES, estimate_and_write, MAX_CHUNK_SAMPLES, open_input
-from .replay_split import default_processes, Splitter, warm_up_seconds
+from .replay_split import can_fork, Splitter, warm_up_seconds
 from ..core.estimation.gate import DEFAULT_RESET_GAP_S
 from ..core.estimation.marker_scale import model_exaggeration
 from ..core.estimation.tables import step_tables
@@ -292,10 +292,10 @@ def _check_arguments(args):
         raise ValueError(f'`--markers-every-n` must be >= 0, got {args.markers_every_n}')
     if not 1 <= args.threads <= MAX_THREADS:
         raise ValueError(f'`--threads` must be in 1..{MAX_THREADS}, got {args.threads}')
-    if args.processes is None:
-        args.processes = default_processes()
     if args.processes not in (1, 2):
         raise ValueError(f'`--processes` must be 1 or 2, got {args.processes}')
+    if args.processes == 2 and not can_fork():
+        raise ValueError('`--processes 2` needs a system that can fork and 2 or more cores')
     if not 1 <= args.chunk_samples <= MAX_CHUNK_SAMPLES:
         raise ValueError(f'`--chunk-samples` must be in 1..{MAX_CHUNK_SAMPLES}, '
                          f'got {args.chunk_samples}')
@@ -389,13 +389,14 @@ def _add_work_arguments(parser):
                         help='with the nonlinear model, follow a long recording in N spans at '
                         'once, each from a warm-up (the same deflections to rounding; memory '
                         f'grows with N, about 32 MB each; 1..{MAX_THREADS}, default 1)')
-    parser.add_argument('--processes', type=int, default=None, metavar='N',
-                        help='with the linear model and --out, estimate and write the second '
-                        'part of a recording in a second process, from a warm-up before it '
-                        '(the same messages; values to rounding: the deflections within '
-                        '5e-12 of their range): 1 or 2; default 2 where the system can fork '
-                        'and has 2 or more cores, else 1; a recording shorter than about '
-                        'two warm-ups (10 s each for the default model) runs in one process')
+    parser.add_argument('--processes', type=int, default=1, metavar='N',
+                        help='2: with the linear model and --out, estimate and write the '
+                        'second part of a recording in a second process, from a warm-up '
+                        'before it (the same messages; values to rounding: the deflections '
+                        'within 5e-12 of their range; about 1.1x faster on an idle 2-core '
+                        'machine, slower on a busy one); a recording shorter than about two '
+                        'warm-ups (10 s each for the default model) runs in one process '
+                        '(default 1: the bytes of one process on any machine)')
 
 
 def register(subparsers):

@@ -51,9 +51,9 @@ MAX_DAMAGED = 1000
 DECAY_CACHE_NAME = 'linear-decay'
 
 
-def default_processes():
-    """2 where the system can fork and has at least 2 cores, else 1 (the ``--processes`` rule)."""
-    return 2 if hasattr(os, 'fork') and (os.cpu_count() or 1) >= 2 else 1
+def can_fork():
+    """Tell whether ``--processes 2`` can run here: the system forks and has 2 or more cores."""
+    return hasattr(os, 'fork') and (os.cpu_count() or 1) >= 2
 
 
 def warm_up_seconds(model, tables, mechanism, options, args):
@@ -269,4 +269,4 @@ class Splitter:
             self.pid = None
 
 
-__all__ = ['default_processes', 'warm_up_seconds', 'Splitter']
+__all__ = ['can_fork', 'warm_up_seconds', 'Splitter']

@@ -236,3 +236,14 @@ def test_a_forked_replay_into_a_folder_not_made_yet(smooth, tmp_path):
     assert replay(bag, out, '--processes', '2')['processes']['second_part'] == 'forked'
     assert len(messages(out)) == len(expected)
     assert sorted(p.name for p in tmp_path.rglob('*')) == ['deeper', 'new', 'two.mcap']
+
+
+def test_one_process_is_the_default_and_a_bad_count_is_one_line(tmp_path):
+    """By default a long recording runs in one process: its bytes are the same on any machine."""
+    bag = recording(tmp_path / 'bag.mcap', seconds=30.0)
+    assert replay(bag, tmp_path / 'out.mcap')['processes'] == {'used': 1}
+    refused = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'replay', str(bag),
+                              '--out', str(tmp_path / 'three.mcap'), '--processes', '3'],
+                             capture_output=True, text=True, timeout=120)
+    assert refused.returncode != 0 and 'Traceback' not in refused.stderr
+    assert '`--processes` must be 1 or 2, got 3' in refused.stderr
