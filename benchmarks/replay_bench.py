@@ -4,7 +4,7 @@
     python benchmarks/replay_bench.py make-bag BAG [--seconds 60] [--rate 1000]
     python benchmarks/replay_bench.py compare BAG [--pairs 7]
         [--reference-python OTHER/.venv/bin/python --reference-root OTHER] [--same-output]
-        [--nonlinear]
+        [--nonlinear] [--flags 'F...'] [--reference-flags 'F...']
 
 ``make-bag`` writes a rosbag2 MCAP of one crank ``sensor_msgs/JointState`` topic: the
 synthetic signal the estimator benches use (:func:`flexlink_ros.studies.synthetic
@@ -14,15 +14,21 @@ an encoder gives it, logged 150 us after its stamp, written in batches (bounded 
 ``compare`` replays the bag with this build and, given ``--reference-python``, with another
 (a worktree of an older commit with its own venv, run from its root), in turn: A B A B ...,
 each a fresh process ``PY -m flexlink_ros.cli replay BAG --out TMP`` with the default model
-(its cache filled by a first, untimed run of each build). It prints every run's wall time, CPU
+and flags (its cache, and each build's compiled modules in a directory of the benchmark's own,
+filled by a first, untimed run of each build: an installed package has its modules compiled).
+It prints every run's wall time, CPU
 time (``os.wait4``) and peak resident size (the child's own ``VmHWM``, read as it exits: the
 ``ru_maxrss`` of ``wait4`` also counts the parent's pages the child held between fork and
 exec), the medians and the ratio of the medians. Timing is
-printed, never asserted: the machine is shared. ``--same-output`` also checks that the two
-builds wrote the same messages (topic, log and publish time, sequence, bytes). The replay is
+printed, never asserted: the machine is shared. ``--same-output`` also compares what the two
+builds wrote: every message's topic, log and publish time, sequence number and length, how many
+messages' bytes differ and, where they do, each topic's largest difference over the range of
+the value (a replay in two processes writes its second part's values to rounding). The replay is
 the linear model's (``--nonlinear off``), or with ``--nonlinear`` the reduced nonlinear
 model's (``--nonlinear on``, and ``--threads 2`` for a build that has it; its deflections
 agree between builds to rounding, not to the byte, where one steps runs of samples at once).
+``--flags`` / ``--reference-flags`` add replay flags to one build's runs (``--flags
+'--processes 1'`` against this build's default times the second process).
 """
 
 import argparse
@@ -95,18 +101,26 @@ _PEAK_WRAPPER = (
     "runpy.run_module('flexlink_ros.cli', run_name='__main__', alter_sys=True)\n")
 
 
-def run_measured(python, root, args):
+def run_measured(python, root, args, bytecode=None):
     """
     Run ``python -m flexlink_ros.cli ARGS`` from ``root`` to its end.
 
-    Returns wall time [s], CPU time [s] (``os.wait4``) and the process's own peak resident size
-    [MB]: the ``ru_maxrss`` of ``wait4`` would also count the parent's pages the child held
-    between fork and exec (a large parent makes every child look as large).
+    Returns wall time [s], CPU time [s] (``os.wait4``: the process's and the children it
+    waited for, a forked part of the replay included) and the process's own peak resident
+    size [MB]: the ``ru_maxrss`` of ``wait4`` would also count the parent's pages the child
+    held between fork and exec (a large parent makes every child look as large).
+    ``bytecode``: a directory where Python keeps the compiled modules
+    (``PYTHONPYCACHEPREFIX``), as an installed package has them, even where the environment
+    says not to write them (``PYTHONDONTWRITEBYTECODE``): the source trees stay untouched.
     """
     argv = [python, '-c', _PEAK_WRAPPER, *args]
+    environment = dict(os.environ)
+    if bytecode is not None:
+        environment.pop('PYTHONDONTWRITEBYTECODE', None)
+        environment['PYTHONPYCACHEPREFIX'] = str(bytecode)
     start = time.perf_counter()
     process = subprocess.Popen(argv, cwd=root, stdout=subprocess.DEVNULL,
-                               stderr=subprocess.PIPE)
+                               stderr=subprocess.PIPE, env=environment)
     _, status, usage = os.wait4(process.pid, 0)
     seconds = time.perf_counter() - start
     error = process.stderr.read().decode(errors='replace')
@@ -117,12 +131,14 @@ def run_measured(python, root, args):
     return seconds, usage.ru_utime + usage.ru_stime, int(peaks[-1]) / 1024.0
 
 
-def replay_once(python, root, bag, out, extra=()):
+def replay_once(python, root, bag, out, extra=(), bytecode=None):
     """Replay in a fresh process from ``root``: wall time [s], CPU time [s], peak RSS [MB]."""
-    threads = ['--threads', '2'] if extra and '--threads' in replay_help(python, root) else []
+    threads = (['--threads', '2'] if '--nonlinear' in extra
+               and '--threads' in replay_help(python, root) else [])
     return run_measured(python, root, ['replay', str(pathlib.Path(bag).resolve()), '--out',
                                        str(out), '--mechanism', 'cho1992',
-                                       *linear_flag(python, root), *extra, *threads])
+                                       *linear_flag(python, root), *extra, *threads],
+                        bytecode)
 
 
 def replay_help(python, root):
@@ -160,26 +176,72 @@ def same_messages(first, second):
             return True
 
 
+def _doubles(data):
+    """Read a message's bytes after the CDR encapsulation as little-endian doubles."""
+    size = (len(data) - 4) // 8 * 8
+    return np.frombuffer(data[4:4 + size], dtype='<f8')
+
+
+def compare_outputs(first, second):
+    """
+    Compare two outputs message by message.
+
+    Returns whether every message's topic, times, sequence and length agree, how many
+    messages' bytes differ, and each topic's largest difference over the range of the value
+    (the doubles of the message, compared where they differ).
+    """
+    ranges = {}
+    for topic, *_, data in messages(first):
+        values = _doubles(data)
+        low, high = ranges.get(topic, (values, values))
+        if len(low) == len(values):
+            ranges[topic] = (np.minimum(low, values), np.maximum(high, values))
+    missing = (None,) * 5
+    heads, differing, worst = True, 0, {}
+    left, right = messages(first), messages(second)
+    while True:
+        a, b = next(left, missing), next(right, missing)
+        if a is missing and b is missing:
+            return heads, differing, worst
+        if a[:4] != b[:4] or len(a[4] or b'') != len(b[4] or b''):
+            heads = False
+            continue
+        if a[4] != b[4]:
+            differing += 1
+            x, y = _doubles(a[4]), _doubles(b[4])
+            changed = x != y
+            span = (ranges[a[0]][1] - ranges[a[0]][0])[changed]
+            scaled = np.abs(x - y)[changed] / np.where(span > 0, span, np.inf)
+            worst[a[0]] = max(worst.get(a[0], 0.0), float(np.max(scaled, initial=0.0)))
+
+
 def compare(args):
     """Alternate the builds; print each run, the medians and the ratio."""
-    builds = [('this', args.python, args.root)]
+    builds = [('this', args.python, args.root, tuple(args.flags.split()))]
     if args.reference_python:
-        builds.append(('reference', args.reference_python, args.reference_root))
+        builds.append(('reference', args.reference_python, args.reference_root,
+                       tuple(args.reference_flags.split())))
     work = pathlib.Path(tempfile.mkdtemp(prefix='replay_bench_'))
     # --nonlinear given last wins over the linear_flag before it; --threads where a build has it.
     extra = ('--nonlinear', 'on') if args.nonlinear else ()
-    times = {name: [] for name, _, _ in builds}
-    cpu = {name: [] for name, _, _ in builds}
+    times = {name: [] for name, *_ in builds}
+    cpu = {name: [] for name, *_ in builds}
     try:
-        for name, python, root in builds:       # fill each build's model cache, untimed
-            replay_once(python, root, args.bag, work / f'warm_{name}.mcap', extra)
+        for name, python, root, flags in builds:       # fill each build's caches, untimed
+            replay_once(python, root, args.bag, work / f'warm_{name}.mcap', extra + flags,
+                        work / f'bytecode_{name}')
         if args.same_output and len(builds) == 2:
-            same = same_messages(work / 'warm_this.mcap', work / 'warm_reference.mcap')
-            print(f'same messages in both outputs: {same}')
+            heads, differing, worst = compare_outputs(work / 'warm_reference.mcap',
+                                                      work / 'warm_this.mcap')
+            print(f'same topics, times and sequence numbers: {heads}; messages whose bytes '
+                  f'differ: {differing}' + ''.join(f'\n  {topic}: largest difference '
+                                                   f'{value:.2g} of its range'
+                                                   for topic, value in worst.items()))
         for pair in range(args.pairs):
-            for name, python, root in builds:
+            for name, python, root, flags in builds:
                 out = work / f'{name}_{pair}.mcap'
-                seconds, cpu_s, peak_mb = replay_once(python, root, args.bag, out, extra)
+                seconds, cpu_s, peak_mb = replay_once(python, root, args.bag, out,
+                                                      extra + flags, work / f'bytecode_{name}')
                 times[name].append(seconds)
                 cpu[name].append(cpu_s)
                 print(f'pair {pair + 1} {name:9s} {seconds:6.3f} s  CPU {cpu_s:6.3f} s  '
@@ -216,6 +278,10 @@ def main(argv=None):
     runs.add_argument('--reference-root', type=pathlib.Path)
     runs.add_argument('--nonlinear', action='store_true',
                       help='time the replay with the reduced nonlinear model (--nonlinear on)')
+    runs.add_argument('--flags', default='', help="more flags of this build's replay, e.g. "
+                      "'--processes 1'")
+    runs.add_argument('--reference-flags', default='',
+                      help="more flags of the reference build's replay")
     runs.add_argument('--same-output', action='store_true',
                       help='check that both builds write the same messages')
     args = parser.parse_args(argv)

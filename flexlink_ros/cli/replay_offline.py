@@ -58,9 +58,13 @@ class InputRows:
 
     """
 
-    def __init__(self, path, topic, joint_name, chunk, damaged=None):
+    def __init__(self, path, topic, joint_name, chunk, damaged=None, start=0):
         self.topic, self.joint_name = topic, joint_name
         self.chunks = iter_crank_samples(path, topic, joint_name, block=chunk, damaged=damaged)
+        # Usable rows start...stop (stop None: to the end) are given to the estimate.
+        self.start, self.stop, self.seen = start, None, 0
+        self.damaged = damaged
+        self.damage_mark = None if damaged is None else len(damaged)   # the survey's
         self.samples = self.skipped = 0
         self.skipped_reasons = {}
         self.first_log_ns = self.last_log_ns = None
@@ -69,10 +73,14 @@ class InputRows:
 
     def _next(self):
         """Return the next chunk with a usable sample (counting the rest), or None."""
-        for chunk in self.chunks:
+        while self.stop is None or self.seen < self.stop:
+            chunk = next(self.chunks, None)
+            if chunk is None:
+                return None
             self.skipped += chunk['skipped']
             for why, count in chunk['skipped_reasons'].items():
                 self.skipped_reasons[why] = self.skipped_reasons.get(why, 0) + count
+            chunk = self._in_range(chunk)
             if chunk['data']:
                 self.samples += len(chunk['data'])
                 if self.first_log_ns is None:
@@ -80,6 +88,30 @@ class InputRows:
                 self.last_log_ns = int(chunk['log_ns'][-1])
                 return chunk
         return None
+
+    def _in_range(self, chunk):
+        """Return the chunk's usable rows within start...stop."""
+        first, self.seen = self.seen, self.seen + len(chunk['data'])
+        low = max(self.start - first, 0)
+        high = len(chunk['data']) if self.stop is None else max(min(self.stop - first, len(
+            chunk['data'])), low)
+        if low == 0 and high == len(chunk['data']):
+            return chunk
+        return {**chunk, **{key: chunk[key][low:high] for key in _COLUMNS}}
+
+    def limit(self, stop):
+        """Give the estimate rows before ``stop`` only (the rest is another part's)."""
+        self.stop = stop
+        kept = collections.deque()
+        first = 0
+        for chunk in self.peeked:
+            size = len(chunk['data'])
+            if first < stop:
+                kept.append({key: chunk[key][:stop - first] for key in _COLUMNS}
+                            if first + size > stop else chunk)
+            first += size
+        self.samples = min(self.samples, stop)
+        self.peeked = kept
 
     def find_first(self):
         """Read up to the first usable sample; ValueError naming why there is none."""
@@ -190,6 +222,25 @@ class EstimateSummary:
                 known = self.largest[key]
                 self.largest[key] = largest if known is None else max(known, largest)
 
+    def state(self):
+        """Return what :meth:`merge` takes (plain JSON values)."""
+        return {'low': {key: self.low[key].tolist() for key in OUTPUT_POINTS},
+                'high': {key: self.high[key].tolist() for key in OUTPUT_POINTS},
+                'seen': self.seen, 'messages': self.messages, 'largest': self.largest}
+
+    def merge(self, state):
+        """Take in another summary's :meth:`state` (rows estimated elsewhere)."""
+        for key in OUTPUT_POINTS:
+            if state['seen'][key]:
+                self.seen[key] = True
+                self.low[key] = np.minimum(self.low[key], state['low'][key])
+                self.high[key] = np.maximum(self.high[key], state['high'][key])
+        self.messages += state['messages']
+        for key, largest in state['largest'].items():
+            known = self.largest[key]
+            if largest is not None:
+                self.largest[key] = largest if known is None else max(known, largest)
+
     def result(self):
         """Each output point's peak-to-peak deflection [um] and the 'quality' summary."""
         result = {f'{key}_peak_to_peak_um': ((1e6 * (self.high[key] - self.low[key])).tolist()
@@ -262,8 +313,22 @@ class _Pipeline:
         self.thread.join()
 
 
+def pipeline_blocks(model, rows, warm_start, tables, consume):
+    """
+    Estimate ``rows`` in a thread while ``consume(blocks)`` takes its blocks here.
+
+    Returns :func:`estimate_stream`'s counts.
+    """
+    pipeline = _Pipeline(model, rows, warm_start, tables)
+    try:
+        consume(iter(pipeline))
+    finally:
+        pipeline.close()
+    return pipeline.outcome
+
+
 def estimate_and_write(args, model, rows, messages, write, on_block=None, tables=None,
-                       transform=None):
+                       transform=None, splitter=None):
     """
     Estimate every sample and, with ``write``, write the output file meanwhile.
 
@@ -278,8 +343,8 @@ def estimate_and_write(args, model, rows, messages, write, on_block=None, tables
     messages : int
         Messages of the input topic (the progress total).
     write : callable or None
-        ``write(blocks, progress)``: :func:`io.replay_writer.write_replay` of the blocks
-        (None: estimate only).
+        ``write(blocks, progress, tail=None)``: :func:`io.replay_writer.write_replay` of the
+        blocks (None: estimate only).
     on_block : callable, optional
         ``on_block(estimate)`` with each block of estimated rows (the chart's rows).
     tables : object, optional
@@ -287,6 +352,9 @@ def estimate_and_write(args, model, rows, messages, write, on_block=None, tables
     transform : NonlinearRows, optional
         Its ``blocks(blocks, messages)`` gives each block's estimate to sum up and write in
         place of the linear one (:class:`.replay_nonlinear.NonlinearRows`).
+    splitter : replay_split.Splitter, optional
+        Estimates and writes the rows from its split row in a forked process, when the
+        recording is long enough (linear model, output file, no chart).
 
     Returns
     -------
@@ -301,7 +369,16 @@ def estimate_and_write(args, model, rows, messages, write, on_block=None, tables
     """
     start = time.perf_counter()
     summary = EstimateSummary()
-    pipeline = _Pipeline(model, rows, not args.no_warm_start, tables)
+    split = (splitter is not None and write is not None and transform is None
+             and on_block is None and splitter.plan(rows, messages))
+    if split:
+        splitter.fork(rows)
+    try:
+        pipeline = _Pipeline(model, rows, not args.no_warm_start, tables)
+    except BaseException:
+        if split:
+            splitter.abandon()
+        raise
 
     def blocks():
         # The nonlinear deflections replace the linear ones (a span of blocks per thread).
@@ -318,10 +395,38 @@ def estimate_and_write(args, model, rows, messages, write, on_block=None, tables
         else:
             with Progress(f'writing {args.out}', messages, unit='sample') as shown:
                 status = write(blocks(), lambda done, force=False: shown(done + rows.skipped,
-                                                                         force=force))
+                                                                         force=force),
+                               tail=(lambda recorder: splitter.finish(recorder, rows))
+                               if split else None)
     finally:
         pipeline.close()
-    times = {'estimate_s': pipeline.seconds, 'write_s': time.perf_counter() - start}
+        if split:
+            splitter.abandon()
+    outcome = pipeline.outcome
+    if split:
+        outcome = _merge_part(rows, outcome, summary, splitter.report)
+    times = {'estimate_s': pipeline.seconds, 'write_s': time.perf_counter() - start,
+             'processes': ({'used': 2, 'split_row': splitter.split,
+                            'second_part': splitter.report['second_part']}
+                           if split else {'used': 1})}
     if status is not None:
         times['status'] = status
-    return pipeline.outcome, summary.result(), times
+    return outcome, summary.result(), times
+
+
+def _merge_part(rows, outcome, summary, report):
+    """Add the rows another part estimated (``report``: :meth:`Splitter.run_part`)."""
+    rows.samples += report['samples']
+    rows.skipped, rows.skipped_reasons = report['skipped'], report['skipped_reasons']
+    if report['last_log_ns'] is not None and report['samples']:
+        rows.last_log_ns = report['last_log_ns']
+    if rows.damaged is not None and report['damaged'] is not None:
+        del rows.damaged[rows.damage_mark:]
+        rows.damaged.extend(tuple(entry) for entry in report['damaged'])
+    summary.merge(report['summary'])
+    merged = dict(outcome)
+    merged['samples'] += report['samples']
+    for key, count in report['counts'].items():
+        merged[key] += count
+    merged['window_rows'] = max(merged['window_rows'], report['window_rows'])
+    return merged

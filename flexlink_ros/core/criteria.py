@@ -24,7 +24,7 @@ import dataclasses
 import math
 
 import numpy as np
-import scipy.optimize
+import scipy   # scipy.optimize loads on first use: a replay from the cache never needs it
 
 from .dynamics import solve_dynamics
 from .kinematics import solve_kinematics

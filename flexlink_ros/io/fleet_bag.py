@@ -201,7 +201,8 @@ def _replay_summary(bag, topic, samples, damaged, model, options, estimate, tota
                'notes': [], 'segments': estimate['segments'],
                'outliers': estimate['outliers'], 'out_of_bound': estimate['out_of_bound'],
                'criteria_available': estimate['criteria_available'],
-               'model_choice': choice, 'nonlinear': nonlinear}
+               'model_choice': choice, 'nonlinear': nonlinear,
+               'processes': {'used': 1}}     # one task, one process, per bag
     summary.update(totals)
     return summary
 

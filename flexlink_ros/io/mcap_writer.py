@@ -36,6 +36,11 @@ _MESSAGE_HEAD = struct.Struct('<BQHIQQ')
 _MESSAGE_FIELDS = [('opcode', 'u1'), ('length', '<u8'), ('channel', '<u2'),
                    ('sequence', '<u4'), ('log', '<u8'), ('publish', '<u8')]
 _MESSAGE_FIXED = _MESSAGE_HEAD.size - 9   # record length counts the fields after the prefix
+# Chunk record after its prefix: start and end time, uncompressed size and CRC, and the
+# compression's length (the name and the records' length and records follow).
+_CHUNK_HEAD = struct.Struct('<QQQII')
+# The longest record a part may hold (a chunk of OUTPUT_CHUNK_BYTES and one message more).
+MAX_PART_RECORD = 1 << 28
 
 
 class McapFileWriter:
@@ -314,6 +319,75 @@ class McapFileWriter:
         self._messages += stop - first
         self._append(b''.join(parts[2 * first:2 * stop]))
 
+    # -- chunks written elsewhere -----------------------------------------------------------
+
+    def write_chunks_only(self):
+        """Write the open chunk (no flush): what a part's writer does at its end."""
+        self._finish_chunk()
+
+    def append_chunks(self, source):
+        """
+        Append the chunks and message indexes another writer of the same channels wrote.
+
+        ``source``: a binary file holding only Chunk records, each followed by its Message
+        Index records (a writer that never started a file: :meth:`write_chunks_only`), read
+        from its start. The open chunk is written first. Their summary entries (chunk
+        indexes at this file's offsets, statistics) are added here.
+
+        Returns
+        -------
+        appended : dict
+            Channel id -> messages appended on it.
+        times : list
+            The least and the greatest log time appended [ns] (None twice: none).
+
+        """
+        self._finish_chunk()
+        appended, times = {}, [None, None]
+        reader = _RecordReader(source)
+        record = reader.next()
+        while record is not None:
+            opcode, data = record
+            if opcode != Opcode.CHUNK:
+                raise ValueError(f'a part holds a record of opcode {opcode} outside a chunk')
+            chunk_offset = self._offset
+            self._write(data)
+            head = _CHUNK_HEAD.unpack_from(data, 9)
+            compression = bytes(data[9 + _CHUNK_HEAD.size:9 + _CHUNK_HEAD.size + head[4]])
+            records_size = len(data) - 9 - _CHUNK_HEAD.size - head[4] - 8
+            index_start = self._offset
+            self._note_times(head[0], head[1])
+            times = [head[0] if times[0] is None else min(times[0], head[0]),
+                     head[1] if times[1] is None else max(times[1], head[1])]
+            offsets = {}
+            record = reader.next()
+            while record is not None and record[0] == Opcode.MESSAGE_INDEX:
+                channel, size = struct.unpack_from('<HI', record[1], 9)
+                offsets[channel] = self._offset
+                appended[channel] = appended.get(channel, 0) + size // 16
+                self._count_channel(channel, size // 16)
+                self._write(record[1])
+                record = reader.next()
+            self._statistics.chunk_count += 1
+            self._chunk_indexes.append(ChunkIndex(
+                message_start_time=head[0], message_end_time=head[1],
+                chunk_start_offset=chunk_offset, chunk_length=index_start - chunk_offset,
+                message_index_offsets=offsets, message_index_length=self._offset - index_start,
+                compression=compression.decode(), compressed_size=records_size,
+                uncompressed_size=head[2]))
+        return appended, times
+
+    def _count_channel(self, channel, count):
+        counts = self._statistics.channel_message_counts
+        counts[channel] = counts.get(channel, 0) + count
+        self._statistics.message_count += count
+
+    def _note_times(self, low, high):
+        statistics = self._statistics
+        statistics.message_start_time = (low if statistics.message_count == 0
+                                         else min(statistics.message_start_time, low))
+        statistics.message_end_time = max(statistics.message_end_time, high)
+
     # -- the end ----------------------------------------------------------------------------
 
     def finish(self):
@@ -355,6 +429,26 @@ class McapFileWriter:
         self._stream.write(data + builder.end() + MAGIC)
         self._offset += len(data) + len(footer_record) + len(MAGIC)
         self._chunk_indexes.close()
+
+
+class _RecordReader:
+    """Records (opcode, bytes of the whole record) of a stream of MCAP records, in order."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def next(self):  # noqa: A003
+        """Read the next record: (opcode, its bytes), or None at the end."""
+        prefix = self._stream.read(9)
+        if not prefix:
+            return None
+        opcode, length = struct.unpack('<BQ', prefix)
+        if len(prefix) < 9 or length > MAX_PART_RECORD:
+            raise ValueError(f'a part holds a cut or oversized record ({length} bytes)')
+        body = self._stream.read(length)
+        if len(body) != length:
+            raise ValueError('a part ends inside a record')
+        return opcode, prefix + body
 
 
 def _message_records(channels, messages, sizes, log, publish, sequences):

@@ -46,9 +46,9 @@ from .msg_schema import (
 )
 from .provenance import custom_data
 from .recorder_files import (
-    abandon, add_batch, batch_arguments, check_settings, create_exclusive, DEFAULT_ZSTD_LEVEL,
-    file_path, make_directories, OpenFile, refuse_existing, register_topic, remove_directories,
-    split_due, start_file, Topic,
+    abandon, add_batch, batch_arguments, check_settings, count_appended, create_exclusive,
+    DEFAULT_ZSTD_LEVEL, file_path, make_directories, OpenFile, refuse_existing, register_topic,
+    remove_directories, split_due, start_file, Topic,
 )
 from .recorder_queue import FlushClock, WriteQueue
 from ..errors import RecorderError
@@ -456,6 +456,26 @@ class McapRecorder:
             if self.split_size_bytes or self.split_duration_ns:   # a split may fall inside
                 return self._write_each(names, index, messages, log, publish)
             return self._write_bulk(names, index, messages, log, publish)
+
+    def append_part(self, source):
+        """
+        Append a :class:`.replay_writer.PartWriter`'s chunks (same topics; no splits).
+
+        Its messages keep their sequence numbers; returns how many were appended.
+        """
+        if self.split_size_bytes or self.split_duration_ns:
+            raise RecorderError('a part cannot be appended to a recording that splits')
+        with self._lock:
+            if self._state is not RecorderState.RECORDING:
+                return self._refuse()
+            try:
+                appended, times = self._file.writer.append_chunks(source)
+            except OSError as exc:
+                self._fail(exc)
+                return self._refuse()
+            count = count_appended(self._topics, self._file, appended, times)
+            self._message_count += count
+            return count
 
     # -- batches and the queue ----------------------------------------------------------------
 

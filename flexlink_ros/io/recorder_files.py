@@ -16,14 +16,16 @@ import os
 import pathlib
 import stat
 
-from mcap.writer import LIBRARY_IDENTIFIER
+import mcap
 import numpy as np
 
 from .mcap_writer import COMPRESSIONS, DEFAULT_ZSTD_LEVEL, McapFileWriter
 from .msg_schema import message_definition, offered_qos_yaml, type_hash
 from .provenance import PROVENANCE_RECORD
 
-LIBRARY = f'flexlink_ros recorder; {LIBRARY_IDENTIFIER}'
+# mcap.writer's LIBRARY_IDENTIFIER, without importing mcap.writer (which asks the installed
+# packages' metadata for its version: about 40 ms of every replay's start).
+LIBRARY = f'flexlink_ros recorder; mcap-python/{mcap.__version__}'
 # Smallest split a live recording accepts (0: never split). Each split finishes a file
 # (summary, indexes, metadata) and starts the next (header, schemas, channels): far below
 # these a recorder fed at 1 kHz would do little but split, and fall behind.
@@ -238,6 +240,24 @@ def add_batch(current, topics, names, index, messages, log, publish, flush_perio
         sequences[chosen] = topics[name].next_sequences(int(chosen.sum()))
     return current.writer.add_messages(channel_of, messages, log, publish, flush_period_ns,
                                        last_flush_log_ns, sequences)
+
+
+def count_appended(topics, current, appended, times):
+    """
+    Count messages appended to the open file ``current`` in bulk; return how many.
+
+    ``appended``: channel id -> messages (:meth:`McapFileWriter.append_chunks`, which also
+    gives their least and greatest log ``times``): each topic's count and last sequence
+    number (the messages carry theirs) and the file's span take them in.
+    """
+    names = {number: name for name, number in current.channel_ids.items()}
+    for channel, number in appended.items():
+        topics[names[channel]].message_count += number
+        topics[names[channel]].sequence += number
+    count = sum(appended.values())
+    if count:
+        current.note(times[0], times[1], count)
+    return count
 
 
 def file_path(path, bare, index):

@@ -10,9 +10,11 @@ messages are encoded in bulk (the row encoders of :mod:`io.output_cdr`) and writ
 
 import numpy as np
 
+from .mcap_writer import McapFileWriter
 from .output_cdr import criteria_rows, MarkerEncoder, quality_rows, rows_to_bytes, \
     vector3_stamped_rows
 from .recorder import McapRecorder
+from .recorder_files import add_batch, batch_arguments, OpenFile, Topic
 from ..core.reduction.second_order_tables import SecondOrderForms
 from ..names import JOINT_STATE, MARKER_ARRAY, OUTPUT_POINTS, VECTOR3_STAMPED
 
@@ -93,17 +95,14 @@ class MarkerSource:
                                         joints, self.levels)
 
 
-def _add_topics(recorder, input_topic, topics, markers):
-    """Declare the input and output topics; the per-sample topic names in write order."""
-    recorder.add_topic(input_topic, JOINT_STATE)
-    for key in OUTPUT_POINTS:
-        recorder.add_topic(topics[key], VECTOR3_STAMPED)
-    recorder.add_topic(topics['criteria'], JOINT_STATE)
-    recorder.add_topic(topics['quality'], JOINT_STATE)
+def replay_topics(input_topic, topics, markers):
+    """Return the output file's topics and their types, in the order they are declared."""
+    declared = [(input_topic, JOINT_STATE)]
+    declared += [(topics[key], VECTOR3_STAMPED) for key in OUTPUT_POINTS]
+    declared += [(topics['criteria'], JOINT_STATE), (topics['quality'], JOINT_STATE)]
     if markers:
-        recorder.add_topic(topics['markers'], MARKER_ARRAY)
-    return (input_topic, topics['lever_tip'], topics['coupler_mid'], topics['criteria'],
-            topics['quality'])
+        declared.append((topics['markers'], MARKER_ARRAY))
+    return declared
 
 
 def _output_columns(samples, estimate, chosen, frame):
@@ -168,9 +167,71 @@ def _write_batch(recorder, samples, estimate, chosen, first, names, marker_topic
     recorder.write_batch(topic_of, messages, log_times, publish_times)
 
 
+class PartWriter:
+    """
+    Replay rows written as chunks alone into a stream, to append to a recording later.
+
+    The part of a replay another process writes (:mod:`cli.replay_split`): the channels are
+    numbered as :func:`write_replay` declares them and each topic's sequence numbers go on
+    from ``sequences`` (topic -> messages before the part); :meth:`McapRecorder.append_part`
+    appends the stream to the output file.
+    """
+
+    def __init__(self, stream, declared, sequences, spill_directory):
+        self.writer = McapFileWriter(stream, chunk_size=OUTPUT_CHUNK_BYTES, compression='zstd',
+                                     spill_directory=spill_directory,
+                                     compression_level=OUTPUT_ZSTD_LEVEL)
+        self.stream = stream
+        self.topics = {name: Topic(name, type_name, [], sequence=int(sequences.get(name, 0)))
+                       for name, type_name in declared}
+        self.file = OpenFile(None, stream, self.writer,
+                             {name: number for number, (name, _) in enumerate(declared, 1)})
+
+    def write_batch(self, topics, messages, log_times_ns, publish_times_ns):
+        """Write a batch (:meth:`McapRecorder.write_batch`'s arguments)."""
+        names, index, log, publish = batch_arguments(topics, messages, log_times_ns,
+                                                     publish_times_ns, self.topics)
+        if len(messages):
+            add_batch(self.file, self.topics, names, index, messages, log, publish,
+                      int(OUTPUT_FLUSH_PERIOD_S * 1e9), None)
+
+    def finish(self):
+        """Write the open chunk and flush the stream."""
+        self.writer.write_chunks_only()
+        self.writer.close()
+        self.stream.flush()
+
+
+def write_rows(target, blocks, declared, frame_id, model, markers_every_n=10,
+               exaggeration=10.0, points_per_link=9, progress=None, joint_levels=None):
+    """
+    Encode and write blocks of rows into ``target`` (a recorder or a :class:`PartWriter`).
+
+    ``declared``: :func:`replay_topics`. The other arguments as :func:`write_replay`; rows
+    are numbered by their blocks' ``first`` (markers on rows that are multiples of
+    ``markers_every_n``). Returns the rows written up to.
+    """
+    names = tuple(name for name, _ in declared[:5])
+    marker_topic = declared[5][0] if len(declared) > 5 else None
+    marker_source = (MarkerSource(model, frame_id, exaggeration, points_per_link,
+                                  joint_levels) if markers_every_n else None)
+    frame = frame_id.encode()
+    written = 0
+    for first, samples, estimate in blocks:
+        count = len(samples['data'])
+        for start in range(0, count, WRITE_BATCH):
+            chosen = slice(start, min(start + WRITE_BATCH, count))
+            _write_batch(target, samples, estimate, chosen, first, names, marker_topic, frame,
+                         markers_every_n, marker_source)
+        written = first + count
+        if progress is not None:
+            progress(written)
+    return written
+
+
 def write_replay(out_path, blocks, input_topic, topics, frame_id, model, markers_every_n=10,
                  exaggeration=10.0, points_per_link=9, progress=None, joint_levels=None,
-                 provenance=None):
+                 provenance=None, tail=None):
     """
     Write the input and the recomputed outputs into a rosbag2 MCAP, a block of rows at a time.
 
@@ -205,6 +266,9 @@ def write_replay(out_path, blocks, input_topic, topics, frame_id, model, markers
         Diagnostic level of each joint in the markers (required with markers).
     provenance : dict, optional
         What made the estimates (:func:`.provenance.provenance_entries`), recorded with them.
+    tail : callable, optional
+        ``tail(recorder)`` after the blocks, before the file is closed (appends the rows
+        another process wrote: :meth:`McapRecorder.append_part`); returns the rows it added.
 
     Returns
     -------
@@ -216,21 +280,14 @@ def write_replay(out_path, blocks, input_topic, topics, frame_id, model, markers
                             flush_period_s=OUTPUT_FLUSH_PERIOD_S, flush_thread=False,
                             provenance=provenance, compression_level=OUTPUT_ZSTD_LEVEL)
     recorder.open()
-    written = 0
     try:
-        names = _add_topics(recorder, input_topic, topics, markers_every_n)
-        marker_source = (MarkerSource(model, frame_id, exaggeration, points_per_link,
-                                      joint_levels) if markers_every_n else None)
-        frame = frame_id.encode()
-        for first, samples, estimate in blocks:
-            count = len(samples['data'])
-            for start in range(0, count, WRITE_BATCH):
-                chosen = slice(start, min(start + WRITE_BATCH, count))
-                _write_batch(recorder, samples, estimate, chosen, first, names,
-                             topics.get('markers'), frame, markers_every_n, marker_source)
-            written = first + count
-            if progress is not None:
-                progress(written)
+        declared = replay_topics(input_topic, topics, markers_every_n)
+        for name, type_name in declared:
+            recorder.add_topic(name, type_name)
+        written = write_rows(recorder, blocks, declared, frame_id, model, markers_every_n,
+                             exaggeration, points_per_link, progress, joint_levels)
+        if tail is not None:
+            written += tail(recorder)
         if progress is not None:
             progress(written, force=True)
     finally:

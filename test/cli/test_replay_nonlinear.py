@@ -1,7 +1,9 @@
 """``flexlink replay --nonlinear`` (cli/replay_nonlinear.py): a real bag, a 2-element model."""
 
+import ctypes
 import json
 import math
+import os
 import subprocess
 import sys
 import warnings
@@ -158,6 +160,72 @@ def test_replay_auto_picks_the_linear_model_at_low_speed(tmp_path):
     assert result['model_choice']['nonlinear'] is False, result['model_choice']
     assert result['model_choice']['why'].startswith('auto: the linear estimate is valid')
     assert result['nonlinear'] is None
+
+
+# inotify: the file was opened, or closed unwritten (alternate events: identical ones in a
+# row would be merged into one).
+IN_OPEN, IN_CLOSE_NOWRITE = 0x20, 0x10
+
+
+class OpenCounter:
+    """Opens of one file by any process, counted by the kernel (inotify)."""
+
+    def __init__(self, path):
+        libc = ctypes.CDLL(None, use_errno=True)
+        self.descriptor = libc.inotify_init1(os.O_NONBLOCK)
+        assert self.descriptor >= 0 and libc.inotify_add_watch(
+            self.descriptor, str(path).encode(), IN_OPEN | IN_CLOSE_NOWRITE) >= 0
+
+    def take(self):
+        """Return the opens since the last call."""
+        opens = 0
+        while True:
+            try:
+                data = os.read(self.descriptor, 4096)
+            except BlockingIOError:
+                return opens
+            # struct inotify_event: wd, mask, cookie, len (no name for a watched file).
+            events = np.frombuffer(data, dtype=[('wd', '<i4'), ('mask', '<u4'),
+                                                ('cookie', '<u4'), ('len', '<u4')])
+            assert not events['len'].any()
+            opens += int(np.count_nonzero(events['mask'] & IN_OPEN))
+
+    def close(self):
+        os.close(self.descriptor)
+
+
+def all_messages(path):
+    """(topic, log, publish, sequence, bytes) of every message of an MCAP file."""
+    with open(path, 'rb') as stream:
+        return [(channel.topic, m.log_time, m.publish_time, m.sequence, bytes(m.data))
+                for _, channel, m in make_reader(stream).iter_messages(log_time_order=False)]
+
+
+@pytest.mark.parametrize('rpm, kept', [(30.0, 'off'), (391.0, 'on')])
+def test_replay_auto_reads_a_recording_it_keeps_linear_once(tmp_path, rpm, kept):
+    """Valid: the linear pass's output stays (read once); not valid: the nonlinear one's."""
+    bag = tmp_path / 'bag'
+    write_bag(bag, rpm, seconds=2.5)
+    counter = OpenCounter(next(bag.glob('*.mcap')))
+    flags = [*SMALL_MODEL, '--cache-dir', str(tmp_path / 'cache')]
+    try:
+        fixed = replay(str(bag), '--out', str(tmp_path / 'fixed.mcap'), '--nonlinear', kept,
+                       *flags)
+        fixed_opens = counter.take()
+        auto = replay(str(bag), '--out', str(tmp_path / 'auto.mcap'), *flags)
+        auto_opens = counter.take()
+    finally:
+        counter.close()
+    assert auto['model_choice']['nonlinear'] is (kept == 'on')
+    assert auto['model_choice']['why'].startswith('auto: the linear estimate is '
+                                                  + ('valid' if kept == 'off' else 'not'))
+    assert all_messages(tmp_path / 'auto.mcap') == all_messages(tmp_path / 'fixed.mcap')
+    assert auto['lever_tip_peak_to_peak_um'] == fixed['lever_tip_peak_to_peak_um']
+    if kept == 'off':
+        assert auto_opens == fixed_opens > 0
+    else:
+        assert auto_opens > fixed_opens > 0
+    assert read_provenance(tmp_path / 'auto.mcap').nonlinear == kept
 
 
 @pytest.fixture(scope='module')

@@ -131,9 +131,11 @@ def test_replay_memory_does_not_grow_with_the_recording(tmp_path, nonlinear, len
     assert peaks[1] - peaks[0] < 15.0, peaks
 
 
+# ... and mcap's writer module, which asks the installed packages' metadata for its version
+# (importlib.metadata: about 40 ms of a start).
 HEAVY_IMPORTS = ("print(sorted(m for m in sys.modules if m.split('.')[0] in "
                  "('rclpy', 'matplotlib') or m in ('scipy.linalg', 'scipy.optimize', "
-                 "'scipy.sparse')))\n")
+                 "'scipy.sparse', 'mcap.writer', 'importlib.metadata')))\n")
 
 
 def test_a_replay_from_the_cache_imports_neither_ros_plotting_nor_scipy_solvers(tmp_path):

@@ -74,3 +74,10 @@ def test_a_link_placed_between_check_and_create_is_not_followed(tmp_path, monkey
         McapRecorder(path).open()
     assert raced == [path]
     assert victim.read_bytes() == b'keep' and path.is_symlink()
+
+
+def test_the_files_name_the_mcap_library_as_its_writer_does():
+    """The header's library: mcap's own identifier, taken without importing its writer."""
+    from flexlink_ros.io.recorder_files import LIBRARY
+    from mcap.writer import LIBRARY_IDENTIFIER
+    assert LIBRARY == f'flexlink_ros recorder; {LIBRARY_IDENTIFIER}'

@@ -1,13 +1,15 @@
 """replay_writer: the input and its recomputed outputs interleaved per sample in a bag."""
 
 import dataclasses
+import tempfile
 
 from flexlink_ros.core.mechanism_file import load_mechanism
 from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction.mechanism_model import model_for_mechanism
 from flexlink_ros.core.reduction.second_order_tables import SecondOrderForms
 from flexlink_ros.io.msg_schema import serialize_exact
-from flexlink_ros.io.replay_writer import MarkerSource, write_replay
+from flexlink_ros.io.replay_writer import MarkerSource, PartWriter, replay_topics, write_replay, \
+    write_rows
 from flexlink_ros.names import JOINT_NAMES, output_topics, QUALITY_NAMES
 from flexlink_ros.ros import messages as ros_messages
 from mcap.reader import make_reader
@@ -89,6 +91,49 @@ def test_replay_bag_holds_each_input_then_its_outputs(tmp_path):
             '/joint_states': COUNT, topics['lever_tip']: COUNT - 1,
             topics['coupler_mid']: COUNT - 1, topics['criteria']: COUNT - 1,
             topics['quality']: COUNT - 1}
+
+
+def rows_of(samples, estimate, rows):
+    """Cut the samples and the estimate to ``rows`` (a slice)."""
+    return ({key: value[rows] for key, value in samples.items()},
+            {key: value[rows] for key, value in estimate.items()})
+
+
+def test_a_part_written_elsewhere_and_appended_gives_the_bag_of_one_writer(tmp_path):
+    """Sequence numbers go on, the summary and metadata.yaml count the appended messages."""
+    samples, estimate = replay_inputs()
+    topics = output_topics('/flexlink_node')
+    whole = write_replay(tmp_path / 'whole', [(0, samples, estimate)], '/joint_states', topics,
+                         'linkage_ground', None, markers_every_n=0)
+    declared = replay_topics('/joint_states', topics, 0)
+    split = OUTLIER + 2     # the first part holds the outlier: one input without outputs
+    written = {name: split - (name != '/joint_states') for name, _ in declared}
+    with tempfile.TemporaryFile(dir=tmp_path) as stream:
+        part = PartWriter(stream, declared, written, tmp_path)
+        write_rows(part, [(split, *rows_of(samples, estimate, slice(split, None)))], declared,
+                   'linkage_ground', None, markers_every_n=0)
+        part.finish()
+        stream.seek(0)
+
+        def tail(recorder):
+            return recorder.append_part(stream)
+        first = rows_of(samples, estimate, slice(0, split))
+        status = write_replay(tmp_path / 'parts', [(0, *first)], '/joint_states', topics,
+                              'linkage_ground', None, markers_every_n=0, tail=tail)
+    assert status['message_count'] == whole['message_count'] == 1 + 5 * (COUNT - 1)
+    assert status['topics'] == whole['topics']
+    read = []
+    for path in (whole['files'][0], status['files'][0]):
+        with open(path, 'rb') as stream:
+            reader = make_reader(stream)
+            summary = reader.get_summary()
+            read.append([(c.topic, m.log_time, m.publish_time, m.sequence, bytes(m.data))
+                         for _, c, m in reader.iter_messages(log_time_order=True)])
+            assert summary.statistics.message_count == len(read[-1])
+    assert read[0] == read[1] and summary.statistics.chunk_count == 2
+    with AnyReader([tmp_path / 'parts']) as reader:
+        assert {c.topic: c.msgcount for c in reader.connections} == whole['topics']
+        assert sum(1 for _ in reader.messages()) == whole['message_count']
 
 
 def test_replay_markers_of_an_order_2_model_draw_the_joints_second_order_motion():

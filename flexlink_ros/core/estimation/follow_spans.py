@@ -34,28 +34,43 @@ def slowest_decay_rate(tables, speeds):
     """
     theta = 2.0 * math.pi * np.arange(tables.grid_size) / tables.grid_size
     fields = tables.at(theta)
-    size = tables.size
-    slowest = math.inf
-    for speed in speeds:
-        mass, damping, stiffness, _ = linear_part(tables, fields, np.full(theta.size, speed),
-                                                  0.0)
-        state = np.zeros((theta.size, 2 * size, 2 * size))
-        state[:, :size, size:] = np.eye(size)
-        state[:, size:, :size] = -np.linalg.solve(mass, stiffness)
-        state[:, size:, size:] = -np.linalg.solve(mass, damping)
-        slowest = min(slowest, float(np.min(-np.linalg.eigvals(state).real)))
-    return slowest
+    return min(least_decay_rate(*linear_part(tables, fields, np.full(theta.size, speed),
+                                             0.0)[:3])
+               for speed in speeds)
+
+
+def least_decay_rate(mass, damping, stiffness):
+    """
+    Return the least ``-Re(lambda)`` [1/s] of ``M x'' + C x' + K x = 0`` over a stack.
+
+    ``mass``, ``damping``, ``stiffness``: (n, r, r), one frozen system per row.
+    """
+    size = mass.shape[-1]
+    state = np.zeros((mass.shape[0], 2 * size, 2 * size))
+    state[:, :size, size:] = np.eye(size)
+    state[:, size:, :size] = -np.linalg.solve(mass, stiffness)
+    state[:, size:, size:] = -np.linalg.solve(mass, damping)
+    return float(np.min(-np.linalg.eigvals(state).real))
 
 
 def warm_up_s(tables, speed_max, reset_gap_s, tolerance=WARM_UP_TOLERANCE):
     """
     Return the warm-up [s] after which a follower's start has faded below ``tolerance``.
 
-    ``ln(1 / tolerance)`` over :func:`slowest_decay_rate` at rest and at ``speed_max`` [rad/s];
-    at least twice ``reset_gap_s``, so that a span with no sample in its warm-up starts after
+    :func:`warm_up_for_rate` of :func:`slowest_decay_rate` at rest and at ``speed_max``
+    [rad/s].
+    """
+    return warm_up_for_rate(slowest_decay_rate(tables, (0.0, speed_max)), reset_gap_s,
+                            tolerance)
+
+
+def warm_up_for_rate(rate, reset_gap_s, tolerance=WARM_UP_TOLERANCE):
+    """
+    Return ``ln(1 / tolerance)`` over the decay ``rate`` [1/s]: a start's error faded by then.
+
+    At least twice ``reset_gap_s``, so that a span with no sample in its warm-up starts after
     a gap the sequential follower restarts at too. Infinite for a model that does not decay.
     """
-    rate = slowest_decay_rate(tables, (0.0, speed_max))
     if not rate > 0.0:
         return math.inf
     return max(math.log(1.0 / tolerance) / rate, 2.0 * reset_gap_s)
@@ -101,4 +116,5 @@ def follow_span(tables, reset_gap_s, warm_up, span, follows_samples):
     return outputs, follower
 
 
-__all__ = ['WARM_UP_TOLERANCE', 'slowest_decay_rate', 'warm_up_s', 'follow_span']
+__all__ = ['WARM_UP_TOLERANCE', 'slowest_decay_rate', 'least_decay_rate', 'warm_up_s',
+           'warm_up_for_rate', 'follow_span']

@@ -85,6 +85,27 @@ def model_for_mechanism(mechanism, options=None, cache_dir=None, use_cache=True,
                            (None if suffix is None else place(suffix), directory), key)
 
 
+def cached_model_values(mechanism, options, cache_dir, use_cache, name, build):
+    """
+    Return arrays derived from a mechanism's model, cached in a file beside the model's.
+
+    For what costs more to compute than to read (the split replay's decay rate: eigenvalues
+    at every grid angle). ``name`` ends the file's name (``-<name>.npz``) and enters its key
+    with the model's key; ``build()`` returns the dict of arrays. Built, not cached, where the
+    model is not (``use_cache`` False or an untrusted directory).
+    """
+    key = store.cache_key(name, model_key(mechanism, options))
+    directory = None
+    if use_cache:
+        directory = store.usable_cache_dir(store.default_cache_dir() if cache_dir in (None, '')
+                                           else cache_dir)
+    path = (None if directory is None
+            else cache_file(directory, mechanism.name, model_key(mechanism, options),
+                            f'-{name}.npz'))
+    arrays, _, _ = store.load_or_build(path, key, lambda: (build(), {}), directory)
+    return dict(arrays)
+
+
 def build_model(mechanism, options, progress=None):
     """
     Precompute the reduced model of a mechanism (full-order pieces from core/fe/linkage.py).
