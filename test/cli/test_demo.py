@@ -40,11 +40,12 @@ def test_demo_runs_records_and_summarises(tmp_path):
                  '/flexlink_node/joint_criteria', '/flexlink_node/quality'):
         assert topics[name] == inputs     # one estimate per sample, none lost in the node
     assert summary['samples'] == summary['outputs'] == inputs
-    # The driver says what it sent while the node listened: the node received every one (the
-    # driver asks for its matched subscribers before each publish: the match may land between).
+    # The driver says what it sent while the node listened, and the node took about as many:
+    # the match may land between the driver's count and its publish (a message or two), and
+    # a node behind its input at the stop leaves what waits in its queue untaken.
     driver = summary['driver']
     assert driver['published'] >= driver['heard'] and driver['periods_skipped'] >= 0
-    assert abs(driver['heard'] - inputs) <= 2, (driver, inputs)
+    assert -2 <= driver['heard'] - inputs <= max(2, inputs // 50), (driver, inputs)
     assert f"crank_driver sent {driver['heard']} messages while the node listened" in \
         cli_demo.summary_text(summary)
     assert inputs // 10 <= topics['/flexlink_node/markers'] <= inputs // 10 + 1
