@@ -60,13 +60,17 @@ def awkward_recording(path, count=5000):
     return path
 
 
-def replay(bag, out, *extra):
+def replay_json(bag, out, *args):
+    """Run ``flexlink replay BAG --out OUT --json ARGS`` to success; return its summary."""
     result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'replay', str(bag),
-                             '--out', str(out), '--json', '--markers-every-n', '7',
-                             '--mechanism', 'cho1992', *extra],
+                             '--out', str(out), '--json', *args],
                             capture_output=True, text=True, timeout=600, cwd=REPO)
     assert result.returncode == 0, result.stderr
-    summary = json.loads(result.stdout)
+    return json.loads(result.stdout)
+
+
+def replay(bag, out, *extra):
+    summary = replay_json(bag, out, '--markers-every-n', '7', '--mechanism', 'cho1992', *extra)
     return {key: value for key, value in summary.items() if key not in RUN_KEYS}
 
 

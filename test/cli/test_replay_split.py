@@ -1,8 +1,5 @@
 """`flexlink replay --processes 2`: the second part forked, the messages of one process."""
 
-import importlib.util
-import json
-import pathlib
 import subprocess
 import sys
 
@@ -13,19 +10,10 @@ import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
 from sensor_msgs.msg import JointState
+from test_replay_offline import messages, replay_bench, replay_json, RUN_KEYS
 
-REPO = pathlib.Path(__file__).resolve().parents[2]
-BENCH = REPO / 'benchmarks' / 'replay_bench.py'
-RUN_KEYS = ('read_s', 'write_s', 'estimate_s', 'samples_per_s', 'times_real_time', 'output',
-            'output_files', 'processes')
-
-
-def bench():
-    """Load the benchmark script as a module (its synthetic signal and message encoder)."""
-    spec = importlib.util.spec_from_file_location('replay_bench', BENCH)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+# What differs between one process and two besides the values: timings, output, the split.
+SPLIT_RUN_KEYS = RUN_KEYS + ('processes',)
 
 
 def recording(path, seconds=60.0, gaps=(), outliers=(), other_joint=False):
@@ -34,7 +22,7 @@ def recording(path, seconds=60.0, gaps=(), outliers=(), other_joint=False):
 
     ``other_joint``: each sample followed by a message of another joint (skipped by a replay).
     """
-    module = bench()
+    module = replay_bench()
     stamps, angles, speeds = module.synthetic_signal(391.0, seconds, 1000.0, jitter=0.3,
                                                      seed=1)
     stamps = stamps + module.START_NS
@@ -56,19 +44,7 @@ def recording(path, seconds=60.0, gaps=(), outliers=(), other_joint=False):
 
 
 def replay(bag, out, *extra):
-    result = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli', 'replay', str(bag),
-                             '--out', str(out), '--json', '--mechanism', 'cho1992',
-                             '--nonlinear', 'off', *extra],
-                            capture_output=True, text=True, timeout=600, cwd=REPO)
-    assert result.returncode == 0, result.stderr
-    return json.loads(result.stdout)
-
-
-def messages(path):
-    """(topic, log, publish, sequence, bytes) of every message, by mcap's own reader."""
-    with open(path, 'rb') as stream:
-        return [(channel.topic, m.log_time, m.publish_time, m.sequence, bytes(m.data))
-                for _, channel, m in make_reader(stream).iter_messages(log_time_order=False)]
+    return replay_json(bag, out, '--mechanism', 'cho1992', '--nonlinear', 'off', *extra)
 
 
 def doubles(data):
@@ -121,7 +97,7 @@ def check_close(worst):
 
 
 def summary_keys(result):
-    return {key: value for key, value in result.items() if key not in RUN_KEYS}
+    return {key: value for key, value in result.items() if key not in SPLIT_RUN_KEYS}
 
 
 @pytest.fixture(scope='module')
