@@ -79,7 +79,7 @@ def _write_blocks(out, blocks, progress, topic, model, args, exaggeration, tail=
 def _splitter(args, made, topic, exaggeration):
     """Return the replay's :class:`.replay_split.Splitter` (None: one process)."""
     mechanism, options, model, tables = made
-    if not args.out or (getattr(args, 'processes', None) or 1) < 2:
+    if not args.out or getattr(args, 'processes', 1) < 2:
         return None
     declared = replay_topics(topic, output_topics(args.node_name), args.markers_every_n)
     rows_writer = functools.partial(write_rows, declared=declared, frame_id=args.frame_id,

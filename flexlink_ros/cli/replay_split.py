@@ -29,11 +29,9 @@ import tempfile
 import numpy as np
 
 from .replay_offline import EstimateSummary, InputRows, pipeline_blocks
-from ..core.estimation.crank_filter import DEFAULT_FIT_TIME_CONSTANT_S
-from ..core.estimation.follow_spans import warm_up_for_rate
 from ..core.estimation.gate import DEFAULT_RESET_GAP_S
 from ..core.estimation.sample import SampleFlag
-from ..core.estimation.time_split import linear_decay_rate, split_row
+from ..core.estimation.time_split import linear_decay_rate, linear_warm_up_s, split_row
 from ..core.reduction.mechanism_model import cached_model_values
 from ..io.replay_writer import PartWriter
 
@@ -67,7 +65,7 @@ def warm_up_seconds(model, tables, mechanism, options, args):
         return {'rate': np.array([linear_decay_rate(model, tables, (0.0, model.speed_max))])}
     rate = float(cached_model_values(mechanism, options, args.cache_dir, not args.no_cache,
                                      DECAY_CACHE_NAME, build)['rate'][0])
-    return warm_up_for_rate(min(rate, 1.0 / DEFAULT_FIT_TIME_CONSTANT_S), DEFAULT_RESET_GAP_S)
+    return linear_warm_up_s(model, tables, DEFAULT_RESET_GAP_S, decay_rate=rate)
 
 
 def part_directory(out):

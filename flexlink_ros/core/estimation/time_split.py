@@ -33,17 +33,18 @@ def linear_decay_rate(model, tables, speeds):
 
 
 def linear_warm_up_s(model, tables, reset_gap_s, tolerance=WARM_UP_TOLERANCE,
-                     fit_time_constant_s=DEFAULT_FIT_TIME_CONSTANT_S):
+                     fit_time_constant_s=DEFAULT_FIT_TIME_CONSTANT_S, decay_rate=None):
     """
     Return the warm-up [s] after which a second estimate's start has faded below ``tolerance``.
 
-    The slower of the model's least damped mode (:func:`linear_decay_rate` at rest and at
-    ``model.speed_max``) and the crank filter's forgetting (``1 / fit_time_constant_s``);
-    :func:`.follow_spans.warm_up_for_rate` of it (at least twice ``reset_gap_s``).
+    The slower of the model's least damped mode (``decay_rate`` where known, else
+    :func:`linear_decay_rate` at rest and at ``model.speed_max``) and the crank filter's
+    forgetting (``1 / fit_time_constant_s``); :func:`.follow_spans.warm_up_for_rate` of it (at
+    least twice ``reset_gap_s``).
     """
-    rate = min(linear_decay_rate(model, tables, (0.0, model.speed_max)),
-               1.0 / fit_time_constant_s)
-    return warm_up_for_rate(rate, reset_gap_s, tolerance)
+    if decay_rate is None:
+        decay_rate = linear_decay_rate(model, tables, (0.0, model.speed_max))
+    return warm_up_for_rate(min(decay_rate, 1.0 / fit_time_constant_s), reset_gap_s, tolerance)
 
 
 def split_row(rows, warm_up_rows, first_share=0.5):
