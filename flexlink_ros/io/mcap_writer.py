@@ -10,7 +10,9 @@ byte for byte), with what the recorder needs and the public ``Writer`` lacks:
   memory stays flat however many chunks a file holds (the ``Writer`` keeps a ~740 B
   ``ChunkIndex`` object per chunk);
 - :meth:`McapFileWriter.add_messages` writes many messages at once, building Message and
-  Message Index records with numpy rather than one Python call per message (replay).
+  Message Index records with numpy rather than one Python call per message: a batch's records
+  are laid out in one buffer (from a :class:`.packed_messages.PackedMessages`, the replay's,
+  without a Python object per message) and each chunk takes slices of it.
 
 Every other record is encoded by ``mcap.records`` through ``mcap.data_stream.RecordBuilder``;
 Message and Message Index records follow the MCAP specification's layout.
@@ -27,6 +29,7 @@ import numpy as np
 import zstandard
 
 from .chunk_index import ChunkIndexStore
+from .packed_messages import PackedMessages
 
 MAGIC = b'\x89MCAP0\r\n'   # MCAP specification: starts and ends every file
 COMPRESSIONS = ('zstd', 'none')
@@ -238,7 +241,7 @@ class McapFileWriter:
         ----------
         channels : numpy.ndarray of uint16, shape (n,)
             Channel id of each message.
-        messages : sequence of bytes, length n
+        messages : sequence of bytes, or PackedMessages, length n
             CDR bytes of each message.
         log : numpy.ndarray of int64, shape (n,)
             Log (receive) times [ns].
@@ -258,8 +261,13 @@ class McapFileWriter:
 
         """
         count = len(messages)
-        sizes = np.fromiter(map(len, messages), dtype=np.int64, count=count)
-        parts = _message_records(channels, messages, sizes, log, publish, sequences)
+        if isinstance(messages, PackedMessages):
+            sizes = messages.lengths()
+            records = messages.records(_message_headers(channels, sizes, log, publish,
+                                                        sequences))
+        else:
+            sizes = np.fromiter(map(len, messages), dtype=np.int64, count=count)
+            records = _message_records(channels, messages, sizes, log, publish, sequences)
         ends = np.cumsum(sizes + _MESSAGE_HEAD.size)   # end of each record in the batch
         starts = ends - (sizes + _MESSAGE_HEAD.size)
         self._count_batch(channels, log)
@@ -283,7 +291,7 @@ class McapFileWriter:
                     timed = window_first + int(np.argmax(due))
                     stop = timed
             last = count if stop is None else stop + 1
-            self._hold(parts, channels, log, starts, first, last)
+            self._hold(records, channels, log, starts, ends, first, last)
             if stop is None:
                 return flushes
             self._finish_chunk()
@@ -307,8 +315,8 @@ class McapFileWriter:
             channel = int(unique[k])
             counts[channel] = counts.get(channel, 0) + int(numbers[k])
 
-    def _hold(self, parts, channels, log, starts, first, stop):
-        """Put messages first..stop-1 of a batch in the open chunk."""
+    def _hold(self, records, channels, log, starts, ends, first, stop):
+        """Put messages first..stop-1 of a batch (their records: a slice of ``records``)."""
         self._seal_singles()
         times = log[first:stop]
         low, high = int(times.min()), int(times.max())
@@ -317,7 +325,7 @@ class McapFileWriter:
         offsets = (starts[first:stop] - int(starts[first]) + self._size).astype(np.uint64)
         self._segments.append((channels[first:stop], times.astype(np.uint64), offsets))
         self._messages += stop - first
-        self._append(b''.join(parts[2 * first:2 * stop]))
+        self._append(memoryview(records)[int(starts[first]):int(ends[stop - 1])])
 
     # -- chunks written elsewhere -----------------------------------------------------------
 
@@ -451,11 +459,9 @@ class _RecordReader:
         return opcode, prefix + body
 
 
-def _message_records(channels, messages, sizes, log, publish, sequences):
-    """Message records of a batch, as a list alternating headers and data."""
-    count = len(messages)
-    head_size = _MESSAGE_HEAD.size
-    headers = np.zeros(count, dtype=np.dtype(_MESSAGE_FIELDS))
+def _message_headers(channels, sizes, log, publish, sequences):
+    """Message record headers of a batch (fields before the data), a row of uint8 each."""
+    headers = np.zeros(len(sizes), dtype=np.dtype(_MESSAGE_FIELDS))
     headers['opcode'] = Opcode.MESSAGE
     headers['length'] = sizes + _MESSAGE_FIXED
     headers['channel'] = channels
@@ -463,11 +469,18 @@ def _message_records(channels, messages, sizes, log, publish, sequences):
     headers['publish'] = publish
     if sequences is not None:
         headers['sequence'] = sequences
-    head = headers.tobytes()
+    return headers.view(np.uint8).reshape(len(sizes), _MESSAGE_HEAD.size)
+
+
+def _message_records(channels, messages, sizes, log, publish, sequences):
+    """Message records of a batch of bytes objects, one after another in one bytes object."""
+    count = len(messages)
+    head_size = _MESSAGE_HEAD.size
+    head = _message_headers(channels, sizes, log, publish, sequences).tobytes()
     parts = [None] * (2 * count)
     parts[0::2] = [head[k:k + head_size] for k in range(0, head_size * count, head_size)]
     parts[1::2] = messages
-    return parts
+    return b''.join(parts)
 
 
 def _message_indexes(channels, logs, offsets, start):

@@ -422,9 +422,9 @@ class McapRecorder:
         Parameters
         ----------
         topics : str or sequence of str
-            One topic for every message, or the topic of each (declared with
-            :meth:`add_topic`).
-        messages : sequence of bytes
+            One topic for every message, or the topic of each (of each column of a
+            PackedMessages), declared with :meth:`add_topic`.
+        messages : sequence of bytes, or :class:`.packed_messages.PackedMessages`
             CDR bytes.
         log_times_ns : array-like of int, shape (n,)
             Log (receive) times [ns].

@@ -21,6 +21,7 @@ import numpy as np
 
 from .mcap_writer import COMPRESSIONS, DEFAULT_ZSTD_LEVEL, McapFileWriter
 from .msg_schema import message_definition, offered_qos_yaml, type_hash
+from .packed_messages import PackedMessages
 from .provenance import PROVENANCE_RECORD
 
 # mcap.writer's LIBRARY_IDENTIFIER, without importing mcap.writer (which asks the installed
@@ -186,8 +187,9 @@ def batch_arguments(topics, messages, log_times_ns, publish_times_ns, known_topi
     Parameters
     ----------
     topics : str or sequence of str
-        One topic for every message, or the topic of each.
-    messages : sequence of bytes
+        One topic for every message, or the topic of each (of each column, for a
+        :class:`.packed_messages.PackedMessages`).
+    messages : sequence of bytes, or PackedMessages
         CDR bytes.
     log_times_ns : array-like of int, shape (n,)
         Log times [ns].
@@ -206,6 +208,13 @@ def batch_arguments(topics, messages, log_times_ns, publish_times_ns, known_topi
     count = len(messages)
     if isinstance(topics, str):
         names, index = [topics], np.zeros(count, dtype=np.intp)
+    elif isinstance(messages, PackedMessages):
+        if len(topics) != len(messages.columns):
+            raise ValueError(f'`topics` has {len(topics)} entries for '
+                             f'{len(messages.columns)} columns')
+        names = list(dict.fromkeys(topics))
+        index = np.array([names.index(name) for name in topics],
+                         dtype=np.intp)[messages.column_of]
     else:
         if len(topics) != count:
             raise ValueError(f'`topics` has {len(topics)} entries for {count} messages')

@@ -4,15 +4,17 @@ The MCAP of a replay: the input and the node's outputs recomputed offline.
 Per sample: the input, the two deflections, the criteria and the quality (the error and
 nonlinearity indicators, the node's ``~/quality``), and every ``markers_every_n``-th sample the
 markers, each logged at the input's log time (the order the node records them in). The
-messages are encoded in bulk (the row encoders of :mod:`io.output_cdr`) and written in batches
-(:meth:`McapRecorder.write_batch`).
+messages are encoded in bulk (the row encoders of :mod:`io.output_cdr`, a 2-D uint8 array per
+topic) and written in batches of samples (:meth:`McapRecorder.write_batch`) as
+:class:`.packed_messages.PackedMessages`: no Python object per message, the records of a batch
+laid out in one buffer that the chunks are cut from.
 """
 
 import numpy as np
 
 from .mcap_writer import McapFileWriter
-from .output_cdr import criteria_rows, MarkerEncoder, quality_rows, rows_to_bytes, \
-    vector3_stamped_rows
+from .output_cdr import criteria_rows, MarkerEncoder, quality_rows, vector3_stamped_rows
+from .packed_messages import FixedColumn, PackedMessages, VariableColumn
 from .recorder import McapRecorder
 from .recorder_files import add_batch, batch_arguments, OpenFile, Topic
 from ..core.reduction.second_order_tables import SecondOrderForms
@@ -105,66 +107,48 @@ def replay_topics(input_topic, topics, markers):
     return declared
 
 
-def _output_columns(samples, estimate, chosen, frame):
-    """Encode the outputs of the samples ``chosen``; with their input bytes, a list each."""
-    stamps = samples['stamps_ns'][chosen]
-    return [samples['data'][chosen],
-            rows_to_bytes(vector3_stamped_rows(stamps, frame, estimate['lever_tip'][chosen])),
-            rows_to_bytes(vector3_stamped_rows(stamps, frame,
-                                               estimate['coupler_mid'][chosen])),
-            rows_to_bytes(criteria_rows(stamps, frame, estimate['criterion'][chosen],
-                                        estimate['gamma_dot'][chosen],
-                                        estimate['reaction_n'][chosen])),
-            rows_to_bytes(quality_rows(stamps, frame, estimate['error_indicator'][chosen],
-                                       estimate['nonlinearity'][chosen]))]
+def _output_columns(samples, estimate, chosen, valid, frame):
+    """The columns of the samples ``chosen``: their input, and the outputs of those ``valid``."""
+    stamps = samples['stamps_ns'][chosen][valid]
 
+    def values(key):
+        return estimate[key][chosen][valid]
 
-def _interleave(columns, names, valid, marked, markers, marker_topic, per_sample):
-    """
-    Messages and their topics in write order: per sample its input, outputs, marker.
-
-    Placed with numpy (object arrays) rather than a Python loop over the samples: sample n's
-    messages start at the sum of ``per_sample`` before it.
-    """
-    starts = np.cumsum(per_sample) - per_sample
-    messages = np.empty(int(starts[-1] + per_sample[-1]) if len(starts) else 0, dtype=object)
-    topic_of = np.zeros(messages.size, dtype=np.intp)
-    messages[starts] = columns[0]
-    accepted = np.flatnonzero(valid)
-    for k, column in enumerate(columns[1:], start=1):
-        place = starts[accepted] + k
-        messages[place] = [column[n] for n in accepted.tolist()]
-        topic_of[place] = k
-    if markers is not None and len(marked):
-        place = starts[marked] + len(names)
-        messages[place] = markers
-        topic_of[place] = len(names)
-    return messages.tolist(), np.array([*names, marker_topic], dtype=object)[topic_of].tolist()
+    return [VariableColumn.from_sequence(samples['data'][chosen]),
+            FixedColumn(vector3_stamped_rows(stamps, frame, values('lever_tip'))),
+            FixedColumn(vector3_stamped_rows(stamps, frame, values('coupler_mid'))),
+            FixedColumn(criteria_rows(stamps, frame, values('criterion'), values('gamma_dot'),
+                                      values('reaction_n'))),
+            FixedColumn(quality_rows(stamps, frame, values('error_indicator'),
+                                     values('nonlinearity')))]
 
 
 def _write_batch(recorder, samples, estimate, chosen, first, names, marker_topic, frame,
                  markers_every_n, marker_source):
     """Encode and write the samples of the slice ``chosen`` of a block of rows from ``first``."""
-    columns = _output_columns(samples, estimate, chosen, frame)
     # Outlier and out-of-bound samples (NaN) keep their input, with no outputs.
     valid = (np.all(np.isfinite(estimate['lever_tip'][chosen]), axis=1)
              & np.all(np.isfinite(estimate['coupler_mid'][chosen]), axis=1))
-    per_sample = np.where(valid, len(names), 1)
-    markers, marked = None, np.zeros(0, dtype=np.intp)
+    columns = _output_columns(samples, estimate, chosen, valid, frame)
+    topics = list(names)
+    present = np.zeros((valid.size, len(names) + bool(markers_every_n)), dtype=bool)
+    present[:, 0] = True
+    present[:, 1:len(names)] = valid[:, None]
     if markers_every_n:
         rows = np.arange(first + chosen.start, first + chosen.stop)
-        marked = np.flatnonzero((rows % markers_every_n == 0) & valid)
-        markers = rows_to_bytes(marker_source.rows(
+        marked = (rows % markers_every_n == 0) & valid
+        columns.append(FixedColumn(marker_source.rows(
             samples['stamps_ns'][chosen][marked], estimate['crank_angle'][chosen][marked],
-            estimate['modal'][chosen][marked]))
-        per_sample[marked] += 1
-    messages, topic_of = _interleave(columns, names, valid, marked, markers, marker_topic,
-                                     per_sample)
+            estimate['modal'][chosen][marked])))
+        topics.append(marker_topic)
+        present[:, -1] = marked
+    # Per sample its input, outputs and marker, each logged at the input's log time; the
+    # input keeps its publish time, the outputs are sent at its log time.
+    per_sample = present.sum(axis=1)
     log_times = np.repeat(samples['log_ns'][chosen], per_sample)
     publish_times = log_times.copy()
-    # The input keeps its publish time; the outputs are logged and sent at its log time.
     publish_times[np.cumsum(per_sample) - per_sample] = samples['publish_ns'][chosen]
-    recorder.write_batch(topic_of, messages, log_times, publish_times)
+    recorder.write_batch(topics, PackedMessages(columns, present), log_times, publish_times)
 
 
 class PartWriter:
