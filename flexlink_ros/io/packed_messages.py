@@ -144,8 +144,8 @@ class PackedMessages:
 
     def message_list(self):
         """Return the messages as a list of bytes, in order (one object each)."""
-        return [self.columns[c].message(row) for c, row in zip(self.column_of.tolist(),
-                                                                 self.row_of.tolist())]
+        places = zip(self.column_of.tolist(), self.row_of.tolist())
+        return [self.columns[c].message(row) for c, row in places]
 
     def records(self, headers):
         """
@@ -191,7 +191,7 @@ class PackedMessages:
         return buffer
 
     def _kind_block(self, chosen, kind, headers, first_message):
-        """The records of the samples ``chosen`` (all of one kind) as rows of one array."""
+        """Lay out the records of the samples ``chosen`` (all of one kind) as rows."""
         width = headers.shape[1]
         present = np.flatnonzero(kind >= 0)
         block = np.empty((chosen.size, int(kind[present].sum()) + width * present.size),

@@ -108,7 +108,7 @@ def replay_topics(input_topic, topics, markers):
 
 
 def _output_columns(samples, estimate, chosen, valid, frame):
-    """The columns of the samples ``chosen``: their input, and the outputs of those ``valid``."""
+    """Encode the samples ``chosen``: a column of inputs, one per output (``valid`` only)."""
     stamps = samples['stamps_ns'][chosen][valid]
 
     def values(key):
