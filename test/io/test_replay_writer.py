@@ -1,6 +1,7 @@
 """replay_writer: the input and its recomputed outputs interleaved per sample in a bag."""
 
 import dataclasses
+import pathlib
 import tempfile
 
 from flexlink_ros.core.mechanism_file import load_mechanism
@@ -8,7 +9,10 @@ from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction.mechanism_model import model_for_mechanism
 from flexlink_ros.core.reduction.second_order_tables import SecondOrderForms
 from flexlink_ros.io.msg_schema import serialize_exact
-from flexlink_ros.io.replay_writer import MarkerSource, PartWriter, replay_topics, write_replay, \
+from flexlink_ros.io.output_cdr import criteria_cdr, quality_cdr, vector3_stamped_cdr
+from flexlink_ros.io.recorder import McapRecorder
+from flexlink_ros.io.replay_writer import MarkerSource, OUTPUT_CHUNK_BYTES, \
+    OUTPUT_FLUSH_PERIOD_S, OUTPUT_ZSTD_LEVEL, PartWriter, replay_topics, write_replay, \
     write_rows
 from flexlink_ros.names import JOINT_NAMES, output_topics, QUALITY_NAMES
 from flexlink_ros.ros import messages as ros_messages
@@ -167,3 +171,96 @@ def test_replay_markers_of_an_order_2_model_draw_the_joints_second_order_motion(
         np.testing.assert_allclose(ends['second'] - ends['linear'], exaggeration * d_b[k],
                                    rtol=1e-9, atol=1e-12)
         np.testing.assert_array_equal(ends['second_start'], ends['linear_start'])   # O4
+
+
+def uneven_replay(model, count):
+    """Inputs of several lengths, outliers, a batch of rows with no outputs, and estimates."""
+    rng = np.random.default_rng(17)
+    stamps = T0_NS + STEP_NS * np.arange(count)
+    data = []
+    for k, stamp in enumerate(stamps.tolist()):
+        message = JointState(name=['crank'], position=[0.1 * k],
+                             velocity=[] if k % 7 == 3 else [40.0])
+        message.header.stamp = ros_messages.ns_to_stamp(stamp)
+        message.header.frame_id = 'crank' + 'x' * (k % 5)
+        data.append(serialize_exact(message))
+    samples = {'data': data, 'stamps_ns': stamps, 'log_ns': stamps + 50_000,
+               'publish_ns': stamps + 20_000}
+    estimate = {key: rng.normal(size=(count, 2)) for key in ('lever_tip', 'coupler_mid')}
+    estimate.update({key: rng.normal(size=(count, 4))
+                     for key in ('criterion', 'gamma_dot', 'reaction_n')})
+    estimate['error_indicator'] = rng.uniform(0.0, 0.1, count)
+    estimate['nonlinearity'] = rng.uniform(0.0, 0.5, count)
+    estimate['crank_angle'] = rng.uniform(-np.pi, np.pi, count)
+    estimate['modal'] = rng.normal(size=(count, model.size)) * 1e-3
+    estimate['lever_tip'][1024:2048] = np.nan       # a whole batch of inputs alone
+    estimate['coupler_mid'][[5, 2100, 2101]] = np.nan
+    return samples, estimate
+
+
+def write_one_by_one(path, samples, estimate, declared, markers_every_n, marker_source):
+    """Write the replay's messages one recorder.write call each, from one-message encoders."""
+    frame = b'linkage_ground'
+    recorder = McapRecorder(path, chunk_size_bytes=OUTPUT_CHUNK_BYTES,
+                            flush_period_s=OUTPUT_FLUSH_PERIOD_S, flush_thread=False,
+                            compression_level=OUTPUT_ZSTD_LEVEL)
+    recorder.open()
+    for name, type_name in declared:
+        recorder.add_topic(name, type_name)
+    names = [name for name, _ in declared]
+    for k in range(len(samples['data'])):
+        log = int(samples['log_ns'][k])
+        recorder.write(names[0], samples['data'][k], log, int(samples['publish_ns'][k]))
+        if not (np.isfinite(estimate['lever_tip'][k]).all()
+                and np.isfinite(estimate['coupler_mid'][k]).all()):
+            continue
+        sec, nanosec = divmod(int(samples['stamps_ns'][k]), 10**9)
+        outputs = [vector3_stamped_cdr(sec, nanosec, frame, *estimate['lever_tip'][k]),
+                   vector3_stamped_cdr(sec, nanosec, frame, *estimate['coupler_mid'][k]),
+                   criteria_cdr(sec, nanosec, frame, estimate['criterion'][k],
+                                estimate['gamma_dot'][k], estimate['reaction_n'][k]),
+                   quality_cdr(sec, nanosec, frame, estimate['error_indicator'][k],
+                               estimate['nonlinearity'][k])]
+        if k % markers_every_n == 0:
+            one = slice(k, k + 1)
+            outputs.append(marker_source.rows(samples['stamps_ns'][one],
+                                              estimate['crank_angle'][one],
+                                              estimate['modal'][one])[0].tobytes())
+        for name, message in zip(names[1:], outputs):
+            recorder.write(name, message, log)
+    return recorder.close()
+
+
+def test_a_replay_bag_is_the_bag_of_its_messages_written_one_by_one(tmp_path):
+    """Packed batches: inputs of several lengths, no outputs in a batch, chunks cut inside."""
+    model = model_for_mechanism(load_mechanism('cho1992'),
+                                ModelOptions.linear(bearings='rigid', grid_size=32))
+    count, every = 2600, 2
+    samples, estimate = uneven_replay(model, count)
+    topics = output_topics('/flexlink_node')
+    levels = [ros_messages.OK] * 4
+    # Two blocks: the second's batches start at its own first row (1500), not at 1024s.
+    blocks = [(0, *rows_of(samples, estimate, slice(0, 1500))),
+              (1500, *rows_of(samples, estimate, slice(1500, None)))]
+    (tmp_path / 'packed').mkdir()
+    packed = write_replay(tmp_path / 'packed' / 'replay.mcap', blocks, '/joint_states', topics,
+                          'linkage_ground', model, markers_every_n=every, joint_levels=levels)
+    (tmp_path / 'single').mkdir()
+    source = MarkerSource(model, 'linkage_ground', 10.0, 9, levels)
+    single = write_one_by_one(tmp_path / 'single' / 'replay.mcap', samples, estimate,
+                              replay_topics('/joint_states', topics, every), every, source)
+    first, second = (pathlib.Path(status['files'][0]).read_bytes()
+                     for status in (packed, single))
+    assert first == second
+    valid = count - 1024 - 3
+    marked = sum(1 for k in range(0, count, every) if not 1024 <= k < 2048 and k != 2100)
+    with AnyReader([tmp_path / 'packed' / 'replay.mcap']) as reader:
+        assert {c.topic: c.msgcount for c in reader.connections} == {
+            '/joint_states': count, topics['lever_tip']: valid, topics['coupler_mid']: valid,
+            topics['criteria']: valid, topics['quality']: valid, topics['markers']: marked}
+    with open(packed['files'][0], 'rb') as stream:
+        reader = make_reader(stream)
+        assert reader.get_summary().statistics.chunk_count >= 3
+        lengths = {len(m.data) for _, c, m in reader.iter_messages() if c.topic
+                   == '/joint_states'}
+    assert len(lengths) > 3
