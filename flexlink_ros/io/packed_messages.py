@@ -41,7 +41,7 @@ class FixedColumn:
 
     def take(self, chosen, length):
         """Return the messages ``chosen`` (indices), all ``length`` bytes, as rows."""
-        return self.rows[chosen]
+        return self.rows.take(chosen, axis=0)
 
     def message(self, k):
         """Return message ``k`` as bytes."""
@@ -89,7 +89,7 @@ class VariableColumn:
     def take(self, chosen, length):
         """Return the messages ``chosen`` (indices), all ``length`` bytes, as rows."""
         if self.uniform:
-            return self.data.reshape(len(self), -1)[chosen]
+            return self.data.reshape(len(self), -1).take(chosen, axis=0)
         return self.data[self.starts[chosen][:, None] + np.arange(length)]
 
     def message(self, k):
@@ -118,33 +118,37 @@ class PackedMessages:
             raise ValueError(f'`present` must have shape (samples, {len(self.columns)}), '
                              f'got {self.present.shape}')
         counts = self.present.sum(axis=0).tolist()
+        # Each message's length at its sample and column (-1: none there).
+        self.length_table = np.full(self.present.shape, -1, dtype=np.int64)
         for c, column in enumerate(self.columns):
             if len(column) != counts[c]:
                 raise ValueError(f'column {c} holds {len(column)} messages for {counts[c]} '
                                  'samples present')
-        self.sample_of, self.column_of = np.nonzero(self.present)   # sample-major order
+            self.length_table[self.present[:, c], c] = column.lengths()
         # Each message's row in its column: samples present before it in that column.
         self.rank = np.cumsum(self.present, axis=0) - 1
-        self.row_of = self.rank[self.sample_of, self.column_of]
 
     def __len__(self):
-        return self.sample_of.size
+        return int(np.count_nonzero(self.present))
+
+    @property
+    def column_of(self):
+        """Return each message's column, in order."""
+        return np.nonzero(self.present)[1]     # row-major: sample-major, columns in order
 
     def lengths(self):
         """Return each message's length [bytes], in order."""
-        lengths = np.empty(len(self), dtype=np.int64)
-        for c, column in enumerate(self.columns):
-            chosen = self.column_of == c
-            lengths[chosen] = column.lengths()[self.row_of[chosen]]
-        return lengths
+        return self.length_table[self.present]
 
     def __getitem__(self, k):
         """Return message ``k`` as bytes (a writer that takes messages one by one)."""
-        return self.columns[int(self.column_of[k])].message(int(self.row_of[k]))
+        sample, column = (int(axis[k]) for axis in np.nonzero(self.present))
+        return self.columns[column].message(int(self.rank[sample, column]))
 
     def message_list(self):
         """Return the messages as a list of bytes, in order (one object each)."""
-        places = zip(self.column_of.tolist(), self.row_of.tolist())
+        samples, columns = np.nonzero(self.present)
+        places = zip(columns.tolist(), self.rank[samples, columns].tolist())
         return [self.columns[c].message(row) for c, row in places]
 
     def records(self, headers):
@@ -162,33 +166,55 @@ class PackedMessages:
         ndarray of uint8, shape (n * head + total length,)
 
         """
-        samples, columns = self.present.shape
-        lengths = np.zeros((samples, columns), dtype=np.int64)
-        lengths[self.sample_of, self.column_of] = self.lengths()
-        width = headers.shape[1]
-        # A kind: the columns present and their lengths; its samples are rows of one array.
-        kinds, kind_of = np.unique(np.where(self.present, lengths, -1), axis=0,
-                                   return_inverse=True)
-        kind_of = kind_of.reshape(-1)
-        sample_bytes = (lengths + width * self.present).sum(axis=1)
-        first_message = np.cumsum(self.present.sum(axis=1)) - self.present.sum(axis=1)
+        kind_of, kinds = self._kinds()
+        per_sample = self.present.sum(axis=1)
+        first_message = np.cumsum(per_sample) - per_sample
         blocks = [self._kind_block(np.flatnonzero(kind_of == k), kind, headers, first_message)
                   for k, kind in enumerate(kinds)]
         if len(blocks) == 1:
             return blocks[0].reshape(-1)
-        buffer = np.empty(int(sample_bytes.sum()), dtype=np.uint8)
-        # Runs of consecutive samples of one kind: one copy each.
+        buffer = np.empty(sum(block.size for block in blocks), dtype=np.uint8)
+        target = memoryview(buffer)
+        sources = [memoryview(block.reshape(-1)) for block in blocks]
+        sample_bytes = [block.shape[1] for block in blocks]
+        # Runs of consecutive samples of one kind: one copy each, from the kind's next rows.
         starts = np.flatnonzero(np.diff(kind_of, prepend=-1))
-        stops = np.append(starts[1:], samples)
-        offsets = np.cumsum(sample_bytes) - sample_bytes
-        row_in_kind = _rank_within(kind_of, len(kinds))
-        for start, stop, kind, row, offset in zip(
-                starts.tolist(), stops.tolist(), kind_of[starts].tolist(),
-                row_in_kind[starts].tolist(), offsets[starts].tolist()):
-            block = blocks[kind]
-            buffer[offset:offset + (stop - start) * block.shape[1]] = \
-                block[row:row + stop - start].reshape(-1)
+        stops = np.append(starts[1:], kind_of.size)
+        taken, offset = [0] * len(blocks), 0
+        for start, stop, kind in zip(starts.tolist(), stops.tolist(),
+                                     kind_of[starts].tolist()):
+            size = (stop - start) * sample_bytes[kind]
+            target[offset:offset + size] = sources[kind][taken[kind]:taken[kind] + size]
+            taken[kind] += size
+            offset += size
         return buffer
+
+    def _kinds(self):
+        """
+        Group the samples by kind: the same columns present, of the same lengths.
+
+        Returns
+        -------
+        kind_of : ndarray of intp, shape (samples,)
+        kinds : ndarray of int64, shape (kinds, columns)
+            Each kind's lengths (-1: column absent).
+
+        """
+        key = np.zeros(self.present.shape[0], dtype=np.int64)
+        radix = 1
+        for c, column in enumerate(self.columns):
+            if isinstance(column, VariableColumn) and not column.uniform:
+                values, code = np.unique(self.length_table[:, c], return_inverse=True)
+                base = values.size
+            else:
+                code, base = self.present[:, c], 2
+            if radix * base >= 1 << 62:     # keep the key in int64: renumber the kinds so far
+                values, key = np.unique(key, return_inverse=True)
+                radix = values.size
+            key += code.reshape(-1) * radix
+            radix *= base
+        _, first, kind_of = np.unique(key, return_index=True, return_inverse=True)
+        return kind_of.reshape(-1), self.length_table[first]
 
     def _kind_block(self, chosen, kind, headers, first_message):
         """Lay out the records of the samples ``chosen`` (all of one kind) as rows."""
@@ -198,19 +224,10 @@ class PackedMessages:
                          dtype=np.uint8)
         offset = 0
         for slot, c in enumerate(present.tolist()):
-            block[:, offset:offset + width] = headers[first_message[chosen] + slot]
+            block[:, offset:offset + width] = headers.take(first_message[chosen] + slot, axis=0)
             offset += width
             length = int(kind[c])
             block[:, offset:offset + length] = self.columns[c].take(self.rank[chosen, c],
                                                                     length)
             offset += length
         return block
-
-
-def _rank_within(labels, count):
-    """Return each element's position among the elements of its label, in order."""
-    order = np.argsort(labels, kind='stable')
-    sizes = np.bincount(labels, minlength=count)
-    rank = np.empty(labels.size, dtype=np.int64)
-    rank[order] = np.arange(labels.size) - np.repeat(np.cumsum(sizes) - sizes, sizes)
-    return rank

@@ -13,7 +13,7 @@ T0_NS = 1_700_000_000_000_000_000
 
 def random_batch(rng, samples, widths, variable_lengths, density=0.7):
     """
-    A batch of columns (fixed ``widths``, then one variable column) and what it holds.
+    Make a batch of columns (one variable column, then fixed ``widths``) and its messages.
 
     Returns the PackedMessages and, built without it, its messages in order: a list of bytes,
     per sample each column present in column order (the variable column first).
@@ -74,8 +74,7 @@ def test_a_column_that_does_not_match_its_samples_is_refused():
     (1 << 20, 40_000),       # flushes by log time inside each batch
     (1 << 20, 10**12),       # one chunk
 ])
-def test_a_file_from_packed_messages_is_the_file_from_their_bytes(chunk_size,
-                                                                    flush_period_ns):
+def test_a_file_from_packed_messages_is_the_file_from_their_bytes(chunk_size, flush_period_ns):
     rng = np.random.default_rng(3)
     samples = 400
     packed, messages = random_batch(rng, samples, [31, 8, 200], [20, 24], 0.8)

@@ -174,7 +174,7 @@ def test_replay_markers_of_an_order_2_model_draw_the_joints_second_order_motion(
 
 
 def uneven_replay(model, count):
-    """Inputs of several lengths, outliers, a batch of rows with no outputs, and estimates."""
+    """Make inputs of several lengths and estimates with outliers and a batch of them."""
     rng = np.random.default_rng(17)
     stamps = T0_NS + STEP_NS * np.arange(count)
     data = []
