@@ -127,14 +127,11 @@ class PackedMessages:
             self.length_table[self.present[:, c], c] = column.lengths()
         # Each message's row in its column: samples present before it in that column.
         self.rank = np.cumsum(self.present, axis=0) - 1
+        # Each message's sample and column (row-major: sample-major, columns in order).
+        self.sample_of, self.column_of = np.nonzero(self.present)
 
     def __len__(self):
-        return int(np.count_nonzero(self.present))
-
-    @property
-    def column_of(self):
-        """Return each message's column, in order."""
-        return np.nonzero(self.present)[1]     # row-major: sample-major, columns in order
+        return self.sample_of.size
 
     def lengths(self):
         """Return each message's length [bytes], in order."""
@@ -142,13 +139,13 @@ class PackedMessages:
 
     def __getitem__(self, k):
         """Return message ``k`` as bytes (a writer that takes messages one by one)."""
-        sample, column = (int(axis[k]) for axis in np.nonzero(self.present))
+        sample, column = int(self.sample_of[k]), int(self.column_of[k])
         return self.columns[column].message(int(self.rank[sample, column]))
 
     def message_list(self):
         """Return the messages as a list of bytes, in order (one object each)."""
-        samples, columns = np.nonzero(self.present)
-        places = zip(columns.tolist(), self.rank[samples, columns].tolist())
+        places = zip(self.column_of.tolist(),
+                     self.rank[self.sample_of, self.column_of].tolist())
         return [self.columns[c].message(row) for c, row in places]
 
     def records(self, headers):

@@ -4,6 +4,7 @@ import io
 
 from flexlink_ros.io.mcap_writer import McapFileWriter
 from flexlink_ros.io.packed_messages import FixedColumn, PackedMessages, VariableColumn
+from flexlink_ros.io.recorder import McapRecorder
 from mcap.reader import make_reader
 import numpy as np
 import pytest
@@ -136,3 +137,45 @@ def write_split(messages, channels, log, sequences, chunk_size, flush_period_ns,
         flushes.append(done)
     writer.finish()
     return stream.getvalue(), flushes
+
+
+def recorded(path):
+    """(topic, log, publish, sequence, bytes) of every message of a recording, in order."""
+    files = sorted(path.glob('*.mcap')) if path.is_dir() else [path]
+    found = []
+    for name in files:
+        with open(name, 'rb') as stream:
+            found += [(channel.topic, m.log_time, m.publish_time, m.sequence, bytes(m.data))
+                      for _, channel, m in make_reader(stream).iter_messages(
+                          log_time_order=False)]
+    return found
+
+
+@pytest.mark.parametrize('splits', [{}, {'split_duration_s': 0.1}])
+def test_a_recorder_writes_packed_messages_as_their_bytes(tmp_path, splits):
+    """In bulk, and one by one where a file split may fall inside the batch."""
+    rng = np.random.default_rng(8)
+    packed, messages = random_batch(rng, 300, [31, 200], [20, 24], 0.8)
+    columns = ['/variable', '/fixed_a', '/fixed_b']
+    per_sample = packed.present.sum(axis=1)
+    log = T0_NS + 1_000_000 * np.repeat(np.arange(300), per_sample)
+    written = {}
+    for kind, batch, topics in (('packed', packed, columns),
+                                ('bytes', messages, [columns[c] for c in packed.column_of])):
+        path = tmp_path / kind if splits else tmp_path / f'{kind}.mcap'
+        with McapRecorder(path, flush_thread=False, **splits) as recorder:
+            for topic in columns:
+                recorder.add_topic(topic, 'std_msgs/msg/String')
+            assert recorder.write_batch(topics, batch, log, log - 5) == len(messages)
+        written[kind] = recorded(path)
+    assert written['packed'] == written['bytes']
+    sequences = {topic: 0 for topic in columns}
+    expected = []
+    for c, time, message in zip(packed.column_of.tolist(), log.tolist(), messages):
+        sequences[columns[c]] += 1
+        expected.append((columns[c], time, time - 5, sequences[columns[c]], message))
+    assert written['packed'] == expected
+    if splits:
+        assert len(list((tmp_path / 'packed').glob('*.mcap'))) == 3
+    with pytest.raises(ValueError, match='`topics` has 2 entries for 3 columns'):
+        McapRecorder(tmp_path / 'refused.mcap').write_batch(columns[:2], packed, log)
