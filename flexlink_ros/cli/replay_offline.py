@@ -31,12 +31,13 @@ from ..io.replay_writer import WRITE_BATCH
 from ..names import OUTPUT_POINTS, QUALITY_NAMES
 
 # Rows handed from the estimate to the writer at a time, and blocks waiting for the writer
-# (the estimate waits when it is that far ahead).
-BLOCK_ROWS = 8 * WRITE_BATCH
-QUEUED_BLOCKS = 2
+# (the estimate waits when it is that far ahead). The last block is written after the estimate
+# ends: a small one shortens that tail.
+BLOCK_ROWS = 2 * WRITE_BATCH
+QUEUED_BLOCKS = 8
 # Input messages read at a time (the --chunk-samples default): the first chunk is read before
-# the estimate starts, the others beside the writing, so a small one (one block) starts sooner.
-CHUNK_SAMPLES = BLOCK_ROWS
+# the estimate starts, the others beside the estimate.
+CHUNK_SAMPLES = 8 * WRITE_BATCH
 # ... and the most the flag accepts (a bound on what one chunk may hold).
 MAX_CHUNK_SAMPLES = 1 << 22
 _COLUMNS = ('data', 'log_ns', 'publish_ns', 'stamps_ns', 'angles', 'speeds')
