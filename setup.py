@@ -52,7 +52,7 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
-            'flexlink = flexlink_ros.cli.main:main',
+            'flexlink = flexlink_ros.cli.main:run',
             'crank_driver = flexlink_ros.ros.crank_driver:main',
             'flexlink_node = flexlink_ros.ros.node:main',
         ],

@@ -48,7 +48,7 @@ from .replay_nonlinear import decide, MAX_THREADS, model_lines, nonlinear_choice
 from .replay_offline import CHUNK_SAMPLES, estimate_and_write, MAX_CHUNK_SAMPLES, open_input
 from .replay_split import can_fork, Splitter, warm_up_seconds
 from ..core.estimation.gate import DEFAULT_RESET_GAP_S
-from ..core.estimation.marker_scale import model_exaggeration
+from ..core.estimation.marker_scale import load_quasi_static_peaks, model_exaggeration
 from ..core.estimation.tables import step_tables
 from ..io.joint_states import read_input_samples
 from ..io.recorder_files import refuse_existing
@@ -142,6 +142,7 @@ def run_replay(args):
     model = load_model(mechanism, options, args)
     chart = ChartRows() if args.chart else None
     tables = step_tables(model)
+    load_quasi_static_peaks(model, tables, mechanism, options, args.cache_dir, not args.no_cache)
     choice, transform, (topic, rows, messages), outcome = _choose_model(
         args, (mechanism, options, model, tables), (topic, rows, messages), chart, damaged)
     if outcome is None:

@@ -4,13 +4,14 @@ The offline path of `flexlink replay`: a recording read, estimated and written i
 The input topic is chosen from a survey of the recording (:mod:`io.recording_stream`: topic
 counts and the first messages of each JointState topic; from the files' summaries and first
 chunks where they have them, so the recording is read once), then its samples are read
-``--chunk-samples`` messages at a time and estimated in a thread
-(:func:`core.estimation.offline.estimate_stream`; the compiled step runs without the GIL)
-while this thread encodes and writes the rows already final (:mod:`io.replay_writer`), so the
-estimate and the writing share the two cores of a small machine. What is held at once does
-not depend on the recording's length: a chunk of input messages and one decompressed MCAP
-chunk, the estimate's window (a chunk, the plan's look-ahead and the rows not yet handed on)
-and at most ``QUEUED_BLOCKS`` + 2 blocks of ``BLOCK_ROWS`` rows on their way to the writer.
+``--chunk-samples`` messages at a time in one thread (:class:`ReadAhead`), estimated in
+another (:func:`core.estimation.offline.estimate_stream`; the compiled step runs without the
+GIL) while this thread encodes and writes the rows already final (:mod:`io.replay_writer`),
+so the reading, the estimate and the writing share the two cores of a small machine. What is
+held at once does not depend on the recording's length: a chunk of input messages and one
+decompressed MCAP chunk, the estimate's window (a chunk, the plan's look-ahead and the rows
+not yet handed on), at most two chunks read ahead and at most ``QUEUED_BLOCKS`` + 2 blocks of
+``BLOCK_ROWS`` rows on their way to the writer.
 """
 
 import collections
@@ -30,15 +31,68 @@ from ..io.replay_writer import WRITE_BATCH
 from ..names import OUTPUT_POINTS, QUALITY_NAMES
 
 # Rows handed from the estimate to the writer at a time, and blocks waiting for the writer
-# (the estimate waits when it is that far ahead).
-BLOCK_ROWS = 8 * WRITE_BATCH
-QUEUED_BLOCKS = 2
+# (the estimate waits when it is that far ahead). The last block is written after the estimate
+# ends: a small one shortens that tail.
+BLOCK_ROWS = 2 * WRITE_BATCH
+QUEUED_BLOCKS = 8
 # Input messages read at a time (the --chunk-samples default): the first chunk is read before
-# the estimate starts, the others beside the writing, so a small one (one block) starts sooner.
-CHUNK_SAMPLES = BLOCK_ROWS
+# the estimate starts, the others beside the estimate.
+CHUNK_SAMPLES = 8 * WRITE_BATCH
 # ... and the most the flag accepts (a bound on what one chunk may hold).
 MAX_CHUNK_SAMPLES = 1 << 22
 _COLUMNS = ('data', 'log_ns', 'publish_ns', 'stamps_ns', 'angles', 'speeds')
+
+
+class ReadAhead:
+    """
+    The items of an iterator made in a thread of their own, at most ``depth`` ahead.
+
+    The input's chunks are read (decompressed, walked, parsed) beside the estimate, which then
+    only takes them. Its errors are raised where the items are taken; :meth:`close` stops it.
+    """
+
+    def __init__(self, items, depth=2):
+        self.items, self.ready = items, queue.Queue(depth)
+        self.stop, self.ended = threading.Event(), False
+        self.thread = threading.Thread(target=self._run, name='replay-read', daemon=True)
+        self.thread.start()
+
+    def __iter__(self):
+        return self
+
+    def __next__(self):
+        if self.ended:
+            raise StopIteration
+        kind, value = self.ready.get()
+        if kind == 'item':
+            return value
+        self.ended = True
+        if kind == 'error':
+            raise value
+        raise StopIteration
+
+    def _run(self):
+        try:
+            for item in self.items:
+                if not self._put(('item', item)):
+                    return
+            self._put(('end', None))
+        except BaseException as exc:   # raised where the items are taken
+            self._put(('error', exc))
+
+    def _put(self, entry):
+        while not self.stop.is_set():
+            try:
+                self.ready.put(entry, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def close(self):
+        """Stop reading ahead (the estimate ended or failed) and wait for the thread."""
+        self.stop.set()
+        self.thread.join()
 
 
 class InputRows:
@@ -123,7 +177,14 @@ class InputRows:
         self.peeked.append(chunk)
 
     def estimate_input(self):
-        """Yield (stamps, angles, speeds) of each chunk, keeping its rows for :meth:`take`."""
+        """
+        Yield (stamps, angles, speeds) of each chunk, keeping its rows for :meth:`take`.
+
+        The chunks after those already read are read ahead in a thread (:class:`ReadAhead`),
+        started here: in the estimate's thread, after any fork (:mod:`.replay_split`).
+        """
+        if not isinstance(self.chunks, ReadAhead):
+            self.chunks = ReadAhead(self.chunks)
         while True:
             chunk = self.peeked.popleft() if self.peeked else self._next()
             if chunk is None:
@@ -149,6 +210,11 @@ class InputRows:
         rows = {key: np.concatenate([part[key] for part in parts]) for key in _COLUMNS[1:]}
         rows['data'] = [data for part in parts for data in part['data']]
         return rows
+
+    def close(self):
+        """Stop the reading ahead, if started."""
+        if isinstance(self.chunks, ReadAhead):
+            self.chunks.close()
 
     def span_s(self):
         """Log time from the first to the last usable sample [s]."""
@@ -311,6 +377,7 @@ class _Pipeline:
         """Stop the estimate if it still runs (the writer failed or was interrupted)."""
         self.stop.set()
         self.thread.join()
+        self.rows.close()
 
 
 def pipeline_blocks(model, rows, warm_start, tables, consume):

@@ -7,6 +7,7 @@ file refused on load ends every command with one line and exit code 2.
 
 import ast
 import importlib.metadata
+import json
 import pathlib
 import re
 import subprocess
@@ -51,6 +52,26 @@ def test_flexlink_version_prints_it_and_exits_0(capsys):
     run = subprocess.run([sys.executable, '-m', 'flexlink_ros.cli.main', '--version'],
                          capture_output=True, text=True, cwd=ROOT)
     assert run.returncode == 0 and run.stdout == f'flexlink {flexlink_ros.__version__}\n'
+
+
+ENTRY_RUNS = [(['kinematics', '--crank-deg', '30', '--json'], 0),
+              (['kinematics', '--crank-deg', 'x'], 1)]
+
+
+@pytest.mark.parametrize('argv, code', ENTRY_RUNS)
+def test_the_scripts_entry_exits_with_the_commands_code_after_all_its_output(argv, code):
+    """The entry freezes what is left out of the collector before leaving: nothing is lost."""
+    program = f'import sys; sys.argv = ["flexlink", *{argv!r}]; from flexlink_ros.cli.main ' \
+              'import run; run()'
+    done = subprocess.run([sys.executable, '-c', program], capture_output=True, text=True,
+                          timeout=120, cwd=ROOT)
+    assert done.returncode == code
+    if code == 0:
+        assert json.loads(done.stdout) == json.loads(subprocess.run(
+            [sys.executable, '-m', 'flexlink_ros.cli', *argv], capture_output=True, text=True,
+            timeout=120, cwd=ROOT, check=True).stdout)
+    else:
+        assert done.stdout == '' and done.stderr.startswith('flexlink kinematics: error:')
 
 
 def test_ros_args_sections_are_split_off_as_rclpy_does():

@@ -6,7 +6,9 @@ import math
 import pathlib
 import subprocess
 import sys
+import threading
 
+from flexlink_ros.cli.replay_offline import ReadAhead
 from flexlink_ros.io.recorder import McapRecorder
 from flexlink_ros.ros import messages as ros_messages
 from mcap.reader import make_reader
@@ -209,3 +211,40 @@ def test_a_replay_reads_only_its_first_chunk_before_the_estimate_starts(tmp_path
     topic, rows, messages = open_input(args, [])
     assert topic == '/joint_states' and messages > 19000
     assert 0 < rows.samples <= messages // 2
+    # No thread reads ahead yet (a fork for --processes 2 comes after this): the estimate's
+    # first chunk starts it, and it reads the rest.
+    assert 'replay-read' not in [thread.name for thread in threading.enumerate()]
+    chunks = rows.estimate_input()
+    first = next(chunks)
+    assert 'replay-read' in [thread.name for thread in threading.enumerate()]
+    assert len(first[0]) + sum(len(chunk[0]) for chunk in chunks) == rows.samples == messages
+    rows.close()
+    assert 'replay-read' not in [thread.name for thread in threading.enumerate()]
+
+
+def test_reading_ahead_gives_the_items_in_order_then_the_error_where_it_happened():
+    def items():
+        yield from range(5)
+        raise ValueError('damaged past item 4')
+
+    ahead = ReadAhead(items(), depth=2)
+    assert [next(ahead) for _ in range(5)] == list(range(5))
+    with pytest.raises(ValueError, match='damaged past item 4'):
+        next(ahead)
+    assert list(ahead) == []          # ended: no wait on a reader that is gone
+    ahead.close()
+    assert list(ReadAhead(iter(range(3)))) == [0, 1, 2]
+
+
+def test_closing_stops_a_reader_waiting_on_a_full_queue():
+    produced = []
+
+    def items():
+        for n in range(1000):
+            produced.append(n)
+            yield n
+
+    ahead = ReadAhead(items(), depth=2)
+    assert next(ahead) == 0
+    ahead.close()
+    assert not ahead.thread.is_alive() and len(produced) <= 4

@@ -19,8 +19,10 @@ import numpy as np
 
 from .streaming import StreamingEstimator
 from ..options import SPEED_MARGIN
+from ..reduction.mechanism_model import cached_model_values
 
 MARKER_SHARE = 0.05   # the expected peak deflection drawn as this share of the coupler length
+PEAKS_CACHE_NAME = 'quasi-static-peaks'
 MAX_EXAGGERATION = 1e6   # the node's parameter range
 ROUND_STEPS = (1.0, 2.0, 5.0)
 
@@ -107,3 +109,22 @@ def default_exaggeration(estimator, mechanism=None):
     length = float(np.hypot(*(coupler[-1] - coupler[0])))
     peak = float(estimator.quasi_static_peak(machine_speed(mechanism, model.speed_max)))
     return round_exaggeration(peak, length), peak, length
+
+
+def load_quasi_static_peaks(model, step_tables, mechanism, options, cache_dir, use_cache):
+    """
+    Give the step tables the quasi-static peaks at the model's top speed and the machine's.
+
+    They set the deflection bound and the markers' exaggeration; computing them solves K q = f
+    over the grid at many speeds (about 0.05 s for the default model), so they are kept in a
+    file beside the model's cache (:func:`.reduction.mechanism_model.cached_model_values`) and
+    taken from it when its speeds are these.
+    """
+    speeds = np.array(sorted({float(model.speed_max), machine_speed(mechanism, model.speed_max)}))
+
+    def build():
+        return {'speeds': speeds,
+                'peaks': np.array([step_tables.quasi_static_peak(model, top) for top in speeds])}
+    values = cached_model_values(mechanism, options, cache_dir, use_cache, PEAKS_CACHE_NAME, build)
+    if np.array_equal(values['speeds'], speeds):
+        step_tables.know_quasi_static_peaks(values['speeds'], values['peaks'])

@@ -244,6 +244,12 @@ class _StepTables:
             self._bounds[key] = bound if math.isfinite(bound) and bound > 0.0 else math.inf
         return self._bounds[key]
 
+    def know_quasi_static_peaks(self, speeds, peaks):
+        """Take :func:`quasi_static_peak` values found before (a cache file) at ``speeds``."""
+        for top, peak in zip(np.asarray(speeds, dtype=float).tolist(),
+                             np.asarray(peaks, dtype=float).tolist()):
+            self._peaks[top] = peak
+
     def quasi_static_peak(self, model, speed_max=None):
         """Return :func:`quasi_static_peak` of the model of these tables (once per speed)."""
         top = float(model.speed_max if speed_max is None else speed_max)

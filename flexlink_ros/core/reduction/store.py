@@ -15,8 +15,11 @@ other shapes, an array whose .npy header announces more (or fewer) bytes than it
 stores or more than :data:`MAX_CACHE_BYTES` in all (checked before anything is allocated),
 compressed members, a checksum mismatch (corrupt bytes), or an unreadable archive (truncated,
 not a zip, a pickle renamed ``.npz``). Each raises :class:`CacheError`; :func:`load_or_build`
-then logs a warning and rebuilds. Writes go to a temporary file in the same directory and are
-moved into place with ``os.replace``, so a reader never sees a half-written file.
+then logs a warning and rebuilds. A file whose checksum was found right carries a record of
+it (an extended attribute with the file's inode, size and modification time): while those are
+unchanged, a load maps the file without reading every byte of it. Writes go to a temporary
+file in the same directory and are moved into place with ``os.replace``, so a reader never
+sees a half-written file.
 
 Before any of that a file must be trusted (:mod:`.cache_location`: owned by the user, not
 writable by others, in directories only the user can change): an untrusted file is never
@@ -31,6 +34,7 @@ import mmap
 import os
 import pathlib
 import tempfile
+import time
 import zipfile
 
 import numpy as np
@@ -55,6 +59,11 @@ MAX_CACHE_BYTES = 2 << 30
 NPY_HEADER_READ = 1 << 16
 # Array data start at a multiple of this in the file, so a load maps them without a copy.
 ARRAY_ALIGNMENT = 64
+# The extended attribute recording a file's checksum as found right (its identity with it),
+# so that the next load maps the file without reading all of it; and how long after the
+# file's last write a check is recorded (longer than any file system's timestamp tick).
+VERIFIED_ATTRIBUTE = 'user.flexlink_ros.verified'
+VERIFIED_AGE_S = 2.0
 
 
 def default_cache_dir():
@@ -301,7 +310,9 @@ def load_cache(path, key):
     CacheError
         If the file is missing, not trusted (:func:`.cache_location.open_trusted`: owned by
         another user, writable by others, not a regular file), unreadable, foreign, of
-        another version or key, announces more than it holds, or is corrupt.
+        another version or key, announces more than it holds, or is corrupt (its checksum
+        is checked unless the file carries the record of an earlier check and has not been
+        written since: :func:`_verified_before`).
 
     """
     path = pathlib.Path(path)
@@ -311,6 +322,10 @@ def load_cache(path, key):
         with open_trusted(path) as stream, zipfile.ZipFile(stream) as archive:
             mapped = mmap.mmap(stream.fileno(), 0, access=mmap.ACCESS_READ)
             header, arrays = _read_archive(mapped, archive, path, key)
+            if not _verified_before(stream, header.get('sha256')):
+                if _array_digest(arrays) != header.get('sha256'):
+                    raise CacheError(f'{path}: checksum mismatch (corrupt cache)')
+                _note_verified(stream, header['sha256'])
     except CacheError:
         raise
     except (OSError, EOFError, ValueError, KeyError, TypeError, AttributeError, RuntimeError,
@@ -318,10 +333,46 @@ def load_cache(path, key):
             zipfile.LargeZipFile) as exc:
         # ValueError covers bad .npy headers and bad JSON; RuntimeError an encrypted member.
         raise CacheError(f'{path}: unreadable cache ({type(exc).__name__}: {exc})') from exc
-    if _array_digest(arrays) != header.get('sha256'):
-        raise CacheError(f'{path}: checksum mismatch (corrupt cache)')
     meta = header.get('meta')
     return arrays, meta if isinstance(meta, dict) else {}
+
+
+def _file_identity(stream):
+    """Return the open file's device, inode, size and modification time [ns]."""
+    info = os.fstat(stream.fileno())
+    return [info.st_dev, info.st_ino, info.st_size, info.st_mtime_ns]
+
+
+def _verified_before(stream, digest):
+    """
+    Tell whether this very file's checksum was found right before and it is unchanged since.
+
+    The record (:func:`_note_verified`) names the file's identity and checksum; any write to
+    the file since changes its modification time, a replacement its inode.
+    """
+    try:
+        record = json.loads(os.getxattr(stream.fileno(), VERIFIED_ATTRIBUTE))
+    except (OSError, AttributeError, ValueError):    # none, or no xattrs on this system
+        return False
+    return record == {'identity': _file_identity(stream), 'sha256': digest}
+
+
+def _note_verified(stream, digest):
+    """
+    Record on the file (an extended attribute) that its checksum was just found right.
+
+    Only for a file last written at least :data:`VERIFIED_AGE_S` ago: a later write then gets
+    a later modification time even where the clock's tick is coarse, so the record cannot
+    outlive a change. Where the file system keeps no attributes the check simply runs again.
+    """
+    identity = _file_identity(stream)
+    if identity[3] > time.time_ns() - int(VERIFIED_AGE_S * 1e9):
+        return
+    record = json.dumps({'identity': identity, 'sha256': digest}).encode()
+    try:
+        os.setxattr(stream.fileno(), VERIFIED_ATTRIBUTE, record)
+    except (OSError, AttributeError):
+        pass
 
 
 def _read_archive(mapped, archive, path, key):

@@ -2,9 +2,13 @@
 
 import pathlib
 
-from flexlink_ros.core.estimation.marker_scale import (default_exaggeration, MARKER_SHARE,
-                                                       MAX_EXAGGERATION, round_exaggeration)
+from flexlink_ros.core.estimation import tables as step_tables_module
+from flexlink_ros.core.estimation.marker_scale import (default_exaggeration,
+                                                       load_quasi_static_peaks, machine_speed,
+                                                       MARKER_SHARE, MAX_EXAGGERATION,
+                                                       PEAKS_CACHE_NAME, round_exaggeration)
 from flexlink_ros.core.estimation.streaming import StreamingEstimator
+from flexlink_ros.core.estimation.tables import step_tables
 from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.fe.simulate import periodic_response
 from flexlink_ros.core.mechanism_file import load_mechanism
@@ -63,3 +67,30 @@ def test_a_slow_machine_is_drawn_at_its_own_speed_not_at_the_range_floor(tmp_pat
                                  points=60, steps=360)
     drawn = factor * float(np.max(np.abs(response.outputs))) / length
     assert MARKER_SHARE / SPEED_MARGIN ** 2 <= drawn < 2.5 * MARKER_SHARE, (factor, peak)
+
+
+def test_the_peaks_are_computed_once_and_then_read_from_beside_the_model(tmp_path, monkeypatch):
+    mechanism = load_mechanism(SOFT)
+    options = default_model_options(grid_size=32)
+    model = model_for_mechanism(mechanism, options, cache_dir=tmp_path)
+    computed = []
+    compute = step_tables_module.quasi_static_peak
+
+    def counted(*args):
+        computed.append(args[-1])
+        return compute(*args)
+
+    monkeypatch.setattr(step_tables_module, 'quasi_static_peak', counted)
+    speeds = sorted({model.speed_max, machine_speed(mechanism, model.speed_max)})
+    first = step_tables(model)
+    load_quasi_static_peaks(model, first, mechanism, options, tmp_path, True)
+    assert computed == speeds and len(list(tmp_path.glob(f'*-{PEAKS_CACHE_NAME}.npz'))) == 1
+    again = step_tables(model)
+    load_quasi_static_peaks(model, again, mechanism, options, tmp_path, True)
+    values = [again.quasi_static_peak(model, top) for top in speeds]
+    assert computed == speeds      # nothing computed the second time
+    assert values == [first.quasi_static_peak(model, top) for top in speeds]
+    assert again.deflection_bound(model, 3.0) == first.deflection_bound(model, 3.0)
+    # Without the cache: computed every time.
+    load_quasi_static_peaks(model, step_tables(model), mechanism, options, tmp_path, False)
+    assert computed == speeds * 2

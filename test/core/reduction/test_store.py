@@ -4,6 +4,7 @@ import io
 import json
 import logging
 import mmap
+import os
 import pickle
 import struct
 import tracemalloc
@@ -204,6 +205,81 @@ def test_bad_file_is_refused_and_rebuilt(tmp_path, caplog, name):
     reloaded, _, from_cache = cache.load_or_build(path, KEY, build)
     assert from_cache and calls == [1]
     assert_same(reloaded, arrays)
+
+
+def age(path, seconds=3600.0):
+    """Give ``path`` a modification time ``seconds`` ago (a cache written some time before)."""
+    info = path.stat()
+    past = info.st_mtime_ns - int(seconds * 1e9)
+    os.utime(path, ns=(past, past))
+
+
+def counted_digests(monkeypatch):
+    """Count the checksums computed (the real function, counted)."""
+    calls = []
+    digest = cache._array_digest
+
+    def counting(arrays):
+        calls.append(1)
+        return digest(arrays)
+
+    monkeypatch.setattr(cache, '_array_digest', counting)
+    return calls
+
+
+def test_a_file_checked_once_is_mapped_again_without_reading_its_bytes(tmp_path, monkeypatch):
+    arrays, meta = content()
+    path = tmp_path / 'model.npz'
+    cache.save_cache(path, KEY, arrays, meta)
+    age(path)
+    calls = counted_digests(monkeypatch)
+    assert_same(cache.load_cache(path, KEY)[0], arrays)
+    record = json.loads(os.getxattr(path, cache.VERIFIED_ATTRIBUTE))
+    info = path.stat()
+    assert record == {'identity': [info.st_dev, info.st_ino, info.st_size, info.st_mtime_ns],
+                      'sha256': cache._array_digest(arrays)}
+    calls.clear()
+    assert_same(cache.load_cache(path, KEY)[0], arrays)
+    assert calls == []
+
+
+@pytest.mark.parametrize('name', ['corrupt bytes', 'tampered array'])
+def test_a_write_after_the_check_is_caught(tmp_path, name):
+    spoil, message = BAD_FILES[name]
+    arrays, meta = content()
+    path = tmp_path / 'model.npz'
+    cache.save_cache(path, KEY, arrays, meta)
+    age(path)
+    cache.load_cache(path, KEY)
+    assert os.getxattr(path, cache.VERIFIED_ATTRIBUTE)
+    spoil(path)     # written in place: the same inode, a new modification time
+    with pytest.raises(CacheError, match=message):
+        cache.load_cache(path, KEY)
+
+
+def test_a_file_written_just_now_is_checked_every_time(tmp_path, monkeypatch):
+    """A coarse clock could give a write within the same tick the same modification time."""
+    arrays, meta = content()
+    path = tmp_path / 'model.npz'
+    cache.save_cache(path, KEY, arrays, meta)
+    calls = counted_digests(monkeypatch)
+    cache.load_cache(path, KEY)
+    cache.load_cache(path, KEY)
+    assert len(calls) == 2
+    assert cache.VERIFIED_ATTRIBUTE not in os.listxattr(path)
+
+
+def test_a_record_of_another_file_is_not_taken(tmp_path, monkeypatch):
+    arrays, meta = content()
+    checked, other = tmp_path / 'model.npz', tmp_path / 'other.npz'
+    for path in (checked, other):
+        cache.save_cache(path, KEY, arrays, meta)
+        age(path)
+    cache.load_cache(checked, KEY)
+    os.setxattr(other, cache.VERIFIED_ATTRIBUTE, os.getxattr(checked, cache.VERIFIED_ATTRIBUTE))
+    calls = counted_digests(monkeypatch)
+    cache.load_cache(other, KEY)
+    assert calls == [1]
 
 
 def test_missing_file_builds_without_warning(tmp_path, caplog):
