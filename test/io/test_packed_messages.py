@@ -169,7 +169,7 @@ def test_a_recorder_writes_packed_messages_as_their_bytes(tmp_path, splits):
             assert recorder.write_batch(topics, batch, log, log - 5) == len(messages)
         written[kind] = recorded(path)
     assert written['packed'] == written['bytes']
-    sequences = {topic: 0 for topic in columns}
+    sequences = dict.fromkeys(columns, 0)
     expected = []
     for c, time, message in zip(packed.column_of.tolist(), log.tolist(), messages):
         sequences[columns[c]] += 1
