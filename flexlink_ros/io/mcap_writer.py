@@ -494,15 +494,18 @@ def _message_indexes(channels, logs, offsets, start):
         records.
 
     """
-    unique, first_seen = np.unique(channels, return_index=True)
+    # The messages grouped by channel, in order within each (a stable sort): one pass.
+    order = np.argsort(channels, kind='stable')
+    entries = np.empty((order.size, 2), dtype='<u8')
+    entries[:, 0] = logs[order]
+    entries[:, 1] = offsets[order]
+    firsts = np.flatnonzero(np.diff(channels[order], prepend=-1))
+    lasts = np.append(firsts[1:], order.size)
     builder = RecordBuilder()
     index_offsets = {}
-    for channel in unique[np.argsort(first_seen)].tolist():
-        chosen = channels == channel
-        entries = np.empty((int(chosen.sum()), 2), dtype='<u8')
-        entries[:, 0] = logs[chosen]
-        entries[:, 1] = offsets[chosen]
-        payload = entries.tobytes()
+    for group in np.argsort(order[firsts]).tolist():     # by each channel's first message
+        channel = int(channels[order[firsts[group]]])
+        payload = entries[firsts[group]:lasts[group]].tobytes()
         index_offsets[channel] = start + builder.count
         builder.start_record(Opcode.MESSAGE_INDEX)
         builder.write2(channel)
