@@ -61,6 +61,14 @@ def test_records_are_each_header_then_its_message_in_order(samples, variable_len
     assert records.dtype == np.uint8 and records.tobytes() == expected
 
 
+def test_one_message_is_its_header_then_its_bytes():
+    packed = PackedMessages([FixedColumn(np.zeros((0, 4), dtype=np.uint8)),
+                             VariableColumn.from_sequence([b'abc'])], [[False, True]])
+    headers = np.array([[7, 8]], dtype=np.uint8)
+    assert len(packed) == 1 and packed.records(headers).tobytes() == b'\x07\x08abc'
+    assert packed.message_list() == [b'abc'] and packed.lengths().tolist() == [3]
+
+
 def test_a_column_that_does_not_match_its_samples_is_refused():
     with pytest.raises(ValueError, match='column 1 holds 2 messages for 1 samples'):
         PackedMessages([VariableColumn.from_sequence([b'a', b'b']),
