@@ -20,6 +20,7 @@ as if it had), the parent discards the child's part and estimates the rest itsel
 recording's start (the sequential numbers, at the sequential cost).
 """
 
+import gc
 import json
 import math
 import os
@@ -127,10 +128,14 @@ class Splitter:
                                            prefix='.replay-part-')
         self.read_fd, write_fd = os.pipe()
         guesses = self._sequences()
+        # The child's collector then leaves the objects made so far alone: its passes would
+        # otherwise write to every one, copying their pages. The parent takes them back.
+        gc.freeze()
         self.pid = os.fork()
         if self.pid == 0:       # the child: never returns
             os.close(self.read_fd)
             self._child(write_fd, guesses, rows.damaged is not None)
+        gc.unfreeze()
         os.close(write_fd)
         rows.limit(self.split)
         self.guesses = guesses

@@ -30,6 +30,8 @@ import stat
 import struct
 import zlib
 
+import numpy as np
+
 from .mcap_records import (
     CHANNEL, CHUNK, CHUNK_HEAD, DATA_END, DATA_OPCODES, decode_chunk, decompression_budget, FOOTER,
     HEADER, KNOWN_OPCODES, MCAP_MAGIC, MESSAGE, MESSAGE_HEAD_SIZE, MESSAGE_INDEX, opcode_name,
@@ -191,6 +193,13 @@ def _records(buffer, offset, end, opcode, salvage):
             if length < MESSAGE_HEAD_SIZE:
                 raise DamagedRecord(f'message of {length} bytes')
             messages.append((body, position))
+            # A chunk's messages all of one length (one topic, one publisher) are the rest of
+            # it, as a rule: checked and listed at once, not walked one by one.
+            run = equal_messages(records, position, stop) if len(messages) == 1 and (
+                opcode == CHUNK) else None
+            if run is not None:
+                messages += run
+                break
         elif code == CHANNEL:
             channel = parse_channel(records, body, position)
             channels[channel.id] = channel
@@ -211,6 +220,30 @@ def _records(buffer, offset, end, opcode, salvage):
     salvage.schemas.update(schemas)
     salvage.channels.update(channels)
     return records, messages
+
+
+def equal_messages(records, start, stop):
+    """
+    Return the (body start, end) of every record of ``records[start:stop]``, all messages.
+
+    Only where all are message records of one length (at least a message head), checked with
+    numpy at once; else None (the records are then walked one by one).
+    """
+    if start == stop:
+        return []
+    if stop - start < RECORD_PREFIX.size:
+        return None
+    code, length = RECORD_PREFIX.unpack_from(records, start)
+    size = RECORD_PREFIX.size + length
+    if code != MESSAGE or length < MESSAGE_HEAD_SIZE or (stop - start) % size:
+        return None
+    prefixes = np.frombuffer(records, dtype=np.uint8, count=stop - start, offset=start).reshape(
+        -1, size)[:, :RECORD_PREFIX.size]
+    if not (np.all(prefixes[:, 0] == MESSAGE)
+            and np.all(prefixes[:, 1:].copy().view('<u8') == length)):
+        return None
+    bodies = start + RECORD_PREFIX.size + size * np.arange(len(prefixes), dtype=np.int64)
+    return list(zip(bodies.tolist(), (bodies + length).tolist()))
 
 
 def _plausible_record(buffer, offset):

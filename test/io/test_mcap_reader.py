@@ -289,3 +289,59 @@ def test_unreadable_files_are_refused_in_one_line_without_output(tmp_path, conte
     expected = 'nothing readable' if content.startswith(mcap_records.MCAP_MAGIC) else 'bad magic'
     assert expected in run.stderr
     assert not out.exists()
+
+
+def salvaged_messages(path):
+    """(channel, log time, data) of every message by the salvaging reader."""
+    buffer = mcap_reader.map_file(path)
+    try:
+        found = [mcap_records.message_fields(records, start, end)
+                 for records, start, end in mcap_reader.iter_messages(buffer,
+                                                                      mcap_reader.Salvage())]
+    finally:
+        buffer.close()
+    return [(channel, log, data) for channel, _, log, _, data in found]
+
+
+def mixed_recording(path, count):
+    """Crank states with one, then two, joints (two lengths) and a second topic between."""
+    with McapRecorder(path, chunk_size_bytes=4096, flush_thread=False) as recorder:
+        recorder.add_topic('/joint_states', JointState)
+        recorder.add_topic('/other', JointState)
+        for k in range(count):
+            names = ('crank',) if k < count // 2 else ('crank', 'lever')
+            recorder.write('/joint_states', crank_state(k, names), T0_NS + k * STEP_NS)
+            if k % 7 == 0:
+                recorder.write('/other', crank_state(k), T0_NS + k * STEP_NS + 1)
+    return path
+
+
+@pytest.mark.parametrize('make', [lambda path: write_crank_recording(path, 3000),
+                                  lambda path: mixed_recording(path, 3000)],
+                         ids=['one length', 'lengths and topics mixed'])
+def test_chunks_of_equal_messages_are_read_at_once_as_the_walk_reads_them(tmp_path, make):
+    path = make(tmp_path / 'bag.mcap')
+    by_mcap = [(topic, log, bytes(data)) for topic, log, data in read_messages(path)]
+    topics = {1: '/joint_states', 2: '/other'}
+    assert [(topics[c], log, data) for c, log, data in salvaged_messages(path)] == by_mcap
+
+
+def message_records(lengths):
+    """Message records of the given body lengths, back to back."""
+    return b''.join(struct.pack('<BQ', mcap_records.MESSAGE, length) + bytes(length)
+                    for length in lengths)
+
+
+def test_a_run_of_equal_messages_is_listed_and_anything_else_is_left_to_the_walk():
+    head = mcap_records.MESSAGE_HEAD_SIZE
+    records = b'xx' + message_records([head + 10] * 4)
+    size = 9 + head + 10        # opcode, length, body
+    assert mcap_reader.equal_messages(records, 2, len(records)) == [
+        (2 + k * size + 9, 2 + (k + 1) * size) for k in range(4)]
+    assert mcap_reader.equal_messages(records, len(records), len(records)) == []
+    for other in (message_records([head + 10, head + 11, head + 10]),     # a longer one
+                  message_records([head - 1] * 3),                        # too short to be one
+                  message_records([head + 10] * 2)[:-1],                  # cut short
+                  message_records([head + 10]) + struct.pack('<BQ', mcap_records.CHANNEL,
+                                                             head + 10) + bytes(head + 10)):
+        assert mcap_reader.equal_messages(other, 0, len(other)) is None
