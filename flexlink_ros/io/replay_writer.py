@@ -21,7 +21,7 @@ from ..core.reduction.second_order_tables import SecondOrderForms
 from ..names import JOINT_STATE, MARKER_ARRAY, OUTPUT_POINTS, VECTOR3_STAMPED
 
 # Rows encoded and written together by write_replay. The markers' contraction runs over a
-# batch's rows at once and its last bits depend on them (a few markers in a thousand differ
+# batch's rows at once and its last bits depend on them (about one marker in a thousand differs
 # with batches of 2 048): the same batches give the same bytes.
 WRITE_BATCH = 1024
 # The output is written in one go, not live: chunks larger than the node's (whose chunk is what
