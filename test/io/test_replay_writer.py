@@ -29,6 +29,19 @@ COUNT = 6
 OUTLIER = 2     # its estimate is NaN: the input is kept, no outputs
 
 
+def random_rows(rng, stamps, data):
+    """Return the samples of input ``data`` at ``stamps`` and a random estimate of outputs."""
+    count = len(data)
+    samples = {'data': data, 'stamps_ns': stamps, 'log_ns': stamps + 50_000,
+               'publish_ns': stamps + 20_000}
+    estimate = {key: rng.normal(size=(count, 2)) for key in ('lever_tip', 'coupler_mid')}
+    estimate.update({key: rng.normal(size=(count, 4))
+                     for key in ('criterion', 'gamma_dot', 'reaction_n')})
+    estimate['error_indicator'] = rng.uniform(0.0, 0.1, count)
+    estimate['nonlinearity'] = rng.uniform(0.0, 0.5, count)
+    return samples, estimate
+
+
 def replay_inputs():
     rng = np.random.default_rng(5)
     stamps = T0_NS + STEP_NS * np.arange(COUNT)
@@ -37,13 +50,7 @@ def replay_inputs():
         message = JointState(name=['crank'], position=[0.1 * k], velocity=[40.0])
         message.header.stamp = ros_messages.ns_to_stamp(stamp)
         data.append(serialize_exact(message))
-    samples = {'data': data, 'stamps_ns': stamps, 'log_ns': stamps + 50_000,
-               'publish_ns': stamps + 20_000}
-    estimate = {key: rng.normal(size=(COUNT, 2)) for key in ('lever_tip', 'coupler_mid')}
-    estimate.update({key: rng.normal(size=(COUNT, 4))
-                     for key in ('criterion', 'gamma_dot', 'reaction_n')})
-    estimate['error_indicator'] = rng.uniform(0.0, 0.1, COUNT)
-    estimate['nonlinearity'] = rng.uniform(0.0, 0.5, COUNT)
+    samples, estimate = random_rows(rng, stamps, data)
     estimate['nonlinearity'][1] = np.nan      # not available: written as NaN, as the node
     estimate['lever_tip'][OUTLIER] = np.nan
     return samples, estimate
@@ -184,13 +191,7 @@ def uneven_replay(model, count):
         message.header.stamp = ros_messages.ns_to_stamp(stamp)
         message.header.frame_id = 'crank' + 'x' * (k % 5)
         data.append(serialize_exact(message))
-    samples = {'data': data, 'stamps_ns': stamps, 'log_ns': stamps + 50_000,
-               'publish_ns': stamps + 20_000}
-    estimate = {key: rng.normal(size=(count, 2)) for key in ('lever_tip', 'coupler_mid')}
-    estimate.update({key: rng.normal(size=(count, 4))
-                     for key in ('criterion', 'gamma_dot', 'reaction_n')})
-    estimate['error_indicator'] = rng.uniform(0.0, 0.1, count)
-    estimate['nonlinearity'] = rng.uniform(0.0, 0.5, count)
+    samples, estimate = random_rows(rng, stamps, data)
     estimate['crank_angle'] = rng.uniform(-np.pi, np.pi, count)
     estimate['modal'] = rng.normal(size=(count, model.size)) * 1e-3
     estimate['lever_tip'][1024:2048] = np.nan       # a whole batch of inputs alone
