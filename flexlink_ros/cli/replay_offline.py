@@ -73,21 +73,17 @@ class ReadAhead:
 
     def _run(self):
         try:
-            for item in self.items:
-                if not self._put(('item', item)):
-                    return
-            self._put(('end', None))
-        except BaseException as exc:   # raised where the items are taken
-            self._put(('error', exc))
-
-    def _put(self, entry):
-        while not self.stop.is_set():
+            last = ('end', None)
             try:
-                self.ready.put(entry, timeout=0.1)
-                return True
-            except queue.Full:
-                continue
-        return False
+                for item in self.items:
+                    _put(self.ready, ('item', item), self.stop)
+            except _Stopped:
+                raise
+            except BaseException as exc:   # raised where the items are taken
+                last = ('error', exc)
+            _put(self.ready, last, self.stop)
+        except _Stopped:
+            pass
 
     def close(self):
         """Stop reading ahead (the estimate ended or failed) and wait for the thread."""
