@@ -298,6 +298,22 @@ def test_a_record_of_another_file_is_not_taken(tmp_path, monkeypatch):
     assert calls == [1]
 
 
+@pytest.mark.parametrize('record', [b'\xff\xfe not json', b'[1, 2]', b'{"identity": null}',
+                                    b'x' * 3000])
+def test_a_malformed_record_is_no_record(tmp_path, monkeypatch, record):
+    needs_extended_attributes(tmp_path)
+    arrays, meta = content()
+    path = tmp_path / 'model.npz'
+    cache.save_cache(path, KEY, arrays, meta)
+    age(path)
+    os.setxattr(path, cache.VERIFIED_ATTRIBUTE, record)
+    calls = counted_digests(monkeypatch)
+    assert_same(cache.load_cache(path, KEY)[0], arrays)
+    assert calls == [1]           # checked in full, and the record made right
+    assert json.loads(os.getxattr(path, cache.VERIFIED_ATTRIBUTE))['sha256'] == \
+        cache._array_digest(arrays)
+
+
 def test_missing_file_builds_without_warning(tmp_path, caplog):
     with caplog.at_level(logging.WARNING):
         _, _, from_cache = cache.load_or_build(tmp_path / 'new.npz', KEY, content)
