@@ -16,7 +16,8 @@ from flexlink_ros.ros import diagnostics
 from flexlink_ros.ros.message_outcomes import PeriodStats
 from flexlink_ros.ros.messages import OK, WARN
 import test_node
-from test_node import DISCOVERY_TIMEOUT_S, joint_state, NodeProcess, READY_TIMEOUT_S, spin_until
+from test_node import (DISCOVERY_TIMEOUT_S, joint_state, lifecycle_client, NodeProcess,
+                       READY_TIMEOUT_S, spin_until)
 
 ros = test_node.ros
 
@@ -56,8 +57,7 @@ def test_two_namespaced_nodes_report_distinct_diagnostics_also_while_inactive(
     plain.wait_for(READY_MESSAGE, READY_TIMEOUT_S)
     spin_until(executor, lambda: len(_latest_statuses(messages, first)) == 7, 30.0,
                'the streaming node on /diagnostics')
-    change_state = test_node.create_client(ChangeState, f'{second}/change_state')
-    spin_until(executor, change_state.service_is_ready, 30.0, 'the lifecycle service')
+    change_state = lifecycle_client(test_node, executor, f'{second}/change_state', 30.0)
     future = change_state.call_async(ChangeState.Request(
         transition=Transition(id=Transition.TRANSITION_CONFIGURE)))
     spin_until(executor, future.done, READY_TIMEOUT_S, 'the configure transition')

@@ -110,6 +110,38 @@ def spin_until(executor, condition, timeout_s, what, detail=lambda: ''):
         executor.spin_once(timeout_sec=0.02)
 
 
+def answering_client(test_node, executor, service_type, service_name, probe,
+                     timeout_s=READY_TIMEOUT_S):
+    """
+    Give a client of a node's service whose answers are sure to reach it.
+
+    The service being ready says only that our requests reach the node. Fast DDS drops an
+    answer when the node's response writer has not yet matched our reader ("client will not
+    receive response"), which a loaded machine's discovery can delay, and the request is not
+    retried. So ``probe``, a request that changes nothing, is sent until one answer comes
+    back: from then on every answer arrives.
+    """
+    client = test_node.create_client(service_type, service_name)
+    spin_until(executor, client.service_is_ready, timeout_s, service_name)
+    deadline = time.monotonic() + timeout_s
+    while True:
+        future = client.call_async(probe)
+        try:
+            spin_until(executor, future.done, 2.0, 'an answer')
+            return client
+        except AssertionError:
+            client.remove_pending_request(future)
+            assert time.monotonic() < deadline, f'no answer from {service_name}'
+
+
+def lifecycle_client(test_node, executor, service_name, timeout_s=READY_TIMEOUT_S):
+    """Give an answering ChangeState client; its probe names no transition (nothing done)."""
+    from lifecycle_msgs.msg import Transition
+    from lifecycle_msgs.srv import ChangeState
+    probe = ChangeState.Request(transition=Transition(label='no_such_transition'))
+    return answering_client(test_node, executor, ChangeState, service_name, probe, timeout_s)
+
+
 def joint_state(stamp_ns, names, positions, velocities):
     from flexlink_ros.ros.messages import ns_to_stamp
     from sensor_msgs.msg import JointState
@@ -376,10 +408,9 @@ def test_managed_node_streams_only_while_active(tmp_path, processes, ros):
                                flags=['--managed'])
     processes.append(node_process)
     test_node, executor = ros
-    get_state = test_node.create_client(GetState, '/flexlink_node/get_state')
-    change_state = test_node.create_client(ChangeState, '/flexlink_node/change_state')
-    spin_until(executor, lambda: change_state.service_is_ready() and get_state.service_is_ready(),
-               READY_TIMEOUT_S, 'lifecycle services')
+    get_state = answering_client(test_node, executor, GetState, '/flexlink_node/get_state',
+                                 GetState.Request())
+    change_state = lifecycle_client(test_node, executor, '/flexlink_node/change_state')
 
     def call(client, request):
         future = client.call_async(request)

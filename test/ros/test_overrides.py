@@ -10,7 +10,7 @@ import sys
 from flexlink_ros.names import NODE_NAME, READY_MESSAGE
 import pytest
 import test_node
-from test_node import NodeProcess, PARAMS_FILE, READY_TIMEOUT_S, spin_until
+from test_node import lifecycle_client, NodeProcess, PARAMS_FILE, READY_TIMEOUT_S, spin_until
 import yaml
 
 ros = test_node.ros
@@ -93,8 +93,7 @@ def test_managed_node_process_exits_after_the_shutdown_transition(tmp_path, proc
     managed = NodeProcess(tmp_path, flags=['--managed'], ros_args=['-r', f'__ns:={NAMESPACE}'])
     processes.append(managed)
     test_node, executor = ros
-    change_state = test_node.create_client(ChangeState, f'{NAMESPACE}/{NODE_NAME}/change_state')
-    spin_until(executor, change_state.service_is_ready, READY_TIMEOUT_S, 'the lifecycle service')
+    change_state = lifecycle_client(test_node, executor, f'{NAMESPACE}/{NODE_NAME}/change_state')
     future = change_state.call_async(ChangeState.Request(
         transition=Transition(id=Transition.TRANSITION_UNCONFIGURED_SHUTDOWN)))
     spin_until(executor, future.done, 30.0, 'the shutdown transition')
@@ -111,8 +110,7 @@ def test_reconfigured_node_records_again_next_to_the_first_take(tmp_path, proces
                           flags=['--managed'])
     processes.append(managed)
     test_node, executor = ros
-    change_state = test_node.create_client(ChangeState, f'/{NODE_NAME}/change_state')
-    spin_until(executor, change_state.service_is_ready, READY_TIMEOUT_S, 'the lifecycle service')
+    change_state = lifecycle_client(test_node, executor, f'/{NODE_NAME}/change_state')
     for transition in ('CONFIGURE', 'CLEANUP', 'CONFIGURE', 'CLEANUP'):
         future = change_state.call_async(ChangeState.Request(
             transition=Transition(id=getattr(Transition, f'TRANSITION_{transition}'))))
