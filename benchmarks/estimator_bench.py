@@ -20,7 +20,7 @@ from flexlink_ros.cli.model_args import add_estimator_arguments, model_options
 from flexlink_ros.cli.progress import Progress
 from flexlink_ros.core.estimation.native import compiled_step_available
 from flexlink_ros.core.estimation.nonlinear_stream import estimate_nonlinear
-from flexlink_ros.core.estimation.offline import replay
+from flexlink_ros.core.estimation.segment_replay import replay
 from flexlink_ros.core.fe import linkage as assembly
 from flexlink_ros.core.integrators import RadauIIA
 from flexlink_ros.core.mechanism_file import load_mechanism

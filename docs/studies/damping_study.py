@@ -51,7 +51,7 @@ import argparse
 import dataclasses
 import math
 
-from flexlink_ros.core.estimation.offline import replay
+from flexlink_ros.core.estimation.segment_replay import replay
 from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.fe.simulate import periodic_response
 from flexlink_ros.core.fe.stiffness_damping import (element_resultants, link_local_rate,
@@ -133,7 +133,7 @@ def streaming_response(model, speed, revolutions=3, points=120, oversample=2):
     """
     Run the streaming estimate at constant crank speed: its last revolution on the grid.
 
-    :func:`core.estimation.offline.replay` (the streaming step over a whole signal, warm
+    :func:`core.estimation.segment_replay.replay` (the streaming step over a whole signal, warm
     start at the first sample) fed ``points * oversample`` samples per revolution of the
     exact crank angle and speed; every ``oversample``-th sample of the last revolution lands
     on the grid ``2 pi i / points`` from crank angle 0 (as :func:`full_order_response`).

@@ -18,7 +18,7 @@ import math
 import pathlib
 import sys
 
-from flexlink_ros.core.estimation.offline import replay
+from flexlink_ros.core.estimation.segment_replay import replay
 from flexlink_ros.core.fe.linkage import FlexibleLinkage
 from flexlink_ros.core.fe.second_order_full import corrected_response
 from flexlink_ros.core.fe.second_order_geometry import FORMS

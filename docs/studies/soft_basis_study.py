@@ -1,7 +1,7 @@
 """
 The estimator on the soft basis against the scene reference, beside the 26-coordinate step.
 
-Every case streams a synthetic crank signal through the estimator (:func:`offline.replay`,
+Every case streams a synthetic crank signal through the estimator (:func:`segment_replay.replay`,
 the same numbers as streaming) with the soft basis (``soft_modes = -1``: the smallest p at a
 usable gap) and without it (``soft_modes = 0``), and compares the outputs with the reference
 of the scene (:func:`studies.plan.scene_options`: 6 elements per link, flexible crank,
@@ -39,7 +39,7 @@ import argparse
 import dataclasses
 import math
 
-from flexlink_ros.core.estimation.offline import replay
+from flexlink_ros.core.estimation.segment_replay import replay
 from flexlink_ros.core.numerics import relative_rms, RPM
 from flexlink_ros.core.options import ModelOptions
 from flexlink_ros.core.reduction import mechanism_model

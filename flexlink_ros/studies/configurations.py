@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from .synthetic import last_revolution, PAPER_RPM, run_estimate, synthetic_signal
-from ..core.estimation.offline import replay
+from ..core.estimation.segment_replay import replay
 from ..core.numerics import relative_rms, RPM
 from ..core.reduction import mechanism_model
 from ..core.reduction import reference as reduction_reference

@@ -16,7 +16,7 @@ import numpy as np
 
 from .configurations import usable_soft_sizes
 from .synthetic import last_revolution, PAPER_RPM, stream_timed, synthetic_signal, timing_summary
-from ..core.estimation.offline import replay
+from ..core.estimation.segment_replay import replay
 from ..core.fe import linkage as assembly
 from ..core.numerics import relative_rms, RPM
 from ..core.reduction import mechanism_model

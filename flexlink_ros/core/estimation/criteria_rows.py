@@ -29,7 +29,7 @@ def criteria_batch(model, angles, speeds, accels,
         A reaction below this fraction of its cycle RMS is flagged near zero.
     blocks : dict, optional
         'force', 'force_dot' (m, joints, 2) and 'rms2' (m, joints) at these states, if
-        already evaluated (core.estimation.offline.replay returns them); else the table is
+        already evaluated (core.estimation.segment_replay.replay returns them); else the table is
         evaluated.
 
     Returns

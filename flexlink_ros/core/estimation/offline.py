@@ -5,30 +5,26 @@ The offline estimate: a recorded sample stream estimated as the streaming node w
 repeats, outliers) and replays each segment in pieces, reading its input in chunks and handing
 the rows on once final, so a recording of any length is estimated in bounded memory
 (:class:`.row_window.RowWindow`); :func:`estimate_offline` does it for arrays in memory.
-:func:`replay` is one segment (strictly increasing stamps, no gaps or outliers): the crank
-filter over the segment in one loop, then the compiled step through the samples in chunks,
-the same numbers as feeding :meth:`StreamingEstimator.update` sample by sample.
+Each segment is a :func:`.segment_replay.replay`; the rows of one chunk are taken (criteria,
+indicators, handed on) in a thread beside the compiled step of the next.
 """
 
+import concurrent.futures
 import math
 
 import numpy as np
 
-from .crank_filter import DEFAULT_FIT_TIME_CONSTANT_S
 from .criteria_rows import criteria_batch
 from .gate import DEFAULT_RESET_GAP_S, InputGate, plan_rows
-from .native import RECORD_SIZE
 from .nonlinearity import NonlinearityIndicator
 from .row_window import RowWindow
-from .sample import error_indicator_rows, OUT_OF_BOUND, SampleFlag
-from .step import MAX_SUBSTEP_NS
-from .streaming import DEFAULT_ACCEL_LIMIT, StreamingEstimator
+from .sample import error_indicator_rows, SampleFlag
+from .segment_replay import replay
+from .streaming import DEFAULT_ACCEL_LIMIT
 from .tables import step_tables
 from .warm_start import WarmStartLimiter
-from ...names import JOINT_NAMES, OUTPUT_NAMES, OUTPUT_POINTS
+from ...names import JOINT_NAMES, OUTPUT_POINTS
 
-# Samples per batch of the offline replay (bounds its memory to a few MB).
-REPLAY_CHUNK = 4096
 # Rows planned at a time (plan_rows) ahead of the segment being replayed; after a restart the
 # window starts small and doubles (little work lost if it stops again).
 PLAN_WINDOW = 4096
@@ -187,11 +183,12 @@ def estimate_stream(model, chunks, emit, warm_start=True, align=1, block_rows=1,
     """
     blocks = (max(int(align), 1), max(int(block_rows), 1))
     run = _OfflineRun(model, iter(chunks), warm_start, emit, blocks, tables)
-    position = 0
-    while position < run.ensure(position + 1):
-        position = run.next_segment(position)
-    run.finish_until(run.window.end)
-    run.hand_on(run.final)
+    with concurrent.futures.ThreadPoolExecutor(1, 'estimate-rows') as run.beside:
+        position = 0
+        while position < run.ensure(position + 1):
+            position = run.next_segment(position)
+        run.finish_until(run.window.end)
+        run.hand_on(run.final)
     return {'samples': run.final, 'criteria_available': run.available,
             'segments': run.segments, 'window_rows': run.window_rows, **run.counts}
 
@@ -226,6 +223,8 @@ class _OfflineRun:
         self.measured = True
         self.done = 0
         self.last_accepted = -1
+        self.taken = None           # rows stepped, their estimate to take (take_rows)
+        self.beside = None          # the thread that takes them while the next rows step
 
     def ensure(self, rows):
         """Read chunks until the window reaches row ``rows`` or the input ends; its end."""
@@ -348,20 +347,46 @@ class _OfflineRun:
         out = replay(self.model, self.stamps_ns[chosen], self.angles[chosen],
                      measured, warm_start=self.warm_start, orbit=self.orbit,
                      on_rows=self.on_rows, tables=self.tables,
-                     warm_start_limiter=self.limiter, resume=self.resume)
+                     warm_start_limiter=self.limiter, resume=self.resume,
+                     beside_step=self.beside_step)
         self.orbit, self.resume = out['orbit'], out['resume']
         if out['stopped'] is None:
             return None
+        self.take_rows()
         row = int(chosen[out['stopped']])
         self.mark([row], SampleFlag.OUT_OF_BOUND)
         self.finish_until(row + 1)
         return row
 
     def on_rows(self, out, upto):
-        """Take the rows of the current segment replay() has finished since the last call."""
+        """
+        Note the rows of the current segment replay() has finished since the last call.
+
+        They are taken (:meth:`take_rows`) while the next rows step, or before anything else
+        reads or hands on rows.
+        """
         if upto <= self.done:
             return
-        rows = slice(self.done, upto)
+        self.take_rows()
+        self.taken = (out, self.done, upto, self.chosen, self.stop)
+        self.done = upto
+
+    def beside_step(self, step):
+        """Run ``step`` (the compiled step, without the GIL) while the rows before it are taken."""
+        if self.taken is None:
+            return step()
+        future = self.beside.submit(self.take_rows)
+        try:
+            return step()
+        finally:
+            future.result()
+
+    def take_rows(self):
+        """Take the rows noted by :meth:`on_rows`: criteria, indicators, then hand them on."""
+        if self.taken is None:
+            return
+        (out, done, upto, chosen, stop), self.taken = self.taken, None
+        rows = slice(done, upto)
         model = self.model
         model_speed = np.clip(out['crank_speed'][rows], -model.speed_max, model.speed_max)
         model_accel = np.clip(out['crank_accel'][rows], -DEFAULT_ACCEL_LIMIT,
@@ -369,7 +394,7 @@ class _OfflineRun:
         blocks = {name: out[name][rows] for name in ('force', 'force_dot', 'rms2')}
         reaction, gamma_dot, criterion, _, self.available = criteria_batch(
             model, out['crank_angle'][rows], model_speed, model_accel, blocks=blocks)
-        target = self.chosen[rows]
+        target = chosen[rows]
         nonlinearity = self.nonlinearity.batch(out['crank_angle'][rows], model_speed, model_accel,
                                                out['modal'][rows], out['velocity'][rows])
         error = error_indicator_rows(*(out[k][rows] for k in OUTPUT_POINTS + ('correction',)))
@@ -379,11 +404,11 @@ class _OfflineRun:
                             ('reaction_n', reaction), ('gamma_dot', gamma_dot),
                             ('criterion', criterion)):
             self.result[key][target] = values
-        self.done = upto
-        self.finish_until(self.stop if upto == self.chosen.size else int(self.chosen[upto]))
+        self.finish_until(stop if upto == chosen.size else int(chosen[upto]))
 
     def finish_until(self, final):
         """Copy the repeats before ``final`` (as StreamingEstimator.update); hand rows on."""
+        self.take_rows()
         while self.copied < len(self.repeats) and self.repeats[self.copied][0] < final:
             row, source = self.repeats[self.copied]
             self.window.copy_row(source, row, _ESTIMATE_KEYS)
@@ -396,6 +421,7 @@ class _OfflineRun:
 
     def hand_on(self, upto):
         """Give rows handed...upto (final) to ``emit``."""
+        self.take_rows()
         if upto <= self.handed:
             return
         block = self.window.rows(self.handed, upto, _ESTIMATE_KEYS + ('flags',))
@@ -404,190 +430,3 @@ class _OfflineRun:
         self.counts['out_of_bound'] += int(np.count_nonzero(flags & SampleFlag.OUT_OF_BOUND))
         first, self.handed = self.handed, upto
         self.emit(first, block)
-
-
-def replay(model, stamps_ns, angles, speeds=None,
-           fit_time_constant_s=DEFAULT_FIT_TIME_CONSTANT_S, warm_start=True,
-           accel_limit=DEFAULT_ACCEL_LIMIT, compiled=True, orbit=None, on_rows=None,
-           tables=None, warm_start_limiter=None, resume=None):
-    """
-    Offline estimate of a recorded crank signal: the streaming step over the whole signal.
-
-    Same numbers as feeding :meth:`StreamingEstimator.update` sample by sample (a test checks
-    this), for strictly increasing stamps without gaps or outliers (one segment of
-    :func:`plan_rows`): the crank filter runs over the signal in one loop, then the compiled
-    step advances through all samples in one call per chunk (the numpy step, sample by
-    sample, where the extension is not built). An estimate beyond the deflection bound, a
-    non-finite one or a failed step ends the replay at that sample ('stopped'): the streaming
-    estimator restarts at the next one, so the caller replays the rest as a new segment.
-
-    Parameters
-    ----------
-    model : ReducedModel
-        The reduced model.
-    stamps_ns : ndarray of int, shape (m,)
-        Strictly increasing stamps [ns].
-    angles : ndarray, shape (m,)
-        Crank angles [rad], any range.
-    speeds : ndarray, shape (m,), or None
-        Measured crank speeds [rad/s]; None to derive them from the angles.
-    fit_time_constant_s, warm_start, accel_limit, compiled
-        As for :class:`StreamingEstimator`.
-    orbit : tuple or None
-        The periodic orbit a streaming estimator would remember from earlier warm starts
-        (the 'orbit' of a previous call): pass it on from segment to segment of one recording
-        and the segments restart exactly as one streaming estimator does.
-    tables : object or None
-        :func:`step_tables` of ``model``, when one caller replays many segments.
-    warm_start_limiter : WarmStartLimiter or None
-        Shared by the segments of one recording (a new one, wall clock, if None).
-    resume : tuple or None
-        The 'resume' of the previous call when these samples continue its segment (same
-        numbers as one call; the first call must hold at least 3 samples, or all of them).
-        A caller that replays a long segment in pieces wastes at most a piece when one
-        goes out of bound.
-    on_rows : callable or None
-        ``on_rows(result, done)`` after each chunk of rows: ``result`` is the returned dict
-        (its arrays are being filled), final for the first ``done`` samples. Lets a caller
-        use the estimate while the rest is computed (the compiled step releases the GIL).
-
-    Returns
-    -------
-    dict of str to ndarray
-        'crank_angle', 'crank_speed', 'crank_accel' (m,); 'lever_tip', 'coupler_mid' (m, 2)
-        [m]; 'correction' (m, 4): the residual correction alone [m] (the error indicator's
-        numerator); 'modal', 'velocity' (m, r): q and q'; 'force', 'force_dot' (m, joints,
-        2) and 'rms2' (m, joints): the tabulated joint reactions at the model's (clipped) crank
-        state; 'orbit' for the next call; 'stopped': the index of the sample that went out of
-        bound (the rows after it are not computed), or None; 'resume' for a call on the
-        samples that follow.
-
-    """
-    stamps_ns = np.asarray(stamps_ns, dtype=np.int64)
-    count = stamps_ns.size
-    if count < 1 or np.any(np.diff(stamps_ns) <= 0):
-        raise ValueError('`stamps_ns` must be strictly increasing')
-    angles = np.asarray(angles, dtype=float)
-    if speeds is not None:
-        speeds = np.asarray(speeds, dtype=float)
-    if not fit_time_constant_s > 0.0:
-        raise ValueError(f'`time_constant_s` must be positive, got {fit_time_constant_s!r}')
-    if resume is None:
-        estimator = StreamingEstimator(model, fit_time_constant_s, warm_start=warm_start,
-                                       accel_limit=accel_limit, compiled=compiled,
-                                       step_tables=tables,
-                                       warm_start_limiter=warm_start_limiter)
-        estimator.orbit = orbit
-        # A fresh filter of the estimator's kind (compiled or not) over the whole signal.
-        rate_filter = type(estimator.rate_filter)(fit_time_constant_s)
-        stamp0_ns, previous_ns = int(stamps_ns[0]), None
-    else:
-        estimator, rate_filter, stamp0_ns, previous_ns = resume
-        if not stamps_ns[0] > previous_ns:
-            raise ValueError('`stamps_ns` must continue after the resumed ones')
-    motion = rate_filter.signal((stamps_ns - stamp0_ns) * 1e-9, angles, speeds)
-    result = {'crank_angle': motion[:, 0], 'crank_speed': motion[:, 1],
-              'crank_accel': motion[:, 2], 'orbit': None, 'stopped': None}
-    _replay_rows(estimator, stamps_ns, angles, speeds, motion, result, on_rows, previous_ns)
-    result['orbit'] = estimator.orbit
-    result['resume'] = (estimator, rate_filter, stamp0_ns, int(stamps_ns[-1]))
-    return result
-
-
-def _allocate(result, count, size):
-    """Add the per-row outputs to a replay's ``result`` (NaN); return (modal, records)."""
-    modal = np.full((count, size), math.nan)
-    result['velocity'] = np.full((count, size), math.nan)
-    records = np.full((count, RECORD_SIZE), math.nan)
-    outputs, joints = len(OUTPUT_NAMES), len(JOINT_NAMES)
-    joint = records[:, 2 * outputs:]
-    result.update({'lever_tip': records[:, 0:2], 'coupler_mid': records[:, 2:4],
-                   'correction': records[:, outputs:2 * outputs], 'modal': modal,
-                   'force': joint[:, :2 * joints].reshape(count, joints, 2),
-                   'force_dot': joint[:, 2 * joints:4 * joints].reshape(count, joints, 2),
-                   'rms2': joint[:, 4 * joints:]})
-    return modal, records
-
-
-def _replay_rows(estimator, stamps_ns, angles, speeds, motion, result, on_rows, previous_ns):
-    """Run the steps of :func:`replay` into ``result`` (its 'stopped' set where one failed)."""
-    count = stamps_ns.size
-    modal, records = _allocate(result, count, estimator.model.size)
-    # The first samples (start and, without measured speeds, the deferred warm start) go
-    # through update() itself; the steps continue from its state.
-    prefix = min(3 if (estimator.warm_start and speeds is None) else 1, count)
-    if previous_ns is not None:
-        prefix = 0              # a resumed segment: the estimator has its state
-    for n in range(prefix):
-        sample = estimator.update(int(stamps_ns[n]), float(angles[n]),
-                                  None if speeds is None else float(speeds[n]))
-        if sample.flags & OUT_OF_BOUND:
-            return _stop(result, n, on_rows)
-        modal[n] = sample.modal
-        result['velocity'][n] = estimator.state[modal.shape[1]:]
-        records[n] = estimator.last_record
-    # A non-finite filter output ends the steps before it (the stepper must not see it).
-    finite = np.all(np.isfinite(motion[prefix:]), axis=1)
-    last = prefix + (int(np.argmin(finite)) if not np.all(finite) else finite.size)
-    rows = _row_table(estimator, stamps_ns, motion, slice(prefix, last), previous_ns)
-    if on_rows is not None:
-        on_rows(result, prefix)
-    stopped = _step_chunks(estimator, rows, prefix, (modal, records, result['velocity']),
-                           result, on_rows)
-    if stopped is not None:
-        return _stop(result, stopped, on_rows)
-    if last < count:
-        return _stop(result, last, on_rows)
-    return None
-
-
-def _row_table(estimator, stamps_ns, motion, rows, previous_ns):
-    """Return the step rows of samples ``rows`` as update() builds them (ROW_SIZE each)."""
-    model = estimator.model
-    wrapped, speed, accel, advance = motion.T
-    model_speed = np.clip(speed, -model.speed_max, model.speed_max)
-    model_accel = np.clip(accel, -estimator.accel_limit, estimator.accel_limit)
-    # Step [s], sub-steps, crank state, advance.
-    before = stamps_ns[0] if previous_ns is None else previous_ns
-    dt_ns = np.diff(stamps_ns, prepend=before)[rows]
-    return np.column_stack([dt_ns * 1e-9, -(-dt_ns // MAX_SUBSTEP_NS), wrapped[rows],
-                            model_speed[rows], model_accel[rows], advance[rows]])
-
-
-def _step_chunks(estimator, rows, prefix, outputs, result, on_rows):
-    """
-    Step through ``rows`` in chunks of REPLAY_CHUNK; return the first row that failed, or None.
-
-    ``outputs`` = (modal, records, velocity) of the replay, filled from row ``prefix`` on; a
-    row fails when its step is singular or non-finite or its deflection is beyond the bound.
-    """
-    modal, records, velocity = outputs
-    r = estimator.model.size
-    channels = len(OUTPUT_NAMES)
-    states = np.empty((min(REPLAY_CHUNK, rows.shape[0]), 2 * r))
-    for first in range(0, rows.shape[0], REPLAY_CHUNK):
-        chunk = rows[first:first + REPLAY_CHUNK]
-        done = slice(prefix + first, prefix + first + chunk.shape[0])
-        states[:] = math.nan            # rows after a failed step stay NaN
-        try:
-            estimator.step_rows(chunk, states[:chunk.shape[0]], records[done])
-        except ValueError:              # singular or non-finite step: found below
-            pass
-        modal[done] = states[:chunk.shape[0], :r]
-        velocity[done] = states[:chunk.shape[0], r:]
-        good = np.all(np.isfinite(states[:chunk.shape[0]]), axis=1) & np.all(
-            np.abs(records[done, :channels]) <= estimator.deflection_bound_m, axis=1)
-        if not np.all(good):
-            return done.start + int(np.argmin(good))
-        if on_rows is not None:
-            on_rows(result, done.stop)
-    return None
-
-
-def _stop(result, row, on_rows):
-    """Mark ``row`` out of bound (NaN) in a replay's result; the rows before it are final."""
-    for key in ('lever_tip', 'coupler_mid', 'modal', 'velocity', 'force', 'force_dot', 'rms2'):
-        result[key][row:] = math.nan
-    result['stopped'] = row
-    if on_rows is not None:
-        on_rows(result, row)
