@@ -168,7 +168,7 @@ def _first_messages(files, wanted):
                     return kept
                 heads = message_heads(records, messages)
                 for channel_id, (name, type_name) in _topics_of(
-                        salvage, np.unique(heads['channel']).tolist()).items():
+                        salvage, sorted(set(heads['channel'].tolist()))).items():
                     if name in wanted and type_name == JOINT_STATE:
                         _probe(kept.setdefault(name, []), heads, records, messages, channel_id)
         finally:
@@ -215,7 +215,7 @@ def iter_topic_messages(path, topic, type_name=JOINT_STATE, block=65536, damaged
         for salvage, records, messages in _file_units(file, damaged):
             heads = message_heads(records, messages)
             wanted = [channel_id for channel_id, found in _topics_of(
-                salvage, np.unique(heads['channel']).tolist()).items()
+                salvage, sorted(set(heads['channel'].tolist()))).items()
                 if found == (topic, type_name)]
             rows = np.flatnonzero(np.isin(heads['channel'], wanted))
             for first in range(0, rows.size, block):

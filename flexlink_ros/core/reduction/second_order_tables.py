@@ -149,7 +149,7 @@ class SecondOrderForms:
         self.slots = int(max(gather[:, 0].max(initial=-1), form[:, 1:].max(initial=-1))) + 1
         # One dense (slots x rows) gather per trig scalar (-1: the constant 1).
         self.gathers = {}
-        for trig in np.unique(gather[:, 2]).tolist():
+        for trig in sorted(set(gather[:, 2].tolist())):
             chosen = gather[:, 2] == trig
             dense = np.zeros((self.slots, self.rows.shape[0]))
             np.add.at(dense, (gather[chosen, 0], gather[chosen, 1]), coef[chosen])
