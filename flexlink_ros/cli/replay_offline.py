@@ -49,11 +49,14 @@ class ReadAhead:
 
     The input's chunks are read (decompressed, walked, parsed) beside the estimate, which then
     only takes them. Its errors are raised where the items are taken; :meth:`close` stops it.
+    With ``begin`` (an Event), nothing is read before it is set: the estimate's start (the
+    warm start, numpy calls that each give the GIL up and wait to get it back) runs alone.
     """
 
-    def __init__(self, items, depth=2):
+    def __init__(self, items, depth=2, begin=None):
         self.items, self.ready = items, queue.Queue(depth)
         self.stop, self.ended = threading.Event(), False
+        self.begin = begin
         self.thread = threading.Thread(target=self._run, name='replay-read', daemon=True)
         self.thread.start()
 
@@ -73,6 +76,10 @@ class ReadAhead:
 
     def _run(self):
         try:
+            if self.begin is not None:
+                while not self.begin.wait(0.1):
+                    if self.stop.is_set():
+                        raise _Stopped()
             last = ('end', None)
             try:
                 for item in self.items:
@@ -120,6 +127,7 @@ class InputRows:
         self.first_log_ns = self.last_log_ns = None
         self.peeked = collections.deque()
         self.pending = collections.deque()      # read, given to the estimate, not yet written
+        self.estimate_started = threading.Event()
 
     def _next(self):
         """Return the next chunk with a usable sample (counting the rest), or None."""
@@ -180,8 +188,10 @@ class InputRows:
         started here: in the estimate's thread, after any fork (:mod:`.replay_split`).
         """
         if not isinstance(self.chunks, ReadAhead):
-            self.chunks = ReadAhead(self.chunks)
+            self.chunks = ReadAhead(self.chunks, begin=self.estimate_started)
         while True:
+            if not self.peeked:
+                self.estimate_started.set()     # it needs what is read ahead
             chunk = self.peeked.popleft() if self.peeked else self._next()
             if chunk is None:
                 return
@@ -356,6 +366,7 @@ class _Pipeline:
             pass
 
     def _emit(self, first, estimate):
+        self.rows.estimate_started.set()
         _put(self.blocks, (first, self.rows.take(len(estimate['flags'])), estimate), self.stop)
 
     def __iter__(self):

@@ -10,6 +10,8 @@ topic) and written in batches of samples (:meth:`McapRecorder.write_batch`) as
 laid out in one buffer that the chunks are cut from.
 """
 
+import itertools
+
 import numpy as np
 
 from .mcap_writer import McapFileWriter
@@ -262,6 +264,11 @@ def write_replay(out_path, blocks, input_topic, topics, frame_id, model, markers
         The recorder's final status.
 
     """
+    # The file is set up once the first rows are estimated: the estimate's start (its warm
+    # start, numpy calls that each give the GIL up) then does not share the GIL with it.
+    blocks = iter(blocks)
+    head = next(blocks, None)
+    blocks = itertools.chain([] if head is None else [head], blocks)
     recorder = McapRecorder(out_path, chunk_size_bytes=OUTPUT_CHUNK_BYTES,
                             flush_period_s=OUTPUT_FLUSH_PERIOD_S, flush_thread=False,
                             provenance=provenance, compression_level=OUTPUT_ZSTD_LEVEL)

@@ -7,6 +7,7 @@ import pathlib
 import subprocess
 import sys
 import threading
+import time
 
 from flexlink_ros.cli.replay_offline import ReadAhead
 from flexlink_ros.io.recorder import McapRecorder
@@ -248,3 +249,22 @@ def test_closing_stops_a_reader_waiting_on_a_full_queue():
     assert next(ahead) == 0
     ahead.close()
     assert not ahead.thread.is_alive() and len(produced) <= 4
+
+
+def test_reading_ahead_waits_for_its_signal_and_stops_while_it_waits():
+    produced = []
+
+    def items():
+        for n in range(5):
+            produced.append(n)
+            yield n
+
+    begin = threading.Event()
+    ahead = ReadAhead(items(), depth=2, begin=begin)
+    time.sleep(0.3)
+    assert produced == []             # the estimate's start has the GIL to itself
+    begin.set()
+    assert list(ahead) == list(range(5))
+    waiting = ReadAhead(items(), begin=threading.Event())
+    waiting.close()
+    assert not waiting.thread.is_alive()
