@@ -224,7 +224,7 @@ def add_estimator_arguments(parser, second_order=True):
     add_reduced_arguments(parser)
 
 
-def model_options(args, **overrides):
+def model_options(args, read=None, **overrides):
     """
     Build the reduced model's options from the command-line arguments, with overrides.
 
@@ -237,6 +237,9 @@ def model_options(args, **overrides):
     ----------
     args : argparse.Namespace
         Parsed flags of :func:`add_estimator_arguments`.
+    read : tuple, optional
+        ``--mechanism``'s file as :func:`core.mechanism_file.read_mechanism_file` gave it
+        (Mechanism, ``stiffness_damping_s``), when the caller has read it.
     **overrides
         Fields set whatever the flags say.
 
@@ -245,7 +248,7 @@ def model_options(args, **overrides):
     ModelOptions
 
     """
-    mechanism, file_beta = read_mechanism_file(args.mechanism)
+    mechanism, file_beta = read_mechanism_file(args.mechanism) if read is None else read
     values = {'rigid_crank': bool(args.rigid_crank), 'bearings': args.bearings,
               'geometric_stiffness': not args.no_geometric_stiffness,
               'elements_per_link': elements_per_link(args),

@@ -10,7 +10,8 @@ and is refused without it (:class:`MissingModel`, exit code 2).
 """
 
 from .model_args import model_options
-from ..core.mechanism_file import load_mechanism, stiffness_damping_from_file
+from ..core.mechanism_file import load_mechanism, read_mechanism_file, read_mechanism_source, \
+    stiffness_damping_from_file
 from ..core.options import ModelOptions
 from ..io.provenance import mechanism_bytes, provenance_entries, ProvenanceError, \
     read_provenance
@@ -156,11 +157,14 @@ def _flags_model(args, recorded, broken):
                            ' give --mechanism FILE (and the model flags it was run with)')
     filled = with_flag_defaults(args)
     args.joint = filled.joint
-    options = model_options(filled)
-    mechanism = load_mechanism(args.mechanism)
+    # Read once: the model and the provenance describe the same bytes.
+    path, raw = read_mechanism_source(args.mechanism)
+    mechanism, file_beta = read_mechanism_file(path, raw)
+    options = model_options(filled, read=(mechanism, file_beta))
     notes = [broken or f'the recording names no model: using --mechanism {args.mechanism} '
              'and the flags']
-    provenance = provenance_entries(PRODUCER, mechanism=args.mechanism, options=options,
+    provenance = provenance_entries(PRODUCER, mechanism=str(path.resolve()), options=options,
                                     damping_ratio=mechanism.damping_ratio,
-                                    crank_joint=args.joint, warm_start=not args.no_warm_start)
+                                    crank_joint=args.joint, warm_start=not args.no_warm_start,
+                                    raw=raw)
     return mechanism, options, notes, provenance

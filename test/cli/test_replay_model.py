@@ -15,6 +15,10 @@ import subprocess
 import sys
 import time
 
+from flexlink_ros.cli import main as cli_main
+from flexlink_ros.cli.model_args import model_options
+from flexlink_ros.cli.replay_model import replay_model, with_flag_defaults
+from flexlink_ros.core import mechanism_file
 from flexlink_ros.names import FIRST_INPUT_MESSAGE, READY_MESSAGE
 from matplotlib import image
 from node_runs import wait_for_log
@@ -24,6 +28,7 @@ from test_replay import deflections_by_stamp, joint_state, write_recording
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 SOFT = ROOT / 'test' / 'data' / 'soft_linkage.yaml'
 STEEL = ROOT / 'test' / 'data' / 'steel_linkage.yaml'
+CONFIG = ROOT / 'config'
 # Each linkage, its crank speed [rpm] and the markers' exaggeration the node derives for it.
 # The markers' exaggeration the node derives: the expected peak up to the machine's speed
 # (1.25 x the file's speed, not the range's 620 rpm floor) drawn as at least 5 % of the
@@ -56,6 +61,32 @@ def test_a_bag_that_names_no_model_needs_mechanism(tmp_path):
                     '--markers-every-n', '0')
     assert result.returncode == 0, result.stderr
     assert 'note: the recording names no model: using --mechanism cho1992' in result.stdout
+
+
+def test_the_mechanism_file_is_read_once_for_the_model_and_its_record(tmp_path, monkeypatch):
+    """--mechanism on a bag that names no model: one read, and the record holds those bytes."""
+    bag = tmp_path / 'plain'
+    write_recording(bag, [10**9 + k * 10**6 for k in range(20)],
+                    [0.03 * k for k in range(20)], [30.0] * 20)
+    source = CONFIG / 'cho1992.yaml'
+    linkage = tmp_path / 'linkage.yaml'
+    linkage.write_bytes(source.read_bytes().replace(b'damping_ratio: 0.02',
+                                                    b'damping_ratio: 0.03'))
+    reads = []
+    read_mapping = mechanism_file._read_mapping
+
+    def counted(path_or_name, raw=None):
+        reads.append(path_or_name)
+        return read_mapping(path_or_name, raw)
+    monkeypatch.setattr(mechanism_file, '_read_mapping', counted)
+    args = cli_main.build_parser(['replay']).parse_args(
+        ['replay', str(bag), '--mechanism', str(linkage), '--out', str(tmp_path / 'o.mcap')])
+    mechanism, options, _, provenance = replay_model(args)
+    assert len(reads) == 1
+    assert mechanism.damping_ratio == 0.03 and provenance['damping_ratio'] == '0.03'
+    assert provenance['mechanism_yaml'].encode() == linkage.read_bytes()
+    assert provenance['mechanism_file'] == str(linkage.resolve())
+    assert options == model_options(with_flag_defaults(args))     # as the flags alone give
 
 
 def _record_linkage(tmp_path, processes, mechanism, rpm, nonlinear='auto'):
