@@ -16,6 +16,7 @@ from geometry_msgs.msg import Vector3Stamped
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import InvalidHandle
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
 from rclpy.subscription import RCLError
@@ -401,7 +402,9 @@ class EstimatorNode(NodeRecording):
         for key, data in outputs:
             try:
                 self.publishers_[key].publish(data)
-            except RCLError as exc:
+            except (RCLError, InvalidHandle) as exc:
+                # InvalidHandle: the markers still waiting at shutdown are delivered after
+                # rclpy shut the context down (recorded all the same, not published).
                 if not is_shutdown_error(exc, self.context):
                     raise
                 return False

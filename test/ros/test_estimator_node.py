@@ -104,3 +104,28 @@ def test_linear_resampling_is_np_interp_of_each_coordinate(points, count):
             np.testing.assert_allclose(
                 resampled[link, :, axis], np.interp(target, source, values[link, :, axis]),
                 rtol=1e-13, atol=1e-15)
+
+
+def test_a_publish_after_shutdown_is_said_and_not_raised():
+    """Markers still waiting at SIGTERM are delivered after rclpy shut the context down."""
+    import types
+
+    import rclpy
+    from rclpy.context import Context
+    from std_msgs.msg import String
+
+    from flexlink_ros.ros.estimator_node import EstimatorNode
+
+    context = Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node('flexlink_shutdown_publish', context=context)
+    try:
+        publisher = node.create_publisher(String, 'flexlink_shutdown_markers', 10)
+        owner = types.SimpleNamespace(publishers_={'markers': publisher}, context=context)
+        data = cdr.serialize_message(String(data='m'))
+        assert EstimatorNode._publish(owner, [('markers', data)])
+        context.try_shutdown()
+        assert EstimatorNode._publish(owner, [('markers', data)]) is False
+    finally:
+        node.destroy_node()
+        context.try_shutdown()
