@@ -368,19 +368,21 @@ class EstimatorNode(NodeRecording):
         sec, nanosec = divmod(stamp_ns, 1_000_000_000)
         frame = self._frame
         outputs = [('lever_tip', vector3_stamped_cdr(sec, nanosec, frame, *lever_tip))]
-        published = self._publish(outputs)
+        published = self._publish(outputs)     # False once SIGTERM shut rclpy down
         outputs += [
             ('coupler_mid', vector3_stamped_cdr(sec, nanosec, frame, *coupler_mid)),
             ('criteria', criteria_cdr(sec, nanosec, frame, sample.criterion,
                                       sample.gamma_dot, sample.reaction_n)),
             ('quality', quality_cdr(sec, nanosec, frame, sample.error_indicator, validity))]
-        published = published and self._publish(outputs[1:])
+        if published:
+            self._publish(outputs[1:])
         self.period.add_sample(sample, validity)
         self._clipped.add(sample)     # beyond the model's speed range: counted and said
         if sample.message:
             self.get_logger().warning(f'estimator: {sample.message}',
                                       throttle_duration_sec=WARN_THROTTLE_S)
-        marked = published and self.totals.published % self.values['markers.every_n'] == 0
+        # Drawn even if SIGTERM shut rclpy down meanwhile: recorded as this sample's outputs.
+        marked = self.totals.published % self.values['markers.every_n'] == 0
         self.totals.published += 1
         log_ns = (self._log_time(self._clock.now().nanoseconds, stamp_ns)
                   if self.recorder is not None or marked else 0)
