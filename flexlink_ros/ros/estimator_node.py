@@ -326,7 +326,7 @@ class EstimatorNode(NodeRecording):
         start = time.perf_counter_ns()
         values = follower.sample(stamp_ns, sample.crank_angle, sample.crank_speed).tolist()
         self.period.update_ns[-1] += time.perf_counter_ns() - start
-        largest = max(abs(value) for value in values)
+        largest = max(map(abs, values))
         bound = self.estimator.deflection_bound_m
         if not largest <= bound:      # also NaN
             follower.restart()

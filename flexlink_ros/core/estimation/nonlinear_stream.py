@@ -281,6 +281,46 @@ class NonlinearStepper:
         self.iterations += iterations
         self.guess = (self._guess_view, buffer[-1]) if has_guess else None
 
+    def _step_one(self, h, angle0, angle1, speed0, speed1, halvings):
+        """
+        Step one sample interval with the compiled march (:meth:`step`'s compiled path).
+
+        The node's per-sample call: the march's argument list is made once and kept while
+        the state's arrays stay the same objects (a start or the numpy step replaces them),
+        so a sample costs one call with no tuple of 37 arguments built anew.
+        """
+        args = self.__dict__.get('_one_args')
+        if (args is None or args[12] is not self.q or args[13] is not self.v
+                or args[15] is not self.axial or args[16] is not self.slope
+                or args[17] is not self.output_operator):
+            args = self._one_arguments()
+        if self.guess is not None and self.guess[0] is not self._guess_view:
+            buffer = self._guess_buffer
+            buffer[:-1], buffer[-1] = self.guess[0].ravel(), self.guess[1]
+        pair = self._one_pair
+        pair[0], pair[1], pair[2], pair[3], pair[4], pair[5] = (0.0, h, angle0, angle1, speed0,
+                                                                speed1)
+        args[35], args[36] = halvings, self.guess is not None
+        iterations, has_guess = compiled_newton.march(*args)
+        self.iterations += iterations
+        self.guess = (self._guess_view, self._guess_buffer[-1]) if has_guess else None
+        return self._one_converged[0] != 0.0
+
+    def _one_arguments(self):
+        """Make (and keep) the compiled march's argument list for one sample interval."""
+        arrays, sizes, constants, one = self._native_arguments()
+        if self.output_operator is None:
+            self.output_operator = np.zeros((self.tables.outputs, self.tables.size))
+        # times, angles and speeds: (0, h), (angle0, angle1), (speed0, speed1) in one buffer
+        self._one_pair = np.empty(6)
+        times, angles, speeds = self._one_pair[0:2], self._one_pair[2:4], self._one_pair[4:6]
+        self._one_converged = one[6]
+        args = [*arrays, times, angles, speeds, self.q, self.v, self._guess_buffer, self.axial,
+                self.slope, self.output_operator, *one[3:], self._work, *sizes, 1, *constants,
+                MAX_HALVINGS, False]
+        self._one_args = args
+        return args
+
     def march(self, times, angles, speeds, halvings=MAX_HALVINGS):
         """
         Step the state through samples 1.. of ``times`` [s], unwrapped ``angles``, ``speeds``.
@@ -305,12 +345,7 @@ class NonlinearStepper:
         a non-finite input or a step that is not positive).
         """
         if self.compiled:          # the compiled march checks the input itself
-            times, angles, speeds, *out = self._native_arguments()[3]
-            times[1], angles[0], angles[1], speeds[0], speeds[1] = h, angle0, angle1, speed0, \
-                speed1
-            times[0] = 0.0
-            self._call_march(times, angles, speeds, out, halvings)
-            return bool(out[3][0])
+            return self._step_one(h, angle0, angle1, speed0, speed1, halvings)
         if not (np.isfinite([h, angle0, angle1, speed0, speed1]).all() and h > 0.0):
             return False
         c = self.method.c

@@ -294,6 +294,25 @@ def test_march_steps_many_samples_as_one_sample_calls(tables):
     assert single.iterations == batch.iterations > count
 
 
+def test_one_sample_steps_follow_the_state_arrays_a_start_replaces(tables):
+    # the per-sample step keeps the march's arguments; a start makes new state arrays, which
+    # the next step must write (not the old ones)
+    pytest.importorskip('flexlink_ros.core.estimation._nonlinear_step')
+    kept, fresh = NonlinearStepper(tables), NonlinearStepper(tables)
+    kept.start(0.0, SPEED)
+    for k in range(5):
+        assert kept.step(1e-3, SPEED * k * 1e-3, SPEED * (k + 1) * 1e-3, SPEED, SPEED)
+    for stepper in (kept, fresh):
+        stepper.start(1.0, SPEED)
+    for k in range(20):
+        angles = (1.0 + SPEED * k * 1e-3, 1.0 + SPEED * (k + 1) * 1e-3)
+        for stepper in (kept, fresh):
+            assert stepper.step(1e-3, *angles, SPEED, SPEED)
+    for name in ('q', 'v', 'output_operator', 'slope', 'axial'):
+        np.testing.assert_array_equal(getattr(kept, name), getattr(fresh, name))
+    assert np.any(kept.q != 0.0)
+
+
 def test_march_refuses_a_table_layout_outside_its_rows(tables):
     pytest.importorskip('flexlink_ros.core.estimation._nonlinear_step')
     stepper = NonlinearStepper(tables)
