@@ -140,8 +140,8 @@ class NonlinearFollower:
             self.validity = float('nan')     # a start is not judged
             return stepper.outputs(angle)
         _, theta0, speed0 = self.last
-        theta = unwrap_next(theta0, float(angle), speed0, float(speed), h)
-        if stepper.step(h, theta0, theta, speed0, speed):
+        theta, converged = stepper.step_to(h, theta0, float(angle), speed0, float(speed))
+        if converged:
             output = stepper.output_operator @ stepper.q
         else:
             self.counts['refused_samples'] += 1

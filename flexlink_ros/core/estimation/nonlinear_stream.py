@@ -281,45 +281,56 @@ class NonlinearStepper:
         self.iterations += iterations
         self.guess = (self._guess_view, buffer[-1]) if has_guess else None
 
-    def _step_one(self, h, angle0, angle1, speed0, speed1, halvings):
+    def step_to(self, h, angle0, angle, speed0, speed, halvings=MAX_HALVINGS):
         """
-        Step one sample interval with the compiled march (:meth:`step`'s compiled path).
+        Step to a sample whose angle may be wrapped: (its unwrapped angle, converged).
 
-        The node's per-sample call: the march's argument list is made once and kept while
-        the state's arrays stay the same objects (a start or the numpy step replaces them),
-        so a sample costs one call with no tuple of 37 arguments built anew.
+        The angle is unwrapped from ``angle0`` by the speeds (:func:`unwrap_next`), then
+        :meth:`step` steps to it: in one compiled call where built (the same numbers).
         """
-        args = self.__dict__.get('_one_args')
-        if (args is None or args[12] is not self.q or args[13] is not self.v
-                or args[15] is not self.axial or args[16] is not self.slope
-                or args[17] is not self.output_operator):
-            args = self._one_arguments()
+        if self.compiled:
+            stepped = self._step_one(h, angle0, angle, speed0, speed, halvings, True)
+            if stepped is not None:
+                return stepped
+        theta = unwrap_next(angle0, angle, speed0, speed, h)   # raises on a non-finite turn
+        return theta, self.step(h, angle0, theta, speed0, speed, halvings)
+
+    def _step_one(self, h, angle0, angle, speed0, speed, halvings, unwrap):
+        """
+        Step one sample interval with the compiled Stepper: (angle stepped to, converged).
+
+        The node's per-sample call: the Stepper holds the march's buffers and is made again
+        only when a start (or the numpy step) replaces the state's arrays. None where the
+        unwrapping is not finite (nothing changed).
+        """
+        kernel, kept = self.__dict__.get('_kernel'), self.__dict__.get('_kernel_arrays')
+        if (kernel is None or kept[0] is not self.q or kept[1] is not self.v
+                or kept[2] is not self.axial or kept[3] is not self.slope
+                or kept[4] is not self.output_operator):
+            kernel = self._make_kernel()
         if self.guess is not None and self.guess[0] is not self._guess_view:
             buffer = self._guess_buffer
             buffer[:-1], buffer[-1] = self.guess[0].ravel(), self.guess[1]
-        pair = self._one_pair
-        pair[0], pair[1], pair[2], pair[3], pair[4], pair[5] = (0.0, h, angle0, angle1, speed0,
-                                                                speed1)
-        args[35], args[36] = halvings, self.guess is not None
-        iterations, has_guess = compiled_newton.march(*args)
+        stepped = kernel.step(h, angle0, angle, speed0, speed, self.guess is not None,
+                              halvings, unwrap)
+        if stepped is None:
+            return None
+        theta, iterations, has_guess, converged = stepped
         self.iterations += iterations
         self.guess = (self._guess_view, self._guess_buffer[-1]) if has_guess else None
-        return self._one_converged[0] != 0.0
+        return theta, converged != 0
 
-    def _one_arguments(self):
-        """Make (and keep) the compiled march's argument list for one sample interval."""
+    def _make_kernel(self):
+        """Make (and keep) the compiled Stepper of the state's current arrays."""
         arrays, sizes, constants, one = self._native_arguments()
         if self.output_operator is None:
             self.output_operator = np.zeros((self.tables.outputs, self.tables.size))
-        # times, angles and speeds: (0, h), (angle0, angle1), (speed0, speed1) in one buffer
-        self._one_pair = np.empty(6)
-        times, angles, speeds = self._one_pair[0:2], self._one_pair[2:4], self._one_pair[4:6]
-        self._one_converged = one[6]
-        args = [*arrays, times, angles, speeds, self.q, self.v, self._guess_buffer, self.axial,
-                self.slope, self.output_operator, *one[3:], self._work, *sizes, 1, *constants,
-                MAX_HALVINGS, False]
-        self._one_args = args
-        return args
+        state = (self.q, self.v, self._guess_buffer, self.axial, self.slope,
+                 self.output_operator)
+        self._kernel = compiled_newton.Stepper(*arrays, *one[:3], *state, *one[3:], self._work,
+                                               *sizes, 1, *constants, MAX_HALVINGS, False)
+        self._kernel_arrays = (self.q, self.v, self.axial, self.slope, self.output_operator)
+        return self._kernel
 
     def march(self, times, angles, speeds, halvings=MAX_HALVINGS):
         """
@@ -344,8 +355,8 @@ class NonlinearStepper:
         Returns True if every (sub)step converged; the state is unchanged otherwise (and for
         a non-finite input or a step that is not positive).
         """
-        if self.compiled:          # the compiled march checks the input itself
-            return self._step_one(h, angle0, angle1, speed0, speed1, halvings)
+        if self.compiled:          # the compiled step checks the input itself
+            return self._step_one(h, angle0, angle1, speed0, speed1, halvings, False)[1]
         if not (np.isfinite([h, angle0, angle1, speed0, speed1]).all() and h > 0.0):
             return False
         c = self.method.c
