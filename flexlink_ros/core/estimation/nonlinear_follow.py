@@ -147,7 +147,8 @@ class NonlinearFollower:
         _, theta0, speed0 = self.last
         theta, converged = stepper.step_to(h, theta0, float(angle), speed0, float(speed))
         if converged:
-            output = stepper.output_operator @ stepper.q
+            # ndarray.dot: the same BLAS product as @ (the same bits), half its call's cost
+            output = stepper.output_operator.dot(stepper.q)
         else:
             self.counts['refused_samples'] += 1
             output = stepper.outputs(theta)

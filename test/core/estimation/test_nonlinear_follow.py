@@ -102,6 +102,18 @@ def test_judging_after_the_sample_gives_what_sample_gives(tables):
     assert now.slope_max > 0.0 and now.counts['restarts'] == 1
 
 
+def test_a_sample_outputs_the_matrix_product_of_its_state(tables):
+    # the output the node publishes: the operator times the state, as numpy's @, bit for bit
+    stamps, angles, speeds = _signal(200)
+    follower = NonlinearFollower(tables, reset_gap_s=0.5)
+    for s, a, w in zip(stamps.tolist(), angles.tolist(), speeds.tolist()):
+        output = follower.sample(s, a, w)
+        stepper = follower.stepper
+        if follower.counts['samples'] > 1:
+            assert np.array_equal(output, stepper.output_operator @ stepper.q)
+    assert follower.counts['refused_samples'] == 0
+
+
 def test_following_blocks_of_samples_gives_what_sample_by_sample_gives(tables):
     """follow() marches runs in one compiled call: sample()'s numbers, gaps and counts."""
     stamps, angles, speeds = _signal(900)
