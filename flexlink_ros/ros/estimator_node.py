@@ -319,17 +319,20 @@ class EstimatorNode(NodeRecording):
         Return (lever tip, coupler mid, validity indicator) to publish, or None (counted).
 
         The nonlinear model's where it runs (stepped on the linear estimator's crank angle
-        and speed, its time counted in the update's), else the linear sample's.
+        and speed, its time counted in the update's; its validity None: the follower's
+        ``judge`` gives it once the lever tip is published), else the linear sample's.
         """
         follower = self.follower
         if follower is None:
             return sample.lever_tip, sample.coupler_mid, sample.nonlinearity
         start = time.perf_counter_ns()
-        values = follower.sample(stamp_ns, sample.crank_angle, sample.crank_speed).tolist()
+        values = follower.sample(stamp_ns, sample.crank_angle, sample.crank_speed,
+                                 judge=False).tolist()
         self.period.update_ns[-1] += time.perf_counter_ns() - start
-        largest = max(abs(value) for value in values)
+        largest = max(map(abs, values))
         bound = self.estimator.deflection_bound_m
         if not largest <= bound:      # also NaN
+            follower.judge()
             follower.restart()
             self._count('out_of_bound')
             self.period.flags |= OUT_OF_BOUND
@@ -339,7 +342,8 @@ class EstimatorNode(NodeRecording):
                                       + self.period.last_out_of_bound,
                                       throttle_duration_sec=WARN_THROTTLE_S)
             return None
-        return values[0:2], values[2:4], follower.validity
+        # The validity (the link slopes judged) waits until the lever tip is out.
+        return values[0:2], values[2:4], None
 
     def _count(self, kind):
         self.totals.counts[kind] += 1
@@ -369,6 +373,8 @@ class EstimatorNode(NodeRecording):
         frame = self._frame
         outputs = [('lever_tip', vector3_stamped_cdr(sec, nanosec, frame, *lever_tip))]
         published = self._publish(outputs)     # False once SIGTERM shut rclpy down
+        if validity is None:        # the nonlinear model's, judged after the lever tip
+            validity = self.follower.judge()
         outputs += [
             ('coupler_mid', vector3_stamped_cdr(sec, nanosec, frame, *coupler_mid)),
             ('criteria', criteria_cdr(sec, nanosec, frame, sample.criterion,

@@ -87,6 +87,18 @@ def test_output_cdr_decodes_with_rclpy_and_equals_the_node_messages():
     assert list(decoded.name) == ['O2', 'A', 'B', 'O4'] and decoded.effort[3] == 40.0
 
 
+@pytest.mark.parametrize('frame', ['', 'g', 'ab', 'abc', 'abcd', 'abcde', 'abcdef', 'abcdefg',
+                                   'linkage_ground', 'machine_base_frame'])
+def test_vector3_stamped_equals_rclpy_for_any_frame_length(frame):
+    """The one-struct encoder against rclpy, frames of every padding class (and none)."""
+    for stamp_ns in (1, 1_700_000_000_987_654_321):
+        stamp = ros_messages.ns_to_stamp(stamp_ns)
+        got = output_cdr.vector3_stamped_cdr(stamp.sec, stamp.nanosec, frame.encode(),
+                                             -3.25e-4, 1.5e-3)
+        expected = output_messages.deflection_message(stamp, frame, -3.25e-4, 1.5e-3)
+        assert got == rclpy_exact(expected)
+
+
 @pytest.mark.parametrize('frame', ['g', 'linkage_ground', 'abc', 'machine_base_frame'])
 def test_criteria_template_path_equals_rclpy_for_any_frame_length(frame):
     """The per-sample template encoder against rclpy, frames of every padding class."""

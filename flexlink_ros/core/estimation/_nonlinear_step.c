@@ -3,13 +3,14 @@
  * NonlinearStepper's numpy step in flexlink_ros/core/estimation/nonlinear_stream.py (its
  * reference; a test compares the two). Plain C API, no numpy headers.
  *
- * march(...): see its notes below. One call steps one sample (the streaming update) or many
- * (offline): per step the tables are read at the stage angles by cubic Hermite interpolation
- * (only the fields the step uses; both stages in one pass over the rows of the grid nodes
- * they share), the linear part is formed from them, and the stage
- * accelerations are solved by simplified Newton (the Jacobian formed at the step's start and
- * again when an iteration contracts by less than half); a step that fails is retried as two
- * halves. No Python object is touched between the samples.
+ * march(...): see its notes below. One call steps one sample or many (offline); a Stepper
+ * (one estimator's step, its buffers taken once) steps the streaming update's samples. Per
+ * step the tables are read at the stage angles by cubic Hermite interpolation (only the
+ * fields the step uses; both stages in one pass over the rows of the grid nodes they share),
+ * the linear part is formed from them, and the stage accelerations are solved by simplified
+ * Newton (the Jacobian formed at the step's start and again when an iteration contracts by
+ * less than half); a step that fails is retried as two halves. No Python object is touched
+ * between the samples.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -713,29 +714,65 @@ static Py_ssize_t workspace_doubles(Py_ssize_t s, Py_ssize_t m, Py_ssize_t e, Py
            + (n * n + n + s * m + 2 * s + e + outputs * m) + 3 * s * (mm + m) + n * n;
 }
 
-static PyObject *run_march(Model *md, Py_buffer *views, Py_ssize_t samples, int halvings,
-                           int has_guess)
+/* The workspace's parts inside the work buffer (views[23]) and the state's arrays. */
+static void work_of(const Model *md, Py_buffer *views, int has_guess, Work *wk, State *st)
 {
     const Py_ssize_t s = md->s, m = md->m, e = md->e, n = s * m, mm = m * m;
     const Py_ssize_t tables = 3 * s * mm + s * m + 2 * s * e * m + 2 * s * e * mm;
     const Py_ssize_t mem = 3 * n + 2 * s * mm + 4 * m;
     double *buf = views[23].buf;
     /* the pivots, as Py_ssize_t in doubles' room (both 8 bytes here, checked at import) */
-    Work wk = {buf, buf + tables, buf + tables + mem + n * n + n, NULL, NULL, NULL, NULL, NULL,
-               {buf + tables + mem, NULL, (Py_ssize_t *)(buf + tables + mem + n * n), 0}};
-    wk.angles = wk.acc + s * m;
-    wk.speed = wk.angles + s;
-    wk.axial = wk.speed + s;
-    wk.output = wk.axial + e;
-    wk.raw = wk.output + md->outputs * m;
-    wk.factor.lut = wk.raw + 3 * s * (mm + m);
-    State st = {views[12].buf, views[13].buf, views[14].buf, views[15].buf, views[16].buf,
-                views[17].buf, has_guess, 0};
-    Py_BEGIN_ALLOW_THREADS
-    march_samples(md, &st, &wk, views[9].buf, views[10].buf, views[11].buf, samples, halvings,
-                  views[18].buf, views[19].buf, views[20].buf, views[21].buf, views[22].buf);
-    Py_END_ALLOW_THREADS
-    return Py_BuildValue("(ni)", st.iterations, st.has_guess);
+    *wk = (Work){buf, buf + tables, buf + tables + mem + n * n + n, NULL, NULL, NULL, NULL, NULL,
+                 {buf + tables + mem, NULL, (Py_ssize_t *)(buf + tables + mem + n * n), 0}};
+    wk->angles = wk->acc + s * m;
+    wk->speed = wk->angles + s;
+    wk->axial = wk->speed + s;
+    wk->output = wk->axial + e;
+    wk->raw = wk->output + md->outputs * m;
+    wk->factor.lut = wk->raw + 3 * s * (mm + m);
+    *st = (State){views[12].buf, views[13].buf, views[14].buf, views[15].buf, views[16].buf,
+                  views[17].buf, has_guess, 0};
+}
+
+/*
+ * Take march's arguments: the sizes and constants into md (and samples, halvings, has_guess),
+ * the BUFFERS buffers into views. Returns 0, or -1 with an exception set and none taken.
+ */
+static int take_arguments(PyObject *const *args, Model *md, Py_ssize_t *samples, int *halvings,
+                          int *has_guess, Py_buffer *views)
+{
+    if (march_sizes(md, samples, halvings, has_guess, args) < 0)
+        return -1;
+    const Py_ssize_t s = md->s, m = md->m, e = md->e, k = *samples, p = md->outputs;
+    const Py_ssize_t counts[BUFFERS] = {md->nodes * md->fields, md->nodes * md->fields, FIELDS,
+                                        m * m, e, e, s * s, s * s, s, k + 1, k + 1, k + 1, m, m,
+                                        s * m + 1, e, e, p * m, k * p, k * e, k * e, k, k,
+                                        workspace_doubles(s, m, e, p)};
+    static const char *const names[BUFFERS] = {
+        "values", "slopes", "offsets", "bearing", "axial_stiffness", "link_length", "a", "a2",
+        "c", "times", "angles", "speeds", "q", "v", "guess", "axial", "slope", "output",
+        "outputs", "axial_out", "slope_out", "converged", "update_ns", "work"};
+    Py_ssize_t taken = 0;
+    for (; taken < BUFFERS; taken++)
+        if (get_doubles(args[taken], &views[taken], counts[taken], names[taken], taken >= 12)
+            < 0)
+            break;
+    if (taken == BUFFERS) {
+        md->values = views[0].buf;
+        md->slopes = views[1].buf;
+        md->off = views[2].buf;
+        md->bearing = views[3].buf;
+        md->k = views[4].buf;
+        md->length = views[5].buf;
+        md->a = views[6].buf;
+        md->a2 = views[7].buf;
+        md->c = views[8].buf;
+        if (check_offsets(md) == 0)
+            return 0;
+    }
+    for (Py_ssize_t i = 0; i < taken; i++)
+        PyBuffer_Release(&views[i]);
+    return -1;
 }
 
 static PyObject *march(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
@@ -748,40 +785,140 @@ static PyObject *march(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
     Model md;
     Py_ssize_t samples;
     int halvings, has_guess;
-    if (march_sizes(&md, &samples, &halvings, &has_guess, args) < 0)
-        return NULL;
-    const Py_ssize_t s = md.s, m = md.m, e = md.e, k = samples, p = md.outputs;
-    const Py_ssize_t counts[BUFFERS] = {md.nodes * md.fields, md.nodes * md.fields, FIELDS,
-                                        m * m, e, e, s * s, s * s, s, k + 1, k + 1, k + 1, m, m,
-                                        s * m + 1, e, e, p * m, k * p, k * e, k * e, k, k,
-                                        workspace_doubles(s, m, e, p)};
-    static const char *const names[BUFFERS] = {
-        "values", "slopes", "offsets", "bearing", "axial_stiffness", "link_length", "a", "a2",
-        "c", "times", "angles", "speeds", "q", "v", "guess", "axial", "slope", "output",
-        "outputs", "axial_out", "slope_out", "converged", "update_ns", "work"};
     Py_buffer views[BUFFERS];
-    Py_ssize_t taken = 0;
-    PyObject *result = NULL;
-    for (; taken < BUFFERS; taken++)
-        if (get_doubles(args[taken], &views[taken], counts[taken], names[taken], taken >= 12)
-            < 0)
-            goto release;
-    md.values = views[0].buf;
-    md.slopes = views[1].buf;
-    md.off = views[2].buf;
-    md.bearing = views[3].buf;
-    md.k = views[4].buf;
-    md.length = views[5].buf;
-    md.a = views[6].buf;
-    md.a2 = views[7].buf;
-    md.c = views[8].buf;
-    if (check_offsets(&md) == 0)
-        result = run_march(&md, views, samples, halvings, has_guess);
-release:
-    for (Py_ssize_t i = 0; i < taken; i++)
+    if (take_arguments(args, &md, &samples, &halvings, &has_guess, views) < 0)
+        return NULL;
+    Work wk;
+    State st;
+    work_of(&md, views, has_guess, &wk, &st);
+    Py_BEGIN_ALLOW_THREADS
+    march_samples(&md, &st, &wk, views[9].buf, views[10].buf, views[11].buf, samples, halvings,
+                  views[18].buf, views[19].buf, views[20].buf, views[21].buf, views[22].buf);
+    Py_END_ALLOW_THREADS
+    for (Py_ssize_t i = 0; i < BUFFERS; i++)
         PyBuffer_Release(&views[i]);
-    return result;
+    return Py_BuildValue("(ni)", st.iterations, st.has_guess);
 }
+
+/*
+ * Stepper(*march's 37 arguments, samples 1): one estimator's per-sample step (the node's
+ * streaming update), its buffers taken once. step(h, theta0, angle, speed0, speed, has_guess,
+ * halvings, unwrap) steps the state as march steps one sample (times 0, h; angles theta0 and
+ * theta), theta the angle unwrapped from theta0 by the speeds (unwrap_next of
+ * nonlinear_stream.py, the same arithmetic) if unwrap, else the angle as given. Returns
+ * (theta, iterations, has_guess, converged), or None where the unwrapping is not finite (the
+ * Python path then says why) with nothing changed.
+ */
+typedef struct {
+    PyObject_HEAD
+    Model md;
+    Py_buffer views[BUFFERS];
+    int holds;
+} Stepper;
+
+static int stepper_init(Stepper *self, PyObject *args, PyObject *kwargs)
+{
+    if (kwargs != NULL && PyDict_GET_SIZE(kwargs) > 0) {
+        PyErr_SetString(PyExc_TypeError, "Stepper takes march's arguments by position");
+        return -1;
+    }
+    if (self->holds) {
+        PyErr_SetString(PyExc_TypeError, "Stepper is made once");
+        return -1;
+    }
+    if (PyTuple_GET_SIZE(args) != MARCH_ARGS) {
+        PyErr_SetString(PyExc_TypeError, "Stepper takes march's 37 arguments");
+        return -1;
+    }
+    Py_ssize_t samples;
+    int halvings, has_guess;
+    if (take_arguments(&PyTuple_GET_ITEM(args, 0), &self->md, &samples, &halvings, &has_guess,
+                       self->views) < 0)
+        return -1;
+    self->holds = 1;
+    if (samples != 1) {
+        PyErr_SetString(PyExc_ValueError, "Stepper steps one sample (samples 1)");
+        return -1;
+    }
+    return 0;
+}
+
+static void stepper_dealloc(Stepper *self)
+{
+    if (self->holds)
+        for (Py_ssize_t i = 0; i < BUFFERS; i++)
+            PyBuffer_Release(&self->views[i]);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+static PyObject *stepper_step(Stepper *self, PyObject *const *args, Py_ssize_t nargs)
+{
+    if (!self->holds) {
+        PyErr_SetString(PyExc_ValueError, "Stepper not made");
+        return NULL;
+    }
+    if (nargs != 8) {
+        PyErr_SetString(PyExc_TypeError,
+                        "step(h, theta0, angle, speed0, speed, has_guess, halvings, unwrap)");
+        return NULL;
+    }
+    double x[5];
+    for (int i = 0; i < 5; i++)
+        x[i] = PyFloat_AsDouble(args[i]);
+    const int has_guess = PyObject_IsTrue(args[5]);
+    const long halvings = PyLong_AsLong(args[6]);
+    const int unwrap = PyObject_IsTrue(args[7]);
+    if (PyErr_Occurred())
+        return NULL;
+    if (halvings < 0 || halvings > 20) {
+        PyErr_SetString(PyExc_ValueError, "step: halvings out of range");
+        return NULL;
+    }
+    const double h = x[0], theta0 = x[1], angle = x[2], speed0 = x[3], speed = x[4];
+    /* unwrap_next, operation for operation (np.pi; round: to nearest, ties to even) */
+    const double two_pi = 2.0 * 3.141592653589793;
+    const double predicted = 0.5 * (speed + speed0) * h;
+    const double change = (angle - theta0) - predicted;
+    const double turns = change / two_pi;
+    if (unwrap && !isfinite(turns))
+        Py_RETURN_NONE;
+    const double theta = unwrap ? theta0 + (predicted + change - two_pi * nearbyint(turns))
+                                : angle;
+    Py_buffer *views = self->views;
+    double *times = views[9].buf, *angles = views[10].buf, *speeds = views[11].buf;
+    times[0] = 0.0;
+    times[1] = h;
+    angles[0] = theta0;
+    angles[1] = theta;
+    speeds[0] = speed0;
+    speeds[1] = speed;
+    Work wk;
+    State st;
+    work_of(&self->md, views, has_guess, &wk, &st);
+    Py_BEGIN_ALLOW_THREADS
+    march_samples(&self->md, &st, &wk, times, angles, speeds, 1, (int)halvings, views[18].buf,
+                  views[19].buf, views[20].buf, views[21].buf, views[22].buf);
+    Py_END_ALLOW_THREADS
+    const int converged = ((double *)views[21].buf)[0] != 0.0;
+    return Py_BuildValue("(dnii)", theta, st.iterations, st.has_guess, converged);
+}
+
+static PyMethodDef STEPPER_METHODS[] = {
+    {"step", (PyCFunction)(void (*)(void))stepper_step, METH_FASTCALL,
+     "Unwrap one sample's angle and step the state to it (see the notes)."},
+    {NULL, NULL, 0, NULL}};
+
+static PyTypeObject STEPPER_TYPE = {
+    PyVarObject_HEAD_INIT(NULL, 0).tp_name = "flexlink_ros.core.estimation._nonlinear_step."
+                                             "Stepper",
+    .tp_basicsize = sizeof(Stepper),
+    .tp_dealloc = (destructor)stepper_dealloc,
+    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_doc = "One estimator's per-sample step, its buffers taken once (see the notes).",
+    .tp_methods = STEPPER_METHODS,
+    .tp_init = (initproc)stepper_init,
+    .tp_new = PyType_GenericNew,
+};
 
 static PyObject *workspace(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
@@ -820,5 +957,16 @@ PyMODINIT_FUNC PyInit__nonlinear_step(void)
         PyErr_SetString(PyExc_ImportError, "_nonlinear_step: Py_ssize_t wider than double");
         return NULL;
     }
-    return PyModule_Create(&MODULE);
+    if (PyType_Ready(&STEPPER_TYPE) < 0)
+        return NULL;
+    PyObject *module = PyModule_Create(&MODULE);
+    if (module == NULL)
+        return NULL;
+    Py_INCREF(&STEPPER_TYPE);
+    if (PyModule_AddObject(module, "Stepper", (PyObject *)&STEPPER_TYPE) < 0) {
+        Py_DECREF(&STEPPER_TYPE);
+        Py_DECREF(module);
+        return NULL;
+    }
+    return module;
 }

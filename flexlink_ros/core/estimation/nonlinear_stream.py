@@ -281,6 +281,57 @@ class NonlinearStepper:
         self.iterations += iterations
         self.guess = (self._guess_view, buffer[-1]) if has_guess else None
 
+    def step_to(self, h, angle0, angle, speed0, speed, halvings=MAX_HALVINGS):
+        """
+        Step to a sample whose angle may be wrapped: (its unwrapped angle, converged).
+
+        The angle is unwrapped from ``angle0`` by the speeds (:func:`unwrap_next`), then
+        :meth:`step` steps to it: in one compiled call where built (the same numbers).
+        """
+        if self.compiled:
+            stepped = self._step_one(h, angle0, angle, speed0, speed, halvings, True)
+            if stepped is not None:
+                return stepped
+        theta = unwrap_next(angle0, angle, speed0, speed, h)   # raises on a non-finite turn
+        return theta, self.step(h, angle0, theta, speed0, speed, halvings)
+
+    def _step_one(self, h, angle0, angle, speed0, speed, halvings, unwrap):
+        """
+        Step one sample interval with the compiled Stepper: (angle stepped to, converged).
+
+        The node's per-sample call: the Stepper holds the march's buffers and is made again
+        only when a start (or the numpy step) replaces the state's arrays. None where the
+        unwrapping is not finite (nothing changed).
+        """
+        kernel, kept = self.__dict__.get('_kernel'), self.__dict__.get('_kernel_arrays')
+        if (kernel is None or kept[0] is not self.q or kept[1] is not self.v
+                or kept[2] is not self.axial or kept[3] is not self.slope
+                or kept[4] is not self.output_operator):
+            kernel = self._make_kernel()
+        if self.guess is not None and self.guess[0] is not self._guess_view:
+            buffer = self._guess_buffer
+            buffer[:-1], buffer[-1] = self.guess[0].ravel(), self.guess[1]
+        stepped = kernel.step(h, angle0, angle, speed0, speed, self.guess is not None,
+                              halvings, unwrap)
+        if stepped is None:
+            return None
+        theta, iterations, has_guess, converged = stepped
+        self.iterations += iterations
+        self.guess = (self._guess_view, self._guess_buffer[-1]) if has_guess else None
+        return theta, converged != 0
+
+    def _make_kernel(self):
+        """Make (and keep) the compiled Stepper of the state's current arrays."""
+        arrays, sizes, constants, one = self._native_arguments()
+        if self.output_operator is None:
+            self.output_operator = np.zeros((self.tables.outputs, self.tables.size))
+        state = (self.q, self.v, self._guess_buffer, self.axial, self.slope,
+                 self.output_operator)
+        self._kernel = compiled_newton.Stepper(*arrays, *one[:3], *state, *one[3:], self._work,
+                                               *sizes, 1, *constants, MAX_HALVINGS, False)
+        self._kernel_arrays = (self.q, self.v, self.axial, self.slope, self.output_operator)
+        return self._kernel
+
     def march(self, times, angles, speeds, halvings=MAX_HALVINGS):
         """
         Step the state through samples 1.. of ``times`` [s], unwrapped ``angles``, ``speeds``.
@@ -304,13 +355,8 @@ class NonlinearStepper:
         Returns True if every (sub)step converged; the state is unchanged otherwise (and for
         a non-finite input or a step that is not positive).
         """
-        if self.compiled:          # the compiled march checks the input itself
-            times, angles, speeds, *out = self._native_arguments()[3]
-            times[1], angles[0], angles[1], speeds[0], speeds[1] = h, angle0, angle1, speed0, \
-                speed1
-            times[0] = 0.0
-            self._call_march(times, angles, speeds, out, halvings)
-            return bool(out[3][0])
+        if self.compiled:          # the compiled step checks the input itself
+            return self._step_one(h, angle0, angle1, speed0, speed1, halvings, False)[1]
         if not (np.isfinite([h, angle0, angle1, speed0, speed1]).all() and h > 0.0):
             return False
         c = self.method.c

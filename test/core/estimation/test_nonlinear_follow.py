@@ -85,6 +85,35 @@ def test_validity_follows_the_last_samples_slope(tables):
     assert 0.0 < follower.validity < VALIDITY_THRESHOLD
 
 
+def test_judging_after_the_sample_gives_what_sample_gives(tables):
+    # the node publishes the lever tip before the slopes are judged: the same outputs,
+    # validity, largest slope and counts as judged within sample()
+    stamps, angles, speeds = _signal(500)
+    stamps[250:] += 2_000_000_000        # a restart: not judged (NaN)
+    speeds = speeds * (1.0 + 0.2 * np.sin(np.arange(500) / 40.0))
+    now, later = (NonlinearFollower(tables, reset_gap_s=0.5) for _ in range(2))
+    for s, a, w in zip(stamps.tolist(), angles.tolist(), speeds.tolist()):
+        output = now.sample(s, a, w)
+        assert np.array_equal(later.sample(s, a, w, judge=False), output)
+        validity = later.judge()
+        # judged once (a start: NaN, as sample() leaves it)
+        assert np.array_equal([validity, later.judge()], [now.validity] * 2, equal_nan=True)
+        assert (later.slope_max, later.counts) == (now.slope_max, now.counts)
+    assert now.slope_max > 0.0 and now.counts['restarts'] == 1
+
+
+def test_a_sample_outputs_the_matrix_product_of_its_state(tables):
+    # the output the node publishes: the operator times the state, as numpy's @, bit for bit
+    stamps, angles, speeds = _signal(200)
+    follower = NonlinearFollower(tables, reset_gap_s=0.5)
+    for s, a, w in zip(stamps.tolist(), angles.tolist(), speeds.tolist()):
+        output = follower.sample(s, a, w)
+        stepper = follower.stepper
+        if follower.counts['samples'] > 1:
+            assert np.array_equal(output, stepper.output_operator @ stepper.q)
+    assert follower.counts['refused_samples'] == 0
+
+
 def test_following_blocks_of_samples_gives_what_sample_by_sample_gives(tables):
     """follow() marches runs in one compiled call: sample()'s numbers, gaps and counts."""
     stamps, angles, speeds = _signal(900)

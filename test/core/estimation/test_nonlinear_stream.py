@@ -294,6 +294,48 @@ def test_march_steps_many_samples_as_one_sample_calls(tables):
     assert single.iterations == batch.iterations > count
 
 
+def test_one_sample_steps_follow_the_state_arrays_a_start_replaces(tables):
+    # the per-sample step keeps the march's arguments; a start makes new state arrays, which
+    # the next step must write (not the old ones)
+    pytest.importorskip('flexlink_ros.core.estimation._nonlinear_step')
+    kept, fresh = NonlinearStepper(tables), NonlinearStepper(tables)
+    kept.start(0.0, SPEED)
+    for k in range(5):
+        assert kept.step(1e-3, SPEED * k * 1e-3, SPEED * (k + 1) * 1e-3, SPEED, SPEED)
+    for stepper in (kept, fresh):
+        stepper.start(1.0, SPEED)
+    for k in range(20):
+        angles = (1.0 + SPEED * k * 1e-3, 1.0 + SPEED * (k + 1) * 1e-3)
+        for stepper in (kept, fresh):
+            assert stepper.step(1e-3, *angles, SPEED, SPEED)
+    for name in ('q', 'v', 'output_operator', 'slope', 'axial'):
+        np.testing.assert_array_equal(getattr(kept, name), getattr(fresh, name))
+    assert np.any(kept.q != 0.0)
+
+
+def test_step_to_unwraps_and_steps_as_unwrap_next_and_the_march(tables):
+    # the streaming update's one compiled call: the same angle and state, bit for bit, as
+    # unwrap_next and a march over the pair; a non-finite angle raises as unwrap_next does
+    pytest.importorskip('flexlink_ros.core.estimation._nonlinear_step')
+    single, reference = NonlinearStepper(tables), NonlinearStepper(tables)
+    for stepper in (single, reference):
+        stepper.start(0.0, SPEED)
+    theta0 = 0.0
+    for k in range(1, 200):     # past a whole turn
+        wrapped = math.fmod(SPEED * k * 1e-3, 2.0 * math.pi)
+        theta, converged = single.step_to(1e-3, theta0, wrapped, SPEED, SPEED)
+        expected = nonlinear_stream.unwrap_next(theta0, wrapped, SPEED, SPEED, 1e-3)
+        marched = reference.march(np.array([0.0, 1e-3]), np.array([theta0, expected]),
+                                  np.full(2, SPEED))
+        assert theta == expected and converged == marched[3][0]
+        for name in ('q', 'v', 'output_operator', 'slope', 'axial'):
+            np.testing.assert_array_equal(getattr(single, name), getattr(reference, name))
+        theta0 = theta
+    assert theta0 > 2.0 * math.pi and single.iterations == reference.iterations
+    with pytest.raises(ValueError):
+        single.step_to(1e-3, theta0, math.nan, SPEED, SPEED)
+
+
 def test_march_refuses_a_table_layout_outside_its_rows(tables):
     pytest.importorskip('flexlink_ros.core.estimation._nonlinear_step')
     stepper = NonlinearStepper(tables)
