@@ -237,15 +237,16 @@ def test_reading_ahead_gives_the_items_in_order_then_the_error_where_it_happened
     assert list(ReadAhead(iter(range(3)))) == [0, 1, 2]
 
 
+def counted_items(count, produced):
+    """Yield 0 ... count - 1, noting each in ``produced`` as it is made."""
+    for n in range(count):
+        produced.append(n)
+        yield n
+
+
 def test_closing_stops_a_reader_waiting_on_a_full_queue():
     produced = []
-
-    def items():
-        for n in range(1000):
-            produced.append(n)
-            yield n
-
-    ahead = ReadAhead(items(), depth=2)
+    ahead = ReadAhead(counted_items(1000, produced), depth=2)
     assert next(ahead) == 0
     ahead.close()
     assert not ahead.thread.is_alive() and len(produced) <= 4
@@ -253,18 +254,12 @@ def test_closing_stops_a_reader_waiting_on_a_full_queue():
 
 def test_reading_ahead_waits_for_its_signal_and_stops_while_it_waits():
     produced = []
-
-    def items():
-        for n in range(5):
-            produced.append(n)
-            yield n
-
     begin = threading.Event()
-    ahead = ReadAhead(items(), depth=2, begin=begin)
+    ahead = ReadAhead(counted_items(5, produced), depth=2, begin=begin)
     time.sleep(0.3)
     assert produced == []             # the estimate's start has the GIL to itself
     begin.set()
     assert list(ahead) == list(range(5))
-    waiting = ReadAhead(items(), begin=threading.Event())
+    waiting = ReadAhead(counted_items(5, []), begin=threading.Event())
     waiting.close()
     assert not waiting.thread.is_alive()
