@@ -14,6 +14,8 @@
  * A sample whose step is split into sub-steps (MAX_SUBSTEP_NS) is advanced here too,
  * with the crank state linear between the samples, as NumpyStep._sub_steps does.
  * Batched rows (advance) and the streaming update both enter the step through step_sample.
+ * A long batch (the offline replay's) records its rows in a thread of its own beside the
+ * steps (RecordWorker): half of a row's arithmetic is its record.
  *
  * Also here: the crank-rate filter (CrankRateFilter.update), the joint criteria, and Update,
  * the whole StreamingEstimator.update of an ordinary sample in one call (gate, filter, step,
@@ -30,6 +32,11 @@
 #include <stddef.h>
 #include <stdlib.h>
 #include <string.h>
+
+#if defined(__unix__) || defined(__APPLE__)
+#include <pthread.h>
+#define RECORD_THREAD 1     /* advance's records in a thread of their own (RecordWorker) */
+#endif
 
 #include "_nonlinearity.h"      /* the validity indicator, for the streaming update */
 
@@ -873,6 +880,170 @@ static int step_sample(Step *s, double *z, double *prev, const double *row,
     return SAMPLE_DONE;
 }
 
+/* Step rows and record them in this thread (every_record 0: only the last row's record). */
+static int advance_alone(Step *s, double *zv, double *pv, const double *row, Py_ssize_t count,
+                         double *state_out, double *record_out, int every_record)
+{
+    const int soft = s->lift_phi != NULL;
+    const Py_ssize_t width = 2 * s->rr;
+    int outcome = SAMPLE_DONE;
+    for (Py_ssize_t m = 0; m < count; m++, row += ROW_FIELDS) {
+        double *record_m = every_record ? record_out + m * RECORD_SIZE
+                                        : (m == count - 1 ? record_out : NULL);
+        outcome = step_sample(s, zv, pv, row, record_m);
+        if (outcome != SAMPLE_DONE)
+            break;
+        if (state_out == NULL)
+            continue;
+        if (soft && record_m == NULL)
+            lift(s, zv, pv);        /* (a record lifted the state already) */
+        memcpy(state_out + m * width, soft ? s->lifted : zv, (size_t)width * sizeof(double));
+    }
+    return outcome;
+}
+
+#ifdef RECORD_THREAD
+/* Rows a batch must have for its records to go to a thread of their own, and rows stepped
+   between two hand-overs to it (each takes a lock). */
+#define RECORD_THREAD_ROWS 256
+#define RECORD_HANDOVER_ROWS 16
+
+/*
+ * The records of a batch (advance) computed beside its steps: the record of a row (and, with
+ * the soft basis, its lift) needs only the row's state and crank state, not the steps after
+ * it, and is half of a row's arithmetic. The stepper leaves each row's state z (q, v: 2 r) at
+ * the start of its row of `states`; this thread reads it there, writes the row's record and
+ * its lifted state over it, with a Step of its own (the same tables, its own scratch): the
+ * same functions, so the same doubles as one thread. Both run without the GIL.
+ */
+typedef struct {
+    Step s;
+    double *scratch;
+    const double *rows;
+    double *states, *records;
+    int soft;
+    pthread_mutex_t lock;
+    pthread_cond_t more;
+    Py_ssize_t stepped;     /* rows whose state is in `states` (under lock) */
+    int finished;           /* no row will follow `stepped` (under lock) */
+} RecordWorker;
+
+/* The record (and lifted state) of row m of a batch from its state in `states`. */
+static void worker_record(RecordWorker *w, Py_ssize_t m)
+{
+    Step *s = &w->s;
+    const Py_ssize_t width = 2 * s->rr;
+    const double *row = w->rows + m * ROW_FIELDS;
+    const double prev[3] = {row[2], row[3], row[4]};    /* the crank state after the row */
+    double *state = w->states + m * width;
+    record(s, state, prev, w->records + m * RECORD_SIZE);
+    if (w->soft)
+        memcpy(state, s->lifted, (size_t)width * sizeof(double));
+}
+
+static void *worker_run(void *arg)
+{
+    RecordWorker *w = arg;
+    Py_ssize_t m = 0;
+    for (;;) {
+        pthread_mutex_lock(&w->lock);
+        while (m >= w->stepped && !w->finished)
+            pthread_cond_wait(&w->more, &w->lock);
+        const Py_ssize_t stepped = w->stepped;
+        pthread_mutex_unlock(&w->lock);
+        if (m >= stepped)
+            return NULL;
+        for (; m < stepped; m++)
+            worker_record(w, m);
+    }
+}
+
+/* Hand rows [0, stepped) over to the worker; `finished`: no more will come. */
+static void worker_hand_over(RecordWorker *w, Py_ssize_t stepped, int finished)
+{
+    pthread_mutex_lock(&w->lock);
+    w->stepped = stepped;
+    w->finished = finished;
+    pthread_cond_signal(&w->more);
+    pthread_mutex_unlock(&w->lock);
+}
+
+/* Start a worker on a copy of the stepper's Step s (scratch of its own); 0, or -1 (none:
+   the caller records the rows itself). */
+static int worker_start(RecordWorker *w, pthread_t *thread, const Step *s, const double *rows,
+                        double *states, double *records)
+{
+    const Py_ssize_t rr = s->rr;
+    memset(w, 0, sizeof(*w));
+    w->s = *s;
+    /* record's and lift's scratch: operator, so_y, so_z, frame, lifted */
+    w->scratch = malloc(sizeof(double) * (size_t)(OUTPUTS * (rr + 1) + s->so_rows + s->so_slots
+                                                  + 1 + 2 * rr * s->r + 2 * rr + 1));
+    if (w->scratch == NULL)
+        return -1;
+    w->s.operator = w->scratch;
+    w->s.so_y = w->s.operator + OUTPUTS * (rr + 1);
+    w->s.so_z = w->s.so_y + s->so_rows;
+    w->s.frame = w->s.so_z + s->so_slots + 1;
+    w->s.lifted = w->s.frame + 2 * rr * s->r;
+    w->rows = rows;
+    w->states = states;
+    w->records = records;
+    w->soft = s->lift_phi != NULL;
+    if (pthread_mutex_init(&w->lock, NULL) != 0) {
+        free(w->scratch);
+        return -1;
+    }
+    if (pthread_cond_init(&w->more, NULL) != 0) {
+        pthread_mutex_destroy(&w->lock);
+        free(w->scratch);
+        return -1;
+    }
+    if (pthread_create(thread, NULL, worker_run, w) != 0) {
+        pthread_cond_destroy(&w->more);
+        pthread_mutex_destroy(&w->lock);
+        free(w->scratch);
+        return -1;
+    }
+    return 0;
+}
+
+/* Step rows with a worker recording them; the outcome as step_sample's, `done` the rows
+   stepped. With the soft basis the stepper's lifted state is the last row's, as one thread
+   leaves it. */
+static int advance_with_worker(Step *s, RecordWorker *w, double *zv, double *pv,
+                               const double *rows, Py_ssize_t count, double *states,
+                               Py_ssize_t *done)
+{
+    const Py_ssize_t width = 2 * s->rr, z_width = 2 * s->r;
+    int outcome = SAMPLE_DONE;
+    Py_ssize_t m = 0;
+    for (; m < count; m++) {
+        outcome = step_sample(s, zv, pv, rows + m * ROW_FIELDS, NULL);
+        if (outcome != SAMPLE_DONE)
+            break;
+        memcpy(states + m * width, zv, (size_t)z_width * sizeof(double));
+        if ((m + 1) % RECORD_HANDOVER_ROWS == 0)
+            worker_hand_over(w, m + 1, 0);
+    }
+    *done = m;
+    return outcome;
+}
+
+/* Wait for a worker's records of rows [0, done) and free it. */
+static void worker_finish(RecordWorker *w, pthread_t thread, Step *s, Py_ssize_t done)
+{
+    worker_hand_over(w, done, 1);
+    pthread_join(thread, NULL);
+    if (w->soft && done > 0)
+        memcpy(s->lifted, w->states + (done - 1) * 2 * s->rr,
+               (size_t)(2 * s->rr) * sizeof(double));
+    pthread_cond_destroy(&w->more);
+    pthread_mutex_destroy(&w->lock);
+    free(w->scratch);
+}
+#endif
+
 static PyObject *advance(PyObject *module, PyObject *args)
 {
     PyObject *objects[15] = {NULL};
@@ -908,7 +1079,6 @@ static PyObject *advance(PyObject *module, PyObject *args)
         || get_buffer(objects[12], &records, 1, "records", -1) != 0)
         goto done;
     const Py_ssize_t rr = s.rr;
-    const int soft = s.lift_phi != NULL;
     if (states.len != 0 && states.len / 8 != count * 2 * rr) {
         PyErr_SetString(PyExc_ValueError, "`states` must be empty or rows x 2 r");
         goto done;
@@ -921,22 +1091,22 @@ static PyObject *advance(PyObject *module, PyObject *args)
     double *zv = z.buf, *pv = prev.buf, *state_out = states.len ? states.buf : NULL;
     double *record_out = records.buf;
     const double *row = rows.buf;
-    int outcome = SAMPLE_DONE;
+    int outcome;
     /* Batches (replay) let other threads run; a single sample keeps the GIL: getting it back
        can wait for another thread's switch interval (5 ms), far longer than the step. */
     PyThreadState *released = count >= RELEASE_GIL_ROWS ? PyEval_SaveThread() : NULL;
-    for (Py_ssize_t m = 0; m < count; m++, row += ROW_FIELDS) {
-        double *record_m = every_record ? record_out + m * RECORD_SIZE
-                                        : (m == count - 1 ? record_out : NULL);
-        outcome = step_sample(&s, zv, pv, row, record_m);
-        if (outcome != SAMPLE_DONE)
-            break;
-        if (state_out == NULL)
-            continue;
-        if (soft && record_m == NULL)
-            lift(&s, zv, pv);       /* (a record lifted the state already) */
-        memcpy(state_out + m * 2 * rr, soft ? s.lifted : zv, (size_t)(2 * rr) * sizeof(double));
+#ifdef RECORD_THREAD
+    RecordWorker worker;
+    pthread_t worker_thread;
+    if (every_record && state_out != NULL && count >= RECORD_THREAD_ROWS
+        && worker_start(&worker, &worker_thread, &s, row, state_out, record_out) == 0) {
+        Py_ssize_t done = 0;
+        outcome = advance_with_worker(&s, &worker, zv, pv, row, count, state_out, &done);
+        worker_finish(&worker, worker_thread, &s, done);
     }
+    else
+#endif
+        outcome = advance_alone(&s, zv, pv, row, count, state_out, record_out, every_record);
     if (released != NULL)
         PyEval_RestoreThread(released);
     if (outcome != SAMPLE_DONE) {

@@ -304,3 +304,69 @@ def test_compiled_soft_step_rejects_bad_lift_tables():
     z = step.z.copy()
     call((phi, dphi, residual, step.lifted, step.history))
     assert not np.array_equal(step.z, z)
+
+
+def _constant_speed_rows(count, speed, seed):
+    """Step rows (h, sub-steps, angle, speed, accel, advance) of a jittered 1 kHz signal."""
+    rng = np.random.default_rng(seed)
+    dt_ns = np.round(1e6 * (1.0 + 0.3 * rng.uniform(-1.0, 1.0, count))).astype(np.int64)
+    dt_ns[count // 3] = 3 * MAX_SUBSTEP_NS // 2         # one row split into sub-steps
+    angles = np.mod(speed * np.cumsum(dt_ns) * 1e-9, 2.0 * np.pi)
+    return np.column_stack([dt_ns * 1e-9, -(-dt_ns // MAX_SUBSTEP_NS), angles,
+                            np.full(count, speed), np.zeros(count), speed * dt_ns * 1e-9])
+
+
+def _started(model, speed):
+    est = StreamingEstimator(model, warm_start=False)
+    est.update(0, 0.0, speed)
+    return est
+
+
+@pytest.mark.parametrize('soft', [False, True])
+def test_batch_records_in_a_thread_of_their_own_equal_one_thread(toy_model, soft):
+    """A long batch records its rows beside the steps: the same doubles as short batches."""
+    compiled_or_skip()
+    model = toys.cho_second_order_model('flexible') if soft else toy_model
+    assert (model.soft is not None) == soft
+    speed = 391.0 * np.pi / 30.0
+    rows = _constant_speed_rows(1500, speed, seed=3)
+    width = 2 * model.size
+    outcomes = []
+    for batch in (rows.shape[0], 100):      # one long batch; short ones, recorded in turn
+        est = _started(model, speed)
+        states = np.full((rows.shape[0], width), np.nan)
+        records = np.full((rows.shape[0], RECORD_SIZE), np.nan)
+        for first in range(0, rows.shape[0], batch):
+            part = slice(first, first + batch)
+            est.step_rows(rows[part], states[part], records[part])
+        outcomes.append((states, records, est._stepper.z.copy(), est.state.copy()))
+    (states, records, z, state), (states1, records1, z1, state1) = outcomes
+    assert np.all(np.isfinite(records)) and np.abs(records[:, :4]).max() > 0.0
+    np.testing.assert_array_equal(states, states1)
+    np.testing.assert_array_equal(records, records1)
+    np.testing.assert_array_equal(z, z1)
+    np.testing.assert_array_equal(state, state1)
+
+
+def test_batch_that_fails_midway_keeps_the_records_of_the_rows_before():
+    compiled_or_skip()
+    model = toys.cho_second_order_model('flexible')
+    speed = 391.0 * np.pi / 30.0
+    rows = _constant_speed_rows(1000, speed, seed=4)
+    rows[700, 0] = 0.0                  # a row with no step: refused there
+    results = []
+    for parts in ((slice(0, 1000),), (slice(0, 100),) + tuple(
+            slice(first, first + 100) for first in range(100, 1000, 100))):
+        est = _started(model, speed)
+        states = np.full((1000, 2 * model.size), np.nan)
+        records = np.full((1000, RECORD_SIZE), np.nan)
+        with pytest.raises(ValueError, match='non-positive step'):
+            for part in parts:
+                est.step_rows(rows[part], states[part], records[part])
+        results.append((states, records, est.state.copy()))
+    (states, records, state), (states1, records1, state1) = results
+    assert np.all(np.isfinite(records[:700])) and np.all(np.isnan(records[700:]))
+    assert np.all(np.isfinite(states[:700])) and np.all(np.isnan(states[700:]))
+    np.testing.assert_array_equal(states, states1)
+    np.testing.assert_array_equal(records, records1)
+    np.testing.assert_array_equal(state, state1)
