@@ -10,12 +10,14 @@ import flexlink_ros
 from flexlink_ros.io import chunk_index
 from flexlink_ros.io.mcap_writer import McapFileWriter
 from flexlink_ros.io.recorder import McapRecorder
+from flexlink_ros.io.replay_writer import OUTPUT_ZSTD_LEVEL
 from geometry_msgs.msg import Vector3Stamped
 from mcap.reader import make_reader, NonSeekingReader, SeekingReader
 from mcap.records import Chunk
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 import numpy as np
+import pytest
 from rclpy.serialization import serialize_message
 from rosbags.highlevel import AnyReader
 import zstandard
@@ -173,8 +175,9 @@ def test_file_equals_mcap_public_writers_byte_for_byte(tmp_path, monkeypatch):
     assert list(tmp_path.iterdir()) == []   # the spill files are gone
 
 
-def test_compression_level_is_the_chunks_zstd_level(tmp_path):
-    """A recorder at level 1 writes each chunk as zstd level 1 compresses it; readers read it."""
+@pytest.mark.parametrize('level', [1, OUTPUT_ZSTD_LEVEL])
+def test_compression_level_is_the_chunks_zstd_level(tmp_path, level):
+    """A recorder at a level writes each chunk as zstd compresses it there; readers read it."""
     path = tmp_path / 'fast.mcap'
     stamps = T0_NS + np.arange(3000) * 1_000_000
     messages = []
@@ -183,7 +186,7 @@ def test_compression_level_is_the_chunks_zstd_level(tmp_path):
         message.header.stamp.sec, message.header.stamp.nanosec = divmod(stamp, 10**9)
         message.vector.x = math.sin(n * 0.01)
         messages.append(bytes(serialize_message(message)))
-    with McapRecorder(path, flush_thread=False, compression_level=1) as recorder:
+    with McapRecorder(path, flush_thread=False, compression_level=level) as recorder:
         recorder.add_topic('/v', Vector3Stamped)
         recorder.write_batch('/v', messages, stamps)
     chunks = 0
@@ -192,7 +195,7 @@ def test_compression_level_is_the_chunks_zstd_level(tmp_path):
             if isinstance(record, Chunk):
                 data = zstandard.ZstdDecompressor().decompress(
                     record.data, max_output_size=record.uncompressed_size)
-                assert record.data == zstandard.ZstdCompressor(level=1).compress(data)
+                assert record.data == zstandard.ZstdCompressor(level=level).compress(data)
                 assert record.data != zstandard.ZstdCompressor(level=3).compress(data)
                 chunks += 1
     assert chunks > 1
