@@ -38,7 +38,6 @@ import time
 
 import numpy as np
 
-from .estimate_nonlinear import CHOICES as NONLINEAR_CHOICES
 from .main import emit
 from .model_args import add_chart_argument, add_estimator_arguments, criterion_thresholds, \
     load_model
@@ -49,13 +48,14 @@ from .replay_offline import CHUNK_SAMPLES, estimate_and_write, MAX_CHUNK_SAMPLES
 from .replay_split import can_fork, Splitter, warm_up_seconds
 from ..core.estimation.gate import DEFAULT_RESET_GAP_S
 from ..core.estimation.marker_scale import load_quasi_static_peaks, model_exaggeration
+from ..core.estimation.nonlinear_follow import CHOICES as NONLINEAR_CHOICES
 from ..core.estimation.tables import step_tables
 from ..io.joint_states import read_input_samples
+from ..io.output_cdr import OK
 from ..io.recorder_files import refuse_existing
 from ..io.replay_writer import replay_topics, write_replay, write_rows
 from ..names import DEFAULT_FRAME_ID, NODE_NAME, output_topics, QUALITY_NAMES
 from ..report.cycle_chart import plot_cycle
-from ..ros.messages import OK
 from ..ros.playback_schedule import DEFAULT_CLOCK_HZ, MAX_CLOCK_HZ
 from ..ros.republish import DISCOVERY_TIMEOUT_S, publish_recording
 
