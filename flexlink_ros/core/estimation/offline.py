@@ -352,7 +352,6 @@ class _OfflineRun:
         self.orbit, self.resume = out['orbit'], out['resume']
         if out['stopped'] is None:
             return None
-        self.take_rows()
         row = int(chosen[out['stopped']])
         self.mark([row], SampleFlag.OUT_OF_BOUND)
         self.finish_until(row + 1)
