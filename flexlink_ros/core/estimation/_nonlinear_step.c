@@ -110,13 +110,18 @@ VECTOR_CLONES static void lumped(const Problem *p, const double *disp, const dou
             /* (h + h^T) x: sq holds h x, ht h^T x */
             for (Py_ssize_t a = 0; a < m; a++)
                 dax[a] = k * (grad[a] + p->beta * (dax[a] + w * (cr[a] + sq[a] + ht[a])));
-            double *kq = fq + i * m * m, *kv = fv + i * m * m;
             const double bw = p->beta * w, bk = p->beta * k;
+            double *restrict chw = sq;      /* sq is spent: ch + beta w cr */
+            for (Py_ssize_t b = 0; b < m; b++)
+                chw[b] = ch[b] + bw * cr[b];
             for (Py_ssize_t a = 0; a < m; a++) {
+                double *restrict kq = fq + i * m * m + a * m, *restrict kv = fv + i * m * m + a * m;
+                const double *restrict ga = g + a * m;
+                const double grad_a = grad[a], kch_a = k * ch[a], ch_a = ch[a];
+#pragma omp simd
                 for (Py_ssize_t b = 0; b < m; b++) {
-                    kq[a * m + b] += grad[a] * dax[b] + n * g[a * m + b]
-                                     - k * ch[a] * (ch[b] + bw * cr[b]);
-                    kv[a * m + b] += bk * (grad[a] * grad[b] - ch[a] * ch[b]);
+                    kq[b] += grad_a * dax[b] + n * ga[b] - kch_a * chw[b];
+                    kv[b] += bk * (grad_a * grad[b] - ch_a * ch[b]);
                 }
             }
         }
@@ -233,15 +238,19 @@ VECTOR_CLONES static void residual(const Problem *p, double *disp, double *vel, 
         }
         if (jac == NULL)
             continue;
+        const double *fvi = fv + i * m * m, *fqi = fq + i * m * m;
         for (Py_ssize_t j = 0; j < s; j++) {
             const double ha = p->h * p->a[i * s + j], hh = p->h * p->h * p->a2[i * s + j];
-            for (Py_ssize_t a = 0; a < m; a++)
-                for (Py_ssize_t b = 0; b < m; b++) {
-                    const Py_ssize_t ab = a * m + b, im = i * m * m;
-                    jac[(i * m + a) * n + j * m + b] =
-                        (i == j ? mm[ab] : 0.0) + ha * (cc[ab] + fv[im + ab])
-                        + hh * (kk[ab] + fq[im + ab]);
-                }
+            const double diagonal = i == j ? 1.0 : 0.0;   /* the mass on the stage's own block */
+            for (Py_ssize_t a = 0; a < m; a++) {
+                double *restrict row = jac + (i * m + a) * n + j * m;
+                const double *restrict ma = mm + a * m, *restrict ca = cc + a * m,
+                                       *restrict ka = kk + a * m, *restrict va = fvi + a * m,
+                                       *restrict qa = fqi + a * m;
+#pragma omp simd
+                for (Py_ssize_t b = 0; b < m; b++)
+                    row[b] = diagonal * ma[b] + ha * (ca[b] + va[b]) + hh * (ka[b] + qa[b]);
+            }
         }
     }
 }
