@@ -128,45 +128,74 @@ VECTOR_CLONES static void lumped(const Problem *p, const double *disp, const dou
     }
 }
 
-/* LU with partial pivoting in place (n x n, row-major); 0 if singular. */
+/* Row swap of two rows of n (no-op for one row). */
+static void swap_rows(double *a, Py_ssize_t n, Py_ssize_t i, Py_ssize_t k)
+{
+    if (i == k)
+        return;
+    double *restrict x = a + i * n, *restrict y = a + k * n;
+    for (Py_ssize_t j = 0; j < n; j++) {
+        const double t = x[j];
+        x[j] = y[j];
+        y[j] = t;
+    }
+}
+
+/* Row of the largest magnitude in column col from row col down (the first of equals). */
+static Py_ssize_t pivot_row(const double *a, Py_ssize_t n, Py_ssize_t col)
+{
+    Py_ssize_t best = col;
+    for (Py_ssize_t r = col + 1; r < n; r++)
+        if (fabs(a[r * n + col]) > fabs(a[best * n + col]))
+            best = r;
+    return best;
+}
+
+/*
+ * LU with partial pivoting in place (n x n, row-major); 0 if singular. Two columns per pass:
+ * the second column's pivot is found after the first's elimination of that column alone, and
+ * the rows below are then updated by both pivot rows in one sweep (each row read once per two
+ * columns). The arithmetic of every entry is the one-column-at-a-time order's.
+ */
 VECTOR_CLONES static int lu_factor(double *a, Py_ssize_t n, Py_ssize_t *piv)
 {
-    for (Py_ssize_t col = 0; col < n; col++) {
-        Py_ssize_t best = col;
-        for (Py_ssize_t r = col + 1; r < n; r++)
-            if (fabs(a[r * n + col]) > fabs(a[best * n + col]))
-                best = r;
-        piv[col] = best;
-        if (a[best * n + col] == 0.0)
+    Py_ssize_t col = 0;
+    for (; col + 1 < n; col += 2) {
+        const Py_ssize_t next = col + 1;
+        piv[col] = pivot_row(a, n, col);
+        swap_rows(a, n, col, piv[col]);
+        if (a[col * n + col] == 0.0)
             return 0;
-        if (best != col)
-            for (Py_ssize_t j = 0; j < n; j++) {
-                double t = a[col * n + j];
-                a[col * n + j] = a[best * n + j];
-                a[best * n + j] = t;
-            }
         const double inv = 1.0 / a[col * n + col];
-        const double *restrict pivot = a + col * n;
-        Py_ssize_t r = col + 1;
-        for (; r + 3 < n; r += 4) {     /* four rows per pass: the pivot row is read once */
-            double *restrict r0 = a + r * n, *restrict r1 = r0 + n, *restrict r2 = r1 + n,
-                             *restrict r3 = r2 + n;
-            const double f0 = (r0[col] *= inv), f1 = (r1[col] *= inv), f2 = (r2[col] *= inv),
-                         f3 = (r3[col] *= inv);
-            for (Py_ssize_t j = col + 1; j < n; j++) {
-                const double pj = pivot[j];
-                r0[j] -= f0 * pj;
-                r1[j] -= f1 * pj;
-                r2[j] -= f2 * pj;
-                r3[j] -= f3 * pj;
-            }
+        const double *restrict first = a + col * n;
+        for (Py_ssize_t r = next; r < n; r++) {       /* column col, then column next */
+            double *restrict row = a + r * n;
+            row[next] -= (row[col] *= inv) * first[next];
         }
-        for (; r < n; r++) {
-            double *restrict r0 = a + r * n;
-            const double f0 = (r0[col] *= inv);
-            for (Py_ssize_t j = col + 1; j < n; j++)
-                r0[j] -= f0 * pivot[j];
+        piv[next] = pivot_row(a, n, next);
+        swap_rows(a, n, next, piv[next]);
+        double *restrict second = a + next * n;
+        if (second[next] == 0.0)
+            return 0;
+        const double f = second[col];
+        for (Py_ssize_t j = next + 1; j < n; j++)      /* the second pivot row's rest */
+            second[j] -= f * first[j];
+        const double inv2 = 1.0 / second[next];
+        const Py_ssize_t len = n - next - 1;
+        const double *restrict p0 = first + next + 1, *restrict p1 = second + next + 1;
+        for (Py_ssize_t r = next + 1; r < n; r++) {
+            double *restrict row = a + r * n;
+            const double f0 = row[col], f1 = (row[next] *= inv2);
+            double *restrict rest = row + next + 1;
+#pragma omp simd
+            for (Py_ssize_t j = 0; j < len; j++)
+                rest[j] = (rest[j] - f0 * p0[j]) - f1 * p1[j];
         }
+    }
+    if (col < n) {          /* odd n: the last column */
+        piv[col] = col;
+        if (a[col * n + col] == 0.0)
+            return 0;
     }
     return 1;
 }
@@ -433,6 +462,23 @@ static void speed_polynomial(const double *speed, double accel, Py_ssize_t s, Py
 }
 
 /*
+ * One stage's C and K from its interpolated G (in damping), K_el (in stiffness), K1, K_a and
+ * K_w2: C = w G + beta (K_el + K_bear), K = K_el + K_bear + beta w K1 + a K_a + w^2 K_w2.
+ */
+VECTOR_CLONES static void stage_matrices(double w, double accel, double beta,
+                                         const double *restrict bearing, Py_ssize_t mm,
+                                         double *restrict damping, double *restrict stiffness,
+                                         const double *restrict k1, const double *restrict ka,
+                                         const double *restrict kw2)
+{
+    for (Py_ssize_t j = 0; j < mm; j++) {
+        const double elastic = stiffness[j] + bearing[j];
+        damping[j] = w * damping[j] + beta * elastic;
+        stiffness[j] = elastic + beta * w * k1[j] + accel * ka[j] + w * w * kw2[j];
+    }
+}
+
+/*
  * The linear part and the link tables at the stages into p (buf holds them), read from the
  * tables: C = w G + beta (K_el + K_bear), K = K_el + K_bear + beta w K1 + a K_a + w^2 K_w2
  * (+ K_G for the linear model), R = f_1 + a f_a + w^2 f_w2, as linear_part. raw: room for
@@ -459,15 +505,9 @@ static void stage_tables(const Model *md, const double *angles, double accel, Pr
     interpolate(hm, s, o[5], mm, r1, mm);
     interpolate(hm, s, o[2], mm, r2, mm);
     interpolate(hm, s, o[3], mm, r3, mm);
-    for (Py_ssize_t i = 0; i < s; i++) {
-        const double w = p->speed[i];
-        for (Py_ssize_t j = 0; j < mm; j++) {
-            const Py_ssize_t ij = i * mm + j;
-            const double elastic = stiffness[ij] + md->bearing[j];
-            damping[ij] = w * damping[ij] + md->beta * elastic;
-            stiffness[ij] = elastic + md->beta * w * r1[ij] + accel * r2[ij] + w * w * r3[ij];
-        }
-    }
+    for (Py_ssize_t i = 0; i < s; i++)
+        stage_matrices(p->speed[i], accel, md->beta, md->bearing, mm, damping + i * mm,
+                       stiffness + i * mm, r1 + i * mm, r2 + i * mm, r3 + i * mm);
     if (!md->nonlinear) {
         interpolate(hm, s, o[6], mm, r1, mm);
         interpolate(hm, s, o[7], mm, r2, mm);
@@ -500,6 +540,22 @@ static void output_at(const Model *md, double theta, double *out)
     interpolate_one(&hm, (Py_ssize_t)md->off[16], md->outputs * md->m, out);
 }
 
+/* x^T g x (g: m x m, row-major). */
+VECTOR_CLONES static double quadratic_form(const double *restrict g, const double *restrict x,
+                                           Py_ssize_t m)
+{
+    double sum = 0.0;
+    for (Py_ssize_t a = 0; a < m; a++) {
+        const double *restrict row = g + a * m;
+        double t = 0.0;
+#pragma omp simd reduction(+ : t)
+        for (Py_ssize_t b = 0; b < m; b++)
+            t += row[b] * x[b];
+        sum += x[a] * t;
+    }
+    return sum;
+}
+
 /* After a converged step: the new state, its output operator and link slopes. */
 static void accept(const Model *md, State *st, const Problem *p, const Work *wk, double h)
 {
@@ -520,14 +576,7 @@ static void accept(const Model *md, State *st, const Problem *p, const Work *wk,
     output_at(md, wk->angles[last], st->output);
     /* RMS slope of each link's bending: sqrt(2 S_L / L), S_L = q^T g_L q / 2 */
     for (Py_ssize_t l = 0; l < e; l++) {
-        const double *g = p->shortening + (last * e + l) * m * m;
-        double doubled = 0.0;
-        for (Py_ssize_t a = 0; a < m; a++) {
-            double t = 0.0;
-            for (Py_ssize_t b = 0; b < m; b++)
-                t += g[a * m + b] * st->q[b];
-            doubled += st->q[a] * t;
-        }
+        const double doubled = quadratic_form(p->shortening + (last * e + l) * m * m, st->q, m);
         st->slope[l] = sqrt(fmax(doubled, 0.0) / md->length[l]);
     }
 }
