@@ -21,6 +21,8 @@ core/estimation/_radau_step.c, equals to rounding) and gives the second-order jo
 the deformed linkage is drawn with.
 """
 
+import functools
+
 import numpy as np
 
 from .cells import CELL_POWERS, periodic_cell_coefficients
@@ -224,6 +226,18 @@ def link_point_motion(d_a, d_b, points):
     (crank O2 -> A, coupler A -> B, lever O4 -> B): the drawn deformed linkage. (The
     shortening's own distribution along a link, of the order of S, is not drawn.)
     """
-    f = np.linspace(0.0, 1.0, points)[None, :, None]
+    f = _fractions(points)
     a, b = d_a[:, None, :], d_b[:, None, :]
-    return np.stack([f * a, (1.0 - f) * a + f * b, f * b], axis=1)
+    motion = np.empty((d_a.shape[0], 3, points, 2))
+    np.multiply(f, a, out=motion[:, 0])
+    np.multiply(f, b, out=motion[:, 2])
+    np.add((1.0 - f) * a, motion[:, 2], out=motion[:, 1])
+    return motion
+
+
+@functools.lru_cache(maxsize=8)
+def _fractions(points):
+    """Fractions 0 .. 1 of ``points`` equally spaced points, shape (1, points, 1), read-only."""
+    fractions = np.linspace(0.0, 1.0, points)[None, :, None]
+    fractions.flags.writeable = False
+    return fractions
