@@ -263,7 +263,9 @@ class ReducedModel:
         """
         k, t = self.cell(theta)
         coef = self.shape_table[int(k)]
-        values = np.tensordot(float(t) ** np.arange(CELL_POWERS), coef, axes=1)
+        # np.tensordot's own product (the same doubles) without its axis bookkeeping
+        powers = (float(t) ** np.arange(CELL_POWERS)).reshape(1, CELL_POWERS)
+        values = np.dot(powers, coef.reshape(CELL_POWERS, -1)).reshape(coef.shape[1:])
         return values[..., -1], values[..., :-1] @ q
 
 
