@@ -540,15 +540,13 @@ static void output_at(const Model *md, double theta, double *out)
     interpolate_one(&hm, (Py_ssize_t)md->off[16], md->outputs * md->m, out);
 }
 
-/* x^T g x (g: m x m, row-major). */
-VECTOR_CLONES static double quadratic_form(const double *restrict g, const double *restrict x,
-                                           Py_ssize_t m)
+/* x^T g x (g: m x m, row-major), summed in order (the link slopes' doubles as before). */
+static double quadratic_form(const double *restrict g, const double *restrict x, Py_ssize_t m)
 {
     double sum = 0.0;
     for (Py_ssize_t a = 0; a < m; a++) {
         const double *restrict row = g + a * m;
         double t = 0.0;
-#pragma omp simd reduction(+ : t)
         for (Py_ssize_t b = 0; b < m; b++)
             t += row[b] * x[b];
         sum += x[a] * t;
