@@ -294,15 +294,17 @@ typedef struct {
 /*
  * Simplified Newton on the stage accelerations (p->acc holds the start): the step matrix is
  * formed at the first iteration and again whenever an iteration contracts by less than half.
+ * An update `divergence` times the first one has left the start's basin (the cubic strain
+ * has far roots a relative test would accept): not converged, so the step is halved.
  * Returns the iterations, 0 if not converged.
  */
-static Py_ssize_t solve(Problem *p, double tolerance, Py_ssize_t iterations, double *mem,
-                        Factor *factor)
+static Py_ssize_t solve(Problem *p, double tolerance, double divergence, Py_ssize_t iterations,
+                        double *mem, Factor *factor)
 {
     const Py_ssize_t s = p->s, m = p->m, n = s * m;
     double *disp = mem, *vel = disp + n, *res = vel + n, *fq = res + n;
     double *fv = fq + s * m * m, *work = fv + s * m * m;
-    double previous = INFINITY;
+    double previous = INFINITY, first = INFINITY;
     for (Py_ssize_t count = 1; count <= iterations; count++) {
         const int form = !factor->valid;
         residual(p, disp, vel, res, form ? factor->lu : NULL, fq, fv, work);
@@ -327,6 +329,10 @@ static Py_ssize_t solve(Problem *p, double tolerance, Py_ssize_t iterations, dou
             return 0;
         if (size <= tolerance * scale || size == 0.0)
             return count;
+        if (count == 1)
+            first = size;
+        else if (size > divergence * first)
+            return 0;
         if (size > 0.5 * previous)
             factor->valid = 0;
         previous = size;
@@ -346,7 +352,7 @@ static Py_ssize_t solve(Problem *p, double tolerance, Py_ssize_t iterations, dou
 typedef struct {
     const double *values, *slopes, *off, *bearing, *k, *length, *a, *a2, *c;
     Py_ssize_t nodes, fields, s, m, e, outputs, iterations;
-    double beta, tolerance;
+    double beta, tolerance, divergence;
     int nonlinear;
 } Model;
 
@@ -634,7 +640,8 @@ static Py_ssize_t advance(const Model *md, State *st, Work *wk, double h, double
     stage_tables(md, wk->angles, (w1 - w0) / h, &p, wk->tables, wk->raw);
     predict(md, st, h, wk->acc);
     wk->factor.valid = 0;
-    Py_ssize_t count = solve(&p, md->tolerance, md->iterations, wk->mem, &wk->factor);
+    Py_ssize_t count = solve(&p, md->tolerance, md->divergence, md->iterations, wk->mem,
+                             &wk->factor);
     for (Py_ssize_t i = 0; count > 0 && i < s * m; i++)
         if (!isfinite(wk->acc[i]))
             count = 0;
@@ -706,7 +713,7 @@ static void march_samples(const Model *md, State *st, Work *wk, const double *ti
  *       times, angles, speeds, q, v, guess, axial, slope, output,
  *       outputs, axial_out, slope_out, converged, update_ns, work,
  *       nodes, fields, stages, size, links, channels, samples, beta, nonlinear, tolerance,
- *       iterations, halvings, has_guess) -> (newton iterations, has_guess)
+ *       iterations, divergence, halvings, has_guess) -> (newton iterations, has_guess)
  *
  * Steps the state (q, v, guess, axial, slope, output: written in place) from sample 0 through
  * `samples` more samples (times [s], unwrapped angles, speeds: samples + 1 each), reading the
@@ -716,7 +723,7 @@ static void march_samples(const Model *md, State *st, Work *wk, const double *ti
  * keeps the state, and its output operator is then the one at the sample's angle.
  * work: scratch of workspace(stages, size, links, channels) doubles, made once by the caller.
  */
-#define MARCH_ARGS 37
+#define MARCH_ARGS 38
 #define BUFFERS 24
 
 static int march_sizes(Model *md, Py_ssize_t *samples, int *halvings, int *has_guess,
@@ -733,13 +740,15 @@ static int march_sizes(Model *md, Py_ssize_t *samples, int *halvings, int *has_g
     md->nonlinear = PyObject_IsTrue(args[32]);
     md->tolerance = PyFloat_AsDouble(args[33]);
     md->iterations = PyLong_AsSsize_t(args[34]);
-    *halvings = (int)PyLong_AsLong(args[35]);
-    *has_guess = PyObject_IsTrue(args[36]);
+    md->divergence = PyFloat_AsDouble(args[35]);
+    *halvings = (int)PyLong_AsLong(args[36]);
+    *has_guess = PyObject_IsTrue(args[37]);
     if (PyErr_Occurred())
         return -1;
     if (md->s < 1 || md->s > 3 || md->m < 1 || md->m > 512 || md->e < 0 || md->e > 64
         || md->outputs < 0 || md->outputs > 64 || md->nodes < 2 || md->fields < 1
-        || *samples < 0 || *halvings < 0 || *halvings > 20 || md->iterations < 1) {
+        || *samples < 0 || *halvings < 0 || *halvings > 20 || md->iterations < 1
+        || !(md->divergence > 1.0)) {
         PyErr_SetString(PyExc_ValueError, "march: sizes out of range");
         return -1;
     }
@@ -835,7 +844,7 @@ static PyObject *march(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 {
     (void)self;
     if (nargs != MARCH_ARGS) {
-        PyErr_SetString(PyExc_TypeError, "march takes 37 arguments (see the module notes)");
+        PyErr_SetString(PyExc_TypeError, "march takes 38 arguments (see the module notes)");
         return NULL;
     }
     Model md;
@@ -857,7 +866,7 @@ static PyObject *march(PyObject *self, PyObject *const *args, Py_ssize_t nargs)
 }
 
 /*
- * Stepper(*march's 37 arguments, samples 1): one estimator's per-sample step (the node's
+ * Stepper(*march's 38 arguments, samples 1): one estimator's per-sample step (the node's
  * streaming update), its buffers taken once. step(h, theta0, angle, speed0, speed, has_guess,
  * halvings, unwrap) steps the state as march steps one sample (times 0, h; angles theta0 and
  * theta), theta the angle unwrapped from theta0 by the speeds (unwrap_next of
@@ -883,7 +892,7 @@ static int stepper_init(Stepper *self, PyObject *args, PyObject *kwargs)
         return -1;
     }
     if (PyTuple_GET_SIZE(args) != MARCH_ARGS) {
-        PyErr_SetString(PyExc_TypeError, "Stepper takes march's 37 arguments");
+        PyErr_SetString(PyExc_TypeError, "Stepper takes march's 38 arguments");
         return -1;
     }
     Py_ssize_t samples;

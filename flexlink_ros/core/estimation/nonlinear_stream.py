@@ -34,6 +34,10 @@ except ImportError:     # not built: the numpy Newton serves
 
 NEWTON_TOLERANCE = 1e-6
 NEWTON_ITERATIONS = 30
+# An update this many times the first one has left the start's basin: the cubic strain has
+# far roots (deflections of kilometres) that the relative test would accept, so the step is
+# halved instead. Converging steps grow their update at most ~300x (random 0.2-6 ms steps).
+NEWTON_DIVERGENCE = 1e4
 # Largest RMS slope of a link's bending relative to its frame [rad] the von Karman strain
 # carries: it keeps v'^2 / 2 of the exact stretch sqrt((1 + u')^2 + v'^2) - 1 and drops
 # -v'^4 / 8, a relative error of v'^2 / 4 (1 % at 0.2 rad).
@@ -196,11 +200,12 @@ class NonlinearStepper:
 
         Simplified Newton from the predicted start (:meth:`_predicted`): the Jacobian is
         formed at the first iteration and formed again only when an iteration contracts the
-        update by less than half.
+        update by less than half. An update ``NEWTON_DIVERGENCE`` times the first one is not
+        converging (the caller halves the step).
         """
         linear = linear_part(self.tables, fields, speed, accel, self.nonlinear)
         s, m = speed.shape[0], self.tables.size
-        acc, factor, previous = self._predicted(h), None, np.inf
+        acc, factor, previous, first = self._predicted(h), None, np.inf, np.inf
         for count in range(1, NEWTON_ITERATIONS + 1):
             residual, jacobian, axial = self._residual(h, acc, fields, speed, linear,
                                                        factor is None)
@@ -215,6 +220,10 @@ class NonlinearStepper:
                 self.iterations += count
                 self.axial = axial[-1]
                 return acc
+            if count == 1:
+                first = size
+            elif size > NEWTON_DIVERGENCE * first:
+                return None
             if size > 0.5 * previous:
                 factor = None
             previous = size
@@ -263,7 +272,8 @@ class NonlinearStepper:
                                                             tables.links, tables.outputs))
             cached = self._native = (
                 tuple(np.ascontiguousarray(a, dtype=float) for a in arrays), sizes,
-                (float(tables.beta), self.nonlinear, NEWTON_TOLERANCE, NEWTON_ITERATIONS), one)
+                (float(tables.beta), self.nonlinear, NEWTON_TOLERANCE, NEWTON_ITERATIONS,
+                 NEWTON_DIVERGENCE), one)
         return cached
 
     def _call_march(self, times, angles, speeds, out, halvings):

@@ -225,6 +225,26 @@ def test_compiled_step_equals_the_numpy_reference_wherever_the_stages_fall_in_th
     assert c_run['newton_iterations'] == numpy_run['newton_iterations']
 
 
+@pytest.mark.parametrize('compiled', [True, False])
+def test_newton_that_leaves_its_start_halves_the_step_instead_of_taking_a_far_root(
+        tables, compiled):
+    # Steps of 0.2-6 ms at random: on some of them Newton leaves the start's basin, and the
+    # cubic strain has far roots (tens of kilometres of deflection) that its relative test
+    # accepts. Without the divergence test the compiled step took one here (outputs of 3e7 m,
+    # then 112 samples refused) and the numpy step did too on two BLAS threads.
+    if compiled:
+        pytest.importorskip('flexlink_ros.core.estimation._nonlinear_step')
+    rng = np.random.default_rng(1)
+    count = 500
+    steps = np.round(rng.uniform(0.2e6, 6e6, count - 1)).astype(np.int64)
+    stamps = np.concatenate([[0], np.cumsum(steps)])
+    angles = np.mod(SPEED * stamps * 1e-9, 2 * math.pi)
+    run = estimate_nonlinear(tables, stamps, angles, np.full(count, SPEED), compiled=compiled)
+    assert run['refused'] == 0
+    # millimetres, as at 1 kHz
+    assert 1e-3 < np.abs(run['outputs']).max() < 1e-2
+
+
 def test_non_finite_samples_are_refused_counted_and_do_not_poison_the_rest(tables):
     count = 600
     stamps = np.arange(count, dtype=np.int64) * 1_000_000
