@@ -36,7 +36,7 @@ NEWTON_TOLERANCE = 1e-6
 NEWTON_ITERATIONS = 30
 # An update this many times the first one has left the start's basin: the cubic strain has
 # far roots (deflections of kilometres) that the relative test would accept, so the step is
-# halved instead. Converging steps grow their update at most ~300x (random 0.2-6 ms steps).
+# halved instead. Converging steps grew it at most 277x (the grid test's random 0.2-6 ms steps).
 NEWTON_DIVERGENCE = 1e4
 # Largest RMS slope of a link's bending relative to its frame [rad] the von Karman strain
 # carries: it keeps v'^2 / 2 of the exact stretch sqrt((1 + u')^2 + v'^2) - 1 and drops
