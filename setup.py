@@ -21,7 +21,8 @@ setup(
     # Both include the validity indicator's kernel (_nonlinearity.h).
     ext_modules=[Extension('flexlink_ros.core.estimation._radau_step',
                            ['flexlink_ros/core/estimation/_radau_step.c'],
-                           depends=['flexlink_ros/core/estimation/_nonlinearity.h'],
+                           depends=['flexlink_ros/core/estimation/_nonlinearity.h',
+                                    'flexlink_ros/core/estimation/_pivot.h'],
                            extra_compile_args=['-O3']),
                  # the validity indicator per sample (its Python twin serves where not built)
                  Extension('flexlink_ros.core.estimation._nonlinearity',
@@ -37,7 +38,8 @@ setup(
                  # the reduced nonlinear model's Newton step (numpy twin where not built)
                  Extension('flexlink_ros.core.estimation._nonlinear_step',
                            ['flexlink_ros/core/estimation/_nonlinear_step.c'],
-                           depends=['flexlink_ros/core/estimation/_doubles.h'],
+                           depends=['flexlink_ros/core/estimation/_doubles.h',
+                                    'flexlink_ros/core/estimation/_pivot.h'],
                            # its dot products split into vector lanes (no OpenMP runtime)
                            extra_compile_args=['-O3', '-fopenmp-simd'])],
     install_requires=['setuptools'],

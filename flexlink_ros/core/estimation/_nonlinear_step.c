@@ -20,6 +20,7 @@
 #include <time.h>
 
 #include "_doubles.h"
+#include "_pivot.h"
 
 /* The hot loops also built for AVX2, chosen at load time where the CPU has it (GCC, x86-64,
  * glibc: the choice is an ifunc). */
@@ -128,29 +129,6 @@ VECTOR_CLONES static void lumped(const Problem *p, const double *disp, const dou
     }
 }
 
-/* Row swap of two rows of n (no-op for one row). */
-static void swap_rows(double *a, Py_ssize_t n, Py_ssize_t i, Py_ssize_t k)
-{
-    if (i == k)
-        return;
-    double *restrict x = a + i * n, *restrict y = a + k * n;
-    for (Py_ssize_t j = 0; j < n; j++) {
-        const double t = x[j];
-        x[j] = y[j];
-        y[j] = t;
-    }
-}
-
-/* Row of the largest magnitude in column col from row col down (the first of equals). */
-static Py_ssize_t pivot_row(const double *a, Py_ssize_t n, Py_ssize_t col)
-{
-    Py_ssize_t best = col;
-    for (Py_ssize_t r = col + 1; r < n; r++)
-        if (fabs(a[r * n + col]) > fabs(a[best * n + col]))
-            best = r;
-    return best;
-}
-
 /*
  * LU with partial pivoting in place (n x n, row-major); 0 if singular. Two columns per pass:
  * the second column's pivot is found after the first's elimination of that column alone, and
@@ -162,7 +140,8 @@ VECTOR_CLONES static int lu_factor(double *a, Py_ssize_t n, Py_ssize_t *piv)
     Py_ssize_t col = 0;
     for (; col + 1 < n; col += 2) {
         const Py_ssize_t next = col + 1;
-        piv[col] = pivot_row(a, n, col);
+        double largest;     /* the pivot's magnitude (the zero test below is on the value) */
+        piv[col] = pivot_row_of(a, n, col, col, &largest);
         swap_rows(a, n, col, piv[col]);
         if (a[col * n + col] == 0.0)
             return 0;
@@ -172,7 +151,7 @@ VECTOR_CLONES static int lu_factor(double *a, Py_ssize_t n, Py_ssize_t *piv)
             double *restrict row = a + r * n;
             row[next] -= (row[col] *= inv) * first[next];
         }
-        piv[next] = pivot_row(a, n, next);
+        piv[next] = pivot_row_of(a, n, next, next, &largest);
         swap_rows(a, n, next, piv[next]);
         double *restrict second = a + next * n;
         if (second[next] == 0.0)

@@ -39,6 +39,7 @@
 #endif
 
 #include "_nonlinearity.h"      /* the validity indicator, for the streaming update */
+#include "_pivot.h"
 
 #define FIRST_MC 4      /* M and C start at monomial 1: weights[4:] */
 #define GROUPS_C 4      /* C: monomials 1, w2, w, w4 (node rows V, S each) */
@@ -321,21 +322,6 @@ static void record(Step *s, const double *z, const double *prev, double *restric
 
 #define LU_PANEL 4
 
-/* Row of the largest |a[i][col]| for i in [from, n) (partial pivoting). */
-static inline Py_ssize_t pivot_row_of(const double *a, Py_ssize_t n, Py_ssize_t col,
-                                      Py_ssize_t from, double *best_out)
-{
-    Py_ssize_t p = from;
-    double best = fabs(a[from * n + col]);
-    for (Py_ssize_t i = from + 1; i < n; i++) {
-        const double v = fabs(a[i * n + col]);
-        p = v > best ? i : p;
-        best = v > best ? v : best;
-    }
-    *best_out = best;
-    return p;
-}
-
 /*
  * Eliminate column k below the pivot inside the panel (columns k .. k + width, width 0..3,
  * a fixed count per loop: a variable inner count of at most 3 cost more in loop set-up than
@@ -377,12 +363,7 @@ STEP_CLONES static int solve(Py_ssize_t n, double *restrict a, double *restrict 
             if (!(best > 0.0))
                 return -1;
             if (p != k) {
-                double *restrict row_k = a + k * n, *restrict row_p = a + p * n;
-                for (Py_ssize_t j = 0; j < n; j++) {
-                    double t = row_k[j];
-                    row_k[j] = row_p[j];
-                    row_p[j] = t;
-                }
+                swap_rows(a, n, k, p);
                 double t = b[k];
                 b[k] = b[p];
                 b[p] = t;
