@@ -728,7 +728,7 @@ static int march_sizes(Model *md, Py_ssize_t *samples, int *halvings, int *has_g
         || md->outputs < 0 || md->outputs > 64 || md->nodes < 2 || md->fields < 1
         || *samples < 0 || *halvings < 0 || *halvings > 20 || md->iterations < 1
         || !(md->divergence > 1.0)) {
-        PyErr_SetString(PyExc_ValueError, "march: sizes out of range");
+        PyErr_SetString(PyExc_ValueError, "march: sizes or Newton limits out of range");
         return -1;
     }
     return 0;

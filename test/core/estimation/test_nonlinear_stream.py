@@ -356,7 +356,7 @@ def test_step_to_unwraps_and_steps_as_unwrap_next_and_the_march(tables):
         single.step_to(1e-3, theta0, math.nan, SPEED, SPEED)
 
 
-def test_march_refuses_a_table_layout_outside_its_rows(tables):
+def test_march_refuses_a_table_layout_outside_its_rows_and_bad_newton_limits(tables):
     pytest.importorskip('flexlink_ros.core.estimation._nonlinear_step')
     stepper = NonlinearStepper(tables)
     stepper.start(0.0, SPEED)
@@ -378,4 +378,11 @@ def test_march_refuses_a_table_layout_outside_its_rows(tables):
             stepper.q, stepper.v, stepper._guess_buffer, stepper.axial, stepper.slope,
             stepper.output_operator, *out, stepper._work[:10], *sizes, 1, *constants, 0,
             False)
+    for divergence in (math.nan, 0.5, -1e4):  # NaN never ends Newton, below 1 almost always
+        with pytest.raises(ValueError, match='Newton limits'):
+            nonlinear_stream.compiled_newton.march(
+                *arrays, np.array([0.0, 1e-3]), np.array([0.0, 0.04]), np.full(2, SPEED),
+                stepper.q, stepper.v, stepper._guess_buffer, stepper.axial, stepper.slope,
+                stepper.output_operator, *out, stepper._work, *sizes, 1, *constants[:-1],
+                divergence, 0, False)
     np.testing.assert_array_equal(stepper.q, state)
